@@ -1,0 +1,186 @@
+"""The ``physdbg`` command: a thin layer over :mod:`physdbg.api`.
+
+Each command parses its options, calls one library function and prints. Every
+user-facing failure is a PhysdbgError, printed as ``error: ...`` with exit code 2 —
+never a traceback. Heavy modules (numpy, numba) are imported inside the commands so
+``physdbg --help`` stays quick.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from .errors import PhysdbgError
+
+app = typer.Typer(
+    name="physdbg",
+    help="A physics engine that shows its work: run a sphere scene and see every contact.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+@contextmanager
+def _user_errors():
+    """Turn PhysdbgError (and unreadable files) into a one-line message and exit code 2."""
+    try:
+        yield
+    except PhysdbgError as err:
+        typer.echo(f"error: {err}", err=True)
+        raise typer.Exit(err.exit_code) from None
+    except KeyboardInterrupt:
+        typer.echo("interrupted", err=True)
+        raise typer.Exit(130) from None
+
+
+@app.command()
+def scenes() -> None:
+    """List the built-in scenes, one line each.
+
+    Example: physdbg scenes
+    """
+    from .scenes import builtin_descriptions
+
+    rows = builtin_descriptions()
+    width = max(len(name) for name, _ in rows)
+    for name, description in rows:
+        typer.echo(f"{name:<{width}}  {description}")
+
+
+SetOption = Annotated[
+    Optional[list[str]],
+    typer.Option("--set", "-s", metavar="KEY=VALUE",
+                 help="Override a scene field, e.g. --set integrator=verlet --set generate.count=500. "
+                      "Repeatable."),
+]
+
+
+@app.command()
+def run(
+    scene: Annotated[str, typer.Argument(help="Built-in scene name (see `physdbg scenes`) or a .toml file.")],
+    set_: SetOption = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON (for scripts).")] = False,
+    dts: Annotated[Optional[Path], typer.Option(
+        "--dts", help="Repeat a run exactly: read each step's dt (one number per line) from this file.")] = None,
+    dts_out: Annotated[Optional[Path], typer.Option(
+        "--dts-out", help="Write each step's dt to this file (to repeat a real-time run with --dts).")] = None,
+    progress: Annotated[bool, typer.Option(
+        "--progress/--no-progress", help="Show a progress bar on long runs (default: when stderr is a terminal).")]
+    = sys.stderr.isatty(),
+) -> None:
+    """Run a scene and print a summary: steps, contacts, energy and momentum drift, ms/step.
+
+    Example: physdbg run bounce --set integrator=verlet --set duration=2
+    """
+    with _user_errors():
+        from .api import run as run_scene
+        from .scene import load_scene
+
+        loaded = load_scene(scene, set_ or [])
+        step_lengths = _read_dts(dts) if dts is not None else None
+        total = len(step_lengths) if step_lengths is not None else loaded.steps
+        bar = _progress_bar(total) if progress and not as_json and (total or 0) >= 500 else None
+        try:
+            summary = run_scene(loaded, dts=step_lengths, on_step=bar.update if bar else None)
+        finally:
+            if bar:
+                bar.close()
+        if dts_out is not None:
+            try:
+                dts_out.write_text("".join(f"{d!r}\n" for d in summary.dts))
+            except OSError as err:
+                raise PhysdbgError(f"{dts_out}: cannot write the step lengths ({err})") from None
+        if as_json:
+            typer.echo(json.dumps(summary.as_dict(), indent=2))
+        else:
+            typer.echo(format_summary(summary))
+
+
+def _read_dts(path: Path) -> list[float]:
+    try:
+        lines = path.read_text().split()
+    except (OSError, UnicodeDecodeError) as err:
+        raise PhysdbgError(f"{path}: cannot read step lengths ({err})") from None
+    out = []
+    for number, text in enumerate(lines, 1):
+        try:
+            value = float(text)
+        except ValueError:
+            value = float("nan")
+        if not value > 0 or value == float("inf"):
+            raise PhysdbgError(f"{path}: entry {number} is {text!r}; each dt must be a positive number of seconds")
+        out.append(value)
+    if not out:
+        raise PhysdbgError(f"{path}: no step lengths in the file")
+    return out
+
+
+class _progress_bar:
+    """A plain-text progress bar on stderr (updated at most ~10 times a second)."""
+
+    def __init__(self, total: int | None):
+        import time
+
+        self.total = total
+        self._time = time.perf_counter
+        self._last = 0.0
+
+    def update(self, done: int, total: int | None) -> None:
+        now = self._time()
+        if now - self._last < 0.1 and done != total:
+            return
+        self._last = now
+        if total:
+            filled = int(30 * done / total)
+            sys.stderr.write(f"\r[{'#' * filled}{'.' * (30 - filled)}] step {done}/{total}")
+        else:
+            sys.stderr.write(f"\rstep {done}")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        sys.stderr.write("\n")
+
+
+def format_summary(s) -> str:
+    """The human-readable run summary."""
+    share = sum(s.phase_seconds.values()) or 1.0
+    phases = ", ".join(f"{name.replace('_', ' ')} {100 * sec / share:.0f}%" for name, sec in s.phase_seconds.items())
+    dts = s.dts
+    dt_text = f"dt {dts[0]:.6g} s" if dts and min(dts) == max(dts) else (
+        f"dt {min(dts):.3g}..{max(dts):.3g} s" if dts else "no steps")
+    lines = [
+        f"scene       {s.scene}  ({s.source})",
+        f"methods     integrator={s.integrator} detection={s.detection} ordering={s.ordering}",
+        f"broad phase {s.broad_phase}: {s.broad_phase_reason}",
+        f"bodies      {s.particles} particles, {s.walls} walls",
+        f"steps       {s.steps}  ({s.sim_time:.6g} s simulated, {dt_text})",
+        f"contacts    {s.contacts}  (at most {s.max_contacts_in_a_step} in a step; {s.swept_tests} swept tests; "
+        f"{s.resting_at_end} resting at the end)",
+        f"energy      {s.energy_start:.6g} J -> {s.energy_end:.6g} J  (drift {s.energy_drift:+.3e})",
+        f"momentum    {_vec(s.momentum_start)} -> {_vec(s.momentum_end)} kg·m/s  (drift {s.momentum_drift:.3e})",
+        f"overlap     max {s.max_overlap:.3g} m",
+        f"speed       {s.ms_per_step:.3f} ms/step  ({phases})",
+        f"state hash  {s.final_hash}",
+        "warnings    " + ("none" if not s.warnings else f"{len(s.warnings)}: " + "; ".join(s.warnings[:3])
+                          + (" ..." if len(s.warnings) > 3 else "")),
+    ]
+    return "\n".join(lines)
+
+
+def _vec(values) -> str:
+    return "[" + ", ".join(f"{v:.4g}" for v in values) + "]"
+
+
+def main() -> None:  # pragma: no cover - console entry point alternative
+    app()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    app()

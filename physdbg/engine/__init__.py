@@ -1,0 +1,19 @@
+"""The pure core: state arrays, integrators, swept tests, broad phase, resolution, stepping.
+
+Imports numpy and numba only (and the standard library's math, hashlib, heapq);
+knows nothing of files or viewers. Results leave through typed events
+(:mod:`physdbg.events`) handed to an observer.
+"""
+
+from .broadphase import BROAD_PHASES, BruteForce, make_broad_phase
+from .motion import INTEGRATOR_NAMES
+from .resolve import RESTITUTION_RULES, combine_restitution
+from .state import ORDERING_NAMES, Settings, State, Walls, energies, state_hash
+from .toi import DETECTION_NAMES
+from .world import StepStats, World
+
+__all__ = [
+    "BROAD_PHASES", "BruteForce", "DETECTION_NAMES", "INTEGRATOR_NAMES", "ORDERING_NAMES",
+    "RESTITUTION_RULES", "Settings", "State", "StepStats", "Walls", "World",
+    "combine_restitution", "energies", "make_broad_phase", "state_hash",
+]

@@ -1,0 +1,347 @@
+"""Narrow phase: when does a sphere first touch a wall or another sphere inside a step?
+
+Three detection methods (the seed's cases):
+
+* ``swept``  exact time of impact along the integrator's path (:mod:`motion`);
+* ``sampled`` k samples along the path, contact at the first overlapping sample (case c);
+* ``discrete`` the end position only (case a) — ``sampled`` with k = 1.
+
+A contact is only ever reported for a sphere that is *approaching*: a touching or
+overlapping pair that separates is left alone, so a just-resolved contact is never
+found again. All times returned are local (seconds after the start time of the test);
+``INF`` means no contact before ``horizon``.
+
+Sphere–wall (swept). With n the wall normal towards the sphere's side, the signed gap
+g(tau) = n·position(tau) - d - r = g0 + p·P1 + q·P2 (p = n·v, q = n·a). For linear
+paths this is the seed's ``t = (±r - ((n·C) - d)) / (n·v)``. In general g'' has one sign
+over the whole step, so the first inward crossing is bracketed exactly (at most two
+roots) and polished: closed-form quadratic when k = 0, safeguarded Newton otherwise.
+
+Sphere–sphere (swept). The relative path D(tau) = dx + dv·P1 + da·P2. When both spheres
+have the same path acceleration (da = 0: same gravity, or Euler's straight lines) D is
+linear in u = P1(tau) and the seed's quadratic (v·v)u² + 2(v·s)u + (s·s - r²) = 0 gives
+u exactly, then tau = P1⁻¹(u). Otherwise (a resting or immovable sphere against a
+falling one) the gap |D| - R is advanced conservatively with a second-order lower
+bound g(tau+s) >= g + g's - M s²/2, M = max|D''|: it converges like Newton and can never
+step over the first root.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .motion import EXACT, SEMI_IMPLICIT, EULER, curvature_scale, path_coefficients, path_state
+
+INF = math.inf
+
+SWEPT = 0
+SAMPLED = 1
+DISCRETE = 2
+DETECTION_NAMES = ("swept", "sampled", "discrete")
+
+
+@njit(cache=True)
+def _gap(g0, p, q, integrator, k, tau):
+    p1, p2, dp1 = path_coefficients(integrator, k, tau)
+    return g0 + p * p1 + q * p2, p * dp1 + q * p1
+
+
+@njit(cache=True)
+def _root_in_bracket(g0, p, q, integrator, k, lo, hi):
+    """The one root of the gap in [lo, hi], where the gap falls from >= 0 to <= 0."""
+    if integrator != EXACT or k == 0.0:
+        # g0 + p*t + (q/2)*t² (q = 0 for Euler paths): numerically stable quadratic.
+        aa = 0.5 * q if integrator >= 2 else 0.0
+        if aa == 0.0:
+            t = -g0 / p if p != 0.0 else lo
+        else:
+            disc = p * p - 4.0 * aa * g0
+            sq = math.sqrt(disc) if disc > 0.0 else 0.0
+            qq = -0.5 * (p + sq) if p >= 0.0 else -0.5 * (p - sq)
+            r1 = qq / aa
+            r2 = g0 / qq if qq != 0.0 else r1
+            # pick the root closest to the bracket (rounding may put it a hair outside)
+            d1 = max(lo - r1, r1 - hi, 0.0)
+            d2 = max(lo - r2, r2 - hi, 0.0)
+            t = r1 if d1 < d2 or (d1 == d2 and r1 < r2) else r2
+        return min(max(t, lo), hi)
+    # drag: safeguarded Newton on the monotone bracket
+    a_t = lo
+    b_t = hi
+    t = 0.5 * (lo + hi)
+    for _ in range(100):
+        g, dg = _gap(g0, p, q, integrator, k, t)
+        if g > 0.0:
+            a_t = t
+        else:
+            b_t = t
+        if dg != 0.0:
+            tn = t - g / dg
+        else:
+            tn = 0.5 * (a_t + b_t)
+        if not (a_t < tn < b_t):
+            tn = 0.5 * (a_t + b_t)
+        if abs(tn - t) <= 1e-16 * max(1.0, abs(t)) or b_t - a_t <= 1e-16 * max(1.0, b_t):
+            return tn
+        t = tn
+    return t
+
+
+@njit(cache=True)
+def _stationary_point(g0, p, q, integrator, k, horizon):
+    """Where the gap's derivative (monotone, by the constant curvature) crosses zero."""
+    if integrator != EXACT or k == 0.0:
+        return -p / q if q != 0.0 else horizon
+    lo = 0.0
+    hi = horizon
+    _, d_lo = _gap(g0, p, q, integrator, k, lo)
+    _, d_hi = _gap(g0, p, q, integrator, k, hi)
+    if (d_hi > 0.0) == (d_lo > 0.0):
+        return horizon  # the derivative keeps its sign over the whole horizon
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        _, d_mid = _gap(g0, p, q, integrator, k, mid)
+        if (d_mid > 0.0) == (d_lo > 0.0):
+            lo = mid
+            d_lo = d_mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-16 * max(1.0, hi):
+            break
+    return 0.5 * (lo + hi)
+
+
+@njit(cache=True)
+def wall_toi_swept(g0, p, q, integrator, k, horizon):
+    """First time in [0, horizon] the gap g0 + p·P1 + q·P2 crosses 0 going down, or INF.
+
+    g0: gap at the start (m, negative = overlapping); p = n·v (m/s); q = n·a (m/s²).
+    """
+    if integrator <= SEMI_IMPLICIT:
+        q = 0.0
+    cq, cp = curvature_scale(integrator, k)
+    curv = cq * q + cp * p  # sign of g''
+    if g0 <= 0.0:
+        # touching or overlapping: a contact now if moving (or accelerating) inward
+        if p < 0.0 or (p == 0.0 and curv < 0.0):
+            return 0.0
+        if curv >= 0.0:
+            return INF  # separating and never coming back
+        t_top = _stationary_point(g0, p, q, integrator, k, horizon)
+        if t_top >= horizon:
+            return INF
+        g_top, _ = _gap(g0, p, q, integrator, k, t_top)
+        if g_top <= 0.0:
+            return t_top  # never left the overlap and is approaching again
+        g_end, _ = _gap(g0, p, q, integrator, k, horizon)
+        if g_end > 0.0:
+            return INF
+        return _root_in_bracket(g0, p, q, integrator, k, t_top, horizon)
+    if curv >= 0.0:
+        if p >= 0.0:
+            return INF
+        t_low = _stationary_point(g0, p, q, integrator, k, horizon) if curv > 0.0 else horizon
+        t_low = min(t_low, horizon)
+        g_low, _ = _gap(g0, p, q, integrator, k, t_low)
+        if g_low > 0.0:
+            return INF
+        return _root_in_bracket(g0, p, q, integrator, k, 0.0, t_low)
+    g_end, _ = _gap(g0, p, q, integrator, k, horizon)
+    if g_end > 0.0:
+        return INF
+    return _root_in_bracket(g0, p, q, integrator, k, 0.0, horizon)
+
+
+@njit(cache=True)
+def wall_toi_sampled(g0, p, q, integrator, k, horizon, samples):
+    """First of ``samples`` evenly spaced instants in (0, horizon] with overlap and approach."""
+    if integrator <= SEMI_IMPLICIT:
+        q = 0.0
+    for m in range(1, samples + 1):
+        t = horizon * m / samples
+        g, dg = _gap(g0, p, q, integrator, k, t)
+        if g < 0.0 and dg < 0.0:
+            return t
+    return INF
+
+
+@njit(cache=True)
+def _linear_pair_u(dx, dv, radius_sum):
+    """The seed's quadratic: first u >= 0 with |dx + dv·u| = R while approaching, or INF."""
+    a = dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2]
+    b = dv[0] * dx[0] + dv[1] * dx[1] + dv[2] * dx[2]
+    c = dx[0] * dx[0] + dx[1] * dx[1] + dx[2] * dx[2] - radius_sum * radius_sum
+    if b >= 0.0 or a == 0.0:
+        return INF  # separating or at rest relative to each other
+    if c <= 0.0:
+        return 0.0  # touching or overlapping and approaching
+    disc = b * b - a * c
+    if disc < 0.0:
+        return INF
+    # smaller root (-b - sqrt(disc))/a written without cancellation
+    return c / (-b + math.sqrt(disc))
+
+
+@njit(cache=True)
+def _u_to_tau(integrator, k, u):
+    if integrator == EXACT and k > 0.0:
+        ku = k * u
+        if ku >= 1.0:
+            return INF  # drag stops the pair before it gets there
+        return -math.log1p(-ku) / k
+    return u
+
+
+@njit(cache=True)
+def _norm(x0, x1, x2):
+    return math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+
+
+@njit(cache=True)
+def pair_toi_swept(dx, dv, da, radius_sum, integrator, k, horizon, tolerance):
+    """First time in [0, horizon] the spheres touch while approaching, or INF.
+
+    dx, dv, da: (3,) relative position, path velocity and path acceleration (a - b)
+    at the common start time; radius_sum: r_a + r_b (m); tolerance: gap (m) below which
+    conservative advancement calls it a contact.
+    """
+    linear = integrator == EULER or integrator == SEMI_IMPLICIT or (
+        da[0] == 0.0 and da[1] == 0.0 and da[2] == 0.0
+    )
+    if linear:
+        u = _linear_pair_u(dx, dv, radius_sum)
+        if u == INF:
+            return INF
+        t = _u_to_tau(integrator, k, u)
+        return t if t <= horizon else INF
+    # conservative advancement with a second-order bound
+    if integrator == EXACT:
+        m = _norm(da[0] - k * dv[0], da[1] - k * dv[1], da[2] - k * dv[2])
+    else:
+        m = _norm(da[0], da[1], da[2])
+    t = 0.0
+    for _ in range(500):
+        if t > horizon:
+            return INF
+        p1, p2, dp1 = path_coefficients(integrator, k, t)
+        d0 = dx[0] + dv[0] * p1 + da[0] * p2
+        d1 = dx[1] + dv[1] * p1 + da[1] * p2
+        d2 = dx[2] + dv[2] * p1 + da[2] * p2
+        e0 = dv[0] * dp1 + da[0] * p1
+        e1 = dv[1] * dp1 + da[1] * p1
+        e2 = dv[2] * dp1 + da[2] * p1
+        dist = _norm(d0, d1, d2)
+        g = dist - radius_sum
+        rate = (d0 * e0 + d1 * e1 + d2 * e2) / dist if dist > 0.0 else -1.0
+        if g <= tolerance:
+            if rate < 0.0:
+                return t
+            if rate == 0.0 and (d0 * da[0] + d1 * da[1] + d2 * da[2]) < 0.0:
+                return t
+            if m == 0.0:
+                return INF
+            # separating from a touch: the bound says it cannot return before this
+            gg = max(g, 0.0)
+            t += (rate + math.sqrt(rate * rate + 2.0 * m * gg)) / m + 1e-15 * max(horizon, 1.0)
+            continue
+        if rate < 0.0:
+            step = 2.0 * g / (math.sqrt(rate * rate + 2.0 * m * g) - rate)
+        else:
+            if m == 0.0:
+                return INF
+            step = (rate + math.sqrt(rate * rate + 2.0 * m * g)) / m
+        t += step
+    return t if t <= horizon else INF
+
+
+@njit(cache=True)
+def pair_toi_sampled(dx, dv, da, radius_sum, integrator, k, horizon, samples):
+    """First of ``samples`` instants in (0, horizon] with overlap while approaching."""
+    if integrator == EULER or integrator == SEMI_IMPLICIT:
+        da = np.zeros(3)
+    for m in range(1, samples + 1):
+        t = horizon * m / samples
+        p1, p2, dp1 = path_coefficients(integrator, k, t)
+        d0 = dx[0] + dv[0] * p1 + da[0] * p2
+        d1 = dx[1] + dv[1] * p1 + da[1] * p2
+        d2 = dx[2] + dv[2] * p1 + da[2] * p2
+        e0 = dv[0] * dp1 + da[0] * p1
+        e1 = dv[1] * dp1 + da[1] * p1
+        e2 = dv[2] * dp1 + da[2] * p1
+        if d0 * d0 + d1 * d1 + d2 * d2 < radius_sum * radius_sum and d0 * e0 + d1 * e1 + d2 * e2 < 0.0:
+            return t
+    return INF
+
+
+@njit(cache=True)
+def predict_pairs(ia, ib, x, v, a, radius, sigma, step_end, integrator, k, detection,
+                  samples, tolerance, out_start, out_toi):
+    """Swept test of each candidate pair (ia[m], ib[m]) from its later anchor time.
+
+    Writes, per pair, the start time of the test and the absolute time in the step of
+    the first contact (INF when none) into out_start, out_toi (both (M,)).
+    """
+    pa = np.empty(3)
+    va = np.empty(3)
+    pb = np.empty(3)
+    vb = np.empty(3)
+    dx = np.empty(3)
+    dv = np.empty(3)
+    da = np.empty(3)
+    for m in range(ia.shape[0]):
+        i = ia[m]
+        j = ib[m]
+        start = max(sigma[i], sigma[j])
+        path_state(x, v, a, sigma, i, start, integrator, k, pa, va)
+        path_state(x, v, a, sigma, j, start, integrator, k, pb, vb)
+        for c in range(3):
+            dx[c] = pa[c] - pb[c]
+            dv[c] = va[c] - vb[c]
+            da[c] = a[i, c] - a[j, c]
+        horizon = step_end - start
+        if detection == SWEPT:
+            t = pair_toi_swept(dx, dv, da, radius[i] + radius[j], integrator, k, horizon, tolerance)
+        else:
+            t = pair_toi_sampled(dx, dv, da, radius[i] + radius[j], integrator, k, horizon,
+                                 1 if detection == DISCRETE else samples)
+        out_start[m] = start
+        out_toi[m] = start + t
+
+
+@njit(cache=True)
+def wall_gap_terms(x, v, a, radius, i, normal, offset, half_thickness, two_sided):
+    """(g0, p, q, side) of particle i's anchor against a wall n·x = d.
+
+    One-sided walls keep spheres on the side n points to; two-sided walls (thin slabs of
+    half-thickness h) push a sphere back to whichever side its anchor is on.
+    """
+    h = normal[0] * x[i, 0] + normal[1] * x[i, 1] + normal[2] * x[i, 2] - offset
+    side = 1.0
+    if two_sided and h < 0.0:
+        side = -1.0
+    g0 = side * h - half_thickness - radius[i]
+    p = side * (normal[0] * v[i, 0] + normal[1] * v[i, 1] + normal[2] * v[i, 2])
+    q = side * (normal[0] * a[i, 0] + normal[1] * a[i, 1] + normal[2] * a[i, 2])
+    return g0, p, q, side
+
+
+@njit(cache=True)
+def predict_walls(ip, iw, x, v, a, radius, sigma, step_end, normals, offsets, half_thickness,
+                  two_sided, integrator, k, detection, samples, out_start, out_toi):
+    """Swept test of particle ip[m] against wall iw[m] from the particle's anchor."""
+    for m in range(ip.shape[0]):
+        i = ip[m]
+        w = iw[m]
+        g0, p, q, _ = wall_gap_terms(x, v, a, radius, i, normals[w], offsets[w],
+                                     half_thickness[w], two_sided[w])
+        horizon = step_end - sigma[i]
+        if detection == SWEPT:
+            t = wall_toi_swept(g0, p, q, integrator, k, horizon)
+        else:
+            t = wall_toi_sampled(g0, p, q, integrator, k, horizon,
+                                 1 if detection == DISCRETE else samples)
+        out_start[m] = sigma[i]
+        out_toi[m] = sigma[i] + t

@@ -1,0 +1,28 @@
+"""Every user-facing failure of physdbg is a :class:`PhysdbgError`.
+
+The CLI catches exactly this hierarchy and prints its message (never a traceback),
+so raising one of these is how library code reports bad input.
+"""
+
+from __future__ import annotations
+
+
+class PhysdbgError(Exception):
+    """Base class: a failure the user can act on; ``str(err)`` is the whole message."""
+
+    exit_code = 2
+
+
+class SceneError(PhysdbgError):
+    """A scene file or override is wrong: names the file, the field and what is allowed."""
+
+    def __init__(self, source: str, field: str, problem: str):
+        self.source = source
+        self.field = field
+        self.problem = problem
+        where = f"{source}: field '{field}'" if field else source
+        super().__init__(f"{where}: {problem}")
+
+
+class UnknownSceneError(PhysdbgError):
+    """The scene is neither a built-in name nor a readable file."""

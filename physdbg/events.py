@@ -1,0 +1,136 @@
+"""Typed events the engine reports to its observer.
+
+One step produces, in this order::
+
+    StepBegin
+    ContactResolved ...        (one per contact, in the order they were resolved)
+    SweptTests                 (one batch: every candidate the narrow phase tested)
+    EngineWarning ...          (zero or more)
+    StepEnd
+
+Units: metres, seconds, kilograms; impulses in N·s. Arrays are float64 unless stated.
+Events are built only when an observer is attached; arrays in them are copies the
+engine will not mutate afterwards, so an observer may keep them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# Kinds of swept-test candidate / contact.
+KIND_PAIR = 0
+KIND_WALL = 1
+
+# Outcomes of one swept test (SweptTests.outcome).
+OUTCOME_MISS = 0  # no contact before the end of the step
+OUTCOME_HIT = 1  # the predicted contact was resolved
+OUTCOME_SUPERSEDED = 2  # a contact was predicted, but an earlier one changed a path first
+OUTCOME_CAPPED = 3  # predicted, but the per-step event cap stopped the step first
+OUTCOME_NAMES = ("miss", "hit", "superseded", "capped")
+
+
+@dataclass(frozen=True)
+class StepBegin:
+    """A step is about to run.
+
+    step: index of the step (0-based); time: simulated time at its start (s);
+    dt: its length (s), exactly as used (kept so a real-time run can be repeated).
+    """
+
+    step: int
+    time: float
+    dt: float
+
+
+@dataclass(frozen=True)
+class ContactResolved:
+    """One contact, resolved at ``time_in_step`` seconds after the step began.
+
+    kind: KIND_PAIR (``other`` is particle b) or KIND_WALL (``other`` is the wall index).
+    order: 0-based position among this step's contacts.
+    point: (3,) contact point on the surface of ``a``; normal: (3,) unit, from b (or the
+    wall) towards a. impulse: j (N·s) applied along ``normal`` to ``a`` (and -j to b);
+    for a wall it is m_a times the change of normal speed (inf for an immovable sphere).
+    velocity_*: (3,) m/s just before and after. restitution: the combined coefficient
+    used; resting: True when the resting rule applied (restitution 0, contact held).
+    closing_speed: normal approach speed before the contact (m/s, >= 0).
+    """
+
+    step: int
+    order: int
+    time_in_step: float
+    kind: int
+    a: int
+    other: int
+    point: np.ndarray
+    normal: np.ndarray
+    impulse: float
+    velocity_a_before: np.ndarray
+    velocity_a_after: np.ndarray
+    velocity_b_before: np.ndarray | None
+    velocity_b_after: np.ndarray | None
+    restitution: float
+    closing_speed: float
+    resting: bool
+
+
+@dataclass(frozen=True)
+class SweptTests:
+    """Every narrow-phase test run during one step, as parallel arrays of length M.
+
+    kind: (M,) int8 KIND_PAIR / KIND_WALL; a, other: (M,) int32 particle, and particle or
+    wall index; start: (M,) time in the step the test started from (s); toi: (M,) predicted
+    time of impact in the step (s, NaN when none); outcome: (M,) int8 OUTCOME_*.
+    """
+
+    step: int
+    kind: np.ndarray
+    a: np.ndarray
+    other: np.ndarray
+    start: np.ndarray
+    toi: np.ndarray
+    outcome: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.kind)
+
+
+@dataclass(frozen=True)
+class EngineWarning:
+    """Something the user should know about a step (code is a stable identifier)."""
+
+    step: int
+    code: str
+    message: str
+
+
+@dataclass(frozen=True)
+class StepEnd:
+    """A step has finished.
+
+    positions, velocities: (N, 3) state at ``time`` (copies). kinetic, potential: J
+    (potential is -m·g_i·x relative to the origin); momentum: (3,) kg·m/s over movable
+    particles. counts: contacts, swept_tests, events (heap pops), resting (contacts held).
+    max_overlap: deepest sphere–sphere or sphere–wall penetration after the step (m,
+    0 when none). timings: seconds per phase. state_hash: hex digest over the exact bytes
+    of positions and velocities.
+    """
+
+    step: int
+    time: float
+    dt: float
+    positions: np.ndarray
+    velocities: np.ndarray
+    kinetic: float
+    potential: float
+    momentum: np.ndarray
+    counts: dict[str, int]
+    max_overlap: float
+    timings: dict[str, float]
+    state_hash: str
+    warnings: tuple[str, ...] = field(default=())
+
+
+Event = StepBegin | ContactResolved | SweptTests | EngineWarning | StepEnd

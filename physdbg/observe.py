@@ -1,0 +1,60 @@
+"""Observers: whoever listens to the engine.
+
+The engine holds at most one observer and calls ``observer.on_event(event)`` for each
+typed event of :mod:`physdbg.events`. Recorders, summaries and tests are observers;
+:class:`FanOut` hands every event to several of them.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from .events import ContactResolved, EngineWarning, Event, StepBegin, StepEnd, SweptTests
+
+
+class Observer(Protocol):
+    def on_event(self, event: Event) -> None: ...
+
+
+class FanOut:
+    """Passes each event to every observer, in the order given."""
+
+    def __init__(self, *observers: Observer):
+        self.observers = [o for o in observers if o is not None]
+
+    def on_event(self, event: Event) -> None:
+        for observer in self.observers:
+            observer.on_event(event)
+
+
+class ListObserver:
+    """Keeps every event, grouped by type; for tests and small scripts."""
+
+    def __init__(self) -> None:
+        self.events: list[Event] = []
+
+    def on_event(self, event: Event) -> None:
+        self.events.append(event)
+
+    def of_type(self, kind: type) -> list:
+        return [e for e in self.events if isinstance(e, kind)]
+
+    @property
+    def contacts(self) -> list[ContactResolved]:
+        return self.of_type(ContactResolved)
+
+    @property
+    def step_ends(self) -> list[StepEnd]:
+        return self.of_type(StepEnd)
+
+    @property
+    def step_begins(self) -> list[StepBegin]:
+        return self.of_type(StepBegin)
+
+    @property
+    def swept_tests(self) -> list[SweptTests]:
+        return self.of_type(SweptTests)
+
+    @property
+    def warnings(self) -> list[EngineWarning]:
+        return self.of_type(EngineWarning)

@@ -1,0 +1,472 @@
+"""Scenes are data: TOML files validated into a :class:`Scene`.
+
+A scene is a built-in name (``physdbg scenes`` lists them) or a path to a ``.toml`` file.
+Every field is documented in docs/scenes.md; :data:`FIELDS` is the source of truth.
+Any field can be overridden before validation with ``key=value`` strings, where the key
+is a dotted path (``integrator``, ``generate.count``, ``particles.0.radius``) and the
+value is a TOML value (bare words are taken as strings).
+
+Every mistake raises :class:`~physdbg.errors.SceneError` naming the file, the field and
+what is allowed.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import tomllib
+from dataclasses import dataclass, field
+from fractions import Fraction
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .engine import (
+    BROAD_PHASES,
+    DETECTION_NAMES,
+    INTEGRATOR_NAMES,
+    ORDERING_NAMES,
+    RESTITUTION_RULES,
+    Settings,
+    State,
+    Walls,
+    World,
+)
+from .errors import SceneError, UnknownSceneError
+from .scenes import builtin_descriptions, builtin_names, builtin_text  # noqa: F401
+
+# ----------------------------------------------------------------------------- schema
+TOP_FIELDS = {
+    "name": "scene name (text)",
+    "description": "one line shown by `physdbg scenes` (text)",
+    "dt": 'time step: seconds > 0, a fraction such as "1/60", or "real" (wall-clock time per step)',
+    "max_dt": "with dt = \"real\": longest step allowed, seconds > 0 (default 0.05)",
+    "steps": "number of steps, integer >= 1 (give steps or duration)",
+    "duration": "simulated seconds > 0 (give steps or duration)",
+    "seed": "random seed for generated initial conditions, integer >= 0",
+    "integrator": "one of " + ", ".join(INTEGRATOR_NAMES),
+    "detection": "one of " + ", ".join(DETECTION_NAMES),
+    "samples": "samples along each path for detection = \"sampled\", integer >= 1",
+    "ordering": "one of " + ", ".join(ORDERING_NAMES),
+    "broad_phase": "one of " + ", ".join(BROAD_PHASES),
+    "gravity": "gravity vector [x, y, z] in m/s²",
+    "drag": "drag d in v·d^t, 0 < d <= 1 (1 = none)",
+    "restitution_rule": "how two restitutions combine: one of " + ", ".join(RESTITUTION_RULES),
+    "rest_speed": "closing speed (m/s, >= 0) at or below which a contact rests",
+    "contact_tolerance": "allowed overlap and resting gap, metres > 0",
+    "max_events_per_step": "cap on contacts resolved in one step, integer >= 1",
+    "particles": "array of [[particles]] tables",
+    "planes": "array of [[planes]] tables",
+    "box": "[box] table: closed axis-aligned container",
+    "generate": "[generate] table: generated particles",
+}
+PARTICLE_FIELDS = {
+    "position": "[x, y, z] in m",
+    "velocity": "[x, y, z] in m/s (default [0, 0, 0]; must be zero when immovable)",
+    "radius": "metres > 0",
+    "mass": "kg > 0 (or give inverse_mass)",
+    "inverse_mass": "1/kg >= 0; 0 = immovable",
+    "restitution": "0 <= e <= 1 (default 1)",
+    "gravity_scale": "multiplies gravity for this particle (default 1)",
+}
+PLANE_FIELDS = {
+    "name": "text shown in events (default plane<k>)",
+    "normal": "[x, y, z], non-zero; spheres are kept on the side it points to",
+    "offset": "d in n·x = d (m), with n the normalised normal",
+    "restitution": "0 <= e <= 1 (default 1)",
+    "two_sided": "true for a thin wall spheres bounce off from either side (default false)",
+    "thickness": "thickness of a two-sided wall, metres >= 0 (default 0)",
+}
+BOX_FIELDS = {
+    "min": "[x, y, z] lower corner (m)",
+    "max": "[x, y, z] upper corner (m), larger than min on every axis",
+    "restitution": "0 <= e <= 1 for all six walls (default 1)",
+}
+GENERATE_FIELDS = {
+    "kind": 'one of "rain" (in the [box]) or "gas" (makes its own box)',
+    "count": "number of particles, integer >= 0",
+    "radius": "metres > 0",
+    "mass": "kg > 0 (default 1)",
+    "restitution": "0 <= e <= 1 (default 1)",
+    "speed": "typical speed, m/s >= 0 (rain: each speed within ±10 % of it; gas: rms speed)",
+    "packing_fraction": "gas only: sphere volume / box volume, 0 < phi <= 0.45",
+}
+FIELDS = {"scene": TOP_FIELDS, "particles": PARTICLE_FIELDS, "planes": PLANE_FIELDS,
+          "box": BOX_FIELDS, "generate": GENERATE_FIELDS}
+
+_SETTINGS_DEFAULTS = Settings()
+
+
+@dataclass
+class Scene:
+    """A validated scene: everything needed to build a World and to repeat a run.
+
+    dt: seconds, or None for real elapsed time; steps: how many steps to run (None in
+    real-time mode with a duration: run until that much time has passed).
+    """
+
+    name: str
+    description: str
+    source: str
+    settings: Settings
+    dt: float | None
+    max_dt: float
+    steps: int | None
+    duration: float | None
+    seed: int
+    state: State
+    walls: Walls
+    raw: dict[str, Any] = field(repr=False)
+
+    def build_world(self, observer=None) -> World:
+        """A fresh World on a copy of the initial state (the scene itself never changes)."""
+        return World(self.state.copy(), self.walls, self.settings, observer)
+
+
+# ----------------------------------------------------------------------------- loading
+def read_scene_text(scene: str) -> tuple[str, str]:
+    """(TOML text, source label) for a built-in name or a file path."""
+    if scene in builtin_names():
+        return builtin_text(scene), f"built-in scene '{scene}'"
+    path = Path(scene)
+    if not path.exists():
+        close = difflib.get_close_matches(scene, builtin_names(), n=1)
+        hint = f" Did you mean '{close[0]}'?" if close else ""
+        raise UnknownSceneError(
+            f"no built-in scene or file called '{scene}'.{hint} Built-in scenes: "
+            + ", ".join(builtin_names()))
+    if path.is_dir():
+        raise UnknownSceneError(f"{scene}: is a directory; give a .toml scene file")
+    try:
+        return path.read_text(encoding="utf-8"), str(path)
+    except (OSError, UnicodeDecodeError) as err:
+        raise UnknownSceneError(f"{scene}: cannot read the file ({err})") from None
+
+
+def load_scene(scene: str, overrides: list[str] | tuple[str, ...] = ()) -> Scene:
+    """Load a built-in scene or a TOML file, apply ``key=value`` overrides, validate."""
+    text, source = read_scene_text(scene)
+    return parse_scene(text, source, overrides)
+
+
+def parse_scene(text: str, source: str = "<scene>", overrides=()) -> Scene:
+    """Validate TOML ``text`` (from ``source``) after applying overrides."""
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise SceneError(source, "", f"not valid TOML: {err}") from None
+    origins: dict[str, str] = {}
+    for item in overrides:
+        _apply_override(raw, item, source)
+        origins[item.split("=", 1)[0].strip()] = item
+    return _validate(raw, source, origins)
+
+
+def _parse_value(text: str) -> Any:
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def _apply_override(raw: dict, item: str, source: str) -> None:
+    if "=" not in item:
+        raise SceneError(source, item, "an override must look like key=value, e.g. integrator=verlet")
+    key, text = (part.strip() for part in item.split("=", 1))
+    if not key:
+        raise SceneError(source, item, "an override needs a field name before '='")
+    parts = key.split(".")
+    if key in ("steps", "duration"):
+        # the run length is given one way: overriding one replaces the other
+        raw.pop("duration" if key == "steps" else "steps", None)
+    node: Any = raw
+    for depth, part in enumerate(parts[:-1]):
+        here = ".".join(parts[:depth + 1])
+        if isinstance(node, list):
+            if not part.isdigit() or int(part) >= len(node):
+                raise SceneError(source, here, f"--set {item}: index must be 0..{len(node) - 1}")
+            node = node[int(part)]
+        else:
+            if part not in node:
+                if part in ("box", "generate"):
+                    node[part] = {}
+                else:
+                    raise SceneError(source, here, f"--set {item}: the scene has no '{here}'")
+            node = node[part]
+    last = parts[-1]
+    if isinstance(node, list):
+        if not last.isdigit() or int(last) >= len(node):
+            raise SceneError(source, key, f"--set {item}: index must be 0..{len(node) - 1}")
+        node[int(last)] = _parse_value(text)
+    else:
+        node[last] = _parse_value(text)
+
+
+# ----------------------------------------------------------------------------- validation
+class _Checker:
+    """Small helpers that raise SceneError with the file, the field and what is allowed."""
+
+    def __init__(self, source: str, origins: dict[str, str]):
+        self.source = source
+        self.origins = origins
+
+    def fail(self, name: str, problem: str):
+        origin = self.origins.get(name)
+        if origin:
+            problem = f"{problem} (set on the command line: --set {origin})"
+        raise SceneError(self.source, name, problem)
+
+    def known(self, table: dict, allowed: dict, prefix: str) -> None:
+        for key in table:
+            if key not in allowed:
+                close = difflib.get_close_matches(key, list(allowed), n=1)
+                hint = f"did you mean '{close[0]}'? " if close else ""
+                self.fail(prefix + key, f"unknown field; {hint}allowed: {', '.join(allowed)}")
+
+    def number(self, table, key, name, *, default=None, lo=None, hi=None, lo_open=False, integer=False):
+        if key not in table:
+            if default is None:
+                self.fail(name, "is required: " + self._what(lo, hi, lo_open, integer))
+            return default
+        value = table[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or (integer and not isinstance(value, int)):
+            self.fail(name, f"got {value!r}; expected " + self._what(lo, hi, lo_open, integer))
+        if not math.isfinite(value) or (lo is not None and (value <= lo if lo_open else value < lo)) or (
+                hi is not None and value > hi):
+            self.fail(name, f"got {value!r}; expected " + self._what(lo, hi, lo_open, integer))
+        return int(value) if integer else float(value)
+
+    @staticmethod
+    def _what(lo, hi, lo_open, integer):
+        kind = "an integer" if integer else "a number"
+        if lo is not None and hi is not None:
+            return f"{kind} {'>' if lo_open else '>='} {lo} and <= {hi}"
+        if lo is not None:
+            return f"{kind} {'>' if lo_open else '>='} {lo}"
+        return kind
+
+    def vector(self, table, key, name, default=None):
+        if key not in table:
+            if default is None:
+                self.fail(name, "is required: [x, y, z] (three numbers)")
+            return np.array(default, dtype=np.float64)
+        value = table[key]
+        if (not isinstance(value, list) or len(value) != 3
+                or any(isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c) for c in value)):
+            self.fail(name, f"got {value!r}; expected [x, y, z] (three finite numbers)")
+        return np.array(value, dtype=np.float64)
+
+    def choice(self, table, key, name, options, default):
+        value = table.get(key, default)
+        if value not in options:
+            close = difflib.get_close_matches(str(value), list(options), n=1)
+            hint = f"did you mean '{close[0]}'? " if close else ""
+            self.fail(name, f"got {value!r}; {hint}allowed: {', '.join(options)}")
+        return value
+
+    def boolean(self, table, key, name, default):
+        value = table.get(key, default)
+        if not isinstance(value, bool):
+            self.fail(name, f"got {value!r}; expected true or false")
+        return value
+
+    def text(self, table, key, name, default):
+        value = table.get(key, default)
+        if not isinstance(value, str):
+            self.fail(name, f"got {value!r}; expected text")
+        return value
+
+    def table(self, raw, key, name):
+        value = raw.get(key, {})
+        if not isinstance(value, dict):
+            self.fail(name, f"expected a [{key}] table")
+        return value
+
+    def tables(self, raw, key, name):
+        value = raw.get(key, [])
+        if not isinstance(value, list) or not all(isinstance(t, dict) for t in value):
+            self.fail(name, f"expected an array of [[{key}]] tables")
+        return value
+
+
+def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
+    c = _Checker(source, origins)
+    c.known(raw, TOP_FIELDS, "")
+    name = c.text(raw, "name", "name", Path(source).stem if source.endswith(".toml") else "scene")
+    description = c.text(raw, "description", "description", "")
+
+    # time
+    dt_raw = raw.get("dt")
+    if dt_raw is None:
+        c.fail("dt", "is required: " + TOP_FIELDS["dt"])
+    if dt_raw == "real":
+        dt = None
+    elif isinstance(dt_raw, str):
+        try:
+            dt = float(Fraction(dt_raw))
+        except (ValueError, ZeroDivisionError):
+            c.fail("dt", f"got {dt_raw!r}; expected " + TOP_FIELDS["dt"])
+        if not dt > 0:
+            c.fail("dt", f"got {dt_raw!r}; expected " + TOP_FIELDS["dt"])
+    else:
+        if isinstance(dt_raw, bool) or not isinstance(dt_raw, (int, float)) or not (0 < dt_raw < math.inf):
+            c.fail("dt", f"got {dt_raw!r}; expected " + TOP_FIELDS["dt"])
+        dt = float(dt_raw)
+    max_dt = c.number(raw, "max_dt", "max_dt", default=0.05, lo=0, lo_open=True)
+    steps = c.number(raw, "steps", "steps", default=0, lo=1, integer=True) if "steps" in raw else None
+    duration = c.number(raw, "duration", "duration", lo=0, lo_open=True) if "duration" in raw else None
+    if steps is None and duration is None:
+        c.fail("steps", "give steps (an integer >= 1) or duration (seconds > 0)")
+    if steps is not None and duration is not None:
+        c.fail("duration", "give steps or duration, not both")
+    if steps is None and dt is not None:
+        steps = max(1, math.ceil(duration / dt - 1e-9))
+    seed = c.number(raw, "seed", "seed", default=0, lo=0, integer=True)
+
+    d = _SETTINGS_DEFAULTS
+    settings = Settings(
+        integrator=c.choice(raw, "integrator", "integrator", INTEGRATOR_NAMES, d.integrator),
+        detection=c.choice(raw, "detection", "detection", DETECTION_NAMES, d.detection),
+        samples=c.number(raw, "samples", "samples", default=d.samples, lo=1, integer=True),
+        ordering=c.choice(raw, "ordering", "ordering", ORDERING_NAMES, d.ordering),
+        broad_phase=c.choice(raw, "broad_phase", "broad_phase", list(BROAD_PHASES), d.broad_phase),
+        gravity=tuple(c.vector(raw, "gravity", "gravity", d.gravity).tolist()),
+        drag=c.number(raw, "drag", "drag", default=d.drag, lo=0, hi=1, lo_open=True),
+        restitution_rule=c.choice(raw, "restitution_rule", "restitution_rule", RESTITUTION_RULES,
+                                  d.restitution_rule),
+        rest_speed=c.number(raw, "rest_speed", "rest_speed", default=d.rest_speed, lo=0),
+        contact_tolerance=c.number(raw, "contact_tolerance", "contact_tolerance",
+                                   default=d.contact_tolerance, lo=0, lo_open=True),
+        max_events_per_step=c.number(raw, "max_events_per_step", "max_events_per_step",
+                                     default=d.max_events_per_step, lo=1, integer=True),
+    )
+
+    # walls
+    names, normals, offsets, rest, two, thick = [], [], [], [], [], []
+    for k, plane in enumerate(c.tables(raw, "planes", "planes")):
+        p = f"planes.{k}."
+        c.known(plane, PLANE_FIELDS, p)
+        normal = c.vector(plane, "normal", p + "normal")
+        length = float(np.linalg.norm(normal))
+        if length == 0.0:
+            c.fail(p + "normal", "must not be [0, 0, 0]")
+        names.append(c.text(plane, "name", p + "name", f"plane{k}"))
+        normals.append(normal / length)
+        offsets.append(c.number(plane, "offset", p + "offset", default=0.0))
+        rest.append(c.number(plane, "restitution", p + "restitution", default=1.0, lo=0, hi=1))
+        two.append(c.boolean(plane, "two_sided", p + "two_sided", False))
+        thick.append(c.number(plane, "thickness", p + "thickness", default=0.0, lo=0))
+        if thick[-1] > 0 and not two[-1]:
+            c.fail(p + "thickness", "only a two-sided wall has a thickness; set two_sided = true")
+    box = c.table(raw, "box", "box")
+    box_lo = box_hi = None
+    if box:
+        c.known(box, BOX_FIELDS, "box.")
+        box_lo = c.vector(box, "min", "box.min")
+        box_hi = c.vector(box, "max", "box.max")
+        if not np.all(box_hi > box_lo):
+            c.fail("box.max", f"got {box_hi.tolist()}; must exceed box.min {box_lo.tolist()} on every axis")
+        e_box = c.number(box, "restitution", "box.restitution", default=1.0, lo=0, hi=1)
+
+    # particles
+    pos, vel, inv, rad, res, gs = [], [], [], [], [], []
+    for k, part in enumerate(c.tables(raw, "particles", "particles")):
+        p = f"particles.{k}."
+        c.known(part, PARTICLE_FIELDS, p)
+        pos.append(c.vector(part, "position", p + "position"))
+        vel.append(c.vector(part, "velocity", p + "velocity", [0.0, 0.0, 0.0]))
+        rad.append(c.number(part, "radius", p + "radius", lo=0, lo_open=True))
+        if "mass" in part and "inverse_mass" in part:
+            c.fail(p + "mass", "give mass or inverse_mass, not both")
+        if "inverse_mass" in part:
+            inv.append(c.number(part, "inverse_mass", p + "inverse_mass", lo=0))
+        else:
+            inv.append(1.0 / c.number(part, "mass", p + "mass", default=1.0, lo=0, lo_open=True))
+        if inv[-1] == 0.0 and np.any(vel[-1] != 0.0):
+            c.fail(p + "velocity", "an immovable particle (inverse_mass = 0) must have velocity [0, 0, 0]")
+        res.append(c.number(part, "restitution", p + "restitution", default=1.0, lo=0, hi=1))
+        gs.append(c.number(part, "gravity_scale", p + "gravity_scale", default=1.0))
+
+    gen = c.table(raw, "generate", "generate")
+    if gen:
+        c.known(gen, GENERATE_FIELDS, "generate.")
+        kind = c.choice(gen, "kind", "generate.kind", ("rain", "gas"), None)
+        g = _generate(c, gen, kind, seed, box_lo, box_hi)
+        if kind == "gas":
+            if box:
+                c.fail("box", "generate.kind = \"gas\" makes its own box from packing_fraction; remove [box]")
+            box_lo, box_hi, e_box = g.pop("box")
+        pos += list(g["position"])
+        vel += list(g["velocity"])
+        rad += list(g["radius"])
+        inv += list(g["inverse_mass"])
+        res += list(g["restitution"])
+        gs += [1.0] * len(g["radius"])
+    if box_lo is not None:
+        for axis, label in enumerate("xyz"):
+            for sign, lim in ((1.0, box_lo), (-1.0, box_hi)):
+                n = np.zeros(3)
+                n[axis] = sign
+                names.append(f"{label}{'-' if sign > 0 else '+'}")
+                normals.append(n)
+                offsets.append(sign * lim[axis])
+                rest.append(e_box)
+                two.append(False)
+                thick.append(0.0)
+
+    state = State(np.array(pos, dtype=np.float64).reshape(-1, 3), np.array(vel, dtype=np.float64).reshape(-1, 3),
+                  np.array(inv), np.array(rad), np.array(res), np.array(gs))
+    walls = Walls(names, np.array(normals, dtype=np.float64).reshape(-1, 3), np.array(offsets, dtype=np.float64),
+                  np.array(rest, dtype=np.float64), np.array(two, dtype=np.bool_), np.array(thick, dtype=np.float64))
+    return Scene(name, description, source, settings, dt, max_dt, steps, duration, seed, state, walls, raw)
+
+
+def _generate(c: _Checker, gen: dict, kind: str, seed: int, box_lo, box_hi) -> dict:
+    """Particles for ``[generate]``, placed on a jittered lattice so none overlap."""
+    count = c.number(gen, "count", "generate.count", lo=0, integer=True)
+    radius = c.number(gen, "radius", "generate.radius", lo=0, lo_open=True)
+    mass = c.number(gen, "mass", "generate.mass", default=1.0, lo=0, lo_open=True)
+    restitution = c.number(gen, "restitution", "generate.restitution", default=1.0, lo=0, hi=1)
+    speed = c.number(gen, "speed", "generate.speed", default=1.0, lo=0)
+    rng = np.random.default_rng(seed)
+    out: dict[str, Any] = {}
+    if kind == "gas":
+        phi = c.number(gen, "packing_fraction", "generate.packing_fraction", lo=0, hi=0.45, lo_open=True)
+        if count == 0:
+            c.fail("generate.count", "a gas needs at least one particle (it sizes the box)")
+        side = (count * 4.0 / 3.0 * math.pi * radius**3 / phi) ** (1.0 / 3.0)
+        box_lo, box_hi = np.zeros(3), np.full(3, side)
+        out["box"] = (box_lo, box_hi, restitution)
+        velocities = rng.normal(size=(count, 3))
+        velocities -= velocities.mean(axis=0) if count > 1 else 0.0
+        rms = math.sqrt(float(np.mean(np.sum(velocities**2, axis=1)))) or 1.0
+        velocities *= speed / rms
+    else:
+        if "packing_fraction" in gen:
+            c.fail("generate.packing_fraction", "only for kind = \"gas\"")
+        if box_lo is None:
+            c.fail("box", "generate.kind = \"rain\" fills the [box]; add a [box] table")
+        directions = rng.normal(size=(count, 3))
+        directions /= np.maximum(np.linalg.norm(directions, axis=1, keepdims=True), 1e-300)
+        velocities = directions * (speed * (1.0 + 0.1 * rng.uniform(-1.0, 1.0, size=(count, 1))))
+    # lattice of cells at least 2r (+1 %) apart inside the box, shuffled, jittered
+    inner_lo = box_lo + radius
+    inner_hi = box_hi - radius
+    extent = inner_hi - inner_lo
+    spacing = 2.0 * radius * 1.01
+    per_axis = np.floor(np.maximum(extent, 0.0) / spacing).astype(int) + 1
+    if np.any(extent < 0) or int(np.prod(per_axis)) < count:
+        c.fail("generate.count", f"{count} spheres of radius {radius} do not fit in the box "
+                                 f"(room for {int(np.prod(per_axis)) if np.all(extent >= 0) else 0})")
+    cells = np.stack(np.meshgrid(*[np.arange(k) for k in per_axis], indexing="ij"), axis=-1).reshape(-1, 3)
+    chosen = cells[rng.permutation(len(cells))[:count]] if kind == "rain" else cells[:count]
+    step = np.where(per_axis > 1, extent / np.maximum(per_axis - 1, 1), 0.0)
+    centre = np.where(per_axis > 1, inner_lo + chosen * step, 0.5 * (inner_lo + inner_hi))
+    slack = np.maximum(step - 2.0 * radius, 0.0) * 0.45
+    # neighbours differ by one cell on some axis, so they stay >= step - 2*slack >= 2r
+    # apart there; clipping to the box moves other axes only along their own cell row
+    positions = np.clip(centre + rng.uniform(-1.0, 1.0, size=centre.shape) * slack, inner_lo, inner_hi)
+    out.update(position=positions, velocity=velocities, radius=np.full(count, radius),
+               inverse_mass=np.full(count, 1.0 / mass), restitution=np.full(count, restitution))
+    return out

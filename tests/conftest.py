@@ -1,0 +1,46 @@
+"""Shared helpers: small worlds built directly from arrays."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from physdbg.engine import Settings, State, Walls, World
+from physdbg.observe import ListObserver
+
+
+def make_state(positions, velocities=None, *, radius=0.1, inverse_mass=1.0, restitution=1.0, gravity_scale=1.0):
+    positions = np.asarray(positions, dtype=float).reshape(-1, 3)
+    n = len(positions)
+    velocities = np.zeros((n, 3)) if velocities is None else np.asarray(velocities, dtype=float).reshape(-1, 3)
+
+    def per(value):
+        return np.broadcast_to(np.asarray(value, dtype=float), (n,)).copy()
+
+    return State(positions, velocities, per(inverse_mass), per(radius), per(restitution), per(gravity_scale))
+
+
+def make_walls(*planes):
+    """planes: (normal, offset, restitution[, two_sided])."""
+    names, normals, offsets, rest, two = [], [], [], [], []
+    for k, plane in enumerate(planes):
+        normal, offset, e = plane[:3]
+        n = np.asarray(normal, dtype=float)
+        names.append(f"w{k}")
+        normals.append(n / np.linalg.norm(n))
+        offsets.append(offset)
+        rest.append(e)
+        two.append(plane[3] if len(plane) > 3 else False)
+    return Walls(names, np.array(normals).reshape(-1, 3), np.array(offsets, dtype=float),
+                 np.array(rest, dtype=float), np.array(two, dtype=bool), np.zeros(len(planes)))
+
+
+def make_world(state, walls=None, observe=True, **settings):
+    observer = ListObserver() if observe else None
+    world = World(state, walls if walls is not None else make_walls(), Settings(**settings), observer)
+    return world, observer
+
+
+@pytest.fixture
+def floor():
+    return make_walls(([0, 1, 0], 0.0, 1.0))

@@ -1,0 +1,124 @@
+"""The CLI through typer's CliRunner: output, JSON, exit codes, errors without tracebacks."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+from typer.testing import CliRunner
+
+from physdbg.cli import app
+from physdbg.scenes import builtin_names
+
+runner = CliRunner()
+
+
+def invoke(*args):
+    result = runner.invoke(app, list(args))
+    assert "Traceback" not in result.output
+    assert result.exception is None or isinstance(result.exception, SystemExit), result.exception
+    return result
+
+
+def test_scenes_lists_every_built_in_with_one_line_each():
+    result = invoke("scenes")
+    assert result.exit_code == 0
+    lines = result.output.strip().splitlines()
+    assert [line.split()[0] for line in lines] == builtin_names()
+    assert all(len(line.split(None, 1)) == 2 for line in lines)
+
+
+def test_run_prints_the_summary():
+    result = invoke("run", "bounce")
+    assert result.exit_code == 0
+    for words in ("steps       300", "contacts    39", "drift", "ms/step", "state hash", "brute-force",
+                  "warnings    none"):
+        assert words in result.output
+
+
+def test_run_json_is_machine_readable_and_repeats_exactly():
+    first = json.loads(invoke("run", "cradle", "--json").output)
+    second = json.loads(invoke("run", "cradle", "--json").output)
+    assert first["steps"] == 180 and first["contacts"] == 4
+    assert first["energy_drift"] == 0.0
+    assert first["final_hash"] == second["final_hash"]
+    assert set(first["phase_seconds"]) == {"forces", "broad_phase", "narrow_phase", "resolve", "finish"}
+
+
+def test_overrides_change_the_run():
+    exact = json.loads(invoke("run", "bullet-wall", "--json", "--set", "steps=1").output)
+    tunnel = json.loads(invoke("run", "bullet-wall", "--json", "--set", "steps=1", "-s", "detection=discrete").output)
+    assert exact["contacts"] == 1 and tunnel["contacts"] == 0
+    assert tunnel["detection"] == "discrete"
+
+
+@pytest.mark.parametrize("args, words", [
+    (["run", "nosuchscene"], "no built-in scene or file called 'nosuchscene'"),
+    (["run", "bounce", "--set", "integrator=rk4"], "field 'integrator'"),
+    (["run", "bounce", "--set", "nonsense"], "key=value"),
+])
+def test_bad_input_is_one_clear_line_and_exit_code_2(args, words):
+    result = invoke(*args)
+    assert result.exit_code == 2
+    assert words in result.output
+    assert result.output.startswith("error: ")
+
+
+def test_bad_scene_file_names_the_file(tmp_path):
+    path = tmp_path / "mine.toml"
+    path.write_text("dt = 0.1\nsteps = 2\nintegrator = 'rk4'\n")
+    result = invoke("run", str(path))
+    assert result.exit_code == 2
+    assert f"{path}: field 'integrator'" in result.output
+
+
+def test_real_time_run_can_be_repeated_exactly_from_its_dts(tmp_path):
+    scene = tmp_path / "real.toml"
+    scene.write_text('dt = "real"\nsteps = 40\ngravity = [0, -9.81, 0]\n'
+                     "[[particles]]\nposition = [0, 0.5, 0]\nradius = 0.1\nrestitution = 0.7\n"
+                     "[[planes]]\nnormal = [0, 1, 0]\n")
+    dts = tmp_path / "dts.txt"
+    live = json.loads(invoke("run", str(scene), "--json", "--dts-out", str(dts)).output)
+    assert len(dts.read_text().split()) == 40
+    assert len(set(live["dts"])) > 1  # real elapsed time: the steps differ
+    again = json.loads(invoke("run", str(scene), "--json", "--dts", str(dts)).output)
+    assert again["final_hash"] == live["final_hash"]
+    assert again["dts"] == live["dts"]
+
+
+def test_bad_dts_file_is_explained(tmp_path):
+    dts = tmp_path / "dts.txt"
+    dts.write_text("0.1\n-3\n")
+    result = invoke("run", "bounce", "--dts", str(dts))
+    assert result.exit_code == 2
+    assert "entry 2" in result.output
+    missing = invoke("run", "bounce", "--dts", str(tmp_path / "missing.txt"))
+    assert missing.exit_code == 2 and "cannot read" in missing.output
+
+
+def test_every_command_is_documented_with_an_example():
+    result = invoke("--help")
+    assert result.exit_code == 0
+    for command in ("scenes", "run"):
+        assert command in result.output
+        help_text = invoke(command, "--help").output
+        assert "Example: physdbg " + command in help_text
+
+
+def test_help_does_not_import_the_engine():
+    code = ("import sys; from physdbg.cli import app\n"
+            "try:\n    app(['--help'])\nexcept SystemExit:\n    pass\n"
+            "print('numba' in sys.modules, 'numpy' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "False False"
+
+
+def test_console_script_runs(tmp_path):
+    exe = [sys.executable, "-m", "physdbg.cli", "run", "cradle", "--set", "steps=3"]
+    out = subprocess.run(exe, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert "steps       3" in out.stdout
+    bad = subprocess.run(exe[:3] + ["run", "nope"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "Traceback" not in bad.stderr and "error:" in bad.stderr

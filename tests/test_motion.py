@@ -1,0 +1,95 @@
+"""Integrators and drag against their closed forms."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from physdbg.engine.motion import EXACT, VERLET, path_coefficients, velocity_coefficients
+
+from .conftest import make_state, make_world
+
+G = 9.81
+
+
+def _fall(integrator, dt=0.01, steps=100, drag=1.0, velocity=(0.0, 0.0, 0.0), dts=None):
+    state = make_state([[0.0, 0.0, 0.0]], [velocity])
+    world, _ = make_world(state, observe=False, integrator=integrator, gravity=(0.0, -G, 0.0), drag=drag)
+    for step_dt in dts if dts is not None else [dt] * steps:
+        world.step(step_dt)
+    return world.state.positions[0].copy(), world.state.velocities[0].copy(), world.time
+
+
+@pytest.mark.parametrize("integrator, error_cm", [
+    ("euler", +4.905), ("semi-implicit", -4.905), ("verlet", 0.0), ("exact", 0.0)])
+def test_position_error_under_gravity_after_one_second(integrator, error_cm):
+    position, velocity, t = _fall(integrator)
+    exact = -0.5 * G * t * t
+    assert (position[1] - exact) * 100 == pytest.approx(error_cm, abs=1e-9)
+    assert velocity[1] == pytest.approx(-G * t, rel=1e-12)  # all four get the velocity right
+
+
+def test_explicit_euler_is_exactly_the_seeds_update():
+    """P_new = P_old + v t (old velocity), v_new = v d^t + a t."""
+    d, dt = 0.9, 0.05
+    v0 = np.array([1.0, 2.0, -3.0])
+    position, velocity, _ = _fall("euler", dt=dt, steps=1, drag=d, velocity=tuple(v0))
+    np.testing.assert_array_equal(position, v0 * dt)
+    np.testing.assert_allclose(velocity, v0 * d**dt + np.array([0.0, -G, 0.0]) * dt, rtol=1e-15)
+
+
+@pytest.mark.parametrize("integrator", ["euler", "semi-implicit", "verlet", "exact"])
+def test_drag_alone_decays_as_d_to_the_t_whatever_the_frame_rate(integrator):
+    """v(t) = v0 d^t: the seed's frame-rate independent drag, with uneven steps too."""
+    d = 0.5
+    rng = np.random.default_rng(3)
+    dts = rng.uniform(0.001, 0.05, size=60)
+    state = make_state([[0.0, 0.0, 0.0]], [[2.0, -1.0, 0.5]])
+    world, _ = make_world(state, observe=False, integrator=integrator, gravity=(0.0, 0.0, 0.0), drag=d)
+    for dt in dts:
+        world.step(float(dt))
+    np.testing.assert_allclose(world.state.velocities[0], np.array([2.0, -1.0, 0.5]) * d ** dts.sum(), rtol=1e-12)
+
+
+@pytest.mark.parametrize("dt", [1 / 240, 1 / 60, 1 / 7, 0.5])
+def test_exact_integrator_follows_the_closed_form_with_drag_and_gravity(dt):
+    """dv/dt = g - k v, k = -ln d:  v = v0 e^(-kt) + g(1-e^(-kt))/k, x = ∫v, for any dt."""
+    d = 0.3
+    k = -math.log(d)
+    v0 = np.array([3.0, 4.0, 0.0])
+    g = np.array([0.0, -G, 0.0])
+    steps = int(round(2.0 / dt))
+    position, velocity, t = _fall("exact", dt=dt, steps=steps, drag=d, velocity=tuple(v0))
+    decay = math.exp(-k * t)
+    expected_v = v0 * decay + g * (1 - decay) / k
+    expected_x = v0 * (1 - decay) / k + g / k * (t - (1 - decay) / k)
+    np.testing.assert_allclose(velocity, expected_v, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(position, expected_x, rtol=1e-12, atol=1e-12)
+
+
+@settings(max_examples=200, deadline=None)
+@given(k=st.floats(0.0, 50.0), tau=st.floats(0.0, 2.0))
+def test_path_coefficients_are_the_closed_form_everywhere(k, tau):
+    """phi1 = (1-e^(-k tau))/k, phi2 = (tau - phi1)/k, and their k -> 0 limits."""
+    p1, p2, dp1 = path_coefficients(EXACT, k, tau)
+    if k * tau < 1e-6:
+        assert p1 == pytest.approx(tau, rel=1e-5, abs=1e-300)
+        assert p2 == pytest.approx(0.5 * tau * tau, rel=1e-5, abs=1e-300)
+    else:
+        ref1 = -math.expm1(-k * tau) / k
+        # tau - phi1 in high precision via the series tail when k tau is small
+        assert p1 == pytest.approx(ref1, rel=1e-14)
+        if k * tau > 0.1:
+            assert p2 == pytest.approx((tau - ref1) / k, rel=1e-12)
+    assert dp1 == pytest.approx(math.exp(-k * tau), rel=1e-15)
+    assert p2 >= 0.0 and p1 <= tau + 1e-300
+
+
+def test_verlet_path_is_the_parabola_and_velocity_has_the_seeds_drag():
+    assert path_coefficients(VERLET, 0.0, 0.3) == (0.3, 0.5 * 0.3 * 0.3, 1.0)
+    damp, gain = velocity_coefficients(VERLET, 0.5, math.log(2.0), 2.0)
+    assert damp == 0.25 and gain == 2.0

@@ -1,0 +1,243 @@
+"""The step pipeline against analytic answers: bounces, cradle, gas, resting, events."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from physdbg.engine import energies
+from physdbg.events import (
+    KIND_PAIR,
+    KIND_WALL,
+    OUTCOME_HIT,
+    OUTCOME_MISS,
+    ContactResolved,
+    StepBegin,
+    StepEnd,
+    SweptTests,
+)
+from physdbg.observe import ListObserver
+from physdbg.scene import load_scene
+
+from .conftest import make_state, make_walls, make_world
+
+G = 9.81
+
+
+# ----------------------------------------------------------------------------- bounce
+@pytest.mark.parametrize("dt", [1 / 60, 1 / 7])
+def test_bouncing_ball_matches_closed_form_for_ten_bounces(dt):
+    """Impact times t_{k+1} = t1[1 + 2e(1-e^k)/(1-e)] and apexes e^(2k)·h0, to 1e-9."""
+    e, h0, r = 0.8, 1.0, 0.1
+    state = make_state([[0.0, h0 + r, 0.0]], radius=r, restitution=e)
+    world, obs = make_world(state, make_walls(([0, 1, 0], 0.0, 1.0)), gravity=(0.0, -G, 0.0))
+    while len(obs.contacts) < 11:
+        world.step(dt)
+    starts = {b.step: b.time for b in obs.step_begins}
+    t1 = math.sqrt(2 * h0 / G)
+    assert t1 == pytest.approx(0.45152, abs=1e-5)
+    for k, contact in enumerate(obs.contacts[:10]):
+        expected_time = t1 * (1 + 2 * e * (1 - e**k) / (1 - e))
+        impact_time = starts[contact.step] + contact.time_in_step
+        assert impact_time == pytest.approx(expected_time, rel=1e-9)
+        apex = contact.velocity_a_after[1] ** 2 / (2 * G)  # height climbed above the contact
+        assert apex == pytest.approx(e ** (2 * (k + 1)) * h0, rel=1e-9)
+        assert contact.kind == KIND_WALL and not contact.resting
+        assert contact.point[1] == pytest.approx(0.0, abs=1e-12)
+    assert obs.contacts[0].velocity_a_after[1] ** 2 / (2 * G) == pytest.approx(0.64, rel=1e-12)
+
+
+def test_bounce_scene_comes_to_rest_on_the_floor():
+    scene = load_scene("bounce")
+    world = scene.build_world()
+    for _ in range(scene.steps):
+        stats = world.step(scene.dt)
+    assert world.state.positions[0, 1] == pytest.approx(0.1, abs=1e-9)
+    assert np.all(world.state.velocities == 0.0)
+    assert stats.held == 1 and stats.contacts == 0
+
+
+# ----------------------------------------------------------------------------- cradle
+def _run_cradle(ordering):
+    scene = load_scene("cradle", [f"ordering={ordering}"])
+    obs = ListObserver()
+    world = scene.build_world(obs)
+    after_impact = None
+    for _ in range(scene.steps):
+        world.step(scene.dt)
+        if obs.contacts and after_impact is None:
+            after_impact = world.state.copy()
+    return world, after_impact, obs
+
+
+def test_cradle_time_ordering_passes_the_blow_to_the_last_ball():
+    world, after_impact, obs = _run_cradle("time")
+    for state in (after_impact, world.state):
+        np.testing.assert_array_equal(state.velocities[:4], 0.0)
+        np.testing.assert_allclose(state.velocities[4], [1.0, 0.0, 0.0], rtol=0, atol=1e-15)
+    # all four contacts happened in the impact step, in order down the row, at one instant
+    assert [c.order for c in obs.contacts] == [0, 1, 2, 3]
+    assert [(c.a, c.other) for c in obs.contacts] == [(0, 1), (1, 2), (2, 3), (3, 4)]
+    assert len({c.step for c in obs.contacts}) == 1
+    # the resting balls never moved; the last one is where the exact answer puts it
+    np.testing.assert_allclose(world.state.positions[1:4, 0], [1.0, 2.0, 3.0], atol=1e-12)
+    np.testing.assert_allclose(world.state.positions[0, 0], 0.0, atol=1e-12)
+    np.testing.assert_allclose(world.state.positions[4, 0], 4.0 + (3.0 - 0.73), atol=1e-12)
+
+
+def test_cradle_index_ordering_does_not_and_shows_why():
+    world, after_impact, obs = _run_cradle("index")
+    # after the impact step a middle ball carries the blow, inside its neighbour
+    assert after_impact.velocities[1, 0] == pytest.approx(1.0)
+    assert after_impact.velocities[4, 0] == 0.0
+    assert np.linalg.norm(after_impact.positions[1] - after_impact.positions[2]) < 1.0 - 1e-3
+    # one ball per step afterwards: the contacts are spread over four steps
+    assert len({c.step for c in obs.contacts}) == 4
+    # and the time lost shows at the end: the last ball lags, the middle ones are displaced
+    assert world.state.positions[4, 0] < 4.0 + (3.0 - 0.73) - 2 * (1 / 60)
+    assert np.max(np.abs(world.state.positions[1:4, 0] - [1.0, 2.0, 3.0])) > 1e-3
+
+
+# ----------------------------------------------------------------------------- gas
+def test_elastic_gas_conserves_energy_over_ten_thousand_steps():
+    scene = load_scene("gas", ["generate.count=27", "steps=10000"])
+    world = scene.build_world()
+    k0, _, _ = energies(world.state, world.gravity)
+    contacts = 0
+    worst_overlap = 0.0
+    for _ in range(scene.steps):
+        stats = world.step(scene.dt)
+        contacts += stats.contacts
+        worst_overlap = max(worst_overlap, stats.max_overlap)
+        assert not stats.warnings
+    k1, _, _ = energies(world.state, world.gravity)
+    assert contacts > 10_000  # it really is a colliding gas
+    assert abs(k1 - k0) / k0 < 1e-10
+    assert worst_overlap <= scene.settings.contact_tolerance
+
+
+# ----------------------------------------------------------------------------- resting
+@pytest.mark.parametrize("integrator", ["exact", "verlet", "semi-implicit", "euler"])
+def test_resting_sphere_stays_at_its_height_with_bounded_events(integrator):
+    r = 0.25
+    state = make_state([[0.3, r, -0.2]], radius=r, restitution=0.5)
+    world, _ = make_world(state, make_walls(([0, 1, 0], 0.0, 0.5)), observe=False,
+                          integrator=integrator, gravity=(0.0, -G, 0.0))
+    heights = []
+    events = []
+    for _ in range(10_000):
+        stats = world.step(1 / 60)
+        heights.append(world.state.positions[0, 1])
+        events.append(stats.contacts)
+    assert max(abs(h - r) for h in heights) <= 1e-9
+    assert max(events) <= 2
+    assert sum(events) <= 4  # it settles once, then costs nothing
+    assert np.all(world.state.positions[0, [0, 2]] == [0.3, -0.2])
+
+
+def test_stacks_and_rows_rest_and_a_dropped_ball_settles():
+    scene = load_scene("rest")
+    world = scene.build_world()
+    start = world.state.positions.copy()
+    per_step = []
+    for _ in range(scene.steps):
+        stats = world.step(scene.dt)
+        per_step.append(stats.contacts)
+        assert stats.max_overlap <= scene.settings.contact_tolerance
+    final = world.state.positions
+    np.testing.assert_allclose(final[:6], start[:6], atol=1e-9)  # stack and row unmoved
+    assert final[6, 1] == pytest.approx(1.5, abs=1e-9)  # dropped ball rests on the row
+    assert np.all(np.abs(world.state.velocities) < 1e-9)
+    assert max(per_step) <= 20
+    assert sum(per_step[-100:]) == 0  # settled: no events any more
+    assert stats.held == 7
+
+
+def test_event_cap_stops_the_step_and_warns():
+    scene = load_scene("cradle", ["max_events_per_step=2"])
+    obs = ListObserver()
+    world = scene.build_world(obs)
+    for _ in range(scene.steps):
+        world.step(scene.dt)
+    caps = [w for w in obs.warnings if w.code == "event-cap"]
+    assert caps, "the cap must be reported"
+    assert max(e.counts["contacts"] for e in obs.step_ends) == 2
+
+
+# ----------------------------------------------------------------------------- events
+def test_events_arrive_in_pipeline_order_with_everything_a_recording_needs():
+    scene = load_scene("cradle")
+    obs = ListObserver()
+    world = scene.build_world(obs)
+    for _ in range(50):
+        world.step(scene.dt)
+    kinds = [type(e) for e in obs.events]
+    assert kinds[0] is StepBegin and kinds[-1] is StepEnd
+    # per step: StepBegin, contacts..., SweptTests, StepEnd
+    step43 = [type(e) for e in obs.events if getattr(e, "step", None) == obs.contacts[0].step]
+    assert step43 == [StepBegin] + [ContactResolved] * 4 + [SweptTests, StepEnd]
+    tests = [t for t in obs.swept_tests if t.step == obs.contacts[0].step][0]
+    assert np.count_nonzero(tests.outcome == OUTCOME_HIT) == 4
+    assert set(np.unique(tests.kind)) <= {KIND_PAIR, KIND_WALL}
+    hits = tests.outcome == OUTCOME_HIT
+    assert np.all(np.isfinite(tests.toi[hits]))
+    assert np.all(np.isnan(tests.toi[tests.outcome == OUTCOME_MISS]))
+    end = obs.step_ends[-1]
+    assert end.positions.shape == (5, 3) and end.velocities.shape == (5, 3)
+    assert set(end.timings) == {"forces", "broad_phase", "narrow_phase", "resolve", "finish"}
+    assert set(end.counts) == {"contacts", "swept_tests", "events", "resting"}
+    assert end.kinetic == pytest.approx(0.5)
+    contact = obs.contacts[0]
+    assert contact.impulse == pytest.approx(1.0)  # j = -(1+1)(1·n)/(1+1), n = -x
+    np.testing.assert_allclose(contact.normal, [-1.0, 0.0, 0.0])
+    np.testing.assert_allclose(contact.point, [0.5, 0.0, 0.0], atol=1e-12)
+
+
+def test_observer_does_not_change_the_run():
+    scene = load_scene("rain", ["steps=60"])
+    watched = scene.build_world(ListObserver())
+    alone = scene.build_world()
+    for _ in range(scene.steps):
+        a = watched.step(scene.dt)
+        b = alone.step(scene.dt)
+        assert a.state_hash == b.state_hash
+
+
+def test_events_carry_copies_not_views():
+    scene = load_scene("bounce", ["steps=5"])
+    obs = ListObserver()
+    world = scene.build_world(obs)
+    world.step(scene.dt)
+    first = obs.step_ends[0].positions.copy()
+    world.step(scene.dt)
+    np.testing.assert_array_equal(obs.step_ends[0].positions, first)
+
+
+# ----------------------------------------------------------------------------- determinism
+# Pinned: bounce, exact + swept + time, 300 steps of 1/60 s (closed forms, no drag:
+# only IEEE +, -, *, /, sqrt). A change to this hash is a change of behaviour.
+GOLDEN_BOUNCE_HASH = "8001b275691de3af018776bfb275eecf"
+
+
+def _final_hash(scene_name, overrides=()):
+    scene = load_scene(scene_name, list(overrides))
+    world = scene.build_world()
+    hashes = [world.step(scene.dt).state_hash for _ in range(scene.steps)]
+    return hashes
+
+
+def test_golden_state_hash_of_bounce():
+    assert _final_hash("bounce")[-1] == GOLDEN_BOUNCE_HASH
+
+
+def test_same_scene_gives_bit_identical_hashes_in_another_process():
+    here = _final_hash("rain", ["steps=40"])
+    code = ("from tests.test_world import _final_hash; "
+            "print('\\n'.join(_final_hash('rain', ['steps=40'])))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=__file__.rsplit("/tests/", 1)[0])
+    assert out.stdout.split() == here
