@@ -25,6 +25,8 @@ class RunSummary:
 
     energy_drift: (E_end - E_start) / |E_start| of kinetic + potential (0 when E_start = 0);
     momentum_drift: |p_end - p_start| (kg·m/s); dts: every step's dt, to repeat the run.
+    compile_seconds: compiling (first run) or loading (cached) the numba kernels, not
+    counted in wall_seconds or ms_per_step.
     """
 
     scene: str
@@ -50,6 +52,7 @@ class RunSummary:
     momentum_drift: float
     max_overlap: float
     wall_seconds: float
+    compile_seconds: float
     ms_per_step: float
     phase_seconds: dict[str, float]
     final_hash: str
@@ -72,9 +75,11 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         scene = load_scene(scene, overrides)
     elif overrides:
         raise PhysdbgError("give overrides when loading the scene, not with a Scene object")
+    from .engine import energies, warm_up
+
+    compile_seconds = warm_up()
     world = scene.build_world(observer)
     st = world.state
-    from .engine import energies
 
     k0, p0, mom0 = energies(st, world.gravity)
     total = len(dts) if dts is not None else scene.steps
@@ -137,5 +142,5 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         max_contacts_in_a_step=max_in_step, energy_start=e0, energy_end=e1, energy_drift=drift,
         momentum_start=[float(c) for c in mom0], momentum_end=[float(c) for c in mom1],
         momentum_drift=float(np.linalg.norm(mom1 - mom0)), max_overlap=max_overlap,
-        wall_seconds=wall, ms_per_step=1000.0 * wall / n_steps if n_steps else math.nan,
+        wall_seconds=wall, compile_seconds=compile_seconds, ms_per_step=1000.0 * wall / n_steps if n_steps else math.nan,
         phase_seconds=phase, final_hash=digest, warnings=warnings, dts=used)

@@ -166,7 +166,7 @@ def format_summary(s) -> str:
         f"energy      {s.energy_start:.6g} J -> {s.energy_end:.6g} J  (drift {s.energy_drift:+.3e})",
         f"momentum    {_vec(s.momentum_start)} -> {_vec(s.momentum_end)} kg·m/s  (drift {s.momentum_drift:.3e})",
         f"overlap     max {s.max_overlap:.3g} m",
-        f"speed       {s.ms_per_step:.3f} ms/step  ({phases})",
+        f"speed       {s.ms_per_step:.3f} ms/step  ({phases}); kernels compiled/loaded in {s.compile_seconds:.2f} s",
         f"state hash  {s.final_hash}",
         "warnings    " + ("none" if not s.warnings else f"{len(s.warnings)}: " + "; ".join(s.warnings[:3])
                           + (" ..." if len(s.warnings) > 3 else "")),

@@ -10,10 +10,10 @@ from .motion import INTEGRATOR_NAMES
 from .resolve import RESTITUTION_RULES, combine_restitution
 from .state import ORDERING_NAMES, Settings, State, Walls, energies, state_hash
 from .toi import DETECTION_NAMES
-from .world import StepStats, World
+from .world import StepStats, World, warm_up
 
 __all__ = [
     "BROAD_PHASES", "BruteForce", "DETECTION_NAMES", "INTEGRATOR_NAMES", "ORDERING_NAMES",
     "RESTITUTION_RULES", "Settings", "State", "StepStats", "Walls", "World",
-    "combine_restitution", "energies", "make_broad_phase", "state_hash",
+    "combine_restitution", "energies", "make_broad_phase", "state_hash", "warm_up",
 ]
