@@ -122,3 +122,12 @@ def test_console_script_runs(tmp_path):
     assert "steps       3" in out.stdout
     bad = subprocess.run(exe[:3] + ["run", "nope"], capture_output=True, text=True)
     assert bad.returncode == 2 and "Traceback" not in bad.stderr and "error:" in bad.stderr
+
+
+def test_long_runs_show_progress_on_stderr_and_keep_stdout_clean():
+    result = invoke("run", "bounce", "--progress", "--set", "steps=600")
+    assert result.exit_code == 0
+    assert "step 600/600" in result.stderr
+    assert result.stdout.startswith("scene ")
+    quiet = invoke("run", "bounce", "--no-progress", "--set", "steps=600")
+    assert "step 600/600" not in quiet.stderr

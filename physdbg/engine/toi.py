@@ -196,6 +196,14 @@ def _u_to_tau(integrator, k, u):
 
 
 @njit(cache=True)
+def _relative_path(dx, dv, da, integrator, k, t):
+    """Relative position D(t) = dx + dv·P1 + da·P2 and its rate D'(t), as six floats."""
+    p1, p2, dp1 = path_coefficients(integrator, k, t)
+    return (dx[0] + dv[0] * p1 + da[0] * p2, dx[1] + dv[1] * p1 + da[1] * p2, dx[2] + dv[2] * p1 + da[2] * p2,
+            dv[0] * dp1 + da[0] * p1, dv[1] * dp1 + da[1] * p1, dv[2] * dp1 + da[2] * p1)
+
+
+@njit(cache=True)
 def _norm(x0, x1, x2):
     return math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
 
@@ -226,13 +234,7 @@ def pair_toi_swept(dx, dv, da, radius_sum, integrator, k, horizon, tolerance):
     for _ in range(500):
         if t > horizon:
             return INF
-        p1, p2, dp1 = path_coefficients(integrator, k, t)
-        d0 = dx[0] + dv[0] * p1 + da[0] * p2
-        d1 = dx[1] + dv[1] * p1 + da[1] * p2
-        d2 = dx[2] + dv[2] * p1 + da[2] * p2
-        e0 = dv[0] * dp1 + da[0] * p1
-        e1 = dv[1] * dp1 + da[1] * p1
-        e2 = dv[2] * dp1 + da[2] * p1
+        d0, d1, d2, e0, e1, e2 = _relative_path(dx, dv, da, integrator, k, t)
         dist = _norm(d0, d1, d2)
         g = dist - radius_sum
         rate = (d0 * e0 + d1 * e1 + d2 * e2) / dist if dist > 0.0 else -1.0
@@ -264,13 +266,7 @@ def pair_toi_sampled(dx, dv, da, radius_sum, integrator, k, horizon, samples):
         da = np.zeros(3)
     for m in range(1, samples + 1):
         t = horizon * m / samples
-        p1, p2, dp1 = path_coefficients(integrator, k, t)
-        d0 = dx[0] + dv[0] * p1 + da[0] * p2
-        d1 = dx[1] + dv[1] * p1 + da[1] * p2
-        d2 = dx[2] + dv[2] * p1 + da[2] * p2
-        e0 = dv[0] * dp1 + da[0] * p1
-        e1 = dv[1] * dp1 + da[1] * p1
-        e2 = dv[2] * dp1 + da[2] * p1
+        d0, d1, d2, e0, e1, e2 = _relative_path(dx, dv, da, integrator, k, t)
         if d0 * d0 + d1 * d1 + d2 * d2 < radius_sum * radius_sum and d0 * e0 + d1 * e1 + d2 * e2 < 0.0:
             return t
     return INF
