@@ -3,6 +3,7 @@
 One step produces, in this order::
 
     StepBegin
+    BroadPhaseInfo             (the structure used this step, its stats and, for BVHs, nodes)
     ContactResolved ...        (one per contact, in the order they were resolved)
     SweptTests                 (one batch: every candidate the narrow phase tested)
     EngineWarning ...          (zero or more)
@@ -42,6 +43,24 @@ class StepBegin:
     step: int
     time: float
     dt: float
+
+
+@dataclass(frozen=True)
+class BroadPhaseInfo:
+    """The broad phase of one step: which structure, why, how it did, and its nodes.
+
+    name: e.g. "grid", "bvh-sah"; reason: why it was chosen; stats: numbers such as
+    build_seconds, query_seconds, nodes_visited, box_tests, sah_cost, rebuilt, pairs.
+    nodes: for BVHs, arrays of length M: lo, hi (M, 3) bounds (m) of the swept boxes;
+    left, right, parent (-1 = none); depth; start, count (range in ``order``); order: the
+    particle index of each leaf slot. None for structures without nodes.
+    """
+
+    step: int
+    name: str
+    reason: str
+    stats: dict
+    nodes: dict[str, np.ndarray] | None
 
 
 @dataclass(frozen=True)
@@ -133,4 +152,4 @@ class StepEnd:
     warnings: tuple[str, ...] = field(default=())
 
 
-Event = StepBegin | ContactResolved | SweptTests | EngineWarning | StepEnd
+Event = StepBegin | BroadPhaseInfo | ContactResolved | SweptTests | EngineWarning | StepEnd

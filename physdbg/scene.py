@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from .engine import (
-    BROAD_PHASES,
+    BROAD_PHASE_NAMES,
     DETECTION_NAMES,
     INTEGRATOR_NAMES,
     ORDERING_NAMES,
@@ -49,7 +49,7 @@ TOP_FIELDS = {
     "detection": "one of " + ", ".join(DETECTION_NAMES),
     "samples": "samples along each path for detection = \"sampled\", integer >= 1",
     "ordering": "one of " + ", ".join(ORDERING_NAMES),
-    "broad_phase": "one of " + ", ".join(BROAD_PHASES),
+    "broad_phase": "one of " + ", ".join(BROAD_PHASE_NAMES) + " (auto picks by size: docs/broadphase.md)",
     "gravity": "gravity vector [x, y, z] in m/s²",
     "drag": "drag d in v·d^t, 0 < d <= 1 (1 = none)",
     "restitution_rule": "how two restitutions combine: one of " + ", ".join(RESTITUTION_RULES),
@@ -330,7 +330,7 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
         detection=c.choice(raw, "detection", "detection", DETECTION_NAMES, d.detection),
         samples=c.number(raw, "samples", "samples", default=d.samples, lo=1, integer=True),
         ordering=c.choice(raw, "ordering", "ordering", ORDERING_NAMES, d.ordering),
-        broad_phase=c.choice(raw, "broad_phase", "broad_phase", list(BROAD_PHASES), d.broad_phase),
+        broad_phase=c.choice(raw, "broad_phase", "broad_phase", BROAD_PHASE_NAMES, d.broad_phase),
         gravity=tuple(c.vector(raw, "gravity", "gravity", d.gravity).tolist()),
         drag=c.number(raw, "drag", "drag", default=d.drag, lo=0, hi=1, lo_open=True),
         restitution_rule=c.choice(raw, "restitution_rule", "restitution_rule", RESTITUTION_RULES,

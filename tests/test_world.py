@@ -11,6 +11,7 @@ import pytest
 
 from physdbg.engine import energies
 from physdbg.events import (
+    BroadPhaseInfo,
     KIND_PAIR,
     KIND_WALL,
     OUTCOME_HIT,
@@ -177,9 +178,9 @@ def test_events_arrive_in_pipeline_order_with_everything_a_recording_needs():
         world.step(scene.dt)
     kinds = [type(e) for e in obs.events]
     assert kinds[0] is StepBegin and kinds[-1] is StepEnd
-    # per step: StepBegin, contacts..., SweptTests, StepEnd
+    # per step: StepBegin, BroadPhaseInfo, contacts..., SweptTests, StepEnd
     step43 = [type(e) for e in obs.events if getattr(e, "step", None) == obs.contacts[0].step]
-    assert step43 == [StepBegin] + [ContactResolved] * 4 + [SweptTests, StepEnd]
+    assert step43 == [StepBegin, BroadPhaseInfo] + [ContactResolved] * 4 + [SweptTests, StepEnd]
     tests = [t for t in obs.swept_tests if t.step == obs.contacts[0].step][0]
     assert np.count_nonzero(tests.outcome == OUTCOME_HIT) == 4
     assert set(np.unique(tests.kind)) <= {KIND_PAIR, KIND_WALL}

@@ -5,7 +5,7 @@ knows nothing of files or viewers. Results leave through typed events
 (:mod:`physdbg.events`) handed to an observer.
 """
 
-from .broadphase import BROAD_PHASES, BruteForce, make_broad_phase
+from .broadphase import BROAD_PHASE_NAMES, BruteForce, choose_broad_phase, make_broad_phase
 from .motion import INTEGRATOR_NAMES
 from .resolve import RESTITUTION_RULES, combine_restitution
 from .state import ORDERING_NAMES, Settings, State, Walls, energies, state_hash
@@ -13,7 +13,7 @@ from .toi import DETECTION_NAMES
 from .world import StepStats, World, warm_up
 
 __all__ = [
-    "BROAD_PHASES", "BruteForce", "DETECTION_NAMES", "INTEGRATOR_NAMES", "ORDERING_NAMES",
+    "BROAD_PHASE_NAMES", "BruteForce", "choose_broad_phase", "DETECTION_NAMES", "INTEGRATOR_NAMES", "ORDERING_NAMES",
     "RESTITUTION_RULES", "Settings", "State", "StepStats", "Walls", "World",
     "combine_restitution", "energies", "make_broad_phase", "state_hash", "warm_up",
 ]

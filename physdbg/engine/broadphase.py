@@ -60,9 +60,43 @@ class BruteForce:
         return np.nonzero(overlap)[0].astype(np.int64)
 
 
-BROAD_PHASES = {"brute-force": BruteForce}
+BROAD_PHASE_NAMES = ("auto", "brute-force", "grid", "bvh-sah", "bvh-median", "bvh-mean", "bvh-lbvh")
+
+# The auto rule (docs/broadphase.md): brute force below this many particles...
+AUTO_BRUTE_FORCE_BELOW = 64
+# ...a grid when the largest radius is at most this many times the smallest...
+AUTO_GRID_MAX_RADIUS_RATIO = 4.0
 
 
 def make_broad_phase(name: str) -> BroadPhase:
-    """The broad phase called ``name`` (see BROAD_PHASES)."""
-    return BROAD_PHASES[name]()
+    """The broad phase called ``name`` (one of BROAD_PHASE_NAMES except ``auto``)."""
+    from .bvh import BVH
+    from .grid import UniformGrid
+
+    if name == "brute-force":
+        return BruteForce()
+    if name == "grid":
+        return UniformGrid()
+    if name.startswith("bvh-") and name[4:] in ("sah", "median", "mean", "lbvh"):
+        return BVH(method=name[4:])
+    raise ValueError(f"unknown broad phase {name!r}; one of {', '.join(BROAD_PHASE_NAMES)}")
+
+
+def choose_broad_phase(name: str, radius: np.ndarray) -> tuple[str, str]:
+    """(broad phase, reason): resolve ``auto`` for particles of these radii (m).
+
+    A scene is modelled with no more machinery than it needs: brute force for a handful
+    of particles, a uniform grid for similar sizes, a BVH when sizes differ widely.
+    """
+    n = int(radius.size)
+    if name != "auto":
+        return name, "chosen in the scene"
+    if n < AUTO_BRUTE_FORCE_BELOW:
+        return "brute-force", (f"auto: {n} particles (< {AUTO_BRUTE_FORCE_BELOW}): {n * (n - 1) // 2} box tests "
+                               f"cost less than building a structure")
+    ratio = float(radius.max() / radius.min()) if radius.min() > 0 else float("inf")
+    if ratio <= AUTO_GRID_MAX_RADIUS_RATIO:
+        return "grid", (f"auto: {n} particles with similar radii (largest/smallest = {ratio:.3g} "
+                        f"<= {AUTO_GRID_MAX_RADIUS_RATIO:g}): a uniform grid")
+    return "bvh-sah", (f"auto: {n} particles with radii spanning {ratio:.3g}x (> {AUTO_GRID_MAX_RADIUS_RATIO:g}): "
+                       f"a grid would be sized for the largest, so a SAH BVH")

@@ -31,7 +31,7 @@ class Settings:
     detection: str = "swept"
     samples: int = 4
     ordering: str = "time"
-    broad_phase: str = "brute-force"
+    broad_phase: str = "auto"
     gravity: tuple[float, float, float] = (0.0, -9.81, 0.0)
     drag: float = 1.0
     restitution_rule: str = "min"

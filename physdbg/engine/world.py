@@ -31,6 +31,7 @@ from time import perf_counter
 import numpy as np
 
 from ..events import (
+    BroadPhaseInfo,
     KIND_PAIR,
     KIND_WALL,
     OUTCOME_CAPPED,
@@ -43,7 +44,7 @@ from ..events import (
     StepEnd,
     SweptTests,
 )
-from .broadphase import make_broad_phase
+from .broadphase import choose_broad_phase, make_broad_phase
 from .motion import EULER, SEMI_IMPLICIT, VERLET, advance_particles, swept_boxes
 from .resolve import apply_pair_impulse, combine_restitution, pair_impulse, reflect, unit
 from .resting import solve_accelerations
@@ -87,7 +88,8 @@ class World:
         self.observer = observer
         self.step_index = 0
         self.time = 0.0
-        self.broad_phase = make_broad_phase(settings.broad_phase)
+        chosen, self.broad_phase_reason = choose_broad_phase(settings.broad_phase, state.radius)
+        self.broad_phase = make_broad_phase(chosen)
         self.held: dict[tuple, np.ndarray | None] = {}
         self._integrator = settings.integrator_code
         self._detection = settings.detection_code
@@ -200,9 +202,12 @@ class World:
                     s.contact_tolerance, lo, hi)
         pairs = self.broad_phase.pairs(lo, hi)
         self._lo, self._hi = lo, hi
+        self._grown: set[int] = set()
         self._build_adjacency(pairs, n)
         t2 = perf_counter()
         timings["broad_phase"] = t2 - t1
+        if obs is not None:
+            obs.on_event(self._broad_phase_event(step_no, len(pairs)))
 
         # -- narrow phase + resolve ----------------------------------------------
         self._tests: list[tuple] = []
@@ -298,9 +303,14 @@ class World:
             return
         self._lo[i] = np.minimum(self._lo[i], lo[0])
         self._hi[i] = np.maximum(self._hi[i], hi[0])
-        found = self.broad_phase.query(self._lo, self._hi, self._lo[i], self._hi[i])
+        found = set(self.broad_phase.query(self._lo, self._hi, self._lo[i], self._hi[i]).tolist())
+        # a structure built at step start knows the old boxes: check grown ones directly
+        for j in self._grown:
+            if np.all(self._lo[j] <= self._hi[i]) and np.all(self._lo[i] <= self._hi[j]):
+                found.add(j)
+        self._grown.add(i)
         known = set(self._partners(i).tolist())
-        for j in found.tolist():
+        for j in sorted(found):
             if j != i and j not in known:
                 self._adj_extra.setdefault(i, set()).add(j)
                 self._adj_extra.setdefault(j, set()).add(i)
@@ -531,6 +541,17 @@ class World:
                 pen = np.where(self._two_sided[None, :] & (pen > r[:, None]), 0.0, pen)
             worst = max(worst, float(pen.max()))
         return max(worst, 0.0)
+
+    def _broad_phase_event(self, step_no: int, pair_count: int) -> BroadPhaseInfo:
+        bp = self.broad_phase
+        stats = dict(getattr(bp, "stats", {}) or {})
+        stats.setdefault("pairs", pair_count)
+        tree = getattr(bp, "nodes", None)
+        nodes = None
+        if tree is not None:
+            nodes = {name: getattr(tree, name).copy() for name in
+                     ("lo", "hi", "left", "right", "parent", "depth", "start", "count", "order")}
+        return BroadPhaseInfo(step_no, bp.name, self.broad_phase_reason, stats, nodes)
 
     def _swept_tests_event(self) -> SweptTests:
         if self._tests:
