@@ -1,11 +1,12 @@
 """Uniform grid broad phase (numba).
 
 Cells are cubes of side ``cell`` no smaller than the largest box (for swept boxes: twice
-the largest radius plus the longest motion of the step), so a box overlaps at most
-2 × 2 × 2 cells. Each box is listed in every cell it overlaps; the list is sorted by cell
-key, and within each cell every pair of boxes is tested. A pair overlapping in several
-cells is reported only by its *owner* cell, the one holding the lower corner of the two
-boxes' intersection — so each pair comes out exactly once, with no hash set.
+the largest radius plus the longest motion of the step). Each box is filed under the
+cell of its centre (a counting sort), so two overlapping boxes have centres at most one
+cell apart on every axis: each box needs testing only against the boxes filed in its own
+and the 26 neighbouring cells, and only those of higher index, so each pair comes out
+once. Going through the boxes in index order and sorting each one's few partners gives
+the pairs already in sorted order.
 """
 
 from __future__ import annotations
@@ -46,73 +47,128 @@ def grid_pairs(lo, hi, cell):
     origin = np.empty(3)
     dims = np.empty(3, dtype=np.int64)
     for c in range(3):
-        mn = lo[0, c]
-        mx = hi[0, c]
-        for i in range(1, n):
-            mn = min(mn, lo[i, c])
-            mx = max(mx, hi[i, c])
+        mn = np.inf
+        mx = -np.inf
+        for i in range(n):
+            centre = 0.5 * (lo[i, c] + hi[i, c])
+            mn = min(mn, centre)
+            mx = max(mx, centre)
         origin[c] = mn
         dims[c] = int(math.floor((mx - mn) / cell)) + 1
-    cell_lo = np.empty((n, 3), dtype=np.int64)
-    cell_hi = np.empty((n, 3), dtype=np.int64)
-    total = 0
+    cells = dims[0] * dims[1] * dims[2]
+    key = np.empty(n, dtype=np.int64)
+    coord = np.empty((n, 3), dtype=np.int64)
     for i in range(n):
-        k = 1
         for c in range(3):
-            cell_lo[i, c] = _cell_of(lo[i, c], origin[c], cell, dims[c])
-            cell_hi[i, c] = _cell_of(hi[i, c], origin[c], cell, dims[c])
-            k *= cell_hi[i, c] - cell_lo[i, c] + 1
-        total += k
-    keys = np.empty(total, dtype=np.int64)
-    ids = np.empty(total, dtype=np.int64)
-    m = 0
+            coord[i, c] = _cell_of(0.5 * (lo[i, c] + hi[i, c]), origin[c], cell, dims[c])
+        key[i] = (coord[i, 0] * dims[1] + coord[i, 1]) * dims[2] + coord[i, 2]
+    dense = cells <= 8 * n + 4096
+    if dense:
+        # counting sort: cell_start[k] .. cell_start[k+1] are the boxes filed in cell k
+        cell_start = np.zeros(cells + 1, dtype=np.int64)
+        for i in range(n):
+            cell_start[key[i] + 1] += 1
+        for k in range(cells):
+            cell_start[k + 1] += cell_start[k]
+        fill = cell_start[:-1].copy()
+        filed = np.empty(n, dtype=np.int64)
+        for i in range(n):
+            filed[fill[key[i]]] = i
+            fill[key[i]] += 1
+        sorted_keys = key[filed]
+    else:
+        filed = np.argsort(key, kind="mergesort")
+        sorted_keys = key[filed]
+        cell_start = np.empty(0, dtype=np.int64)
+    used = 0
+    for k in range(n):
+        if k == 0 or sorted_keys[k] != sorted_keys[k - 1]:
+            used += 1
+    # walk the boxes in cell order over cell-ordered copies of their bounds (memory locality),
+    # visiting each neighbouring cell pair once: own cell (later boxes) + the 13 higher cells
+    slo = np.empty((n, 3))
+    shi = np.empty((n, 3))
+    for k in range(n):
+        for c in range(3):
+            slo[k, c] = lo[filed[k], c]
+            shi[k, c] = hi[filed[k], c]
+    out_i = np.empty(max(16, 4 * n), dtype=np.int64)
+    out_j = np.empty(max(16, 4 * n), dtype=np.int64)
+    found = 0
+    plane = dims[1] * dims[2]
+    for k in range(n):
+        i = filed[k]
+        own = sorted_keys[k]
+        own_x = own // plane
+        own_y = (own // dims[2]) % dims[1]
+        own_z = own % dims[2]
+        for ox in range(-1, 2):
+            x = own_x + ox
+            if x < 0 or x >= dims[0]:
+                continue
+            for oy in range(-1, 2):
+                y = own_y + oy
+                if y < 0 or y >= dims[1]:
+                    continue
+                for oz in range(-1, 2):
+                    z = own_z + oz
+                    if z < 0 or z >= dims[2]:
+                        continue
+                    kk = (x * dims[1] + y) * dims[2] + z
+                    if kk < own:
+                        continue
+                    if dense:
+                        first = cell_start[kk]
+                        last = cell_start[kk + 1]
+                    else:
+                        first = np.searchsorted(sorted_keys, kk)
+                        last = np.searchsorted(sorted_keys, kk, side="right")
+                    if kk == own:
+                        first = k + 1
+                    for t in range(first, last):
+                        if (slo[k, 0] > shi[t, 0] or slo[t, 0] > shi[k, 0] or slo[k, 1] > shi[t, 1]
+                                or slo[t, 1] > shi[k, 1] or slo[k, 2] > shi[t, 2] or slo[t, 2] > shi[k, 2]):
+                            continue
+                        if found == out_i.shape[0]:
+                            bigger_i = np.empty(2 * found, dtype=np.int64)
+                            bigger_j = np.empty(2 * found, dtype=np.int64)
+                            bigger_i[:found] = out_i[:found]
+                            bigger_j[:found] = out_j[:found]
+                            out_i = bigger_i
+                            out_j = bigger_j
+                        j = filed[t]
+                        out_i[found] = min(i, j)
+                        out_j[found] = max(i, j)
+                        found += 1
+    return sort_pairs(out_i[:found], out_j[:found], n), used
+
+
+@njit(cache=True)
+def sort_pairs(first, second, n):
+    """(M, 2) pairs in lexicographic order: counting sort on the first index (O(M + N)),
+    then an insertion sort of each row's few second indices."""
+    m = first.shape[0]
+    start = np.zeros(n + 1, dtype=np.int64)
+    for t in range(m):
+        start[first[t] + 1] += 1
     for i in range(n):
-        for x in range(cell_lo[i, 0], cell_hi[i, 0] + 1):
-            for y in range(cell_lo[i, 1], cell_hi[i, 1] + 1):
-                for z in range(cell_lo[i, 2], cell_hi[i, 2] + 1):
-                    keys[m] = (x * dims[1] + y) * dims[2] + z
-                    ids[m] = i
-                    m += 1
-    order = np.argsort(keys, kind="mergesort")
-    keys = keys[order]
-    ids = ids[order]
-    out = np.empty((max(16, 4 * n), 2), dtype=np.int64)
-    count = 0
-    cells_used = 0
-    start = 0
-    while start < total:
-        end = start + 1
-        while end < total and keys[end] == keys[start]:
-            end += 1
-        cells_used += 1
-        key = keys[start]
-        cz = key % dims[2]
-        cy = (key // dims[2]) % dims[1]
-        cx = key // (dims[2] * dims[1])
-        for a in range(start, end):
-            i = ids[a]
-            for b in range(a + 1, end):
-                j = ids[b]
-                if not _boxes_overlap(lo, hi, i, j):
-                    continue
-                # owner cell: the cell of the intersection's lower corner
-                if (_cell_of(max(lo[i, 0], lo[j, 0]), origin[0], cell, dims[0]) != cx
-                        or _cell_of(max(lo[i, 1], lo[j, 1]), origin[1], cell, dims[1]) != cy
-                        or _cell_of(max(lo[i, 2], lo[j, 2]), origin[2], cell, dims[2]) != cz):
-                    continue
-                if count == out.shape[0]:
-                    bigger = np.empty((2 * count, 2), dtype=np.int64)
-                    bigger[:count] = out[:count]
-                    out = bigger
-                out[count, 0] = min(i, j)
-                out[count, 1] = max(i, j)
-                count += 1
-        start = end
-    pairs = out[:count]
-    if count > 1:
-        rank = np.argsort(pairs[:, 0] * n + pairs[:, 1])
-        pairs = pairs[rank]
-    return pairs, cells_used
+        start[i + 1] += start[i]
+    fill = start[:-1].copy()
+    out = np.empty((m, 2), dtype=np.int64)
+    for t in range(m):
+        row = fill[first[t]]
+        out[row, 0] = first[t]
+        out[row, 1] = second[t]
+        fill[first[t]] += 1
+    for i in range(n):
+        for a in range(start[i] + 1, start[i + 1]):
+            value = out[a, 1]
+            b = a - 1
+            while b >= start[i] and out[b, 1] > value:
+                out[b + 1, 1] = out[b, 1]
+                b -= 1
+            out[b + 1, 1] = value
+    return out
 
 
 class UniformGrid:

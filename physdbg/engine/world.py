@@ -36,7 +36,6 @@ from ..events import (
     KIND_WALL,
     OUTCOME_CAPPED,
     OUTCOME_HIT,
-    OUTCOME_MISS,
     OUTCOME_SUPERSEDED,
     ContactResolved,
     EngineWarning,
@@ -46,10 +45,35 @@ from ..events import (
 )
 from .broadphase import choose_broad_phase, make_broad_phase
 from .motion import EULER, SEMI_IMPLICIT, VERLET, advance_particles, swept_boxes
-from .resolve import apply_pair_impulse, combine_restitution, pair_impulse, reflect, unit
+from .resolve import RESTITUTION_RULES, apply_pair_impulse, combine_restitution, pair_impulse, reflect, unit
 from .resting import solve_accelerations
 from .state import Settings, State, Walls, energies, state_hash
-from .toi import INF, predict_pairs, predict_walls
+from .timeline import (
+    CAPPED,
+    CF_CLOSING,
+    CF_IMPULSE,
+    CF_NORMAL,
+    CF_POINT,
+    CF_RESTITUTION,
+    CF_TIME,
+    CF_VA_AFTER,
+    CF_VA_BEFORE,
+    CF_VB_AFTER,
+    CF_VB_BEFORE,
+    CONTACTS,
+    DONE,
+    EVENTS,
+    GROW,
+    PAUSE_RESOLVE,
+    REQUERY,
+    TESTS,
+    Buffers,
+    adjacency_from_pairs,
+    max_overlap,
+    predict_into,
+    reachable_walls,
+    run_time_order,
+)
 
 _EMPTY_I = np.empty(0, dtype=np.int64)
 
@@ -108,6 +132,8 @@ class World:
         self._anchor_is_flow = self._integrator not in (EULER, VERLET) or (
             self._integrator == VERLET and self._drag == 1.0)
         self._offsets = np.ascontiguousarray(walls.offsets, dtype=np.float64)
+        self._wall_restitution = np.ascontiguousarray(walls.restitution, dtype=np.float64)
+        self._buf = Buffers()
 
     # ------------------------------------------------------------------ helpers
     def _wall_normal_towards(self, i: int, w: int) -> np.ndarray:
@@ -159,6 +185,21 @@ class World:
             gap = float(np.linalg.norm(x[i] - x[j])) - self.state.radius[i] - self.state.radius[j]
         return abs(gap) <= tol
 
+    def _sync_held(self) -> None:
+        """Held contacts as the arrays the compiled loop reads (sorted keys, flags)."""
+        n = self.state.count
+        nw = len(self.walls)
+        pairs = sorted(key[1] * n + key[2] for key in self.held if key[0] == "pair")
+        walls = sorted(key[1] * nw + key[2] for key in self.held if key[0] == "wall")
+        self._held_pairs = np.array(pairs, dtype=np.int64)
+        self._held_walls = np.array(walls, dtype=np.int64)
+        has = np.zeros(n, dtype=np.bool_)
+        for key in self.held:
+            has[key[1]] = True
+            if key[0] == "pair":
+                has[key[2]] = True
+        self._has_held = has
+
     # ------------------------------------------------------------------ the step
     def step(self, dt: float) -> StepStats:
         """Advance the world by ``dt`` seconds and report what happened."""
@@ -168,6 +209,7 @@ class World:
         s = self.settings
         obs = self.observer
         n = st.count
+        nw = len(self.walls)
         step_no = self.step_index
         if obs is not None:
             obs.on_event(StepBegin(step_no, self.time, dt))
@@ -200,6 +242,7 @@ class World:
         hi = np.empty((n, 3))
         swept_boxes(x, v, path_accel, st.radius, sigma, dt, self._integrator, self._k,
                     s.contact_tolerance, lo, hi)
+        self._add_reach(lo, hi, dt)
         pairs = self.broad_phase.pairs(lo, hi)
         self._lo, self._hi = lo, hi
         self._grown: set[int] = set()
@@ -209,28 +252,23 @@ class World:
         if obs is not None:
             obs.on_event(self._broad_phase_event(step_no, len(pairs)))
 
-        # -- narrow phase + resolve ----------------------------------------------
-        self._tests: list[tuple] = []
-        self._test_count = 0
-        self._outcome: dict[int, int] = {}
-        self._contacts = 0
-        self._events = 0
-        self._contact_order = 0
+        # -- narrow phase ---------------------------------------------------------
         self._step_no = step_no
         self._dt = dt
         self._version = np.zeros(n, dtype=np.int64)
-        self._heap: list = []
-        all_particles = np.arange(n, dtype=np.int64)
-        wall_ids = np.arange(len(self.walls), dtype=np.int64)
-        predictions = self._predict(pairs[:, 0].copy(), pairs[:, 1].copy(),
-                                    np.repeat(all_particles, len(wall_ids)),
-                                    np.tile(wall_ids, n))
+        buf = self._buf
+        buf.reset()
+        self._sync_held()
+        push = s.ordering == "time"
+        self._predict(KIND_PAIR, pairs[:, 0].copy(), pairs[:, 1].copy(), push)
+        wall_p, wall_w = reachable_walls(lo, hi, self._normals, self._offsets, self._half_thickness,
+                                         self._two_sided)
+        self._predict(KIND_WALL, wall_p, wall_w, push)
         t3 = perf_counter()
         timings["narrow_phase"] = t3 - t2
-        if s.ordering == "time":
-            capped = self._resolve_in_time_order(predictions)
-        else:
-            capped = self._resolve_in_index_order(predictions)
+
+        # -- resolve --------------------------------------------------------------
+        capped = self._resolve_in_time_order() if push else self._resolve_in_index_order()
         if capped:
             msg = (f"step {step_no}: event cap of {s.max_events_per_step} contacts reached; "
                    f"remaining contacts in this step were not resolved")
@@ -241,7 +279,8 @@ class World:
         timings["resolve"] = t4 - t3
 
         # -- finish -------------------------------------------------------------
-        advance_particles(x, v, self._a, sigma, all_particles, dt, self._integrator, self._drag, self._k)
+        advance_particles(x, v, self._a, sigma, np.arange(n, dtype=np.int64), dt, self._integrator,
+                          self._drag, self._k)
         sigma[:] = 0.0
         max_overlap = self._max_overlap()
         if s.detection == "swept" and max_overlap > s.contact_tolerance and not capped:
@@ -256,42 +295,52 @@ class World:
         self.step_index += 1
         t5 = perf_counter()
         timings["finish"] = t5 - t4
-        stats = StepStats(step_no, self.time, dt, kinetic, potential, momentum, self._contacts,
-                          self._test_count, self._events, len(self.held), max_overlap, digest,
-                          timings, warnings)
+        contacts = int(buf.counters[CONTACTS])
+        tests = int(buf.counters[TESTS])
+        events = int(buf.counters[EVENTS])
+        stats = StepStats(step_no, self.time, dt, kinetic, potential, momentum, contacts, tests, events,
+                          len(self.held), max_overlap, digest, timings, warnings)
         if obs is not None:
+            for event in self._contact_events():
+                obs.on_event(event)
             obs.on_event(self._swept_tests_event())
             obs.on_event(StepEnd(step_no, self.time, dt, x.copy(), v.copy(), kinetic, potential,
                                  momentum.copy(),
-                                 {"contacts": self._contacts, "swept_tests": self._test_count,
-                                  "events": self._events, "resting": len(self.held)},
+                                 {"contacts": contacts, "swept_tests": tests, "events": events,
+                                  "resting": len(self.held)},
                                  max_overlap, dict(timings), digest, tuple(warnings)))
         return stats
 
     # ------------------------------------------------------------------ candidates
     def _build_adjacency(self, pairs: np.ndarray, n: int) -> None:
-        """CSR lists of each particle's broad-phase partners (+ later additions)."""
-        if pairs.size:
-            both = np.concatenate((pairs, pairs[:, ::-1]))
-            order = np.lexsort((both[:, 1], both[:, 0]))
-            both = both[order]
-            self._adj_start = np.searchsorted(both[:, 0], np.arange(n + 1))
-            self._adj = both[:, 1].copy()
-        else:
-            self._adj_start = np.zeros(n + 1, dtype=np.int64)
-            self._adj = _EMPTY_I
-        self._adj_extra: dict[int, set[int]] = {}
+        """CSR lists of each particle's broad-phase partners (pairs must be sorted)."""
+        self._adj_start, self._adj = adjacency_from_pairs(np.ascontiguousarray(pairs, dtype=np.int64), n)
+        self._max_degree = int(np.diff(self._adj_start).max()) if n else 0
         self._pairs = pairs
 
-    def _partners(self, i: int) -> np.ndarray:
-        base = self._adj[self._adj_start[i]:self._adj_start[i + 1]]
-        extra = self._adj_extra.get(i)
-        if extra:
-            return np.union1d(base, np.fromiter(extra, dtype=np.int64))
-        return base
+    def _add_reach(self, lo: np.ndarray, hi: np.ndarray, dt: float) -> None:
+        """Grow each swept box to the cube a sphere could reach this step at a typical speed.
 
-    def _refresh_box(self, i: int) -> None:
-        """If i's new path leaves its swept box, grow the box and ask the broad phase again."""
+        A contact turns a path, so a box around the old path alone would send nearly every
+        particle back to the broad phase after its first contact. The cube x ± (reach + r)
+        with reach = max(own speed, the scene's 99th-percentile speed) · dt (speed counting
+        one step of acceleration) holds any path that does not outrun it; the rare one that
+        does is queried again (timeline.REQUERY). In place on lo, hi (N, 3).
+        """
+        st = self.state
+        if st.count == 0:
+            return
+        speed = np.linalg.norm(st.velocities, axis=1) + np.linalg.norm(self._a, axis=1) * dt
+        typical = float(np.quantile(speed, 0.99))
+        reach = (np.maximum(speed, typical) * dt + st.radius + self.settings.contact_tolerance)[:, None]
+        np.minimum(lo, st.positions - reach, out=lo)
+        np.maximum(hi, st.positions + reach, out=hi)
+
+    def _partners(self, i: int) -> np.ndarray:
+        return self._adj[self._adj_start[i]:self._adj_start[i + 1]]
+
+    def _refresh_box(self, i: int) -> list[int]:
+        """Grow i's swept box to hold its new path; return partners it did not have."""
         st = self.state
         lo = np.empty((1, 3))
         hi = np.empty((1, 3))
@@ -300,64 +349,50 @@ class World:
                     self._sigma[idx], self._dt, self._integrator, self._k,
                     self.settings.contact_tolerance, lo, hi)
         if np.all(lo[0] >= self._lo[i]) and np.all(hi[0] <= self._hi[i]):
-            return
+            return []
         self._lo[i] = np.minimum(self._lo[i], lo[0])
         self._hi[i] = np.maximum(self._hi[i], hi[0])
         found = set(self.broad_phase.query(self._lo, self._hi, self._lo[i], self._hi[i]).tolist())
         # a structure built at step start knows the old boxes: check grown ones directly
-        for j in self._grown:
-            if np.all(self._lo[j] <= self._hi[i]) and np.all(self._lo[i] <= self._hi[j]):
-                found.add(j)
+        if self._grown:
+            grown = np.fromiter(self._grown, dtype=np.int64)
+            hit = np.all((self._lo[grown] <= self._hi[i]) & (self._lo[i] <= self._hi[grown]), axis=1)
+            found.update(grown[hit].tolist())
         self._grown.add(i)
         known = set(self._partners(i).tolist())
-        for j in sorted(found):
-            if j != i and j not in known:
-                self._adj_extra.setdefault(i, set()).add(j)
-                self._adj_extra.setdefault(j, set()).add(i)
+        return sorted(j for j in found if j != i and j not in known)
+
+    def _add_partners(self, new_pairs: list[tuple[int, int]]) -> None:
+        """Add broad-phase pairs found mid-step, and predict them."""
+        if not new_pairs:
+            return
+        extra = np.array(sorted(set(new_pairs)), dtype=np.int64).reshape(-1, 2)
+        merged = np.concatenate((self._pairs, extra))
+        merged = merged[np.lexsort((merged[:, 1], merged[:, 0]))]
+        self._build_adjacency(merged, self.state.count)
+        self._predict(KIND_PAIR, extra[:, 0].copy(), extra[:, 1].copy(), True)
 
     # ------------------------------------------------------------------ narrow phase
-    def _predict(self, pa, pb, wp, ww):
-        """Swept-test pairs (pa[m], pb[m]) and particle–wall pairs (wp[m], ww[m]).
-
-        Held contacts are skipped (they touch by definition). Returns a list of
-        (record id, toi, kind, a, other) for every finite prediction within the step.
-        """
+    def _predict(self, kind: int, ia: np.ndarray, ib: np.ndarray, push: bool) -> None:
+        """Swept-test candidates (kind, ia[m], ib[m]) into the buffers (held ones skipped)."""
+        if ia.size == 0:
+            return
         st = self.state
         s = self.settings
-        if self.held and pa.size:
-            keep = np.array([("pair", int(i), int(j)) not in self.held for i, j in zip(pa, pb)], dtype=bool)
-            pa, pb = pa[keep], pb[keep]
-        if self.held and wp.size:
-            keep = np.array([("wall", int(i), int(w)) not in self.held for i, w in zip(wp, ww)], dtype=bool)
-            wp, ww = wp[keep], ww[keep]
-        out = []
-        dt = self._dt
-        for kind, ia, ib in ((KIND_PAIR, pa, pb), (KIND_WALL, wp, ww)):
-            m = ia.size
-            if m == 0:
-                continue
-            start = np.empty(m)
-            toi = np.empty(m)
-            if kind == KIND_PAIR:
-                predict_pairs(ia, ib, st.positions, st.velocities, self._a, st.radius, self._sigma,
-                              dt, self._integrator, self._k, self._detection, s.samples,
-                              s.contact_tolerance * 1e-3, start, toi)
-            else:
-                predict_walls(ia, ib, st.positions, st.velocities, self._a, st.radius, self._sigma,
-                              dt, self._normals, self._offsets, self._half_thickness, self._two_sided,
-                              self._integrator, self._k, self._detection, s.samples, start, toi)
-            base = self._test_count
-            self._test_count += m
-            self._tests.append((kind, ia, ib, start, toi))
-            hit = np.nonzero(toi <= dt)[0]
-            for h in hit.tolist():
-                out.append((base + h, float(toi[h]), kind, int(ia[h]), int(ib[h])))
-        return out
+        buf = self._buf
+        buf.ensure(ia.size, ia.size, 0)
+        predict_into(kind, ia, ib, st.positions, st.velocities, self._a, st.radius, self._sigma, self._version,
+                     self._dt, self._integrator, self._k, self._detection, s.samples, s.contact_tolerance * 1e-3,
+                     self._normals, self._offsets, self._half_thickness, self._two_sided, self._held_pairs,
+                     self._held_walls, len(self.walls), buf.test_int, buf.test_float, buf.test_outcome,
+                     buf.heap_toi, buf.heap_data, buf.counters, push)
 
-    def _predict_for(self, particles: set[int]):
+    def _predict_for(self, particles: set[int]) -> None:
         """Re-predict everything involving ``particles`` (after their paths changed)."""
-        for i in particles:
-            self._refresh_box(i)
+        new_pairs = []
+        for i in sorted(particles):
+            new_pairs += [(min(i, j), max(i, j)) for j in self._refresh_box(i)]
+        self._add_partners(new_pairs)
         seen = set()
         pa, pb = [], []
         for i in sorted(particles):
@@ -367,57 +402,69 @@ class World:
                     seen.add(key)
                     pa.append(key[0])
                     pb.append(key[1])
-        plist = sorted(particles)
+        plist = np.array(sorted(particles), dtype=np.int64)
         nw = len(self.walls)
-        return self._predict(np.array(pa, dtype=np.int64), np.array(pb, dtype=np.int64),
-                             np.repeat(np.array(plist, dtype=np.int64), nw),
-                             np.tile(np.arange(nw, dtype=np.int64), len(plist)))
+        self._predict(KIND_PAIR, np.array(pa, dtype=np.int64), np.array(pb, dtype=np.int64), True)
+        self._predict(KIND_WALL, np.repeat(plist, nw), np.tile(np.arange(nw, dtype=np.int64), plist.size), True)
 
     # ------------------------------------------------------------------ policies
-    def _push(self, predictions) -> None:
-        ver = self._version
-        for rid, toi, kind, a, other in predictions:
-            vb = ver[other] if kind == KIND_PAIR else 0
-            heapq.heappush(self._heap, (toi, rid, kind, a, other, ver[a], vb))
-
-    def _resolve_in_time_order(self, predictions) -> bool:
-        self._push(predictions)
-        heap = self._heap
-        cap = self.settings.max_events_per_step
-        while heap:
-            toi, rid, kind, a, other, va, vb = heapq.heappop(heap)
-            self._events += 1
-            if self._version[a] != va or (kind == KIND_PAIR and self._version[other] != vb):
-                self._outcome[rid] = OUTCOME_SUPERSEDED
-                continue
-            if self._contacts >= cap:
-                self._outcome[rid] = OUTCOME_CAPPED
-                for entry in heap:
-                    self._outcome[entry[1]] = OUTCOME_CAPPED
-                heap.clear()
+    def _resolve_in_time_order(self) -> bool:
+        """The compiled loop, with Python taking the pauses (see timeline.py)."""
+        st = self.state
+        s = self.settings
+        buf = self._buf
+        nw = len(self.walls)
+        cap = s.max_events_per_step
+        rest_factor = 1.5 if self._integrator in (EULER, SEMI_IMPLICIT) else 0.0
+        rule = RESTITUTION_RULES.index(s.restitution_rule)
+        while True:
+            status = run_time_order(
+                st.positions, st.velocities, self._a, self._acc, st.radius, st.inverse_mass, st.restitution,
+                self._sigma, self._version, self._dt, self._integrator, self._drag, self._k, self._detection,
+                s.samples, s.contact_tolerance * 1e-3, s.rest_speed, rest_factor, rule,
+                self._normals, self._offsets, self._half_thickness, self._two_sided, self._wall_restitution,
+                self._held_pairs, self._held_walls, self._has_held, self._adj_start, self._adj, self._lo, self._hi,
+                s.contact_tolerance, self._max_degree, cap, self._anchor_is_flow,
+                buf.heap_toi, buf.heap_data, buf.test_int, buf.test_float, buf.test_outcome, buf.contact_float,
+                buf.contact_int, buf.counters, buf.pending_int, buf.pending_float, buf.requery, buf.requery_count)
+            if status == DONE:
+                return False
+            if status == CAPPED:
                 return True
-            changed, resolved = self._resolve(kind, a, other, toi)
-            self._outcome[rid] = OUTCOME_HIT if resolved else OUTCOME_SUPERSEDED
-            if not changed:
-                continue
-            for i in changed:
-                self._version[i] += 1
-            self._push(self._predict_for(changed))
-        return False
+            if status == GROW:
+                room = 2 * self._max_degree + 2 * nw + 4
+                buf.ensure(room, room, 2)
+            elif status == PAUSE_RESOLVE:
+                kind, a, other, rid = (int(c) for c in buf.pending_int)
+                changed, resolved = self._resolve(kind, a, other, float(buf.pending_float[0]))
+                buf.test_outcome[rid] = OUTCOME_HIT if resolved else OUTCOME_SUPERSEDED
+                self._sync_held()
+                if changed:
+                    for i in changed:
+                        self._version[i] += 1
+                    self._predict_for(changed)
+            elif status == REQUERY:
+                new_pairs = []
+                for i in buf.requery[: buf.requery_count[0]].tolist():
+                    new_pairs += [(min(i, j), max(i, j)) for j in self._refresh_box(i)]
+                self._add_partners(new_pairs)
 
-    def _resolve_in_index_order(self, predictions) -> bool:
-        # detection order: the order the swept tests ran (pairs by index, then walls)
-        predictions.sort(key=lambda p: p[0])
+    def _resolve_in_index_order(self) -> bool:
+        """Every contact predicted at step start, in detection order, nothing re-predicted."""
+        buf = self._buf
         cap = self.settings.max_events_per_step
-        for n_done, (rid, toi, kind, a, other) in enumerate(predictions):
-            self._events += 1
-            if self._contacts >= cap:
-                for rest in predictions[n_done:]:
-                    self._outcome[rest[0]] = OUTCOME_CAPPED
+        count = int(buf.counters[TESTS])
+        toi = buf.test_float[:count, 1]
+        for rid in np.nonzero(toi <= self._dt)[0].tolist():
+            buf.counters[EVENTS] += 1
+            if buf.counters[CONTACTS] >= cap:
+                hits = np.nonzero(toi <= self._dt)[0]
+                buf.test_outcome[hits[hits >= rid]] = OUTCOME_CAPPED
                 return True
-            at = max(toi, self._sigma[a], self._sigma[other] if kind == KIND_PAIR else 0.0)
+            kind, a, other = (int(c) for c in buf.test_int[rid])
+            at = max(float(toi[rid]), self._sigma[a], self._sigma[other] if kind == KIND_PAIR else 0.0)
             _, resolved = self._resolve(kind, a, other, at)
-            self._outcome[rid] = OUTCOME_HIT if resolved else OUTCOME_SUPERSEDED
+            buf.test_outcome[rid] = OUTCOME_HIT if resolved else OUTCOME_SUPERSEDED
         return False
 
     # ------------------------------------------------------------------ one contact
@@ -472,14 +519,8 @@ class World:
             for k_ in [k_ for k_ in self.held if k_[1] in changed or (k_[0] == "pair" and k_[2] in changed)]:
                 del self.held[k_]
         changed |= self._rebalance_held(when)
-        self._contacts += 1
-        if self.observer is not None:
-            point = x[a] - normal * st.radius[a]
-            self.observer.on_event(ContactResolved(
-                self._step_no, self._contact_order, when, kind, a, other, point.copy(), normal.copy(),
-                float(j), va_before, v[a].copy(), vb_before, v[b].copy() if b >= 0 else None,
-                float(used), float(closing), bool(resting)))
-        self._contact_order += 1
+        self._record_contact(kind, a, other, when, x[a] - normal * st.radius[a], normal, j, va_before, v[a],
+                             vb_before, v[b] if b >= 0 else None, used, closing, resting)
         return changed, True
 
     def _rebalance_held(self, when: float) -> set[int]:
@@ -519,28 +560,47 @@ class World:
             moved[:] = True
         return {int(i) for i in idx[moved]}
 
+    def _record_contact(self, kind, a, other, when, point, normal, impulse, va_before, va_after, vb_before,
+                        vb_after, restitution, closing, resting) -> None:
+        """One row of the contact buffer (the same columns the compiled loop writes)."""
+        buf = self._buf
+        buf.ensure(0, 0, 1)
+        row = int(buf.counters[CONTACTS])
+        cf = buf.contact_float[row]
+        cf[CF_TIME] = when
+        cf[CF_POINT:CF_POINT + 3] = point
+        cf[CF_NORMAL:CF_NORMAL + 3] = normal
+        cf[CF_IMPULSE] = impulse
+        cf[CF_VA_BEFORE:CF_VA_BEFORE + 3] = va_before
+        cf[CF_VA_AFTER:CF_VA_AFTER + 3] = va_after
+        cf[CF_VB_BEFORE:CF_VB_BEFORE + 3] = vb_before if vb_before is not None else np.nan
+        cf[CF_VB_AFTER:CF_VB_AFTER + 3] = vb_after if vb_after is not None else np.nan
+        cf[CF_RESTITUTION] = restitution
+        cf[CF_CLOSING] = closing
+        buf.contact_int[row] = (kind, a, other, int(resting))
+        buf.counters[CONTACTS] = row + 1
+
+    def _contact_events(self) -> list[ContactResolved]:
+        buf = self._buf
+        out = []
+        for row in range(int(buf.counters[CONTACTS])):
+            f = buf.contact_float[row].copy()
+            kind, a, other, resting = (int(c) for c in buf.contact_int[row])
+            pair = kind == KIND_PAIR
+            out.append(ContactResolved(
+                self._step_no, row, float(f[CF_TIME]), kind, a, other, f[CF_POINT:CF_POINT + 3],
+                f[CF_NORMAL:CF_NORMAL + 3], float(f[CF_IMPULSE]), f[CF_VA_BEFORE:CF_VA_BEFORE + 3],
+                f[CF_VA_AFTER:CF_VA_AFTER + 3], f[CF_VB_BEFORE:CF_VB_BEFORE + 3] if pair else None,
+                f[CF_VB_AFTER:CF_VB_AFTER + 3] if pair else None, float(f[CF_RESTITUTION]),
+                float(f[CF_CLOSING]), bool(resting)))
+        return out
+
     # ------------------------------------------------------------------ audit
     def _max_overlap(self) -> float:
         """Deepest penetration (m) among candidate pairs and particle–wall pairs."""
-        st = self.state
-        x, r = st.positions, st.radius
-        worst = 0.0
-        pairs = self._pairs
-        if pairs.size:
-            d = np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1)
-            worst = max(worst, float(np.max(r[pairs[:, 0]] + r[pairs[:, 1]] - d)))
-        for (i, js) in self._adj_extra.items():
-            for j in js:
-                worst = max(worst, float(r[i] + r[j] - np.linalg.norm(x[i] - x[j])))
-        if len(self.walls) and st.count:
-            h = x @ self._normals.T - self._offsets[None, :]
-            h = np.where(self._two_sided[None, :], np.abs(h), h)
-            pen = self._half_thickness[None, :] + r[:, None] - h
-            if self.settings.detection != "swept":
-                # thin walls that a sphere tunnelled through are not "overlapping" them
-                pen = np.where(self._two_sided[None, :] & (pen > r[:, None]), 0.0, pen)
-            worst = max(worst, float(pen.max()))
-        return max(worst, 0.0)
+        return float(max_overlap(self.state.positions, self.state.radius, self._pairs, self._normals,
+                                 self._offsets, self._half_thickness, self._two_sided,
+                                 self.settings.detection != "swept"))
 
     def _broad_phase_event(self, step_no: int, pair_count: int) -> BroadPhaseInfo:
         bp = self.broad_phase
@@ -554,22 +614,13 @@ class World:
         return BroadPhaseInfo(step_no, bp.name, self.broad_phase_reason, stats, nodes)
 
     def _swept_tests_event(self) -> SweptTests:
-        if self._tests:
-            kind = np.concatenate([np.full(t[1].size, t[0], dtype=np.int8) for t in self._tests])
-            a = np.concatenate([t[1] for t in self._tests]).astype(np.int32)
-            other = np.concatenate([t[2] for t in self._tests]).astype(np.int32)
-            start = np.concatenate([t[3] for t in self._tests])
-            toi = np.concatenate([t[4] for t in self._tests])
-        else:
-            kind = np.zeros(0, dtype=np.int8)
-            a = other = np.zeros(0, dtype=np.int32)
-            start = toi = np.zeros(0)
-        outcome = np.full(kind.size, OUTCOME_MISS, dtype=np.int8)
-        for rid, code in self._outcome.items():
-            outcome[rid] = code
-        toi = np.where(toi <= self._dt, toi, np.nan)
-        return SweptTests(self._step_no, kind, a, other, start, toi, outcome)
-
+        buf = self._buf
+        count = int(buf.counters[TESTS])
+        toi = buf.test_float[:count, 1].copy()
+        return SweptTests(self._step_no, buf.test_int[:count, 0].astype(np.int8),
+                          buf.test_int[:count, 1].astype(np.int32), buf.test_int[:count, 2].astype(np.int32),
+                          buf.test_float[:count, 0].copy(), np.where(toi <= self._dt, toi, np.nan),
+                          buf.test_outcome[:count].copy())
 
 def warm_up() -> float:
     """Compile (or load from numba's cache) every kernel a step uses; returns seconds taken.

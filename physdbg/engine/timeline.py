@@ -1,0 +1,537 @@
+"""The time-ordered contact loop, compiled: the hot path of ``World.step``.
+
+The world hands this module its per-step arrays and a set of *buffers*; the loop pops
+the earliest predicted contact, drops it if stale, resolves it (advance the particles to
+the contact, impulse or reflection, finish over the remaining time), re-predicts only the
+particles involved and pushes their new predictions — until nothing is left before the
+end of the step. Everything it does is written to buffers (Box2D-style event arrays):
+every swept test (kind, particles, start, toi, outcome) and every contact (time, point,
+normal, impulse, velocities before and after ...). The world turns them into typed
+events afterwards, only if someone observes.
+
+The loop *pauses* and returns to Python for the rare cases that need the general code:
+
+* PAUSE_RESOLVE: the contact is resting, or touches a particle with held contacts
+  (the resting rule and its constraint solve live in Python, resting.py);
+* REQUERY: a new path left the swept box its broad-phase pairs were found for;
+* GROW: a buffer is nearly full.
+
+Python handles it and calls ``run_time_order`` again, which carries on where it stopped.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .motion import EULER, SEMI_IMPLICIT, advance_particles, path_state, swept_boxes
+from .toi import DISCRETE, SWEPT, pair_toi_sampled, pair_toi_swept, wall_gap_terms, wall_toi_sampled, wall_toi_swept
+
+# statuses
+DONE = 0
+PAUSE_RESOLVE = 1
+REQUERY = 2
+GROW = 3
+CAPPED = 4
+
+# counters
+HEAP_SIZE = 0
+TESTS = 1
+CONTACTS = 2
+EVENTS = 3
+
+# test outcomes (same codes as physdbg.events)
+_MISS = 0
+_HIT = 1
+_SUPERSEDED = 2
+
+# contact float columns
+CF_TIME = 0
+CF_POINT = 1
+CF_NORMAL = 4
+CF_IMPULSE = 7
+CF_VA_BEFORE = 8
+CF_VA_AFTER = 11
+CF_VB_BEFORE = 14
+CF_VB_AFTER = 17
+CF_RESTITUTION = 20
+CF_CLOSING = 21
+CF_WIDTH = 22
+# contact int columns: kind, a, other, resting
+CI_WIDTH = 4
+
+_KIND_PAIR = 0
+_KIND_WALL = 1
+
+
+class Buffers:
+    """Growable arrays the compiled loop writes into; one set per World."""
+
+    def __init__(self, heap: int = 1024, tests: int = 4096, contacts: int = 256):
+        self.heap_toi = np.empty(heap)
+        self.heap_data = np.empty((heap, 6), dtype=np.int64)  # rid, kind, a, other, version a, version b
+        self.test_int = np.empty((tests, 3), dtype=np.int64)  # kind, a, other
+        self.test_float = np.empty((tests, 2))  # start, toi
+        self.test_outcome = np.empty(tests, dtype=np.int8)
+        self.contact_float = np.empty((contacts, CF_WIDTH))
+        self.contact_int = np.empty((contacts, CI_WIDTH), dtype=np.int64)
+        self.counters = np.zeros(4, dtype=np.int64)
+        self.pending_int = np.zeros(4, dtype=np.int64)  # kind, a, other, rid
+        self.pending_float = np.zeros(1)  # toi
+        self.requery = np.empty(2, dtype=np.int64)
+        self.requery_count = np.zeros(1, dtype=np.int64)
+
+    def reset(self) -> None:
+        self.counters[:] = 0
+        self.requery_count[0] = 0
+
+    def ensure(self, heap_room: int, test_room: int, contact_room: int) -> None:
+        """Make sure at least this much more fits in each buffer (doubling as needed)."""
+        c = self.counters
+        while self.heap_toi.shape[0] - c[HEAP_SIZE] < heap_room:
+            self.heap_toi = _grown(self.heap_toi)
+            self.heap_data = _grown(self.heap_data)
+        while self.test_outcome.shape[0] - c[TESTS] < test_room:
+            self.test_int = _grown(self.test_int)
+            self.test_float = _grown(self.test_float)
+            self.test_outcome = _grown(self.test_outcome)
+        while self.contact_int.shape[0] - c[CONTACTS] < contact_room:
+            self.contact_float = _grown(self.contact_float)
+            self.contact_int = _grown(self.contact_int)
+        if self.requery.shape[0] < 2:
+            self.requery = np.empty(2, dtype=np.int64)
+
+
+def _grown(array: np.ndarray) -> np.ndarray:
+    bigger = np.empty((2 * array.shape[0],) + array.shape[1:], dtype=array.dtype)
+    bigger[: array.shape[0]] = array
+    return bigger
+
+
+# ------------------------------------------------------------------------------ heap
+@njit(cache=True)
+def _less(toi, data, i, j):
+    return toi[i] < toi[j] or (toi[i] == toi[j] and data[i, 0] < data[j, 0])
+
+
+@njit(cache=True)
+def _swap(toi, data, i, j):
+    t = toi[i]
+    toi[i] = toi[j]
+    toi[j] = t
+    for c in range(6):
+        d = data[i, c]
+        data[i, c] = data[j, c]
+        data[j, c] = d
+
+
+@njit(cache=True)
+def heap_push(toi, data, counters, t, rid, kind, a, other, va, vb):
+    n = counters[HEAP_SIZE]
+    toi[n] = t
+    data[n, 0] = rid
+    data[n, 1] = kind
+    data[n, 2] = a
+    data[n, 3] = other
+    data[n, 4] = va
+    data[n, 5] = vb
+    counters[HEAP_SIZE] = n + 1
+    while n > 0:
+        up = (n - 1) // 2
+        if _less(toi, data, n, up):
+            _swap(toi, data, n, up)
+            n = up
+        else:
+            break
+
+
+@njit(cache=True)
+def heap_pop(toi, data, counters):
+    """Move the smallest entry to the slot just past the heap and return that slot."""
+    n = counters[HEAP_SIZE] - 1
+    _swap(toi, data, 0, n)
+    counters[HEAP_SIZE] = n
+    i = 0
+    while True:
+        left = 2 * i + 1
+        if left >= n:
+            break
+        child = left
+        if left + 1 < n and _less(toi, data, left + 1, left):
+            child = left + 1
+        if _less(toi, data, child, i):
+            _swap(toi, data, child, i)
+            i = child
+        else:
+            break
+    return n
+
+
+# ------------------------------------------------------------------------------ predict
+@njit(cache=True)
+def predict_into(kind, ia, ib, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
+                 tolerance, normals, offsets, half_thickness, two_sided, held_pairs, held_walls, n_walls,
+                 test_int, test_float, test_outcome, heap_toi, heap_data, counters, push):
+    """Swept-test candidates (kind, ia[m], ib[m]); record each test; push hits if ``push``.
+
+    held_pairs / held_walls: sorted keys (a·N + b, particle·W + wall) of held contacts,
+    which are not tested. Returns the number of tests recorded.
+    """
+    n = x.shape[0]
+    pa = np.empty(3)
+    va = np.empty(3)
+    pb = np.empty(3)
+    vb = np.empty(3)
+    dx = np.empty(3)
+    dv = np.empty(3)
+    da = np.empty(3)
+    recorded = 0
+    for m in range(ia.shape[0]):
+        i = ia[m]
+        j = ib[m]
+        if kind == _KIND_PAIR:
+            if held_pairs.shape[0] > 0:
+                key = min(i, j) * n + max(i, j)
+                pos = np.searchsorted(held_pairs, key)
+                if pos < held_pairs.shape[0] and held_pairs[pos] == key:
+                    continue
+            start = max(sigma[i], sigma[j])
+            path_state(x, v, a, sigma, i, start, integrator, k, pa, va)
+            path_state(x, v, a, sigma, j, start, integrator, k, pb, vb)
+            for c in range(3):
+                dx[c] = pa[c] - pb[c]
+                dv[c] = va[c] - vb[c]
+                da[c] = a[i, c] - a[j, c]
+            horizon = step_end - start
+            if detection == SWEPT:
+                t = pair_toi_swept(dx, dv, da, radius[i] + radius[j], integrator, k, horizon, tolerance)
+            else:
+                t = pair_toi_sampled(dx, dv, da, radius[i] + radius[j], integrator, k, horizon,
+                                     1 if detection == DISCRETE else samples)
+        else:
+            if held_walls.shape[0] > 0:
+                key = i * n_walls + j
+                pos = np.searchsorted(held_walls, key)
+                if pos < held_walls.shape[0] and held_walls[pos] == key:
+                    continue
+            g0, p, q, _ = wall_gap_terms(x, v, a, radius, i, normals[j], offsets[j], half_thickness[j],
+                                         two_sided[j])
+            start = sigma[i]
+            horizon = step_end - start
+            if detection == SWEPT:
+                t = wall_toi_swept(g0, p, q, integrator, k, horizon)
+            else:
+                t = wall_toi_sampled(g0, p, q, integrator, k, horizon, 1 if detection == DISCRETE else samples)
+        rid = counters[TESTS]
+        test_int[rid, 0] = kind
+        test_int[rid, 1] = i
+        test_int[rid, 2] = j
+        test_float[rid, 0] = start
+        test_float[rid, 1] = start + t
+        test_outcome[rid] = _MISS
+        counters[TESTS] = rid + 1
+        recorded += 1
+        if push and start + t <= step_end:
+            heap_push(heap_toi, heap_data, counters, start + t, rid, kind, i, j, version[i],
+                      version[j] if kind == _KIND_PAIR else 0)
+    return recorded
+
+
+# ------------------------------------------------------------------------------ resolve
+@njit(cache=True)
+def _combine(rule, e_a, e_b):
+    if rule == 0:
+        return min(e_a, e_b)
+    if rule == 1:
+        return max(e_a, e_b)
+    if rule == 2:
+        return e_a * e_b
+    return 0.5 * (e_a + e_b)
+
+
+@njit(cache=True)
+def _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, tolerance,
+               normals, offsets, half_thickness, two_sided, held_pairs, held_walls, adj_start, adj,
+               other_changed, test_int, test_float, test_outcome, heap_toi, heap_data, counters):
+    """Push new predictions of particle p against its partners and the walls."""
+    count = adj_start[p + 1] - adj_start[p]
+    ia = np.empty(count, dtype=np.int64)
+    ib = np.empty(count, dtype=np.int64)
+    m = 0
+    for s in range(adj_start[p], adj_start[p + 1]):
+        q = adj[s]
+        if q == other_changed and q < p:
+            continue  # the pair is predicted once, from the smaller index
+        ia[m] = min(p, q)
+        ib[m] = max(p, q)
+        m += 1
+    predict_into(_KIND_PAIR, ia[:m], ib[:m], x, v, a, radius, sigma, version, step_end, integrator, k,
+                 detection, samples, tolerance, normals, offsets, half_thickness, two_sided, held_pairs,
+                 held_walls, normals.shape[0], test_int, test_float, test_outcome, heap_toi, heap_data,
+                 counters, True)
+    nw = normals.shape[0]
+    wp = np.full(nw, p, dtype=np.int64)
+    ww = np.arange(nw)
+    predict_into(_KIND_WALL, wp, ww, x, v, a, radius, sigma, version, step_end, integrator, k, detection,
+                 samples, tolerance, normals, offsets, half_thickness, two_sided, held_pairs, held_walls, nw,
+                 test_int, test_float, test_outcome, heap_toi, heap_data, counters, True)
+
+
+@njit(cache=True)
+def _inside_box(x, v, a, radius, sigma, p, step_end, integrator, k, margin, box_lo, box_hi):
+    lo = np.empty((1, 3))
+    hi = np.empty((1, 3))
+    idx = np.array([p])
+    swept_boxes(x[idx], v[idx], a[idx], radius[idx], sigma[idx], step_end, integrator, k, margin, lo, hi)
+    for c in range(3):
+        if lo[0, c] < box_lo[p, c] or hi[0, c] > box_hi[p, c]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, version, step_end, integrator, drag,
+                   k, detection, samples, tolerance, rest_speed, rest_step_factor, rule, normals, offsets,
+                   half_thickness, two_sided, wall_restitution, held_pairs, held_walls, has_held, adj_start, adj,
+                   box_lo, box_hi, box_margin, max_degree, cap, anchor_is_flow,
+                   heap_toi, heap_data, test_int, test_float, test_outcome, contact_float, contact_int, counters,
+                   pending_int, pending_float, requery, requery_count):
+    """Resolve contacts in time order until done or a pause (see module doc)."""
+    nw = normals.shape[0]
+    room = 2 * max_degree + 2 * nw + 4
+    pair = np.empty(2, dtype=np.int64)
+    while counters[HEAP_SIZE] > 0:
+        if (heap_toi.shape[0] - counters[HEAP_SIZE] < room or test_outcome.shape[0] - counters[TESTS] < room
+                or contact_int.shape[0] - counters[CONTACTS] < 2):
+            return GROW
+        slot = heap_pop(heap_toi, heap_data, counters)
+        counters[EVENTS] += 1
+        toi = heap_toi[slot]
+        rid = heap_data[slot, 0]
+        kind = heap_data[slot, 1]
+        ia = heap_data[slot, 2]
+        other = heap_data[slot, 3]
+        if version[ia] != heap_data[slot, 4] or (kind == _KIND_PAIR and version[other] != heap_data[slot, 5]):
+            test_outcome[rid] = _SUPERSEDED
+            continue
+        if counters[CONTACTS] >= cap:
+            test_outcome[rid] = 3
+            for s in range(counters[HEAP_SIZE]):
+                test_outcome[heap_data[s, 0]] = 3
+            counters[HEAP_SIZE] = 0
+            return CAPPED
+        ib = other if kind == _KIND_PAIR else -1
+        if has_held[ia] or (ib >= 0 and has_held[ib]):
+            pending_int[0] = kind
+            pending_int[1] = ia
+            pending_int[2] = other
+            pending_int[3] = rid
+            pending_float[0] = toi
+            return PAUSE_RESOLVE
+        # advance to the contact
+        if ib >= 0:
+            pair[0] = ia
+            pair[1] = ib
+            advance_particles(x, v, a, sigma, pair, toi, integrator, drag, k)
+        else:
+            pair[0] = ia
+            advance_particles(x, v, a, sigma, pair[:1], toi, integrator, drag, k)
+        # normal, closing speed, restitution
+        nx = 0.0
+        ny = 0.0
+        nz = 0.0
+        if ib >= 0:
+            dx0 = x[ia, 0] - x[ib, 0]
+            dx1 = x[ia, 1] - x[ib, 1]
+            dx2 = x[ia, 2] - x[ib, 2]
+            length = math.sqrt(dx0 * dx0 + dx1 * dx1 + dx2 * dx2)
+            if length == 0.0:
+                nx = 1.0
+            else:
+                nx = dx0 / length
+                ny = dx1 / length
+                nz = dx2 / length
+            closing = -((v[ia, 0] - v[ib, 0]) * nx + (v[ia, 1] - v[ib, 1]) * ny + (v[ia, 2] - v[ib, 2]) * nz)
+            rel_acc = (acc[ia, 0] - acc[ib, 0]) * nx + (acc[ia, 1] - acc[ib, 1]) * ny + (acc[ia, 2] - acc[ib, 2]) * nz
+            e = _combine(rule, restitution[ia], restitution[ib])
+        else:
+            nx = normals[other, 0]
+            ny = normals[other, 1]
+            nz = normals[other, 2]
+            if two_sided[other] and nx * x[ia, 0] + ny * x[ia, 1] + nz * x[ia, 2] - offsets[other] < 0.0:
+                nx = -nx
+                ny = -ny
+                nz = -nz
+            closing = -(v[ia, 0] * nx + v[ia, 1] * ny + v[ia, 2] * nz)
+            rel_acc = acc[ia, 0] * nx + acc[ia, 1] * ny + acc[ia, 2] * nz
+            e = _combine(rule, restitution[ia], wall_restitution[other])
+        if closing < 0.0 or (closing == 0.0 and not rel_acc < 0.0) or (
+                ib >= 0 and inverse_mass[ia] + inverse_mass[ib] == 0.0):
+            test_outcome[rid] = _SUPERSEDED
+            if not anchor_is_flow:  # Euler (and dragged Verlet) paths change with the anchor
+                version[ia] += 1
+                _repredict(ia, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
+                           tolerance, normals, offsets, half_thickness, two_sided, held_pairs, held_walls,
+                           adj_start, adj, ib, test_int, test_float, test_outcome, heap_toi, heap_data, counters)
+                if ib >= 0:
+                    version[ib] += 1
+                    _repredict(ib, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
+                               tolerance, normals, offsets, half_thickness, two_sided, held_pairs, held_walls,
+                               adj_start, adj, ia, test_int, test_float, test_outcome, heap_toi, heap_data,
+                               counters)
+            continue
+        threshold = rest_speed + (abs(rel_acc) * (step_end * rest_step_factor))
+        if closing <= threshold:
+            pending_int[0] = kind
+            pending_int[1] = ia
+            pending_int[2] = other
+            pending_int[3] = rid
+            pending_float[0] = toi
+            return PAUSE_RESOLVE
+        # resolve: the seed's impulse / reflection
+        row = counters[CONTACTS]
+        cf = contact_float
+        cf[row, CF_TIME] = toi
+        cf[row, CF_NORMAL] = nx
+        cf[row, CF_NORMAL + 1] = ny
+        cf[row, CF_NORMAL + 2] = nz
+        for c in range(3):
+            cf[row, CF_POINT + c] = x[ia, c] - cf[row, CF_NORMAL + c] * radius[ia]
+            cf[row, CF_VA_BEFORE + c] = v[ia, c]
+            cf[row, CF_VB_BEFORE + c] = v[ib, c] if ib >= 0 else math.nan
+        if ib >= 0:
+            j = (1.0 + e) * closing / (inverse_mass[ia] + inverse_mass[ib])
+            wa = j * inverse_mass[ia]
+            wb = j * inverse_mass[ib]
+            v[ia, 0] += wa * nx
+            v[ia, 1] += wa * ny
+            v[ia, 2] += wa * nz
+            v[ib, 0] -= wb * nx
+            v[ib, 1] -= wb * ny
+            v[ib, 2] -= wb * nz
+        else:
+            dvn = (1.0 + e) * closing
+            v[ia, 0] += dvn * nx
+            v[ia, 1] += dvn * ny
+            v[ia, 2] += dvn * nz
+            j = dvn / inverse_mass[ia] if inverse_mass[ia] > 0.0 else math.inf
+        for c in range(3):
+            cf[row, CF_VA_AFTER + c] = v[ia, c]
+            cf[row, CF_VB_AFTER + c] = v[ib, c] if ib >= 0 else math.nan
+        cf[row, CF_IMPULSE] = j
+        cf[row, CF_RESTITUTION] = e
+        cf[row, CF_CLOSING] = closing
+        contact_int[row, 0] = kind
+        contact_int[row, 1] = ia
+        contact_int[row, 2] = other
+        contact_int[row, 3] = 0
+        counters[CONTACTS] = row + 1
+        test_outcome[rid] = _HIT
+        # re-predict only the particles involved
+        version[ia] += 1
+        if ib >= 0:
+            version[ib] += 1
+        _repredict(ia, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, tolerance,
+                   normals, offsets, half_thickness, two_sided, held_pairs, held_walls, adj_start, adj, ib,
+                   test_int, test_float, test_outcome, heap_toi, heap_data, counters)
+        if ib >= 0:
+            _repredict(ib, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
+                       tolerance, normals, offsets, half_thickness, two_sided, held_pairs, held_walls, adj_start,
+                       adj, ia, test_int, test_float, test_outcome, heap_toi, heap_data, counters)
+        # a path that left its swept box may meet particles it was never paired with
+        out = 0
+        if not _inside_box(x, v, a, radius, sigma, ia, step_end, integrator, k, box_margin, box_lo, box_hi):
+            requery[out] = ia
+            out += 1
+        if ib >= 0 and not _inside_box(x, v, a, radius, sigma, ib, step_end, integrator, k, box_margin, box_lo,
+                                       box_hi):
+            requery[out] = ib
+            out += 1
+        if out:
+            requery_count[0] = out
+            return REQUERY
+    return DONE
+
+
+# ------------------------------------------------------------------------------ step helpers
+@njit(cache=True)
+def adjacency_from_pairs(pairs, n):
+    """CSR partner lists (start (N+1,), partners (2M,)) from sorted pairs i < j.
+
+    Rows come out sorted because the pairs are: row i first receives the (x, i) with
+    x < i in order of x, then the (i, y) in order of y.
+    """
+    start = np.zeros(n + 1, dtype=np.int64)
+    for m in range(pairs.shape[0]):
+        start[pairs[m, 0] + 1] += 1
+        start[pairs[m, 1] + 1] += 1
+    for i in range(n):
+        start[i + 1] += start[i]
+    fill = start[:-1].copy()
+    partners = np.empty(2 * pairs.shape[0], dtype=np.int64)
+    for m in range(pairs.shape[0]):
+        i = pairs[m, 0]
+        j = pairs[m, 1]
+        partners[fill[i]] = j
+        fill[i] += 1
+        partners[fill[j]] = i
+        fill[j] += 1
+    return start, partners
+
+
+@njit(cache=True)
+def reachable_walls(lo, hi, normals, offsets, half_thickness, two_sided):
+    """Particle–wall candidates (particles (K,), walls (K,)) whose swept box reaches the wall.
+
+    lo, hi already include the radius, so a box entirely beyond the plane (or slab) cannot
+    touch it on its current path.
+    """
+    n = lo.shape[0]
+    nw = normals.shape[0]
+    ip = np.empty(n * nw, dtype=np.int64)
+    iw = np.empty(n * nw, dtype=np.int64)
+    m = 0
+    for i in range(n):
+        for w in range(nw):
+            low = 0.0
+            high = 0.0
+            for c in range(3):
+                a = normals[w, c] * lo[i, c]
+                b = normals[w, c] * hi[i, c]
+                low += min(a, b)
+                high += max(a, b)
+            low -= offsets[w]
+            high -= offsets[w]
+            h = half_thickness[w]
+            if (two_sided[w] and low <= h and high >= -h) or (not two_sided[w] and low <= h):
+                ip[m] = i
+                iw[m] = w
+                m += 1
+    return ip[:m], iw[:m]
+
+
+@njit(cache=True)
+def max_overlap(x, radius, pairs, normals, offsets, half_thickness, two_sided, ignore_tunnelled):
+    """Deepest penetration (m, >= 0) among the candidate pairs and every particle–wall pair.
+
+    ignore_tunnelled: a sphere past the middle of a thin wall went through it (discrete or
+    sampled detection) and is not counted as overlapping it.
+    """
+    worst = 0.0
+    for m in range(pairs.shape[0]):
+        i = pairs[m, 0]
+        j = pairs[m, 1]
+        d = math.sqrt((x[i, 0] - x[j, 0]) ** 2 + (x[i, 1] - x[j, 1]) ** 2 + (x[i, 2] - x[j, 2]) ** 2)
+        worst = max(worst, radius[i] + radius[j] - d)
+    for i in range(x.shape[0]):
+        for w in range(normals.shape[0]):
+            h = normals[w, 0] * x[i, 0] + normals[w, 1] * x[i, 1] + normals[w, 2] * x[i, 2] - offsets[w]
+            if two_sided[w]:
+                h = abs(h)
+            pen = half_thickness[w] + radius[i] - h
+            if ignore_tunnelled and two_sided[w] and pen > radius[i]:
+                pen = 0.0
+            worst = max(worst, pen)
+    return worst
