@@ -46,7 +46,7 @@ INTEGRATOR_NAMES = ("euler", "semi-implicit", "verlet", "exact")
 _SERIES_LIMIT = 1e-2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def path_coefficients(integrator, k, tau):
     """(P1, P2, dP1) of the table above at local time tau (s)."""
     if integrator == EXACT:
@@ -72,7 +72,7 @@ def path_coefficients(integrator, k, tau):
     return tau, 0.0, 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def curvature_scale(integrator, k):
     """How the second derivative of n·position relates to (q, p) = (n·a, n·v).
 
@@ -85,7 +85,7 @@ def curvature_scale(integrator, k):
     return 0.0, 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def velocity_coefficients(integrator, drag, k, tau):
     """(V0, V1) of the table above: the integrator's velocity after tau seconds."""
     if integrator == EXACT:
@@ -119,58 +119,50 @@ def advance_particles(x, v, a, sigma, indices, to_time, integrator, drag, k):
 
 
 @njit(cache=True)
-def path_state(x, v, a, sigma, i, at_time, integrator, k, out_pos, out_vel):
-    """Position and path velocity of particle i at ``at_time`` (>= its anchor), no update."""
-    tau = at_time - sigma[i]
-    if tau < 0.0:
-        tau = 0.0
-    p1, p2, dp1 = path_coefficients(integrator, k, tau)
+def particle_box(x, v, a, radius, sigma, i, step_end, integrator, k, margin, out_lo, out_hi):
+    """AABB (out_lo, out_hi: (3,)) of particle i's path from its anchor to ``step_end``.
+
+    Each coordinate of a path is convex or concave in tau, so its extremes are at the
+    ends or at the one interior point where its derivative vanishes.
+    """
+    tau_end = step_end - sigma[i]
+    if tau_end < 0.0:
+        tau_end = 0.0
+    p1e, p2e, _ = path_coefficients(integrator, k, tau_end)
     for c in range(3):
-        out_pos[c] = x[i, c] + v[i, c] * p1 + a[i, c] * p2
-        out_vel[c] = v[i, c] * dp1 + a[i, c] * p1
+        x0 = x[i, c]
+        x1 = x0 + v[i, c] * p1e + a[i, c] * p2e
+        mn = min(x0, x1)
+        mx = max(x0, x1)
+        if a[i, c] != 0.0 and integrator >= VERLET:
+            # interior extremum where v*dP1 + a*P1 = 0; bisection on the monotone derivative
+            lo_t = 0.0
+            hi_t = tau_end
+            f_lo = v[i, c]
+            q1, _, dq = path_coefficients(integrator, k, hi_t)
+            f_hi = v[i, c] * dq + a[i, c] * q1
+            if f_lo * f_hi < 0.0:
+                for _ in range(60):
+                    mid = 0.5 * (lo_t + hi_t)
+                    m1, _, dm = path_coefficients(integrator, k, mid)
+                    f_mid = v[i, c] * dm + a[i, c] * m1
+                    if f_mid * f_lo > 0.0:
+                        lo_t = mid
+                        f_lo = f_mid
+                    else:
+                        hi_t = mid
+                for t_ext in (lo_t, hi_t):
+                    e1, e2, _ = path_coefficients(integrator, k, t_ext)
+                    xe = x0 + v[i, c] * e1 + a[i, c] * e2
+                    mn = min(mn, xe)
+                    mx = max(mx, xe)
+        r = radius[i] + margin
+        out_lo[c] = mn - r
+        out_hi[c] = mx + r
 
 
 @njit(cache=True)
 def swept_boxes(x, v, a, radius, sigma, step_end, integrator, k, margin, lo, hi):
-    """AABB of each particle's whole path from its anchor to ``step_end`` (its swept volume).
-
-    Each coordinate of a path is convex or concave in tau, so its extremes are at the
-    ends or at the one interior point where its derivative vanishes. lo, hi: (N, 3) out.
-    """
-    n = x.shape[0]
-    for i in range(n):
-        tau_end = step_end - sigma[i]
-        if tau_end < 0.0:
-            tau_end = 0.0
-        p1e, p2e, _ = path_coefficients(integrator, k, tau_end)
-        for c in range(3):
-            x0 = x[i, c]
-            x1 = x0 + v[i, c] * p1e + a[i, c] * p2e
-            mn = min(x0, x1)
-            mx = max(x0, x1)
-            if a[i, c] != 0.0 and integrator >= VERLET:
-                # interior extremum where v*dP1 + a*P1 = 0; bisection on the monotone derivative
-                lo_t = 0.0
-                hi_t = tau_end
-                _, _, d0 = path_coefficients(integrator, k, 0.0)
-                f_lo = v[i, c] * d0
-                q1, _, dq = path_coefficients(integrator, k, hi_t)
-                f_hi = v[i, c] * dq + a[i, c] * q1
-                if f_lo * f_hi < 0.0:
-                    for _ in range(60):
-                        mid = 0.5 * (lo_t + hi_t)
-                        m1, _, dm = path_coefficients(integrator, k, mid)
-                        f_mid = v[i, c] * dm + a[i, c] * m1
-                        if f_mid * f_lo > 0.0:
-                            lo_t = mid
-                            f_lo = f_mid
-                        else:
-                            hi_t = mid
-                    for t_ext in (lo_t, hi_t):
-                        e1, e2, _ = path_coefficients(integrator, k, t_ext)
-                        xe = x0 + v[i, c] * e1 + a[i, c] * e2
-                        mn = min(mn, xe)
-                        mx = max(mx, xe)
-            r = radius[i] + margin
-            lo[i, c] = mn - r
-            hi[i, c] = mx + r
+    """particle_box for every particle: lo, hi (N, 3) out, padded by radius + margin (m)."""
+    for i in range(x.shape[0]):
+        particle_box(x, v, a, radius, sigma, i, step_end, integrator, k, margin, lo[i], hi[i])

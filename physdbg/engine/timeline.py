@@ -26,8 +26,17 @@ import math
 import numpy as np
 from numba import njit
 
-from .motion import EULER, SEMI_IMPLICIT, advance_particles, path_state, swept_boxes
-from .toi import DISCRETE, SWEPT, pair_toi_sampled, pair_toi_swept, wall_gap_terms, wall_toi_sampled, wall_toi_swept
+from .motion import advance_particles, particle_box
+from .motion import path_coefficients
+from .toi import (
+    DISCRETE,
+    SWEPT,
+    pair_toi_sampled_scalar,
+    pair_toi_swept_scalar,
+    wall_gap_terms,
+    wall_toi_sampled,
+    wall_toi_swept,
+)
 
 # statuses
 DONE = 0
@@ -111,12 +120,12 @@ def _grown(array: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------ heap
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _less(toi, data, i, j):
     return toi[i] < toi[j] or (toi[i] == toi[j] and data[i, 0] < data[j, 0])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _swap(toi, data, i, j):
     t = toi[i]
     toi[i] = toi[j]
@@ -127,7 +136,7 @@ def _swap(toi, data, i, j):
         data[j, c] = d
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def heap_push(toi, data, counters, t, rid, kind, a, other, va, vb):
     n = counters[HEAP_SIZE]
     toi[n] = t
@@ -170,77 +179,96 @@ def heap_pop(toi, data, counters):
 
 
 # ------------------------------------------------------------------------------ predict
+@njit(cache=True, inline="always")
+def _record(kind, i, j, start, t, step_end, version, test_int, test_float, test_outcome, heap_toi, heap_data,
+            counters, push):
+    rid = counters[TESTS]
+    test_int[rid, 0] = kind
+    test_int[rid, 1] = i
+    test_int[rid, 2] = j
+    test_float[rid, 0] = start
+    test_float[rid, 1] = start + t
+    test_outcome[rid] = _MISS
+    counters[TESTS] = rid + 1
+    if push and start + t <= step_end:
+        heap_push(heap_toi, heap_data, counters, start + t, rid, kind, i, j, version[i],
+                  version[j] if kind == _KIND_PAIR else 0)
+
+
+@njit(cache=True, inline="always")
+def _predict_pair(i, j, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, tolerance,
+                  held_pairs, test_int, test_float, test_outcome, heap_toi, heap_data, counters, push):
+    """Swept test of pair (i, j) from the later of their anchors; record it, push a hit."""
+    if held_pairs.shape[0] > 0:
+        key = min(i, j) * x.shape[0] + max(i, j)
+        pos = np.searchsorted(held_pairs, key)
+        if pos < held_pairs.shape[0] and held_pairs[pos] == key:
+            return
+    start = max(sigma[i], sigma[j])
+    pi1, pi2, dpi = path_coefficients(integrator, k, start - sigma[i])
+    pj1, pj2, dpj = path_coefficients(integrator, k, start - sigma[j])
+    # relative position and path velocity at the common start (see motion.path_state)
+    dx0 = (x[i, 0] + v[i, 0] * pi1 + a[i, 0] * pi2) - (x[j, 0] + v[j, 0] * pj1 + a[j, 0] * pj2)
+    dx1 = (x[i, 1] + v[i, 1] * pi1 + a[i, 1] * pi2) - (x[j, 1] + v[j, 1] * pj1 + a[j, 1] * pj2)
+    dx2 = (x[i, 2] + v[i, 2] * pi1 + a[i, 2] * pi2) - (x[j, 2] + v[j, 2] * pj1 + a[j, 2] * pj2)
+    dv0 = (v[i, 0] * dpi + a[i, 0] * pi1) - (v[j, 0] * dpj + a[j, 0] * pj1)
+    dv1 = (v[i, 1] * dpi + a[i, 1] * pi1) - (v[j, 1] * dpj + a[j, 1] * pj1)
+    dv2 = (v[i, 2] * dpi + a[i, 2] * pi1) - (v[j, 2] * dpj + a[j, 2] * pj1)
+    horizon = step_end - start
+    if detection == SWEPT:
+        t = pair_toi_swept_scalar(dx0, dx1, dx2, dv0, dv1, dv2, a[i, 0] - a[j, 0], a[i, 1] - a[j, 1],
+                                  a[i, 2] - a[j, 2], radius[i] + radius[j], integrator, k, horizon, tolerance)
+    else:
+        t = pair_toi_sampled_scalar(dx0, dx1, dx2, dv0, dv1, dv2, a[i, 0] - a[j, 0], a[i, 1] - a[j, 1],
+                                    a[i, 2] - a[j, 2], radius[i] + radius[j], integrator, k, horizon,
+                                    1 if detection == DISCRETE else samples)
+    _record(_KIND_PAIR, i, j, start, t, step_end, version, test_int, test_float, test_outcome, heap_toi,
+            heap_data, counters, push)
+
+
+@njit(cache=True, inline="always")
+def _predict_wall(i, w, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, normals,
+                  offsets, half_thickness, two_sided, held_walls, test_int, test_float, test_outcome, heap_toi,
+                  heap_data, counters, push):
+    """Swept test of particle i against wall w from i's anchor; record it, push a hit."""
+    if held_walls.shape[0] > 0:
+        key = i * normals.shape[0] + w
+        pos = np.searchsorted(held_walls, key)
+        if pos < held_walls.shape[0] and held_walls[pos] == key:
+            return
+    g0, p, q, _ = wall_gap_terms(x, v, a, radius, i, normals[w], offsets[w], half_thickness[w], two_sided[w])
+    start = sigma[i]
+    horizon = step_end - start
+    if detection == SWEPT:
+        t = wall_toi_swept(g0, p, q, integrator, k, horizon)
+    else:
+        t = wall_toi_sampled(g0, p, q, integrator, k, horizon, 1 if detection == DISCRETE else samples)
+    _record(_KIND_WALL, i, w, start, t, step_end, version, test_int, test_float, test_outcome, heap_toi, heap_data,
+            counters, push)
+
+
 @njit(cache=True)
 def predict_into(kind, ia, ib, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
-                 tolerance, normals, offsets, half_thickness, two_sided, held_pairs, held_walls, n_walls,
+                 tolerance, normals, offsets, half_thickness, two_sided, held_pairs, held_walls,
                  test_int, test_float, test_outcome, heap_toi, heap_data, counters, push):
     """Swept-test candidates (kind, ia[m], ib[m]); record each test; push hits if ``push``.
 
     held_pairs / held_walls: sorted keys (a·N + b, particle·W + wall) of held contacts,
-    which are not tested. Returns the number of tests recorded.
+    which are not tested.
     """
-    n = x.shape[0]
-    pa = np.empty(3)
-    va = np.empty(3)
-    pb = np.empty(3)
-    vb = np.empty(3)
-    dx = np.empty(3)
-    dv = np.empty(3)
-    da = np.empty(3)
-    recorded = 0
     for m in range(ia.shape[0]):
-        i = ia[m]
-        j = ib[m]
         if kind == _KIND_PAIR:
-            if held_pairs.shape[0] > 0:
-                key = min(i, j) * n + max(i, j)
-                pos = np.searchsorted(held_pairs, key)
-                if pos < held_pairs.shape[0] and held_pairs[pos] == key:
-                    continue
-            start = max(sigma[i], sigma[j])
-            path_state(x, v, a, sigma, i, start, integrator, k, pa, va)
-            path_state(x, v, a, sigma, j, start, integrator, k, pb, vb)
-            for c in range(3):
-                dx[c] = pa[c] - pb[c]
-                dv[c] = va[c] - vb[c]
-                da[c] = a[i, c] - a[j, c]
-            horizon = step_end - start
-            if detection == SWEPT:
-                t = pair_toi_swept(dx, dv, da, radius[i] + radius[j], integrator, k, horizon, tolerance)
-            else:
-                t = pair_toi_sampled(dx, dv, da, radius[i] + radius[j], integrator, k, horizon,
-                                     1 if detection == DISCRETE else samples)
+            _predict_pair(ia[m], ib[m], x, v, a, radius, sigma, version, step_end, integrator, k, detection,
+                          samples, tolerance, held_pairs, test_int, test_float, test_outcome, heap_toi,
+                          heap_data, counters, push)
         else:
-            if held_walls.shape[0] > 0:
-                key = i * n_walls + j
-                pos = np.searchsorted(held_walls, key)
-                if pos < held_walls.shape[0] and held_walls[pos] == key:
-                    continue
-            g0, p, q, _ = wall_gap_terms(x, v, a, radius, i, normals[j], offsets[j], half_thickness[j],
-                                         two_sided[j])
-            start = sigma[i]
-            horizon = step_end - start
-            if detection == SWEPT:
-                t = wall_toi_swept(g0, p, q, integrator, k, horizon)
-            else:
-                t = wall_toi_sampled(g0, p, q, integrator, k, horizon, 1 if detection == DISCRETE else samples)
-        rid = counters[TESTS]
-        test_int[rid, 0] = kind
-        test_int[rid, 1] = i
-        test_int[rid, 2] = j
-        test_float[rid, 0] = start
-        test_float[rid, 1] = start + t
-        test_outcome[rid] = _MISS
-        counters[TESTS] = rid + 1
-        recorded += 1
-        if push and start + t <= step_end:
-            heap_push(heap_toi, heap_data, counters, start + t, rid, kind, i, j, version[i],
-                      version[j] if kind == _KIND_PAIR else 0)
-    return recorded
+            _predict_wall(ia[m], ib[m], x, v, a, radius, sigma, version, step_end, integrator, k, detection,
+                          samples, normals, offsets, half_thickness, two_sided, held_walls, test_int, test_float,
+                          test_outcome, heap_toi, heap_data, counters, push)
 
 
 # ------------------------------------------------------------------------------ resolve
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _combine(rule, e_a, e_b):
     if rule == 0:
         return min(e_a, e_b)
@@ -254,39 +282,26 @@ def _combine(rule, e_a, e_b):
 @njit(cache=True)
 def _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, tolerance,
                normals, offsets, half_thickness, two_sided, held_pairs, held_walls, adj_start, adj,
-               other_changed, test_int, test_float, test_outcome, heap_toi, heap_data, counters):
+               other_changed, scratch, test_int, test_float, test_outcome, heap_toi, heap_data, counters):
     """Push new predictions of particle p against its partners and the walls."""
-    count = adj_start[p + 1] - adj_start[p]
-    ia = np.empty(count, dtype=np.int64)
-    ib = np.empty(count, dtype=np.int64)
-    m = 0
     for s in range(adj_start[p], adj_start[p + 1]):
         q = adj[s]
         if q == other_changed and q < p:
             continue  # the pair is predicted once, from the smaller index
-        ia[m] = min(p, q)
-        ib[m] = max(p, q)
-        m += 1
-    predict_into(_KIND_PAIR, ia[:m], ib[:m], x, v, a, radius, sigma, version, step_end, integrator, k,
-                 detection, samples, tolerance, normals, offsets, half_thickness, two_sided, held_pairs,
-                 held_walls, normals.shape[0], test_int, test_float, test_outcome, heap_toi, heap_data,
-                 counters, True)
-    nw = normals.shape[0]
-    wp = np.full(nw, p, dtype=np.int64)
-    ww = np.arange(nw)
-    predict_into(_KIND_WALL, wp, ww, x, v, a, radius, sigma, version, step_end, integrator, k, detection,
-                 samples, tolerance, normals, offsets, half_thickness, two_sided, held_pairs, held_walls, nw,
-                 test_int, test_float, test_outcome, heap_toi, heap_data, counters, True)
+        _predict_pair(min(p, q), max(p, q), x, v, a, radius, sigma, version, step_end, integrator, k, detection,
+                      samples, tolerance, held_pairs, test_int, test_float, test_outcome, heap_toi,
+                      heap_data, counters, True)
+    for w in range(normals.shape[0]):
+        _predict_wall(p, w, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, normals,
+                      offsets, half_thickness, two_sided, held_walls, test_int, test_float, test_outcome, heap_toi,
+                      heap_data, counters, True)
 
 
 @njit(cache=True)
-def _inside_box(x, v, a, radius, sigma, p, step_end, integrator, k, margin, box_lo, box_hi):
-    lo = np.empty((1, 3))
-    hi = np.empty((1, 3))
-    idx = np.array([p])
-    swept_boxes(x[idx], v[idx], a[idx], radius[idx], sigma[idx], step_end, integrator, k, margin, lo, hi)
+def _inside_box(x, v, a, radius, sigma, p, step_end, integrator, k, margin, box_lo, box_hi, scratch):
+    particle_box(x, v, a, radius, sigma, p, step_end, integrator, k, margin, scratch[0], scratch[1])
     for c in range(3):
-        if lo[0, c] < box_lo[p, c] or hi[0, c] > box_hi[p, c]:
+        if scratch[0, c] < box_lo[p, c] or scratch[1, c] > box_hi[p, c]:
             return False
     return True
 
@@ -302,6 +317,7 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
     nw = normals.shape[0]
     room = 2 * max_degree + 2 * nw + 4
     pair = np.empty(2, dtype=np.int64)
+    scratch = np.empty((7, 3))
     while counters[HEAP_SIZE] > 0:
         if (heap_toi.shape[0] - counters[HEAP_SIZE] < room or test_outcome.shape[0] - counters[TESTS] < room
                 or contact_int.shape[0] - counters[CONTACTS] < 2):
@@ -374,12 +390,12 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
                 version[ia] += 1
                 _repredict(ia, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
                            tolerance, normals, offsets, half_thickness, two_sided, held_pairs, held_walls,
-                           adj_start, adj, ib, test_int, test_float, test_outcome, heap_toi, heap_data, counters)
+                           adj_start, adj, ib, scratch, test_int, test_float, test_outcome, heap_toi, heap_data, counters)
                 if ib >= 0:
                     version[ib] += 1
                     _repredict(ib, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
                                tolerance, normals, offsets, half_thickness, two_sided, held_pairs, held_walls,
-                               adj_start, adj, ia, test_int, test_float, test_outcome, heap_toi, heap_data,
+                               adj_start, adj, ia, scratch, test_int, test_float, test_outcome, heap_toi, heap_data,
                                counters)
             continue
         threshold = rest_speed + (abs(rel_acc) * (step_end * rest_step_factor))
@@ -435,18 +451,18 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
             version[ib] += 1
         _repredict(ia, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, tolerance,
                    normals, offsets, half_thickness, two_sided, held_pairs, held_walls, adj_start, adj, ib,
-                   test_int, test_float, test_outcome, heap_toi, heap_data, counters)
+                   scratch, test_int, test_float, test_outcome, heap_toi, heap_data, counters)
         if ib >= 0:
             _repredict(ib, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
                        tolerance, normals, offsets, half_thickness, two_sided, held_pairs, held_walls, adj_start,
-                       adj, ia, test_int, test_float, test_outcome, heap_toi, heap_data, counters)
+                       adj, ia, scratch, test_int, test_float, test_outcome, heap_toi, heap_data, counters)
         # a path that left its swept box may meet particles it was never paired with
         out = 0
-        if not _inside_box(x, v, a, radius, sigma, ia, step_end, integrator, k, box_margin, box_lo, box_hi):
+        if not _inside_box(x, v, a, radius, sigma, ia, step_end, integrator, k, box_margin, box_lo, box_hi, scratch):
             requery[out] = ia
             out += 1
         if ib >= 0 and not _inside_box(x, v, a, radius, sigma, ib, step_end, integrator, k, box_margin, box_lo,
-                                       box_hi):
+                                       box_hi, scratch):
             requery[out] = ib
             out += 1
         if out:

@@ -33,7 +33,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .motion import EXACT, SEMI_IMPLICIT, EULER, curvature_scale, path_coefficients, path_state
+from .motion import EULER, EXACT, SEMI_IMPLICIT, curvature_scale, path_coefficients
 
 INF = math.inf
 
@@ -43,7 +43,7 @@ DISCRETE = 2
 DETECTION_NAMES = ("swept", "sampled", "discrete")
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _gap(g0, p, q, integrator, k, tau):
     p1, p2, dp1 = path_coefficients(integrator, k, tau)
     return g0 + p * p1 + q * p2, p * dp1 + q * p1
@@ -168,12 +168,12 @@ def wall_toi_sampled(g0, p, q, integrator, k, horizon, samples):
     return INF
 
 
-@njit(cache=True)
-def _linear_pair_u(dx, dv, radius_sum):
+@njit(cache=True, inline="always")
+def _linear_pair_u(dx0, dx1, dx2, dv0, dv1, dv2, radius_sum):
     """The seed's quadratic: first u >= 0 with |dx + dv·u| = R while approaching, or INF."""
-    a = dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2]
-    b = dv[0] * dx[0] + dv[1] * dx[1] + dv[2] * dx[2]
-    c = dx[0] * dx[0] + dx[1] * dx[1] + dx[2] * dx[2] - radius_sum * radius_sum
+    a = dv0 * dv0 + dv1 * dv1 + dv2 * dv2
+    b = dv0 * dx0 + dv1 * dx1 + dv2 * dx2
+    c = dx0 * dx0 + dx1 * dx1 + dx2 * dx2 - radius_sum * radius_sum
     if b >= 0.0 or a == 0.0:
         return INF  # separating or at rest relative to each other
     if c <= 0.0:
@@ -185,7 +185,7 @@ def _linear_pair_u(dx, dv, radius_sum):
     return c / (-b + math.sqrt(disc))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _u_to_tau(integrator, k, u):
     if integrator == EXACT and k > 0.0:
         ku = k * u
@@ -195,15 +195,15 @@ def _u_to_tau(integrator, k, u):
     return u
 
 
-@njit(cache=True)
-def _relative_path(dx, dv, da, integrator, k, t):
+@njit(cache=True, inline="always")
+def _relative_path(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, integrator, k, t):
     """Relative position D(t) = dx + dv·P1 + da·P2 and its rate D'(t), as six floats."""
     p1, p2, dp1 = path_coefficients(integrator, k, t)
-    return (dx[0] + dv[0] * p1 + da[0] * p2, dx[1] + dv[1] * p1 + da[1] * p2, dx[2] + dv[2] * p1 + da[2] * p2,
-            dv[0] * dp1 + da[0] * p1, dv[1] * dp1 + da[1] * p1, dv[2] * dp1 + da[2] * p1)
+    return (dx0 + dv0 * p1 + da0 * p2, dx1 + dv1 * p1 + da1 * p2, dx2 + dv2 * p1 + da2 * p2,
+            dv0 * dp1 + da0 * p1, dv1 * dp1 + da1 * p1, dv2 * dp1 + da2 * p1)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _norm(x0, x1, x2):
     return math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
 
@@ -216,32 +216,38 @@ def pair_toi_swept(dx, dv, da, radius_sum, integrator, k, horizon, tolerance):
     at the common start time; radius_sum: r_a + r_b (m); tolerance: gap (m) below which
     conservative advancement calls it a contact.
     """
-    linear = integrator == EULER or integrator == SEMI_IMPLICIT or (
-        da[0] == 0.0 and da[1] == 0.0 and da[2] == 0.0
-    )
+    return pair_toi_swept_scalar(dx[0], dx[1], dx[2], dv[0], dv[1], dv[2], da[0], da[1], da[2], radius_sum,
+                                 integrator, k, horizon, tolerance)
+
+
+@njit(cache=True)
+def pair_toi_swept_scalar(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, radius_sum, integrator, k, horizon,
+                          tolerance):
+    """pair_toi_swept on scalars (the form the compiled loop calls: no arrays to pass)."""
+    linear = integrator == EULER or integrator == SEMI_IMPLICIT or (da0 == 0.0 and da1 == 0.0 and da2 == 0.0)
     if linear:
-        u = _linear_pair_u(dx, dv, radius_sum)
+        u = _linear_pair_u(dx0, dx1, dx2, dv0, dv1, dv2, radius_sum)
         if u == INF:
             return INF
         t = _u_to_tau(integrator, k, u)
         return t if t <= horizon else INF
     # conservative advancement with a second-order bound
     if integrator == EXACT:
-        m = _norm(da[0] - k * dv[0], da[1] - k * dv[1], da[2] - k * dv[2])
+        m = _norm(da0 - k * dv0, da1 - k * dv1, da2 - k * dv2)
     else:
-        m = _norm(da[0], da[1], da[2])
+        m = _norm(da0, da1, da2)
     t = 0.0
     for _ in range(500):
         if t > horizon:
             return INF
-        d0, d1, d2, e0, e1, e2 = _relative_path(dx, dv, da, integrator, k, t)
+        d0, d1, d2, e0, e1, e2 = _relative_path(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, integrator, k, t)
         dist = _norm(d0, d1, d2)
         g = dist - radius_sum
         rate = (d0 * e0 + d1 * e1 + d2 * e2) / dist if dist > 0.0 else -1.0
         if g <= tolerance:
             if rate < 0.0:
                 return t
-            if rate == 0.0 and (d0 * da[0] + d1 * da[1] + d2 * da[2]) < 0.0:
+            if rate == 0.0 and (d0 * da0 + d1 * da1 + d2 * da2) < 0.0:
                 return t
             if m == 0.0:
                 return INF
@@ -262,49 +268,24 @@ def pair_toi_swept(dx, dv, da, radius_sum, integrator, k, horizon, tolerance):
 @njit(cache=True)
 def pair_toi_sampled(dx, dv, da, radius_sum, integrator, k, horizon, samples):
     """First of ``samples`` instants in (0, horizon] with overlap while approaching."""
-    if integrator == EULER or integrator == SEMI_IMPLICIT:
-        da = np.zeros(3)
-    for m in range(1, samples + 1):
-        t = horizon * m / samples
-        d0, d1, d2, e0, e1, e2 = _relative_path(dx, dv, da, integrator, k, t)
-        if d0 * d0 + d1 * d1 + d2 * d2 < radius_sum * radius_sum and d0 * e0 + d1 * e1 + d2 * e2 < 0.0:
-            return t
-    return INF
+    return pair_toi_sampled_scalar(dx[0], dx[1], dx[2], dv[0], dv[1], dv[2], da[0], da[1], da[2], radius_sum,
+                                   integrator, k, horizon, samples)
 
 
 @njit(cache=True)
-def predict_pairs(ia, ib, x, v, a, radius, sigma, step_end, integrator, k, detection,
-                  samples, tolerance, out_start, out_toi):
-    """Swept test of each candidate pair (ia[m], ib[m]) from its later anchor time.
-
-    Writes, per pair, the start time of the test and the absolute time in the step of
-    the first contact (INF when none) into out_start, out_toi (both (M,)).
-    """
-    pa = np.empty(3)
-    va = np.empty(3)
-    pb = np.empty(3)
-    vb = np.empty(3)
-    dx = np.empty(3)
-    dv = np.empty(3)
-    da = np.empty(3)
-    for m in range(ia.shape[0]):
-        i = ia[m]
-        j = ib[m]
-        start = max(sigma[i], sigma[j])
-        path_state(x, v, a, sigma, i, start, integrator, k, pa, va)
-        path_state(x, v, a, sigma, j, start, integrator, k, pb, vb)
-        for c in range(3):
-            dx[c] = pa[c] - pb[c]
-            dv[c] = va[c] - vb[c]
-            da[c] = a[i, c] - a[j, c]
-        horizon = step_end - start
-        if detection == SWEPT:
-            t = pair_toi_swept(dx, dv, da, radius[i] + radius[j], integrator, k, horizon, tolerance)
-        else:
-            t = pair_toi_sampled(dx, dv, da, radius[i] + radius[j], integrator, k, horizon,
-                                 1 if detection == DISCRETE else samples)
-        out_start[m] = start
-        out_toi[m] = start + t
+def pair_toi_sampled_scalar(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, radius_sum, integrator, k, horizon,
+                            samples):
+    """pair_toi_sampled on scalars."""
+    if integrator == EULER or integrator == SEMI_IMPLICIT:
+        da0 = 0.0
+        da1 = 0.0
+        da2 = 0.0
+    for m in range(1, samples + 1):
+        t = horizon * m / samples
+        d0, d1, d2, e0, e1, e2 = _relative_path(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, integrator, k, t)
+        if d0 * d0 + d1 * d1 + d2 * d2 < radius_sum * radius_sum and d0 * e0 + d1 * e1 + d2 * e2 < 0.0:
+            return t
+    return INF
 
 
 @njit(cache=True)
@@ -322,22 +303,3 @@ def wall_gap_terms(x, v, a, radius, i, normal, offset, half_thickness, two_sided
     p = side * (normal[0] * v[i, 0] + normal[1] * v[i, 1] + normal[2] * v[i, 2])
     q = side * (normal[0] * a[i, 0] + normal[1] * a[i, 1] + normal[2] * a[i, 2])
     return g0, p, q, side
-
-
-@njit(cache=True)
-def predict_walls(ip, iw, x, v, a, radius, sigma, step_end, normals, offsets, half_thickness,
-                  two_sided, integrator, k, detection, samples, out_start, out_toi):
-    """Swept test of particle ip[m] against wall iw[m] from the particle's anchor."""
-    for m in range(ip.shape[0]):
-        i = ip[m]
-        w = iw[m]
-        g0, p, q, _ = wall_gap_terms(x, v, a, radius, i, normals[w], offsets[w],
-                                     half_thickness[w], two_sided[w])
-        horizon = step_end - sigma[i]
-        if detection == SWEPT:
-            t = wall_toi_swept(g0, p, q, integrator, k, horizon)
-        else:
-            t = wall_toi_sampled(g0, p, q, integrator, k, horizon,
-                                 1 if detection == DISCRETE else samples)
-        out_start[m] = sigma[i]
-        out_toi[m] = sigma[i] + t

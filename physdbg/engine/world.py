@@ -384,7 +384,7 @@ class World:
         predict_into(kind, ia, ib, st.positions, st.velocities, self._a, st.radius, self._sigma, self._version,
                      self._dt, self._integrator, self._k, self._detection, s.samples, s.contact_tolerance * 1e-3,
                      self._normals, self._offsets, self._half_thickness, self._two_sided, self._held_pairs,
-                     self._held_walls, len(self.walls), buf.test_int, buf.test_float, buf.test_outcome,
+                     self._held_walls, buf.test_int, buf.test_float, buf.test_outcome,
                      buf.heap_toi, buf.heap_data, buf.counters, push)
 
     def _predict_for(self, particles: set[int]) -> None:
