@@ -85,9 +85,9 @@ def worker_physdbg(text: str) -> dict:
     from physdbg.engine import warm_up
     from physdbg.scene import parse_scene
 
-    compile_s = warm_up()
     scene = parse_scene(text, "bench")
     world = scene.build_world()
+    compile_s = warm_up(world.broad_phase.name)
     contacts = 0
     started = time.perf_counter()
     for _ in range(scene.steps):

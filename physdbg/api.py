@@ -77,8 +77,8 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         raise PhysdbgError("give overrides when loading the scene, not with a Scene object")
     from .engine import energies, warm_up
 
-    compile_seconds = warm_up()
     world = scene.build_world(observer)
+    compile_seconds = warm_up(world.broad_phase.name)
     st = world.state
 
     k0, p0, mom0 = energies(st, world.gravity)

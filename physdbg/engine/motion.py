@@ -46,7 +46,7 @@ INTEGRATOR_NAMES = ("euler", "semi-implicit", "verlet", "exact")
 _SERIES_LIMIT = 1e-2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def path_coefficients(integrator, k, tau):
     """(P1, P2, dP1) of the table above at local time tau (s)."""
     if integrator == EXACT:
@@ -72,7 +72,7 @@ def path_coefficients(integrator, k, tau):
     return tau, 0.0, 1.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def curvature_scale(integrator, k):
     """How the second derivative of n·position relates to (q, p) = (n·a, n·v).
 
@@ -85,7 +85,7 @@ def curvature_scale(integrator, k):
     return 0.0, 0.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def velocity_coefficients(integrator, drag, k, tau):
     """(V0, V1) of the table above: the integrator's velocity after tau seconds."""
     if integrator == EXACT:

@@ -268,7 +268,7 @@ def predict_into(kind, ia, ib, x, v, a, radius, sigma, version, step_end, integr
 
 
 # ------------------------------------------------------------------------------ resolve
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _combine(rule, e_a, e_b):
     if rule == 0:
         return min(e_a, e_b)

@@ -43,7 +43,7 @@ DISCRETE = 2
 DETECTION_NAMES = ("swept", "sampled", "discrete")
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _gap(g0, p, q, integrator, k, tau):
     p1, p2, dp1 = path_coefficients(integrator, k, tau)
     return g0 + p * p1 + q * p2, p * dp1 + q * p1
@@ -168,7 +168,7 @@ def wall_toi_sampled(g0, p, q, integrator, k, horizon, samples):
     return INF
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _linear_pair_u(dx0, dx1, dx2, dv0, dv1, dv2, radius_sum):
     """The seed's quadratic: first u >= 0 with |dx + dv·u| = R while approaching, or INF."""
     a = dv0 * dv0 + dv1 * dv1 + dv2 * dv2
@@ -185,7 +185,7 @@ def _linear_pair_u(dx0, dx1, dx2, dv0, dv1, dv2, radius_sum):
     return c / (-b + math.sqrt(disc))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _u_to_tau(integrator, k, u):
     if integrator == EXACT and k > 0.0:
         ku = k * u
@@ -195,7 +195,7 @@ def _u_to_tau(integrator, k, u):
     return u
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _relative_path(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, integrator, k, t):
     """Relative position D(t) = dx + dv·P1 + da·P2 and its rate D'(t), as six floats."""
     p1, p2, dp1 = path_coefficients(integrator, k, t)
@@ -203,7 +203,7 @@ def _relative_path(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, integrator, k, t
             dv0 * dp1 + da0 * p1, dv1 * dp1 + da1 * p1, dv2 * dp1 + da2 * p1)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _norm(x0, x1, x2):
     return math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
 

@@ -622,14 +622,17 @@ class World:
                           buf.test_float[:count, 0].copy(), np.where(toi <= self._dt, toi, np.nan),
                           buf.test_outcome[:count].copy())
 
-def warm_up() -> float:
+def warm_up(broad_phase: str | None = None) -> float:
     """Compile (or load from numba's cache) every kernel a step uses; returns seconds taken.
 
     Runs a two-sphere, one-wall world for one step with contacts, so the first real step
     is not charged with compilation. The kernels take the integrator and detection as
-    arguments, so one run compiles every method.
+    arguments, so one run compiles every method. broad_phase: also compile this one.
     """
     started = perf_counter()
+    if broad_phase is not None and broad_phase != "brute-force":
+        boxes = np.random.default_rng(0).uniform(0.0, 1.0, (8, 3))
+        make_broad_phase(broad_phase).pairs(boxes, boxes + 0.3)
     state = State(np.array([[0.0, 0.3, 0.0], [0.5, 0.3, 0.0]]), np.array([[1.0, -1.0, 0.0], [-1.0, 0.0, 0.0]]),
                   np.ones(2), np.full(2, 0.1), np.ones(2), np.ones(2))
     walls = Walls(["floor"], np.array([[0.0, 1.0, 0.0]]), np.zeros(1), np.ones(1), np.zeros(1, dtype=np.bool_),
