@@ -131,3 +131,12 @@ def test_long_runs_show_progress_on_stderr_and_keep_stdout_clean():
     assert result.stdout.startswith("scene ")
     quiet = invoke("run", "bounce", "--no-progress", "--set", "steps=600")
     assert "step 600/600" not in quiet.stderr
+
+
+def test_summary_says_which_broad_phase_auto_chose_and_why():
+    rain = invoke("run", "rain", "--set", "steps=2", "--set", "generate.count=200")
+    assert "broad phase grid: auto: 200 particles with similar radii" in rain.output
+    small = invoke("run", "cradle", "--set", "steps=2")
+    assert "broad phase brute-force: auto: 5 particles" in small.output
+    chosen = invoke("run", "cradle", "--set", "steps=2", "--set", "broad_phase=bvh-lbvh")
+    assert "broad phase bvh-lbvh: chosen in the scene" in chosen.output

@@ -33,6 +33,8 @@ from time import perf_counter
 import numpy as np
 from numba import njit
 
+from .grid import boxes_overlap
+
 MEDIAN = 0
 MEAN = 1
 SAH = 2
@@ -306,19 +308,13 @@ def build_lbvh(lo, hi):
         right[i] = b
         parent[a] = i
         parent[b] = i
-    root = 0
-    # depth top-down, bounds bottom-up (children before parents via reversed pre-order)
-    pre = np.empty(2 * n - 1, dtype=np.int64)
+    # depth top-down (pre-order from the root), then bounds bottom-up
     stack = np.empty(2 * n - 1, dtype=np.int64)
-    top = 0
-    stack[0] = root
+    stack[0] = 0
     top = 1
-    m = 0
     while top > 0:
         top -= 1
         node = stack[top]
-        pre[m] = node
-        m += 1
         if left[node] >= 0:
             depth[left[node]] = depth[node] + 1
             depth[right[node]] = depth[node] + 1
@@ -326,14 +322,7 @@ def build_lbvh(lo, hi):
             top += 1
             stack[top] = left[node]
             top += 1
-    for idx in range(m - 1, -1, -1):
-        node = pre[idx]
-        if left[node] < 0:
-            _fit_leaf(lo, hi, order, start[node], count[node], node_lo, node_hi, node)
-        else:
-            for c in range(3):
-                node_lo[node, c] = min(node_lo[left[node], c], node_lo[right[node], c])
-                node_hi[node, c] = max(node_hi[left[node], c], node_hi[right[node], c])
+    refit(lo, hi, node_lo, node_hi, left, right, parent, start, count, order)
     return node_lo, node_hi, left, right, parent, depth, start, count, order
 
 
@@ -374,14 +363,6 @@ def refit(lo, hi, node_lo, node_hi, left, right, parent, start, count, order):
 
 
 @njit(cache=True)
-def _nodes_overlap(node_lo, node_hi, a, b):
-    for c in range(3):
-        if node_lo[a, c] > node_hi[b, c] or node_lo[b, c] > node_hi[a, c]:
-            return False
-    return True
-
-
-@njit(cache=True)
 def _emit(out, count, i, j):
     if count == out.shape[0]:
         bigger = np.empty((2 * count + 16, 2), dtype=np.int64)
@@ -419,7 +400,7 @@ def self_pairs(lo, hi, node_lo, node_hi, left, right, start, count, order, root)
                         tests += 1
                         p = order[x]
                         q = order[y]
-                        if _nodes_overlap(lo, hi, p, q):
+                        if boxes_overlap(lo, hi, p, q):
                             out, found = _emit(out, found, p, q)
             else:
                 if top + 3 > stack.shape[0]:
@@ -435,7 +416,7 @@ def self_pairs(lo, hi, node_lo, node_hi, left, right, start, count, order, root)
                 top += 3
             continue
         tests += 1
-        if not _nodes_overlap(node_lo, node_hi, a, b):
+        if not boxes_overlap(node_lo, node_hi, a, b):
             continue
         a_leaf = left[a] < 0
         b_leaf = left[b] < 0
@@ -445,7 +426,7 @@ def self_pairs(lo, hi, node_lo, node_hi, left, right, start, count, order, root)
                     tests += 1
                     p = order[x]
                     q = order[y]
-                    if _nodes_overlap(lo, hi, p, q):
+                    if boxes_overlap(lo, hi, p, q):
                         out, found = _emit(out, found, p, q)
             continue
         if top + 2 > stack.shape[0]:

@@ -18,7 +18,8 @@ from numba import njit
 
 
 @njit(cache=True)
-def _boxes_overlap(lo, hi, i, j):
+def boxes_overlap(lo, hi, i, j):
+    """Do boxes i and j of (lo, hi) (N, 3) overlap (touching counts)?"""
     for c in range(3):
         if lo[i, c] > hi[j, c] or lo[j, c] > hi[i, c]:
             return False

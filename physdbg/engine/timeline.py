@@ -339,13 +339,7 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
             counters[HEAP_SIZE] = 0
             return CAPPED
         ib = other if kind == _KIND_PAIR else -1
-        if has_held[ia] or (ib >= 0 and has_held[ib]):
-            pending_int[0] = kind
-            pending_int[1] = ia
-            pending_int[2] = other
-            pending_int[3] = rid
-            pending_float[0] = toi
-            return PAUSE_RESOLVE
+        held = has_held[ia] or (ib >= 0 and has_held[ib])
         # advance to the contact
         if ib >= 0:
             pair[0] = ia
@@ -399,7 +393,8 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
                                counters)
             continue
         threshold = rest_speed + (abs(rel_acc) * (step_end * rest_step_factor))
-        if closing <= threshold:
+        if held or closing <= threshold:
+            # the resting rule and held contacts are the Python code's (resting.py)
             pending_int[0] = kind
             pending_int[1] = ia
             pending_int[2] = other

@@ -231,7 +231,7 @@ class World:
             path_accel = acc.copy()
         sigma = np.zeros(n)
         self._acc = acc
-        self._acc_differs_from_free = bool(self.held)
+        self._held_members = {i for key in self.held for i in ((key[1], key[2]) if key[0] == "pair" else (key[1],))}
         self._a = path_accel
         self._sigma = sigma
         t1 = perf_counter()
@@ -533,15 +533,13 @@ class World:
             members.add(key[1])
             if key[0] == "pair":
                 members.add(key[2])
-        old_acc = self._acc
-        if not self.held and not self._acc_differs_from_free:
+        # only particles held now or before can have an acceleration other than free fall
+        touched = members | self._held_members
+        if not touched:
             return set()
         new_acc = self._solve_held()
-        self._acc_differs_from_free = bool(self.held)
-        touched = members | set(np.nonzero(np.any(new_acc != old_acc, axis=1))[0].tolist())
-        if not touched:
-            self._acc = new_acc
-            return set()
+        members = {i for key in self.held for i in ((key[1], key[2]) if key[0] == "pair" else (key[1],))}
+        self._held_members = members
         idx = np.array(sorted(touched), dtype=np.int64)
         st = self.state
         advance_particles(st.positions, st.velocities, self._a, self._sigma, idx, when,
