@@ -148,7 +148,7 @@ def test_auto_explains_its_choice():
     name, reason = choose_broad_phase("auto", np.full(500, 0.1))
     assert name == "grid" and "similar radii" in reason
     name, reason = choose_broad_phase("auto", np.r_[np.full(499, 0.01), 1.0])
-    assert name == "bvh-sah" and "100x" in reason
+    assert name == "bvh-lbvh" and "100x" in reason
     assert choose_broad_phase("bvh-lbvh", np.full(500, 0.1)) == ("bvh-lbvh", "chosen in the scene")
 
 
