@@ -65,18 +65,19 @@ def _fit_leaf(lo, hi, order, s, cnt, node_lo, node_hi, node):
 
 
 @njit(cache=True)
+def _empty_nodes(cap):
+    """Node arrays for up to ``cap`` nodes: lo, hi, left, right, parent, depth, start, count."""
+    return (np.empty((cap, 3)), np.empty((cap, 3)), np.full(cap, -1, dtype=np.int64),
+            np.full(cap, -1, dtype=np.int64), np.full(cap, -1, dtype=np.int64), np.zeros(cap, dtype=np.int64),
+            np.zeros(cap, dtype=np.int64), np.zeros(cap, dtype=np.int64))
+
+
+@njit(cache=True)
 def build_top_down(lo, hi, method, leaf_size):
     """Top-down build; returns (node_lo, node_hi, left, right, parent, depth, start, count, order)."""
     n = lo.shape[0]
     cap = max(2 * n - 1, 1)
-    node_lo = np.empty((cap, 3))
-    node_hi = np.empty((cap, 3))
-    left = np.full(cap, -1, dtype=np.int64)
-    right = np.full(cap, -1, dtype=np.int64)
-    parent = np.full(cap, -1, dtype=np.int64)
-    depth = np.zeros(cap, dtype=np.int64)
-    start = np.zeros(cap, dtype=np.int64)
-    count = np.zeros(cap, dtype=np.int64)
+    node_lo, node_hi, left, right, parent, depth, start, count = _empty_nodes(cap)
     order = np.arange(n)
     if n == 0:
         return (node_lo[:0], node_hi[:0], left[:0], right[:0], parent[:0], depth[:0], start[:0],
@@ -241,14 +242,7 @@ def build_lbvh(lo, hi):
     """
     n = lo.shape[0]
     cap = max(2 * n - 1, 1)
-    node_lo = np.empty((cap, 3))
-    node_hi = np.empty((cap, 3))
-    left = np.full(cap, -1, dtype=np.int64)
-    right = np.full(cap, -1, dtype=np.int64)
-    parent = np.full(cap, -1, dtype=np.int64)
-    depth = np.zeros(cap, dtype=np.int64)
-    start = np.zeros(cap, dtype=np.int64)
-    count = np.zeros(cap, dtype=np.int64)
+    node_lo, node_hi, left, right, parent, depth, start, count = _empty_nodes(cap)
     if n == 0:
         return (node_lo[:0], node_hi[:0], left[:0], right[:0], parent[:0], depth[:0], start[:0],
                 count[:0], np.arange(0))
