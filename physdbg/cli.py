@@ -159,7 +159,7 @@ def format_summary(s) -> str:
         f"scene       {s.scene}  ({s.source})",
         f"methods     integrator={s.integrator} detection={s.detection} ordering={s.ordering}",
         f"broad phase {s.broad_phase}: {s.broad_phase_reason}",
-        f"bodies      {s.particles} particles, {s.walls} walls",
+        f"bodies      {_count(s.particles, 'particle')}, {_count(s.walls, 'wall')}",
         f"steps       {s.steps}  ({s.sim_time:.6g} s simulated, {dt_text})",
         f"contacts    {s.contacts}  (at most {s.max_contacts_in_a_step} in a step; {s.swept_tests} swept tests; "
         f"{s.resting_at_end} resting at the end)",
@@ -172,6 +172,10 @@ def format_summary(s) -> str:
                           + (" ..." if len(s.warnings) > 3 else "")),
     ]
     return "\n".join(lines)
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" + ("" if n == 1 else "s")
 
 
 def _vec(values) -> str:

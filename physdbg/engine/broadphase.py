@@ -92,8 +92,8 @@ def choose_broad_phase(name: str, radius: np.ndarray) -> tuple[str, str]:
     if name != "auto":
         return name, "chosen in the scene"
     if n < AUTO_BRUTE_FORCE_BELOW:
-        return "brute-force", (f"auto: {n} particles (< {AUTO_BRUTE_FORCE_BELOW}): {n * (n - 1) // 2} box tests "
-                               f"cost less than building a structure")
+        return "brute-force", (f"auto: {n} particle{'' if n == 1 else 's'} (< {AUTO_BRUTE_FORCE_BELOW}): "
+                               f"{n * (n - 1) // 2} box tests cost less than building a structure")
     ratio = float(radius.max() / radius.min()) if radius.min() > 0 else float("inf")
     if ratio <= AUTO_GRID_MAX_RADIUS_RATIO:
         return "grid", (f"auto: {n} particles with similar radii (largest/smallest = {ratio:.3g} "
