@@ -182,9 +182,5 @@ def _vec(values) -> str:
     return "[" + ", ".join(f"{v:.4g}" for v in values) + "]"
 
 
-def main() -> None:  # pragma: no cover - console entry point alternative
-    app()
-
-
 if __name__ == "__main__":  # pragma: no cover
     app()

@@ -89,12 +89,6 @@ class State:
     def count(self) -> int:
         return self.positions.shape[0]
 
-    @property
-    def mass(self) -> np.ndarray:
-        """(N,) kg; inf for immovable particles."""
-        with np.errstate(divide="ignore"):
-            return np.where(self.inverse_mass > 0, 1.0 / np.where(self.inverse_mass > 0, self.inverse_mass, 1.0), np.inf)
-
     def copy(self) -> "State":
         return State(self.positions.copy(), self.velocities.copy(), self.inverse_mass.copy(),
                      self.radius.copy(), self.restitution.copy(), self.gravity_scale.copy())

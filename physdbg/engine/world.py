@@ -75,7 +75,6 @@ from .timeline import (
     run_time_order,
 )
 
-_EMPTY_I = np.empty(0, dtype=np.int64)
 
 
 @dataclass
