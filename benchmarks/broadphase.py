@@ -102,7 +102,6 @@ def worker_physdbg(text: str) -> dict:
 
 
 def worker_pybullet(n: int, steps: int) -> dict:
-    import numpy as np
     import pybullet as p
 
     side = (n * 4.0 / 3.0 * math.pi * 0.05**3 / 0.1) ** (1.0 / 3.0)
@@ -121,7 +120,7 @@ def worker_pybullet(n: int, steps: int) -> dict:
         body = p.createMultiBody(0, wall, basePosition=pos, baseOrientation=q)
         p.changeDynamics(body, -1, restitution=0.8)
     sphere = p.createCollisionShape(p.GEOM_SPHERE, radius=0.05)
-    for x, v in zip(scene.state.positions, scene.state.velocities):
+    for x, v in zip(scene.state.positions, scene.state.velocities, strict=True):
         body = p.createMultiBody(1.0, sphere, basePosition=x.tolist())
         p.resetBaseVelocity(body, linearVelocity=v.tolist())
         p.changeDynamics(body, -1, restitution=0.8, linearDamping=0.0, angularDamping=0.0)

@@ -58,11 +58,11 @@ def grid_pairs(lo, hi, cell):
         dims[c] = int(math.floor((mx - mn) / cell)) + 1
     cells = dims[0] * dims[1] * dims[2]
     key = np.empty(n, dtype=np.int64)
-    coord = np.empty((n, 3), dtype=np.int64)
     for i in range(n):
-        for c in range(3):
-            coord[i, c] = _cell_of(0.5 * (lo[i, c] + hi[i, c]), origin[c], cell, dims[c])
-        key[i] = (coord[i, 0] * dims[1] + coord[i, 1]) * dims[2] + coord[i, 2]
+        cx = _cell_of(0.5 * (lo[i, 0] + hi[i, 0]), origin[0], cell, dims[0])
+        cy = _cell_of(0.5 * (lo[i, 1] + hi[i, 1]), origin[1], cell, dims[1])
+        cz = _cell_of(0.5 * (lo[i, 2] + hi[i, 2]), origin[2], cell, dims[2])
+        key[i] = (cx * dims[1] + cy) * dims[2] + cz
     dense = cells <= 8 * n + 4096
     if dense:
         # counting sort: cell_start[k] .. cell_start[k+1] are the boxes filed in cell k

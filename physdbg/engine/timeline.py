@@ -109,8 +109,6 @@ class Buffers:
         while self.contact_int.shape[0] - c[CONTACTS] < contact_room:
             self.contact_float = _grown(self.contact_float)
             self.contact_int = _grown(self.contact_int)
-        if self.requery.shape[0] < 2:
-            self.requery = np.empty(2, dtype=np.int64)
 
 
 def _grown(array: np.ndarray) -> np.ndarray:
@@ -317,7 +315,7 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
     nw = normals.shape[0]
     room = 2 * max_degree + 2 * nw + 4
     pair = np.empty(2, dtype=np.int64)
-    scratch = np.empty((7, 3))
+    scratch = np.empty((2, 3))  # the lo, hi rows of _inside_box
     while counters[HEAP_SIZE] > 0:
         if (heap_toi.shape[0] - counters[HEAP_SIZE] < room or test_outcome.shape[0] - counters[TESTS] < room
                 or contact_int.shape[0] - counters[CONTACTS] < 2):

@@ -23,7 +23,6 @@ costs one branch per step.
 
 from __future__ import annotations
 
-import heapq
 import math
 from dataclasses import dataclass
 from time import perf_counter
@@ -208,7 +207,6 @@ class World:
         s = self.settings
         obs = self.observer
         n = st.count
-        nw = len(self.walls)
         step_no = self.step_index
         if obs is not None:
             obs.on_event(StepBegin(step_no, self.time, dt))
