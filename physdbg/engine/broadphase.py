@@ -56,8 +56,13 @@ class BruteForce:
 
     def query(self, lo: np.ndarray, hi: np.ndarray, box_lo: np.ndarray,
               box_hi: np.ndarray) -> np.ndarray:
-        overlap = np.all((box_lo <= hi) & (lo <= box_hi), axis=1)
-        return np.nonzero(overlap)[0].astype(np.int64)
+        return overlapping(lo, hi, box_lo, box_hi)
+
+
+def overlapping(lo: np.ndarray, hi: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray) -> np.ndarray:
+    """Indices (sorted) of the boxes lo, hi (N, 3) that overlap one box: a linear scan."""
+    overlap = np.all((box_lo <= hi) & (lo <= box_hi), axis=1)
+    return np.nonzero(overlap)[0].astype(np.int64)
 
 
 BROAD_PHASE_NAMES = ("auto", "brute-force", "grid", "bvh-sah", "bvh-median", "bvh-mean", "bvh-lbvh")

@@ -66,11 +66,7 @@ def grid_pairs(lo, hi, cell):
     dense = cells <= 8 * n + 4096
     if dense:
         # counting sort: cell_start[k] .. cell_start[k+1] are the boxes filed in cell k
-        cell_start = np.zeros(cells + 1, dtype=np.int64)
-        for i in range(n):
-            cell_start[key[i] + 1] += 1
-        for k in range(cells):
-            cell_start[k + 1] += cell_start[k]
+        cell_start = bucket_starts(key, cells)
         fill = cell_start[:-1].copy()
         filed = np.empty(n, dtype=np.int64)
         for i in range(n):
@@ -145,15 +141,22 @@ def grid_pairs(lo, hi, cell):
 
 
 @njit(cache=True)
+def bucket_starts(keys, buckets):
+    """Counting-sort offsets: items with key k go to [start[k], start[k+1]); (buckets + 1,)."""
+    start = np.zeros(buckets + 1, dtype=np.int64)
+    for t in range(keys.shape[0]):
+        start[keys[t] + 1] += 1
+    for k in range(buckets):
+        start[k + 1] += start[k]
+    return start
+
+
+@njit(cache=True)
 def sort_pairs(first, second, n):
     """(M, 2) pairs in lexicographic order: counting sort on the first index (O(M + N)),
     then an insertion sort of each row's few second indices."""
     m = first.shape[0]
-    start = np.zeros(n + 1, dtype=np.int64)
-    for t in range(m):
-        start[first[t] + 1] += 1
-    for i in range(n):
-        start[i + 1] += start[i]
+    start = bucket_starts(first, n)
     fill = start[:-1].copy()
     out = np.empty((m, 2), dtype=np.int64)
     for t in range(m):
@@ -199,5 +202,7 @@ class UniformGrid:
         return pairs
 
     def query(self, lo: np.ndarray, hi: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray) -> np.ndarray:
-        overlap = np.all((box_lo <= hi) & (lo <= box_hi), axis=1)
-        return np.nonzero(overlap)[0].astype(np.int64)
+        """Boxes overlapping one box: a linear scan (mid-step re-queries are rare)."""
+        from .broadphase import overlapping
+
+        return overlapping(lo, hi, box_lo, box_hi)

@@ -26,6 +26,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ..events import KIND_PAIR, KIND_WALL, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_SUPERSEDED
 from .motion import advance_particles, particle_box
 from .motion import path_coefficients
 from .toi import (
@@ -51,10 +52,6 @@ TESTS = 1
 CONTACTS = 2
 EVENTS = 3
 
-# test outcomes (same codes as physdbg.events)
-_MISS = 0
-_HIT = 1
-_SUPERSEDED = 2
 
 # contact float columns
 CF_TIME = 0
@@ -70,9 +67,6 @@ CF_CLOSING = 21
 CF_WIDTH = 22
 # contact int columns: kind, a, other, resting
 CI_WIDTH = 4
-
-_KIND_PAIR = 0
-_KIND_WALL = 1
 
 
 class Buffers:
@@ -186,11 +180,11 @@ def _record(kind, i, j, start, t, step_end, version, test_int, test_float, test_
     test_int[rid, 2] = j
     test_float[rid, 0] = start
     test_float[rid, 1] = start + t
-    test_outcome[rid] = _MISS
+    test_outcome[rid] = OUTCOME_MISS
     counters[TESTS] = rid + 1
     if push and start + t <= step_end:
         heap_push(heap_toi, heap_data, counters, start + t, rid, kind, i, j, version[i],
-                  version[j] if kind == _KIND_PAIR else 0)
+                  version[j] if kind == KIND_PAIR else 0)
 
 
 @njit(cache=True, inline="always")
@@ -220,7 +214,7 @@ def _predict_pair(i, j, x, v, a, radius, sigma, version, step_end, integrator, k
         t = pair_toi_sampled_scalar(dx0, dx1, dx2, dv0, dv1, dv2, a[i, 0] - a[j, 0], a[i, 1] - a[j, 1],
                                     a[i, 2] - a[j, 2], radius[i] + radius[j], integrator, k, horizon,
                                     1 if detection == DISCRETE else samples)
-    _record(_KIND_PAIR, i, j, start, t, step_end, version, test_int, test_float, test_outcome, heap_toi,
+    _record(KIND_PAIR, i, j, start, t, step_end, version, test_int, test_float, test_outcome, heap_toi,
             heap_data, counters, push)
 
 
@@ -241,7 +235,7 @@ def _predict_wall(i, w, x, v, a, radius, sigma, version, step_end, integrator, k
         t = wall_toi_swept(g0, p, q, integrator, k, horizon)
     else:
         t = wall_toi_sampled(g0, p, q, integrator, k, horizon, 1 if detection == DISCRETE else samples)
-    _record(_KIND_WALL, i, w, start, t, step_end, version, test_int, test_float, test_outcome, heap_toi, heap_data,
+    _record(KIND_WALL, i, w, start, t, step_end, version, test_int, test_float, test_outcome, heap_toi, heap_data,
             counters, push)
 
 
@@ -255,7 +249,7 @@ def predict_into(kind, ia, ib, x, v, a, radius, sigma, version, step_end, integr
     which are not tested.
     """
     for m in range(ia.shape[0]):
-        if kind == _KIND_PAIR:
+        if kind == KIND_PAIR:
             _predict_pair(ia[m], ib[m], x, v, a, radius, sigma, version, step_end, integrator, k, detection,
                           samples, tolerance, held_pairs, test_int, test_float, test_outcome, heap_toi,
                           heap_data, counters, push)
@@ -327,16 +321,16 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
         kind = heap_data[slot, 1]
         ia = heap_data[slot, 2]
         other = heap_data[slot, 3]
-        if version[ia] != heap_data[slot, 4] or (kind == _KIND_PAIR and version[other] != heap_data[slot, 5]):
-            test_outcome[rid] = _SUPERSEDED
+        if version[ia] != heap_data[slot, 4] or (kind == KIND_PAIR and version[other] != heap_data[slot, 5]):
+            test_outcome[rid] = OUTCOME_SUPERSEDED
             continue
         if counters[CONTACTS] >= cap:
-            test_outcome[rid] = 3
+            test_outcome[rid] = OUTCOME_CAPPED
             for s in range(counters[HEAP_SIZE]):
-                test_outcome[heap_data[s, 0]] = 3
+                test_outcome[heap_data[s, 0]] = OUTCOME_CAPPED
             counters[HEAP_SIZE] = 0
             return CAPPED
-        ib = other if kind == _KIND_PAIR else -1
+        ib = other if kind == KIND_PAIR else -1
         held = has_held[ia] or (ib >= 0 and has_held[ib])
         # advance to the contact
         if ib >= 0:
@@ -377,7 +371,7 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
             e = _combine(rule, restitution[ia], wall_restitution[other])
         if closing < 0.0 or (closing == 0.0 and not rel_acc < 0.0) or (
                 ib >= 0 and inverse_mass[ia] + inverse_mass[ib] == 0.0):
-            test_outcome[rid] = _SUPERSEDED
+            test_outcome[rid] = OUTCOME_SUPERSEDED
             if not anchor_is_flow:  # Euler (and dragged Verlet) paths change with the anchor
                 version[ia] += 1
                 _repredict(ia, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
@@ -437,7 +431,7 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
         contact_int[row, 2] = other
         contact_int[row, 3] = 0
         counters[CONTACTS] = row + 1
-        test_outcome[rid] = _HIT
+        test_outcome[rid] = OUTCOME_HIT
         # re-predict only the particles involved
         version[ia] += 1
         if ib >= 0:

@@ -43,7 +43,7 @@ from ..events import (
     SweptTests,
 )
 from .broadphase import choose_broad_phase, make_broad_phase
-from .motion import EULER, SEMI_IMPLICIT, VERLET, advance_particles, swept_boxes
+from .motion import EULER, SEMI_IMPLICIT, VERLET, advance_particles, particle_box, swept_boxes
 from .resolve import RESTITUTION_RULES, apply_pair_impulse, combine_restitution, pair_impulse, reflect, unit
 from .resting import solve_accelerations
 from .state import Settings, State, Walls, energies, state_hash
@@ -129,6 +129,8 @@ class World:
         # exact and semi-implicit paths are flows: re-anchoring mid-path changes nothing
         self._anchor_is_flow = self._integrator not in (EULER, VERLET) or (
             self._integrator == VERLET and self._drag == 1.0)
+        # straight Euler paths arrive at a rest with about one step of acceleration (resting.py)
+        self._rest_step_factor = 1.5 if self._integrator in (EULER, SEMI_IMPLICIT) else 0.0
         self._offsets = np.ascontiguousarray(walls.offsets, dtype=np.float64)
         self._wall_restitution = np.ascontiguousarray(walls.restitution, dtype=np.float64)
         self._buf = Buffers()
@@ -149,8 +151,7 @@ class World:
 
     def _rest_threshold(self, accel_along_normal: float, dt: float) -> float:
         """Closing speed (m/s) at or below which a contact rests (see resting.py)."""
-        extra = abs(accel_along_normal) * dt * 1.5 if self._integrator in (EULER, SEMI_IMPLICIT) else 0.0
-        return self.settings.rest_speed + extra
+        return self.settings.rest_speed + abs(accel_along_normal) * dt * self._rest_step_factor
 
     def _solve_held(self):
         """Accelerations from held contacts; contacts that no longer push are released."""
@@ -183,6 +184,10 @@ class World:
             gap = float(np.linalg.norm(x[i] - x[j])) - self.state.radius[i] - self.state.radius[j]
         return abs(gap) <= tol
 
+    def _held_particles(self) -> set[int]:
+        """Every particle in a held contact."""
+        return {i for key in self.held for i in ((key[1], key[2]) if key[0] == "pair" else (key[1],))}
+
     def _sync_held(self) -> None:
         """Held contacts as the arrays the compiled loop reads (sorted keys, flags)."""
         n = self.state.count
@@ -192,10 +197,7 @@ class World:
         self._held_pairs = np.array(pairs, dtype=np.int64)
         self._held_walls = np.array(walls, dtype=np.int64)
         has = np.zeros(n, dtype=np.bool_)
-        for key in self.held:
-            has[key[1]] = True
-            if key[0] == "pair":
-                has[key[2]] = True
+        has[list(self._held_particles())] = True
         self._has_held = has
 
     # ------------------------------------------------------------------ the step
@@ -228,7 +230,7 @@ class World:
             path_accel = acc.copy()
         sigma = np.zeros(n)
         self._acc = acc
-        self._held_members = {i for key in self.held for i in ((key[1], key[2]) if key[0] == "pair" else (key[1],))}
+        self._held_members = self._held_particles()
         self._a = path_accel
         self._sigma = sigma
         t1 = perf_counter()
@@ -339,16 +341,14 @@ class World:
     def _refresh_box(self, i: int) -> list[int]:
         """Grow i's swept box to hold its new path; return partners it did not have."""
         st = self.state
-        lo = np.empty((1, 3))
-        hi = np.empty((1, 3))
-        idx = np.array([i])
-        swept_boxes(st.positions[idx], st.velocities[idx], self._a[idx], st.radius[idx],
-                    self._sigma[idx], self._dt, self._integrator, self._k,
-                    self.settings.contact_tolerance, lo, hi)
-        if np.all(lo[0] >= self._lo[i]) and np.all(hi[0] <= self._hi[i]):
+        lo = np.empty(3)
+        hi = np.empty(3)
+        particle_box(st.positions, st.velocities, self._a, st.radius, self._sigma, i, self._dt, self._integrator,
+                     self._k, self.settings.contact_tolerance, lo, hi)
+        if np.all(lo >= self._lo[i]) and np.all(hi <= self._hi[i]):
             return []
-        self._lo[i] = np.minimum(self._lo[i], lo[0])
-        self._hi[i] = np.maximum(self._hi[i], hi[0])
+        self._lo[i] = np.minimum(self._lo[i], lo)
+        self._hi[i] = np.maximum(self._hi[i], hi)
         found = set(self.broad_phase.query(self._lo, self._hi, self._lo[i], self._hi[i]).tolist())
         # a structure built at step start knows the old boxes: check grown ones directly
         if self._grown:
@@ -412,13 +412,12 @@ class World:
         buf = self._buf
         nw = len(self.walls)
         cap = s.max_events_per_step
-        rest_factor = 1.5 if self._integrator in (EULER, SEMI_IMPLICIT) else 0.0
         rule = RESTITUTION_RULES.index(s.restitution_rule)
         while True:
             status = run_time_order(
                 st.positions, st.velocities, self._a, self._acc, st.radius, st.inverse_mass, st.restitution,
                 self._sigma, self._version, self._dt, self._integrator, self._drag, self._k, self._detection,
-                s.samples, s.contact_tolerance * 1e-3, s.rest_speed, rest_factor, rule,
+                s.samples, s.contact_tolerance * 1e-3, s.rest_speed, self._rest_step_factor, rule,
                 self._normals, self._offsets, self._half_thickness, self._two_sided, self._wall_restitution,
                 self._held_pairs, self._held_walls, self._has_held, self._adj_start, self._adj, self._lo, self._hi,
                 s.contact_tolerance, self._max_degree, cap, self._anchor_is_flow,
@@ -525,18 +524,12 @@ class World:
 
         Returns the particles whose velocity or acceleration changed.
         """
-        members = set()
-        for key in self.held:
-            members.add(key[1])
-            if key[0] == "pair":
-                members.add(key[2])
         # only particles held now or before can have an acceleration other than free fall
-        touched = members | self._held_members
+        touched = self._held_particles() | self._held_members
         if not touched:
             return set()
         new_acc = self._solve_held()
-        members = {i for key in self.held for i in ((key[1], key[2]) if key[0] == "pair" else (key[1],))}
-        self._held_members = members
+        self._held_members = self._held_particles()
         idx = np.array(sorted(touched), dtype=np.int64)
         st = self.state
         advance_particles(st.positions, st.velocities, self._a, self._sigma, idx, when,
