@@ -4,9 +4,9 @@ One step produces, in this order::
 
     StepBegin
     BroadPhaseInfo             (the structure used this step, its stats and, for BVHs, nodes)
-    ContactResolved ...        (one per contact, in the order they were resolved)
+    EngineWarning ...          (zero or more, as they arise)
+    Contacts                   (one batch: every contact, in the order they were resolved)
     SweptTests                 (one batch: every candidate the narrow phase tested)
-    EngineWarning ...          (zero or more)
     StepEnd
 
 Units: metres, seconds, kilograms; impulses in N·s. Arrays are float64 unless stated.
@@ -65,7 +65,7 @@ class BroadPhaseInfo:
 
 @dataclass(frozen=True)
 class ContactResolved:
-    """One contact, resolved at ``time_in_step`` seconds after the step began.
+    """One contact (a row of :class:`Contacts`), resolved at ``time_in_step`` seconds after the step began.
 
     kind: KIND_PAIR (``other`` is particle b) or KIND_WALL (``other`` is the wall index).
     order: 0-based position among this step's contacts.
@@ -93,6 +93,50 @@ class ContactResolved:
     restitution: float
     closing_speed: float
     resting: bool
+
+
+@dataclass(frozen=True)
+class Contacts:
+    """Every contact resolved during one step, as parallel arrays of length M, in the
+    order they were resolved (row i is contact ``order`` i). Box2D-style buffered events:
+    one object per step however many contacts, so observing stays cheap.
+
+    time_in_step: (M,) s; kind: (M,) int8; a, other: (M,) int32; point, normal,
+    velocity_a_before, velocity_a_after: (M, 3); velocity_b_before/after: (M, 3), NaN rows
+    for walls; impulse, restitution, closing_speed: (M,); resting: (M,) bool. Meanings as
+    in :class:`ContactResolved`; ``record(i)`` or iteration gives one contact as that type.
+    """
+
+    step: int
+    time_in_step: np.ndarray
+    kind: np.ndarray
+    a: np.ndarray
+    other: np.ndarray
+    point: np.ndarray
+    normal: np.ndarray
+    impulse: np.ndarray
+    velocity_a_before: np.ndarray
+    velocity_a_after: np.ndarray
+    velocity_b_before: np.ndarray
+    velocity_b_after: np.ndarray
+    restitution: np.ndarray
+    closing_speed: np.ndarray
+    resting: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.kind)
+
+    def record(self, i: int) -> ContactResolved:
+        pair = int(self.kind[i]) == KIND_PAIR
+        return ContactResolved(
+            self.step, i, float(self.time_in_step[i]), int(self.kind[i]), int(self.a[i]), int(self.other[i]),
+            self.point[i].copy(), self.normal[i].copy(), float(self.impulse[i]),
+            self.velocity_a_before[i].copy(), self.velocity_a_after[i].copy(),
+            self.velocity_b_before[i].copy() if pair else None, self.velocity_b_after[i].copy() if pair else None,
+            float(self.restitution[i]), float(self.closing_speed[i]), bool(self.resting[i]))
+
+    def __iter__(self):
+        return (self.record(i) for i in range(len(self)))
 
 
 @dataclass(frozen=True)
@@ -152,4 +196,4 @@ class StepEnd:
     warnings: tuple[str, ...] = field(default=())
 
 
-Event = StepBegin | BroadPhaseInfo | ContactResolved | SweptTests | EngineWarning | StepEnd
+Event = StepBegin | BroadPhaseInfo | Contacts | SweptTests | EngineWarning | StepEnd

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Protocol
 
-from .events import ContactResolved, EngineWarning, Event, StepBegin, StepEnd, SweptTests
+from .events import ContactResolved, Contacts, EngineWarning, Event, StepBegin, StepEnd, SweptTests
 
 
 class Observer(Protocol):
@@ -41,7 +41,8 @@ class ListObserver:
 
     @property
     def contacts(self) -> list[ContactResolved]:
-        return self.of_type(ContactResolved)
+        """Every contact of every step, one record each (from the Contacts batches)."""
+        return [record for batch in self.of_type(Contacts) for record in batch]
 
     @property
     def step_ends(self) -> list[StepEnd]:

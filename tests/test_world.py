@@ -16,7 +16,7 @@ from physdbg.events import (
     KIND_WALL,
     OUTCOME_HIT,
     OUTCOME_MISS,
-    ContactResolved,
+    Contacts,
     StepBegin,
     StepEnd,
     SweptTests,
@@ -180,7 +180,9 @@ def test_events_arrive_in_pipeline_order_with_everything_a_recording_needs():
     assert kinds[0] is StepBegin and kinds[-1] is StepEnd
     # per step: StepBegin, BroadPhaseInfo, contacts..., SweptTests, StepEnd
     step43 = [type(e) for e in obs.events if getattr(e, "step", None) == obs.contacts[0].step]
-    assert step43 == [StepBegin, BroadPhaseInfo] + [ContactResolved] * 4 + [SweptTests, StepEnd]
+    assert step43 == [StepBegin, BroadPhaseInfo, Contacts, SweptTests, StepEnd]
+    batch = [b for b in obs.of_type(Contacts) if b.step == obs.contacts[0].step][0]
+    assert len(batch) == 4 and list(batch.a) == [0, 1, 2, 3] and batch.velocity_b_before.shape == (4, 3)
     tests = [t for t in obs.swept_tests if t.step == obs.contacts[0].step][0]
     assert np.count_nonzero(tests.outcome == OUTCOME_HIT) == 4
     assert set(np.unique(tests.kind)) <= {KIND_PAIR, KIND_WALL}

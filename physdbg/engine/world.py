@@ -36,7 +36,7 @@ from ..events import (
     OUTCOME_CAPPED,
     OUTCOME_HIT,
     OUTCOME_SUPERSEDED,
-    ContactResolved,
+    Contacts,
     EngineWarning,
     StepBegin,
     StepEnd,
@@ -300,8 +300,7 @@ class World:
         stats = StepStats(step_no, self.time, dt, kinetic, potential, momentum, contacts, tests, events,
                           len(self.held), max_overlap, digest, timings, warnings)
         if obs is not None:
-            for event in self._contact_events():
-                obs.on_event(event)
+            obs.on_event(self._contacts_event())
             obs.on_event(self._swept_tests_event())
             obs.on_event(StepEnd(step_no, self.time, dt, x.copy(), v.copy(), kinetic, potential,
                                  momentum.copy(),
@@ -568,20 +567,19 @@ class World:
         buf.contact_int[row] = (kind, a, other, int(resting))
         buf.counters[CONTACTS] = row + 1
 
-    def _contact_events(self) -> list[ContactResolved]:
+    def _contacts_event(self) -> Contacts:
         buf = self._buf
-        out = []
-        for row in range(int(buf.counters[CONTACTS])):
-            f = buf.contact_float[row].copy()
-            kind, a, other, resting = (int(c) for c in buf.contact_int[row])
-            pair = kind == KIND_PAIR
-            out.append(ContactResolved(
-                self._step_no, row, float(f[CF_TIME]), kind, a, other, f[CF_POINT:CF_POINT + 3],
-                f[CF_NORMAL:CF_NORMAL + 3], float(f[CF_IMPULSE]), f[CF_VA_BEFORE:CF_VA_BEFORE + 3],
-                f[CF_VA_AFTER:CF_VA_AFTER + 3], f[CF_VB_BEFORE:CF_VB_BEFORE + 3] if pair else None,
-                f[CF_VB_AFTER:CF_VB_AFTER + 3] if pair else None, float(f[CF_RESTITUTION]),
-                float(f[CF_CLOSING]), bool(resting)))
-        return out
+        m = int(buf.counters[CONTACTS])
+        f = buf.contact_float[:m]
+        ints = buf.contact_int[:m]
+
+        def vec(col: int) -> np.ndarray:
+            return f[:, col:col + 3].copy()
+
+        return Contacts(self._step_no, f[:, CF_TIME].copy(), ints[:, 0].astype(np.int8), ints[:, 1].astype(np.int32),
+                        ints[:, 2].astype(np.int32), vec(CF_POINT), vec(CF_NORMAL), f[:, CF_IMPULSE].copy(),
+                        vec(CF_VA_BEFORE), vec(CF_VA_AFTER), vec(CF_VB_BEFORE), vec(CF_VB_AFTER),
+                        f[:, CF_RESTITUTION].copy(), f[:, CF_CLOSING].copy(), ints[:, 3].astype(np.bool_))
 
     # ------------------------------------------------------------------ audit
     def _max_overlap(self) -> float:
