@@ -12,6 +12,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -144,3 +145,235 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         momentum_drift=float(np.linalg.norm(mom1 - mom0)), max_overlap=max_overlap,
         wall_seconds=wall, compile_seconds=compile_seconds, ms_per_step=1000.0 * wall / n_steps if n_steps else math.nan,
         phase_seconds=phase, final_hash=digest, warnings=warnings, dts=used)
+
+
+# ----------------------------------------------------------------------------- recording
+@dataclass
+class RecordResult:
+    """What ``record`` wrote. mcap / rrd: paths (rrd None when not written); frames:
+    states in the MCAP file (frame 0 = initial state); bytes_mcap / bytes_rrd: sizes;
+    bvh_note: set when the BVH was logged only down to some depth; interrupted: Ctrl-C
+    stopped the run (the files hold every step completed before it)."""
+
+    summary: RunSummary | None
+    mcap: str
+    rrd: str | None
+    detail: str
+    frames: int
+    bytes_mcap: int
+    bytes_rrd: int
+    bvh_note: str = ""
+    interrupted: bool = False
+
+
+class RecordingInterrupted(PhysdbgError):
+    exit_code = 130
+
+
+def default_paths(scene: Scene, mcap_path: str | None, rrd_path: str | None, rrd: bool) -> tuple[Path, Path | None]:
+    """recordings/<scene>.mcap and .rrd unless given; the .rrd follows -o when only that is given."""
+    mcap_out = Path(mcap_path) if mcap_path else Path("recordings") / f"{scene.name}.mcap"
+    if not rrd:
+        return mcap_out, None
+    return mcap_out, Path(rrd_path) if rrd_path else mcap_out.with_suffix(".rrd")
+
+
+def check_writable(paths: Sequence[Path | None], force: bool) -> None:
+    """Never overwrite a recording unless forced; make the folders."""
+    for path in paths:
+        if path is None:
+            continue
+        if path.exists() and not force:
+            raise PhysdbgError(f"{path} already exists; pass --force to overwrite it")
+        if path.exists() and path.is_dir():
+            raise PhysdbgError(f"{path} is a directory")
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise PhysdbgError(f"{path.parent}: cannot create the folder ({err.strerror})") from None
+
+
+def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | None = None,
+           rrd_path: str | None = None, rrd: bool = True, detail: str = "full", force: bool = False,
+           spawn: bool = False, bvh_max_nodes: int | None = None, dts: Sequence[float] | None = None,
+           on_step: Callable[[int, int | None], None] | None = None) -> RecordResult:
+    """Run a scene and record every step to MCAP (and Rerun unless rrd=False).
+
+    bvh_max_nodes: log at most this many BVH nodes a step, whole levels from the root
+    (None: the default cap, 0: no cap). Ctrl-C ends the run with valid files up to the
+    last complete step and raises RecordingInterrupted.
+    """
+    from .record.format import DETAIL_LEVELS
+    from .record.header import DEFAULT_BVH_MAX_NODES, RecordingHeader
+    from .record.mcap_sink import McapRecorder
+    from .observe import FanOut
+
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene, overrides)
+    if detail not in DETAIL_LEVELS:
+        raise PhysdbgError(f"--detail must be one of {', '.join(DETAIL_LEVELS)}, not {detail!r}")
+    mcap_out, rrd_out = default_paths(scene, mcap_path, rrd_path, rrd)
+    if rrd_out is not None and rrd_out.resolve() == mcap_out.resolve():
+        raise PhysdbgError(f"the MCAP and Rerun outputs are the same file: {mcap_out}")
+    check_writable([mcap_out, rrd_out], force)
+    cap = DEFAULT_BVH_MAX_NODES if bvh_max_nodes is None else (bvh_max_nodes or None)
+    header = RecordingHeader.from_scene(scene, detail, cap)
+    sinks = []
+    summary = None
+    interrupted = False
+    stop = _StopAtStepEnd(on_step)
+    try:
+        sinks.append(McapRecorder(mcap_out, header))
+        if rrd_out is not None or spawn:
+            from .record.rerun_sink import RerunSink
+
+            sinks.append(RerunSink(header, rrd_out, spawn=spawn))
+        with stop:
+            summary = run(scene, observer=FanOut(*sinks), dts=dts, on_step=stop.on_step)
+    except KeyboardInterrupt:
+        interrupted = True
+    except OSError as err:
+        raise PhysdbgError(f"cannot write the recording ({err})") from None
+    finally:
+        for sink in sinks:
+            sink.close()
+    mcap_sink = sinks[0]
+    note = ""
+    if mcap_sink.bvh_capped_steps:
+        note = (f"BVH logged down to depth {mcap_sink.bvh_logged_depth} ({cap} nodes at most) in "
+                f"{mcap_sink.bvh_capped_steps} steps; use --bvh-max-nodes 0 for every node")
+    result = RecordResult(summary, str(mcap_out), str(rrd_out) if rrd_out else None, detail, mcap_sink.frames,
+                          mcap_out.stat().st_size, rrd_out.stat().st_size if rrd_out and rrd_out.exists() else 0,
+                          note, interrupted)
+    if interrupted:
+        raise RecordingInterrupted(
+            f"interrupted: {mcap_out} holds steps 1..{mcap_sink.frames - 1} (every step completed)")
+    return result
+
+
+class _StopAtStepEnd:
+    """Defers Ctrl-C to the end of the current step, so no sink is stopped mid-write.
+
+    A second Ctrl-C interrupts at once. Only in the main thread (where signals arrive).
+    """
+
+    def __init__(self, on_step):
+        self.forward = on_step
+        self.requested = False
+        self.previous = None
+
+    def _handler(self, signum, frame):
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def on_step(self, done, total):
+        if self.forward is not None:
+            self.forward(done, total)
+        if self.requested:
+            raise KeyboardInterrupt
+
+    def __enter__(self):
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread():
+            self.previous = signal.signal(signal.SIGINT, self._handler)
+        return self
+
+    def __exit__(self, *exc):
+        import signal
+
+        if self.previous is not None:
+            signal.signal(signal.SIGINT, self.previous)
+
+
+@dataclass
+class VerifyResult:
+    """Outcome of re-simulating a recording. ok: every step matched; checked: steps
+    compared; first_bad_step: frame of the first mismatch (None if none); reason: why."""
+
+    ok: bool
+    checked: int
+    first_bad_step: int | None = None
+    reason: str = ""
+
+
+def verify(path: str | Path, on_step: Callable[[int, int | None], None] | None = None) -> VerifyResult:
+    """Re-simulate a recording from its embedded scene and step lengths; compare every
+    step's state hash (and check each stored state against its stored hash)."""
+    from .engine import state_hash
+    from .record import open_recording
+
+    with open_recording(path) as rec:
+        scene = rec.scene
+        world = scene.build_world()
+        from .engine import warm_up
+
+        warm_up(world.broad_phase.name)
+        first = rec.state(0)
+        if state_hash(first.positions, first.velocities) != first.state_hash:
+            return VerifyResult(False, 0, 0, "the stored initial state does not match its stored hash (file altered)")
+        if world.state.positions.tobytes() != first.positions.tobytes() or \
+                world.state.velocities.tobytes() != first.velocities.tobytes():
+            return VerifyResult(False, 0, 0, "the scene in the file does not give the recorded initial state")
+        checked = 0
+        for frame in rec.states(1):
+            k = frame.frame
+            if state_hash(frame.positions, frame.velocities) != frame.state_hash:
+                return VerifyResult(False, checked, k, f"step {k}: the stored state does not match its stored hash "
+                                                      f"(the file was altered)")
+            stats = world.step(frame.dt)
+            if stats.state_hash != frame.state_hash:
+                moved = np.nonzero(np.any(world.state.positions != frame.positions, axis=1)
+                                   | np.any(world.state.velocities != frame.velocities, axis=1))[0]
+                return VerifyResult(False, checked, k, f"step {k}: re-simulated hash {stats.state_hash} != recorded "
+                                                      f"{frame.state_hash}; {len(moved)} spheres differ "
+                                                      f"(first: {moved[:5].tolist()})")
+            checked += 1
+            if on_step is not None:
+                on_step(checked, rec.steps)
+        return VerifyResult(True, checked)
+
+
+def replay(path: str | Path, rrd_path: str | None = None, force: bool = False, spawn: bool = False) -> dict:
+    """Rebuild the Rerun view of a recording from the MCAP file alone; returns what was written."""
+    from .record import open_recording
+    from .record.rerun_sink import RerunSink
+
+    out = Path(rrd_path) if rrd_path else None
+    if out is not None:
+        check_writable([out], force)
+    with open_recording(path) as rec:
+        sink = RerunSink(rec.header, out, spawn=spawn)
+        try:
+            for events in rec.iter_step_events():
+                for event in events:
+                    sink.on_event(event)
+        finally:
+            sink.close()
+        return {"mcap": str(path), "rrd": str(out) if out else None, "steps": rec.steps,
+                "truncated": rec.truncated}
+
+
+def info(path: str | Path) -> dict:
+    """What a recording holds: scene, settings, steps, channels and sizes."""
+    from .record import open_recording
+
+    with open_recording(path) as rec:
+        meta = rec.meta
+        last = rec.state(rec.frames - 1)
+        size = Path(path).stat().st_size
+        n = rec.header.count
+        return {
+            "path": str(path), "bytes": size, "truncated": rec.truncated,
+            "scene": meta["scene"]["name"], "source": meta["scene"]["source"],
+            "description": meta["scene"]["description"],
+            "physdbg_version": meta["physdbg_version"], "format_version": meta["format_version"],
+            "detail": rec.detail, "particles": n, "walls": list(rec.header.walls.names),
+            "steps": rec.steps, "sim_time": last.time, "final_hash": last.state_hash,
+            "settings": meta["settings"], "dt": meta["dt"], "bvh_max_nodes": meta.get("bvh_max_nodes"),
+            "bytes_per_particle_step": size / (n * rec.frames) if n and rec.frames else None,
+            "channels": [{"topic": c.topic, "encoding": c.message_encoding, "schema": c.schema_name,
+                          "messages": c.messages} for c in rec.channels()],
+        }

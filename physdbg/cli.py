@@ -103,6 +103,166 @@ def run(
             typer.echo(format_summary(summary))
 
 
+@app.command()
+def record(
+    scene: Annotated[str, typer.Argument(help="Built-in scene name (see `physdbg scenes`) or a .toml file.")],
+    set_: SetOption = None,
+    output: Annotated[Optional[Path], typer.Option(
+        "--output", "-o", help="The MCAP file to write (default recordings/<scene>.mcap).")] = None,
+    rrd: Annotated[Optional[Path], typer.Option(
+        "--rrd", help="The Rerun file to write (default: beside the MCAP file, ending .rrd).")] = None,
+    no_rrd: Annotated[bool, typer.Option("--no-rrd", help="Write only the MCAP file.")] = False,
+    spawn: Annotated[bool, typer.Option("--spawn", help="Also stream to a Rerun viewer started now.")] = False,
+    detail: Annotated[str, typer.Option(
+        "--detail", help="What to record: state (states, stats, warnings), contacts (+ every contact), "
+                         "full (+ swept tests, broad phase, BVH nodes).")] = "full",
+    bvh_max_nodes: Annotated[Optional[int], typer.Option(
+        "--bvh-max-nodes", help="Log at most this many BVH nodes a step, whole levels from the root "
+                                "(default 4095; 0 = all).")] = None,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite existing recordings.")] = False,
+    dts: Annotated[Optional[Path], typer.Option(
+        "--dts", help="Repeat a run exactly: read each step's dt (one number per line) from this file.")] = None,
+    progress: Annotated[bool, typer.Option(
+        "--progress/--no-progress", help="Show a progress bar on long runs (default: when stderr is a terminal).")]
+    = sys.stderr.isatty(),
+) -> None:
+    """Run a scene and record every step: MCAP (lossless) and Rerun (.rrd, to look at).
+
+    Example: physdbg record bounce        then: rerun recordings/bounce.rrd
+    """
+    with _user_errors():
+        from .api import record as record_scene
+        from .scene import load_scene
+
+        loaded = load_scene(scene, set_ or [])
+        step_lengths = _read_dts(dts) if dts is not None else None
+        total = len(step_lengths) if step_lengths is not None else loaded.steps
+        bar = _progress_bar(total) if progress and (total or 0) >= 500 else None
+        try:
+            result = record_scene(loaded, mcap_path=str(output) if output else None,
+                                  rrd_path=str(rrd) if rrd else None, rrd=not no_rrd, detail=detail,
+                                  force=force, spawn=spawn, bvh_max_nodes=bvh_max_nodes, dts=step_lengths,
+                                  on_step=bar.update if bar else None)
+        finally:
+            if bar:
+                bar.close()
+        typer.echo(format_summary(result.summary))
+        typer.echo(f"recorded    {result.frames - 1} steps, detail {result.detail}")
+        typer.echo(f"mcap        {result.mcap}  ({_size(result.bytes_mcap)})")
+        if result.rrd:
+            typer.echo(f"rerun       {result.rrd}  ({_size(result.bytes_rrd)})")
+        if result.bvh_note:
+            typer.echo(f"note        {result.bvh_note}")
+        typer.echo("open with   " + (f"rerun {result.rrd}" if result.rrd else f"physdbg replay {result.mcap} --spawn")
+                   + f"   |   physdbg info {result.mcap}   |   physdbg replay {result.mcap} --verify")
+
+
+@app.command()
+def replay(
+    recording: Annotated[Path, typer.Argument(help="A .mcap recording made by `physdbg record`.")],
+    rrd: Annotated[Optional[Path], typer.Option("--rrd", help="Write the Rerun view to this .rrd file.")] = None,
+    spawn: Annotated[bool, typer.Option("--spawn", help="Open the Rerun viewer on the recording.")] = False,
+    web: Annotated[bool, typer.Option("--web", help="Serve the Rerun web viewer on localhost.")] = False,
+    verify: Annotated[bool, typer.Option(
+        "--verify", help="Re-simulate from the embedded scene and check every step's hash; "
+                         "exit 1 at the first mismatch.")] = False,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing --rrd file.")] = False,
+) -> None:
+    """Rebuild the Rerun view of a recording from the MCAP file alone, or verify it.
+
+    Example: physdbg replay recordings/bounce.mcap --rrd bounce.rrd --verify
+    """
+    with _user_errors():
+        from . import api
+
+        if not (rrd or spawn or web or verify):
+            raise PhysdbgError("say what to do: --rrd FILE, --spawn, --web and/or --verify")
+        if verify:
+            result = api.verify(recording)
+            if result.ok:
+                typer.echo(f"verify      ok: {result.checked} steps re-simulated, every state hash matches")
+            else:
+                typer.echo(f"verify      MISMATCH at step {result.first_bad_step}: {result.reason}")
+                raise typer.Exit(1)
+        if rrd or spawn or web:
+            target = rrd
+            if target is None:
+                import tempfile
+
+                target = Path(tempfile.mkdtemp(prefix="physdbg-")) / (recording.stem + ".rrd")
+            done = api.replay(recording, str(target), force=force)
+            typer.echo(f"replayed    {done['steps']} steps" + (" (truncated recording)" if done["truncated"] else "")
+                       + f" -> {target}")
+            if spawn or web:
+                _open_viewer(target, web)
+
+
+def _open_viewer(rrd: Path, web: bool) -> None:
+    """Start the Rerun viewer (native, or web on localhost) on an .rrd file."""
+    import subprocess
+
+    try:
+        import rerun_cli  # the viewer binary ships inside rerun-sdk
+        import os
+
+        binary = os.path.join(os.path.dirname(rerun_cli.__file__), "rerun")
+    except ImportError:
+        binary = "rerun"
+    args = [binary, str(rrd)] + (["--web-viewer"] if web else [])
+    try:
+        if web:
+            typer.echo("serving the web viewer on localhost (Ctrl-C to stop)")
+            subprocess.run(args, check=False)
+        else:
+            subprocess.Popen(args, start_new_session=True)
+    except OSError as err:
+        raise PhysdbgError(f"cannot start the Rerun viewer ({err})") from None
+
+
+@app.command()
+def info(
+    recording: Annotated[Path, typer.Argument(help="A .mcap recording.")],
+    as_json: Annotated[bool, typer.Option("--json", help="Print as JSON.")] = False,
+) -> None:
+    """Show what a recording holds: scene, settings, steps, channels and sizes.
+
+    Example: physdbg info recordings/bounce.mcap
+    """
+    with _user_errors():
+        from .api import info as recording_info
+
+        data = recording_info(recording)
+        if as_json:
+            typer.echo(json.dumps(data, indent=2))
+            return
+        settings = " ".join(f"{k}={v}" for k, v in data["settings"].items())
+        lines = [
+            f"recording   {data['path']}  ({_size(data['bytes'])}"
+            + (", TRUNCATED: the writer stopped before closing it" if data["truncated"] else "") + ")",
+            f"scene       {data['scene']}  ({data['source']})",
+            f"settings    {settings}",
+            f"steps       {data['steps']}  ({data['sim_time']:.6g} s simulated), detail {data['detail']}",
+            f"bodies      {_count(data['particles'], 'particle')}, {_count(len(data['walls']), 'wall')}",
+            f"size        {data['bytes_per_particle_step']:.1f} bytes per particle-step (everything)"
+            if data["bytes_per_particle_step"] else "size        -",
+            f"final hash  {data['final_hash']}",
+            f"written by  physdbg {data['physdbg_version']}, format {data['format_version']}",
+            "channels",
+        ]
+        width = max(len(c["topic"]) for c in data["channels"])
+        for c in data["channels"]:
+            lines.append(f"  {c['topic']:<{width}}  {c['messages']:>7} messages  {c['encoding']:<14} {c['schema']}")
+        typer.echo("\n".join(lines))
+
+
+def _size(n: int) -> str:
+    for unit in ("bytes", "KiB", "MiB", "GiB"):
+        if n < 1024 or unit == "GiB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1024
+    return str(n)
+
+
 def _read_dts(path: Path) -> list[float]:
     try:
         lines = path.read_text().split()

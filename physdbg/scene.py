@@ -12,6 +12,7 @@ what is allowed.
 
 from __future__ import annotations
 
+import copy
 import difflib
 import math
 import tomllib
@@ -161,6 +162,11 @@ def parse_scene(text: str, source: str = "<scene>", overrides=()) -> Scene:
         _apply_override(raw, item, source)
         origins[item.split("=", 1)[0].strip()] = item
     return _validate(raw, source, origins)
+
+
+def scene_from_dict(raw: dict, source: str) -> Scene:
+    """Validate an already-parsed scene table (e.g. the one kept in a recording)."""
+    return _validate(copy.deepcopy(raw), source, {})
 
 
 def _parse_value(text: str) -> Any:

@@ -101,7 +101,7 @@ def test_bad_dts_file_is_explained(tmp_path):
 def test_every_command_is_documented_with_an_example():
     result = invoke("--help")
     assert result.exit_code == 0
-    for command in ("scenes", "run"):
+    for command in ("scenes", "run", "record", "replay", "info"):
         assert command in result.output
         help_text = invoke(command, "--help").output
         assert "Example: physdbg " + command in help_text
@@ -110,9 +110,9 @@ def test_every_command_is_documented_with_an_example():
 def test_help_does_not_import_the_engine():
     code = ("import sys; from physdbg.cli import app\n"
             "try:\n    app(['--help'])\nexcept SystemExit:\n    pass\n"
-            "print('numba' in sys.modules, 'numpy' in sys.modules)")
+            "print('numba' in sys.modules, 'numpy' in sys.modules, 'rerun' in sys.modules, 'mcap' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip().splitlines()[-1] == "False False"
+    assert out.stdout.strip().splitlines()[-1] == "False False False False"
 
 
 def test_console_script_runs(tmp_path):
@@ -140,3 +140,59 @@ def test_summary_says_which_broad_phase_auto_chose_and_why():
     assert "broad phase brute-force: auto: 5 particles" in small.output
     chosen = invoke("run", "cradle", "--set", "steps=2", "--set", "broad_phase=bvh-lbvh")
     assert "broad phase bvh-lbvh: chosen in the scene" in chosen.output
+
+
+# ----------------------------------------------------------------------------- record / replay / info
+def test_record_writes_both_files_where_it_says_and_how_to_open_them(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    result = invoke("record", "cradle", "--set", "steps=60")
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "recordings" / "cradle.mcap").stat().st_size > 0
+    assert (tmp_path / "recordings" / "cradle.rrd").stat().st_size > 0
+    assert "rerun recordings/cradle.rrd" in result.output and "recorded    60 steps" in result.output
+    again = invoke("record", "cradle", "--set", "steps=60")
+    assert again.exit_code == 2 and "already exists; pass --force" in again.output
+    assert invoke("record", "cradle", "--set", "steps=10", "--force").exit_code == 0
+
+
+def test_record_options_choose_paths_and_detail(tmp_path):
+    out = tmp_path / "x" / "run.mcap"
+    result = invoke("record", "bounce", "-s", "steps=30", "-o", str(out), "--no-rrd", "--detail", "state")
+    assert result.exit_code == 0, result.output
+    assert out.exists() and not out.with_suffix(".rrd").exists()
+    info = invoke("info", str(out), "--json")
+    data = json.loads(info.output)
+    assert data["steps"] == 30 and data["detail"] == "state" and data["scene"] == "bounce"
+    assert {c["topic"] for c in data["channels"]} >= {"/physdbg/state", "/physdbg/stats"}
+    bad = invoke("record", "bounce", "--detail", "everything", "-o", str(tmp_path / "y.mcap"))
+    assert bad.exit_code == 2 and "state, contacts, full" in bad.output
+
+
+def test_info_prints_scene_settings_steps_channels_and_sizes(tmp_path):
+    out = tmp_path / "b.mcap"
+    invoke("record", "billiards", "-s", "steps=40", "-o", str(out), "--no-rrd")
+    text = invoke("info", str(out)).output
+    for words in ("scene       billiards", "integrator=exact", "steps       40", "/physdbg/contacts",
+                  "bytes per particle-step", "final hash"):
+        assert words in text, words
+
+
+def test_replay_verifies_and_rebuilds_the_rerun_file(tmp_path):
+    out = tmp_path / "g.mcap"
+    invoke("record", "gas", "-s", "steps=40", "-o", str(out), "--no-rrd")
+    result = invoke("replay", str(out), "--verify", "--rrd", str(tmp_path / "g.rrd"))
+    assert result.exit_code == 0, result.output
+    assert "verify      ok: 40 steps" in result.output and (tmp_path / "g.rrd").exists()
+    assert invoke("replay", str(out)).exit_code == 2  # nothing asked
+
+
+@pytest.mark.parametrize("content, words", [
+    (b"not a recording at all", "not an MCAP file"),
+    (b"\x89MCAP0\r\n" + b"\x00" * 40, "truncated before its first complete chunk"),
+])
+def test_foreign_or_broken_files_get_one_clear_line(tmp_path, content, words):
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(content)
+    for args in (("info", str(bad)), ("replay", str(bad), "--verify")):
+        result = invoke(*args)
+        assert result.exit_code == 2 and words in result.output, result.output

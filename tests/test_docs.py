@@ -26,7 +26,7 @@ def _readme_commands():
 
 def test_readme_has_the_two_commands_and_ci_runs_the_second_verbatim():
     setup_and_run, setup_and_test = _readme_commands()
-    assert "physdbg run" in setup_and_run
+    assert "physdbg record" in setup_and_run
     assert "pytest" in setup_and_test
     ci = (ROOT / ".ci" / "run").read_text()
     assert setup_and_test in ci.splitlines()

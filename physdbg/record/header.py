@@ -1,0 +1,104 @@
+"""What every recording starts with: the scene, its constants and its initial state.
+
+Built from a Scene for a live recording, or read back from an MCAP file for a replay, so
+the sinks (MCAP, Rerun) get the same thing either way.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import __version__
+from ..engine import Walls, state_hash
+from .format import DETAIL_LEVELS, FORMAT_NAME, FORMAT_VERSION
+
+DEFAULT_BVH_MAX_NODES = 4095  # a full tree of depth 11; deeper levels are left out unless asked
+
+
+@dataclass
+class RecordingHeader:
+    """The constants of a recorded run.
+
+    meta: the JSON object of /physdbg/scene (scene table, settings, versions, detail);
+    radius, inverse_mass, restitution, gravity_scale: (N,); walls: the scene's walls;
+    positions, velocities: (N, 3) initial state (frame 0); state_hash: its hash.
+    """
+
+    meta: dict
+    radius: np.ndarray
+    inverse_mass: np.ndarray
+    restitution: np.ndarray
+    gravity_scale: np.ndarray
+    walls: Walls
+    positions: np.ndarray
+    velocities: np.ndarray
+    state_hash: str
+
+    @property
+    def name(self) -> str:
+        return self.meta["scene"]["name"]
+
+    @property
+    def count(self) -> int:
+        return len(self.radius)
+
+    @property
+    def detail(self) -> str:
+        return self.meta["detail"]
+
+    @classmethod
+    def from_scene(cls, scene, detail: str = "full", bvh_max_nodes: int | None = DEFAULT_BVH_MAX_NODES,
+                   broad_phase: str | None = None) -> RecordingHeader:
+        """The header of a live recording of ``scene`` (a physdbg.scene.Scene)."""
+        if detail not in DETAIL_LEVELS:
+            raise ValueError(f"detail must be one of {', '.join(DETAIL_LEVELS)}, not {detail!r}")
+        st = scene.state
+        settings = {name: getattr(scene.settings, name) for name in scene.settings.__dataclass_fields__}
+        meta = {
+            "format": FORMAT_NAME,
+            "format_version": FORMAT_VERSION,
+            "physdbg_version": __version__,
+            "numpy_version": np.__version__,
+            "scene": {"name": scene.name, "description": scene.description, "source": scene.source,
+                      "table": scene.raw},
+            "settings": _plain(settings),
+            "dt": scene.dt,
+            "steps": scene.steps,
+            "duration": scene.duration,
+            "particles": st.count,
+            "broad_phase": broad_phase,
+            "detail": detail,
+            "bvh_max_nodes": bvh_max_nodes,
+        }
+        json.dumps(meta)  # fail here, not mid-recording, if the scene table is not plain data
+        return cls(meta, st.radius.copy(), st.inverse_mass.copy(), st.restitution.copy(),
+                   st.gravity_scale.copy(), scene.walls, st.positions.copy(), st.velocities.copy(),
+                   state_hash(st.positions, st.velocities))
+
+    def walls_json(self) -> dict:
+        w = self.walls
+        return {"names": list(w.names), "normals": w.normals.tolist(), "offsets": w.offsets.tolist(),
+                "restitution": w.restitution.tolist(), "two_sided": [bool(b) for b in w.two_sided],
+                "thickness": w.thickness.tolist()}
+
+    @staticmethod
+    def walls_from_json(data: dict) -> Walls:
+        return Walls(list(data["names"]), np.array(data["normals"], dtype=np.float64).reshape(-1, 3),
+                     np.array(data["offsets"], dtype=np.float64), np.array(data["restitution"], dtype=np.float64),
+                     np.array(data["two_sided"], dtype=np.bool_), np.array(data["thickness"], dtype=np.float64))
+
+
+def _plain(value):
+    """Settings as JSON-ready values (tuples become lists, numpy scalars become floats)."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return value

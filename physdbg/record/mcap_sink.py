@@ -1,0 +1,201 @@
+"""The MCAP recorder: an observer that writes every step losslessly to an MCAP file.
+
+Call sequence (as the mcap library's own): ``McapRecorder(path, header)`` writes the
+scene and frame 0; attach it as the world's observer; ``close()`` writes the summary.
+A step's events are buffered and written together when its StepEnd arrives, so a run
+stopped at any moment leaves only whole steps in the file; the file is flushed after
+every step so a killed process leaves every finished chunk readable.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..events import BroadPhaseInfo, Contacts, EngineWarning, StepEnd, SweptTests
+from . import format as fmt
+from .header import RecordingHeader
+
+CHUNK_BYTES = 1 << 20  # mcap's default; chunks are the unit that survives a killed process
+
+
+class McapRecorder:
+    """Writes a recording. path: the .mcap file (created; the caller checks overwriting).
+
+    header: scene constants and initial state; chunk_bytes: uncompressed chunk size.
+    Attributes after close(): frames (states written, incl. frame 0), bvh_capped_steps,
+    bvh_logged_depth (deepest level written when capped, else None), bytes_written.
+    """
+
+    def __init__(self, path: str | Path, header: RecordingHeader, chunk_bytes: int = CHUNK_BYTES):
+        from mcap.writer import CompressionType, Writer
+
+        self.path = Path(path)
+        self.header = header
+        self.detail = header.detail
+        self.bvh_max_nodes = header.meta.get("bvh_max_nodes")
+        self._file = open(self.path, "wb")
+        self._writer = Writer(self._file, chunk_size=chunk_bytes, compression=CompressionType.ZSTD)
+        self._writer.start(profile=fmt.PROFILE, library=f"physdbg {header.meta['physdbg_version']}")
+        self._channels: dict[str, int] = {}
+        self._dtypes: dict[str, np.dtype] = {}
+        for topic in fmt.topics_for(self.detail):
+            self._register(topic)
+        self._writer.add_metadata("physdbg", {
+            "format": fmt.FORMAT_NAME, "format_version": str(fmt.FORMAT_VERSION),
+            "physdbg_version": header.meta["physdbg_version"], "scene": header.name,
+            "detail": self.detail, "particles": str(header.count)})
+        self._pending: list[tuple[str, bytes]] = []
+        self._history: list[np.ndarray] = []  # the last two frames' (N, 6) states, for the codec
+        self.frames = 0
+        self.time = 0.0
+        self.bvh_capped_steps = 0
+        self.bvh_logged_depth: int | None = None
+        self.closed = False
+        self._write(fmt.TOPIC_SCENE, 0, 0, json.dumps(header.meta).encode())
+        particles = np.zeros(header.count, dtype=self._dtypes[fmt.TOPIC_PARTICLES])
+        for name in ("radius", "inverse_mass", "restitution", "gravity_scale"):
+            particles[name] = getattr(header, name)
+        self._write(fmt.TOPIC_PARTICLES, 0, 0, particles.tobytes())
+        self._write(fmt.TOPIC_WALLS, 0, 0, json.dumps(header.walls_json()).encode())
+        self._write_state(0, 0.0, 0.0, header.state_hash, header.positions, header.velocities)
+        self._file.flush()
+
+    # ------------------------------------------------------------------ observer
+    def on_event(self, event) -> None:
+        frame = event.step + 1
+        if isinstance(event, StepEnd):
+            self._end_step(event)
+        elif isinstance(event, Contacts):
+            if fmt.TOPIC_CONTACTS in self._channels:
+                self._pending.append((fmt.TOPIC_CONTACTS, self._contacts_bytes(event)))
+        elif isinstance(event, SweptTests):
+            if fmt.TOPIC_SWEPT in self._channels:
+                rows = np.zeros(len(event), dtype=self._dtypes[fmt.TOPIC_SWEPT])
+                for name in ("kind", "outcome", "a", "other", "start", "toi"):
+                    rows[name] = getattr(event, name)
+                self._pending.append((fmt.TOPIC_SWEPT, rows.tobytes()))
+        elif isinstance(event, BroadPhaseInfo):
+            if fmt.TOPIC_BROAD_PHASE in self._channels:
+                self._broad_phase(event, frame)
+        elif isinstance(event, EngineWarning):
+            self._pending.append((fmt.TOPIC_WARNINGS, json.dumps(
+                {"step": frame, "code": event.code, "message": event.message}).encode()))
+
+    def _end_step(self, end: StepEnd) -> None:
+        frame = end.step + 1
+        publish = int(round(end.time * 1e9))
+        for topic, data in self._pending:
+            self._write(topic, frame, publish, data)
+        self._pending.clear()
+        stats = np.zeros(1, dtype=self._dtypes[fmt.TOPIC_STATS])
+        stats["time"], stats["dt"] = end.time, end.dt
+        stats["kinetic"], stats["potential"], stats["momentum"] = end.kinetic, end.potential, end.momentum
+        for name in ("contacts", "swept_tests", "events", "resting"):
+            stats[name] = end.counts.get(name, 0)
+        stats["max_overlap"] = end.max_overlap
+        for name, seconds in end.timings.items():
+            if "seconds_" + name in stats.dtype.names:
+                stats["seconds_" + name] = seconds
+        self._write(fmt.TOPIC_STATS, frame, publish, stats.tobytes())
+        # The state goes last: a frame whose state is in the file is a complete step.
+        self._write_state(frame, end.time, end.dt, end.state_hash, end.positions, end.velocities)
+        self._file.flush()
+
+    # ------------------------------------------------------------------ pieces
+    def _register(self, topic: str) -> None:
+        w = self._writer
+        if topic == fmt.TOPIC_STATE:
+            schema = w.register_schema("physdbg.State", fmt.SCHEMA_STATE, json.dumps(fmt.STATE_SCHEMA).encode())
+            encoding = fmt.ENCODING_STATE
+        elif topic in fmt.ARRAY_SCHEMAS:
+            name, fields = fmt.ARRAY_SCHEMAS[topic]
+            schema = w.register_schema(name, fmt.SCHEMA_ARRAY, fmt.array_schema_data(fields))
+            self._dtypes[topic] = fmt.dtype_of(fields)
+            encoding = fmt.ENCODING_ARRAY
+        else:
+            name, jsonschema = fmt.JSON_SCHEMAS[topic]
+            schema = w.register_schema(name, fmt.SCHEMA_JSON, json.dumps(jsonschema).encode())
+            encoding = fmt.ENCODING_JSON
+        self._channels[topic] = w.register_channel(topic, encoding, schema)
+
+    def _write(self, topic: str, frame: int, publish_ns: int, data: bytes) -> None:
+        self._writer.add_message(self._channels[topic], log_time=frame, data=data, publish_time=publish_ns,
+                                 sequence=frame)
+
+    def _write_state(self, frame: int, time: float, dt: float, digest: str, x: np.ndarray, v: np.ndarray) -> None:
+        codec = fmt.codec_for(frame, len(self._history))
+        previous = self._history[-1] if self._history else None
+        before = self._history[-2] if len(self._history) > 1 else None
+        data = fmt.encode_state(frame, time, dt, digest, x, v, codec, previous, before)
+        self._write(fmt.TOPIC_STATE, frame, int(round(time * 1e9)), data)
+        state = np.empty((x.shape[0], 6))
+        state[:, :3], state[:, 3:] = x, v
+        self._history = [*self._history[-1:], state]
+        self.frames = frame + 1
+        self.time = time
+
+    def _contacts_bytes(self, c: Contacts) -> bytes:
+        rows = np.zeros(len(c), dtype=self._dtypes[fmt.TOPIC_CONTACTS])
+        for name in rows.dtype.names:
+            rows[name] = getattr(c, name)
+        return rows.tobytes()
+
+    def _broad_phase(self, info: BroadPhaseInfo, frame: int) -> None:
+        meta = {"name": info.name, "reason": info.reason, "stats": _plain_stats(info.stats)}
+        nodes = info.nodes
+        if nodes is not None and fmt.TOPIC_BVH in self._channels:
+            depth = nodes["depth"]
+            keep = np.ones(len(depth), dtype=bool)
+            meta["bvh_nodes"] = int(len(depth))
+            meta["bvh_depth"] = int(depth.max()) if len(depth) else 0
+            if self.bvh_max_nodes is not None and len(depth) > self.bvh_max_nodes:
+                per_level = np.cumsum(np.bincount(depth))
+                logged = max(int(np.searchsorted(per_level, self.bvh_max_nodes, side="right")) - 1, 0)
+                keep = depth <= logged
+                meta["bvh_logged_depth"] = logged
+                self.bvh_capped_steps += 1
+                self.bvh_logged_depth = logged
+            index = np.nonzero(keep)[0]
+            rows = np.zeros(len(index), dtype=self._dtypes[fmt.TOPIC_BVH])
+            rows["node"] = index
+            for name in ("depth", "left", "right", "parent", "start", "count", "lo", "hi"):
+                rows[name] = nodes[name][index]
+            self._pending.append((fmt.TOPIC_BVH, rows.tobytes()))
+            if keep.all():
+                order = np.zeros(len(nodes["order"]), dtype=self._dtypes[fmt.TOPIC_BVH_ORDER])
+                order["particle"] = nodes["order"]
+                self._pending.append((fmt.TOPIC_BVH_ORDER, order.tobytes()))
+        self._pending.append((fmt.TOPIC_BROAD_PHASE, json.dumps(meta).encode()))
+
+    # ------------------------------------------------------------------ end
+    def close(self) -> None:
+        """Write the summary and close the file (events of an unfinished step are dropped)."""
+        if self.closed:
+            return
+        self.closed = True
+        self._pending.clear()
+        try:
+            self._writer.finish()
+        finally:
+            self._file.close()
+        self.bytes_written = self.path.stat().st_size
+
+    def __enter__(self) -> McapRecorder:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _plain_stats(stats: dict) -> dict:
+    out = {}
+    for key, value in stats.items():
+        if isinstance(value, (np.generic,)):
+            value = value.item()
+        if isinstance(value, float) and not np.isfinite(value):
+            value = None
+        out[key] = value
+    return out

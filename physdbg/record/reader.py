@@ -1,0 +1,337 @@
+"""Reading recordings back: ``open_recording(path)``.
+
+>>> rec = open_recording("recordings/bounce.mcap")          # doctest: +SKIP
+>>> rec.steps, rec.state(120).positions[0]                  # doctest: +SKIP
+
+Frames count steps completed: frame 0 is the initial state, frame k the state after the
+k-th step (see :mod:`.format`). ``state(k)`` reads only the chunks holding frames from the
+key frame before k up to k. A file whose writer was killed (no summary) is read
+sequentially up to its last complete chunk and its last complete step; ``truncated`` says so.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from collections import defaultdict
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import PhysdbgError
+from ..events import BroadPhaseInfo, Contacts, EngineWarning, StepBegin, StepEnd, SweptTests
+from . import format as fmt
+from .header import RecordingHeader
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+class RecordingError(PhysdbgError):
+    """A file that is not a readable physdbg recording."""
+
+
+@dataclass(frozen=True)
+class FrameState:
+    """The state at one frame. positions, velocities: (N, 3) float64, m and m/s; time: s;
+    dt: s of the step that led here (0 at frame 0); state_hash: as the engine computed it."""
+
+    frame: int
+    time: float
+    dt: float
+    positions: np.ndarray
+    velocities: np.ndarray
+    state_hash: str
+
+
+@dataclass(frozen=True)
+class ChannelInfo:
+    topic: str
+    message_encoding: str
+    schema_name: str
+    messages: int
+
+
+def open_recording(path: str | Path) -> Recording:
+    """Open a .mcap recording for reading (RecordingError if it is not one)."""
+    return Recording(path)
+
+
+class Recording:
+    """A physdbg recording. Attributes: path, header (RecordingHeader), meta (dict),
+    frames (states held, frame 0 included), steps (= frames - 1), detail, truncated."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        try:
+            self._file = open(self.path, "rb")
+        except OSError as err:
+            raise RecordingError(f"{path}: cannot open ({err.strerror or err})") from None
+        try:
+            self._open()
+        except RecordingError:
+            self._file.close()
+            raise
+        except Exception as err:  # anything the mcap library raises on a damaged file
+            self._file.close()
+            raise RecordingError(f"{path}: not a readable physdbg recording ({type(err).__name__}: {err})") from None
+
+    # ------------------------------------------------------------------ opening
+    def _open(self) -> None:
+        from mcap.reader import SeekingReader
+
+        if self._file.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+            raise RecordingError(f"{self.path}: not an MCAP file (a physdbg recording starts with the MCAP magic bytes)")
+        self._file.seek(0)
+        self._reader = SeekingReader(self._file)
+        self._memory: dict[str, list[tuple[int, bytes]]] | None = None
+        self.truncated = False
+        try:
+            summary = self._reader.get_summary()
+        except Exception:
+            summary = None
+        if summary is None or not summary.chunk_indexes:
+            self._recover()
+        else:
+            self._channels = {c.topic: c for c in summary.channels.values()}
+            self._schemas = summary.schemas
+            counts = summary.statistics.channel_message_counts if summary.statistics else {}
+            self._counts = {c.topic: counts.get(cid, 0) for cid, c in summary.channels.items()}
+            if fmt.TOPIC_STATE not in self._channels:
+                raise RecordingError(f"{self.path}: an MCAP file, but not a physdbg recording (no {fmt.TOPIC_STATE} channel)")
+            self.frames = self._counts[fmt.TOPIC_STATE]
+        self._read_header()
+
+    def _recover(self) -> None:
+        """Read a file with no summary (its writer was killed) as far as it is whole."""
+        from mcap.records import Channel, Message, Schema
+        from mcap.stream_reader import StreamReader
+
+        self.truncated = True
+        self._file.seek(0)
+        channels: dict[int, Channel] = {}
+        self._schemas: dict[int, Schema] = {}
+        memory: dict[str, list[tuple[int, bytes]]] = defaultdict(list)
+        try:
+            for record in StreamReader(self._file, validate_crcs=True).records:
+                if isinstance(record, Schema):
+                    self._schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, Message) and record.channel_id in channels:
+                    memory[channels[record.channel_id].topic].append((record.log_time, record.data))
+        except Exception:  # the torn end of the file: keep what came before it
+            pass
+        self._channels = {c.topic: c for c in channels.values()}
+        if fmt.TOPIC_STATE not in self._channels or not memory.get(fmt.TOPIC_STATE):
+            raise RecordingError(f"{self.path}: truncated before its first complete chunk; no steps can be read")
+        last = memory[fmt.TOPIC_STATE][-1][0]
+        # A frame is complete when its state arrived (the writer puts the state last).
+        self._memory = {topic: [(f, d) for f, d in rows if f <= last] for topic, rows in memory.items()}
+        self._counts = {topic: len(rows) for topic, rows in self._memory.items()}
+        self.frames = last + 1
+
+    def _read_header(self) -> None:
+        scene = self._one(fmt.TOPIC_SCENE)
+        particles = self._one(fmt.TOPIC_PARTICLES)
+        walls = self._one(fmt.TOPIC_WALLS)
+        if scene is None or particles is None or walls is None:
+            raise RecordingError(f"{self.path}: an MCAP file, but its physdbg scene, particles or walls are missing")
+        meta = json.loads(scene)
+        if meta.get("format") != fmt.FORMAT_NAME:
+            raise RecordingError(f"{self.path}: an MCAP file, but not a physdbg recording")
+        if meta.get("format_version") != fmt.FORMAT_VERSION:
+            raise RecordingError(f"{self.path}: recording format version {meta.get('format_version')}; "
+                                 f"this physdbg reads version {fmt.FORMAT_VERSION}")
+        rows = np.frombuffer(particles, dtype=self._dtype(fmt.TOPIC_PARTICLES))
+        first = self._decode_states(0, 0)[0]
+        self.header = RecordingHeader(meta, rows["radius"].copy(), rows["inverse_mass"].copy(),
+                                      rows["restitution"].copy(), rows["gravity_scale"].copy(),
+                                      RecordingHeader.walls_from_json(json.loads(walls)),
+                                      first.positions, first.velocities, first.state_hash)
+        self.meta = meta
+        self.detail = meta["detail"]
+        self.steps = self.frames - 1
+
+    # ------------------------------------------------------------------ raw access
+    def _messages(self, topics: list[str], first: int, last: int) -> Iterator[tuple[str, int, bytes]]:
+        """(topic, frame, data) of the given topics for frames first..last, in frame order."""
+        topics = [t for t in topics if t in self._channels]
+        if not topics:
+            return
+        if self._memory is not None:
+            merged = [(f, i, t, d) for i, t in enumerate(topics) for f, d in self._memory.get(t, ()) if first <= f <= last]
+            merged.sort(key=lambda row: (row[0], row[1]))
+            for f, _, t, d in merged:
+                yield t, f, d
+            return
+        for _, channel, message in self._reader.iter_messages(topics=topics, starting_at=first,
+                                                              ending_before=last + 1):
+            yield channel.topic, message.log_time, message.data
+
+    def _one(self, topic: str) -> bytes | None:
+        for _, _, data in self._messages([topic], 0, 0):
+            return data
+        return None
+
+    def _dtype(self, topic: str) -> np.dtype:
+        channel = self._channels[topic]
+        return fmt.dtype_from_schema(self._schemas[channel.schema_id].data)
+
+    def _check_frame(self, k: int) -> int:
+        k = int(k)
+        if k < 0:
+            k += self.frames
+        if not 0 <= k < self.frames:
+            raise IndexError(f"frame {k} is not in the recording (frames 0..{self.frames - 1})")
+        return k
+
+    # ------------------------------------------------------------------ states
+    def _decode_states(self, first: int, last: int) -> list[FrameState]:
+        """Decode frames first..last, starting from the key frame at or before ``first``."""
+        start = first - first % fmt.KEYFRAME_INTERVAL
+        out: list[FrameState] = []
+        history: list[np.ndarray] = []
+        for _, frame, data in self._messages([fmt.TOPIC_STATE], start, last):
+            try:
+                state, frame_no, time, dt, digest = fmt.decode_state(
+                    data, history[-1] if history else None, history[-2] if len(history) > 1 else None)
+            except (ValueError, struct.error) as err:
+                raise RecordingError(f"{self.path}: frame {frame}: damaged state message ({err})") from None
+            history = [*history[-1:], state]
+            if frame_no >= first:
+                out.append(FrameState(frame_no, time, dt, state[:, :3].copy(), state[:, 3:].copy(), digest))
+        if len(out) != last - first + 1:
+            raise RecordingError(f"{self.path}: frames {first}..{last} are not all in the file")
+        return out
+
+    def state(self, k: int) -> FrameState:
+        """The state at frame k (negative k counts from the end)."""
+        k = self._check_frame(k)
+        return self._decode_states(k, k)[0]
+
+    def states(self, start: int = 0, stop: int | None = None, batch: int = 256) -> Iterator[FrameState]:
+        """Every state from frame ``start`` up to (not including) ``stop``, in one pass."""
+        stop = self.frames if stop is None else min(stop, self.frames)
+        for first in range(start, stop, batch):
+            yield from self._decode_states(first, min(first + batch, stop) - 1)
+
+    # ------------------------------------------------------------------ step events
+    def step_events(self, k: int) -> list:
+        """The engine events of the k-th step (frame k >= 1), in the engine's order."""
+        k = self._check_frame(k)
+        if k == 0:
+            raise IndexError("frame 0 is the initial state; steps are frames 1..frames-1")
+        return next(self.iter_step_events(k, k + 1))
+
+    def iter_step_events(self, start: int = 1, stop: int | None = None) -> Iterator[list]:
+        """For each step start..stop-1: the list of its events (StepBegin, BroadPhaseInfo,
+        EngineWarning..., Contacts, SweptTests, StepEnd), as the engine emitted them —
+        what a replay feeds to the sinks."""
+        stop = self.frames if stop is None else min(stop, self.frames)
+        topics = [fmt.TOPIC_STATS, fmt.TOPIC_WARNINGS, fmt.TOPIC_CONTACTS, fmt.TOPIC_SWEPT,
+                  fmt.TOPIC_BROAD_PHASE, fmt.TOPIC_BVH, fmt.TOPIC_BVH_ORDER]
+        batch = 64
+        for first in range(max(start, 1), stop, batch):
+            last = min(first + batch, stop) - 1
+            per_frame: dict[int, dict[str, list[bytes]]] = defaultdict(lambda: defaultdict(list))
+            for topic, frame, data in self._messages(topics, first, last):
+                per_frame[frame][topic].append(data)
+            states = self._decode_states(first - 1, last)
+            for k in range(first, last + 1):
+                yield self._events_of(k, per_frame.get(k, {}), states[k - first], states[k - first + 1])
+
+    def _events_of(self, k: int, parts: dict, before: FrameState, after: FrameState) -> list:
+        step = k - 1
+        events: list = [StepBegin(step, before.time, after.dt)]
+        if parts.get(fmt.TOPIC_BROAD_PHASE):
+            meta = json.loads(parts[fmt.TOPIC_BROAD_PHASE][0])
+            nodes = None
+            if parts.get(fmt.TOPIC_BVH):
+                rows = np.frombuffer(parts[fmt.TOPIC_BVH][0], dtype=self._dtype(fmt.TOPIC_BVH))
+                nodes = {name: rows[name].copy() for name in ("lo", "hi", "left", "right", "parent", "depth",
+                                                              "start", "count", "node")}
+                if parts.get(fmt.TOPIC_BVH_ORDER):
+                    order = np.frombuffer(parts[fmt.TOPIC_BVH_ORDER][0], dtype=self._dtype(fmt.TOPIC_BVH_ORDER))
+                    nodes["order"] = order["particle"].copy()
+            stats = dict(meta["stats"])
+            for key in ("bvh_nodes", "bvh_depth", "bvh_logged_depth"):
+                if key in meta:
+                    stats[key] = meta[key]
+            events.append(BroadPhaseInfo(step, meta["name"], meta["reason"], stats, nodes))
+        warnings = [json.loads(w) for w in parts.get(fmt.TOPIC_WARNINGS, [])]
+        events.extend(EngineWarning(step, w["code"], w["message"]) for w in warnings)
+        if fmt.TOPIC_CONTACTS in self._channels:
+            events.append(self._contacts(step, parts.get(fmt.TOPIC_CONTACTS, [b""])[0]))
+        if fmt.TOPIC_SWEPT in self._channels:
+            rows = np.frombuffer(parts.get(fmt.TOPIC_SWEPT, [b""])[0], dtype=self._dtype(fmt.TOPIC_SWEPT))
+            events.append(SweptTests(step, rows["kind"].copy(), rows["a"].copy(), rows["other"].copy(),
+                                     rows["start"].copy(), rows["toi"].copy(), rows["outcome"].copy()))
+        stats_data = parts.get(fmt.TOPIC_STATS)
+        if not stats_data:
+            raise RecordingError(f"{self.path}: step {k} has a state but no stats message")
+        s = np.frombuffer(stats_data[0], dtype=self._dtype(fmt.TOPIC_STATS))[0]
+        counts = {name: int(s[name]) for name in ("contacts", "swept_tests", "events", "resting")}
+        timings = {name[len("seconds_"):]: float(s[name]) for name in s.dtype.names if name.startswith("seconds_")}
+        events.append(StepEnd(step, after.time, after.dt, after.positions, after.velocities, float(s["kinetic"]),
+                              float(s["potential"]), s["momentum"].copy(), counts, float(s["max_overlap"]),
+                              timings, after.state_hash, tuple(w["message"] for w in warnings)))
+        return events
+
+    def _contacts(self, step: int, data: bytes) -> Contacts:
+        rows = np.frombuffer(data, dtype=self._dtype(fmt.TOPIC_CONTACTS))
+        return Contacts(step, *(rows[name].copy() if name != "resting" else rows[name].astype(np.bool_)
+                                for name in Contacts.__dataclass_fields__ if name != "step"))
+
+    def contacts(self, k: int) -> Contacts:
+        """Contacts of the k-th step (detail contacts or full)."""
+        return self._of_type(k, Contacts, "contacts")
+
+    def swept_tests(self, k: int) -> SweptTests:
+        """Swept tests of the k-th step (detail full)."""
+        return self._of_type(k, SweptTests, "full")
+
+    def step_end(self, k: int) -> StepEnd:
+        """State, energies, momentum, counts and timings after the k-th step."""
+        return self._of_type(k, StepEnd, "state")
+
+    def _of_type(self, k: int, kind: type, level: str):
+        for event in self.step_events(k):
+            if isinstance(event, kind):
+                return event
+        raise RecordingError(f"{self.path}: recorded with --detail {self.detail}; "
+                             f"{kind.__name__} needs --detail {level} or more")
+
+    # ------------------------------------------------------------------ description
+    def channels(self) -> list[ChannelInfo]:
+        out = []
+        for topic, channel in sorted(self._channels.items()):
+            schema = self._schemas.get(channel.schema_id)
+            out.append(ChannelInfo(topic, channel.message_encoding, schema.name if schema else "",
+                                   self._counts.get(topic, 0)))
+        return out
+
+    @property
+    def scene(self):
+        """The recorded scene, rebuilt from the table kept in the file (to repeat the run)."""
+        from ..scene import scene_from_dict
+
+        info = self.meta["scene"]
+        return scene_from_dict(info["table"], f"{info['source']} (from {self.path.name})")
+
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self) -> Recording:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return (f"Recording({str(self.path)!r}, scene={self.header.name!r}, steps={self.steps}, "
+                f"detail={self.detail!r}{', truncated' if self.truncated else ''})")
+
+
+__all__ = ["ChannelInfo", "FrameState", "Recording", "RecordingError", "open_recording"]

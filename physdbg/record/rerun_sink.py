@@ -1,0 +1,299 @@
+"""The Rerun sink: an observer that draws a run for the Rerun viewer.
+
+The same sink serves a live recording (events from the engine) and a replay (events
+read back from an MCAP file), so the two pictures are the same by construction.
+
+Entities (timelines ``step`` = frame, steps completed, and ``sim_time`` in seconds):
+
+    world/spheres            Points3D, one per particle, with radii (float32 copies)
+    world/walls/<name>       LineStrips3D outline of each wall, so walls never hide spheres
+    world/bvh/level_<d>      Boxes3D wireframes, one entity per BVH level (toggle levels;
+                             the blueprint shows the first BVH_LEVELS_SHOWN)
+    world/paths              LineStrips3D: each particle's path through the step,
+                             through the centres where its contacts happened
+    world/contacts/ghosts    Points3D: where each sphere was at each contact
+    world/contacts/normals   Arrows3D: contact normals (length = the sphere's radius)
+    world/contacts/impulses  Arrows3D: velocity change of sphere a, × IMPULSE_ARROW_SECONDS
+    stats/energy/*, stats/momentum/*, stats/contacts   Scalars, sent in columns
+    log                      TextLog: contacts and warnings in words
+
+A default blueprint (3D view, energy and contact plots, the event log) goes in the file.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..events import KIND_PAIR, BroadPhaseInfo, Contacts, EngineWarning, StepEnd
+from .header import RecordingHeader
+
+APPLICATION_ID = "physdbg"
+IMPULSE_ARROW_SECONDS = 0.05  # an impulse arrow shows how far its velocity change moves a in 50 ms
+LOG_LINES_PER_STEP = 20  # contacts described in words per step; the rest are counted
+PATHS_ALL_UP_TO = 2000  # above this many particles, only paths of particles with contacts are drawn
+SERIES_BATCH = 128
+BVH_LEVELS_SHOWN = 3  # levels 0..2 are drawn when the file opens; deeper ones are a click away  # steps of scalar series buffered before one send_columns
+
+
+class RerunSink:
+    """Writes (or streams) the Rerun picture of a run.
+
+    header: the recording's constants; rrd: file to write, or None; spawn: also stream
+    to a viewer it starts; detail: "state" | "contacts" | "full" (as the MCAP file).
+    Call close() at the end (it flushes the series and the file).
+    """
+
+    def __init__(self, header: RecordingHeader, rrd: str | Path | None = None, spawn: bool = False,
+                 detail: str | None = None, recording_id: str | None = None):
+        import rerun as rr
+
+        self.rr = rr
+        self.header = header
+        self.detail = detail or header.detail
+        self.rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id or f"physdbg-{header.name}")
+        self.rec.set_log_time_enabled(False)  # wall-clock time would make live and replay files differ
+        sinks = []
+        if rrd is not None:
+            sinks.append(rr.FileSink(str(rrd)))
+        if spawn:
+            rr.spawn(connect=False)
+            sinks.append(rr.GrpcSink())
+        if not sinks:
+            raise ValueError("give an .rrd path, spawn=True, or both")
+        self.rec.set_sinks(*sinks)
+        self.rec.send_blueprint(blueprint(), make_active=True, make_default=True)
+        self.radius = header.radius.astype(np.float32)
+        self.previous = header.positions.copy()
+        self.bvh_levels = 0
+        self._series: dict[str, list[float]] = {}
+        self._series_steps: list[int] = []
+        self._series_times: list[float] = []
+        self._contacts: Contacts | None = None
+        self._broad_phase: BroadPhaseInfo | None = None
+        self._warnings: list[EngineWarning] = []
+        self._log_static(header)
+
+    # ------------------------------------------------------------------ static
+    def _log_static(self, h: RecordingHeader) -> None:
+        rr, rec = self.rr, self.rec
+        rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Y_UP, static=True)
+        lo, hi = _scene_bounds(h)
+        for name, strip in _wall_outlines(h.walls, lo, hi):
+            rec.log(f"world/walls/{name}", rr.LineStrips3D([strip], colors=[[150, 150, 160]], radii=[-1.5]),
+                    static=True)
+        self._set_time(0, 0.0)
+        rec.log("world/spheres", rr.Points3D(np.asarray(h.positions, dtype=np.float32), radii=self.radius,
+                                             colors=_sphere_colors(h.inverse_mass)))
+        rec.log("log", rr.TextLog(f"{h.name}: {h.count} spheres, {len(h.walls)} walls; "
+                                  f"settings {h.meta.get('settings', {})}", level="INFO"))
+
+    def _set_time(self, frame: int, time: float) -> None:
+        self.rec.set_time("step", sequence=frame)
+        self.rec.set_time("sim_time", duration=time)
+
+    # ------------------------------------------------------------------ observer
+    def on_event(self, event) -> None:
+        if isinstance(event, StepEnd):
+            self._end_step(event)
+        elif isinstance(event, Contacts):
+            self._contacts = event
+        elif isinstance(event, EngineWarning):
+            self._warnings.append(event)
+        elif isinstance(event, BroadPhaseInfo) and self.detail == "full":
+            self._broad_phase = event
+
+    def _end_step(self, end: StepEnd) -> None:
+        rr, rec = self.rr, self.rec
+        frame = end.step + 1
+        self._set_time(frame, end.time)
+        # Copies in float32: rerun may hold the array until it flushes.
+        rec.log("world/spheres", rr.Points3D.from_fields(positions=np.asarray(end.positions, dtype=np.float32)))
+        contacts = self._contacts if self.detail != "state" else None
+        if self._broad_phase is not None:
+            self._bvh(self._broad_phase)
+            self._broad_phase = None
+        self._paths(end, contacts)
+        if contacts is not None:
+            self._draw_contacts(contacts)
+            self._describe(frame, contacts, end.dt)
+        for warning in self._warnings:
+            rec.log("log", rr.TextLog(f"step {frame}: {warning.message}", level="WARN"))
+        self._warnings = []
+        self._contacts = None
+        self.previous = end.positions
+        self._add_series(frame, end)
+
+    # ------------------------------------------------------------------ pieces
+    def _paths(self, end: StepEnd, contacts: Contacts | None) -> None:
+        before, after = self.previous, end.positions
+        stops: dict[int, list[np.ndarray]] = {}
+        if contacts is not None:
+            centres = _contact_centres(contacts, self.header.radius)
+            for row in range(len(contacts)):
+                stops.setdefault(int(contacts.a[row]), []).append(centres[row])
+                if contacts.kind[row] == KIND_PAIR:
+                    other = int(contacts.other[row])
+                    centre_b = contacts.point[row] - contacts.normal[row] * self.header.radius[other]
+                    stops.setdefault(other, []).append(centre_b)
+        if len(after) <= PATHS_ALL_UP_TO:
+            chosen = range(len(after))
+        else:
+            chosen = sorted(stops)
+        strips = [np.asarray([before[i], *stops.get(i, ()), after[i]], dtype=np.float32) for i in chosen]
+        self.rec.log("world/paths", self.rr.LineStrips3D(strips, radii=[-1.0], colors=[[90, 170, 255]]))
+
+    def _draw_contacts(self, c: Contacts) -> None:
+        rr, rec = self.rr, self.rec
+        radius = self.header.radius[c.a] if len(c) else np.zeros(0)
+        centres = _contact_centres(c, self.header.radius)
+        rec.log("world/contacts/ghosts", rr.Points3D(centres.astype(np.float32), radii=radius.astype(np.float32),
+                                                     colors=[[255, 200, 60, 90]]))
+        rec.log("world/contacts/normals", rr.Arrows3D(origins=c.point.astype(np.float32),
+                                                      vectors=(c.normal * radius[:, None]).astype(np.float32),
+                                                      colors=[[80, 220, 120]]))
+        inv_mass = self.header.inverse_mass[c.a] if len(c) else np.zeros(0)
+        with np.errstate(invalid="ignore"):
+            change = c.normal * (c.impulse * inv_mass)[:, None] * IMPULSE_ARROW_SECONDS
+        finite = np.all(np.isfinite(change), axis=1)
+        rec.log("world/contacts/impulses", rr.Arrows3D(origins=c.point[finite].astype(np.float32),
+                                                       vectors=change[finite].astype(np.float32),
+                                                       colors=[[255, 90, 60]]))
+
+    def _describe(self, frame: int, c: Contacts, dt: float) -> None:
+        rr, rec = self.rr, self.rec
+        names = self.header.walls.names
+        for row in range(min(len(c), LOG_LINES_PER_STEP)):
+            other = (f"sphere {int(c.other[row])}" if c.kind[row] == KIND_PAIR
+                     else f"wall {names[int(c.other[row])]}")
+            verb = "rests on" if c.resting[row] else "hit"
+            rec.log("log", rr.TextLog(
+                f"step {frame}: sphere {int(c.a[row])} {verb} {other} at {c.time_in_step[row] / dt:.3f}·dt "
+                f"({c.time_in_step[row]:.4g} s into the step), "
+                f"j = {c.impulse[row]:.3g} N·s, closing {c.closing_speed[row]:.3g} m/s, e = {c.restitution[row]:.3g}",
+                level="DEBUG" if c.resting[row] else "INFO"))
+        if len(c) > LOG_LINES_PER_STEP:
+            rec.log("log", rr.TextLog(f"step {frame}: ... and {len(c) - LOG_LINES_PER_STEP} more contacts",
+                                      level="INFO"))
+
+    def _bvh(self, info: BroadPhaseInfo) -> None:
+        rr, rec = self.rr, self.rec
+        nodes = info.nodes
+        if nodes is None:
+            return
+        depth = nodes["depth"]
+        levels = int(depth.max()) + 1 if len(depth) else 0
+        for level in range(max(levels, self.bvh_levels)):
+            at = depth == level
+            lo, hi = nodes["lo"][at], nodes["hi"][at]
+            rec.log(f"world/bvh/level_{level}", rr.Boxes3D(
+                centers=((lo + hi) * 0.5).astype(np.float32), half_sizes=((hi - lo) * 0.5).astype(np.float32),
+                colors=[_level_color(level)], radii=[-0.5], fill_mode="majorwireframe"))
+        self.bvh_levels = max(levels, self.bvh_levels)
+
+    def _add_series(self, frame: int, end: StepEnd) -> None:
+        values = {
+            "stats/energy/kinetic": end.kinetic, "stats/energy/potential": end.potential,
+            "stats/energy/total": end.kinetic + end.potential,
+            "stats/momentum/x": end.momentum[0], "stats/momentum/y": end.momentum[1],
+            "stats/momentum/z": end.momentum[2],
+            "stats/contacts": end.counts.get("contacts", 0),
+        }
+        for path, value in values.items():
+            self._series.setdefault(path, []).append(float(value))
+        self._series_steps.append(frame)
+        self._series_times.append(end.time)
+        if len(self._series_steps) >= SERIES_BATCH:
+            self._send_series()
+
+    def _send_series(self) -> None:
+        rr = self.rr
+        if not self._series_steps:
+            return
+        index = [rr.TimeColumn("step", sequence=self._series_steps),
+                 rr.TimeColumn("sim_time", duration=self._series_times)]
+        for path, values in self._series.items():
+            self.rec.send_columns(path, indexes=index, columns=rr.Scalars.columns(scalars=values))
+        self._series = {}
+        self._series_steps = []
+        self._series_times = []
+
+    def close(self) -> None:
+        self._send_series()
+        self.rec.flush()
+        self.rec.disconnect()
+
+
+# ----------------------------------------------------------------------------- blueprint
+def blueprint():
+    """3D view of the world beside the energy and contact plots and the event log."""
+    import rerun.blueprint as rrb
+
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial3DView(origin="/world", name="scene", overrides={
+                f"/world/bvh/level_{level}": rrb.EntityBehavior(visible=False)
+                for level in range(BVH_LEVELS_SHOWN, 64)}),
+            rrb.Vertical(
+                rrb.TimeSeriesView(origin="/stats/energy", name="energy (J)"),
+                rrb.TimeSeriesView(origin="/stats", contents=["/stats/contacts"], name="contacts per step"),
+                rrb.TextLogView(origin="/log", name="events"),
+                row_shares=[2, 1, 2],
+            ),
+            column_shares=[3, 2],
+        ),
+        rrb.TimePanel(timeline="step"),
+        collapse_panels=True,
+    )
+
+
+# ----------------------------------------------------------------------------- geometry
+def _contact_centres(c: Contacts, radius: np.ndarray) -> np.ndarray:
+    """(M, 3) centre of sphere a at each contact: the point lies on a's surface, against the normal."""
+    if not len(c):
+        return np.zeros((0, 3))
+    return c.point + c.normal * radius[c.a][:, None]
+
+
+def _scene_bounds(h: RecordingHeader) -> tuple[np.ndarray, np.ndarray]:
+    """A box around the initial spheres and every axis-aligned wall, at least half as deep
+    on each axis as on its longest, so a lone floor is drawn bigger than one ball."""
+    r = float(h.radius.max()) if h.count else 0.5
+    lo = h.positions.min(axis=0) - r if h.count else np.full(3, -1.0)
+    hi = h.positions.max(axis=0) + r if h.count else np.full(3, 1.0)
+    for normal, offset in zip(h.walls.normals, h.walls.offsets):
+        axis = int(np.argmax(np.abs(normal)))
+        if abs(normal[axis]) > 1 - 1e-12:
+            coordinate = offset / normal[axis]
+            lo[axis], hi[axis] = min(lo[axis], coordinate), max(hi[axis], coordinate)
+    centre, half = (lo + hi) / 2, (hi - lo) / 2
+    half = np.maximum(half, max(half.max() / 2, r))
+    return centre - half, centre + half
+
+
+def _wall_outlines(walls, lo: np.ndarray, hi: np.ndarray):
+    """(name, (5, 3) closed outline) of each wall inside the box lo..hi."""
+    centre, half = (lo + hi) / 2, (hi - lo) / 2
+    for name, normal, offset in zip(walls.names, walls.normals, walls.offsets):
+        on_plane = centre + (offset - normal @ centre) * normal
+        helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+        u = np.cross(normal, helper)
+        u /= np.linalg.norm(u)
+        w = np.cross(normal, u)
+        su, sw = float(np.abs(u) @ half), float(np.abs(w) @ half)
+        corners = [on_plane + a * su * u + b * sw * w for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1), (-1, -1))]
+        yield name, np.asarray(corners, dtype=np.float32)
+
+
+def _sphere_colors(inverse_mass: np.ndarray) -> np.ndarray:
+    """Immovable spheres grey, the rest a warm orange."""
+    colors = np.tile(np.array([[240, 140, 50]], dtype=np.uint8), (len(inverse_mass), 1))
+    colors[inverse_mass == 0] = (140, 140, 140)
+    return colors
+
+
+def _level_color(level: int) -> list[int]:
+    palette = [[255, 255, 255], [255, 120, 120], [120, 255, 120], [120, 160, 255], [255, 220, 100],
+               [220, 120, 255], [100, 230, 230]]
+    return palette[level % len(palette)]

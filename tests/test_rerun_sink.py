@@ -1,0 +1,131 @@
+"""The Rerun picture: read back with rerun's own reader, replayed from MCAP, and shown in
+the real viewer under Xvfb."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physdbg import api, open_recording
+from physdbg.events import StepEnd
+from physdbg.observe import FanOut, ListObserver
+from physdbg.record import RecordingHeader
+from physdbg.record.mcap_sink import McapRecorder
+from physdbg.record.rerun_sink import RerunSink
+from physdbg.scene import load_scene
+
+rerun_chunk = pytest.importorskip("rerun.chunk")
+
+
+def read_rrd(path: Path) -> dict:
+    """{(entity, step): {component: value}} of every temporal row of the recording."""
+    reader = rerun_chunk.RrdReader(path)
+    rows: dict = {}
+    for chunk in reader.stream():
+        if chunk.is_static:
+            continue
+        batch = chunk.to_record_batch()
+        names = batch.schema.names
+        steps = batch.column("step").to_pylist()
+        for name in names:
+            if name in ("step", "sim_time") or name.startswith("rerun."):
+                continue
+            for step, value in zip(steps, batch.column(name).to_pylist()):
+                rows.setdefault((chunk.entity_path, step), {}).setdefault(name, []).append(value)
+    return rows
+
+
+@pytest.fixture(scope="module")
+def billiards_live(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("live")
+    scene = load_scene("billiards", ["steps=120"])
+    header = RecordingHeader.from_scene(scene)
+    live = ListObserver()
+    mcap, rrd = tmp / "b.mcap", tmp / "b.rrd"
+    sinks = [McapRecorder(mcap, header), RerunSink(header, rrd)]
+    api.run(scene, observer=FanOut(*sinks, live))
+    for sink in sinks:
+        sink.close()
+    return mcap, rrd, live
+
+
+def test_the_rrd_holds_the_engines_positions_at_every_step_and_a_blueprint(billiards_live):
+    _, rrd, live = billiards_live
+    reader = rerun_chunk.RrdReader(rrd)
+    assert len(reader.blueprints()) == 1 and len(reader.recordings()) == 1
+    rows = read_rrd(rrd)
+    ends = live.of_type(StepEnd)
+    for k in (1, 17, 60, 120):
+        got = np.array(rows[("/world/spheres", k)]["Points3D:positions"][-1], dtype=np.float32)
+        np.testing.assert_array_equal(got, ends[k - 1].positions.astype(np.float32))
+    contacts_series = rows[("/stats/contacts", 60)]["Scalars:scalars"][0]
+    assert contacts_series == [ends[59].counts["contacts"]]
+    logged = [text for (entity, _), comps in rows.items() if entity == "/log"
+              for row in comps.get("TextLog:text", []) for text in row]
+    first = live.contacts[0]
+    assert any(f"step {first.step + 1}: sphere {first.a} hit" in text for text in logged)
+
+
+def test_replay_from_mcap_alone_draws_the_same_picture_as_the_live_run(billiards_live, tmp_path):
+    mcap, rrd, _ = billiards_live
+    again = tmp_path / "replayed.rrd"
+    api.replay(mcap, str(again))
+    live_rows, replay_rows = read_rrd(rrd), read_rrd(again)
+    assert live_rows.keys() == replay_rows.keys()
+    assert live_rows == replay_rows
+
+
+def test_replay_never_overwrites_without_force(billiards_live, tmp_path):
+    mcap, _, _ = billiards_live
+    out = tmp_path / "x.rrd"
+    out.write_text("keep me")
+    with pytest.raises(api.PhysdbgError, match="--force"):
+        api.replay(mcap, str(out))
+    assert out.read_text() == "keep me"
+
+
+def _viewer_binary() -> str | None:
+    try:
+        import rerun_cli
+    except ImportError:
+        return None
+    path = os.path.join(os.path.dirname(rerun_cli.__file__), "rerun")
+    return path if os.access(path, os.X_OK) else None
+
+
+@pytest.mark.skipif(shutil.which("Xvfb") is None or _viewer_binary() is None,
+                    reason="needs Xvfb and the Rerun viewer (.ci/run installs xvfb and mesa)")
+def test_the_real_viewer_opens_the_recording_on_a_picture_that_is_not_blank(tmp_path):
+    from PIL import Image
+
+    rec = api.record("cradle", ["steps=100"], mcap_path=str(tmp_path / "c.mcap"), rrd_path=str(tmp_path / "c.rrd"))
+    display = f":{90 + os.getpid() % 100}"
+    xvfb = subprocess.Popen(["Xvfb", display, "-screen", "0", "1280x800x24"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    try:
+        time.sleep(1.0)
+        shot = tmp_path / "shot.png"
+        env = dict(os.environ, DISPLAY=display, CI="1")
+        done = subprocess.run([_viewer_binary(), rec.rrd, "--screenshot-to", str(shot), "--window-size", "1200x750"],
+                              env=env, capture_output=True, timeout=120)
+        assert done.returncode == 0, done.stderr[-2000:]
+    finally:
+        xvfb.terminate()
+        xvfb.wait(timeout=10)
+    image = np.asarray(Image.open(shot).convert("RGB"))
+    height, width, _ = image.shape
+    assert width >= 1000 and height >= 600
+    colours = len(np.unique(image.reshape(-1, 3), axis=0))
+    assert colours > 200  # text, plots and shaded spheres, not a blank window
+    scene_view = image[: int(height * 0.75), : int(width * 0.6)]
+    orange = (scene_view[..., 0] > 200) & (scene_view[..., 1] > 90) & (scene_view[..., 1] < 190) & \
+             (scene_view[..., 2] < 110)
+    assert orange.sum() > 500  # the spheres are in the 3D view
+    shutil.copy(shot, Path(rec.rrd).with_suffix(".png"))
+    assert open_recording(rec.mcap).steps == 100
