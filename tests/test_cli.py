@@ -110,9 +110,9 @@ def test_every_command_is_documented_with_an_example():
 def test_help_does_not_import_the_engine():
     code = ("import sys; from physdbg.cli import app\n"
             "try:\n    app(['--help'])\nexcept SystemExit:\n    pass\n"
-            "print('numba' in sys.modules, 'numpy' in sys.modules, 'rerun' in sys.modules, 'mcap' in sys.modules)")
+            "print('numba' in sys.modules, 'numpy' in sys.modules, 'rerun' in sys.modules, 'mcap' in sys.modules, 'rich' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip().splitlines()[-1] == "False False False False"
+    assert out.stdout.strip().splitlines()[-1] == "False False False False False"
 
 
 def test_console_script_runs(tmp_path):

@@ -129,3 +129,25 @@ def test_the_real_viewer_opens_the_recording_on_a_picture_that_is_not_blank(tmp_
     assert orange.sum() > 500  # the spheres are in the 3D view
     shutil.copy(shot, Path(rec.rrd).with_suffix(".png"))
     assert open_recording(rec.mcap).steps == 100
+
+
+def test_each_path_runs_from_the_start_of_the_step_through_its_contacts_to_the_end(billiards_live):
+    _, rrd, live = billiards_live
+    rows = read_rrd(rrd)
+    ends = live.of_type(StepEnd)
+    first = live.contacts[0]
+    frame = first.step + 1
+    strips = rows[("/world/paths", frame)]["LineStrips3D:strips"][0]
+    assert len(strips) == 12  # every particle of a small scene has a path
+    mine = [c for c in live.contacts if c.step == first.step]
+    for particle in {first.a, first.other}:
+        stops = [c for c in mine if particle in (c.a, c.other)]
+        strip = np.array(strips[particle], dtype=np.float32)
+        assert len(strip) == 2 + len(stops)
+        np.testing.assert_array_equal(strip[0], ends[frame - 2].positions[particle].astype(np.float32))
+        np.testing.assert_array_equal(strip[-1], ends[frame - 1].positions[particle].astype(np.float32))
+    radius = load_scene("billiards").state.radius
+    strip = np.array(strips[first.a], dtype=np.float32)
+    np.testing.assert_allclose(strip[1], first.point + first.normal * radius[first.a], atol=1e-6)
+    untouched = next(i for i in range(12) if all(i not in (c.a, c.other) for c in mine))
+    assert len(strips[untouched]) == 2

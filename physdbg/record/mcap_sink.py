@@ -5,11 +5,18 @@ scene and frame 0; attach it as the world's observer; ``close()`` writes the sum
 A step's events are buffered and written together when its StepEnd arrives, so a run
 stopped at any moment leaves only whole steps in the file; the file is flushed after
 every step so a killed process leaves every finished chunk readable.
+
+The observer only encodes (numpy to bytes); a writer thread hands the messages to the
+mcap library, which compresses each chunk with zstd. zstd releases the GIL, so on two
+cores compression overlaps the next step instead of adding to it. At most
+QUEUE_STEPS steps wait for the writer, which bounds the memory this takes.
 """
 
 from __future__ import annotations
 
 import json
+import queue
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +26,7 @@ from . import format as fmt
 from .header import RecordingHeader
 
 CHUNK_BYTES = 1 << 20  # mcap's default; chunks are the unit that survives a killed process
+QUEUE_STEPS = 8
 
 
 class McapRecorder:
@@ -48,6 +56,11 @@ class McapRecorder:
             "physdbg_version": header.meta["physdbg_version"], "scene": header.name,
             "detail": self.detail, "particles": str(header.count)})
         self._pending: list[tuple[str, bytes]] = []
+        self._queue: queue.Queue = queue.Queue(maxsize=QUEUE_STEPS)
+        self._error: BaseException | None = None
+        self._outbox: list[tuple[int, int, int, bytes]] = []
+        self._thread = threading.Thread(target=self._drain, name="physdbg-mcap-writer", daemon=True)
+        self._thread.start()
         self._history: list[np.ndarray] = []  # the last two frames' (N, 6) states, for the codec
         self.frames = 0
         self.time = 0.0
@@ -61,7 +74,7 @@ class McapRecorder:
         self._write(fmt.TOPIC_PARTICLES, 0, 0, particles.tobytes())
         self._write(fmt.TOPIC_WALLS, 0, 0, json.dumps(header.walls_json()).encode())
         self._write_state(0, 0.0, 0.0, header.state_hash, header.positions, header.velocities)
-        self._file.flush()
+        self._send()
 
     # ------------------------------------------------------------------ observer
     def on_event(self, event) -> None:
@@ -102,7 +115,7 @@ class McapRecorder:
         self._write(fmt.TOPIC_STATS, frame, publish, stats.tobytes())
         # The state goes last: a frame whose state is in the file is a complete step.
         self._write_state(frame, end.time, end.dt, end.state_hash, end.positions, end.velocities)
-        self._file.flush()
+        self._send()
 
     # ------------------------------------------------------------------ pieces
     def _register(self, topic: str) -> None:
@@ -122,8 +135,30 @@ class McapRecorder:
         self._channels[topic] = w.register_channel(topic, encoding, schema)
 
     def _write(self, topic: str, frame: int, publish_ns: int, data: bytes) -> None:
-        self._writer.add_message(self._channels[topic], log_time=frame, data=data, publish_time=publish_ns,
-                                 sequence=frame)
+        self._outbox.append((self._channels[topic], frame, publish_ns, data))
+
+    def _send(self) -> None:
+        """Hand one whole step to the writer thread."""
+        if self._error is not None:
+            raise OSError(f"writing {self.path} failed: {self._error}") from self._error
+        self._queue.put(self._outbox)
+        self._outbox = []
+
+    def _drain(self) -> None:
+        """The writer thread: add each step's messages, then flush the file."""
+        while True:
+            step = self._queue.get()
+            if step is None:
+                return
+            if self._error is not None:
+                continue
+            try:
+                for channel, frame, publish_ns, data in step:
+                    self._writer.add_message(channel, log_time=frame, data=data, publish_time=publish_ns,
+                                             sequence=frame)
+                self._file.flush()
+            except BaseException as err:  # reported by the next _send or close
+                self._error = err
 
     def _write_state(self, frame: int, time: float, dt: float, digest: str, x: np.ndarray, v: np.ndarray) -> None:
         codec = fmt.codec_for(frame, len(self._history))
@@ -177,10 +212,16 @@ class McapRecorder:
             return
         self.closed = True
         self._pending.clear()
+        self._outbox = []
+        self._queue.put(None)
+        self._thread.join()
         try:
-            self._writer.finish()
+            if self._error is None:
+                self._writer.finish()
         finally:
             self._file.close()
+        if self._error is not None:
+            raise OSError(f"writing {self.path} failed: {self._error}") from self._error
         self.bytes_written = self.path.stat().st_size
 
     def __enter__(self) -> McapRecorder:
