@@ -350,8 +350,12 @@ def replay(path: str | Path, rrd_path: str | None = None, force: bool = False, s
             for events in rec.iter_step_events():
                 for event in events:
                     sink.on_event(event)
-        finally:
+        except BaseException:
             sink.close()
+            if out is not None:
+                out.unlink(missing_ok=True)  # no half-made picture left behind
+            raise
+        sink.close()
         return {"mcap": str(path), "rrd": str(out) if out else None, "steps": rec.steps,
                 "truncated": rec.truncated}
 

@@ -164,6 +164,7 @@ def replay(
     rrd: Annotated[Optional[Path], typer.Option("--rrd", help="Write the Rerun view to this .rrd file.")] = None,
     spawn: Annotated[bool, typer.Option("--spawn", help="Open the Rerun viewer on the recording.")] = False,
     web: Annotated[bool, typer.Option("--web", help="Serve the Rerun web viewer on localhost.")] = False,
+    port: Annotated[int, typer.Option("--port", help="The web viewer's HTTP port (with --web).")] = 9090,
     verify: Annotated[bool, typer.Option(
         "--verify", help="Re-simulate from the embedded scene and check every step's hash; "
                          "exit 1 at the first mismatch.")] = False,
@@ -195,24 +196,19 @@ def replay(
             typer.echo(f"replayed    {done['steps']} steps" + (" (truncated recording)" if done["truncated"] else "")
                        + f" -> {target}")
             if spawn or web:
-                _open_viewer(target, web)
+                _open_viewer(target, web, port)
 
 
-def _open_viewer(rrd: Path, web: bool) -> None:
+def _open_viewer(rrd: Path, web: bool, port: int) -> None:
     """Start the Rerun viewer (native, or web on localhost) on an .rrd file."""
     import subprocess
 
-    try:
-        import rerun_cli  # the viewer binary ships inside rerun-sdk
-        import os
+    from .record.rerun_sink import viewer_binary
 
-        binary = os.path.join(os.path.dirname(rerun_cli.__file__), "rerun")
-    except ImportError:
-        binary = "rerun"
-    args = [binary, str(rrd)] + (["--web-viewer"] if web else [])
+    args = [viewer_binary(), str(rrd)] + (["--web-viewer", "--web-viewer-port", str(port)] if web else [])
     try:
         if web:
-            typer.echo("serving the web viewer on localhost (Ctrl-C to stop)")
+            typer.echo(f"serving the web viewer at http://localhost:{port} (Ctrl-C to stop)")
             subprocess.run(args, check=False)
         else:
             subprocess.Popen(args, start_new_session=True)

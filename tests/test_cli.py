@@ -196,3 +196,45 @@ def test_foreign_or_broken_files_get_one_clear_line(tmp_path, content, words):
     for args in (("info", str(bad)), ("replay", str(bad), "--verify")):
         result = invoke(*args)
         assert result.exit_code == 2 and words in result.output, result.output
+
+
+def test_a_damaged_chunk_is_reported_not_raised(tmp_path):
+    out = tmp_path / "r.mcap"
+    invoke("record", "rain", "-s", "steps=200", "-o", str(out), "--no-rrd", "--detail", "state")
+    data = bytearray(out.read_bytes())
+    middle = len(data) // 2
+    data[middle:middle + 64] = bytes(64)  # zeros over compressed chunk data
+    out.write_bytes(bytes(data))
+    for args in (("replay", str(out), "--verify"), ("replay", str(out), "--rrd", str(tmp_path / "r.rrd"))):
+        result = invoke(*args)
+        assert result.exit_code == 2 and "damaged" in result.output, result.output
+
+
+def test_replay_web_serves_the_viewer_on_localhost(tmp_path):
+    import os
+    import signal
+    import socket
+    import time
+    import urllib.request
+
+    pytest.importorskip("rerun_cli")
+    out = tmp_path / "c.mcap"
+    invoke("record", "cradle", "-s", "steps=20", "-o", str(out), "--no-rrd")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen([sys.executable, "-m", "physdbg.cli", "replay", str(out), "--web", "--port", str(port)],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True,
+                            env=dict(os.environ, CI="1"))
+    try:
+        deadline = time.time() + 60
+        status = None
+        while time.time() < deadline and status is None:
+            try:
+                status = urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=2).status
+            except OSError:
+                time.sleep(0.5)
+        assert status == 200
+    finally:
+        os.killpg(proc.pid, signal.SIGTERM)
+        proc.wait(timeout=30)

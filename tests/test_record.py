@@ -403,3 +403,11 @@ def test_golden_recordings_still_read_and_still_match_the_engine(name):
     assert rec.header.name == name and not rec.truncated
     result = api.verify(rec.path)
     assert result.ok and result.checked == rec.steps, result.reason
+
+
+def test_a_real_time_run_is_recorded_with_its_step_lengths_and_verifies(tmp_path):
+    result = api.record("bounce", ["dt=real", "duration=0.2"], mcap_path=str(tmp_path / "rt.mcap"), rrd=False)
+    rec = open_recording(result.mcap)
+    dts = [rec.state(k).dt for k in range(1, rec.frames)]
+    assert len(set(dts)) > 1  # real elapsed times, not a fixed dt
+    assert rec.meta["dt"] is None and api.verify(result.mcap).ok

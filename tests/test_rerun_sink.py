@@ -17,7 +17,7 @@ from physdbg.events import StepEnd
 from physdbg.observe import FanOut, ListObserver
 from physdbg.record import RecordingHeader
 from physdbg.record.mcap_sink import McapRecorder
-from physdbg.record.rerun_sink import RerunSink
+from physdbg.record.rerun_sink import RerunSink, viewer_binary
 from physdbg.scene import load_scene
 
 rerun_chunk = pytest.importorskip("rerun.chunk")
@@ -91,12 +91,8 @@ def test_replay_never_overwrites_without_force(billiards_live, tmp_path):
 
 
 def _viewer_binary() -> str | None:
-    try:
-        import rerun_cli
-    except ImportError:
-        return None
-    path = os.path.join(os.path.dirname(rerun_cli.__file__), "rerun")
-    return path if os.access(path, os.X_OK) else None
+    path = viewer_binary()
+    return path if os.path.isabs(path) else shutil.which(path)
 
 
 @pytest.mark.skipif(shutil.which("Xvfb") is None or _viewer_binary() is None,

@@ -84,7 +84,7 @@ class Recording:
         if self._file.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
             raise RecordingError(f"{self.path}: not an MCAP file (a physdbg recording starts with the MCAP magic bytes)")
         self._file.seek(0)
-        self._reader = SeekingReader(self._file)
+        self._reader = SeekingReader(self._file, validate_crcs=True)
         self._memory: dict[str, list[tuple[int, bytes]]] | None = None
         self.truncated = False
         try:
@@ -166,8 +166,15 @@ class Recording:
             for f, _, t, d in merged:
                 yield t, f, d
             return
-        for _, channel, message in self._reader.iter_messages(topics=topics, starting_at=first,
-                                                              ending_before=last + 1):
+        messages = self._reader.iter_messages(topics=topics, starting_at=first, ending_before=last + 1)
+        while True:
+            try:
+                _, channel, message = next(messages)
+            except StopIteration:
+                return
+            except Exception as err:  # a damaged chunk: say where, never a traceback
+                raise RecordingError(f"{self.path}: damaged between frames {first} and {last} "
+                                     f"({type(err).__name__}: {err})") from None
             yield channel.topic, message.log_time, message.data
 
     def _one(self, topic: str) -> bytes | None:

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import PhysdbgError
 from ..events import KIND_PAIR, BroadPhaseInfo, Contacts, EngineWarning, StepEnd
 from .header import RecordingHeader
 
@@ -35,6 +36,22 @@ LOG_LINES_PER_STEP = 20  # contacts described in words per step; the rest are co
 PATHS_ALL_UP_TO = 2000  # above this many particles, only paths of particles with contacts are drawn
 SERIES_BATCH = 128
 BVH_LEVELS_SHOWN = 3  # levels 0..2 are drawn when the file opens; deeper ones are a click away  # steps of scalar series buffered before one send_columns
+
+
+class ViewerError(PhysdbgError):
+    """The Rerun viewer could not be started."""
+
+
+def viewer_binary() -> str:
+    """The Rerun viewer shipped inside rerun-sdk (found even when the venv is not on PATH)."""
+    import os
+
+    try:
+        import rerun_cli
+    except ImportError:
+        return "rerun"
+    path = os.path.join(os.path.dirname(rerun_cli.__file__), "rerun")
+    return path if os.access(path, os.X_OK) else "rerun"
 
 
 class RerunSink:
@@ -58,12 +75,16 @@ class RerunSink:
         if rrd is not None:
             sinks.append(rr.FileSink(str(rrd)))
         if spawn:
-            rr.spawn(connect=False)
+            try:
+                rr.spawn(connect=False, hide_welcome_screen=True, executable_path=viewer_binary(),
+                         recording=self.rec)
+            except (RuntimeError, OSError) as err:
+                raise ViewerError(f"cannot start the Rerun viewer ({err})") from None
             sinks.append(rr.GrpcSink())
         if not sinks:
             raise ValueError("give an .rrd path, spawn=True, or both")
         self.rec.set_sinks(*sinks)
-        self.rec.send_blueprint(blueprint(), make_active=True, make_default=True)
+        self.rec.send_blueprint(blueprint(header), make_active=True, make_default=True)
         self.radius = header.radius.astype(np.float32)
         self.previous = header.positions.copy()
         self.bvh_levels = 0
@@ -78,7 +99,9 @@ class RerunSink:
     # ------------------------------------------------------------------ static
     def _log_static(self, h: RecordingHeader) -> None:
         rr, rec = self.rr, self.rec
-        rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Y_UP, static=True)
+        up = _up_axis(h)
+        rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP if up[2] else rr.ViewCoordinates.RIGHT_HAND_Y_UP,
+                static=True)
         lo, hi = _scene_bounds(h)
         for name, strip in _wall_outlines(h.walls, lo, hi):
             rec.log(f"world/walls/{name}", rr.LineStrips3D([strip], colors=[[150, 150, 160]], radii=[-1.5]),
@@ -86,8 +109,8 @@ class RerunSink:
         self._set_time(0, 0.0)
         rec.log("world/spheres", rr.Points3D(np.asarray(h.positions, dtype=np.float32), radii=self.radius,
                                              colors=_sphere_colors(h.inverse_mass)))
-        rec.log("log", rr.TextLog(f"{h.name}: {h.count} spheres, {len(h.walls)} walls; "
-                                  f"settings {h.meta.get('settings', {})}", level="INFO"))
+        settings = " ".join(f"{key}={value}" for key, value in h.meta.get("settings", {}).items())
+        rec.log("log", rr.TextLog(f"{h.name}: {h.count} spheres, {len(h.walls)} walls; {settings}", level="INFO"))
 
     def _set_time(self, frame: int, time: float) -> None:
         self.rec.set_time("step", sequence=frame)
@@ -253,13 +276,23 @@ class RerunSink:
 
 
 # ----------------------------------------------------------------------------- blueprint
-def blueprint():
-    """3D view of the world beside the energy and contact plots and the event log."""
+def blueprint(header: RecordingHeader):
+    """3D view of the world beside the energy and contact plots and the event log; the
+    camera looks at the whole scene from above and to the side, up against gravity."""
     import rerun.blueprint as rrb
 
+    lo, hi = _scene_bounds(header)
+    centre = (lo + hi) / 2
+    up = _up_axis(header)
+    helper = np.array([0.0, 0.0, 1.0]) if not up[2] else np.array([0.0, -1.0, 0.0])
+    side = np.cross(up, helper)
+    front = np.cross(side, up)
+    direction = front + 0.55 * side + 0.45 * up
+    eye = centre + direction / np.linalg.norm(direction) * 1.4 * float(np.linalg.norm(hi - lo))
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Spatial3DView(origin="/world", name="scene", overrides={
+            rrb.Spatial3DView(origin="/world", name="scene", eye_controls=rrb.EyeControls3D(
+                position=eye.tolist(), look_target=centre.tolist(), eye_up=up.tolist()), overrides={
                 f"/world/bvh/level_{level}": rrb.EntityBehavior(visible=False)
                 for level in range(BVH_LEVELS_SHOWN, 64)}),
             rrb.Vertical(
@@ -293,6 +326,14 @@ def _line_strips(points: np.ndarray, offsets: np.ndarray):
     strips = pa.ListArray.from_arrays(pa.array(offsets, type=pa.int32()), values)
     strips = strips.cast(rr.components.LineStrip3DBatch([]).as_arrow_array().type)
     return rr.DescribedComponentBatch(_ArrowBatch(strips), rr.LineStrips3D.descriptor_strips())
+
+
+def _up_axis(h: RecordingHeader) -> np.ndarray:
+    """+z when gravity points down z, else +y (the engine's default gravity is -y)."""
+    gravity = np.asarray(h.meta.get("settings", {}).get("gravity", (0.0, -9.81, 0.0)), dtype=float)
+    if abs(gravity[2]) > abs(gravity[1]) and abs(gravity[2]) >= abs(gravity[0]) and gravity[2] < 0:
+        return np.array([0.0, 0.0, 1.0])
+    return np.array([0.0, 1.0, 0.0])
 
 
 def _contact_centres(c: Contacts, radius: np.ndarray) -> np.ndarray:
