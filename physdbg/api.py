@@ -223,11 +223,12 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
     interrupted = False
     stop = _StopAtStepEnd(on_step)
     try:
-        sinks.append(McapRecorder(mcap_out, header))
-        if rrd_out is not None or spawn:
+        if rrd_out is not None or spawn:  # first: if the viewer cannot start, no file is left behind
             from .record.rerun_sink import RerunSink
 
             sinks.append(RerunSink(header, rrd_out, spawn=spawn))
+        mcap_sink = McapRecorder(mcap_out, header)
+        sinks.insert(0, mcap_sink)
         with stop:
             summary = run(scene, observer=FanOut(*sinks), dts=dts, on_step=stop.on_step)
     except KeyboardInterrupt:
@@ -237,7 +238,6 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
     finally:
         for sink in sinks:
             sink.close()
-    mcap_sink = sinks[0]
     note = ""
     if mcap_sink.bvh_capped_steps:
         note = (f"BVH logged down to depth {mcap_sink.bvh_logged_depth} ({cap} nodes at most) in "

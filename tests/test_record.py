@@ -111,7 +111,7 @@ def test_reader_gives_back_every_state_hash_and_event_of_the_live_run(tmp_path):
     for k, events in enumerate(rec.iter_step_events(), start=1):
         live_step = [e for e in live.events if e.step == k - 1]
         assert [type(e) for e in events] == [type(e) for e in live_step]
-        for mine, theirs in zip(events, live_step):
+        for mine, theirs in zip(events, live_step, strict=True):
             if isinstance(mine, (Contacts, SweptTests)):
                 for name in mine.__dataclass_fields__:
                     np.testing.assert_array_equal(getattr(mine, name), getattr(theirs, name))

@@ -36,7 +36,7 @@ def read_rrd(path: Path) -> dict:
         for name in names:
             if name in ("step", "sim_time") or name.startswith("rerun."):
                 continue
-            for step, value in zip(steps, batch.column(name).to_pylist()):
+            for step, value in zip(steps, batch.column(name).to_pylist(), strict=True):
                 rows.setdefault((chunk.entity_path, step), {}).setdefault(name, []).append(value)
     return rows
 
@@ -147,3 +147,13 @@ def test_each_path_runs_from_the_start_of_the_step_through_its_contacts_to_the_e
     np.testing.assert_allclose(strip[1], first.point + first.normal * radius[first.a], atol=1e-6)
     untouched = next(i for i in range(12) if all(i not in (c.a, c.other) for c in mine))
     assert len(strips[untouched]) == 2
+
+
+def test_the_event_log_line_quoted_in_the_readme_is_what_cradle_writes(tmp_path):
+    import re
+
+    rec = api.record("cradle", mcap_path=str(tmp_path / "c.mcap"), rrd_path=str(tmp_path / "c.rrd"))
+    rows = read_rrd(Path(rec.rrd))
+    readme = " ".join((Path(__file__).resolve().parents[1] / "README.md").read_text().split())
+    quoted = re.search(r"\(`(step 44: [^`]*)` in `physdbg record cradle`\)", readme).group(1)
+    assert [quoted] in rows[("/log", 44)]["TextLog:text"]

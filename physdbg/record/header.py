@@ -50,8 +50,8 @@ class RecordingHeader:
         return self.meta["detail"]
 
     @classmethod
-    def from_scene(cls, scene, detail: str = "full", bvh_max_nodes: int | None = DEFAULT_BVH_MAX_NODES,
-                   broad_phase: str | None = None) -> RecordingHeader:
+    def from_scene(cls, scene, detail: str = "full",
+                   bvh_max_nodes: int | None = DEFAULT_BVH_MAX_NODES) -> RecordingHeader:
         """The header of a live recording of ``scene`` (a physdbg.scene.Scene)."""
         if detail not in DETAIL_LEVELS:
             raise ValueError(f"detail must be one of {', '.join(DETAIL_LEVELS)}, not {detail!r}")
@@ -69,7 +69,6 @@ class RecordingHeader:
             "steps": scene.steps,
             "duration": scene.duration,
             "particles": st.count,
-            "broad_phase": broad_phase,
             "detail": detail,
             "bvh_max_nodes": bvh_max_nodes,
         }

@@ -349,7 +349,7 @@ def _scene_bounds(h: RecordingHeader) -> tuple[np.ndarray, np.ndarray]:
     r = float(h.radius.max()) if h.count else 0.5
     lo = h.positions.min(axis=0) - r if h.count else np.full(3, -1.0)
     hi = h.positions.max(axis=0) + r if h.count else np.full(3, 1.0)
-    for normal, offset in zip(h.walls.normals, h.walls.offsets):
+    for normal, offset in zip(h.walls.normals, h.walls.offsets, strict=True):
         axis = int(np.argmax(np.abs(normal)))
         if abs(normal[axis]) > 1 - 1e-12:
             coordinate = offset / normal[axis]
@@ -362,7 +362,7 @@ def _scene_bounds(h: RecordingHeader) -> tuple[np.ndarray, np.ndarray]:
 def _wall_outlines(walls, lo: np.ndarray, hi: np.ndarray):
     """(name, (5, 3) closed outline) of each wall inside the box lo..hi."""
     centre, half = (lo + hi) / 2, (hi - lo) / 2
-    for name, normal, offset in zip(walls.names, walls.normals, walls.offsets):
+    for name, normal, offset in zip(walls.names, walls.normals, walls.offsets, strict=True):
         on_plane = centre + (offset - normal @ centre) * normal
         helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
         u = np.cross(normal, helper)
