@@ -238,3 +238,57 @@ def test_replay_web_serves_the_viewer_on_localhost(tmp_path):
     finally:
         os.killpg(proc.pid, signal.SIGTERM)
         proc.wait(timeout=30)
+
+
+def test_record_caps_a_big_bvh_and_says_so(tmp_path):
+    out = tmp_path / "b.mcap"
+    result = invoke("record", "rain", "-s", "broad_phase=bvh-sah", "-s", "steps=5", "-o", str(out), "--no-rrd",
+                    "--bvh-max-nodes", "30")
+    assert result.exit_code == 0, result.output
+    assert "note        BVH logged down to depth" in result.output and "--bvh-max-nodes 0" in result.output
+    full = invoke("record", "rain", "-s", "broad_phase=bvh-sah", "-s", "steps=5", "-o", str(out), "--no-rrd",
+                  "--bvh-max-nodes", "0", "--force")
+    assert "note" not in full.output
+
+
+def test_record_repeats_a_real_time_run_from_its_step_lengths(tmp_path):
+    first = tmp_path / "rt.mcap"
+    invoke("record", "bounce", "-s", "dt=real", "-s", "duration=0.1", "-o", str(first), "--no-rrd")
+    from physdbg import open_recording
+
+    rec = open_recording(first)
+    dts = tmp_path / "dts.txt"
+    dts.write_text("".join(f"{rec.state(k).dt!r}\n" for k in range(1, rec.frames)))
+    again = tmp_path / "again.mcap"
+    result = invoke("record", "bounce", "-s", "dt=real", "--dts", str(dts), "-o", str(again), "--no-rrd")
+    assert result.exit_code == 0, result.output
+    assert open_recording(again).state(-1).state_hash == rec.state(-1).state_hash
+
+
+def test_record_spawn_streams_to_a_viewer_it_starts(tmp_path):
+    import os
+    import shutil
+    import time
+
+    if shutil.which("Xvfb") is None:
+        pytest.skip("needs Xvfb (.ci/run installs it)")
+    pytest.importorskip("rerun_cli")
+    display = f":{150 + os.getpid() % 50}"
+    xvfb = subprocess.Popen(["Xvfb", display, "-screen", "0", "1024x768x24"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    try:
+        time.sleep(1.0)
+        log = tmp_path / "stderr.txt"
+        with open(log, "w") as err:  # a file, not a pipe: the detached viewer keeps its copy open
+            done = subprocess.run([sys.executable, "-m", "physdbg.cli", "record", "cradle", "-s", "steps=30",
+                                   "--spawn", "-o", str(tmp_path / "c.mcap")],
+                                  env=dict(os.environ, DISPLAY=display, CI="1"), stdout=subprocess.DEVNULL,
+                                  stderr=err, timeout=120)
+        assert done.returncode == 0 and "Traceback" not in log.read_text(), log.read_text()[-2000:]
+        assert (tmp_path / "c.rrd").stat().st_size > 0
+        viewers = subprocess.run(["pgrep", "-f", "rerun_cli/rerun --port=9876"], capture_output=True, text=True)
+        assert viewers.stdout.split(), "no viewer was started"
+    finally:
+        subprocess.run(["pkill", "-f", "rerun_cli/rerun --port=9876"], check=False)
+        xvfb.terminate()
+        xvfb.wait(timeout=10)

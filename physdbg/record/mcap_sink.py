@@ -63,7 +63,6 @@ class McapRecorder:
         self._thread.start()
         self._history: list[np.ndarray] = []  # the last two frames' (N, 6) states, for the codec
         self.frames = 0
-        self.time = 0.0
         self.bvh_capped_steps = 0
         self.bvh_logged_depth: int | None = None
         self.closed = False
@@ -170,7 +169,6 @@ class McapRecorder:
         state[:, :3], state[:, 3:] = x, v
         self._history = [*self._history[-1:], state]
         self.frames = frame + 1
-        self.time = time
 
     def _contacts_bytes(self, c: Contacts) -> bytes:
         rows = np.zeros(len(c), dtype=self._dtypes[fmt.TOPIC_CONTACTS])
