@@ -154,8 +154,10 @@ def record(
             typer.echo(f"rerun       {result.rrd}  ({_size(result.bytes_rrd)})")
         if result.bvh_note:
             typer.echo(f"note        {result.bvh_note}")
-        typer.echo("open with   " + (f"rerun {result.rrd}" if result.rrd else f"physdbg replay {result.mcap} --spawn")
-                   + f"   |   physdbg info {result.mcap}   |   physdbg replay {result.mcap} --verify")
+        me = _command("physdbg")
+        typer.echo("open with   " + (f"{_command('rerun')} {result.rrd}" if result.rrd
+                                 else f"{me} replay {result.mcap} --spawn"))
+        typer.echo(f"then try    {me} info {result.mcap}   |   {me} replay {result.mcap} --verify")
 
 
 @app.command()
@@ -250,6 +252,21 @@ def info(
         for c in data["channels"]:
             lines.append(f"  {c['topic']:<{width}}  {c['messages']:>7} messages  {c['encoding']:<14} {c['schema']}")
         typer.echo("\n".join(lines))
+
+
+def _command(name: str) -> str:
+    """How to run ``name`` (rerun, physdbg) from here: the bare name if it is on PATH, else
+    its path in this venv (after README command 1 the venv is not activated)."""
+    import os
+    import shutil
+
+    if shutil.which(name):
+        return name
+    beside = os.path.join(os.path.dirname(sys.executable), name)
+    if not os.path.exists(beside):
+        return name
+    relative = os.path.relpath(beside)
+    return relative if not relative.startswith("..") else beside
 
 
 def _size(n: int) -> str:
