@@ -44,3 +44,27 @@ def make_world(state, walls=None, observe=True, **settings):
 @pytest.fixture
 def floor():
     return make_walls(([0, 1, 0], 0.0, 1.0))
+
+
+@pytest.fixture
+def virtual_display():
+    """A DISPLAY on a fresh Xvfb screen with the Rerun viewer available; skips, saying why,
+    where Xvfb or the viewer is missing (.ci/run installs xvfb and mesa)."""
+    import os
+    import shutil
+    import subprocess
+    import time
+
+    from physdbg.record.rerun_sink import viewer_binary
+
+    if shutil.which("Xvfb") is None or shutil.which(viewer_binary()) is None:
+        pytest.skip("needs Xvfb and the Rerun viewer (.ci/run installs xvfb and mesa)")
+    display = f":{90 + os.getpid() % 150}"
+    xvfb = subprocess.Popen(["Xvfb", display, "-screen", "0", "1280x800x24"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    time.sleep(1.0)
+    try:
+        yield display
+    finally:
+        xvfb.terminate()
+        xvfb.wait(timeout=10)

@@ -265,24 +265,15 @@ def test_record_repeats_a_real_time_run_from_its_step_lengths(tmp_path):
     assert open_recording(again).state(-1).state_hash == rec.state(-1).state_hash
 
 
-def test_record_spawn_streams_to_a_viewer_it_starts(tmp_path):
+def test_record_spawn_streams_to_a_viewer_it_starts(tmp_path, virtual_display):
     import os
-    import shutil
-    import time
 
-    if shutil.which("Xvfb") is None:
-        pytest.skip("needs Xvfb (.ci/run installs it)")
-    pytest.importorskip("rerun_cli")
-    display = f":{150 + os.getpid() % 50}"
-    xvfb = subprocess.Popen(["Xvfb", display, "-screen", "0", "1024x768x24"], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
+    log = tmp_path / "stderr.txt"
     try:
-        time.sleep(1.0)
-        log = tmp_path / "stderr.txt"
         with open(log, "w") as err:  # a file, not a pipe: the detached viewer keeps its copy open
             done = subprocess.run([sys.executable, "-m", "physdbg.cli", "record", "cradle", "-s", "steps=30",
                                    "--spawn", "-o", str(tmp_path / "c.mcap")],
-                                  env=dict(os.environ, DISPLAY=display, CI="1"), stdout=subprocess.DEVNULL,
+                                  env=dict(os.environ, DISPLAY=virtual_display, CI="1"), stdout=subprocess.DEVNULL,
                                   stderr=err, timeout=120)
         assert done.returncode == 0 and "Traceback" not in log.read_text(), log.read_text()[-2000:]
         assert (tmp_path / "c.rrd").stat().st_size > 0
@@ -290,5 +281,3 @@ def test_record_spawn_streams_to_a_viewer_it_starts(tmp_path):
         assert viewers.stdout.split(), "no viewer was started"
     finally:
         subprocess.run(["pkill", "-f", "rerun_cli/rerun --port=9876"], check=False)
-        xvfb.terminate()
-        xvfb.wait(timeout=10)

@@ -6,7 +6,6 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
-import time
 from pathlib import Path
 
 import numpy as np
@@ -90,30 +89,14 @@ def test_replay_never_overwrites_without_force(billiards_live, tmp_path):
     assert out.read_text() == "keep me"
 
 
-def _viewer_binary() -> str | None:
-    path = viewer_binary()
-    return path if os.path.isabs(path) else shutil.which(path)
-
-
-@pytest.mark.skipif(shutil.which("Xvfb") is None or _viewer_binary() is None,
-                    reason="needs Xvfb and the Rerun viewer (.ci/run installs xvfb and mesa)")
-def test_the_real_viewer_opens_the_recording_on_a_picture_that_is_not_blank(tmp_path):
+def test_the_real_viewer_opens_the_recording_on_a_picture_that_is_not_blank(tmp_path, virtual_display):
     from PIL import Image
 
     rec = api.record("cradle", ["steps=100"], mcap_path=str(tmp_path / "c.mcap"), rrd_path=str(tmp_path / "c.rrd"))
-    display = f":{90 + os.getpid() % 100}"
-    xvfb = subprocess.Popen(["Xvfb", display, "-screen", "0", "1280x800x24"], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
-    try:
-        time.sleep(1.0)
-        shot = tmp_path / "shot.png"
-        env = dict(os.environ, DISPLAY=display, CI="1")
-        done = subprocess.run([_viewer_binary(), rec.rrd, "--screenshot-to", str(shot), "--window-size", "1200x750"],
-                              env=env, capture_output=True, timeout=120)
-        assert done.returncode == 0, done.stderr[-2000:]
-    finally:
-        xvfb.terminate()
-        xvfb.wait(timeout=10)
+    shot = tmp_path / "shot.png"
+    done = subprocess.run([viewer_binary(), rec.rrd, "--screenshot-to", str(shot), "--window-size", "1200x750"],
+                          env=dict(os.environ, DISPLAY=virtual_display, CI="1"), capture_output=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
     image = np.asarray(Image.open(shot).convert("RGB"))
     height, width, _ = image.shape
     assert width >= 1000 and height >= 600
