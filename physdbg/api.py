@@ -152,8 +152,8 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
 class RecordResult:
     """What ``record`` wrote. mcap / rrd: paths (rrd None when not written); frames:
     states in the MCAP file (frame 0 = initial state); bytes_mcap / bytes_rrd: sizes;
-    bvh_note: set when the BVH was logged only down to some depth; interrupted: Ctrl-C
-    stopped the run (the files hold every step completed before it)."""
+    bvh_note: set when the BVH was logged only down to some depth. (A run stopped by
+    Ctrl-C raises RecordingInterrupted instead; its files hold every step completed.)"""
 
     summary: RunSummary | None
     mcap: str
@@ -163,7 +163,6 @@ class RecordResult:
     bytes_mcap: int
     bytes_rrd: int
     bvh_note: str = ""
-    interrupted: bool = False
 
 
 class RecordingInterrupted(PhysdbgError):
@@ -220,6 +219,7 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
     header = RecordingHeader.from_scene(scene, detail, cap)
     sinks = []
     summary = None
+    mcap_sink = None
     interrupted = False
     stop = _StopAtStepEnd(on_step)
     try:
@@ -238,13 +238,15 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
     finally:
         for sink in sinks:
             sink.close()
+    if mcap_sink is None:  # Ctrl-C before the first byte was written
+        raise RecordingInterrupted("interrupted before the recording began; nothing was written")
     note = ""
     if mcap_sink.bvh_capped_steps:
         note = (f"BVH logged down to depth {mcap_sink.bvh_logged_depth} ({cap} nodes at most) in "
                 f"{mcap_sink.bvh_capped_steps} steps; use --bvh-max-nodes 0 for every node")
     result = RecordResult(summary, str(mcap_out), str(rrd_out) if rrd_out else None, detail, mcap_sink.frames,
                           mcap_out.stat().st_size, rrd_out.stat().st_size if rrd_out and rrd_out.exists() else 0,
-                          note, interrupted)
+                          note)
     if interrupted:
         raise RecordingInterrupted(
             f"interrupted: {mcap_out} holds steps 1..{mcap_sink.frames - 1} (every step completed)")
