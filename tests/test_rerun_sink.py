@@ -140,3 +140,16 @@ def test_the_event_log_line_quoted_in_the_readme_is_what_cradle_writes(tmp_path)
     readme = " ".join((Path(__file__).resolve().parents[1] / "README.md").read_text().split())
     quoted = re.search(r"\(`(step 44: [^`]*)` in `physdbg record cradle`\)", readme).group(1)
     assert [quoted] in rows[("/log", 44)]["TextLog:text"]
+
+
+def test_a_step_with_more_contacts_than_are_drawn_says_so(tmp_path, monkeypatch):
+    from physdbg.record import rerun_sink
+
+    monkeypatch.setattr(rerun_sink, "DRAWN_CONTACTS_PER_STEP", 2)
+    monkeypatch.setattr(rerun_sink, "LOG_LINES_PER_STEP", 1)
+    rec = api.record("cradle", mcap_path=str(tmp_path / "c.mcap"), rrd_path=str(tmp_path / "c.rrd"))
+    rows = read_rrd(Path(rec.rrd))
+    ghosts = rows[("/world/contacts/ghosts", 44)]["Points3D:positions"][0]
+    assert len(ghosts) == 2 and len(open_recording(rec.mcap).contacts(44)) == 4
+    texts = [t for row in rows[("/log", 44)]["TextLog:text"] for t in row]
+    assert "step 44: ... and 3 more contacts; ghosts and arrows for the first 2" in texts

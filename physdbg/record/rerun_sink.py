@@ -11,7 +11,8 @@ Entities (timelines ``step`` = frame, steps completed, and ``sim_time`` in secon
                              the blueprint shows the first BVH_LEVELS_SHOWN)
     world/paths              LineStrips3D: each particle's path through the step,
                              through the centres where its contacts happened
-    world/contacts/ghosts    Points3D: where each sphere was at each contact
+    world/contacts/ghosts    Points3D: where each sphere was at each contact (the first
+                             DRAWN_CONTACTS_PER_STEP of a step; the log says when more)
     world/contacts/normals   Arrows3D: contact normals (length = the sphere's radius)
     world/contacts/impulses  Arrows3D: velocity change of sphere a, × IMPULSE_ARROW_SECONDS
     stats/energy/*, stats/momentum/*, stats/contacts   Scalars, sent in columns
@@ -22,6 +23,7 @@ A default blueprint (3D view, energy and contact plots, the event log) goes in t
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +36,7 @@ APPLICATION_ID = "physdbg"
 IMPULSE_ARROW_SECONDS = 0.05  # an impulse arrow shows how far its velocity change moves a in 50 ms
 LOG_LINES_PER_STEP = 20  # contacts described in words per step; the rest are counted
 PATHS_ALL_UP_TO = 2000  # above this many particles, only paths of particles with contacts are drawn
+DRAWN_CONTACTS_PER_STEP = 1000  # ghosts and arrows for the first this many contacts of a step (all are in the MCAP)
 SERIES_BATCH = 128
 BVH_LEVELS_SHOWN = 3  # levels 0..2 are drawn when the file opens; deeper ones are a click away  # steps of scalar series buffered before one send_columns
 
@@ -140,7 +143,7 @@ class RerunSink:
         self._paths(end, contacts)
         lines = [(f"step {frame}: {warning.message}", "WARN") for warning in self._warnings]
         if contacts is not None:
-            self._draw_contacts(contacts)
+            self._draw_contacts(_first_contacts(contacts, DRAWN_CONTACTS_PER_STEP))
             lines += self._describe(frame, contacts, end.dt)
         self._log_lines(frame, end.time, lines)
         self._warnings = []
@@ -214,7 +217,9 @@ class RerunSink:
                 f"j = {c.impulse[row]:.3g} N·s, closing {c.closing_speed[row]:.3g} m/s, e = {c.restitution[row]:.3g}",
                 "DEBUG" if c.resting[row] else "INFO"))
         if len(c) > LOG_LINES_PER_STEP:
-            lines.append((f"step {frame}: ... and {len(c) - LOG_LINES_PER_STEP} more contacts", "INFO"))
+            drawn = (f"; ghosts and arrows for the first {DRAWN_CONTACTS_PER_STEP}"
+                     if len(c) > DRAWN_CONTACTS_PER_STEP else "")
+            lines.append((f"step {frame}: ... and {len(c) - LOG_LINES_PER_STEP} more contacts{drawn}", "INFO"))
         return lines
 
     def _log_lines(self, frame: int, time: float, lines: list[tuple[str, str]]) -> None:
@@ -334,6 +339,14 @@ def _up_axis(h: RecordingHeader) -> np.ndarray:
     if abs(gravity[2]) > abs(gravity[1]) and abs(gravity[2]) >= abs(gravity[0]) and gravity[2] < 0:
         return np.array([0.0, 0.0, 1.0])
     return np.array([0.0, 1.0, 0.0])
+
+
+def _first_contacts(c: Contacts, count: int) -> Contacts:
+    """The first ``count`` contacts of a step (all of them when there are no more)."""
+    if len(c) <= count:
+        return c
+    return dataclasses.replace(c, **{name: getattr(c, name)[:count] for name in Contacts.__dataclass_fields__
+                                     if name != "step"})
 
 
 def _contact_centres(c: Contacts, radius: np.ndarray) -> np.ndarray:
