@@ -304,14 +304,11 @@ class VerifyResult:
 def verify(path: str | Path, on_step: Callable[[int, int | None], None] | None = None) -> VerifyResult:
     """Re-simulate a recording from its embedded scene and step lengths; compare every
     step's state hash (and check each stored state against its stored hash)."""
-    from .engine import state_hash
+    from .engine import state_hash, warm_up
     from .record import open_recording
 
     with open_recording(path) as rec:
-        scene = rec.scene
-        world = scene.build_world()
-        from .engine import warm_up
-
+        world = rec.scene.build_world()
         warm_up(world.broad_phase.name)
         first = rec.state(0)
         if state_hash(first.positions, first.velocities) != first.state_hash:

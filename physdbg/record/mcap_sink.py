@@ -67,10 +67,7 @@ class McapRecorder:
         self.bvh_logged_depth: int | None = None
         self.closed = False
         self._write(fmt.TOPIC_SCENE, 0, 0, json.dumps(header.meta).encode())
-        particles = np.zeros(header.count, dtype=self._dtypes[fmt.TOPIC_PARTICLES])
-        for name in ("radius", "inverse_mass", "restitution", "gravity_scale"):
-            particles[name] = getattr(header, name)
-        self._write(fmt.TOPIC_PARTICLES, 0, 0, particles.tobytes())
+        self._write(fmt.TOPIC_PARTICLES, 0, 0, self._rows(fmt.TOPIC_PARTICLES, header, header.count))
         self._write(fmt.TOPIC_WALLS, 0, 0, json.dumps(header.walls_json()).encode())
         self._write_state(0, 0.0, 0.0, header.state_hash, header.positions, header.velocities)
         self._send()
@@ -82,13 +79,10 @@ class McapRecorder:
             self._end_step(event)
         elif isinstance(event, Contacts):
             if fmt.TOPIC_CONTACTS in self._channels:
-                self._pending.append((fmt.TOPIC_CONTACTS, self._contacts_bytes(event)))
+                self._pending.append((fmt.TOPIC_CONTACTS, self._rows(fmt.TOPIC_CONTACTS, event, len(event))))
         elif isinstance(event, SweptTests):
             if fmt.TOPIC_SWEPT in self._channels:
-                rows = np.zeros(len(event), dtype=self._dtypes[fmt.TOPIC_SWEPT])
-                for name in ("kind", "outcome", "a", "other", "start", "toi"):
-                    rows[name] = getattr(event, name)
-                self._pending.append((fmt.TOPIC_SWEPT, rows.tobytes()))
+                self._pending.append((fmt.TOPIC_SWEPT, self._rows(fmt.TOPIC_SWEPT, event, len(event))))
         elif isinstance(event, BroadPhaseInfo):
             if fmt.TOPIC_BROAD_PHASE in self._channels:
                 self._broad_phase(event, frame)
@@ -170,10 +164,11 @@ class McapRecorder:
         self._history = [*self._history[-1:], state]
         self.frames = frame + 1
 
-    def _contacts_bytes(self, c: Contacts) -> bytes:
-        rows = np.zeros(len(c), dtype=self._dtypes[fmt.TOPIC_CONTACTS])
+    def _rows(self, topic: str, source, count: int) -> bytes:
+        """The channel's packed rows, each field taken from the attribute of that name."""
+        rows = np.zeros(count, dtype=self._dtypes[topic])
         for name in rows.dtype.names:
-            rows[name] = getattr(c, name)
+            rows[name] = getattr(source, name)
         return rows.tobytes()
 
     def _broad_phase(self, info: BroadPhaseInfo, frame: int) -> None:
