@@ -94,7 +94,7 @@ def worker_physdbg(text: str) -> dict:
     for _ in range(scene.steps):
         stats = world.step(scene.dt)
         contacts += stats.contacts
-        capped += any("event cap" in w for w in stats.warnings)
+        capped += any(w.code == "max_events_per_step" for w in stats.warnings)
     wall = time.perf_counter() - started
     return {"ms_per_step": 1e3 * wall / scene.steps, "contacts": contacts, "steps": scene.steps,
             "collisions_per_s": contacts / wall, "broad_phase": world.broad_phase.name,

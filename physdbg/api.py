@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import PhysdbgError
+from .errors import NonFiniteRunError, PhysdbgError
 from .scene import Scene, load_scene
 
 
@@ -27,7 +27,9 @@ class RunSummary:
     energy_drift: (E_end - E_start) / |E_start| of kinetic + potential (0 when E_start = 0);
     momentum_drift: |p_end - p_start| (kg·m/s); dts: every step's dt, to repeat the run.
     compile_seconds: compiling (first run) or loading (cached) the numba kernels, not
-    counted in wall_seconds or ms_per_step.
+    counted in wall_seconds or ms_per_step. walls: the walls' names. warning_counts: how
+    many engine warnings of each kind (code); warnings: the first few of each kind, as
+    "step k: message" with k counted from 1 (step k ends at frame k of a recording).
     """
 
     scene: str
@@ -38,7 +40,7 @@ class RunSummary:
     broad_phase: str
     broad_phase_reason: str
     particles: int
-    walls: int
+    walls: list[str]
     steps: int
     sim_time: float
     contacts: int
@@ -57,6 +59,7 @@ class RunSummary:
     ms_per_step: float
     phase_seconds: dict[str, float]
     final_hash: str
+    warning_counts: dict[str, int] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     dts: list[float] = field(default_factory=list, repr=False)
 
@@ -66,20 +69,28 @@ class RunSummary:
 
 def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         dts: Sequence[float] | None = None,
-        on_step: Callable[[int, int | None], None] | None = None) -> RunSummary:
+        on_step: Callable[[int, int | None], None] | None = None,
+        on_status: Callable[[str], None] | None = None) -> RunSummary:
     """Run a scene (built-in name, path, or Scene) to the end and summarise it.
 
     dts: replay exactly these step lengths (e.g. from a real-time run) instead of the
     scene's dt. on_step(done, total): called after each step (for progress bars).
+    on_status(what): "compiling" before the kernels are compiled or loaded, "running"
+    when the first step starts. Raises NonFiniteRunError (exit code 3) when a position or
+    velocity becomes NaN or infinite; the observer has seen every step up to that one.
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene, overrides)
     elif overrides:
         raise PhysdbgError("give overrides when loading the scene, not with a Scene object")
-    from .engine import energies, warm_up
+    from .engine import NonFiniteState, energies, state_hash, warm_up
 
     world = scene.build_world(observer)
+    if on_status is not None:
+        on_status("compiling")
     compile_seconds = warm_up(world.broad_phase.name)
+    if on_status is not None:
+        on_status("running")
     st = world.state
 
     k0, p0, mom0 = energies(st, world.gravity)
@@ -88,29 +99,15 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     phase = {"forces": 0.0, "broad_phase": 0.0, "narrow_phase": 0.0, "resolve": 0.0, "finish": 0.0}
     contacts = tests = max_in_step = 0
     max_overlap = 0.0
-    warnings: list[str] = []
-    stats = None
+    warnings = WarningTally()
     started = time.perf_counter()
-    last = started
-    while True:
-        done = len(used)
-        if dts is not None:
-            if done >= len(dts):
-                break
-            dt = float(dts[done])
-        elif scene.dt is not None:
-            if done >= scene.steps:
-                break
-            dt = scene.dt
-        else:  # real elapsed time, as the seed suggests; kept in `dts` to repeat the run
-            if scene.steps is not None and done >= scene.steps:
-                break
-            if scene.steps is None and world.time >= scene.duration:
-                break
-            now = time.perf_counter()
-            dt = min(max(now - last, 1e-6), scene.max_dt)
-            last = now
-        stats = world.step(dt)
+    digest = state_hash(st.positions, st.velocities)
+    for dt in scene.step_lengths(dts):
+        try:
+            stats = world.step(dt)
+        except NonFiniteState as err:
+            raise NonFiniteRunError(f"{err}: the run stopped there (a NaN or infinity cannot be stepped on); "
+                                    f"look at the contacts of that step") from None
         used.append(dt)
         for name, seconds in stats.timings.items():
             phase[name] += seconds
@@ -118,33 +115,48 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         tests += stats.swept_tests
         max_in_step = max(max_in_step, stats.contacts)
         max_overlap = max(max_overlap, stats.max_overlap)
-        if stats.warnings and len(warnings) < 20:
-            warnings.extend(stats.warnings[: 20 - len(warnings)])
+        warnings.add(stats.warnings)
+        digest = stats.state_hash
         if on_step is not None:
             on_step(len(used), total)
     wall = time.perf_counter() - started
     k1, p1, mom1 = energies(st, world.gravity)
     e0, e1 = k0 + p0, k1 + p1
     drift = (e1 - e0) / abs(e0) if e0 != 0 else (e1 - e0)
-    if stats is None:
-        from .engine import state_hash
-
-        digest = state_hash(st.positions, st.velocities)
-    else:
-        digest = stats.state_hash
     n_steps = len(used)
     return RunSummary(
         scene=scene.name, source=scene.source, integrator=scene.settings.integrator,
         detection=scene.settings.detection, ordering=scene.settings.ordering,
         broad_phase=world.broad_phase.name,
         broad_phase_reason=world.broad_phase_reason,
-        particles=st.count, walls=len(scene.walls), steps=n_steps, sim_time=world.time,
+        particles=st.count, walls=list(scene.walls.names), steps=n_steps, sim_time=world.time,
         contacts=contacts, swept_tests=tests, resting_at_end=len(world.held),
         max_contacts_in_a_step=max_in_step, energy_start=e0, energy_end=e1, energy_drift=drift,
         momentum_start=[float(c) for c in mom0], momentum_end=[float(c) for c in mom1],
         momentum_drift=float(np.linalg.norm(mom1 - mom0)), max_overlap=max_overlap,
         wall_seconds=wall, compile_seconds=compile_seconds, ms_per_step=1000.0 * wall / n_steps if n_steps else math.nan,
-        phase_seconds=phase, final_hash=digest, warnings=warnings, dts=used)
+        phase_seconds=phase, final_hash=digest, warning_counts=dict(warnings.counts),
+        warnings=warnings.examples(), dts=used)
+
+
+class WarningTally:
+    """Engine warnings of a run: a total per kind and the first few of each, as text."""
+
+    def __init__(self, examples_per_kind: int = 3):
+        self.counts: dict[str, int] = {}
+        self.first: dict[str, list[str]] = {}
+        self.keep = examples_per_kind
+
+    def add(self, warnings) -> None:
+        """warnings: EngineWarning events (step, code, message)."""
+        for w in warnings:
+            self.counts[w.code] = self.counts.get(w.code, 0) + 1
+            kept = self.first.setdefault(w.code, [])
+            if len(kept) < self.keep:
+                kept.append(f"step {w.step + 1}: {w.message}")
+
+    def examples(self) -> list[str]:
+        return [line for lines in self.first.values() for line in lines]
 
 
 # ----------------------------------------------------------------------------- recording

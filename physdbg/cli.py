@@ -333,7 +333,7 @@ def format_summary(s) -> str:
         f"scene       {s.scene}  ({s.source})",
         f"methods     integrator={s.integrator} detection={s.detection} ordering={s.ordering}",
         f"broad phase {s.broad_phase}: {s.broad_phase_reason}",
-        f"bodies      {_count(s.particles, 'particle')}, {_count(s.walls, 'wall')}",
+        f"bodies      {_count(s.particles, 'particle')}, {_count(len(s.walls), 'wall')}",
         f"steps       {s.steps}  ({s.sim_time:.6g} s simulated, {dt_text})",
         f"contacts    {s.contacts}  (at most {s.max_contacts_in_a_step} in a step; {s.swept_tests} swept tests; "
         f"{s.resting_at_end} resting at the end)",
@@ -342,10 +342,18 @@ def format_summary(s) -> str:
         f"overlap     max {s.max_overlap:.3g} m",
         f"speed       {s.ms_per_step:.3f} ms/step  ({phases}); kernels compiled/loaded in {s.compile_seconds:.2f} s",
         f"state hash  {s.final_hash}",
-        "warnings    " + ("none" if not s.warnings else f"{len(s.warnings)}: " + "; ".join(s.warnings[:3])
-                          + (" ..." if len(s.warnings) > 3 else "")),
+        "warnings    " + _warning_totals(s.warning_counts),
     ]
+    lines += [f"  {line}" for line in s.warnings]
     return "\n".join(lines)
+
+
+def _warning_totals(counts: dict[str, int]) -> str:
+    """'none', or the total and a count per kind: '197: 76 max_events_per_step, 121 overlap'."""
+    if not counts:
+        return "none"
+    kinds = ", ".join(f"{n} {code}" for code, n in sorted(counts.items(), key=lambda item: -item[1]))
+    return f"{sum(counts.values())} ({kinds}); the first of each kind:"
 
 
 def _count(n: int, noun: str) -> str:

@@ -26,3 +26,9 @@ class SceneError(PhysdbgError):
 
 class UnknownSceneError(PhysdbgError):
     """The scene is neither a built-in name nor a readable file."""
+
+
+class NonFiniteRunError(PhysdbgError):
+    """A position or velocity became NaN or infinite while running: the run stopped there."""
+
+    exit_code = 3

@@ -25,6 +25,7 @@ import numpy as np
 
 from .engine import (
     BROAD_PHASE_NAMES,
+    BUDGETS,
     DETECTION_NAMES,
     INTEGRATOR_NAMES,
     ORDERING_NAMES,
@@ -54,9 +55,16 @@ TOP_FIELDS = {
     "gravity": "gravity vector [x, y, z] in m/s²",
     "drag": "drag d in v·d^t, 0 < d <= 1 (1 = none)",
     "restitution_rule": "how two restitutions combine: one of " + ", ".join(RESTITUTION_RULES),
-    "rest_speed": "closing speed (m/s, >= 0) at or below which a contact rests",
+    "rest_fraction": ("a pressed contact rests when its closing speed is at most this fraction of |a_n|·dt, "
+                      "the speed its pressing acceleration adds in one step (0 to 1, default 0.01)"),
     "contact_tolerance": "allowed overlap and resting gap, metres > 0",
-    "max_events_per_step": "cap on contacts resolved in one step, integer >= 1",
+    "max_events_per_step": "budget: contacts resolved in one step, integer >= 1 (default 10000)",
+    "max_pairs_per_step": "budget: broad-phase candidate pairs in one step, integer >= 1 (default 10000000)",
+    "max_swept_tests_per_step": "budget: swept tests in one step, integer >= 1 (default 10000000)",
+    "max_resting_work_per_step": ("budget: resting-solve work in one step (iterations × held contacts), "
+                                  "integer >= 1 (default 2000000)"),
+    "max_memory": "refuse a scene whose estimated memory is more than this many bytes (default 4e9)",
+    "max_particle_steps": "refuse a run of more particle-steps (particles × steps) than this (default 1e10)",
     "particles": "array of [[particles]] tables",
     "planes": "array of [[planes]] tables",
     "box": "[box] table: closed axis-aligned container",
@@ -96,7 +104,28 @@ GENERATE_FIELDS = {
 FIELDS = {"scene": TOP_FIELDS, "particles": PARTICLE_FIELDS, "planes": PLANE_FIELDS,
           "box": BOX_FIELDS, "generate": GENERATE_FIELDS}
 
+# Fields that were renamed: the hint an old scene file gets.
+RENAMED = {"rest_speed": "rest_speed (an absolute m/s) was replaced by rest_fraction, which scales with the scene"}
+
 _SETTINGS_DEFAULTS = Settings()
+
+# Every number in a scene is 0 or at most MAX_MAGNITUDE in size, and every length, mass and
+# time that something is divided by is at least MIN_SCALE: then products of a few of them
+# (v·dt, a·dt², |x|², m·v²) stay finite, and no derived quantity (a unit normal, an
+# inverse mass, a step count) can overflow or vanish. SI units: use reduced units for
+# atoms or planets.
+MAX_MAGNITUDE = 1e12
+MIN_SCALE = 1e-12
+MAX_INTEGER = 10**12
+DEFAULT_MAX_MEMORY = 4e9
+DEFAULT_MAX_PARTICLE_STEPS = 1e10
+# Estimated bytes of memory per particle while stepping (state, swept boxes, candidate
+# pairs, swept-test and heap buffers): box-rain peaks at ~1.7 KiB at 10k and ~1 KiB at
+# 100k (peak RSS over the start); twice that leaves room for dense steps.
+BYTES_PER_PARTICLE = 4096
+MAX_SCENE_BYTES = 64 * 2**20  # a scene file is text: larger ones are made with [generate]
+MAX_NESTING = 6
+MAX_SAMPLES = 1000  # samples along a path per swept test (detection = "sampled")  # table > array of tables > table > vector is 4 deep
 
 
 @dataclass
@@ -124,6 +153,31 @@ class Scene:
         """A fresh World on a copy of the initial state (the scene itself never changes)."""
         return World(self.state.copy(), self.walls, self.settings, observer)
 
+    def step_lengths(self, dts=None):
+        """Each step's dt (s), in order, for a loop ``for dt in scene.step_lengths(): world.step(dt)``.
+
+        dts: exactly these step lengths (to repeat a run). Otherwise the scene's dt for
+        ``steps`` steps; with dt = "real", the wall-clock time since the previous step
+        (at least 1 µs, at most max_dt), until ``steps`` steps or ``duration`` seconds.
+        """
+        if dts is not None:
+            yield from (float(d) for d in dts)
+            return
+        if self.dt is not None:
+            for _ in range(self.steps):
+                yield self.dt
+            return
+        import time
+
+        taken, simulated, last = 0, 0.0, time.perf_counter()
+        while (taken < self.steps) if self.steps is not None else (simulated < self.duration):
+            now = time.perf_counter()
+            dt = min(max(now - last, 1e-6), self.max_dt)
+            last = now
+            taken += 1
+            simulated += dt
+            yield dt
+
 
 # ----------------------------------------------------------------------------- loading
 def read_scene_text(scene: str) -> tuple[str, str]:
@@ -140,6 +194,11 @@ def read_scene_text(scene: str) -> tuple[str, str]:
     if path.is_dir():
         raise UnknownSceneError(f"{scene}: is a directory; give a .toml scene file")
     try:
+        if not path.is_file():
+            raise UnknownSceneError(f"{scene}: not a regular file; give a .toml scene file")
+        if path.stat().st_size > MAX_SCENE_BYTES:
+            raise UnknownSceneError(f"{scene}: {path.stat().st_size} bytes is more than a scene file may be "
+                                    f"({MAX_SCENE_BYTES // 2**20} MiB); make many particles with [generate]")
         return path.read_text(encoding="utf-8"), str(path)
     except (OSError, UnicodeDecodeError) as err:
         raise UnknownSceneError(f"{scene}: cannot read the file ({err})") from None
@@ -157,16 +216,35 @@ def parse_scene(text: str, source: str = "<scene>", overrides=()) -> Scene:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise SceneError(source, "", f"not valid TOML: {err}") from None
+    except RecursionError:
+        raise SceneError(source, "", f"nested more deeply than a scene can be ({MAX_NESTING} levels)") from None
     origins: dict[str, str] = {}
     for item in overrides:
         _apply_override(raw, item, source)
         origins[item.split("=", 1)[0].strip()] = item
+    _check_nesting(raw, source)
     return _validate(raw, source, origins)
 
 
 def scene_from_dict(raw: dict, source: str) -> Scene:
     """Validate an already-parsed scene table (e.g. the one kept in a recording)."""
+    if not isinstance(raw, dict):
+        raise SceneError(source, "", "the scene is not a table")
+    _check_nesting(raw, source)
     return _validate(copy.deepcopy(raw), source, {})
+
+
+def _check_nesting(raw: dict, source: str) -> None:
+    """Refuse structures nested deeper than any scene field (walked without recursion)."""
+    stack: list[tuple[Any, str, int]] = [(raw, "", 0)]
+    while stack:
+        node, where, depth = stack.pop()
+        if depth > MAX_NESTING:
+            raise SceneError(source, where, f"nested more deeply than any scene field ({MAX_NESTING} levels)")
+        if isinstance(node, dict):
+            stack.extend((value, f"{where}.{key}" if where else str(key), depth + 1) for key, value in node.items())
+        elif isinstance(node, list):
+            stack.extend((value, f"{where}.{k}", depth + 1) for k, value in enumerate(node))
 
 
 def _parse_value(text: str) -> Any:
@@ -174,6 +252,8 @@ def _parse_value(text: str) -> Any:
         return tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
         return text
+    except RecursionError:
+        return None  # reported by the nesting check, which names the field
 
 
 def _apply_override(raw: dict, item: str, source: str) -> None:
@@ -187,7 +267,13 @@ def _apply_override(raw: dict, item: str, source: str) -> None:
         # the run length is given one way: overriding one replaces the other
         raw.pop("duration" if key == "steps" else "steps", None)
     node: Any = raw
-    for depth, part in enumerate(parts[:-1]):
+    for depth, part in enumerate(parts):
+        if not isinstance(node, (dict, list)):
+            # a dotted key that walks on past a value (dt.x = 1): nothing there to set
+            raise SceneError(source, key, f"--set {item}: '{'.'.join(parts[:depth])}' is a value ({node!r}), "
+                                          f"not a table or array, so it has no field '{part}'")
+        if depth == len(parts) - 1:
+            break
         here = ".".join(parts[:depth + 1])
         if isinstance(node, list):
             if not part.isdigit() or int(part) >= len(node):
@@ -220,47 +306,64 @@ class _Checker:
     def fail(self, name: str, problem: str):
         origin = self.origins.get(name)
         if origin:
-            problem = f"{problem} (set on the command line: --set {origin})"
+            problem = f"{problem} (set on the command line: --set {_clip(origin, 80)})"
         raise SceneError(self.source, name, problem)
 
     def known(self, table: dict, allowed: dict, prefix: str) -> None:
         for key in table:
             if key not in allowed:
-                close = difflib.get_close_matches(key, list(allowed), n=1)
+                if key in RENAMED:
+                    self.fail(prefix + key, RENAMED[key])
+                close = difflib.get_close_matches(str(key), list(allowed), n=1)
                 hint = f"did you mean '{close[0]}'? " if close else ""
                 self.fail(prefix + key, f"unknown field; {hint}allowed: {', '.join(allowed)}")
 
-    def number(self, table, key, name, *, default=None, lo=None, hi=None, lo_open=False, integer=False):
+    def number(self, table, key, name, *, default=None, lo=None, hi=None, lo_open=False, integer=False,
+               scale=False):
+        """A number in range. Floats are finite and at most MAX_MAGNITUDE in size; integers at
+        most MAX_INTEGER unless ``hi`` says; ``scale``: a length, mass or time something is
+        divided by, so at least MIN_SCALE."""
+        if scale:
+            lo, lo_open = MIN_SCALE, False
+        if hi is None:
+            hi = MAX_INTEGER if integer else MAX_MAGNITUDE
+        if lo is None and not integer:
+            lo = -MAX_MAGNITUDE
         if key not in table:
             if default is None:
                 self.fail(name, "is required: " + self._what(lo, hi, lo_open, integer))
             return default
         value = table[key]
         if isinstance(value, bool) or not isinstance(value, (int, float)) or (integer and not isinstance(value, int)):
-            self.fail(name, f"got {value!r}; expected " + self._what(lo, hi, lo_open, integer))
-        if not math.isfinite(value) or (lo is not None and (value <= lo if lo_open else value < lo)) or (
-                hi is not None and value > hi):
-            self.fail(name, f"got {value!r}; expected " + self._what(lo, hi, lo_open, integer))
+            self.fail(name, f"got {_short(value)}; expected " + self._what(lo, hi, lo_open, integer))
+        # compare before converting: an integer too big for a float is out of range, not an overflow
+        in_range = (not isinstance(value, float) or math.isfinite(value)) and (
+            lo is None or (value > lo if lo_open else value >= lo)) and value <= hi
+        if not in_range:
+            self.fail(name, f"got {_short(value)}; expected " + self._what(lo, hi, lo_open, integer))
         return int(value) if integer else float(value)
 
     @staticmethod
     def _what(lo, hi, lo_open, integer):
         kind = "an integer" if integer else "a number"
         if lo is not None and hi is not None:
-            return f"{kind} {'>' if lo_open else '>='} {lo} and <= {hi}"
+            return f"{kind} {'>' if lo_open else '>='} {lo:g} and <= {hi:g}"
         if lo is not None:
-            return f"{kind} {'>' if lo_open else '>='} {lo}"
+            return f"{kind} {'>' if lo_open else '>='} {lo:g}"
         return kind
 
     def vector(self, table, key, name, default=None):
+        """[x, y, z], each finite and at most MAX_MAGNITUDE in size."""
         if key not in table:
             if default is None:
                 self.fail(name, "is required: [x, y, z] (three numbers)")
             return np.array(default, dtype=np.float64)
         value = table[key]
         if (not isinstance(value, list) or len(value) != 3
-                or any(isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c) for c in value)):
-            self.fail(name, f"got {value!r}; expected [x, y, z] (three finite numbers)")
+                or any(isinstance(c, bool) or not isinstance(c, (int, float)) for c in value)
+                or any(not (-MAX_MAGNITUDE <= c <= MAX_MAGNITUDE) for c in value)):
+            self.fail(name, f"got {_short(value)}; expected [x, y, z] (three numbers, each between "
+                            f"-{MAX_MAGNITUDE:g} and {MAX_MAGNITUDE:g})")
         return np.array(value, dtype=np.float64)
 
     def choice(self, table, key, name, options, default):
@@ -268,19 +371,19 @@ class _Checker:
         if value not in options:
             close = difflib.get_close_matches(str(value), list(options), n=1)
             hint = f"did you mean '{close[0]}'? " if close else ""
-            self.fail(name, f"got {value!r}; {hint}allowed: {', '.join(options)}")
+            self.fail(name, f"got {_short(value)}; {hint}allowed: {', '.join(options)}")
         return value
 
     def boolean(self, table, key, name, default):
         value = table.get(key, default)
         if not isinstance(value, bool):
-            self.fail(name, f"got {value!r}; expected true or false")
+            self.fail(name, f"got {_short(value)}; expected true or false")
         return value
 
     def text(self, table, key, name, default):
         value = table.get(key, default)
         if not isinstance(value, str):
-            self.fail(name, f"got {value!r}; expected text")
+            self.fail(name, f"got {_short(value)}; expected text")
         return value
 
     def table(self, raw, key, name):
@@ -296,6 +399,35 @@ class _Checker:
         return value
 
 
+def _dt(c: _Checker, dt_raw: Any) -> float | None:
+    """The time step (s) from a number, a fraction such as "1/60", or "real" (None)."""
+    expected = f"expected {TOP_FIELDS['dt']}, between {MIN_SCALE:g} and {MAX_MAGNITUDE:g} s"
+    if dt_raw is None:
+        c.fail("dt", "is required: " + TOP_FIELDS["dt"])
+    if dt_raw == "real":
+        return None
+    if isinstance(dt_raw, str):
+        try:
+            exact = Fraction(dt_raw)
+        except (ValueError, ZeroDivisionError):
+            c.fail("dt", f"got {_short(dt_raw)}; {expected}")
+        if not MIN_SCALE <= exact <= MAX_MAGNITUDE:  # compared exactly: "1e400" does not overflow
+            c.fail("dt", f"got {_short(dt_raw)}; {expected}")
+        return float(exact)
+    if isinstance(dt_raw, bool) or not isinstance(dt_raw, (int, float)) or not MIN_SCALE <= dt_raw <= MAX_MAGNITUDE:
+        c.fail("dt", f"got {_short(dt_raw)}; {expected}")
+    return float(dt_raw)
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    """repr of a value for a message, cut short (a 100-digit integer, a huge array)."""
+    return _clip(repr(value), limit)
+
+
+def _clip(text: str, limit: int) -> str:
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
     c = _Checker(source, origins)
     c.known(raw, TOP_FIELDS, "")
@@ -303,49 +435,37 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
     description = c.text(raw, "description", "description", "")
 
     # time
-    dt_raw = raw.get("dt")
-    if dt_raw is None:
-        c.fail("dt", "is required: " + TOP_FIELDS["dt"])
-    if dt_raw == "real":
-        dt = None
-    elif isinstance(dt_raw, str):
-        try:
-            dt = float(Fraction(dt_raw))
-        except (ValueError, ZeroDivisionError):
-            c.fail("dt", f"got {dt_raw!r}; expected " + TOP_FIELDS["dt"])
-        if not dt > 0:
-            c.fail("dt", f"got {dt_raw!r}; expected " + TOP_FIELDS["dt"])
-    else:
-        if isinstance(dt_raw, bool) or not isinstance(dt_raw, (int, float)) or not (0 < dt_raw < math.inf):
-            c.fail("dt", f"got {dt_raw!r}; expected " + TOP_FIELDS["dt"])
-        dt = float(dt_raw)
-    max_dt = c.number(raw, "max_dt", "max_dt", default=0.05, lo=0, lo_open=True)
+    dt = _dt(c, raw.get("dt"))
+    max_dt = c.number(raw, "max_dt", "max_dt", default=0.05, scale=True)
     steps = c.number(raw, "steps", "steps", default=0, lo=1, integer=True) if "steps" in raw else None
-    duration = c.number(raw, "duration", "duration", lo=0, lo_open=True) if "duration" in raw else None
+    duration = c.number(raw, "duration", "duration", scale=True) if "duration" in raw else None
     if steps is None and duration is None:
         c.fail("steps", "give steps (an integer >= 1) or duration (seconds > 0)")
     if steps is not None and duration is not None:
         c.fail("duration", "give steps or duration, not both")
     if steps is None and dt is not None:
-        steps = max(1, math.ceil(duration / dt - 1e-9))
-    seed = c.number(raw, "seed", "seed", default=0, lo=0, integer=True)
+        steps = max(1, math.ceil(duration / dt - 1e-9))  # both within range: finite
+    seed = c.number(raw, "seed", "seed", default=0, lo=0, hi=2**64 - 1, integer=True)
+    max_memory = c.number(raw, "max_memory", "max_memory", default=DEFAULT_MAX_MEMORY, lo=1, hi=1e18)
+    max_particle_steps = c.number(raw, "max_particle_steps", "max_particle_steps",
+                                  default=DEFAULT_MAX_PARTICLE_STEPS, lo=1, hi=1e18)
 
     d = _SETTINGS_DEFAULTS
     settings = Settings(
         integrator=c.choice(raw, "integrator", "integrator", INTEGRATOR_NAMES, d.integrator),
         detection=c.choice(raw, "detection", "detection", DETECTION_NAMES, d.detection),
-        samples=c.number(raw, "samples", "samples", default=d.samples, lo=1, integer=True),
+        samples=c.number(raw, "samples", "samples", default=d.samples, lo=1, hi=MAX_SAMPLES, integer=True),
         ordering=c.choice(raw, "ordering", "ordering", ORDERING_NAMES, d.ordering),
         broad_phase=c.choice(raw, "broad_phase", "broad_phase", BROAD_PHASE_NAMES, d.broad_phase),
         gravity=tuple(c.vector(raw, "gravity", "gravity", d.gravity).tolist()),
-        drag=c.number(raw, "drag", "drag", default=d.drag, lo=0, hi=1, lo_open=True),
+        drag=c.number(raw, "drag", "drag", default=d.drag, hi=1, scale=True),
         restitution_rule=c.choice(raw, "restitution_rule", "restitution_rule", RESTITUTION_RULES,
                                   d.restitution_rule),
-        rest_speed=c.number(raw, "rest_speed", "rest_speed", default=d.rest_speed, lo=0),
+        rest_fraction=c.number(raw, "rest_fraction", "rest_fraction", default=d.rest_fraction, lo=0, hi=1),
         contact_tolerance=c.number(raw, "contact_tolerance", "contact_tolerance",
-                                   default=d.contact_tolerance, lo=0, lo_open=True),
-        max_events_per_step=c.number(raw, "max_events_per_step", "max_events_per_step",
-                                     default=d.max_events_per_step, lo=1, integer=True),
+                                   default=d.contact_tolerance, scale=True),
+        **{budget: c.number(raw, budget, budget, default=getattr(d, budget), lo=1, integer=True)
+           for budget in BUDGETS},
     )
 
     # walls
@@ -354,11 +474,12 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
         p = f"planes.{k}."
         c.known(plane, PLANE_FIELDS, p)
         normal = c.vector(plane, "normal", p + "normal")
-        length = float(np.linalg.norm(normal))
-        if length == 0.0:
+        biggest = float(np.max(np.abs(normal)))
+        if biggest == 0.0:
             c.fail(p + "normal", "must not be [0, 0, 0]")
+        normal = normal / biggest  # first, so that squaring neither overflows nor underflows
         names.append(c.text(plane, "name", p + "name", f"plane{k}"))
-        normals.append(normal / length)
+        normals.append(normal / float(np.linalg.norm(normal)))
         offsets.append(c.number(plane, "offset", p + "offset", default=0.0))
         rest.append(c.number(plane, "restitution", p + "restitution", default=1.0, lo=0, hi=1))
         two.append(c.boolean(plane, "two_sided", p + "two_sided", False))
@@ -382,13 +503,13 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
         c.known(part, PARTICLE_FIELDS, p)
         pos.append(c.vector(part, "position", p + "position"))
         vel.append(c.vector(part, "velocity", p + "velocity", [0.0, 0.0, 0.0]))
-        rad.append(c.number(part, "radius", p + "radius", lo=0, lo_open=True))
+        rad.append(c.number(part, "radius", p + "radius", scale=True))
         if "mass" in part and "inverse_mass" in part:
             c.fail(p + "mass", "give mass or inverse_mass, not both")
         if "inverse_mass" in part:
             inv.append(c.number(part, "inverse_mass", p + "inverse_mass", lo=0))
         else:
-            inv.append(1.0 / c.number(part, "mass", p + "mass", default=1.0, lo=0, lo_open=True))
+            inv.append(1.0 / c.number(part, "mass", p + "mass", default=1.0, scale=True))
         if inv[-1] == 0.0 and np.any(vel[-1] != 0.0):
             c.fail(p + "velocity", "an immovable particle (inverse_mass = 0) must have velocity [0, 0, 0]")
         res.append(c.number(part, "restitution", p + "restitution", default=1.0, lo=0, hi=1))
@@ -398,6 +519,8 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
     if gen:
         c.known(gen, GENERATE_FIELDS, "generate.")
         kind = c.choice(gen, "kind", "generate.kind", ("rain", "gas"), None)
+        count = c.number(gen, "count", "generate.count", lo=0, integer=True)
+        _check_resources(c, len(pos) + count, steps, max_memory, max_particle_steps)
         g = _generate(c, gen, kind, seed, box_lo, box_hi)
         if kind == "gas":
             if box:
@@ -409,6 +532,8 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
         inv += list(g["inverse_mass"])
         res += list(g["restitution"])
         gs += [1.0] * len(g["radius"])
+    else:
+        _check_resources(c, len(pos), steps, max_memory, max_particle_steps)
     if box_lo is not None:
         for axis, label in enumerate("xyz"):
             for sign, lim in ((1.0, box_lo), (-1.0, box_hi)):
@@ -428,11 +553,28 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
     return Scene(name, description, source, settings, dt, max_dt, steps, duration, seed, state, walls, raw)
 
 
+def _check_resources(c: _Checker, particles: int, steps: int | None, max_memory: float,
+                     max_particle_steps: float) -> None:
+    """Refuse, before anything is allocated, a scene too big for the limits (max_memory,
+    max_particle_steps), saying the estimate and how to raise the limit."""
+    memory = particles * BYTES_PER_PARTICLE
+    if memory > max_memory:
+        c.fail("max_memory", f"{particles} particles need about {memory / 2**30:.3g} GiB while stepping "
+                             f"(~{BYTES_PER_PARTICLE // 1024} KiB each), more than max_memory = {max_memory:.3g} "
+                             f"bytes; use fewer particles or raise the limit, e.g. --set max_memory={memory * 1.5:.2g}")
+    work = max(particles, 1) * (steps or 0)
+    if work > max_particle_steps:
+        c.fail("max_particle_steps", f"{steps} steps × {particles} particles = {work:.3g} particle-steps, more than "
+                                     f"max_particle_steps = {max_particle_steps:.3g}; shorten the run (steps, "
+                                     f"duration, dt) or raise the limit, e.g. --set max_particle_steps={work * 1.5:.2g}")
+
+
 def _generate(c: _Checker, gen: dict, kind: str, seed: int, box_lo, box_hi) -> dict:
-    """Particles for ``[generate]``, placed on a jittered lattice so none overlap."""
+    """Particles for ``[generate]``, on randomly chosen cells of a jittered lattice, so none
+    overlap and a gas starts uniform (cells are drawn without building the lattice)."""
     count = c.number(gen, "count", "generate.count", lo=0, integer=True)
-    radius = c.number(gen, "radius", "generate.radius", lo=0, lo_open=True)
-    mass = c.number(gen, "mass", "generate.mass", default=1.0, lo=0, lo_open=True)
+    radius = c.number(gen, "radius", "generate.radius", scale=True)
+    mass = c.number(gen, "mass", "generate.mass", default=1.0, scale=True)
     restitution = c.number(gen, "restitution", "generate.restitution", default=1.0, lo=0, hi=1)
     speed = c.number(gen, "speed", "generate.speed", default=1.0, lo=0)
     rng = np.random.default_rng(seed)
@@ -441,8 +583,7 @@ def _generate(c: _Checker, gen: dict, kind: str, seed: int, box_lo, box_hi) -> d
         phi = c.number(gen, "packing_fraction", "generate.packing_fraction", lo=0, hi=0.45, lo_open=True)
         if count == 0:
             c.fail("generate.count", "a gas needs at least one particle (it sizes the box)")
-        side = (count * 4.0 / 3.0 * math.pi * radius**3 / phi) ** (1.0 / 3.0)
-        box_lo, box_hi = np.zeros(3), np.full(3, side)
+        box_lo, box_hi = np.zeros(3), np.full(3, _gas_side(count, radius, phi))
         out["box"] = (box_lo, box_hi, restitution)
         velocities = rng.normal(size=(count, 3))
         velocities -= velocities.mean(axis=0) if count > 1 else 0.0
@@ -456,19 +597,18 @@ def _generate(c: _Checker, gen: dict, kind: str, seed: int, box_lo, box_hi) -> d
         directions = rng.normal(size=(count, 3))
         directions /= np.maximum(np.linalg.norm(directions, axis=1, keepdims=True), 1e-300)
         velocities = directions * (speed * (1.0 + 0.1 * rng.uniform(-1.0, 1.0, size=(count, 1))))
-    # lattice of cells at least 2r (+1 %) apart inside the box, shuffled, jittered
+    per_axis = _lattice(box_lo, box_hi, radius)
+    room = math.prod(per_axis)
+    if room < count:
+        c.fail("generate.count", _fit_advice(kind, count, radius, box_lo, box_hi, room))
+    # cells at least 2r (+1 %) apart inside the box, drawn at random (uniform, no corner block)
+    chosen = np.stack(np.unravel_index(rng.choice(room, size=count, replace=False), per_axis), axis=-1)
+    shape = np.array(per_axis)
     inner_lo = box_lo + radius
     inner_hi = box_hi - radius
     extent = inner_hi - inner_lo
-    spacing = 2.0 * radius * 1.01
-    per_axis = np.floor(np.maximum(extent, 0.0) / spacing).astype(int) + 1
-    if np.any(extent < 0) or int(np.prod(per_axis)) < count:
-        c.fail("generate.count", f"{count} spheres of radius {radius} do not fit in the box "
-                                 f"(room for {int(np.prod(per_axis)) if np.all(extent >= 0) else 0})")
-    cells = np.stack(np.meshgrid(*[np.arange(k) for k in per_axis], indexing="ij"), axis=-1).reshape(-1, 3)
-    chosen = cells[rng.permutation(len(cells))[:count]] if kind == "rain" else cells[:count]
-    step = np.where(per_axis > 1, extent / np.maximum(per_axis - 1, 1), 0.0)
-    centre = np.where(per_axis > 1, inner_lo + chosen * step, 0.5 * (inner_lo + inner_hi))
+    step = np.where(shape > 1, extent / np.maximum(shape - 1, 1), 0.0)
+    centre = np.where(shape > 1, inner_lo + chosen * step, 0.5 * (inner_lo + inner_hi))
     slack = np.maximum(step - 2.0 * radius, 0.0) * 0.45
     # neighbours differ by one cell on some axis, so they stay >= step - 2*slack >= 2r
     # apart there; clipping to the box moves other axes only along their own cell row
@@ -476,3 +616,44 @@ def _generate(c: _Checker, gen: dict, kind: str, seed: int, box_lo, box_hi) -> d
     out.update(position=positions, velocity=velocities, radius=np.full(count, radius),
                inverse_mass=np.full(count, 1.0 / mass), restitution=np.full(count, restitution))
     return out
+
+
+LATTICE_SPACING = 2.02  # lattice cells are this many radii apart (2r + 1 %)
+MAX_CELLS_PER_AXIS = 2**20  # more cells than particles can ever need; keeps indices in int64
+
+
+def _lattice(box_lo, box_hi, radius: float) -> tuple[int, ...]:
+    """Lattice cells per axis for spheres of ``radius`` inside the box (0s if none fit)."""
+    extent = (np.asarray(box_hi) - np.asarray(box_lo)) - 2.0 * radius
+    if np.any(extent < 0):
+        return (0, 0, 0)
+    return tuple(min(int(e // (LATTICE_SPACING * radius)) + 1, MAX_CELLS_PER_AXIS) for e in extent.tolist())
+
+
+def _gas_side(count: int, radius: float, phi: float) -> float:
+    """Side (m) of the cubic box that ``count`` spheres fill to packing fraction ``phi``."""
+    return (count * 4.0 / 3.0 * math.pi * radius**3 / phi) ** (1.0 / 3.0)
+
+
+def _largest(fits, lo: float, hi: float) -> float:
+    """The largest x in [lo, hi] with fits(x), for fits true at lo and monotone (bisection)."""
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+    return lo
+
+
+def _fit_advice(kind: str, count: int, radius: float, box_lo, box_hi, room: int) -> str:
+    """What to set, and to what, when ``count`` spheres do not fit."""
+    said = f"{count} spheres of radius {radius:g} m do not fit (room for {room} spaced {LATTICE_SPACING}r apart)"
+    if kind == "gas":
+        phi = _largest(lambda p: math.prod(_lattice(np.zeros(3), np.full(3, _gas_side(count, radius, p)),
+                                                    radius)) >= count, 1e-9, 0.45)
+        return f"{said}; set generate.packing_fraction to at most {math.floor(phi * 1000) / 1000:g}"
+    size = np.asarray(box_hi) - np.asarray(box_lo)
+    fits_radius = _largest(lambda r: math.prod(_lattice(box_lo, box_hi, r)) >= count, 0.0, radius)
+    scale = 1.0 / _largest(lambda f: f > 0 and math.prod(_lattice(box_lo, box_lo + size / f, radius)) >= count,
+                           0.0, 1.0)
+    bigger = [float(f"{v:.4g}") for v in (np.asarray(box_lo) + size * scale * 1.0001).tolist()]
+    return (f"{said} in the box; set generate.radius to at most {fits_radius:.3g}, or make the box "
+            f"{scale:.3g}x larger on each axis (box.max = {bigger} with box.min = {np.asarray(box_lo).tolist()})")

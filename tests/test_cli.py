@@ -33,7 +33,7 @@ def test_scenes_lists_every_built_in_with_one_line_each():
 def test_run_prints_the_summary():
     result = invoke("run", "bounce")
     assert result.exit_code == 0
-    for words in ("steps       300", "contacts    39", "drift", "ms/step", "state hash", "brute-force",
+    for words in ("steps       300", "contacts    37", "drift", "ms/step", "state hash", "brute-force",
                   "warnings    none"):
         assert words in result.output
 

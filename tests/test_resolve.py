@@ -25,11 +25,12 @@ def _head_on(m_a, m_b, u_a, u_b, e):
     world, obs = make_world(state, gravity=(0.0, 0.0, 0.0))
     for _ in range(20):
         world.step(0.1)
-    # one collision; with e = 0 the pair then moves on touching, which the resting rule
-    # may pick up as a resting contact (restitution 0, rounding-sized closing speed)
-    collisions = [c for c in obs.contacts if not c.resting]
+    # one collision; with e = 0 the pair then moves on touching, and rounding may give
+    # another contact with a closing speed of order 1e-16 (nothing presses it, so it never
+    # rests), which changes nothing measurable
+    collisions = [c for c in obs.contacts if c.closing_speed > 1e-12]
     assert len(collisions) == 1
-    assert all(c.closing_speed < 1e-12 for c in obs.contacts if c.resting)
+    assert not any(c.resting for c in obs.contacts)
     return world.state.velocities[:, 0], collisions[0]
 
 

@@ -114,7 +114,7 @@ def test_fraction_dt_and_duration_give_whole_steps():
     ("integrater=verlet", "integrater", "did you mean 'integrator'"),
     ("drag=1.5", "drag", "<= 1"),
     ("particles.3.radius=1", "particles.3", "index must be 0..0"),
-    ("particles.0.radius=-1", "particles.0.radius", "> 0"),
+    ("particles.0.radius=-1", "particles.0.radius", ">= 1e-12"),
     ("particles.0.restitution=2", "particles.0.restitution", "<= 1"),
     ("samples=2.5", "samples", "an integer"),
     ("dt=0", "dt", "seconds > 0"),

@@ -164,7 +164,7 @@ def test_event_cap_stops_the_step_and_warns():
     world = scene.build_world(obs)
     for _ in range(scene.steps):
         world.step(scene.dt)
-    caps = [w for w in obs.warnings if w.code == "event-cap"]
+    caps = [w for w in obs.warnings if w.code == "max_events_per_step"]
     assert caps, "the cap must be reported"
     assert max(e.counts["contacts"] for e in obs.step_ends) == 2
 

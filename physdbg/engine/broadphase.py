@@ -2,7 +2,9 @@
 
 A broad phase answers two questions about axis-aligned boxes (lo, hi: (N, 3), m):
 
-* ``pairs(lo, hi)`` -> (M, 2) int64 array of every i < j whose boxes overlap, sorted;
+* ``pairs(lo, hi, limit)`` -> (M, 2) int64 array of every i < j whose boxes overlap,
+  sorted; a structure stops looking once it has found ``limit + 1`` pairs, so more than
+  ``limit`` rows means "over the budget" (memory stays bounded whatever the boxes);
 * ``query(lo, hi, box_lo, box_hi)`` -> (K,) int64 indices whose boxes overlap one box.
 
 :class:`BruteForce` compares every pair. It is the reference the faster structures
@@ -15,11 +17,13 @@ from typing import Protocol
 
 import numpy as np
 
+from .grid import NO_LIMIT
+
 
 class BroadPhase(Protocol):
     name: str
 
-    def pairs(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray: ...
+    def pairs(self, lo: np.ndarray, hi: np.ndarray, limit: int = ...) -> np.ndarray: ...
 
     def query(self, lo: np.ndarray, hi: np.ndarray, box_lo: np.ndarray,
               box_hi: np.ndarray) -> np.ndarray: ...
@@ -36,9 +40,10 @@ class BruteForce:
     def __init__(self, block: int = 512):
         self.block = block
 
-    def pairs(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    def pairs(self, lo: np.ndarray, hi: np.ndarray, limit: int = NO_LIMIT) -> np.ndarray:
         n = lo.shape[0]
         chunks = []
+        found = 0
         for start in range(0, max(n - 1, 0), self.block):
             rows = slice(start, min(start + self.block, n))
             overlap = np.ones((rows.stop - start, n), dtype=bool)
@@ -49,7 +54,10 @@ class BruteForce:
             overlap &= np.arange(n)[None, :] > np.arange(start, rows.stop)[:, None]
             i, j = np.nonzero(overlap)
             if i.size:
-                chunks.append(np.column_stack((i + start, j)))
+                chunks.append(np.column_stack((i + start, j))[: limit + 1 - found])
+                found += len(chunks[-1])
+                if found > limit:
+                    break
         if not chunks:
             return np.empty((0, 2), dtype=np.int64)
         return np.concatenate(chunks).astype(np.int64)

@@ -33,7 +33,7 @@ from time import perf_counter
 import numpy as np
 from numba import njit
 
-from .grid import boxes_overlap
+from .grid import NO_LIMIT, boxes_overlap
 
 MEDIAN = 0
 MEAN = 1
@@ -368,8 +368,10 @@ def _emit(out, count, i, j):
 
 
 @njit(cache=True)
-def self_pairs(lo, hi, node_lo, node_hi, left, right, start, count, order, root):
-    """All overlapping primitive pairs by simultaneous descent; (pairs, nodes visited, box tests)."""
+def self_pairs(lo, hi, node_lo, node_hi, left, right, start, count, order, root, limit):
+    """All overlapping primitive pairs by simultaneous descent; (pairs, nodes visited, box tests).
+
+    Stops after limit + 1 pairs (over the budget)."""
     n = lo.shape[0]
     out = np.empty((max(16, 4 * n), 2), dtype=np.int64)
     found = 0
@@ -381,7 +383,7 @@ def self_pairs(lo, hi, node_lo, node_hi, left, right, start, count, order, root)
     stack[0, 0] = root
     stack[0, 1] = root
     top = 1
-    while top > 0:
+    while top > 0 and found <= limit:
         top -= 1
         a = stack[top, 0]
         b = stack[top, 1]
@@ -596,7 +598,7 @@ class BVH:
                       "nodes": self.nodes.size, "depth": self.nodes.max_depth}
         return rebuilt
 
-    def pairs(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    def pairs(self, lo: np.ndarray, hi: np.ndarray, limit: int = NO_LIMIT) -> np.ndarray:
         lo = np.ascontiguousarray(lo, dtype=np.float64)
         hi = np.ascontiguousarray(hi, dtype=np.float64)
         self._lo, self._hi = lo, hi
@@ -604,7 +606,7 @@ class BVH:
         t0 = perf_counter()
         tree = self.nodes
         pairs, visited, tests = self_pairs(lo, hi, tree.lo, tree.hi, tree.left, tree.right, tree.start,
-                                           tree.count, tree.order, tree.root)
+                                           tree.count, tree.order, tree.root, limit)
         self.stats.update(query_seconds=perf_counter() - t0, nodes_visited=int(visited), box_tests=int(tests),
                           pairs=len(pairs))
         return pairs

@@ -16,6 +16,8 @@ import math
 import numpy as np
 from numba import njit
 
+NO_LIMIT = 2**62  # a pair budget that is no budget (broad phases take ``limit``)
+
 
 @njit(cache=True)
 def boxes_overlap(lo, hi, i, j):
@@ -37,10 +39,11 @@ def _cell_of(value, origin, cell, dim):
 
 
 @njit(cache=True)
-def grid_pairs(lo, hi, cell):
+def grid_pairs(lo, hi, cell, limit):
     """(M, 2) int64 pairs i < j of overlapping boxes, sorted; and the number of cells used.
 
-    lo, hi: (N, 3) box corners (m); cell: cell side (m) >= the largest box extent.
+    lo, hi: (N, 3) box corners (m); cell: cell side (m) >= the largest box extent;
+    limit: stop after limit + 1 pairs (over the budget).
     """
     n = lo.shape[0]
     if n < 2:
@@ -94,6 +97,8 @@ def grid_pairs(lo, hi, cell):
     found = 0
     plane = dims[1] * dims[2]
     for k in range(n):
+        if found > limit:
+            break
         i = filed[k]
         own = sorted_keys[k]
         own_x = own // plane
@@ -137,6 +142,8 @@ def grid_pairs(lo, hi, cell):
                         out_i[found] = min(i, j)
                         out_j[found] = max(i, j)
                         found += 1
+                        if found > limit:
+                            break
     return sort_pairs(out_i[:found], out_j[:found], n), used
 
 
@@ -195,9 +202,9 @@ class UniformGrid:
         span = float(np.max(np.max(hi, axis=0) - np.min(lo, axis=0))) if lo.size else 1.0
         return max(extent, span / 2.0**20, 1e-12)
 
-    def pairs(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    def pairs(self, lo: np.ndarray, hi: np.ndarray, limit: int = NO_LIMIT) -> np.ndarray:
         cell = self._cell_size(lo, hi)
-        pairs, cells = grid_pairs(np.ascontiguousarray(lo), np.ascontiguousarray(hi), cell)
+        pairs, cells = grid_pairs(np.ascontiguousarray(lo), np.ascontiguousarray(hi), cell, limit)
         self.stats = {"cell": cell, "cells_used": cells, "pairs": len(pairs)}
         return pairs
 

@@ -4,10 +4,14 @@ An impulse solver alone cannot hold a ball on a floor: with restitution c < 1 it
 ever lower (infinitely many bounces in finite time) and with a step-sized approach
 speed (Euler) it jitters forever. The rule, applied identically under both orderings:
 
-1. A contact whose closing speed is at most ``rest_speed`` (plus, for the two Euler
-   integrators whose straight paths arrive with one step of acceleration, |a_n|·dt) is
-   *resting*: it is resolved with restitution 0 (normal relative velocity set to 0)
-   and the contact is *held*.
+1. A contact is *resting* only where something presses it: its relative acceleration
+   along the normal pushes the two together (a_n < 0: gravity, or a held neighbour), and
+   it closes no faster than that acceleration adds in a fraction of a step,
+   |a_n|·dt·(rest_fraction + f), with f = 1.5 for the two Euler integrators, whose
+   straight paths arrive with about one step of acceleration, and 0 otherwise. The
+   threshold scales with the scene (its accelerations and dt), and a contact nothing
+   presses never rests: an e = 1 gas keeps its energy at any speed. A resting contact
+   is resolved with restitution 0 (normal relative velocity set to 0) and *held*.
 2. A held contact removes the part of the particles' acceleration that would push them
    into each other (a frictionless constraint): accelerations are projected by a
    projected Gauss–Seidel solve of  (a_a - a_b)·n >= 0,  lambda >= 0,  complementary,
@@ -24,6 +28,19 @@ Hence a resting ball costs no event per step and stays exactly at its height.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def rests(closing: float, rel_acc: float, dt: float, step_factor: float, fraction: float) -> bool:
+    """The resting rule (rule 1 above), the one place it is decided.
+
+    closing: approach speed along the normal (m/s, >= 0); rel_acc: relative acceleration
+    along the normal (m/s², < 0 when it presses the contact); dt: the step (s);
+    step_factor: the integrator's f; fraction: Settings.rest_fraction.
+    """
+    return rel_acc < 0.0 and closing <= -rel_acc * dt * (step_factor + fraction)
+
 
 # A held contact: ("wall", particle, wall) or ("pair", a, b) with a < b.
 WallKey = tuple[str, int, int]
@@ -31,15 +48,16 @@ WallKey = tuple[str, int, int]
 
 def solve_accelerations(free_accel: np.ndarray, inverse_mass: np.ndarray, positions: np.ndarray,
                         held: dict[tuple, np.ndarray], iterations: int = 200,
-                        tolerance: float = 1e-15) -> tuple[np.ndarray, dict[tuple, float]]:
-    """Accelerations (N, 3) that satisfy every held contact, and each contact's lambda.
+                        tolerance: float = 1e-15) -> tuple[np.ndarray, dict[tuple, float], int]:
+    """Accelerations (N, 3) that satisfy every held contact, each contact's lambda, and the
+    work done (sweeps × contacts, counted against Settings.max_resting_work_per_step).
 
     free_accel: (N, 3) accelerations without contacts (m/s²). held maps a key to the
     wall normal (3,) for wall contacts; pair normals are taken from ``positions``.
     """
     accel = free_accel.copy()
     if not held:
-        return accel, {}
+        return accel, {}, 0
     keys = list(held)
     normals = []
     for key in keys:
@@ -50,7 +68,9 @@ def solve_accelerations(free_accel: np.ndarray, inverse_mass: np.ndarray, positi
             normals.append(d / np.linalg.norm(d))
     lam = np.zeros(len(keys))
     scale = max(1.0, float(np.abs(free_accel).max()))
+    sweeps = 0
     for _ in range(iterations):
+        sweeps += 1
         worst = 0.0
         for c, key in enumerate(keys):
             n = normals[c]
@@ -83,4 +103,4 @@ def solve_accelerations(free_accel: np.ndarray, inverse_mass: np.ndarray, positi
             along = float(accel[i] @ n)
             if along < 0.0:
                 accel[i] -= along * n
-    return accel, {key: float(lam[c]) for c, key in enumerate(keys)}
+    return accel, {key: float(lam[c]) for c, key in enumerate(keys)}, sweeps * len(keys)

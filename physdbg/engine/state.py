@@ -15,6 +15,18 @@ from .toi import DETECTION_NAMES
 
 ORDERING_NAMES = ("time", "index")
 
+# The work budgets of one step (Settings fields), each with what it counts and what
+# happens to the rest of the step when it is reached.
+BUDGETS = {
+    "max_events_per_step": ("contacts resolved", "the remaining contacts of the step were not resolved"),
+    "max_pairs_per_step": ("broad-phase candidate pairs",
+                           "sphere–sphere contacts were not tested in this step (spheres may pass through "
+                           "or overlap each other); usually dt is too long for the speeds, or spheres overlap"),
+    "max_swept_tests_per_step": ("swept tests", "the remaining contacts of the step were not resolved"),
+    "max_resting_work_per_step": ("resting-solve updates (iterations × held contacts)",
+                                  "the remaining contacts of the step were not resolved"),
+}
+
 
 @dataclass
 class Settings:
@@ -23,8 +35,11 @@ class Settings:
     integrator: one of motion.INTEGRATOR_NAMES; detection: one of toi.DETECTION_NAMES;
     samples: k for ``sampled``; ordering: ``time`` or ``index``; gravity: (3,) m/s²;
     drag: d in v·d^t, in (0, 1] (1 = none); restitution_rule: see resolve.py;
-    rest_speed: closing speed (m/s) at or below which a contact rests; contact_tolerance:
-    allowed overlap / resting gap (m); max_events_per_step: cap on contacts per step.
+    rest_fraction: a pressed contact rests when its closing speed is at most this fraction
+    of |a_n|·dt (resting.py); contact_tolerance: allowed overlap / resting gap (m).
+
+    Budgets bound the work of one step (see BUDGETS); when one is reached the step still
+    finishes, and a warning names the budget.
     """
 
     integrator: str = "exact"
@@ -35,9 +50,12 @@ class Settings:
     gravity: tuple[float, float, float] = (0.0, -9.81, 0.0)
     drag: float = 1.0
     restitution_rule: str = "min"
-    rest_speed: float = 1e-3
+    rest_fraction: float = 0.01
     contact_tolerance: float = 1e-9
     max_events_per_step: int = 10_000
+    max_pairs_per_step: int = 10_000_000
+    max_swept_tests_per_step: int = 10_000_000
+    max_resting_work_per_step: int = 2_000_000
 
     @property
     def integrator_code(self) -> int:
@@ -92,6 +110,30 @@ class State:
     def copy(self) -> "State":
         return State(self.positions.copy(), self.velocities.copy(), self.inverse_mass.copy(),
                      self.radius.copy(), self.restitution.copy(), self.gravity_scale.copy())
+
+
+class NonFiniteState(FloatingPointError):
+    """A position or velocity became NaN or infinite in a step; the run cannot go on.
+
+    step: the step (0-based index) at whose end it was found; particle: the first such
+    particle; field: "position" or "velocity"; count: how many particles are affected.
+    """
+
+    def __init__(self, step: int, particle: int, field: str, count: int):
+        self.step, self.particle, self.field, self.count = step, particle, field, count
+        others = f" (and {count - 1} more)" if count > 1 else ""
+        super().__init__(f"the {field} of sphere {particle}{others} became NaN or infinite in step {step + 1}")
+
+
+def first_non_finite(positions: np.ndarray, velocities: np.ndarray) -> tuple[int, str, int] | None:
+    """(first particle, "position" or "velocity", how many) whose state is not finite, or None."""
+    bad_x = ~np.isfinite(positions).all(axis=1)
+    bad_v = ~np.isfinite(velocities).all(axis=1)
+    bad = bad_x | bad_v
+    if not bad.any():
+        return None
+    first = int(np.argmax(bad))
+    return first, "position" if bad_x[first] else "velocity", int(bad.sum())
 
 
 def state_hash(positions: np.ndarray, velocities: np.ndarray) -> str:

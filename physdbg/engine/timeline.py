@@ -16,6 +16,9 @@ The loop *pauses* and returns to Python for the rare cases that need the general
 * REQUERY: a new path left the swept box its broad-phase pairs were found for;
 * GROW: a buffer is nearly full.
 
+It stops for good with CAPPED (the contact budget, max_events_per_step) or TEST_BUDGET
+(max_swept_tests_per_step): the step's remaining predictions are marked capped.
+
 Python handles it and calls ``run_time_order`` again, which carries on where it stopped.
 """
 
@@ -29,6 +32,7 @@ from numba import njit
 from ..events import KIND_PAIR, KIND_WALL, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_SUPERSEDED
 from .motion import advance_particles, particle_box
 from .motion import path_coefficients
+from .resting import rests
 from .toi import (
     DISCRETE,
     SWEPT,
@@ -45,6 +49,7 @@ PAUSE_RESOLVE = 1
 REQUERY = 2
 GROW = 3
 CAPPED = 4
+TEST_BUDGET = 5
 
 # counters
 HEAP_SIZE = 0
@@ -290,6 +295,14 @@ def _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, dete
 
 
 @njit(cache=True)
+def _mark_capped(heap_data, test_outcome, counters):
+    """Every prediction still queued is left unresolved by a budget: mark it, empty the heap."""
+    for s in range(counters[HEAP_SIZE]):
+        test_outcome[heap_data[s, 0]] = OUTCOME_CAPPED
+    counters[HEAP_SIZE] = 0
+
+
+@njit(cache=True)
 def _inside_box(x, v, a, radius, sigma, p, step_end, integrator, k, margin, box_lo, box_hi, scratch):
     particle_box(x, v, a, radius, sigma, p, step_end, integrator, k, margin, scratch[0], scratch[1])
     for c in range(3):
@@ -300,9 +313,9 @@ def _inside_box(x, v, a, radius, sigma, p, step_end, integrator, k, margin, box_
 
 @njit(cache=True)
 def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, version, step_end, integrator, drag,
-                   k, detection, samples, tolerance, rest_speed, rest_step_factor, rule, normals, offsets,
+                   k, detection, samples, tolerance, rest_fraction, rest_step_factor, rule, normals, offsets,
                    half_thickness, two_sided, wall_restitution, held_pairs, held_walls, has_held, adj_start, adj,
-                   box_lo, box_hi, box_margin, max_degree, cap, anchor_is_flow,
+                   box_lo, box_hi, box_margin, max_degree, cap, max_tests, anchor_is_flow,
                    heap_toi, heap_data, test_int, test_float, test_outcome, contact_float, contact_int, counters,
                    pending_int, pending_float, requery, requery_count):
     """Resolve contacts in time order until done or a pause (see module doc)."""
@@ -314,6 +327,9 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
         if (heap_toi.shape[0] - counters[HEAP_SIZE] < room or test_outcome.shape[0] - counters[TESTS] < room
                 or contact_int.shape[0] - counters[CONTACTS] < 2):
             return GROW
+        if counters[TESTS] >= max_tests:
+            _mark_capped(heap_data, test_outcome, counters)
+            return TEST_BUDGET
         slot = heap_pop(heap_toi, heap_data, counters)
         counters[EVENTS] += 1
         toi = heap_toi[slot]
@@ -326,9 +342,7 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
             continue
         if counters[CONTACTS] >= cap:
             test_outcome[rid] = OUTCOME_CAPPED
-            for s in range(counters[HEAP_SIZE]):
-                test_outcome[heap_data[s, 0]] = OUTCOME_CAPPED
-            counters[HEAP_SIZE] = 0
+            _mark_capped(heap_data, test_outcome, counters)
             return CAPPED
         ib = other if kind == KIND_PAIR else -1
         held = has_held[ia] or (ib >= 0 and has_held[ib])
@@ -384,8 +398,7 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
                                adj_start, adj, ia, scratch, test_int, test_float, test_outcome, heap_toi, heap_data,
                                counters)
             continue
-        threshold = rest_speed + (abs(rel_acc) * (step_end * rest_step_factor))
-        if held or closing <= threshold:
+        if held or rests(closing, rel_acc, step_end, rest_step_factor, rest_fraction):
             # the resting rule and held contacts are the Python code's (resting.py)
             pending_int[0] = kind
             pending_int[1] = ia

@@ -45,8 +45,8 @@ from ..events import (
 from .broadphase import choose_broad_phase, make_broad_phase
 from .motion import EULER, SEMI_IMPLICIT, VERLET, advance_particles, particle_box, swept_boxes
 from .resolve import RESTITUTION_RULES, apply_pair_impulse, combine_restitution, pair_impulse, reflect, unit
-from .resting import solve_accelerations
-from .state import Settings, State, Walls, energies, state_hash
+from .resting import rests, solve_accelerations
+from .state import BUDGETS, NonFiniteState, Settings, State, Walls, energies, first_non_finite, state_hash
 from .timeline import (
     CAPPED,
     CF_CLOSING,
@@ -63,8 +63,10 @@ from .timeline import (
     DONE,
     EVENTS,
     GROW,
+    HEAP_SIZE,
     PAUSE_RESOLVE,
     REQUERY,
+    TEST_BUDGET,
     TESTS,
     Buffers,
     adjacency_from_pairs,
@@ -93,7 +95,7 @@ class StepStats:
     max_overlap: float
     state_hash: str
     timings: dict[str, float]
-    warnings: list[str]
+    warnings: list[EngineWarning]
 
 
 class World:
@@ -104,6 +106,9 @@ class World:
     """
 
     def __init__(self, state: State, walls: Walls, settings: Settings, observer=None):
+        bad = first_non_finite(state.positions, state.velocities)
+        if bad is not None:
+            raise ValueError(f"the initial {bad[1]} of sphere {bad[0]} is NaN or infinite")
         self.state = state
         self.walls = walls
         self.settings = settings
@@ -149,15 +154,12 @@ class World:
         d = self.state.positions[key[1]] - self.state.positions[key[2]]
         return unit(d)
 
-    def _rest_threshold(self, accel_along_normal: float, dt: float) -> float:
-        """Closing speed (m/s) at or below which a contact rests (see resting.py)."""
-        return self.settings.rest_speed + abs(accel_along_normal) * dt * self._rest_step_factor
-
     def _solve_held(self):
         """Accelerations from held contacts; contacts that no longer push are released."""
         while True:
-            acc, lam = solve_accelerations(self._free_accel, self.state.inverse_mass,
-                                           self.state.positions, self.held)
+            acc, lam, work = solve_accelerations(self._free_accel, self.state.inverse_mass,
+                                                 self.state.positions, self.held)
+            self._resting_work += work
             loose = [key for key, value in lam.items() if value <= 0.0]
             if not loose:
                 return acc
@@ -168,8 +170,9 @@ class World:
         """Remove any approach along held contacts from the velocities (in place)."""
         if not self.held:
             return
-        projected, _ = solve_accelerations(self.state.velocities, self.state.inverse_mass,
-                                           self.state.positions, self.held)
+        projected, _, work = solve_accelerations(self.state.velocities, self.state.inverse_mass,
+                                                 self.state.positions, self.held)
+        self._resting_work += work
         self.state.velocities[particles] = projected[particles]
 
     def _held_gap_ok(self, key: tuple) -> bool:
@@ -202,9 +205,15 @@ class World:
 
     # ------------------------------------------------------------------ the step
     def step(self, dt: float) -> StepStats:
-        """Advance the world by ``dt`` seconds and report what happened."""
-        if not dt > 0.0 or not math.isfinite(dt):
-            raise ValueError(f"dt must be a positive finite number of seconds, got {dt!r}")
+        """Advance the world by ``dt`` seconds and report what happened.
+
+        Raises NonFiniteState (after reporting the step) when a position or velocity
+        became NaN or infinite: the world cannot go on from there.
+        """
+        if isinstance(dt, bool) or not isinstance(dt, (int, float, np.floating)) or not 0.0 < dt < math.inf:
+            raise ValueError(f"World.step needs dt, a positive finite number of seconds; got {dt!r} (a scene with "
+                             f'dt = "real" gives each step\'s length through Scene.step_lengths())')
+        dt = float(dt)
         st = self.state
         s = self.settings
         obs = self.observer
@@ -213,8 +222,14 @@ class World:
         if obs is not None:
             obs.on_event(StepBegin(step_no, self.time, dt))
         timings: dict[str, float] = {}
-        warnings: list[str] = []
+        warnings: list[EngineWarning] = []
+        self._resting_work = 0
         x, v = st.positions, st.velocities
+
+        def warn(code: str, message: str) -> None:
+            warnings.append(EngineWarning(step_no, code, message))
+            if obs is not None:
+                obs.on_event(warnings[-1])
 
         # -- forces ---------------------------------------------------------------
         t0 = perf_counter()
@@ -242,7 +257,10 @@ class World:
         swept_boxes(x, v, path_accel, st.radius, sigma, dt, self._integrator, self._k,
                     s.contact_tolerance, lo, hi)
         self._add_reach(lo, hi, dt)
-        pairs = self.broad_phase.pairs(lo, hi)
+        pairs = self.broad_phase.pairs(lo, hi, s.max_pairs_per_step)
+        if len(pairs) > s.max_pairs_per_step:
+            warn("max_pairs_per_step", _budget_message("max_pairs_per_step", s.max_pairs_per_step))
+            pairs = np.empty((0, 2), dtype=np.int64)
         self._lo, self._hi = lo, hi
         self._grown: set[int] = set()
         self._build_adjacency(pairs, n)
@@ -267,13 +285,9 @@ class World:
         timings["narrow_phase"] = t3 - t2
 
         # -- resolve --------------------------------------------------------------
-        capped = self._resolve_in_time_order() if push else self._resolve_in_index_order()
-        if capped:
-            msg = (f"step {step_no}: event cap of {s.max_events_per_step} contacts reached; "
-                   f"remaining contacts in this step were not resolved")
-            warnings.append(msg)
-            if obs is not None:
-                obs.on_event(EngineWarning(step_no, "event-cap", msg))
+        budget = self._resolve_in_time_order() if push else self._resolve_in_index_order()
+        if budget is not None:
+            warn(budget, _budget_message(budget, getattr(s, budget)))
         t4 = perf_counter()
         timings["resolve"] = t4 - t3
 
@@ -282,12 +296,13 @@ class World:
                           self._drag, self._k)
         sigma[:] = 0.0
         max_overlap = self._max_overlap()
-        if s.detection == "swept" and max_overlap > s.contact_tolerance and not capped:
-            msg = (f"step {step_no}: spheres overlap by {max_overlap:.3g} m, more than the "
-                   f"contact tolerance {s.contact_tolerance:g} m")
-            warnings.append(msg)
-            if obs is not None:
-                obs.on_event(EngineWarning(step_no, "overlap", msg))
+        if s.detection == "swept" and max_overlap > s.contact_tolerance and not warnings:
+            warn("overlap", f"spheres overlap by {max_overlap:.3g} m, more than the contact tolerance "
+                            f"{s.contact_tolerance:g} m")
+        non_finite = first_non_finite(x, v)
+        if non_finite is not None:
+            failure = NonFiniteState(step_no, *non_finite)
+            warn("non-finite", str(failure))
         kinetic, potential, momentum = energies(st, self.gravity)
         digest = state_hash(x, v)
         self.time += dt
@@ -306,7 +321,9 @@ class World:
                                  momentum.copy(),
                                  {"contacts": contacts, "swept_tests": tests, "events": events,
                                   "resting": len(self.held)},
-                                 max_overlap, dict(timings), digest, tuple(warnings)))
+                                 max_overlap, dict(timings), digest, tuple(w.message for w in warnings)))
+        if non_finite is not None:
+            raise failure
         return stats
 
     # ------------------------------------------------------------------ candidates
@@ -404,8 +421,9 @@ class World:
         self._predict(KIND_WALL, np.repeat(plist, nw), np.tile(np.arange(nw, dtype=np.int64), plist.size), True)
 
     # ------------------------------------------------------------------ policies
-    def _resolve_in_time_order(self) -> bool:
-        """The compiled loop, with Python taking the pauses (see timeline.py)."""
+    def _resolve_in_time_order(self) -> str | None:
+        """The compiled loop, with Python taking the pauses (see timeline.py); returns the
+        budget that stopped it (a Settings field name), or None."""
         st = self.state
         s = self.settings
         buf = self._buf
@@ -416,16 +434,21 @@ class World:
             status = run_time_order(
                 st.positions, st.velocities, self._a, self._acc, st.radius, st.inverse_mass, st.restitution,
                 self._sigma, self._version, self._dt, self._integrator, self._drag, self._k, self._detection,
-                s.samples, s.contact_tolerance * 1e-3, s.rest_speed, self._rest_step_factor, rule,
+                s.samples, s.contact_tolerance * 1e-3, s.rest_fraction, self._rest_step_factor, rule,
                 self._normals, self._offsets, self._half_thickness, self._two_sided, self._wall_restitution,
                 self._held_pairs, self._held_walls, self._has_held, self._adj_start, self._adj, self._lo, self._hi,
-                s.contact_tolerance, self._max_degree, cap, self._anchor_is_flow,
+                s.contact_tolerance, self._max_degree, cap, s.max_swept_tests_per_step, self._anchor_is_flow,
                 buf.heap_toi, buf.heap_data, buf.test_int, buf.test_float, buf.test_outcome, buf.contact_float,
                 buf.contact_int, buf.counters, buf.pending_int, buf.pending_float, buf.requery, buf.requery_count)
             if status == DONE:
-                return False
+                return None
             if status == CAPPED:
-                return True
+                return "max_events_per_step"
+            if status == TEST_BUDGET:
+                return "max_swept_tests_per_step"
+            if self._resting_work > s.max_resting_work_per_step:
+                self._abandon_queue()
+                return "max_resting_work_per_step"
             if status == GROW:
                 room = 2 * self._max_degree + 2 * nw + 4
                 buf.ensure(room, room, 2)
@@ -444,23 +467,33 @@ class World:
                     new_pairs += [(min(i, j), max(i, j)) for j in self._refresh_box(i)]
                 self._add_partners(new_pairs)
 
-    def _resolve_in_index_order(self) -> bool:
-        """Every contact predicted at step start, in detection order, nothing re-predicted."""
+    def _abandon_queue(self) -> None:
+        """A budget stopped the step: what is still queued is marked capped."""
         buf = self._buf
-        cap = self.settings.max_events_per_step
+        size = int(buf.counters[HEAP_SIZE])
+        buf.test_outcome[buf.heap_data[:size, 0]] = OUTCOME_CAPPED
+        buf.counters[HEAP_SIZE] = 0
+
+    def _resolve_in_index_order(self) -> str | None:
+        """Every contact predicted at step start, in detection order, nothing re-predicted;
+        returns the budget that stopped it (a Settings field name), or None."""
+        buf = self._buf
+        s = self.settings
         count = int(buf.counters[TESTS])
         toi = buf.test_float[:count, 1]
         for rid in np.nonzero(toi <= self._dt)[0].tolist():
             buf.counters[EVENTS] += 1
-            if buf.counters[CONTACTS] >= cap:
+            over = ("max_events_per_step" if buf.counters[CONTACTS] >= s.max_events_per_step else
+                    "max_resting_work_per_step" if self._resting_work > s.max_resting_work_per_step else None)
+            if over is not None:
                 hits = np.nonzero(toi <= self._dt)[0]
                 buf.test_outcome[hits[hits >= rid]] = OUTCOME_CAPPED
-                return True
+                return over
             kind, a, other = (int(c) for c in buf.test_int[rid])
             at = max(float(toi[rid]), self._sigma[a], self._sigma[other] if kind == KIND_PAIR else 0.0)
             _, resolved = self._resolve(kind, a, other, at)
             buf.test_outcome[rid] = OUTCOME_HIT if resolved else OUTCOME_SUPERSEDED
-        return False
+        return None
 
     # ------------------------------------------------------------------ one contact
     def _resolve(self, kind: int, a: int, other: int, when: float) -> tuple[set[int], bool]:
@@ -495,7 +528,7 @@ class World:
         accelerating_in = rel_acc < 0.0
         if closing < 0.0 or (closing == 0.0 and not accelerating_in):
             return moved_only, False
-        resting = closing <= self._rest_threshold(rel_acc, dt)
+        resting = rests(closing, rel_acc, dt, self._rest_step_factor, self.settings.rest_fraction)
         used = 0.0 if resting else restitution
         va_before = v[a].copy()
         vb_before = v[b].copy() if b >= 0 else None
@@ -607,6 +640,13 @@ class World:
                           buf.test_int[:count, 1].astype(np.int32), buf.test_int[:count, 2].astype(np.int32),
                           buf.test_float[:count, 0].copy(), np.where(toi <= self._dt, toi, np.nan),
                           buf.test_outcome[:count].copy())
+
+def _budget_message(budget: str, value: int) -> str:
+    """What a warning says when a budget stopped a step: which, what happened, what to change."""
+    counts, consequence = BUDGETS[budget]
+    return (f"{budget} reached ({value} {counts}); {consequence}; raise it with --set {budget}=N "
+            f"if the scene really needs more")
+
 
 def warm_up(broad_phase: str | None = None) -> float:
     """Compile (or load from numba's cache) every kernel a step uses; returns seconds taken.
