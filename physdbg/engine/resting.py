@@ -42,6 +42,25 @@ def rests(closing: float, rel_acc: float, dt: float, step_factor: float, fractio
     return rel_acc < 0.0 and closing <= -rel_acc * dt * (step_factor + fraction)
 
 
+# Separation speeds below this fraction of |a_n|·dt are rounding, not separation.
+ROUNDING_FRACTION = 1e-9
+
+
+@njit(cache=True)
+def pressed_closing(closing: float, rel_acc: float, dt: float) -> float:
+    """The closing speed to judge a contact by (m/s): 0 for a rounding-sized separation
+    (below ROUNDING_FRACTION·|a_n|·dt) while an acceleration presses the two together.
+
+    A swept test finds such a contact at the instant the pair stops separating, but its
+    time rounds to the anchor, where the velocity still points (by ~1e-16 m/s) away: taken
+    as separating, the contact would be dropped and, with nothing re-predicted, the sphere
+    would fall through what it rests on for the rest of the step.
+    """
+    if rel_acc < 0.0 and closing < 0.0 and -closing <= -rel_acc * dt * ROUNDING_FRACTION:
+        return 0.0
+    return closing
+
+
 # A held contact: ("wall", particle, wall) or ("pair", a, b) with a < b.
 WallKey = tuple[str, int, int]
 

@@ -32,7 +32,7 @@ from numba import njit
 from ..events import KIND_PAIR, KIND_WALL, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_SUPERSEDED
 from .motion import advance_particles, particle_box
 from .motion import path_coefficients
-from .resting import rests
+from .resting import pressed_closing, rests
 from .toi import (
     DISCRETE,
     SWEPT,
@@ -383,6 +383,7 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
             closing = -(v[ia, 0] * nx + v[ia, 1] * ny + v[ia, 2] * nz)
             rel_acc = acc[ia, 0] * nx + acc[ia, 1] * ny + acc[ia, 2] * nz
             e = _combine(rule, restitution[ia], wall_restitution[other])
+        closing = pressed_closing(closing, rel_acc, step_end)
         if closing < 0.0 or (closing == 0.0 and not rel_acc < 0.0) or (
                 ib >= 0 and inverse_mass[ia] + inverse_mass[ib] == 0.0):
             test_outcome[rid] = OUTCOME_SUPERSEDED

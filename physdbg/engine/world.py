@@ -45,7 +45,7 @@ from ..events import (
 from .broadphase import choose_broad_phase, make_broad_phase
 from .motion import EULER, SEMI_IMPLICIT, VERLET, advance_particles, particle_box, swept_boxes
 from .resolve import RESTITUTION_RULES, apply_pair_impulse, combine_restitution, pair_impulse, reflect, unit
-from .resting import rests, solve_accelerations
+from .resting import pressed_closing, rests, solve_accelerations
 from .state import BUDGETS, NonFiniteState, Settings, State, Walls, energies, first_non_finite, state_hash
 from .timeline import (
     CAPPED,
@@ -526,6 +526,7 @@ class World:
                                               float(self.walls.restitution[other]))
             key = ("wall", a, other)
         accelerating_in = rel_acc < 0.0
+        closing = pressed_closing(closing, rel_acc, dt)
         if closing < 0.0 or (closing == 0.0 and not accelerating_in):
             return moved_only, False
         resting = rests(closing, rel_acc, dt, self._rest_step_factor, self.settings.rest_fraction)
