@@ -207,7 +207,8 @@ def check_writable(paths: Sequence[Path | None], force: bool) -> None:
 def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | None = None,
            rrd_path: str | None = None, rrd: bool = True, detail: str = "full", force: bool = False,
            spawn: bool = False, bvh_max_nodes: int | None = None, dts: Sequence[float] | None = None,
-           on_step: Callable[[int, int | None], None] | None = None) -> RecordResult:
+           on_step: Callable[[int, int | None], None] | None = None,
+           on_status: Callable[[str], None] | None = None) -> RecordResult:
     """Run a scene and record every step to MCAP (and Rerun unless rrd=False).
 
     bvh_max_nodes: log at most this many BVH nodes a step, whole levels from the root
@@ -233,25 +234,42 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
     summary = None
     mcap_sink = None
     interrupted = False
+    failure: str | None = None  # why writing failed, if it did
+    non_finite: NonFiniteRunError | None = None
     stop = _StopAtStepEnd(on_step)
     try:
         if rrd_out is not None or spawn:  # first: if the viewer cannot start, no file is left behind
             from .record.rerun_sink import RerunSink
 
-            sinks.append(RerunSink(header, rrd_out, spawn=spawn))
-        mcap_sink = McapRecorder(mcap_out, header)
+            try:
+                sinks.append(RerunSink(header, rrd_out, spawn=spawn))
+            except RuntimeError as err:  # rerun's file sink: an unwritable folder or file
+                raise PhysdbgError(f"{rrd_out}: cannot write the Rerun file ({err})") from None
+        try:
+            mcap_sink = McapRecorder(mcap_out, header)
+        except OSError as err:
+            raise PhysdbgError(f"{mcap_out}: cannot write the recording ({err.strerror or err})") from None
         sinks.insert(0, mcap_sink)
         with stop:
-            summary = run(scene, observer=FanOut(*sinks), dts=dts, on_step=stop.on_step)
+            summary = run(scene, observer=FanOut(*sinks), dts=dts, on_step=stop.on_step, on_status=on_status)
     except KeyboardInterrupt:
         interrupted = True
-    except OSError as err:
-        raise PhysdbgError(f"cannot write the recording ({err})") from None
+    except NonFiniteRunError as err:
+        non_finite = err
+    except (OSError, RuntimeError) as err:
+        failure = str(err)
     finally:
         for sink in sinks:
-            sink.close()
+            try:
+                sink.close()
+            except (OSError, RuntimeError) as err:
+                failure = failure or str(err)
     if mcap_sink is None:  # Ctrl-C before the first byte was written
         raise RecordingInterrupted("interrupted before the recording began; nothing was written")
+    if failure is not None:
+        raise PhysdbgError(f"writing the recording failed ({failure}); {_what_is_kept(mcap_out)}")
+    if non_finite is not None:
+        raise NonFiniteRunError(f"{non_finite}; {_what_is_kept(mcap_out)}")
     note = ""
     if mcap_sink.bvh_capped_steps:
         note = (f"BVH logged down to depth {mcap_sink.bvh_logged_depth} ({cap} nodes at most) in "
@@ -263,6 +281,18 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
         raise RecordingInterrupted(
             f"interrupted: {mcap_out} holds steps 1..{mcap_sink.frames - 1} (every step completed)")
     return result
+
+
+def _what_is_kept(mcap_out: Path) -> str:
+    """What a user can still read after a recording stopped early: which steps, or nothing."""
+    from .record import open_recording
+
+    try:
+        with open_recording(mcap_out) as rec:
+            return f"{mcap_out} is readable and holds steps 1..{rec.steps}"
+    except PhysdbgError:
+        mcap_out.unlink(missing_ok=True)
+        return f"nothing readable could be written, so {mcap_out} was removed"
 
 
 class _StopAtStepEnd:

@@ -22,10 +22,27 @@ app = typer.Typer(
     name="physdbg",
     help="A physics engine that shows its work: run or record a sphere scene and see every contact.",
     no_args_is_help=True,
-    add_completion=False,
+    add_completion=True,
     pretty_exceptions_enable=False,
     rich_markup_mode=None,  # plain help: importing rich would cost ~0.15 s on every call
+    context_settings={"help_option_names": ["-h", "--help"]},
 )
+
+
+def _show_version(value: bool) -> None:
+    if value:
+        from . import __version__
+
+        typer.echo(f"physdbg {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def main(
+    version: Annotated[bool, typer.Option("--version", callback=_show_version, is_eager=True,
+                                          help="Print physdbg's version and exit.")] = False,
+) -> None:
+    """A physics engine that shows its work: run or record a sphere scene and see every contact."""
 
 
 @contextmanager
@@ -39,6 +56,20 @@ def _user_errors():
     except KeyboardInterrupt:
         typer.echo("interrupted", err=True)
         raise typer.Exit(130) from None
+    except MemoryError:
+        typer.echo("error: out of memory; use fewer particles, or lower max_memory / the per-step budgets "
+                   "(docs/scenes.md)", err=True)
+        raise typer.Exit(2) from None
+    except (typer.Exit, typer.Abort, SystemExit):
+        raise
+    except Exception as err:  # a bug in physdbg: still one line, with how to see the rest
+        import os
+
+        if os.environ.get("PHYSDBG_TRACEBACK"):
+            raise
+        typer.echo(f"error: internal error ({type(err).__name__}: {err}); this is a bug in physdbg: please "
+                   f"report it with the command you ran (PHYSDBG_TRACEBACK=1 shows the traceback)", err=True)
+        raise typer.Exit(70) from None
 
 
 @app.command()
@@ -87,12 +118,11 @@ def run(
         loaded = load_scene(scene, set_ or [])
         step_lengths = _read_dts(dts) if dts is not None else None
         total = len(step_lengths) if step_lengths is not None else loaded.steps
-        bar = _progress_bar(total) if progress and not as_json and (total or 0) >= 500 else None
+        bar = _progress_bar(total, show=progress and not as_json)
         try:
-            summary = run_scene(loaded, dts=step_lengths, on_step=bar.update if bar else None)
+            summary = run_scene(loaded, dts=step_lengths, on_step=bar.update, on_status=bar.status)
         finally:
-            if bar:
-                bar.close()
+            bar.close()
         if dts_out is not None:
             try:
                 dts_out.write_text("".join(f"{d!r}\n" for d in summary.dts))
@@ -118,7 +148,7 @@ def record(
         "--detail", help="What to record: state (states, stats, warnings), contacts (+ every contact), "
                          "full (+ swept tests, broad phase, BVH nodes).")] = "full",
     bvh_max_nodes: Annotated[Optional[int], typer.Option(
-        "--bvh-max-nodes", help="Log at most this many BVH nodes a step, whole levels from the root "
+        "--bvh-max-nodes", min=0, help="Log at most this many BVH nodes a step, whole levels from the root "
                                 "(default 4095; 0 = all).")] = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite existing recordings.")] = False,
     dts: Annotated[Optional[Path], typer.Option(
@@ -138,15 +168,14 @@ def record(
         loaded = load_scene(scene, set_ or [])
         step_lengths = _read_dts(dts) if dts is not None else None
         total = len(step_lengths) if step_lengths is not None else loaded.steps
-        bar = _progress_bar(total) if progress and (total or 0) >= 500 else None
+        bar = _progress_bar(total, show=progress)
         try:
             result = record_scene(loaded, mcap_path=str(output) if output else None,
                                   rrd_path=str(rrd) if rrd else None, rrd=not no_rrd, detail=detail,
                                   force=force, spawn=spawn, bvh_max_nodes=bvh_max_nodes, dts=step_lengths,
-                                  on_step=bar.update if bar else None)
+                                  on_step=bar.update, on_status=bar.status)
         finally:
-            if bar:
-                bar.close()
+            bar.close()
         typer.echo(format_summary(result.summary))
         typer.echo(f"recorded    {result.frames - 1} steps, detail {result.detail}")
         typer.echo(f"mcap        {result.mcap}  ({_size(result.bytes_mcap)})")
@@ -166,7 +195,8 @@ def replay(
     rrd: Annotated[Optional[Path], typer.Option("--rrd", help="Write the Rerun view to this .rrd file.")] = None,
     spawn: Annotated[bool, typer.Option("--spawn", help="Open the Rerun viewer on the recording.")] = False,
     web: Annotated[bool, typer.Option("--web", help="Serve the Rerun web viewer on localhost.")] = False,
-    port: Annotated[int, typer.Option("--port", help="The web viewer's HTTP port (with --web).")] = 9090,
+    port: Annotated[int, typer.Option("--port", min=1, max=65535,
+                                      help="The web viewer's HTTP port on localhost (with --web).")] = 9090,
     verify: Annotated[bool, typer.Option(
         "--verify", help="Re-simulate from the embedded scene and check every step's hash; "
                          "exit 1 at the first mismatch.")] = False,
@@ -189,33 +219,76 @@ def replay(
                 typer.echo(f"verify      MISMATCH at step {result.first_bad_step}: {result.reason}")
                 raise typer.Exit(1)
         if rrd or spawn or web:
-            target = rrd
-            if target is None:
-                import tempfile
+            import shutil
+            import tempfile
 
-                target = Path(tempfile.mkdtemp(prefix="physdbg-")) / (recording.stem + ".rrd")
-            done = api.replay(recording, str(target), force=force)
-            typer.echo(f"replayed    {done['steps']} steps" + (" (truncated recording)" if done["truncated"] else "")
-                       + f" -> {target}")
-            if spawn or web:
-                _open_viewer(target, web, port)
+            scratch = None if rrd else Path(tempfile.mkdtemp(prefix="physdbg-"))
+            target = rrd or scratch / (recording.stem + ".rrd")
+            try:
+                done = api.replay(recording, str(target), force=force)
+                typer.echo(f"replayed    {done['steps']} steps"
+                           + (" (truncated recording)" if done["truncated"] else "") + f" -> {target}")
+                if web:
+                    _serve_web(target, port)
+                elif spawn:
+                    _spawn_viewer(target)
+                    scratch = None  # the viewer reads it after we exit; the OS cleans temp folders
+            finally:
+                if scratch is not None:
+                    shutil.rmtree(scratch, ignore_errors=True)
 
 
-def _open_viewer(rrd: Path, web: bool, port: int) -> None:
-    """Start the Rerun viewer (native, or web on localhost) on an .rrd file."""
+def _spawn_viewer(rrd: Path) -> None:
+    """Start the native Rerun viewer on an .rrd file, detached (it outlives this command)."""
     import subprocess
 
     from .record.rerun_sink import viewer_binary
 
-    args = [viewer_binary(), str(rrd)] + (["--web-viewer", "--web-viewer-port", str(port)] if web else [])
     try:
-        if web:
-            typer.echo(f"serving the web viewer at http://localhost:{port} (Ctrl-C to stop)")
-            subprocess.run(args, check=False)
-        else:
-            subprocess.Popen(args, start_new_session=True)
+        subprocess.Popen([viewer_binary(), str(rrd)], start_new_session=True)
     except OSError as err:
         raise PhysdbgError(f"cannot start the Rerun viewer ({err})") from None
+
+
+def _serve_web(rrd: Path, port: int) -> None:
+    """Serve the recording to the web viewer on localhost only, until Ctrl-C or SIGTERM;
+    the viewer process is stopped either way."""
+    import signal
+    import socket
+    import subprocess
+
+    from .record.rerun_sink import viewer_binary
+
+    with socket.socket() as probe:  # a free port for the recording's gRPC server
+        probe.bind(("127.0.0.1", 0))
+        grpc_port = probe.getsockname()[1]
+    args = [viewer_binary(), str(rrd), "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port", str(port),
+            "--port", str(grpc_port)]
+    try:
+        viewer = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    except OSError as err:
+        raise PhysdbgError(f"cannot start the Rerun viewer ({err})") from None
+
+    def stop(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        typer.echo(f"open        http://127.0.0.1:{port}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc_port}%2Fproxy")
+        typer.echo("            (served on localhost only; Ctrl-C to stop)")
+        code = viewer.wait()
+        if code:
+            raise PhysdbgError(f"the Rerun web viewer stopped with exit code {code} (is port {port} in use?)")
+    except KeyboardInterrupt:
+        pass
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        if viewer.poll() is None:
+            viewer.terminate()
+            try:
+                viewer.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                viewer.kill()
 
 
 @app.command()
@@ -278,6 +351,9 @@ def _size(n: int) -> str:
 
 
 def _read_dts(path: Path) -> list[float]:
+    """Step lengths (s) from a file, one per line, each in the range a scene's dt allows."""
+    from .scene import MAX_MAGNITUDE, MIN_SCALE
+
     try:
         lines = path.read_text().split()
     except (OSError, UnicodeDecodeError) as err:
@@ -288,8 +364,9 @@ def _read_dts(path: Path) -> list[float]:
             value = float(text)
         except ValueError:
             value = float("nan")
-        if not value > 0 or value == float("inf"):
-            raise PhysdbgError(f"{path}: entry {number} is {text!r}; each dt must be a positive number of seconds")
+        if not MIN_SCALE <= value <= MAX_MAGNITUDE:
+            raise PhysdbgError(f"{path}: entry {number} is {text[:40]!r}; each dt must be a number of seconds "
+                               f"between {MIN_SCALE:g} and {MAX_MAGNITUDE:g}")
         out.append(value)
     if not out:
         raise PhysdbgError(f"{path}: no step lengths in the file")
@@ -297,20 +374,55 @@ def _read_dts(path: Path) -> list[float]:
 
 
 class _progress_bar:
-    """A plain-text progress bar on stderr (updated at most ~10 times a second)."""
+    """Progress on stderr: a note when the kernels take a while to compile (the first run),
+    and a bar once a run has taken more than a second (whatever its step count).
 
-    def __init__(self, total: int | None):
+    show: draw the bar at all (off for --json or when stderr is not a terminal); the
+    compile note is shown whenever compiling takes more than a second.
+    """
+
+    AFTER_SECONDS = 1.0
+
+    def __init__(self, total: int | None, show: bool = True):
         import time
 
         self.total = total
+        self.show = show
         self._time = time.perf_counter
+        self._started = self._time()
         self._last = 0.0
+        self._drawn = False
+        self._timer = None
+
+    def status(self, what: str) -> None:
+        """'compiling': start a timer that says so after a second; 'running': the steps begin."""
+        import threading
+
+        if what == "compiling":
+            self._timer = threading.Timer(self.AFTER_SECONDS, self._say_compiling)
+            self._timer.daemon = True
+            self._timer.start()
+        else:
+            self._cancel()
+            self._started = self._time()
+
+    def _say_compiling(self) -> None:
+        sys.stderr.write("compiling the engine's kernels (the first run only: about 15-25 s; cached afterwards)...\n")
+        sys.stderr.flush()
+
+    def _cancel(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
 
     def update(self, done: int, total: int | None) -> None:
         now = self._time()
+        if not self.show or now - self._started < self.AFTER_SECONDS:
+            return
         if now - self._last < 0.1 and done != total:
             return
         self._last = now
+        self._drawn = True
         if total:
             filled = int(30 * done / total)
             sys.stderr.write(f"\r[{'#' * filled}{'.' * (30 - filled)}] step {done}/{total}")
@@ -319,7 +431,9 @@ class _progress_bar:
         sys.stderr.flush()
 
     def close(self) -> None:
-        sys.stderr.write("\n")
+        self._cancel()
+        if self._drawn:
+            sys.stderr.write("\n")
 
 
 def format_summary(s) -> str:

@@ -148,6 +148,7 @@ class Scene:
     state: State
     walls: Walls
     raw: dict[str, Any] = field(repr=False)
+    overrides: tuple[str, ...] = ()  # the --set KEY=VALUE strings applied to the scene file
 
     def build_world(self, observer=None) -> World:
         """A fresh World on a copy of the initial state (the scene itself never changes)."""
@@ -223,7 +224,9 @@ def parse_scene(text: str, source: str = "<scene>", overrides=()) -> Scene:
         _apply_override(raw, item, source)
         origins[item.split("=", 1)[0].strip()] = item
     _check_nesting(raw, source)
-    return _validate(raw, source, origins)
+    scene = _validate(raw, source, origins)
+    scene.overrides = tuple(overrides)
+    return scene
 
 
 def scene_from_dict(raw: dict, source: str) -> Scene:
@@ -643,6 +646,14 @@ def _largest(fits, lo: float, hi: float) -> float:
     return lo
 
 
+def _round_sig(value: float, up: bool, digits: int = 3) -> float:
+    """value rounded to ``digits`` significant digits, up or down (advice that must hold)."""
+    if value == 0.0:
+        return 0.0
+    unit = 10.0 ** (math.floor(math.log10(abs(value))) - digits + 1)
+    return (math.ceil(value / unit) if up else math.floor(value / unit)) * unit
+
+
 def _fit_advice(kind: str, count: int, radius: float, box_lo, box_hi, room: int) -> str:
     """What to set, and to what, when ``count`` spheres do not fit."""
     said = f"{count} spheres of radius {radius:g} m do not fit (room for {room} spaced {LATTICE_SPACING}r apart)"
@@ -651,9 +662,9 @@ def _fit_advice(kind: str, count: int, radius: float, box_lo, box_hi, room: int)
                                                     radius)) >= count, 1e-9, 0.45)
         return f"{said}; set generate.packing_fraction to at most {math.floor(phi * 1000) / 1000:g}"
     size = np.asarray(box_hi) - np.asarray(box_lo)
-    fits_radius = _largest(lambda r: math.prod(_lattice(box_lo, box_hi, r)) >= count, 0.0, radius)
+    fits_radius = _round_sig(_largest(lambda r: math.prod(_lattice(box_lo, box_hi, r)) >= count, 0.0, radius), False)
     scale = 1.0 / _largest(lambda f: f > 0 and math.prod(_lattice(box_lo, box_lo + size / f, radius)) >= count,
                            0.0, 1.0)
-    bigger = [float(f"{v:.4g}") for v in (np.asarray(box_lo) + size * scale * 1.0001).tolist()]
-    return (f"{said} in the box; set generate.radius to at most {fits_radius:.3g}, or make the box "
-            f"{scale:.3g}x larger on each axis (box.max = {bigger} with box.min = {np.asarray(box_lo).tolist()})")
+    bigger = [_round_sig(v, True) for v in (np.asarray(box_lo) + size * scale).tolist()]
+    return (f"{said} in the box; set generate.radius to at most {fits_radius:g}, or make the box "
+            f"{_round_sig(scale, True):g}x larger on each axis (box.max = {bigger} with box.min = {np.asarray(box_lo).tolist()})")

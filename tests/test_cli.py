@@ -124,13 +124,35 @@ def test_console_script_runs(tmp_path):
     assert bad.returncode == 2 and "Traceback" not in bad.stderr and "error:" in bad.stderr
 
 
-def test_long_runs_show_progress_on_stderr_and_keep_stdout_clean():
-    result = invoke("run", "bounce", "--progress", "--set", "steps=600")
+def test_long_runs_show_progress_on_stderr_and_keep_stdout_clean(monkeypatch):
+    from physdbg import cli
+
+    monkeypatch.setattr(cli._progress_bar, "AFTER_SECONDS", 0.0)  # "long": past the first second
+    result = invoke("run", "bounce", "--progress", "--set", "steps=20")  # whatever the step count
     assert result.exit_code == 0
-    assert "step 600/600" in result.stderr
+    assert "step 20/20" in result.stderr
     assert result.stdout.startswith("scene ")
-    quiet = invoke("run", "bounce", "--no-progress", "--set", "steps=600")
-    assert "step 600/600" not in quiet.stderr
+    quiet = invoke("run", "bounce", "--no-progress", "--set", "steps=20")
+    assert "step 20/20" not in quiet.stderr
+
+
+def test_short_runs_show_no_bar():
+    result = invoke("run", "bounce", "--progress", "--set", "steps=20")
+    assert "step 20/20" not in result.stderr
+
+
+def test_a_slow_first_compile_says_what_it_is_doing(monkeypatch):
+    import time
+
+    from physdbg import cli, engine
+
+    monkeypatch.setattr(cli._progress_bar, "AFTER_SECONDS", 0.05)
+    real = engine.warm_up
+    monkeypatch.setattr(engine, "warm_up", lambda *a: (time.sleep(0.3), real(*a))[1])
+    result = invoke("run", "bounce", "--no-progress", "--set", "steps=5")
+    assert "compiling the engine's kernels" in result.stderr
+    monkeypatch.setattr(engine, "warm_up", real)
+    assert "compiling" not in invoke("run", "bounce", "--set", "steps=5").stderr
 
 
 def test_summary_says_which_broad_phase_auto_chose_and_why():
@@ -210,10 +232,12 @@ def test_a_damaged_chunk_is_reported_not_raised(tmp_path):
         assert result.exit_code == 2 and "damaged" in result.output, result.output
 
 
-def test_replay_web_serves_the_viewer_on_localhost(tmp_path):
+def test_replay_web_serves_the_recording_on_localhost_and_cleans_up_on_sigterm(tmp_path):
+    import glob
     import os
     import signal
     import socket
+    import tempfile
     import time
     import urllib.request
 
@@ -223,21 +247,32 @@ def test_replay_web_serves_the_viewer_on_localhost(tmp_path):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
+    scratch_before = set(glob.glob(os.path.join(tempfile.gettempdir(), "physdbg-*")))
     proc = subprocess.Popen([sys.executable, "-m", "physdbg.cli", "replay", str(out), "--web", "--port", str(port)],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True,
-                            env=dict(os.environ, CI="1"))
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ, CI="1"))
     try:
+        lines = [proc.stdout.readline() for _ in range(2)]
+        url = lines[1].split()[1]
+        # the URL opens the recording, not the welcome page
+        assert url.startswith(f"http://127.0.0.1:{port}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A"), lines
         deadline = time.time() + 60
         status = None
         while time.time() < deadline and status is None:
             try:
-                status = urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=2).status
+                status = urllib.request.urlopen(url, timeout=2).status
             except OSError:
                 time.sleep(0.5)
         assert status == 200
+        listening = subprocess.run(["ss", "-ltn"], capture_output=True, text=True).stdout
+        ours = [line for line in listening.splitlines() if f":{port} " in line]
+        assert ours and all("127.0.0.1:" in line for line in ours), ours  # localhost only
     finally:
-        os.killpg(proc.pid, signal.SIGTERM)
+        proc.send_signal(signal.SIGTERM)
         proc.wait(timeout=30)
+    time.sleep(0.5)
+    with pytest.raises(OSError):
+        urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=2)  # the viewer child is gone
+    assert set(glob.glob(os.path.join(tempfile.gettempdir(), "physdbg-*"))) <= scratch_before  # no folder left
 
 
 def test_record_caps_a_big_bvh_and_says_so(tmp_path):

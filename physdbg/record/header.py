@@ -7,7 +7,9 @@ the sinks (MCAP, Rerun) get the same thing either way.
 from __future__ import annotations
 
 import json
+import uuid
 from dataclasses import dataclass
+from datetime import datetime, timezone
 
 import numpy as np
 
@@ -71,11 +73,21 @@ class RecordingHeader:
             "particles": st.count,
             "detail": detail,
             "bvh_max_nodes": bvh_max_nodes,
+            # who this run is: its own id (a Rerun recording id) and a readable name
+            "run_id": uuid.uuid4().hex,
+            "recorded_at": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+            "overrides": list(getattr(scene, "overrides", ())),
         }
         json.dumps(meta)  # fail here, not mid-recording, if the scene table is not plain data
         return cls(meta, st.radius.copy(), st.inverse_mass.copy(), st.restitution.copy(),
                    st.gravity_scale.copy(), scene.walls, st.positions.copy(), st.velocities.copy(),
                    state_hash(st.positions, st.velocities))
+
+    @property
+    def run_name(self) -> str:
+        """A readable name for this run: scene, the settings changed from the scene file, time."""
+        parts = [self.name, *self.meta.get("overrides", []), self.meta.get("recorded_at", "")]
+        return " ".join(part for part in parts if part)
 
     def walls_json(self) -> dict:
         w = self.walls

@@ -45,6 +45,7 @@ class McapRecorder:
         self.detail = header.detail
         self.bvh_max_nodes = header.meta.get("bvh_max_nodes")
         self._file = open(self.path, "wb")
+        self._good_size = 0  # file size after the last successful flush: whole records only
         self._writer = Writer(self._file, chunk_size=chunk_bytes, compression=CompressionType.ZSTD)
         self._writer.start(profile=fmt.PROFILE, library=f"physdbg {header.meta['physdbg_version']}")
         self._channels: dict[str, int] = {}
@@ -150,6 +151,7 @@ class McapRecorder:
                     self._writer.add_message(channel, log_time=frame, data=data, publish_time=publish_ns,
                                              sequence=frame)
                 self._file.flush()
+                self._good_size = self._file.tell()
             except BaseException as err:  # reported by the next _send or close
                 self._error = err
 
@@ -211,11 +213,27 @@ class McapRecorder:
         try:
             if self._error is None:
                 self._writer.finish()
-        finally:
+        except OSError as err:
+            self._error = err
+        try:
             self._file.close()
+        except OSError as err:  # the buffered tail could not be written either
+            self._error = self._error or err
         if self._error is not None:
+            self._cut_to_whole_records()
             raise OSError(f"writing {self.path} failed: {self._error}") from self._error
         self.bytes_written = self.path.stat().st_size
+
+    def _cut_to_whole_records(self) -> None:
+        """After a write error (a full disk), cut the file back to what the last successful
+        flush left: whole chunks, which a reader reads as a truncated recording."""
+        import os
+
+        try:
+            with open(self.path, "r+b") as f:
+                os.ftruncate(f.fileno(), self._good_size)
+        except OSError:
+            pass  # not a regular file, or gone: nothing to keep
 
     def __enter__(self) -> McapRecorder:
         return self

@@ -65,6 +65,9 @@ class Recording:
     def __init__(self, path: str | Path):
         self.path = Path(path)
         try:
+            # a FIFO or device would block or never end: only regular files are recordings
+            if self.path.exists() and not self.path.is_file():
+                raise RecordingError(f"{path}: not a regular file (a recording is an .mcap file)")
             self._file = open(self.path, "rb")
         except OSError as err:
             raise RecordingError(f"{path}: cannot open ({err.strerror or err})") from None

@@ -24,6 +24,7 @@ A default blueprint (3D view, energy and contact plots, the event log) goes in t
 from __future__ import annotations
 
 import dataclasses
+import uuid
 from pathlib import Path
 
 import numpy as np
@@ -72,7 +73,10 @@ class RerunSink:
         self.rr = rr
         self.header = header
         self.detail = detail or header.detail
-        self.rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id or f"physdbg-{header.name}")
+        # each run its own id (kept in the MCAP file, so a replay is the same recording as
+        # the live view), so two runs of one scene open side by side, not merged
+        self.rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id or header.meta.get("run_id")
+                                      or uuid.uuid4().hex)
         self.rec.set_log_time_enabled(False)  # wall-clock time would make live and replay files differ
         sinks = []
         if rrd is not None:
@@ -88,6 +92,7 @@ class RerunSink:
             raise ValueError("give an .rrd path, spawn=True, or both")
         self.rec.set_sinks(*sinks)
         self.rec.send_blueprint(blueprint(header), make_active=True, make_default=True)
+        self.rec.send_recording_name(header.run_name)
         self.radius = header.radius.astype(np.float32)
         self.previous = header.positions.copy()
         self.bvh_levels = 0
@@ -107,7 +112,7 @@ class RerunSink:
                 static=True)
         lo, hi = _scene_bounds(h)
         for name, strip in _wall_outlines(h.walls, lo, hi):
-            rec.log(f"world/walls/{name}", rr.LineStrips3D([strip], colors=[[150, 150, 160]], radii=[-1.5]),
+            rec.log(f"world/walls/{rr.escape_entity_path_part(name)}", rr.LineStrips3D([strip], colors=[[150, 150, 160]], radii=[-1.5]),
                     static=True)
         self._set_time(0, 0.0)
         rec.log("world/spheres", rr.Points3D(np.asarray(h.positions, dtype=np.float32), radii=self.radius,
