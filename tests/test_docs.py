@@ -5,6 +5,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import pytest
+
 from physdbg.scene import FIELDS
 from physdbg.scenes import builtin_names
 
@@ -30,3 +32,51 @@ def test_readme_has_the_two_commands_and_ci_runs_the_second_verbatim():
     assert "pytest" in setup_and_test
     ci = (ROOT / ".ci" / "run").read_text()
     assert setup_and_test in ci.splitlines()
+
+
+# ----------------------------------------------------------------------------- every command runs
+# Commands that open a window or serve until stopped are the only ones not run here.
+OPENS_A_WINDOW = ("--spawn", "--web", "bin/rerun ")
+DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+
+def _physdbg_commands(path: Path) -> list[str]:
+    """Every `physdbg ...` command in the file's ```sh blocks, in order (also after &&)."""
+    commands = []
+    for block in re.findall(r"```sh\n(.*?)```", path.read_text(), re.S):
+        for line in block.splitlines():
+            line = line.split("  #")[0].strip()
+            for part in line.split("&&"):
+                part = part.strip()
+                if part.startswith((".venv/bin/physdbg ", "physdbg ")):
+                    commands.append(part)
+    return commands
+
+
+def test_the_docs_show_physdbg_commands_to_run():
+    assert len(_physdbg_commands(ROOT / "README.md")) >= 12
+
+
+@pytest.mark.parametrize("path", DOCS, ids=lambda p: p.name)
+def test_every_command_and_python_example_in_the_docs_runs_as_written(path, tmp_path, monkeypatch):
+    import shlex
+    import shutil
+
+    from typer.testing import CliRunner
+
+    from physdbg.cli import app
+
+    shutil.copytree(ROOT / "docs", tmp_path / "docs")  # example scenes the commands name
+    monkeypatch.chdir(tmp_path)
+    runner = CliRunner()
+    for command in _physdbg_commands(path):
+        if any(marker in command for marker in OPENS_A_WINDOW):
+            continue
+        result = runner.invoke(app, shlex.split(command)[1:])
+        assert result.exit_code == 0, f"{path.name}: `{command}` exited {result.exit_code}:\n{result.output}"
+    for block in re.findall(r"```python\n(.*?)```", path.read_text(), re.S):
+        exec(compile(block, f"{path.name} example", "exec"), {})  # noqa: S102 - our own docs
+    for block in re.findall(r"```toml\n(.*?)```", path.read_text(), re.S):
+        from physdbg.scene import parse_scene
+
+        parse_scene(block, f"{path.name} example")

@@ -5,6 +5,7 @@ budgeted; NaN never passes silently."""
 from __future__ import annotations
 
 import math
+import re
 import string
 
 import numpy as np
@@ -237,3 +238,127 @@ def test_the_slow_gas_from_the_issue_keeps_its_energy():
     summary = run("gas", ["generate.count=200", "generate.packing_fraction=0.2", "generate.speed=0.001",
                           "dt=10", "steps=100"])
     assert abs(summary.energy_drift) < 1e-12
+
+
+# ----------------------------------------------------------------------------- the CLI and files
+def _cli(*args):
+    from typer.testing import CliRunner
+
+    from physdbg.cli import app
+
+    return CliRunner().invoke(app, list(args))
+
+
+@pytest.mark.parametrize("args, words", [
+    (("record", "bounce", "--bvh-max-nodes", "-5", "--no-rrd"), "--bvh-max-nodes"),
+    (("replay", "x.mcap", "--web", "--port", "99999"), "--port"),
+])
+def test_options_out_of_range_are_refused(args, words):
+    result = _cli(*args)
+    assert result.exit_code == 2 and words in result.output
+
+
+def test_dts_beyond_the_range_of_a_dt_are_refused(tmp_path):
+    dts = tmp_path / "dts.txt"
+    dts.write_text("0.01\n1e300\n")
+    result = _cli("run", "bounce", "--dts", str(dts))
+    assert result.exit_code == 2 and "entry 2" in result.output and "1e+12" in result.output
+
+
+def test_a_fifo_is_not_opened_as_a_recording(tmp_path):
+    import os
+
+    fifo = tmp_path / "pipe.mcap"
+    os.mkfifo(fifo)
+    result = _cli("info", str(fifo))  # would block forever if opened
+    assert result.exit_code == 2 and "not a regular file" in result.output
+
+
+def test_a_run_that_turns_nan_exits_3_and_leaves_a_readable_recording(tmp_path, monkeypatch):
+    from physdbg import open_recording
+    from physdbg.engine import World
+
+    # Validated scenes keep every product finite, so a NaN here stands for one that a bug
+    # (or a foreign state) brings in: sphere 1's velocity turns NaN as step 3 begins.
+    original = World.step
+
+    def step(self, dt):
+        if self.step_index == 2:
+            self.state.velocities[1, 0] = math.nan
+        return original(self, dt)
+
+    monkeypatch.setattr(World, "step", step)
+    out = tmp_path / "cradle.mcap"
+    result = _cli("record", "cradle", "-s", "steps=10", "-o", str(out), "--no-rrd")
+    assert result.exit_code == 3, result.output
+    assert "of sphere 1 became NaN or infinite in step 3" in result.output
+    assert "is readable and holds steps 1..3" in result.output
+    with open_recording(out) as rec:
+        assert rec.steps == 3
+        assert np.isnan(rec.state(3).velocities[1]).any() and np.isfinite(rec.state(2).velocities).all()
+
+
+def test_a_full_disk_ends_the_recording_readable_with_a_message(tmp_path):
+    import subprocess
+    import sys
+
+    script = ("import resource, signal, sys\n"
+              "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # past the limit writes fail, as on a full disk\n"
+              "resource.setrlimit(resource.RLIMIT_FSIZE, (300000, 300000))\n"
+              "from physdbg.cli import app\n"
+              "app(sys.argv[1:])\n")
+    out = tmp_path / "full.mcap"
+    done = subprocess.run([sys.executable, "-c", script, "record", "rain", "-s", "generate.count=300",
+                           "-s", "steps=200", "-o", str(out), "--no-rrd", "--no-progress"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2, done.stderr
+    assert "Traceback" not in done.stderr
+    assert "writing the recording failed" in done.stderr and "is readable and holds steps 1.." in done.stderr
+    from physdbg import open_recording
+
+    with open_recording(out) as rec:
+        steps = int(done.stderr.split("holds steps 1..")[1].split()[0])
+        assert rec.steps == steps > 0 and rec.truncated
+
+
+def test_two_recordings_of_one_scene_are_two_rerun_recordings_with_readable_names(tmp_path):
+    from physdbg.record.header import RecordingHeader
+    from physdbg.scene import load_scene
+
+    a = RecordingHeader.from_scene(load_scene("cradle", ["ordering=index"]))
+    b = RecordingHeader.from_scene(load_scene("cradle"))
+    assert a.meta["run_id"] != b.meta["run_id"]
+    assert a.run_name.startswith("cradle ordering=index 20")
+
+
+def test_a_wall_name_with_a_space_is_escaped_in_the_rerun_file(tmp_path):
+    scene = tmp_path / "thin.toml"
+    scene.write_text('dt = 0.1\nsteps = 2\n[[planes]]\nname = "thin wall"\nnormal = [1, 0, 0]\noffset = 1\n'
+                     'two_sided = true\n[[particles]]\nposition = [0, 0, 0]\nvelocity = [5, 0, 0]\nradius = 0.1\n')
+    out = tmp_path / "thin.mcap"
+    result = _cli("record", str(scene), "-o", str(out))
+    assert result.exit_code == 0, result.output
+    from rerun.chunk import RrdReader
+
+    paths = {str(chunk.entity_path) for chunk in RrdReader(out.with_suffix(".rrd")).stream()}
+    assert "/world/walls/thin\\ wall" in paths, paths
+
+
+def test_run_json_and_info_json_give_walls_the_same_shape(tmp_path):
+    import json
+
+    ran = json.loads(_cli("run", "cradle", "--json", "-s", "steps=2").output)
+    _cli("record", "cradle", "-s", "steps=2", "-o", str(tmp_path / "c.mcap"), "--no-rrd")
+    info = json.loads(_cli("info", str(tmp_path / "c.mcap"), "--json").output)
+    assert ran["walls"] == info["walls"] and isinstance(ran["walls"], list)
+
+
+def test_warnings_are_totalled_per_kind_with_one_step_number_each():
+    result = _cli("run", "rain", "-s", "generate.count=300", "-s", "steps=4", "-s", "max_events_per_step=5")
+    assert result.exit_code == 0
+    line = next(line for line in result.output.splitlines() if line.startswith("warnings"))
+    assert "max_events_per_step" in line
+    total = int(line.split()[1])
+    assert total >= 4
+    examples = [line for line in result.output.splitlines() if line.startswith("  step ")]
+    assert examples and all(len(re.findall(r"step \d+", line)) == 1 for line in examples)

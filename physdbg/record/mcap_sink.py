@@ -93,7 +93,7 @@ class McapRecorder:
 
     def _end_step(self, end: StepEnd) -> None:
         frame = end.step + 1
-        publish = int(round(end.time * 1e9))
+        publish = _nanoseconds(end.time)
         for topic, data in self._pending:
             self._write(topic, frame, publish, data)
         self._pending.clear()
@@ -160,7 +160,7 @@ class McapRecorder:
         previous = self._history[-1] if self._history else None
         before = self._history[-2] if len(self._history) > 1 else None
         data = fmt.encode_state(frame, time, dt, digest, x, v, codec, previous, before)
-        self._write(fmt.TOPIC_STATE, frame, int(round(time * 1e9)), data)
+        self._write(fmt.TOPIC_STATE, frame, _nanoseconds(time), data)
         state = np.empty((x.shape[0], 6))
         state[:, :3], state[:, 3:] = x, v
         self._history = [*self._history[-1:], state]
@@ -240,6 +240,15 @@ class McapRecorder:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+MAX_NANOSECONDS = 2**64 - 1
+
+
+def _nanoseconds(seconds: float) -> int:
+    """An MCAP time (uint64 ns) for a simulated time, saturating past ~585 years; the exact
+    time (float64 s) is in every message, so nothing is lost."""
+    return min(max(int(round(seconds * 1e9)), 0), MAX_NANOSECONDS)
 
 
 def _plain_stats(stats: dict) -> dict:
