@@ -194,10 +194,12 @@ def check_writable(paths: Sequence[Path | None], force: bool) -> None:
     for path in paths:
         if path is None:
             continue
-        if path.exists() and not force:
-            raise PhysdbgError(f"{path} already exists; pass --force to overwrite it")
         if path.exists() and path.is_dir():
             raise PhysdbgError(f"{path} is a directory")
+        if path.exists() and not path.is_file():  # /dev/full, a FIFO: never written, never removed
+            raise PhysdbgError(f"{path} is not a regular file; give a file path for the recording")
+        if path.exists() and not force:
+            raise PhysdbgError(f"{path} already exists; pass --force to overwrite it")
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as err:
@@ -291,7 +293,9 @@ def _what_is_kept(mcap_out: Path) -> str:
         with open_recording(mcap_out) as rec:
             return f"{mcap_out} is readable and holds steps 1..{rec.steps}"
     except PhysdbgError:
-        mcap_out.unlink(missing_ok=True)
+        if not mcap_out.is_file():
+            return f"nothing readable could be written to {mcap_out}"
+        mcap_out.unlink()
         return f"nothing readable could be written, so {mcap_out} was removed"
 
 

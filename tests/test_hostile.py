@@ -258,6 +258,14 @@ def test_options_out_of_range_are_refused(args, words):
     assert result.exit_code == 2 and words in result.output
 
 
+def test_a_device_is_never_a_recording_even_with_force():
+    result = _cli("record", "bounce", "-o", "/dev/full", "--no-rrd", "--force")
+    assert result.exit_code == 2 and "not a regular file" in result.output
+    import os
+
+    assert os.path.exists("/dev/full")
+
+
 def test_dts_beyond_the_range_of_a_dt_are_refused(tmp_path):
     dts = tmp_path / "dts.txt"
     dts.write_text("0.01\n1e300\n")
