@@ -522,9 +522,10 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
     if gen:
         c.known(gen, GENERATE_FIELDS, "generate.")
         kind = c.choice(gen, "kind", "generate.kind", ("rain", "gas"), None)
-        count = c.number(gen, "count", "generate.count", lo=0, integer=True)
-        _check_resources(c, len(pos) + count, steps, max_memory, max_particle_steps)
-        g = _generate(c, gen, kind, seed, box_lo, box_hi)
+    count = c.number(gen, "count", "generate.count", lo=0, integer=True) if gen else 0
+    _check_resources(c, len(pos) + count, steps, max_memory, max_particle_steps)
+    if gen:
+        g = _generate(c, gen, kind, count, seed, box_lo, box_hi)
         if kind == "gas":
             if box:
                 c.fail("box", "generate.kind = \"gas\" makes its own box from packing_fraction; remove [box]")
@@ -535,8 +536,6 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
         inv += list(g["inverse_mass"])
         res += list(g["restitution"])
         gs += [1.0] * len(g["radius"])
-    else:
-        _check_resources(c, len(pos), steps, max_memory, max_particle_steps)
     if box_lo is not None:
         for axis, label in enumerate("xyz"):
             for sign, lim in ((1.0, box_lo), (-1.0, box_hi)):
@@ -572,10 +571,9 @@ def _check_resources(c: _Checker, particles: int, steps: int | None, max_memory:
                                      f"duration, dt) or raise the limit, e.g. --set max_particle_steps={work * 1.5:.2g}")
 
 
-def _generate(c: _Checker, gen: dict, kind: str, seed: int, box_lo, box_hi) -> dict:
+def _generate(c: _Checker, gen: dict, kind: str, count: int, seed: int, box_lo, box_hi) -> dict:
     """Particles for ``[generate]``, on randomly chosen cells of a jittered lattice, so none
     overlap and a gas starts uniform (cells are drawn without building the lattice)."""
-    count = c.number(gen, "count", "generate.count", lo=0, integer=True)
     radius = c.number(gen, "radius", "generate.radius", scale=True)
     mass = c.number(gen, "mass", "generate.mass", default=1.0, scale=True)
     restitution = c.number(gen, "restitution", "generate.restitution", default=1.0, lo=0, hi=1)

@@ -127,6 +127,11 @@ class NonFiniteState(FloatingPointError):
 
 def first_non_finite(positions: np.ndarray, velocities: np.ndarray) -> tuple[int, str, int] | None:
     """(first particle, "position" or "velocity", how many) whose state is not finite, or None."""
+    # fast path, every step: a sum is finite when no entry is NaN or infinite (or, with
+    # finite entries that overflow the sum, the exact check below finds nothing): 0.2 ms
+    # instead of 5 ms at 100k particles
+    if np.isfinite(positions.sum() + velocities.sum()):
+        return None
     bad_x = ~np.isfinite(positions).all(axis=1)
     bad_v = ~np.isfinite(velocities).all(axis=1)
     bad = bad_x | bad_v

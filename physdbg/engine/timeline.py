@@ -295,7 +295,7 @@ def _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, dete
 
 
 @njit(cache=True)
-def _mark_capped(heap_data, test_outcome, counters):
+def mark_capped(heap_data, test_outcome, counters):
     """Every prediction still queued is left unresolved by a budget: mark it, empty the heap."""
     for s in range(counters[HEAP_SIZE]):
         test_outcome[heap_data[s, 0]] = OUTCOME_CAPPED
@@ -328,7 +328,7 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
                 or contact_int.shape[0] - counters[CONTACTS] < 2):
             return GROW
         if counters[TESTS] >= max_tests:
-            _mark_capped(heap_data, test_outcome, counters)
+            mark_capped(heap_data, test_outcome, counters)
             return TEST_BUDGET
         slot = heap_pop(heap_toi, heap_data, counters)
         counters[EVENTS] += 1
@@ -342,7 +342,7 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
             continue
         if counters[CONTACTS] >= cap:
             test_outcome[rid] = OUTCOME_CAPPED
-            _mark_capped(heap_data, test_outcome, counters)
+            mark_capped(heap_data, test_outcome, counters)
             return CAPPED
         ib = other if kind == KIND_PAIR else -1
         held = has_held[ia] or (ib >= 0 and has_held[ib])

@@ -63,13 +63,13 @@ from .timeline import (
     DONE,
     EVENTS,
     GROW,
-    HEAP_SIZE,
     PAUSE_RESOLVE,
     REQUERY,
     TEST_BUDGET,
     TESTS,
     Buffers,
     adjacency_from_pairs,
+    mark_capped,
     max_overlap,
     predict_into,
     reachable_walls,
@@ -447,7 +447,7 @@ class World:
             if status == TEST_BUDGET:
                 return "max_swept_tests_per_step"
             if self._resting_work > s.max_resting_work_per_step:
-                self._abandon_queue()
+                mark_capped(self._buf.heap_data, self._buf.test_outcome, self._buf.counters)
                 return "max_resting_work_per_step"
             if status == GROW:
                 room = 2 * self._max_degree + 2 * nw + 4
@@ -466,13 +466,6 @@ class World:
                 for i in buf.requery[: buf.requery_count[0]].tolist():
                     new_pairs += [(min(i, j), max(i, j)) for j in self._refresh_box(i)]
                 self._add_partners(new_pairs)
-
-    def _abandon_queue(self) -> None:
-        """A budget stopped the step: what is still queued is marked capped."""
-        buf = self._buf
-        size = int(buf.counters[HEAP_SIZE])
-        buf.test_outcome[buf.heap_data[:size, 0]] = OUTCOME_CAPPED
-        buf.counters[HEAP_SIZE] = 0
 
     def _resolve_in_index_order(self) -> str | None:
         """Every contact predicted at step start, in detection order, nothing re-predicted;
