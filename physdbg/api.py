@@ -30,6 +30,9 @@ class RunSummary:
     counted in wall_seconds or ms_per_step. walls: the walls' names. warning_counts: how
     many engine warnings of each kind (code); warnings: the first few of each kind, as
     "step k: message" with k counted from 1 (step k ends at frame k of a recording).
+    finding_counts / findings: what the audit found (physdbg.analysis.audit: tunnelling,
+    overlaps, out-of-order contacts, energy gained, NaN, budgets, collapse), per kind and
+    the first few in words; empty when the run is clean or was not audited.
     """
 
     scene: str
@@ -61,6 +64,8 @@ class RunSummary:
     final_hash: str
     warning_counts: dict[str, int] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    finding_counts: dict[str, int] = field(default_factory=dict)
+    findings: list[str] = field(default_factory=list)
     dts: list[float] = field(default_factory=list, repr=False)
 
     def as_dict(self) -> dict:
@@ -70,7 +75,8 @@ class RunSummary:
 def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         dts: Sequence[float] | None = None,
         on_step: Callable[[int, int | None], None] | None = None,
-        on_status: Callable[[str], None] | None = None) -> RunSummary:
+        on_status: Callable[[str], None] | None = None, audit: bool = True,
+        on_finding: Callable | None = None) -> RunSummary:
     """Run a scene (built-in name, path, or Scene) to the end and summarise it.
 
     dts: replay exactly these step lengths (e.g. from a real-time run) instead of the
@@ -78,13 +84,23 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     on_status(what): "compiling" before the kernels are compiled or loaded, "running"
     when the first step starts. Raises NonFiniteRunError (exit code 3) when a position or
     velocity becomes NaN or infinite; the observer has seen every step up to that one.
+    audit: check every step as it runs (physdbg.analysis.audit); on_finding(finding):
+    called with each finding as it is made.
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene, overrides)
     elif overrides:
         raise PhysdbgError("give overrides when loading the scene, not with a Scene object")
     from .engine import NonFiniteState, energies, state_hash, warm_up
+    from .observe import FanOut
 
+    auditor = None
+    if audit:
+        from .analysis.audit import Auditor
+        from .record.header import RecordingHeader
+
+        auditor = Auditor(RecordingHeader.from_scene(scene), on_finding)
+        observer = FanOut(observer, auditor) if observer is not None else auditor
     world = scene.build_world(observer)
     if on_status is not None:
         on_status("compiling")
@@ -136,7 +152,8 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         momentum_drift=float(np.linalg.norm(mom1 - mom0)), max_overlap=max_overlap,
         wall_seconds=wall, compile_seconds=compile_seconds, ms_per_step=1000.0 * wall / n_steps if n_steps else math.nan,
         phase_seconds=phase, final_hash=digest, warning_counts=dict(warnings.counts),
-        warnings=warnings.examples(), dts=used)
+        warnings=warnings.examples(), finding_counts=dict(auditor.counts) if auditor else {},
+        findings=auditor.report(scene.name).lines() if auditor else [], dts=used)
 
 
 class WarningTally:
@@ -252,8 +269,10 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
         except OSError as err:
             raise PhysdbgError(f"{mcap_out}: cannot write the recording ({err.strerror or err})") from None
         sinks.insert(0, mcap_sink)
+        marker = next((s.mark_finding for s in sinks if hasattr(s, "mark_finding")), None)
         with stop:
-            summary = run(scene, observer=FanOut(*sinks), dts=dts, on_step=stop.on_step, on_status=on_status)
+            summary = run(scene, observer=FanOut(*sinks), dts=dts, on_step=stop.on_step, on_status=on_status,
+                          on_finding=marker)
     except KeyboardInterrupt:
         interrupted = True
     except NonFiniteRunError as err:
@@ -370,11 +389,13 @@ def verify(path: str | Path, on_step: Callable[[int, int | None], None] | None =
                                                       f"(the file was altered)")
             stats = world.step(frame.dt)
             if stats.state_hash != frame.state_hash:
-                moved = np.nonzero(np.any(world.state.positions != frame.positions, axis=1)
-                                   | np.any(world.state.velocities != frame.velocities, axis=1))[0]
+                from .analysis.align import state_difference
+
+                d = state_difference(world.state.positions, world.state.velocities, frame.positions,
+                                     frame.velocities)
+                worst = ", ".join(f"sphere {p['particle']} |Δx| = {p['position']:.3g} m" for p in d.particles[:3])
                 return VerifyResult(False, checked, k, f"step {k}: re-simulated hash {stats.state_hash} != recorded "
-                                                      f"{frame.state_hash}; {len(moved)} spheres differ "
-                                                      f"(first: {moved[:5].tolist()})")
+                                                      f"{frame.state_hash}; {d.count} spheres differ ({worst})")
             checked += 1
             if on_step is not None:
                 on_step(checked, rec.steps)
@@ -389,12 +410,16 @@ def replay(path: str | Path, rrd_path: str | None = None, force: bool = False, s
     out = Path(rrd_path) if rrd_path else None
     if out is not None:
         check_writable([out], force)
+    from .analysis.audit import Auditor
+
     with open_recording(path) as rec:
         sink = RerunSink(rec.header, out, spawn=spawn)
+        auditor = Auditor(rec.header, sink.mark_finding)  # the findings marked, as in the live picture
         try:
             for events in rec.iter_step_events():
                 for event in events:
                     sink.on_event(event)
+                    auditor.on_event(event)
         except BaseException:
             sink.close()
             if out is not None:
@@ -426,3 +451,28 @@ def info(path: str | Path) -> dict:
             "channels": [{"topic": c.topic, "encoding": c.message_encoding, "schema": c.schema_name,
                           "messages": c.messages} for c in rec.channels()],
         }
+
+
+# ----------------------------------------------------------------------------- analysis
+def diff(a: str | Path, b: str | Path, atol: float | None = None, rtol: float | None = None):
+    """Where two recordings part and why (physdbg.analysis.diff.DiffReport)."""
+    from .analysis.diff import diff as _diff
+
+    return _diff(a, b, atol=atol, rtol=rtol)
+
+
+def explain(path: str | Path):
+    """Audit one recording (physdbg.analysis.audit.AuditReport)."""
+    from .analysis.audit import explain as _explain
+
+    return _explain(path)
+
+
+def overlay(a: str | Path, b: str | Path, report=None, rrd_path: str | None = None, force: bool = False,
+            spawn: bool = False) -> str | None:
+    """Both runs in one Rerun recording, side by side, opened at the divergence."""
+    from .analysis.overlay import write_overlay
+
+    if rrd_path is not None:
+        check_writable([Path(rrd_path)], force)
+    return write_overlay(a, b, report if report is not None else diff(a, b), rrd_path, spawn=spawn)

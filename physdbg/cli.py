@@ -156,15 +156,21 @@ def record(
     progress: Annotated[bool, typer.Option(
         "--progress/--no-progress", help="Show a progress bar on long runs (default: when stderr is a terminal).")]
     = sys.stderr.isatty(),
+    check_against: Annotated[Optional[Path], typer.Option(
+        "--check-against", help="After recording, diff against this golden recording: exit 1 (and say why) when "
+                                "the runs part.")] = None,
 ) -> None:
     """Run a scene and record every step: MCAP (lossless) and Rerun (.rrd, to look at).
 
     Example: physdbg record bounce        then: rerun recordings/bounce.rrd
     """
     with _user_errors():
+        from .api import diff as api_diff
         from .api import record as record_scene
         from .scene import load_scene
 
+        if check_against is not None and not check_against.is_file():
+            raise PhysdbgError(f"{check_against}: no such recording to check against")
         loaded = load_scene(scene, set_ or [])
         step_lengths = _read_dts(dts) if dts is not None else None
         total = len(step_lengths) if step_lengths is not None else loaded.steps
@@ -186,7 +192,81 @@ def record(
         me = _command("physdbg")
         typer.echo("open with   " + (f"{_command('rerun')} {result.rrd}" if result.rrd
                                  else f"{me} replay {result.mcap} --spawn"))
-        typer.echo(f"then try    {me} info {result.mcap}   |   {me} replay {result.mcap} --verify")
+        typer.echo(f"then try    {me} info {result.mcap}   |   {me} explain {result.mcap}")
+        if check_against is not None:
+            report = api_diff(check_against, result.mcap)
+            from .analysis.report import diff_text
+
+            typer.echo(f"check       against {check_against}")
+            typer.echo(diff_text(report))
+            raise typer.Exit(report.exit_code)
+
+
+OutputFormat = Annotated[str, typer.Option(
+    "--format", "-f", help="text (default), json (schema in docs/diff.md) or markdown (for a CI step summary).")]
+
+
+def _render(report, kind: str, output_format: str, as_json: bool, markdown: bool) -> str:
+    from .analysis import report as rendering
+
+    chosen = "json" if as_json else "markdown" if markdown else output_format
+    if chosen not in ("text", "json", "markdown"):
+        raise PhysdbgError(f"--format must be text, json or markdown, not {chosen!r}")
+    return getattr(rendering, f"{kind}_{'text' if chosen == 'text' else chosen}")(report)
+
+
+@app.command()
+def diff(
+    a: Annotated[Path, typer.Argument(help="The first recording (.mcap), e.g. the golden one.")],
+    b: Annotated[Path, typer.Argument(help="The second recording (.mcap).")],
+    atol: Annotated[Optional[float], typer.Option(
+        "--atol", min=0.0, help="Absolute tolerance (m, m/s). Default: exact when no setting that matters differs, "
+                                "else 1e-9.")] = None,
+    rtol: Annotated[Optional[float], typer.Option("--rtol", min=0.0, help="Relative tolerance (default as --atol).")]
+    = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the report as JSON.")] = False,
+    markdown: Annotated[bool, typer.Option("--markdown", help="Print the report as Markdown (CI step summary).")]
+    = False,
+    output_format: OutputFormat = "text",
+    overlay: Annotated[Optional[Path], typer.Option(
+        "--rrd", help="Also write both runs into one Rerun file, side by side, opened at the divergence.")] = None,
+    spawn: Annotated[bool, typer.Option("--spawn", help="Open the overlay in the Rerun viewer.")] = False,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing --rrd file.")] = False,
+) -> None:
+    """Find where two recordings part ways and say why. Exit 0 equivalent, 1 different, 2 error.
+
+    Example: physdbg diff recordings/golden/cradle.mcap cradle-index.mcap --markdown
+    """
+    with _user_errors():
+        from . import api
+
+        report = api.diff(a, b, atol=atol, rtol=rtol)
+        typer.echo(_render(report, "diff", output_format, as_json, markdown))
+        if overlay or spawn:
+            written = api.overlay(a, b, report, str(overlay) if overlay else None, force=force, spawn=spawn)
+            if written and not (as_json or markdown):
+                typer.echo(f"overlay  {written}  (both runs side by side, opened at the divergence)")
+        raise typer.Exit(report.exit_code)
+
+
+@app.command()
+def explain(
+    recording: Annotated[Path, typer.Argument(help="A .mcap recording to audit.")],
+    as_json: Annotated[bool, typer.Option("--json", help="Print the report as JSON.")] = False,
+    markdown: Annotated[bool, typer.Option("--markdown", help="Print the report as Markdown.")] = False,
+    output_format: OutputFormat = "text",
+) -> None:
+    """Audit one recording: tunnelling, overlaps, out-of-order contacts, energy gained, NaN,
+    budgets hit, collapse. Exit 0 clean, 1 findings, 2 error.
+
+    Example: physdbg explain recordings/bullet-wall.mcap
+    """
+    with _user_errors():
+        from . import api
+
+        report = api.explain(recording)
+        typer.echo(_render(report, "explain", output_format, as_json, markdown))
+        raise typer.Exit(0 if report.clean else 1)
 
 
 @app.command()
@@ -459,6 +539,11 @@ def format_summary(s) -> str:
         "warnings    " + _warning_totals(s.warning_counts),
     ]
     lines += [f"  {line}" for line in s.warnings]
+    lines.append("audit       " + ("clean (no tunnelling, overlap, out-of-order contact, energy gain or collapse)"
+                                   if not s.finding_counts else
+                                   ", ".join(f"{n} {kind}" for kind, n in s.finding_counts.items())
+                                   + "; the first of each kind:"))
+    lines += [f"  {line}" for line in s.findings]
     return "\n".join(lines)
 
 

@@ -42,14 +42,20 @@ DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 
 def _physdbg_commands(path: Path) -> list[str]:
     """Every `physdbg ...` command in the file's ```sh blocks, in order (also after &&)."""
+    return [command for command, _ in _commands_and_exits(path)]
+
+
+def _commands_and_exits(path: Path) -> list[tuple[str, int]]:
+    """(command, expected exit code): 0, or N when its comment says "exit N"."""
     commands = []
     for block in re.findall(r"```sh\n(.*?)```", path.read_text(), re.S):
         for line in block.splitlines():
-            line = line.split("  #")[0].strip()
-            for part in line.split("&&"):
+            line, _, comment = line.partition("  #")
+            expected = re.match(r"\s*exit (\d)\b", comment)
+            for part in line.strip().split("&&"):
                 part = part.strip()
                 if part.startswith((".venv/bin/physdbg ", "physdbg ")):
-                    commands.append(part)
+                    commands.append((part, int(expected.group(1)) if expected else 0))
     return commands
 
 
@@ -67,13 +73,14 @@ def test_every_command_and_python_example_in_the_docs_runs_as_written(path, tmp_
     from physdbg.cli import app
 
     shutil.copytree(ROOT / "docs", tmp_path / "docs")  # example scenes the commands name
+    shutil.copytree(ROOT / "recordings" / "ci", tmp_path / "recordings" / "ci")  # the goldens ci.md names
     monkeypatch.chdir(tmp_path)
     runner = CliRunner()
-    for command in _physdbg_commands(path):
+    for command, expected in _commands_and_exits(path):
         if any(marker in command for marker in OPENS_A_WINDOW):
             continue
         result = runner.invoke(app, shlex.split(command)[1:])
-        assert result.exit_code == 0, f"{path.name}: `{command}` exited {result.exit_code}:\n{result.output}"
+        assert result.exit_code == expected, f"{path.name}: `{command}` exited {result.exit_code}:\n{result.output}"
     for block in re.findall(r"```python\n(.*?)```", path.read_text(), re.S):
         exec(compile(block, f"{path.name} example", "exec"), {})  # noqa: S102 - our own docs
     for block in re.findall(r"```toml\n(.*?)```", path.read_text(), re.S):

@@ -312,12 +312,12 @@ def test_a_full_disk_ends_the_recording_readable_with_a_message(tmp_path):
 
     script = ("import resource, signal, sys\n"
               "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # past the limit writes fail, as on a full disk\n"
-              "resource.setrlimit(resource.RLIMIT_FSIZE, (300000, 300000))\n"
+              "resource.setrlimit(resource.RLIMIT_FSIZE, (1500000, 1500000))\n"
               "from physdbg.cli import app\n"
               "app(sys.argv[1:])\n")
     out = tmp_path / "full.mcap"
     done = subprocess.run([sys.executable, "-c", script, "record", "rain", "-s", "generate.count=300",
-                           "-s", "steps=200", "-o", str(out), "--no-rrd", "--no-progress"],
+                           "-s", "steps=400", "-o", str(out), "--no-rrd", "--no-progress"],
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 2, done.stderr
     assert "Traceback" not in done.stderr

@@ -166,9 +166,25 @@ def test_thin_wall_discrete_and_sampled_tunnel(detection):
     assert velocity[0] == 100.0
 
 
+@pytest.mark.parametrize("detection", ["discrete", "sampled"])
+def test_a_sample_past_a_thin_wall_is_logged_as_a_miss_not_a_found_contact(detection):
+    from physdbg.events import OUTCOME_MISS
+    from physdbg.observe import ListObserver
+
+    scene = load_scene("bullet-wall", [f"detection={detection}"])
+    events = ListObserver()
+    world = scene.build_world(events)
+    world.step(scene.dt)
+    tests = events.swept_tests[0]
+    assert list(tests.outcome) == [OUTCOME_MISS] and np.isnan(tests.toi[0])
+    # ...while a sample inside the slab is a contact: a slow sphere is caught
+    assert wall_toi_sampled(0.05, -1.0, 0.0, EULER, 0.0, 0.1, 1, 0.2) == 0.1
+    assert wall_toi_sampled(0.05, -10.0, 0.0, EULER, 0.0, 0.1, 1, 0.2) == INF
+
+
 def test_sampled_detection_catches_what_falls_between_its_samples_only_if_slow():
     # a wall 0.3 m ahead; 4 samples over 1 s: at 1 m/s it is caught at a sample...
-    assert wall_toi_sampled(0.3, -1.0, 0.0, EULER, 0.0, 1.0, 4) == 0.5
+    assert wall_toi_sampled(0.3, -1.0, 0.0, EULER, 0.0, 1.0, 4, INF) == 0.5
     # ...and a sphere pair crossing between samples is missed (the seed's case c)
     dx = np.array([-1.0, 0.0, 0.0])
     assert pair_toi_sampled(dx, np.array([2.6, 0.0, 0.0]), np.zeros(3), 0.2, EULER, 0.0, 1.0, 4) == INF

@@ -239,7 +239,8 @@ def _predict_wall(i, w, x, v, a, radius, sigma, version, step_end, integrator, k
     if detection == SWEPT:
         t = wall_toi_swept(g0, p, q, integrator, k, horizon)
     else:
-        t = wall_toi_sampled(g0, p, q, integrator, k, horizon, 1 if detection == DISCRETE else samples)
+        depth = 2.0 * (radius[i] + half_thickness[w]) if two_sided[w] else math.inf
+        t = wall_toi_sampled(g0, p, q, integrator, k, horizon, 1 if detection == DISCRETE else samples, depth)
     _record(KIND_WALL, i, w, start, t, step_end, version, test_int, test_float, test_outcome, heap_toi, heap_data,
             counters, push)
 

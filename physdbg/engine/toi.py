@@ -155,14 +155,19 @@ def wall_toi_swept(g0, p, q, integrator, k, horizon):
 
 
 @njit(cache=True)
-def wall_toi_sampled(g0, p, q, integrator, k, horizon, samples):
-    """First of ``samples`` evenly spaced instants in (0, horizon] with overlap and approach."""
+def wall_toi_sampled(g0, p, q, integrator, k, horizon, samples, depth):
+    """First of ``samples`` evenly spaced instants in (0, horizon] with overlap and approach.
+
+    depth: how far past contact (m, in gap terms) the sphere still overlaps the wall: INF
+    for a one-sided wall (a half-space), 2·(r + h) for a two-sided slab. A sample beyond
+    the slab is no overlap: the sphere is through, and the test is a miss (it tunnelled).
+    """
     if integrator <= SEMI_IMPLICIT:
         q = 0.0
     for m in range(1, samples + 1):
         t = horizon * m / samples
         g, dg = _gap(g0, p, q, integrator, k, t)
-        if g < 0.0 and dg < 0.0:
+        if g < 0.0 and g > -depth and dg < 0.0:
             return t
     return INF
 

@@ -46,9 +46,15 @@ TOPIC_SWEPT = "/physdbg/swept_tests"  # detail full: every narrow-phase test (ar
 TOPIC_BROAD_PHASE = "/physdbg/broad_phase"  # detail full: structure, reason, stats (JSON)
 TOPIC_BVH = "/physdbg/bvh"  # detail full, BVH broad phases: node rows (array)
 TOPIC_BVH_ORDER = "/physdbg/bvh_order"  # detail full, uncapped BVH: particle of each leaf slot
+TOPIC_FRAME_INDEX = "/physdbg/frame_index"  # once, at the end: every frame's time, dt and state hash
+
+# The bulky per-step channels are written in chunks of their own, so reading states,
+# stats and contacts (diff, explain, a replay at detail "state") never decompresses them.
+HEAVY_TOPICS = frozenset({"/physdbg/swept_tests", "/physdbg/broad_phase", "/physdbg/bvh", "/physdbg/bvh_order"})
 
 TOPICS_BY_DETAIL = {
-    "state": (TOPIC_SCENE, TOPIC_PARTICLES, TOPIC_WALLS, TOPIC_STATE, TOPIC_STATS, TOPIC_WARNINGS),
+    "state": (TOPIC_SCENE, TOPIC_PARTICLES, TOPIC_WALLS, TOPIC_STATE, TOPIC_STATS, TOPIC_WARNINGS,
+              TOPIC_FRAME_INDEX),
     "contacts": (TOPIC_CONTACTS,),
     "full": (TOPIC_SWEPT, TOPIC_BROAD_PHASE, TOPIC_BVH, TOPIC_BVH_ORDER),
 }
@@ -92,6 +98,7 @@ BVH_FIELDS = [
     ("start", "<i4", ()), ("count", "<i4", ()), ("lo", "<f8", (3,)), ("hi", "<f8", (3,)),
 ]
 BVH_ORDER_FIELDS = [("particle", "<i4", ())]
+FRAME_INDEX_FIELDS = [("time", "<f8", ()), ("dt", "<f8", ()), ("state_hash", "u1", (16,))]
 
 UNITS = {
     "radius": "m", "inverse_mass": "1/kg (0 = immovable)", "time": "s", "dt": "s", "kinetic": "J",
@@ -108,6 +115,7 @@ ARRAY_SCHEMAS = {
     TOPIC_SWEPT: ("physdbg.SweptTests", SWEPT_FIELDS),
     TOPIC_BVH: ("physdbg.BvhNodes", BVH_FIELDS),
     TOPIC_BVH_ORDER: ("physdbg.BvhOrder", BVH_ORDER_FIELDS),
+    TOPIC_FRAME_INDEX: ("physdbg.FrameIndex", FRAME_INDEX_FIELDS),
 }
 JSON_SCHEMAS = {
     TOPIC_SCENE: ("physdbg.Scene", {"type": "object", "required": ["format", "format_version", "scene"]}),

@@ -6,6 +6,12 @@ A step's events are buffered and written together when its StepEnd arrives, so a
 stopped at any moment leaves only whole steps in the file; the file is flushed after
 every step so a killed process leaves every finished chunk readable.
 
+Chunks: the bulky channels (swept tests, broad phase, BVH nodes) go in chunks of their
+own, written just before the chunk of states, stats and contacts for the same frames, so
+"a frame whose state is in the file is complete" still holds and a reader of states
+never decompresses swept tests. At close, one /physdbg/frame_index message lists every
+frame's time, dt and state hash (what ``diff`` compares first).
+
 The observer only encodes (numpy to bytes); a writer thread hands the messages to the
 mcap library, which compresses each chunk with zstd. zstd releases the GIL, so on two
 cores compression overlaps the next step instead of adding to it. At most
@@ -60,13 +66,17 @@ class McapRecorder:
         self._queue: queue.Queue = queue.Queue(maxsize=QUEUE_STEPS)
         self._error: BaseException | None = None
         self._outbox: list[tuple[int, int, int, bytes]] = []
-        self._thread = threading.Thread(target=self._drain, name="physdbg-mcap-writer", daemon=True)
-        self._thread.start()
         self._history: list[np.ndarray] = []  # the last two frames' (N, 6) states, for the codec
+        self._chunk_bytes = chunk_bytes
+        self._heavy = {self._channels[t] for t in fmt.HEAVY_TOPICS if t in self._channels}
+        self._index_rows: list[tuple[float, float, bytes]] = []  # (time, dt, hash) of every frame
+        self._sent_frames = 0
         self.frames = 0
         self.bvh_capped_steps = 0
         self.bvh_logged_depth: int | None = None
         self.closed = False
+        self._thread = threading.Thread(target=self._drain, name="physdbg-mcap-writer", daemon=True)
+        self._thread.start()
         self._write(fmt.TOPIC_SCENE, 0, 0, json.dumps(header.meta).encode())
         self._write(fmt.TOPIC_PARTICLES, 0, 0, self._rows(fmt.TOPIC_PARTICLES, header, header.count))
         self._write(fmt.TOPIC_WALLS, 0, 0, json.dumps(header.walls_json()).encode())
@@ -137,23 +147,40 @@ class McapRecorder:
             raise OSError(f"writing {self.path} failed: {self._error}") from self._error
         self._queue.put(self._outbox)
         self._outbox = []
+        self._sent_frames = self.frames
 
     def _drain(self) -> None:
-        """The writer thread: add each step's messages, then flush the file."""
+        """The writer thread: gather steps into a bulky and a light batch; when either is a
+        chunk's worth (or at the end), write the bulky chunk, then the light one, then flush."""
+        batches: tuple[list, list] = ([], [])  # (bulky, light) messages
+        sizes = [0, 0]
+        first = True  # frame 0 (scene, particles, walls, initial state) gets a chunk at once
         while True:
             step = self._queue.get()
-            if step is None:
-                return
             if self._error is not None:
+                if step is None:
+                    return
                 continue
             try:
-                for channel, frame, publish_ns, data in step:
-                    self._writer.add_message(channel, log_time=frame, data=data, publish_time=publish_ns,
-                                             sequence=frame)
-                self._file.flush()
-                self._good_size = self._file.tell()
+                if step is not None:
+                    for message in step:
+                        light = message[0] not in self._heavy
+                        batches[light].append(message)
+                        sizes[light] += len(message[3])
+                if step is None or first or max(sizes) >= self._chunk_bytes:
+                    first = False
+                    for batch in batches:
+                        for channel, frame, publish_ns, data in batch:
+                            self._writer.add_message(channel, log_time=frame, data=data, publish_time=publish_ns,
+                                                     sequence=frame)
+                        self._writer.flush()  # finish this chunk: bulky and light never share one
+                        batch.clear()
+                    sizes = [0, 0]
+                    self._good_size = self._file.tell()
             except BaseException as err:  # reported by the next _send or close
                 self._error = err
+            if step is None:
+                return
 
     def _write_state(self, frame: int, time: float, dt: float, digest: str, x: np.ndarray, v: np.ndarray) -> None:
         codec = fmt.codec_for(frame, len(self._history))
@@ -161,6 +188,7 @@ class McapRecorder:
         before = self._history[-2] if len(self._history) > 1 else None
         data = fmt.encode_state(frame, time, dt, digest, x, v, codec, previous, before)
         self._write(fmt.TOPIC_STATE, frame, _nanoseconds(time), data)
+        self._index_rows.append((time, dt, bytes.fromhex(digest)))
         state = np.empty((x.shape[0], 6))
         state[:, :3], state[:, 3:] = x, v
         self._history = [*self._history[-1:], state]
@@ -208,6 +236,17 @@ class McapRecorder:
         self.closed = True
         self._pending.clear()
         self._outbox = []
+        self.frames = self._sent_frames  # a state encoded but never sent is not in the file
+        del self._index_rows[self.frames:]
+        if self._error is None and fmt.TOPIC_FRAME_INDEX in self._channels:
+            rows = np.zeros(len(self._index_rows), dtype=self._dtypes[fmt.TOPIC_FRAME_INDEX])
+            if len(rows):
+                times, dts, digests = zip(*self._index_rows, strict=True)
+                rows["time"], rows["dt"] = times, dts
+                rows["state_hash"] = np.frombuffer(b"".join(digests), dtype=np.uint8).reshape(-1, 16)
+            last = len(rows) - 1
+            self._queue.put([(self._channels[fmt.TOPIC_FRAME_INDEX], last,
+                              _nanoseconds(self._index_rows[-1][0]) if len(rows) else 0, rows.tobytes())])
         self._queue.put(None)
         self._thread.join()
         try:

@@ -46,6 +46,19 @@ class FrameState:
 
 
 @dataclass(frozen=True)
+class FrameTable:
+    """Per frame (F = frames): time (F,) s; dt (F,) s of the step that led there (0 at
+    frame 0); hashes (F, 16) uint8, the stored state hash (BLAKE2b-128) of each frame."""
+
+    time: np.ndarray
+    dt: np.ndarray
+    hashes: np.ndarray
+
+    def hash_hex(self, frame: int) -> str:
+        return self.hashes[frame].tobytes().hex()
+
+
+@dataclass(frozen=True)
 class ChannelInfo:
     topic: str
     message_encoding: str
@@ -89,6 +102,7 @@ class Recording:
         self._file.seek(0)
         self._reader = SeekingReader(self._file, validate_crcs=True)
         self._memory: dict[str, list[tuple[int, bytes]]] | None = None
+        self._frame_table: FrameTable | None = None
         self.truncated = False
         try:
             summary = self._reader.get_summary()
@@ -227,6 +241,38 @@ class Recording:
         for first in range(start, stop, batch):
             yield from self._decode_states(first, min(first + batch, stop) - 1)
 
+    def frame_table(self) -> FrameTable:
+        """Every frame's time, dt and stored state hash, without decoding a state.
+
+        From the /physdbg/frame_index message written at close (one small read); a file
+        without it (its writer was killed) is scanned: state headers only, no decoding.
+        """
+        if self._frame_table is None:
+            self._frame_table = self._read_frame_table()
+        return self._frame_table
+
+    def _read_frame_table(self) -> FrameTable:
+        if fmt.TOPIC_FRAME_INDEX in self._channels and self._memory is None:
+            for _, _, data in self._messages([fmt.TOPIC_FRAME_INDEX], 0, self.frames):
+                rows = np.frombuffer(data, dtype=self._dtype(fmt.TOPIC_FRAME_INDEX))
+                if len(rows) == self.frames:
+                    return FrameTable(rows["time"].copy(), rows["dt"].copy(), rows["state_hash"].copy())
+        times, dts, hashes = np.empty(self.frames), np.empty(self.frames), np.empty((self.frames, 16), np.uint8)
+        seen = 0
+        for _, frame, data in self._messages([fmt.TOPIC_STATE], 0, self.frames - 1):
+            try:
+                _, _, frame_no, time, dt, digest = fmt.decode_state_header(data)
+            except (ValueError, struct.error) as err:
+                raise RecordingError(f"{self.path}: frame {frame}: damaged state message ({err})") from None
+            if frame_no != seen:
+                raise RecordingError(f"{self.path}: frame {seen} is missing (found frame {frame_no})")
+            times[seen], dts[seen] = time, dt
+            hashes[seen] = np.frombuffer(bytes.fromhex(digest), dtype=np.uint8)
+            seen += 1
+        if seen != self.frames:
+            raise RecordingError(f"{self.path}: frames {seen}..{self.frames - 1} are not in the file")
+        return FrameTable(times, dts, hashes)
+
     # ------------------------------------------------------------------ step events
     def step_events(self, k: int) -> list:
         """The engine events of the k-th step (frame k >= 1), in the engine's order."""
@@ -235,13 +281,15 @@ class Recording:
             raise IndexError("frame 0 is the initial state; steps are frames 1..frames-1")
         return next(self.iter_step_events(k, k + 1))
 
-    def iter_step_events(self, start: int = 1, stop: int | None = None) -> Iterator[list]:
+    def iter_step_events(self, start: int = 1, stop: int | None = None, detail: str = "full") -> Iterator[list]:
         """For each step start..stop-1: the list of its events (StepBegin, BroadPhaseInfo,
         EngineWarning..., Contacts, SweptTests, StepEnd), as the engine emitted them —
-        what a replay feeds to the sinks."""
+        what a replay feeds to the sinks. detail: read no more than this level ("state"
+        skips contacts, "contacts" skips swept tests and the broad phase: much faster)."""
         stop = self.frames if stop is None else min(stop, self.frames)
-        topics = [fmt.TOPIC_STATS, fmt.TOPIC_WARNINGS, fmt.TOPIC_CONTACTS, fmt.TOPIC_SWEPT,
-                  fmt.TOPIC_BROAD_PHASE, fmt.TOPIC_BVH, fmt.TOPIC_BVH_ORDER]
+        wanted = fmt.topics_for(detail)
+        topics = [t for t in (fmt.TOPIC_STATS, fmt.TOPIC_WARNINGS, fmt.TOPIC_CONTACTS, fmt.TOPIC_SWEPT,
+                              fmt.TOPIC_BROAD_PHASE, fmt.TOPIC_BVH, fmt.TOPIC_BVH_ORDER) if t in wanted]
         batch = 64
         for first in range(max(start, 1), stop, batch):
             last = min(first + batch, stop) - 1
@@ -250,9 +298,9 @@ class Recording:
                 per_frame[frame][topic].append(data)
             states = self._decode_states(first - 1, last)
             for k in range(first, last + 1):
-                yield self._events_of(k, per_frame.get(k, {}), states[k - first], states[k - first + 1])
+                yield self._events_of(k, per_frame.get(k, {}), states[k - first], states[k - first + 1], topics)
 
-    def _events_of(self, k: int, parts: dict, before: FrameState, after: FrameState) -> list:
+    def _events_of(self, k: int, parts: dict, before: FrameState, after: FrameState, topics) -> list:
         step = k - 1
         events: list = [StepBegin(step, before.time, after.dt)]
         if parts.get(fmt.TOPIC_BROAD_PHASE):
@@ -272,9 +320,9 @@ class Recording:
             events.append(BroadPhaseInfo(step, meta["name"], meta["reason"], stats, nodes))
         warnings = [json.loads(w) for w in parts.get(fmt.TOPIC_WARNINGS, [])]
         events.extend(EngineWarning(step, w["code"], w["message"]) for w in warnings)
-        if fmt.TOPIC_CONTACTS in self._channels:
+        if fmt.TOPIC_CONTACTS in self._channels and fmt.TOPIC_CONTACTS in topics:
             events.append(self._contacts(step, parts.get(fmt.TOPIC_CONTACTS, [b""])[0]))
-        if fmt.TOPIC_SWEPT in self._channels:
+        if fmt.TOPIC_SWEPT in self._channels and fmt.TOPIC_SWEPT in topics:
             rows = np.frombuffer(parts.get(fmt.TOPIC_SWEPT, [b""])[0], dtype=self._dtype(fmt.TOPIC_SWEPT))
             events.append(SweptTests(step, rows["kind"].copy(), rows["a"].copy(), rows["other"].copy(),
                                      rows["start"].copy(), rows["toi"].copy(), rows["outcome"].copy()))
@@ -344,4 +392,4 @@ class Recording:
                 f"detail={self.detail!r}{', truncated' if self.truncated else ''})")
 
 
-__all__ = ["ChannelInfo", "FrameState", "Recording", "RecordingError", "open_recording"]
+__all__ = ["ChannelInfo", "FrameState", "FrameTable", "Recording", "RecordingError", "open_recording"]

@@ -15,6 +15,7 @@ Entities (timelines ``step`` = frame, steps completed, and ``sim_time`` in secon
                              DRAWN_CONTACTS_PER_STEP of a step; the log says when more)
     world/contacts/normals   Arrows3D: contact normals (length = the sphere's radius)
     world/contacts/impulses  Arrows3D: velocity change of sphere a, × IMPULSE_ARROW_SECONDS
+    world/findings           Points3D: a red marker where the audit found a problem
     stats/energy/*, stats/momentum/*, stats/contacts   Scalars, sent in columns
     log                      TextLog: contacts and warnings in words
 
@@ -67,16 +68,19 @@ class RerunSink:
     """
 
     def __init__(self, header: RecordingHeader, rrd: str | Path | None = None, spawn: bool = False,
-                 detail: str | None = None, recording_id: str | None = None):
+                 detail: str | None = None, recording_id: str | None = None, stream=None, root: str = ""):
         import rerun as rr
 
         self.rr = rr
         self.header = header
+        self.root = root.strip("/") + "/" if root else ""  # e.g. "a/": entities under /a/world, /a/stats
         self.detail = detail or header.detail
         # each run its own id (kept in the MCAP file, so a replay is the same recording as
         # the live view), so two runs of one scene open side by side, not merged
-        self.rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id or header.meta.get("run_id")
-                                      or uuid.uuid4().hex)
+        self.shared = stream is not None
+        # a run drawn into a recording someone else owns (the diff overlay), or its own
+        self.rec = stream if self.shared else rr.RecordingStream(
+            APPLICATION_ID, recording_id=recording_id or header.meta.get("run_id") or uuid.uuid4().hex)
         self.rec.set_log_time_enabled(False)  # wall-clock time would make live and replay files differ
         sinks = []
         if rrd is not None:
@@ -88,11 +92,12 @@ class RerunSink:
             except (RuntimeError, OSError) as err:
                 raise ViewerError(f"cannot start the Rerun viewer ({err})") from None
             sinks.append(rr.GrpcSink())
-        if not sinks:
+        if not sinks and not self.shared:
             raise ValueError("give an .rrd path, spawn=True, or both")
-        self.rec.set_sinks(*sinks)
-        self.rec.send_blueprint(blueprint(header), make_active=True, make_default=True)
-        self.rec.send_recording_name(header.run_name)
+        if not self.shared:
+            self.rec.set_sinks(*sinks)
+            self.rec.send_blueprint(blueprint(header), make_active=True, make_default=True)
+            self.rec.send_recording_name(header.run_name)
         self.radius = header.radius.astype(np.float32)
         self.previous = header.positions.copy()
         self.bvh_levels = 0
@@ -102,23 +107,24 @@ class RerunSink:
         self._contacts: Contacts | None = None
         self._broad_phase: BroadPhaseInfo | None = None
         self._warnings: list[EngineWarning] = []
+        self._last_time = (0, 0.0)
         self._log_static(header)
 
     # ------------------------------------------------------------------ static
     def _log_static(self, h: RecordingHeader) -> None:
         rr, rec = self.rr, self.rec
         up = _up_axis(h)
-        rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP if up[2] else rr.ViewCoordinates.RIGHT_HAND_Y_UP,
+        rec.log(self.root + "world", rr.ViewCoordinates.RIGHT_HAND_Z_UP if up[2] else rr.ViewCoordinates.RIGHT_HAND_Y_UP,
                 static=True)
         lo, hi = _scene_bounds(h)
         for name, strip in _wall_outlines(h.walls, lo, hi):
-            rec.log(f"world/walls/{rr.escape_entity_path_part(name)}", rr.LineStrips3D([strip], colors=[[150, 150, 160]], radii=[-1.5]),
+            rec.log(self.root + f"world/walls/{rr.escape_entity_path_part(name)}", rr.LineStrips3D([strip], colors=[[150, 150, 160]], radii=[-1.5]),
                     static=True)
         self._set_time(0, 0.0)
-        rec.log("world/spheres", rr.Points3D(np.asarray(h.positions, dtype=np.float32), radii=self.radius,
+        rec.log(self.root + "world/spheres", rr.Points3D(np.asarray(h.positions, dtype=np.float32), radii=self.radius,
                                              colors=_sphere_colors(h.inverse_mass)))
         settings = " ".join(f"{key}={value}" for key, value in h.meta.get("settings", {}).items())
-        rec.log("log", rr.TextLog(f"{h.name}: {h.count} spheres, {len(h.walls)} walls; {settings}", level="INFO"))
+        rec.log(self.root + "log", rr.TextLog(f"{h.name}: {h.count} spheres, {len(h.walls)} walls; {settings}", level="INFO"))
 
     def _set_time(self, frame: int, time: float) -> None:
         self.rec.set_time("step", sequence=frame)
@@ -138,9 +144,10 @@ class RerunSink:
     def _end_step(self, end: StepEnd) -> None:
         rr, rec = self.rr, self.rec
         frame = end.step + 1
+        self._last_time = (frame, end.time)
         self._set_time(frame, end.time)
         # Copies in float32: rerun may hold the array until it flushes.
-        rec.log("world/spheres", rr.Points3D.from_fields(positions=np.asarray(end.positions, dtype=np.float32)))
+        rec.log(self.root + "world/spheres", rr.Points3D.from_fields(positions=np.asarray(end.positions, dtype=np.float32)))
         contacts = self._contacts if self.detail != "state" else None
         if self._broad_phase is not None:
             self._bvh(self._broad_phase)
@@ -155,6 +162,22 @@ class RerunSink:
         self._contacts = None
         self.previous = end.positions
         self._add_series(frame, end)
+
+    def mark_finding(self, finding) -> None:
+        """Mark an audit finding where and when it happened: a red marker in the 3D view
+        (world/findings, shown from that step on) and a warning line in the log."""
+        rr, rec = self.rr, self.rec
+        frame = finding.step
+        self._set_time(frame, self._time_of(frame))
+        if finding.position is not None:
+            size = float(self.header.radius[finding.particles].max()) if finding.particles else float(
+                self.header.radius.max())
+            rec.log(self.root + "world/findings", rr.Points3D([finding.position], radii=[1.6 * size], colors=[[255, 40, 40, 160]],
+                                                  labels=[finding.kind]))
+        self._log_lines(frame, self._time_of(frame), [(f"step {frame}: [{finding.kind}] {finding.message}", "WARN")])
+
+    def _time_of(self, frame: int) -> float:
+        return self._last_time[1] if self._last_time[0] == frame else 0.0
 
     # ------------------------------------------------------------------ pieces
     def _paths(self, end: StepEnd, contacts: Contacts | None) -> None:
@@ -188,23 +211,23 @@ class RerunSink:
             first_stop = np.searchsorted(who, who)  # index of each particle's first stop in `who`
             rank = np.arange(len(who)) - first_stop
             points[offsets[slot[who]] + 1 + rank] = where
-        self.rec.log("world/paths", [_line_strips(points, offsets)])
-        self.rec.log("world/paths", self.rr.LineStrips3D.from_fields(radii=[-1.0], colors=[[90, 170, 255]]))
+        self.rec.log(self.root + "world/paths", [_line_strips(points, offsets)])
+        self.rec.log(self.root + "world/paths", self.rr.LineStrips3D.from_fields(radii=[-1.0], colors=[[90, 170, 255]]))
 
     def _draw_contacts(self, c: Contacts) -> None:
         rr, rec = self.rr, self.rec
         radius = self.header.radius[c.a] if len(c) else np.zeros(0)
         centres = _contact_centres(c, self.header.radius)
-        rec.log("world/contacts/ghosts", rr.Points3D(centres.astype(np.float32), radii=radius.astype(np.float32),
+        rec.log(self.root + "world/contacts/ghosts", rr.Points3D(centres.astype(np.float32), radii=radius.astype(np.float32),
                                                      colors=[[255, 200, 60, 90]]))
-        rec.log("world/contacts/normals", rr.Arrows3D(origins=c.point.astype(np.float32),
+        rec.log(self.root + "world/contacts/normals", rr.Arrows3D(origins=c.point.astype(np.float32),
                                                       vectors=(c.normal * radius[:, None]).astype(np.float32),
                                                       colors=[[80, 220, 120]]))
         inv_mass = self.header.inverse_mass[c.a] if len(c) else np.zeros(0)
         with np.errstate(invalid="ignore"):
             change = c.normal * (c.impulse * inv_mass)[:, None] * IMPULSE_ARROW_SECONDS
         finite = np.all(np.isfinite(change), axis=1)
-        rec.log("world/contacts/impulses", rr.Arrows3D(origins=c.point[finite].astype(np.float32),
+        rec.log(self.root + "world/contacts/impulses", rr.Arrows3D(origins=c.point[finite].astype(np.float32),
                                                        vectors=change[finite].astype(np.float32),
                                                        colors=[[255, 90, 60]]))
 
@@ -234,7 +257,7 @@ class RerunSink:
         rr = self.rr
         index = [rr.TimeColumn("step", sequence=[frame] * len(lines)),
                  rr.TimeColumn("sim_time", duration=[time] * len(lines))]
-        self.rec.send_columns("log", indexes=index, columns=rr.TextLog.columns(
+        self.rec.send_columns(self.root + "log", indexes=index, columns=rr.TextLog.columns(
             text=[text for text, _ in lines], level=[level for _, level in lines]))
 
     def _bvh(self, info: BroadPhaseInfo) -> None:
@@ -247,7 +270,7 @@ class RerunSink:
         for level in range(max(levels, self.bvh_levels)):
             at = depth == level
             lo, hi = nodes["lo"][at], nodes["hi"][at]
-            rec.log(f"world/bvh/level_{level}", rr.Boxes3D(
+            rec.log(self.root + f"world/bvh/level_{level}", rr.Boxes3D(
                 centers=((lo + hi) * 0.5).astype(np.float32), half_sizes=((hi - lo) * 0.5).astype(np.float32),
                 colors=[_level_color(level)], radii=[-0.5], fill_mode="majorwireframe"))
         self.bvh_levels = max(levels, self.bvh_levels)
@@ -274,13 +297,15 @@ class RerunSink:
         index = [rr.TimeColumn("step", sequence=self._series_steps),
                  rr.TimeColumn("sim_time", duration=self._series_times)]
         for path, values in self._series.items():
-            self.rec.send_columns(path, indexes=index, columns=rr.Scalars.columns(scalars=values))
+            self.rec.send_columns(self.root + path, indexes=index, columns=rr.Scalars.columns(scalars=values))
         self._series = {}
         self._series_steps = []
         self._series_times = []
 
     def close(self) -> None:
         self._send_series()
+        if self.shared:
+            return
         self.rec.flush()
         self.rec.disconnect()
 

@@ -1,0 +1,171 @@
+"""Where two runs part: aligning frames, comparing states, measuring how a gap grows.
+
+Used by ``physdbg diff`` and by ``replay --verify`` (a re-simulation against its file),
+so there is one way to find and describe a divergence.
+
+Alignment. When both runs took the same steps (every dt equal), frame k of one is
+compared with frame k of the other, and the stored state hashes find the first frame
+that differs without decoding a state. Otherwise frames are aligned by simulated time:
+each frame of the run with the longer steps is compared with the other run at the same
+time — its frame there when one exists (within 1e-9 of a step), else a cubic Hermite
+interpolation between the two frames around it (positions from positions and
+velocities, velocities linearly). Interpolation is exact for free flight under constant
+acceleration, and only approximate across a contact inside the interval.
+"""
+
+from __future__ import annotations
+
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from ..engine.state import state_hash
+
+
+@dataclass
+class StateDifference:
+    """How two states differ. particles: the most different first (at most 5), each
+    {"particle", "position", "velocity"} with |Δx| (m) and |Δv| (m/s); count: how many
+    particles differ beyond the tolerance; max_position, max_velocity: over all."""
+
+    count: int
+    max_position: float
+    max_velocity: float
+    particles: list[dict] = field(default_factory=list)
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def state_difference(xa, va, xb, vb, atol: float = 0.0, rtol: float = 0.0) -> StateDifference:
+    """Compare two states (N, 3) each; with atol = rtol = 0 any bit of difference counts."""
+    dx = np.linalg.norm(xa - xb, axis=1)
+    dv = np.linalg.norm(va - vb, axis=1)
+    if atol == 0.0 and rtol == 0.0:
+        beyond = np.any(xa != xb, axis=1) | np.any(va != vb, axis=1)
+        beyond |= np.isnan(dx) | np.isnan(dv)
+    else:
+        beyond = (dx > atol + rtol * np.linalg.norm(xb, axis=1)) | (dv > atol + rtol * np.linalg.norm(vb, axis=1))
+        beyond |= ~np.isfinite(dx) | ~np.isfinite(dv)
+    order = np.argsort(-(np.nan_to_num(dx, nan=np.inf) + np.nan_to_num(dv, nan=np.inf)), kind="stable")
+    top = [int(i) for i in order[:5] if beyond[i]]
+    return StateDifference(int(beyond.sum()), float(np.nanmax(dx)) if len(dx) else 0.0,
+                           float(np.nanmax(dv)) if len(dv) else 0.0,
+                           [{"particle": i, "position": float(dx[i]), "velocity": float(dv[i])} for i in top])
+
+
+def first_differing_frame(hashes_a: np.ndarray, hashes_b: np.ndarray) -> int | None:
+    """First frame whose stored hashes differ among the frames both have ((F, 16) uint8)."""
+    n = min(len(hashes_a), len(hashes_b))
+    differ = np.nonzero(np.any(hashes_a[:n] != hashes_b[:n], axis=1))[0]
+    return int(differ[0]) if len(differ) else None
+
+
+def same_steps(dt_a: np.ndarray, dt_b: np.ndarray) -> bool:
+    """Did both runs take the same steps (bit-equal dt) for the frames both have?"""
+    n = min(len(dt_a), len(dt_b))
+    return bool(np.array_equal(dt_a[:n], dt_b[:n]))
+
+
+def check_stored_hash(rec, frame) -> None:
+    """RecordingError when a decoded state does not give the hash stored with it."""
+    from ..record.reader import RecordingError
+
+    if state_hash(frame.positions, frame.velocities) != frame.state_hash:
+        raise RecordingError(f"{rec.path}: frame {frame.frame}: the stored state does not match its stored hash "
+                             f"(the file was altered or damaged)")
+    table = rec.frame_table()
+    if table.hash_hex(frame.frame) != frame.state_hash:
+        raise RecordingError(f"{rec.path}: frame {frame.frame}: the frame index and the state disagree "
+                             f"(the file was altered or damaged)")
+
+
+def hermite(t: float, a, b):
+    """State (x (N, 3), v (N, 3)) at time t between two FrameStates a (earlier) and b."""
+    h = b.time - a.time
+    if h <= 0.0:
+        return a.positions, a.velocities
+    s = (t - a.time) / h
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+    x = h00 * a.positions + h10 * h * a.velocities + h01 * b.positions + h11 * h * b.velocities
+    v = (1 - s) * a.velocities + s * b.velocities
+    return x, v
+
+
+@dataclass
+class Growth:
+    """How the gap (largest |Δx| over particles, m) grows after the divergence.
+
+    steps_to_mm / steps_to_radius: steps after the first differing one until the gap
+    reaches 1 mm / the smallest radius (None: never within the runs); model:
+    "exponential" (gap ~ e^(rate·t), rate in 1/s) or "power" (gap ~ t^rate) or "" when
+    there are too few points; samples: (step, gap) pairs measured."""
+
+    steps_to_mm: int | None
+    steps_to_radius: int | None
+    radius: float
+    model: str
+    rate: float
+    fit_r2: float
+    final_gap: float
+    samples: list[tuple[int, float]]
+
+    def as_dict(self) -> dict:
+        out = asdict(self)
+        out["samples"] = [list(s) for s in self.samples]
+        return out
+
+    def sentence(self, dt: float) -> str:
+        parts = []
+        if self.steps_to_mm == 0 and self.samples:
+            parts.append(f"is already {self.samples[0][1]:.3g} m in that step and {self.final_gap:.3g} m at the end")
+        elif self.steps_to_mm is not None:
+            parts.append(f"reaches 1 mm after {self.steps_to_mm} more steps")
+        if self.steps_to_radius is not None:
+            parts.append(f"one radius ({self.radius:.3g} m) after {self.steps_to_radius}")
+        if not parts:
+            parts.append(f"stays below 1 mm (at most {self.final_gap:.3g} m at the end)")
+        if self.model == "exponential" and self.rate > 0:
+            parts.append(f"it grows exponentially, ×e every {1 / self.rate:.3g} s (chaotic: collisions amplify "
+                         f"any difference)")
+        elif self.model == "power":
+            parts.append(f"it grows like t^{self.rate:.2f} (a smooth drift)")
+        return "the gap " + ", ".join(parts)
+
+
+def fit_growth(steps: np.ndarray, times: np.ndarray, gaps: np.ndarray, radius: float, first_step: int,
+               first_time: float, dt: float) -> Growth:
+    """Growth of (steps, times, gaps) samples after a divergence at ``first_step``."""
+    order = np.argsort(steps)
+    steps, times, gaps = steps[order], times[order], gaps[order]
+
+    def first_reaching(level: float) -> int | None:
+        at = np.nonzero(gaps >= level)[0]
+        return int(steps[at[0]] - first_step) if len(at) else None
+
+    use = (gaps > 0) & np.isfinite(gaps) & (gaps < radius)
+    model, rate, r2 = "", 0.0, 0.0
+    if use.sum() >= 3:
+        y = np.log(gaps[use])
+        elapsed = times[use] - first_time + dt
+        best = None
+        for name, x in (("exponential", elapsed), ("power", np.log(elapsed))):
+            if np.ptp(x) == 0:
+                continue
+            slope, intercept = np.polyfit(x, y, 1)
+            residual = y - (slope * x + intercept)
+            total = np.sum((y - y.mean()) ** 2)
+            score = 1 - np.sum(residual**2) / total if total > 0 else 1.0
+            if best is None or score > best[2] + 1e-9:
+                best = (name, float(slope), float(score))
+        if best is not None:
+            model, rate, r2 = best
+    samples = [(int(s), float(g)) for s, g in zip(steps, gaps, strict=True)]
+    return Growth(first_reaching(1e-3), first_reaching(radius), radius, model, rate, r2,
+                  float(gaps[-1]) if len(gaps) else 0.0, samples[:400])
+
+
+__all__ = ["Growth", "StateDifference", "check_stored_hash", "first_differing_frame", "fit_growth", "hermite",
+           "same_steps", "state_difference"]
+

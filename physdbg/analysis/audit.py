@@ -1,0 +1,312 @@
+"""Auditing one run: what went wrong, where, in words.
+
+:class:`Auditor` is an observer: it reads the engine's events (live, during ``physdbg
+run`` / ``record``) or the same events read back from a recording (``physdbg explain``),
+so the live summary and the audit of a file are the same code. Each check is one method
+of :class:`Auditor`; each problem found is a :class:`Finding`.
+
+Checks (kind: what it means):
+
+* ``tunnelling``: a sphere crossed a wall or another sphere with no contact (the exact
+  swept test run over the recorded states, :mod:`.tunnel`);
+* ``overlap``: spheres left overlapping after a step by more than the contact tolerance;
+* ``order``: contacts of a step resolved out of time order;
+* ``energy-gain``: a collision that left more kinetic energy than it found;
+* ``non-finite``: a position or velocity became NaN or infinite;
+* ``budget``: a step hit the event cap or another work budget and left work undone;
+* ``collapse``: a collision rate that blows up (inelastic collapse).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from ..events import KIND_PAIR, KIND_WALL, Contacts, EngineWarning, StepEnd
+from .tunnel import StepChecker
+
+FINDING_KINDS = ("tunnelling", "overlap", "order", "energy-gain", "non-finite", "budget", "collapse")
+EXAMPLES_PER_KIND = 5
+# a step with more contacts than this many per sphere involved (and at least
+# COLLAPSE_MIN_CONTACTS) is a collision rate that has blown up
+COLLAPSE_CONTACTS_PER_SPHERE = 10
+COLLAPSE_MIN_CONTACTS = 200
+ENERGY_GAIN_RELATIVE = 1e-9  # rounding in one impulse is ~1e-16 relative; this is a real gain
+
+
+@dataclass
+class Finding:
+    """One problem. step: the step it happened in, counted from 1 (step k ends at frame k);
+    particles: the spheres involved; message: one sentence; advice: what to change;
+    position: (3,) m where to put a marker (None when there is no one place);
+    evidence: the numbers behind the sentence."""
+
+    kind: str
+    step: int
+    particles: list[int]
+    message: str
+    advice: str = ""
+    position: list[float] | None = None
+    evidence: dict = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class AuditReport:
+    """What the audit of one run found. counts: findings per kind (all of them);
+    findings: the first EXAMPLES_PER_KIND of each kind, in step order; checked: the steps
+    audited; notes: what could not be checked and why."""
+
+    source: str
+    scene: str
+    steps: int
+    checked: int
+    counts: dict[str, int]
+    findings: list[Finding]
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def clean(self) -> bool:
+        return not self.counts
+
+    def as_dict(self) -> dict:
+        return {"source": self.source, "scene": self.scene, "steps": self.steps, "checked": self.checked,
+                "clean": self.clean, "counts": self.counts, "findings": [f.as_dict() for f in self.findings],
+                "notes": self.notes}
+
+    def lines(self) -> list[str]:
+        """One line per finding, with a count of the ones not shown."""
+        out = [f"step {f.step}: {f.message}" for f in self.findings]
+        shown = {}
+        for f in self.findings:
+            shown[f.kind] = shown.get(f.kind, 0) + 1
+        for kind, count in self.counts.items():
+            if count > shown.get(kind, 0):
+                out.append(f"... and {count - shown.get(kind, 0)} more {kind} findings")
+        return out
+
+
+class Auditor:
+    """Observer that audits a run step by step.
+
+    header: the run's RecordingHeader (constants, walls, settings, initial state);
+    on_finding: called with each Finding as it is made (e.g. to mark it in the viewer).
+    """
+
+    def __init__(self, header, on_finding: Callable[[Finding], None] | None = None):
+        self.header = header
+        self.settings = header.meta.get("settings", {})
+        self.names = list(header.walls.names)
+        self.radius = header.radius
+        self.mass = np.where(header.inverse_mass > 0, 1.0 / np.where(header.inverse_mass > 0,
+                                                                        header.inverse_mass, 1.0), np.inf)
+        self.checker = StepChecker(header.radius, header.inverse_mass, header.gravity_scale, header.walls,
+                                   self.settings)
+        self.tolerance = float(self.settings.get("contact_tolerance", 1e-9))
+        self.listeners = [on_finding] if on_finding else []
+        self.counts: dict[str, int] = {}
+        self.examples: list[Finding] = []
+        self.steps = 0
+        self.notes: list[str] = []
+        self._x, self._v = header.positions.copy(), header.velocities.copy()
+        self._contacts: Contacts | None = None
+        self._warnings: list[EngineWarning] = []
+        self._open_overlap: tuple | None = None  # an overlap carried over from the step before
+        self._saw_contacts = False
+
+    # ------------------------------------------------------------------ observer
+    def on_event(self, event) -> None:
+        if isinstance(event, Contacts):
+            self._contacts = event
+            self._saw_contacts = True
+        elif isinstance(event, EngineWarning):
+            self._warnings.append(event)
+        elif isinstance(event, StepEnd):
+            self._end_step(event)
+
+    def _end_step(self, end: StepEnd) -> None:
+        step = end.step + 1
+        contacts = self._contacts
+        self._check_warnings(step)
+        if np.isfinite(end.positions).all() and np.isfinite(end.velocities).all():
+            self._check_crossings(step, end, contacts)
+            self._check_overlap(step, end)
+            if contacts is not None and len(contacts):
+                self._check_order(step, end.dt, contacts)
+                self._check_energy(step, contacts)
+                self._check_collapse(step, contacts)
+        self._x, self._v = end.positions, end.velocities
+        self._contacts = None
+        self._warnings = []
+        self.steps = step
+
+    def _add(self, finding: Finding) -> None:
+        self.counts[finding.kind] = self.counts.get(finding.kind, 0) + 1
+        if sum(1 for f in self.examples if f.kind == finding.kind) < EXAMPLES_PER_KIND:
+            self.examples.append(finding)
+        for listener in self.listeners:
+            listener(finding)
+
+    # ------------------------------------------------------------------ checks
+    def _check_warnings(self, step: int) -> None:
+        from ..engine.state import BUDGETS
+
+        for w in self._warnings:
+            if w.code == "non-finite":
+                self._add(Finding("non-finite", step, [], w.message[0].upper() + w.message[1:] + ".",
+                                  "look at the contacts of this step; a restitution, mass or speed out of "
+                                  "proportion usually starts it", evidence={"warning": w.message}))
+            elif w.code in BUDGETS:
+                what, consequence = BUDGETS[w.code]
+                value = self.settings.get(w.code)
+                self._add(Finding("budget", step, [], f"the {w.code} budget ({value} {what}) was hit: {consequence}.",
+                                  f"raise it with --set {w.code}=N, or see whether the scene is in inelastic "
+                                  f"collapse (many contacts among few spheres)", evidence={"budget": w.code,
+                                                                                          "value": value}))
+
+    def _check_crossings(self, step: int, end: StepEnd, contacts: Contacts | None) -> None:
+        for c in self.checker.check(self._x, self._v, end.positions, end.dt, contacts):
+            detection = self.settings.get("detection", "swept")
+            how = {"discrete": "detection = discrete tests only where each step ends",
+                   "sampled": f"detection = sampled tests only {self.settings.get('samples', 4)} instants a step"}
+            budgets = [w.code for w in self._warnings if w.code != "non-finite" and w.code != "overlap"]
+            if budgets:
+                advice = (f"this step hit the {budgets[0]} budget, so contacts after it were not resolved: "
+                          f"raise it, or let slow contacts rest (rest_fraction)")
+            elif detection != "swept":
+                advice = "use detection = swept (exact time of impact), or a shorter dt"
+            elif self.settings.get("ordering") == "index" and c.kind == KIND_PAIR:
+                advice = ("ordering = index resolves the step's predicted contacts in index order, so a contact "
+                          "that an earlier one creates is missed: use ordering = time")
+            else:
+                advice = "a swept, time-ordered run should never do this: please report it with the recording"
+            speed = float(np.linalg.norm(self._v[c.a]))
+            if c.kind == KIND_WALL:
+                name = self.names[c.other]
+                message = (f"sphere {c.a} went through wall '{name}' with no contact "
+                           f"(it moved {speed * end.dt:.3g} m in the step at {speed:.3g} m/s"
+                           f"{'; ' + how[detection] if detection in how else ''})")
+                where = self.header.walls.normals[c.other] * self.header.walls.offsets[c.other]
+                # the point where the centre's straight path met the plane
+                x0, x1 = self._x[c.a], end.positions[c.a]
+                n, d = self.header.walls.normals[c.other], self.header.walls.offsets[c.other]
+                h0, h1 = float(n @ x0 - d), float(n @ x1 - d)
+                if h0 != h1:
+                    where = x0 + (x1 - x0) * (h0 / (h0 - h1))
+                self._add(Finding("tunnelling", step, [c.a], message, advice, [float(q) for q in where],
+                                  {"wall": name, "speed": speed, "dt": end.dt, "detection": detection}))
+            else:
+                message = (f"spheres {c.a} and {c.other} passed into each other with no contact at "
+                           f"{c.time / end.dt:.3f}·dt, {c.depth:.3g} m deep"
+                           f"{' (' + how[detection] + ')' if detection in how else ''}")
+                where = 0.5 * (end.positions[c.a] + end.positions[c.other])
+                self._add(Finding("tunnelling", step, [c.a, c.other], message, advice, [float(q) for q in where],
+                                  {"time_in_step": c.time, "depth": c.depth, "detection": detection}))
+
+    def _check_overlap(self, step: int, end: StepEnd) -> None:
+        if not end.max_overlap > max(self.tolerance, 0.0):
+            self._open_overlap = None
+            return
+        if self._open_overlap is not None:  # the same overlap going on: counted where it began
+            return
+        self._open_overlap = (step,)
+        self._add(Finding("overlap", step, [], f"spheres overlap by {end.max_overlap:.3g} m after the step (the "
+                                               f"contact tolerance is {self.tolerance:g} m)",
+                          "overlaps are left by discrete or sampled detection, a budget that stopped a step, or "
+                          "an impossible start; swept detection leaves none", evidence={"depth": end.max_overlap}))
+
+    def _check_order(self, step: int, dt: float, c: Contacts) -> None:
+        t = c.time_in_step
+        late = np.nonzero(t[1:] < t[:-1] - 1e-12 * dt)[0]
+        if not len(late):
+            return
+        i = int(late[0])
+        first, second = self._who(c, i), self._who(c, i + 1)
+        ordering = self.settings.get("ordering", "time")
+        self._add(Finding("order", step, [int(c.a[i]), int(c.a[i + 1])],
+                          f"contacts resolved out of time order: {first} (t = {t[i] / dt:.3f}·dt) before "
+                          f"{second} (t = {t[i + 1] / dt:.3f}·dt)"
+                          + (" because ordering = index" if ordering == "index" else ""),
+                          "use ordering = time: a contact is resolved before the later ones it changes",
+                          evidence={"first": [i, float(t[i])], "second": [i + 1, float(t[i + 1])],
+                                    "ordering": ordering}))
+
+    def _who(self, c: Contacts, i: int) -> str:
+        if c.kind[i] == KIND_PAIR:
+            return f"{int(c.a[i])}–{int(c.other[i])}"
+        return f"{int(c.a[i])}–wall '{self.names[int(c.other[i])]}'"
+
+    def _check_energy(self, step: int, c: Contacts) -> None:
+        ma = self.mass[c.a]
+        finite_a = np.isfinite(ma)
+        before = np.where(finite_a, 0.5 * ma * np.einsum("ij,ij->i", c.velocity_a_before, c.velocity_a_before), 0.0)
+        after = np.where(finite_a, 0.5 * ma * np.einsum("ij,ij->i", c.velocity_a_after, c.velocity_a_after), 0.0)
+        pair = c.kind == KIND_PAIR
+        if pair.any():
+            mb = self.mass[c.other[pair]]
+            finite_b = np.isfinite(mb)
+            vb0, vb1 = c.velocity_b_before[pair], c.velocity_b_after[pair]
+            before[pair] += np.where(finite_b, 0.5 * mb * np.einsum("ij,ij->i", vb0, vb0), 0.0)
+            after[pair] += np.where(finite_b, 0.5 * mb * np.einsum("ij,ij->i", vb1, vb1), 0.0)
+        gain = after - before
+        bad = np.nonzero(gain > ENERGY_GAIN_RELATIVE * np.maximum(before, 1e-300))[0]
+        if not len(bad):
+            return
+        i = int(bad[0])
+        self._add(Finding("energy-gain", step, [int(c.a[i])] + ([int(c.other[i])] if c.kind[i] == KIND_PAIR else []),
+                          f"contact {self._who(c, i)} left {gain[i]:.3g} J more kinetic energy than it found "
+                          f"({before[i]:.3g} J before, e = {c.restitution[i]:.3g})",
+                          "a restitution above 1, or an impulse applied twice", list(map(float, c.point[i])),
+                          {"before": float(before[i]), "after": float(after[i]), "contact": i}))
+
+    def _check_collapse(self, step: int, c: Contacts) -> None:
+        involved = np.unique(np.concatenate([c.a, c.other[c.kind == KIND_PAIR]]))
+        if len(c) < COLLAPSE_MIN_CONTACTS or len(c) < COLLAPSE_CONTACTS_PER_SPHERE * len(involved):
+            return
+        rest = self.settings.get("rest_fraction")
+        self._add(Finding("collapse", step, involved[:10].tolist(),
+                          f"{len(c)} contacts among {len(involved)} spheres in one step: the collision rate has "
+                          f"blown up (inelastic collapse: with restitution below 1 the gaps between a few spheres "
+                          f"shrink geometrically and they collide ever more often)",
+                          f"let slow contacts rest (raise rest_fraction, now {rest}), lower the restitution, "
+                          f"or use a shorter dt", evidence={"contacts": len(c), "spheres": len(involved)}))
+
+    # ------------------------------------------------------------------ result
+    def report(self, source: str, total_steps: int | None = None) -> AuditReport:
+        notes = list(self.notes)
+        if not self._saw_contacts and self.steps:
+            notes.append("no contacts recorded (detail state): crossings are judged from states alone, and "
+                         "order, energy and collapse checks need --detail contacts")
+        examples = sorted(self.examples, key=lambda f: (f.step, FINDING_KINDS.index(f.kind)))
+        return AuditReport(source, self.header.name, total_steps if total_steps is not None else self.steps,
+                           self.steps, dict(self.counts), examples, notes)
+
+
+def explain(recording, on_step: Callable[[int, int], None] | None = None) -> AuditReport:
+    """Audit one recording (a path or an open Recording): every check, every step."""
+    from ..record import open_recording
+    from ..record.reader import Recording
+
+    rec = recording if isinstance(recording, Recording) else open_recording(recording)
+    try:
+        auditor = Auditor(rec.header)
+        detail = "contacts" if rec.detail != "state" else "state"
+        for events in rec.iter_step_events(detail=detail):
+            for event in events:
+                auditor.on_event(event)
+            if on_step is not None:
+                on_step(auditor.steps, rec.steps)
+        report = auditor.report(str(rec.path), rec.steps)
+        if rec.truncated:
+            report.notes.append(f"the file is truncated (its writer was killed): steps 1..{rec.steps} audited")
+        return report
+    finally:
+        if rec is not recording:
+            rec.close()
+
+
+__all__ = ["AuditReport", "Auditor", "Finding", "FINDING_KINDS", "explain"]

@@ -1,0 +1,661 @@
+"""``physdbg diff A B``: where two recordings part ways, and why, in plain words.
+
+Steps: (1) settings, scene and engine differences, each named with both values and
+whether it can matter; (2) the first differing frame (hashes when the runs took the same
+steps, states aligned by simulated time otherwise: see :mod:`.align`); (3) in that step,
+the first diverging event (contact k: which pair or wall, when, in each run), which
+particles and fields differ and by how much; (4) how the gap grows afterwards; (5) the
+causes, each with its evidence.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from ..events import KIND_PAIR
+from . import align
+from .tunnel import StepChecker
+
+DEFAULT_TOLERANCE = 1e-9  # atol (m, m/s) and rtol when a setting that matters differs
+GROWTH_DENSE_STEPS = 64  # every frame this many steps after the divergence, then key frames
+GROWTH_MAX_SAMPLES = 200
+
+# settings that cannot change a run, and why
+CANNOT_MATTER = {
+    "broad_phase": "every broad phase finds the same candidate pairs, so runs are identical by design",
+    "name": "a name", "description": "a description",
+}
+BUDGET_SETTINGS = ("max_events_per_step", "max_pairs_per_step", "max_swept_tests_per_step",
+                   "max_resting_work_per_step", "max_memory", "max_particle_steps")
+METHOD_SETTINGS = ("integrator", "dt", "drag", "gravity", "detection", "samples", "steps", "duration")
+
+
+@dataclass
+class SettingDifference:
+    """One setting or scene field that differs: name (dotted for scene fields), a, b
+    (the values), matters (False when it cannot change the run), note (why not)."""
+
+    name: str
+    a: object
+    b: object
+    matters: bool = True
+    note: str = ""
+
+
+@dataclass
+class Cause:
+    """One reason the runs part. kind: settings | engine-version | engine-limits |
+    non-finite | tunnelling | collision-order | missed-contact | contact-outcome |
+    method-drift | outside-change | length; text: the sentence; evidence: its numbers."""
+
+    kind: str
+    text: str
+    evidence: dict = field(default_factory=dict)
+
+
+@dataclass
+class Divergence:
+    """The first step where the runs differ beyond the tolerance. step / step_b: its
+    number in A / B (counted from 1; equal when aligned by step); time: s at its end;
+    state: StateDifference at its end; first_event: the first differing contact of the
+    step (index, and each run's contact as a dict or None), or None when none differs."""
+
+    step: int
+    step_b: int
+    time: float
+    state: align.StateDifference
+    first_event: dict | None
+
+
+@dataclass
+class DiffReport:
+    """What ``diff`` found. exit_code: 0 equivalent within tolerance, 1 different."""
+
+    a: str
+    b: str
+    scene_a: str
+    scene_b: str
+    steps_a: int
+    steps_b: int
+    aligned_by: str
+    alignment_note: str
+    atol: float
+    rtol: float
+    compared: int
+    settings: list[SettingDifference]
+    divergence: Divergence | None
+    growth: align.Growth | None
+    causes: list[Cause]
+    headline: str
+
+    same_length: bool = True
+
+    @property
+    def equivalent(self) -> bool:
+        return self.divergence is None and self.same_length
+
+    @property
+    def exit_code(self) -> int:
+        return 0 if self.equivalent else 1
+
+    def as_dict(self) -> dict:
+        out = asdict(self)
+        out["equivalent"] = self.equivalent
+        out["exit_code"] = self.exit_code
+        if self.growth is not None:
+            out["growth"] = self.growth.as_dict()
+        return out
+
+
+# ----------------------------------------------------------------------------- settings
+def _flatten(value, prefix: str = "") -> dict:
+    if isinstance(value, dict):
+        out = {}
+        for key, item in value.items():
+            out.update(_flatten(item, f"{prefix}.{key}" if prefix else str(key)))
+        return out
+    if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+        out = {}
+        for i, item in enumerate(value):
+            out.update(_flatten(item, f"{prefix}.{i}"))
+        return out
+    return {prefix: value}
+
+
+def compare_settings(meta_a: dict, meta_b: dict, warned_a: set[str], warned_b: set[str]) -> list[SettingDifference]:
+    """Scene fields (after overrides), engine settings as used, and versions that differ.
+
+    warned_a / warned_b: the budget names each run hit (a budget that neither hit
+    cannot have mattered)."""
+    table_a = _flatten(meta_a["scene"]["table"])
+    table_b = _flatten(meta_b["scene"]["table"])
+    used_a = {**table_a, **meta_a.get("settings", {}), "dt": meta_a.get("dt")}
+    used_b = {**table_b, **meta_b.get("settings", {}), "dt": meta_b.get("dt")}
+    out = []
+    for name in sorted(set(used_a) | set(used_b), key=lambda n: (n.count("."), n)):
+        a, b = used_a.get(name), used_b.get(name)
+        if _same(a, b):
+            continue
+        if name in table_a or name in table_b:
+            # a field given in one file and defaulted in the other: compare what was used
+            base = name.split(".")[0]
+            if base in meta_a.get("settings", {}) and name == base and _same(meta_a["settings"].get(base),
+                                                                               meta_b["settings"].get(base)):
+                continue
+        matters, note = True, ""
+        if name in CANNOT_MATTER:
+            matters, note = False, CANNOT_MATTER[name]
+        elif name in BUDGET_SETTINGS and name not in warned_a | warned_b:
+            matters, note = False, "a work limit that neither run reached"
+        elif name == "samples" and "sampled" not in (used_a.get("detection"), used_b.get("detection")):
+            matters, note = False, "used only by detection = sampled"
+        out.append(SettingDifference(name, a, b, matters, note))
+    for name in ("physdbg_version", "numpy_version"):
+        if meta_a.get(name) != meta_b.get(name):
+            out.append(SettingDifference(name, meta_a.get(name), meta_b.get(name), True,
+                                         "recorded by different builds: results may differ in the last bits"))
+    return out
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)) and not isinstance(a, bool):
+        return float(a) == float(b) or (a != a and b != b)
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    return a == b
+
+
+# ----------------------------------------------------------------------------- diff
+def diff(a, b, atol: float | None = None, rtol: float | None = None,
+         on_status: Callable[[str], None] | None = None) -> DiffReport:
+    """Compare two recordings (paths or open Recordings); see the module doc.
+
+    atol, rtol: a particle differs when |Δx| > atol + rtol·|x| (or the same for v);
+    default exact (0, 0) when no setting that matters differs, else 1e-9 each."""
+    from ..record import open_recording
+    from ..record.reader import Recording
+
+    ra = a if isinstance(a, Recording) else open_recording(a)
+    rb = b if isinstance(b, Recording) else open_recording(b)
+    try:
+        return _Differ(ra, rb, atol, rtol).run()
+    finally:
+        for rec, given in ((ra, a), (rb, b)):
+            if rec is not given:
+                rec.close()
+
+
+class _Differ:
+    def __init__(self, ra, rb, atol, rtol):
+        self.ra, self.rb = ra, rb
+        self.ta, self.tb = ra.frame_table(), rb.frame_table()
+        self.warn_a, self.warn_b = _warnings(ra), _warnings(rb)
+        budgets_a = {w["code"] for ws in self.warn_a.values() for w in ws}
+        budgets_b = {w["code"] for ws in self.warn_b.values() for w in ws}
+        self.settings = compare_settings(ra.meta, rb.meta, budgets_a, budgets_b)
+        matters = any(s.matters for s in self.settings)
+        default = DEFAULT_TOLERANCE if matters else 0.0
+        self.atol = default if atol is None else float(atol)
+        self.rtol = default if rtol is None else float(rtol)
+        self.by_step = align.same_steps(self.ta.dt, self.tb.dt)
+        self.names_a = list(ra.header.walls.names)
+        movable = ra.header.inverse_mass > 0
+        self.radius = float(ra.header.radius[movable].min()) if movable.any() else float(ra.header.radius.min())
+
+    # ------------------------------------------------------------------ driver
+    def run(self) -> DiffReport:
+        ra, rb = self.ra, self.rb
+        if ra.header.count != rb.header.count:
+            return self._report(None, None, [Cause("settings", f"the runs have different numbers of spheres "
+                                                               f"({ra.header.count} and {rb.header.count}); "
+                                                               f"their states cannot be compared")], 0)
+        if self.by_step:
+            found, compared = self._first_by_step()
+        else:
+            found, compared = self._first_by_time()
+        if found is None:
+            causes = self._setting_causes()
+            if not self._same_length():
+                shorter = min(ra.steps, rb.steps)
+                causes.append(Cause("length", f"the runs agree for the {shorter} steps both have; run " if self.by_step
+                                    else f"the runs agree up to t = {min(self.ta.time[-1], self.tb.time[-1]):.6g} s; run "
+                                              f"{'A' if ra.steps > rb.steps else 'B'} goes on for "
+                                              f"{abs(ra.steps - rb.steps)} more",
+                                    {"steps_a": ra.steps, "steps_b": rb.steps}))
+            return self._report(None, None, causes, compared)
+        fa, fb, xa, va, xb, vb, prev_a, prev_b = found
+        state = align.state_difference(xa, va, xb, vb, self.atol, self.rtol)
+        event, contacts_a, contacts_b = self._first_event(fa, fb)
+        divergence = Divergence(fa, fb, float(self.ta.time[fa]), state, event)
+        growth = self._growth(fa, fb)
+        causes = self._causes(divergence, prev_a, prev_b, contacts_a, contacts_b, growth)
+        return self._report(divergence, growth, causes, compared)
+
+    def _report(self, divergence, growth, causes, compared) -> DiffReport:
+        ra, rb = self.ra, self.rb
+        note = ("frame k of A against frame k of B (the same steps); stored hashes compared first"
+                if self.by_step else
+                "by simulated time: each frame of the run with longer steps against the other run at that time "
+                "(its own frame when one falls there, else Hermite interpolation between its two frames)")
+        if divergence is None:
+            if ra.header.count != rb.header.count:
+                headline = "different: the runs cannot be compared"
+            elif not self._same_length():
+                headline = (f"different lengths: they agree for the {min(ra.steps, rb.steps)} steps both have, then "
+                            f"one run stops" if self.by_step else
+                            f"different lengths: they agree up to t = {min(self.ta.time[-1], self.tb.time[-1]):.6g} s, "
+                            f"then one run stops")
+            else:
+                exact = self.atol == 0 and self.rtol == 0
+                headline = ("equivalent: every state is bit-identical" if exact and self.by_step else
+                            f"equivalent within atol={self.atol:g}, rtol={self.rtol:g}")
+        else:
+            headline = f"the runs part in step {divergence.step}" + (
+                f" (step {divergence.step_b} of B)" if divergence.step_b != divergence.step else "") + \
+                (": " + re.sub(r"^Step \d+: ", "", _main(causes).text) if causes else "")
+        return DiffReport(str(ra.path), str(rb.path), ra.header.name, rb.header.name, ra.steps, rb.steps,
+                          "step" if self.by_step else "time", note, self.atol, self.rtol, compared,
+                          self.settings, divergence, growth, causes, headline, self._same_length())
+
+    def _same_length(self) -> bool:
+        if self.by_step:
+            return self.ra.steps == self.rb.steps
+        end_a, end_b = float(self.ta.time[-1]), float(self.tb.time[-1])
+        return abs(end_a - end_b) <= 1e-9 * max(float(self.ta.dt[-1]), float(self.tb.dt[-1]), 1e-300)
+
+    # ------------------------------------------------------------------ finding the step
+    def _first_by_step(self):
+        ra, rb = self.ra, self.rb
+        start = align.first_differing_frame(self.ta.hashes, self.tb.hashes)
+        common = min(ra.frames, rb.frames)
+        if start is None:
+            return None, common
+        exact = self.atol == 0 and self.rtol == 0
+        previous = None
+        first = max(start - 1, 0)
+        for sa, sb in zip(ra.states(first, common), rb.states(first, common), strict=True):
+            if sa.frame < start:
+                previous = (sa, sb)
+                continue
+            if sa.frame == start:
+                align.check_stored_hash(ra, sa)
+                align.check_stored_hash(rb, sb)
+            d = align.state_difference(sa.positions, sa.velocities, sb.positions, sb.velocities, self.atol,
+                                       self.rtol)
+            if d.count:
+                prev_a, prev_b = previous if previous else (None, None)
+                return (sa.frame, sb.frame, sa.positions, sa.velocities, sb.positions, sb.velocities,
+                        prev_a, prev_b), sa.frame + 1
+            if exact:  # hashes differ but the states are equal: the frame index lies
+                align.check_stored_hash(ra, sa)
+                align.check_stored_hash(rb, sb)
+            previous = (sa, sb)
+        return None, common
+
+    def _first_by_time(self):
+        """Align by simulated time (the coarser run's frames against the finer run)."""
+        ra, rb = self.ra, self.rb
+        swap = np.median(self.tb.dt[1:]) > np.median(self.ta.dt[1:]) if rb.frames > 1 and ra.frames > 1 else False
+        coarse, fine = (rb, ra) if swap else (ra, rb)
+        fine_states = fine.states()
+        before = next(fine_states)
+        after = next(fine_states, None)
+        compared = 0
+        for sc in coarse.states():
+            t = sc.time
+            while after is not None and after.time < t - 1e-9 * max(after.dt, 1e-300):
+                before, after = after, next(fine_states, None)
+            if after is None and before.time < t - 1e-9 * max(before.dt, 1e-300):
+                break  # past the end of the finer run
+            if after is not None and abs(after.time - t) <= 1e-9 * max(after.dt, 1e-300):
+                xf, vf, match = after.positions, after.velocities, after
+            elif abs(before.time - t) <= 1e-9 * max(before.dt, sc.dt, 1e-300):
+                xf, vf, match = before.positions, before.velocities, before
+            else:
+                xf, vf = align.hermite(t, before, after)
+                match = after
+            compared += 1
+            xa, va, xb, vb = (xf, vf, sc.positions, sc.velocities) if swap else (sc.positions, sc.velocities, xf, vf)
+            d = align.state_difference(xa, va, xb, vb, self.atol, self.rtol)
+            if d.count:
+                fa, fb = (match.frame, sc.frame) if swap else (sc.frame, match.frame)
+                return (fa, fb, xa, va, xb, vb, None, None), compared
+        return None, compared
+
+    # ------------------------------------------------------------------ the step itself
+    def _step_contacts(self, rec, frame: int, since_time: float | None = None):
+        """Contacts with absolute times: of step ``frame``, or of every step after
+        ``since_time`` up to it (when aligned by time). None when not recorded."""
+        if rec.detail == "state" or frame < 1:
+            return None
+        table = rec.frame_table()
+        first = frame
+        if since_time is not None:
+            while first > 1 and table.time[first - 1] > since_time + 1e-12:
+                first -= 1
+        rows = []
+        for k in range(first, frame + 1):
+            c = rec.contacts(k)
+            base = float(table.time[k - 1])
+            for i in range(len(c)):
+                rows.append({"step": k, "index": i, "time": base + float(c.time_in_step[i]),
+                             "time_in_step": float(c.time_in_step[i]), "dt": float(table.dt[k]),
+                             "kind": int(c.kind[i]), "a": int(c.a[i]), "other": int(c.other[i]),
+                             "resting": bool(c.resting[i]), "impulse": float(c.impulse[i]),
+                             "restitution": float(c.restitution[i]),
+                             "velocity_a_after": [float(q) for q in c.velocity_a_after[i]]})
+        return rows
+
+    def _first_event(self, fa: int, fb: int):
+        since = None
+        if not self.by_step:
+            since = min(float(self.ta.time[fa - 1]) if fa > 0 else 0.0, float(self.tb.time[fb - 1]) if fb > 0 else 0.0)
+        ca = self._step_contacts(self.ra, fa, since)
+        cb = self._step_contacts(self.rb, fb, since)
+        if ca is None or cb is None:
+            return None, ca, cb
+        tol_t = 1e-9 * max(float(self.ta.dt[fa]) if fa else 0.0, 1e-300) if (self.atol or self.rtol) else 0.0
+        for i in range(max(len(ca), len(cb))):
+            x = ca[i] if i < len(ca) else None
+            y = cb[i] if i < len(cb) else None
+            if x is None or y is None or _key(x) != _key(y) or abs(x["time"] - y["time"]) > tol_t \
+                    or not _close(x["impulse"], y["impulse"], self.atol, self.rtol) \
+                    or x["resting"] != y["resting"]:
+                return {"index": i, "a": x, "b": y}, ca, cb
+        return None, ca, cb
+
+    # ------------------------------------------------------------------ growth
+    def _growth(self, fa: int, fb: int) -> align.Growth | None:
+        if not self.by_step:
+            return self._growth_by_time(fa)
+        ra, rb = self.ra, self.rb
+        common = min(ra.frames, rb.frames)
+        frames = list(range(fa, min(fa + GROWTH_DENSE_STEPS, common)))
+        key = ((fa + GROWTH_DENSE_STEPS) // 64 + 1) * 64
+        later = list(range(key, common, 64))
+        if len(later) > GROWTH_MAX_SAMPLES:
+            later = [later[int(i)] for i in np.linspace(0, len(later) - 1, GROWTH_MAX_SAMPLES)]
+        gaps = {}
+        for sa, sb in zip(ra.states(frames[0], frames[-1] + 1), rb.states(frames[0], frames[-1] + 1), strict=True):
+            gaps[sa.frame] = float(np.nanmax(np.linalg.norm(sa.positions - sb.positions, axis=1)))
+        for k in later:
+            sa, sb = ra.state(k), rb.state(k)
+            gaps[k] = float(np.nanmax(np.linalg.norm(sa.positions - sb.positions, axis=1)))
+        self._refine(gaps, 1e-3)
+        self._refine(gaps, self.radius)
+        steps = np.array(sorted(gaps))
+        values = np.array([gaps[k] for k in steps])
+        return align.fit_growth(steps, self.ta.time[steps], values, self.radius, fa, float(self.ta.time[fa]),
+                                float(self.ta.dt[fa]))
+
+    def _refine(self, gaps: dict, level: float) -> None:
+        """Fill in every frame between the last sample below ``level`` and the first above."""
+        steps = sorted(gaps)
+        above = [k for k in steps if gaps[k] >= level]
+        if not above:
+            return
+        first = above[0]
+        below = [k for k in steps if k < first]
+        if not below or first - below[-1] <= 1:
+            return
+        for sa, sb in zip(self.ra.states(below[-1] + 1, first), self.rb.states(below[-1] + 1, first), strict=True):
+            gaps[sa.frame] = float(np.nanmax(np.linalg.norm(sa.positions - sb.positions, axis=1)))
+
+    def _growth_by_time(self, fa: int) -> align.Growth | None:
+        """Gaps at the frames of A (aligned by time, as for the divergence)."""
+        ra, rb = self.ra, self.rb
+        fine = rb.states()
+        before = next(fine)
+        after = next(fine, None)
+        steps, times, gaps = [], [], []
+        for sa in ra.states(fa):
+            t = sa.time
+            while after is not None and after.time < t - 1e-9 * max(after.dt, 1e-300):
+                before, after = after, next(fine, None)
+            if after is None:
+                break
+            if abs(after.time - t) <= 1e-9 * max(after.dt, 1e-300):
+                xb = after.positions
+            else:
+                xb, _ = align.hermite(t, before, after)
+            steps.append(sa.frame)
+            times.append(t)
+            gaps.append(float(np.nanmax(np.linalg.norm(sa.positions - xb, axis=1))))
+        if not steps:
+            return None
+        return align.fit_growth(np.array(steps), np.array(times), np.array(gaps), self.radius, fa,
+                                float(self.ta.time[fa]), float(self.ta.dt[fa]))
+
+    # ------------------------------------------------------------------ causes
+    def _setting_causes(self) -> list[Cause]:
+        out = []
+        matters = [s for s in self.settings if s.matters and s.name not in ("physdbg_version", "numpy_version")]
+        if matters:
+            listed = "; ".join(f"{s.name}: {_show(s.a)} in A, {_show(s.b)} in B" for s in matters[:6])
+            more = f" (and {len(matters) - 6} more)" if len(matters) > 6 else ""
+            out.append(Cause("settings", f"different settings: {listed}{more}",
+                             {"settings": [s.name for s in matters]}))
+        versions = [s for s in self.settings if s.name in ("physdbg_version", "numpy_version")]
+        if versions:
+            out.append(Cause("engine-version", "recorded by different engine builds: " + "; ".join(
+                f"{s.name} {s.a} in A, {s.b} in B" for s in versions), {"versions": [asdict(s) for s in versions]}))
+        return out
+
+    def _causes(self, div: Divergence, prev_a, prev_b, ca, cb, growth) -> list[Cause]:
+        causes = self._setting_causes()
+        step, step_b = div.step, div.step_b
+        settings_a, settings_b = self.ra.meta["settings"], self.rb.meta["settings"]
+        # engine limits and NaN, in either run, in the diverging step
+        for label, warns, k in (("A", self.warn_a, step), ("B", self.warn_b, step_b)):
+            for w in warns.get(k, []):
+                if w["code"] == "non-finite":
+                    causes.append(Cause("non-finite", f"in run {label}, step {k}: {w['message']}", w))
+                elif w["code"].startswith("max_"):
+                    other = self.warn_b if label == "A" else self.warn_a
+                    other_k = step_b if label == "A" else step
+                    if not any(x["code"] == w["code"] for x in other.get(other_k, [])):
+                        causes.append(Cause("engine-limits", f"run {label} hit the {w['code']} budget in step {k} "
+                                            f"and left the rest of the step unresolved; run "
+                                            f"{'B' if label == 'A' else 'A'} did not ({w['message']})", w))
+        # tunnelling: the exact swept test over each run's recorded step
+        crossed = {}
+        if self.by_step and prev_a is not None:
+            for label, rec, prev, contacts_rec in (("A", self.ra, prev_a, self.ra), ("B", self.rb, prev_b, self.rb)):
+                contacts = contacts_rec.contacts(step) if rec.detail != "state" else None
+                after = rec.state(step)
+                checker = StepChecker(rec.header.radius, rec.header.inverse_mass, rec.header.gravity_scale,
+                                      rec.header.walls, rec.meta["settings"])
+                crossed[label] = checker.check(prev.positions, prev.velocities, after.positions, after.dt, contacts)
+            for label, other in (("A", "B"), ("B", "A")):
+                theirs = {(c.kind, c.a, c.other) for c in crossed[other]}
+                for c in crossed[label]:
+                    if (c.kind, c.a, c.other) in theirs:
+                        continue
+                    what = (f"went through wall '{self.names_a[c.other]}'" if c.kind != KIND_PAIR
+                            else f"passed into sphere {c.other}")
+                    rec = self.ra if label == "A" else self.rb
+                    run_settings = rec.meta["settings"]
+                    if run_settings.get("detection") != "swept":
+                        reason = f"detection = {run_settings.get('detection')}"
+                    elif run_settings.get("ordering") == "index":
+                        reason = "ordering = index: a contact that an earlier one creates is not looked for"
+                    else:
+                        reason = "a budget or the resting rule"
+                    made = [x for x in ((cb if label == "A" else ca) or []) if _touches(x, c)]
+                    other_did = (f"run {other} resolved a contact there at {made[0]['time_in_step'] / made[0]['dt']:.3f}·dt"
+                                 if made else f"run {other} did not cross")
+                    causes.append(Cause("tunnelling", f"step {step}: in run {label} sphere {c.a} {what} "
+                                                      f"with no contact ({reason}); {other_did}",
+                                        {"run": label, "particle": c.a, "other": c.other, "kind": c.kind}))
+        event = div.first_event
+        identical_start = (self.by_step and self.atol == 0 and self.rtol == 0 and prev_a is not None
+                           and not any(s.matters for s in self.settings))
+        if identical_start and not any(c.kind in ("engine-limits", "non-finite") for c in causes):
+            who = div.state.particles[0] if div.state.particles else {}
+            seen = ""
+            if event is not None and event["a"] is not None and event["b"] is not None:
+                seen = (f"; the first sign is contact #{event['index']} of the step "
+                        f"({self._describe(event['a'], times=False)}), whose time differs by "
+                        f"{abs(event['a']['time'] - event['b']['time']):.2g} s")
+            causes.append(Cause("outside-change",
+                                f"both runs were bit-identical at the start of step {step} (frame {step - 1}), with "
+                                f"the same settings and engine, yet sphere {who.get('particle')} differs by "
+                                f"{who.get('position', 0):.3g} m after it{seen}. The engine is deterministic, so the "
+                                f"state was changed outside its rules (a script that moved a sphere between steps), "
+                                f"or the two runs did not come from the same engine build", {"particle": who}))
+            return causes
+        if event is not None:
+            x, y = event["a"], event["b"]
+            keys_a = sorted(_key(r) for r in ca)
+            keys_b = sorted(_key(r) for r in cb)
+            orders_differ = settings_a.get("ordering") != settings_b.get("ordering")
+            if orders_differ and (x is None or y is None or _key(x) != _key(y)):
+                causes.insert(1 if causes and causes[0].kind == "settings" else 0, Cause(
+                    "collision-order",
+                    f"Step {step}: run A (ordering = {settings_a.get('ordering')}) resolved "
+                    f"{self._sequence(ca, event['index'])}; run B (ordering = {settings_b.get('ordering')}) resolved "
+                    f"{self._sequence(cb, event['index'])}.{_order_note(settings_a, settings_b)}"
+                    + self._consequence(div), {"a": x, "b": y, "index": event["index"],
+                                               "ordering": [settings_a.get("ordering"), settings_b.get("ordering")]}))
+            elif x is not None and y is not None and keys_a == keys_b and _key(x) != _key(y):
+                first_a, first_b = self._describe(x), self._describe(y)
+                later_a = next((r for r in ca if _key(r) == _key(y)), None)
+                why_a = _why_order(settings_a.get("ordering"))
+                why_b = _why_order(settings_b.get("ordering"))
+                text = (f"Step {step}: run A resolved {first_a} before {self._describe(later_a) if later_a else '…'}"
+                        f"{why_a}; run B resolved {first_b} first{why_b}.")
+                causes.append(Cause("collision-order", text + self._consequence(div),
+                                    {"a": x, "b": y, "ordering": [settings_a.get("ordering"),
+                                                                  settings_b.get("ordering")]}))
+            elif x is None or y is None or _key(x) != _key(y) or x["resting"] != y["resting"]:
+                if not any(c.kind == "tunnelling" for c in causes):
+                    causes.append(self._missed(step, x, y, ca, cb, div))
+            else:
+                dt = x["dt"]
+                if abs(x["time"] - y["time"]) > 0:
+                    text = (f"Step {step}: the same contact {self._describe(x, times=False)} happened at "
+                            f"{x['time_in_step'] / dt:.6f}·dt in A and {y['time_in_step'] / y['dt']:.6f}·dt in B "
+                            f"(a difference of {abs(x['time'] - y['time']):.2g} s)")
+                else:
+                    text = (f"Step {step}: the same contact {self._describe(x, times=False)} at the same time had "
+                            f"another outcome: impulse {x['impulse']:.6g} N·s with e = {x['restitution']:.3g} in A, "
+                            f"{y['impulse']:.6g} N·s with e = {y['restitution']:.3g} in B")
+                causes.append(Cause("contact-outcome", text + "." + self._consequence(div), {"a": x, "b": y}))
+        elif not any(c.kind in ("tunnelling", "engine-limits", "non-finite") for c in causes):
+            method = [s.name for s in self.settings if s.matters and s.name in METHOD_SETTINGS]
+            if method or not self.by_step:
+                causes.append(Cause("method-drift", f"no event differs up to step {step}: the states drift apart "
+                                                    f"smoothly ({', '.join(method) or 'dt'} differ{'s' if len(method) == 1 else ''})"
+                                                    f"; {growth.sentence(float(self.ta.dt[step])) if growth else ''}",
+                                    {"settings": method}))
+            elif self.by_step and not [c for c in causes if c.kind == "settings"]:
+                who = div.state.particles[0] if div.state.particles else {}
+                causes.append(Cause("outside-change",
+                                    f"both runs were bit-identical at the start of step {step}, with the same settings "
+                                    f"and engine, and no event differs, yet sphere {who.get('particle')} differs by "
+                                    f"{who.get('position', 0):.3g} m after it: the engine is deterministic, so the state "
+                                    f"was changed outside its rules (a script that moved a sphere between steps), or the "
+                                    f"two runs did not come from the same engine build", {"particle": who}))
+            else:
+                causes.append(Cause("method-drift", f"no event differs up to step {step}; the states drift apart "
+                                                    f"because of the settings above", {}))
+        return causes
+
+    def _missed(self, step, x, y, ca, cb, div) -> Cause:
+        present, missing, label, other = (x, y, "A", "B") if x is not None else (y, x, "B", "A")
+        if present is not None and missing is not None and _key(present) == _key(missing):
+            rest = "A" if x["resting"] else "B"
+            text = (f"Step {step}: {self._describe(x, times=False)} came to rest in run {rest} (the resting rule: "
+                    f"a pressed, slow contact is held instead of bounced) and bounced in the other")
+            return Cause("missed-contact", text + "." + self._consequence(div), {"a": x, "b": y})
+        in_other = [r for r in (cb if label == "A" else ca) if _key(r) == _key(present)]
+        text = (f"Step {step}: run {label} resolved {self._describe(present)} (contact {present['index']} of the "
+                f"step); run {other} " + (f"resolved it later, as contact {in_other[0]['index']}"
+                                          if in_other else "had no such contact"))
+        if missing is not None and not in_other:
+            text += f", and resolved {self._describe(missing)} instead"
+        return Cause("missed-contact", text + "." + self._consequence(div), {"a": x, "b": y})
+
+    def _sequence(self, rows: list[dict], index: int) -> str:
+        """The step's contacts in the order resolved, up to two past ``index``."""
+        shown = [self._describe(r) for r in rows[:index + 2]]
+        if not shown:
+            return "no contacts"
+        more = f", … ({len(rows)} in all)" if len(rows) > index + 2 else ""
+        return ", then ".join(shown) + more
+
+    def _describe(self, r: dict | None, times: bool = True) -> str:
+        if r is None:
+            return "nothing"
+        who = (f"{r['a']}–{r['other']}" if r["kind"] == KIND_PAIR else f"{r['a']}–wall '{self.names_a[r['other']]}'")
+        return who + (f" (t = {r['time_in_step'] / r['dt']:.2f}·dt)" if times else "")
+
+    def _consequence(self, div: Divergence) -> str:
+        if not div.state.particles:
+            return ""
+        p = div.state.particles[0]["particle"]
+        va = np.linalg.norm(self.ra.state(div.step).velocities[p])
+        vb = np.linalg.norm(self.rb.state(div.step_b).velocities[p])
+        return f" From there sphere {p} leaves at {va:.2f} m/s in A and {vb:.2f} m/s in B."
+
+
+def _main(causes: list[Cause]) -> Cause:
+    """The most telling cause: the mechanism, rather than the list of settings."""
+    specific = [c for c in causes if c.kind not in ("settings", "engine-version")]
+    return specific[0] if specific else causes[0]
+
+
+def _order_note(sa: dict, sb: dict) -> str:
+    if "index" in (sa.get("ordering"), sb.get("ordering")):
+        return (" Ordering by index resolves the contacts predicted at the start of the step in index order, so a "
+                "contact that an earlier one creates in the same step is missed; ordering by time resolves each "
+                "contact at its time of impact and looks again after it.")
+    return ""
+
+
+def _why_order(ordering: str | None) -> str:
+    return {"index": " because it orders by index", "time": " because it orders by time"}.get(ordering or "", "")
+
+
+def _key(r: dict) -> tuple:
+    if r["kind"] == KIND_PAIR:
+        return (r["kind"], min(r["a"], r["other"]), max(r["a"], r["other"]))
+    return (r["kind"], r["a"], r["other"])
+
+
+def _touches(r: dict, crossing) -> bool:
+    if crossing.kind == KIND_PAIR:
+        return r["kind"] == KIND_PAIR and {r["a"], r["other"]} == {crossing.a, crossing.other}
+    return r["kind"] != KIND_PAIR and r["a"] == crossing.a and r["other"] == crossing.other
+
+
+def _close(a: float, b: float, atol: float, rtol: float) -> bool:
+    if a == b or (math.isinf(a) and a == b):
+        return True
+    return abs(a - b) <= atol + rtol * abs(b)
+
+
+def _show(value) -> str:
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
+def _warnings(rec) -> dict[int, list[dict]]:
+    """Every warning of a recording, by step (frame), from its warnings channel."""
+    import json
+
+    from ..record import format as fmt
+
+    out: dict[int, list[dict]] = {}
+    for _, frame, data in rec._messages([fmt.TOPIC_WARNINGS], 1, rec.frames - 1):
+        out.setdefault(frame, []).append(json.loads(data))
+    return out
+
+
+__all__ = ["Cause", "DiffReport", "Divergence", "SettingDifference", "compare_settings", "diff"]

@@ -1,0 +1,283 @@
+"""Tunnelling found after the fact: did a recorded step carry a sphere through a wall or
+through another sphere without a contact?
+
+The check runs the engine's own exact swept test over the recorded states, not over a
+re-simulation: each particle's path through step k is rebuilt from the state at frame
+k-1 and the contacts of the step (each contact is an anchor: the centre there and the
+velocity after it), along the integrator's own path. A particle whose rebuilt path does
+not end where the recording says (a held, resting particle whose acceleration the
+resting solve changed) is left out of the pair test, which is therefore conservative:
+it never reports a crossing that the recorded states do not show.
+
+* Two-sided (thin) walls: the centre is on the other side at the end of the step and no
+  contact with that wall was resolved: it went through (true for any path).
+* One-sided walls: the centre ends more than a radius behind the plane with no contact.
+* Sphere pairs: the swept test on the rebuilt paths finds a touch while approaching,
+  no contact between the two was resolved, and they go on to overlap by more than the
+  tolerance (a graze within rounding is not a crossing).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ..engine.motion import EULER, SEMI_IMPLICIT, path_coefficients, velocity_coefficients
+from ..engine.toi import INF, pair_toi_swept_scalar
+from ..events import KIND_PAIR, KIND_WALL
+
+DEPTH_SAMPLES = 32  # instants at which a touched pair's overlap is measured after the touch
+
+
+@dataclass(frozen=True)
+class Crossing:
+    """One crossing in a step: kind KIND_WALL (other = wall index) or KIND_PAIR (other =
+    sphere); time: s after the step began (for walls: NaN, the instant is not known);
+    depth: how far into the other sphere it went (m; for walls the distance past the plane)."""
+
+    kind: int
+    a: int
+    other: int
+    time: float
+    depth: float
+
+
+@njit(cache=True)
+def _at(anchor_t, anchor_x, anchor_v, row, acc, i, t, integrator, drag, k, out):
+    """Position and velocity of particle i at time t from anchor ``row``: out (6,)."""
+    tau = t - anchor_t[row]
+    p1, p2, _ = path_coefficients(integrator, k, tau)
+    v0, v1 = velocity_coefficients(integrator, drag, k, tau)
+    for c in range(3):
+        out[c] = anchor_x[row, c] + anchor_v[row, c] * p1 + acc[i, c] * p2
+        out[3 + c] = anchor_v[row, c] * v0 + acc[i, c] * v1
+
+
+@njit(cache=True)
+def _sort_and_sweep(lo, hi, checked):
+    """Candidate pairs (i < j) whose boxes overlap, among checked particles: (M, 2)."""
+    n = lo.shape[0]
+    order = np.argsort(lo[:, 0])
+    out = np.empty((max(16, 4 * n), 2), dtype=np.int64)
+    m = 0
+    for p in range(n):
+        i = order[p]
+        if not checked[i]:
+            continue
+        for q in range(p + 1, n):
+            j = order[q]
+            if lo[j, 0] > hi[i, 0]:
+                break
+            if not checked[j]:
+                continue
+            if lo[j, 1] > hi[i, 1] or lo[i, 1] > hi[j, 1] or lo[j, 2] > hi[i, 2] or lo[i, 2] > hi[j, 2]:
+                continue
+            if m == out.shape[0]:
+                grown = np.empty((2 * m, 2), dtype=np.int64)
+                grown[:m] = out
+                out = grown
+            out[m, 0] = min(i, j)
+            out[m, 1] = max(i, j)
+            m += 1
+    return out[:m]
+
+
+@njit(cache=True)
+def pair_crossings(anchor_start, anchor_t, anchor_x, anchor_v, acc, radius, checked, lo, hi, contacted, dt,
+                   integrator, drag, k, tolerance):
+    """Pairs that touch along their rebuilt paths with no contact resolved between them.
+
+    anchor_start: (N+1,) CSR offsets of each particle's anchors (time-sorted rows of
+    anchor_t (s), anchor_x, anchor_v (M, 3)); acc: (N, 3) path accelerations; lo, hi:
+    (N, 3) boxes of the paths; contacted: sorted keys i*N+j (i<j) of pairs with a contact
+    this step. Returns (i, j, time, depth) rows as (K, 4) float64.
+    """
+    n = radius.shape[0]
+    pairs = _sort_and_sweep(lo, hi, checked)
+    found = np.empty((0, 4))
+    rows = []
+    si = np.empty(6)
+    sj = np.empty(6)
+    for m in range(pairs.shape[0]):
+        i = pairs[m, 0]
+        j = pairs[m, 1]
+        key = i * n + j
+        pos = np.searchsorted(contacted, key)
+        if pos < contacted.shape[0] and contacted[pos] == key:
+            continue
+        # walk the instants where either path has a kink (both anchor lists are sorted
+        # by time): the paths are smooth between them
+        big_r = radius[i] + radius[j]
+        pi = anchor_start[i]
+        pj = anchor_start[j]
+        ei = anchor_start[i + 1]
+        ej = anchor_start[j + 1]
+        t0 = 0.0
+        while t0 < dt:
+            # the anchors in force at t0, and the next kink after it
+            while pi + 1 < ei and anchor_t[pi + 1] <= t0:
+                pi += 1
+            while pj + 1 < ej and anchor_t[pj + 1] <= t0:
+                pj += 1
+            t1 = dt
+            if pi + 1 < ei:
+                t1 = min(t1, anchor_t[pi + 1])
+            if pj + 1 < ej:
+                t1 = min(t1, anchor_t[pj + 1])
+            ri = pi
+            rj = pj
+            _at(anchor_t, anchor_x, anchor_v, ri, acc, i, t0, integrator, drag, k, si)
+            _at(anchor_t, anchor_x, anchor_v, rj, acc, j, t0, integrator, drag, k, sj)
+            toi = pair_toi_swept_scalar(si[0] - sj[0], si[1] - sj[1], si[2] - sj[2], si[3] - sj[3], si[4] - sj[4],
+                                        si[5] - sj[5], acc[i, 0] - acc[j, 0], acc[i, 1] - acc[j, 1],
+                                        acc[i, 2] - acc[j, 2], big_r, integrator, k, t1 - t0, tolerance)
+            if toi == INF:
+                t0 = t1
+                continue
+            # how deep does it go before the interval ends?
+            deepest = 0.0
+            for q in range(DEPTH_SAMPLES + 1):
+                t = t0 + toi + (t1 - t0 - toi) * q / DEPTH_SAMPLES
+                _at(anchor_t, anchor_x, anchor_v, ri, acc, i, t, integrator, drag, k, si)
+                _at(anchor_t, anchor_x, anchor_v, rj, acc, j, t, integrator, drag, k, sj)
+                d = math.sqrt((si[0] - sj[0]) ** 2 + (si[1] - sj[1]) ** 2 + (si[2] - sj[2]) ** 2)
+                deepest = max(deepest, big_r - d)
+            if deepest > tolerance:
+                rows.append((float(i), float(j), t0 + toi, deepest))
+                break
+            t0 = t1
+    if len(rows):
+        found = np.empty((len(rows), 4))
+        for r in range(len(rows)):
+            found[r, 0] = rows[r][0]
+            found[r, 1] = rows[r][1]
+            found[r, 2] = rows[r][2]
+            found[r, 3] = rows[r][3]
+    return found
+
+
+class StepChecker:
+    """Finds crossings in recorded steps of one run.
+
+    radius, inverse_mass, gravity_scale: (N,); walls: engine Walls; settings: the
+    recorded settings dict (integrator, drag, gravity, contact_tolerance).
+    """
+
+    def __init__(self, radius, inverse_mass, gravity_scale, walls, settings: dict):
+        from ..engine.motion import INTEGRATOR_NAMES
+
+        self.radius = np.asarray(radius, dtype=np.float64)
+        self.n = len(self.radius)
+        self.walls = walls
+        self.integrator = INTEGRATOR_NAMES.index(settings.get("integrator", "exact"))
+        self.drag = float(settings.get("drag", 1.0))
+        self.k = -math.log(self.drag) if 0.0 < self.drag < 1.0 else 0.0
+        gravity = np.asarray(settings.get("gravity", (0.0, 0.0, 0.0)), dtype=np.float64)
+        movable = np.asarray(inverse_mass) > 0
+        self.gravity_acc = np.where(movable[:, None], np.asarray(gravity_scale)[:, None] * gravity[None, :], 0.0)
+        self.path_acc = np.zeros_like(self.gravity_acc) if self.integrator in (EULER, SEMI_IMPLICIT) \
+            else self.gravity_acc
+        self.tolerance = max(float(settings.get("contact_tolerance", 1e-9)), 0.0)
+        self.two_sided = np.asarray(walls.two_sided, dtype=bool)
+        self.half_thickness = 0.5 * np.asarray(walls.thickness, dtype=np.float64)
+
+    def check(self, x0, v0, x1, dt: float, contacts) -> list[Crossing]:
+        """Crossings in one step from frame state (x0, v0) to positions x1 (all (N, 3));
+        contacts: the step's Contacts (None when not recorded)."""
+        out = self._walls(x0, x1, contacts)
+        if self.n > 1:
+            out += self._pairs(x0, v0, x1, dt, contacts)
+        return out
+
+    def _walls(self, x0, x1, contacts) -> list[Crossing]:
+        walls = self.walls
+        if not len(walls):
+            return []
+        h0 = x0 @ walls.normals.T - walls.offsets[None, :]  # (N, W) signed distance of centres
+        h1 = x1 @ walls.normals.T - walls.offsets[None, :]
+        through = np.where(self.two_sided[None, :], (np.sign(h0) != np.sign(h1)) & (h0 != 0) & (h1 != 0),
+                           (h0 >= 0) & (h1 < -self.radius[:, None]))
+        if not through.any():
+            return []
+        touched = set()
+        if contacts is not None:
+            wall = contacts.kind == KIND_WALL
+            touched = set(zip(contacts.a[wall].tolist(), contacts.other[wall].tolist(), strict=True))
+        out = []
+        for i, w in zip(*np.nonzero(through), strict=True):
+            if (int(i), int(w)) not in touched:
+                out.append(Crossing(KIND_WALL, int(i), int(w), math.nan, float(abs(h1[i, w]))))
+        return out
+
+    def _pairs(self, x0, v0, x1, dt, contacts) -> list[Crossing]:
+        n = self.n
+        radius = self.radius
+        v_start = v0
+        if self.integrator == SEMI_IMPLICIT:  # the step's kick comes first, then straight lines
+            v_start = v0 * (self.drag ** dt if self.drag != 1.0 else 1.0) + self.gravity_acc * dt
+        who = [np.arange(n)]
+        when = [np.zeros(n)]
+        where = [x0]
+        speed = [v_start]
+        contacted = np.zeros(0, dtype=np.int64)
+        if contacts is not None and len(contacts):
+            centre_a = contacts.point + contacts.normal * radius[contacts.a][:, None]
+            who.append(contacts.a.astype(np.int64))
+            when.append(contacts.time_in_step)
+            where.append(centre_a)
+            speed.append(contacts.velocity_a_after)
+            pair = contacts.kind == KIND_PAIR
+            b = contacts.other[pair].astype(np.int64)
+            who.append(b)
+            when.append(contacts.time_in_step[pair])
+            where.append(contacts.point[pair] - contacts.normal[pair] * radius[b][:, None])
+            speed.append(contacts.velocity_b_after[pair])
+            a = contacts.a[pair].astype(np.int64)
+            contacted = np.unique(np.minimum(a, b) * n + np.maximum(a, b))
+        who = np.concatenate(who)
+        when = np.concatenate(when)
+        where = np.concatenate(where)
+        speed = np.concatenate(speed)
+        order = np.lexsort((np.arange(len(who)), when, who))
+        who, when, where, speed = who[order], when[order], where[order], speed[order]
+        start = np.zeros(n + 1, dtype=np.int64)
+        np.cumsum(np.bincount(who, minlength=n), out=start[1:])
+        last = start[1:] - 1
+        # where each rebuilt path ends; a path that does not end where the recording says
+        # was changed by something not in the contacts (the resting solve): not checked
+        end = _ends(when[last], where[last], speed[last], self.path_acc, dt, self.integrator, self.drag, self.k)
+        slack = 1e-6 * radius + 10.0 * self.tolerance + 1e-12 * np.abs(x1).max(axis=1)
+        checked = np.linalg.norm(end - x1, axis=1) <= slack
+        if not checked.any():
+            return []
+        # boxes: every anchor and the end, padded by the radius and the most a path can bow
+        lo = np.minimum(x0, x1)
+        hi = np.maximum(x0, x1)
+        np.minimum.at(lo, who, where)
+        np.maximum.at(hi, who, where)
+        bow = 0.125 * (np.linalg.norm(self.path_acc, axis=1) + self.k * np.abs(speed).max(initial=0.0)) * dt * dt
+        pad = (radius + bow + self.tolerance)[:, None]
+        found = pair_crossings(start, when, np.ascontiguousarray(where), np.ascontiguousarray(speed),
+                               np.ascontiguousarray(self.path_acc), radius, checked, lo - pad, hi + pad, contacted,
+                               dt, self.integrator, self.drag, self.k, max(self.tolerance, 1e-12))
+        depth_floor = 1e-6 * radius
+        return [Crossing(KIND_PAIR, int(i), int(j), float(t), float(d)) for i, j, t, d in found
+                if d > max(depth_floor[int(i)], depth_floor[int(j)], self.tolerance)]
+
+
+def _ends(t, x, v, acc, dt, integrator, drag, k) -> np.ndarray:
+    """(N, 3) positions at dt from anchors (t (N,), x, v (N, 3)) along the integrator's path."""
+    out = np.empty_like(x)
+    _ends_kernel(t, x, v, acc, dt, integrator, drag, k, out)
+    return out
+
+
+@njit(cache=True)
+def _ends_kernel(t, x, v, acc, dt, integrator, drag, k, out):
+    for i in range(x.shape[0]):
+        p1, p2, _ = path_coefficients(integrator, k, dt - t[i])
+        for c in range(3):
+            out[i, c] = x[i, c] + v[i, c] * p1 + acc[i, c] * p2
