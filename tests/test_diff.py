@@ -126,6 +126,13 @@ def test_cli_formats_and_exit_codes(tmp_path):
     assert runner.invoke(app, ["diff", str(a), str(b), "--markdown"]).output.startswith("### ❌ physdbg diff")
     same = runner.invoke(app, ["diff", str(a), str(a)])
     assert same.exit_code == 0 and "EQUIVALENT" in same.output
+    loose = runner.invoke(app, ["diff", str(a), str(b), "--atol", "1", "--rtol", "0", "--format", "json"])
+    assert json.loads(loose.output)["atol"] == 1.0
+    bad_format = runner.invoke(app, ["diff", str(a), str(b), "--format", "yaml"])
+    assert bad_format.exit_code == 2 and "--format must be text, json or markdown" in bad_format.output
+    no_golden = runner.invoke(app, ["record", "cradle", "--no-rrd", "-o", str(tmp_path / "c.mcap"),
+                                    "--check-against", str(tmp_path / "none.mcap")])
+    assert no_golden.exit_code == 2 and "no such recording to check against" in no_golden.output
     missing = runner.invoke(app, ["diff", str(a), str(tmp_path / "nope.mcap")])
     assert missing.exit_code == 2 and "nope.mcap" in missing.output
 

@@ -115,7 +115,7 @@ class Auditor:
         self._x, self._v = header.positions.copy(), header.velocities.copy()
         self._contacts: Contacts | None = None
         self._warnings: list[EngineWarning] = []
-        self._open_overlap: tuple | None = None  # an overlap carried over from the step before
+        self._in_overlap = False  # the step before ended overlapping: the same overlap goes on
         self._saw_contacts = False
 
     # ------------------------------------------------------------------ observer
@@ -209,11 +209,11 @@ class Auditor:
 
     def _check_overlap(self, step: int, end: StepEnd) -> None:
         if not end.max_overlap > max(self.tolerance, 0.0):
-            self._open_overlap = None
+            self._in_overlap = False
             return
-        if self._open_overlap is not None:  # the same overlap going on: counted where it began
+        if self._in_overlap:  # counted where it began
             return
-        self._open_overlap = (step,)
+        self._in_overlap = True
         self._add(Finding("overlap", step, [], f"spheres overlap by {end.max_overlap:.3g} m after the step (the "
                                                f"contact tolerance is {self.tolerance:g} m)",
                           "overlaps are left by discrete or sampled detection, a budget that stopped a step, or "
