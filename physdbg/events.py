@@ -24,6 +24,12 @@ import numpy as np
 KIND_PAIR = 0
 KIND_WALL = 1
 
+# how a contact was resolved (Contacts.how; the recording's contacts ``resting`` column)
+HOW_IMPULSE = 0  # the seed's impulse (or reflection), alone
+HOW_RESTING = 1  # held by the resting rule, restitution 0
+HOW_RAPID = 2  # held by the rapid-contact (TC) rule, restitution 0
+HOW_WITH_HELD = 3  # an impulse solved together with the held contacts it reached
+
 # Outcomes of one swept test (SweptTests.outcome).
 OUTCOME_MISS = 0  # no contact before the end of the step
 OUTCOME_HIT = 1  # the predicted contact was resolved
@@ -73,8 +79,11 @@ class ContactResolved:
     wall) towards a. impulse: j (N·s) applied along ``normal`` to ``a`` (and -j to b);
     for a wall it is m_a times the change of normal speed (inf for an immovable sphere).
     velocity_*: (3,) m/s just before and after. restitution: the combined coefficient
-    used; resting: True when the resting rule applied (restitution 0, contact held).
-    closing_speed: normal approach speed before the contact (m/s, >= 0).
+    used; resting: True when the contact was held (restitution 0: the resting rule or
+    the rapid-contact rule). closing_speed: normal approach speed before the contact
+    (m/s, >= 0). how: HOW_IMPULSE (the seed's impulse alone), HOW_RESTING, HOW_RAPID
+    (held by that rule) or HOW_WITH_HELD (an impulse solved together with the held
+    contacts it reached, which also moved other spheres).
     """
 
     step: int
@@ -93,6 +102,7 @@ class ContactResolved:
     restitution: float
     closing_speed: float
     resting: bool
+    how: int = 0
 
 
 @dataclass(frozen=True)
@@ -122,6 +132,7 @@ class Contacts:
     restitution: np.ndarray
     closing_speed: np.ndarray
     resting: np.ndarray
+    how: np.ndarray
 
     def __len__(self) -> int:
         return len(self.kind)
@@ -133,7 +144,7 @@ class Contacts:
             self.point[i].copy(), self.normal[i].copy(), float(self.impulse[i]),
             self.velocity_a_before[i].copy(), self.velocity_a_after[i].copy(),
             self.velocity_b_before[i].copy() if pair else None, self.velocity_b_after[i].copy() if pair else None,
-            float(self.restitution[i]), float(self.closing_speed[i]), bool(self.resting[i]))
+            float(self.restitution[i]), float(self.closing_speed[i]), bool(self.resting[i]), int(self.how[i]))
 
     def __iter__(self):
         return (self.record(i) for i in range(len(self)))

@@ -57,12 +57,15 @@ TOP_FIELDS = {
     "restitution_rule": "how two restitutions combine: one of " + ", ".join(RESTITUTION_RULES),
     "rest_fraction": ("a pressed contact rests when its closing speed is at most this fraction of |a_n|·dt, "
                       "the speed its pressing acceleration adds in one step (0 to 1, default 0.01)"),
+    "rapid_contact_time": ("a contact with restitution < 1 within this many seconds of either sphere's previous "
+                           "contact is held like a resting one if something presses it, and elastic if not (the TC "
+                           "model against inelastic collapse), seconds >= 0, 0 = off (default 1e-4)"),
     "contact_tolerance": "allowed overlap and resting gap, metres > 0",
     "max_events_per_step": "budget: contacts resolved in one step, integer >= 1 (default 10000)",
     "max_pairs_per_step": "budget: broad-phase candidate pairs in one step, integer >= 1 (default 10000000)",
     "max_swept_tests_per_step": "budget: swept tests in one step, integer >= 1 (default 10000000)",
-    "max_resting_work_per_step": ("budget: resting-solve work in one step (iterations × held contacts), "
-                                  "integer >= 1 (default 2000000)"),
+    "max_resting_work_per_step": ("budget: held-contact solve updates in one step, "
+                                  "integer >= 1 (default 100000000)"),
     "max_memory": "refuse a scene whose estimated memory is more than this many bytes (default 4e9)",
     "max_particle_steps": "refuse a run of more particle-steps (particles × steps) than this (default 1e10)",
     "particles": "array of [[particles]] tables",
@@ -465,6 +468,8 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
         restitution_rule=c.choice(raw, "restitution_rule", "restitution_rule", RESTITUTION_RULES,
                                   d.restitution_rule),
         rest_fraction=c.number(raw, "rest_fraction", "rest_fraction", default=d.rest_fraction, lo=0, hi=1),
+        rapid_contact_time=c.number(raw, "rapid_contact_time", "rapid_contact_time", default=d.rapid_contact_time,
+                                    lo=0),
         contact_tolerance=c.number(raw, "contact_tolerance", "contact_tolerance",
                                    default=d.contact_tolerance, scale=True),
         **{budget: c.number(raw, budget, budget, default=getattr(d, budget), lo=1, integer=True)

@@ -567,8 +567,9 @@ class _Differ:
         present, missing, label, other = (x, y, "A", "B") if x is not None else (y, x, "B", "A")
         if present is not None and missing is not None and _key(present) == _key(missing):
             rest = "A" if x["resting"] else "B"
-            text = (f"Step {step}: {self._describe(x, times=False)} came to rest in run {rest} (the resting rule: "
-                    f"a pressed, slow contact is held instead of bounced) and bounced in the other")
+            text = (f"Step {step}: {self._describe(x, times=False)} was held in run {rest} (with restitution 0, "
+                    f"instead of bounced: the resting rule holds a pressed, slow contact, the rapid-contact rule a "
+                    f"pressed one soon after the spheres' previous contact) and bounced in the other")
             return Cause("missed-contact", text + "." + self._consequence(div), {"a": x, "b": y})
         in_other = [r for r in (cb if label == "A" else ca) if _key(r) == _key(present)]
         text = (f"Step {step}: run {label} resolved {self._describe(present)} (contact {present['index']} of the "

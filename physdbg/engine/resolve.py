@@ -1,4 +1,4 @@
-"""Contact resolution: the seed's impulse and wall reflection, with restitution.
+"""Contact resolution: the seed's impulse and wall reflection, with restitution — the one resolver.
 
 Sphere–sphere (the seed)::
 
@@ -9,11 +9,18 @@ Sphere–sphere (the seed)::
 with inverse masses w = 1/m (0 = immovable, so a post takes any impulse unmoved).
 
 Sphere–wall: the seed's reflection R_r = R_i - 2N(R_i·N) with restitution c,
-v' = v - (1 + c)(v·n) n (c = 1 is exactly the seed's mirror).
+v' = v - (1 + c)(v·n) n (c = 1 is exactly the seed's mirror): the same impulse with the
+wall as an immovable partner (w_b = 0).
 
 Restitution of a contact combines the two coefficients by the scene's
 ``restitution_rule``: ``min`` (default: a pair is as bouncy as its less bouncy member),
 ``max``, ``product`` or ``mean``.
+
+:func:`resolve_contact` is the only code that resolves a contact: the time-ordered loop
+(timeline.py) and the index-ordered policy (world.py) both call it. A contact that
+involves no held contact takes the seed's impulse alone; one that rests, is rapid, or
+touches a sphere with held contacts is solved with the held contacts it reaches
+(resting.py).
 """
 
 from __future__ import annotations
@@ -21,53 +28,338 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
+
+from ..events import HOW_IMPULSE, HOW_RAPID, HOW_RESTING, HOW_WITH_HELD, KIND_PAIR
+from .motion import advance_particles
+from .resting import (
+    begin_solve,
+    contacts_of,
+    held_add,
+    held_find,
+    held_remove,
+    pressed_closing,
+    push_along,
+    rapid,
+    relative_normal,
+    release_loose,
+    rests,
+    solve_contacts,
+    touch,
+)
 
 RESTITUTION_RULES = ("min", "max", "product", "mean")
 
+# what resolve_contact did
+SKIPPED = 0
+RESOLVED = 1
+OUT_OF_WORK = 2
+
+# why a contact was held (the contact row's ``resting`` column: events.HOW_*)
+NOT_HELD = HOW_IMPULSE
+HELD_RESTING = HOW_RESTING
+HELD_RAPID = HOW_RAPID
+
+# contact float columns
+CF_TIME = 0
+CF_POINT = 1
+CF_NORMAL = 4
+CF_IMPULSE = 7
+CF_VA_BEFORE = 8
+CF_VA_AFTER = 11
+CF_VB_BEFORE = 14
+CF_VB_AFTER = 17
+CF_RESTITUTION = 20
+CF_CLOSING = 21
+CF_WIDTH = 22
+# contact int columns: kind, a, other, how (events.HOW_*)
+CI_WIDTH = 4
+
+
+@njit(cache=True)
+def combine(rule, e_a, e_b):
+    """The restitution of a contact: rule is an index into RESTITUTION_RULES."""
+    if rule == 0:
+        return min(e_a, e_b)
+    if rule == 1:
+        return max(e_a, e_b)
+    if rule == 2:
+        return e_a * e_b
+    return 0.5 * (e_a + e_b)
+
 
 def combine_restitution(rule: str, e_a: float, e_b: float) -> float:
-    """The restitution of a contact between two materials (see module doc)."""
-    if rule == "min":
-        return min(e_a, e_b)
-    if rule == "max":
-        return max(e_a, e_b)
-    if rule == "product":
-        return e_a * e_b
-    if rule == "mean":
-        return 0.5 * (e_a + e_b)
-    raise ValueError(f"unknown restitution rule {rule!r}")
+    """The restitution of a contact between two materials (see module doc), by rule name."""
+    if rule not in RESTITUTION_RULES:
+        raise ValueError(f"unknown restitution rule {rule!r}")
+    return float(combine(RESTITUTION_RULES.index(rule), e_a, e_b))
 
 
-def pair_impulse(v_a: np.ndarray, v_b: np.ndarray, w_a: float, w_b: float, normal: np.ndarray,
-                 restitution: float) -> float:
-    """Scalar impulse j (N·s) along ``normal`` (unit, from b to a); 0 unless approaching.
+@njit(cache=True)
+def seed_impulse(closing, restitution, inverse_mass_sum):
+    """The seed's impulse j = (1 + c)·closing / (w_a + w_b) (N·s, >= 0 for closing >= 0);
+    a wall is a partner with w_b = 0, which makes it the reflection."""
+    return (1.0 + restitution) * closing / inverse_mass_sum
 
-    v_a, v_b: (3,) velocities (m/s); w_a, w_b: inverse masses (1/kg).
+
+@njit(cache=True)
+def contact_normal(x, ia, ib, other, normals, offsets, two_sided):
+    """Unit normal (3 floats) from b (or the wall) to a at the anchors; coincident centres give +x."""
+    if ib >= 0:
+        d0 = x[ia, 0] - x[ib, 0]
+        d1 = x[ia, 1] - x[ib, 1]
+        d2 = x[ia, 2] - x[ib, 2]
+        length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        if length == 0.0:
+            return 1.0, 0.0, 0.0
+        return d0 / length, d1 / length, d2 / length
+    nx = normals[other, 0]
+    ny = normals[other, 1]
+    nz = normals[other, 2]
+    if two_sided[other] and nx * x[ia, 0] + ny * x[ia, 1] + nz * x[ia, 2] - offsets[other] < 0.0:
+        return -nx, -ny, -nz
+    return nx, ny, nz
+
+
+@njit(cache=True)
+def resolve_contact(kind, ia, other, toi, run_time, x, v, a, acc, radius, inverse_mass, restitution, sigma,
+                    last_contact, step_end, integrator, drag, k, anchor_is_flow, path_follows_acc, rest_fraction,
+                    rest_step_factor, rule, rapid_time, normals, offsets, two_sided, wall_restitution, h,
+                    contact_float, contact_int, counters, contacts_slot, rapid_slot, changed, work_budget,
+                    vtol, atol):
+    """Resolve the predicted contact (kind, ia, other) at time ``toi`` in the step.
+
+    Advances the spheres to the contact, judges it (approaching? resting? rapid?),
+    applies the seed's impulse or the simultaneous solve with held contacts, writes one
+    contact row (contact_float/int at counters[contacts_slot]) and lists in ``changed``
+    (count first) the spheres whose paths changed. run_time: the run's time at step start
+    (s); path_follows_acc: the path acceleration is the contact-solved acceleration (every
+    integrator but semi-implicit). Returns SKIPPED (not approaching: nothing resolved),
+    RESOLVED, or OUT_OF_WORK (the held-contact solve ran out of its budget).
     """
-    closing = float(np.dot(v_a - v_b, normal))
-    if closing >= 0.0 or w_a + w_b == 0.0:
-        return 0.0
-    return -(1.0 + restitution) * closing / (w_a + w_b)
+    ib = other if kind == KIND_PAIR else -1
+    changed[0] = 0
+    one = np.empty(2, np.int64)
+    one[0] = ia
+    one[1] = ib
+    advance_particles(x, v, a, sigma, one[:2] if ib >= 0 else one[:1], toi, integrator, drag, k)
+    nx, ny, nz = contact_normal(x, ia, ib, other, normals, offsets, two_sided)
+    closing = -relative_normal(v, ia, ib, nx, ny, nz)
+    rel_acc = relative_normal(acc, ia, ib, nx, ny, nz)
+    if ib >= 0:
+        e = combine(rule, restitution[ia], restitution[ib])
+        wsum = inverse_mass[ia] + inverse_mass[ib]
+    else:
+        e = combine(rule, restitution[ia], wall_restitution[other])
+        wsum = inverse_mass[ia]
+    closing = pressed_closing(closing, rel_acc, step_end)
+    if closing < 0.0 or (closing == 0.0 and not rel_acc < 0.0) or wsum == 0.0:
+        if not anchor_is_flow:  # Euler (and dragged Verlet) paths change with the anchor
+            changed[0] = 2 if ib >= 0 else 1
+            changed[1] = ia
+            changed[2] = ib
+        return SKIPPED
+    now = run_time + toi
+    resting = rests(closing, rel_acc, step_end, rest_step_factor, rest_fraction)
+    is_rapid = not resting and rapid(now, last_contact[ia], last_contact[ib] if ib >= 0 else -math.inf, e,
+                                     rapid_time)
+    # a rapid contact that something presses is held like a resting one; one that nothing
+    # presses is elastic (the original TC model): a free cluster cannot collapse, and
+    # nothing that never rests (a gas, a break shot) loses energy to the rule
+    held = HELD_RESTING if resting else (HELD_RAPID if is_rapid and rel_acc < 0.0 else NOT_HELD)
+    used = 0.0 if held != NOT_HELD else (1.0 if is_rapid else e)
+    row = counters[contacts_slot]
+    cf = contact_float
+    cf[row, CF_TIME] = toi
+    cf[row, CF_NORMAL] = nx
+    cf[row, CF_NORMAL + 1] = ny
+    cf[row, CF_NORMAL + 2] = nz
+    for c in range(3):
+        cf[row, CF_POINT + c] = x[ia, c] - cf[row, CF_NORMAL + c] * radius[ia]
+        cf[row, CF_VA_BEFORE + c] = v[ia, c]
+        cf[row, CF_VB_BEFORE + c] = v[ib, c] if ib >= 0 else math.nan
+    last_contact[ia] = now
+    if ib >= 0:
+        last_contact[ib] = now
+    status = RESOLVED
+    with_held = not (held == NOT_HELD and h.deg[ia] == 0 and (ib < 0 or h.deg[ib] == 0))
+    if not with_held:
+        # the seed's impulse, alone
+        j = seed_impulse(closing, used, wsum)
+        push_along(v, inverse_mass, ia, ib, nx, ny, nz, j)
+        changed[0] = 2 if ib >= 0 else 1
+        changed[1] = ia
+        changed[2] = ib
+    else:
+        stick = step_end * (rest_step_factor + rest_fraction)
+        j, ok = _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, used * closing, held != NOT_HELD, x, v, a,
+                                 acc, inverse_mass, sigma, integrator, drag, k, anchor_is_flow, path_follows_acc, h,
+                                 changed, work_budget, vtol, atol, stick)
+        if not ok:
+            status = OUT_OF_WORK
+    for c in range(3):
+        cf[row, CF_VA_AFTER + c] = v[ia, c]
+        cf[row, CF_VB_AFTER + c] = v[ib, c] if ib >= 0 else math.nan
+    cf[row, CF_IMPULSE] = j
+    cf[row, CF_RESTITUTION] = used
+    cf[row, CF_CLOSING] = closing
+    contact_int[row, 0] = kind
+    contact_int[row, 1] = ia
+    contact_int[row, 2] = other
+    contact_int[row, 3] = held if (held != NOT_HELD or not with_held) else HOW_WITH_HELD
+    counters[contacts_slot] = row + 1
+    if is_rapid:
+        counters[rapid_slot] += 1
+    return status
 
 
-def apply_pair_impulse(v: np.ndarray, inverse_mass: np.ndarray, a: int, b: int,
-                       normal: np.ndarray, j: float) -> None:
-    """v_a += j n w_a, v_b -= j n w_b, in place on the (N, 3) velocity array."""
-    v[a] += (j * inverse_mass[a]) * normal
-    v[b] -= (j * inverse_mass[b]) * normal
+@njit(cache=True)
+def _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, target, hold, x, v, a, acc, inverse_mass, sigma,
+                     integrator, drag, k, anchor_is_flow, path_follows_acc, h, changed, work_budget, vtol, atol,
+                     stick):
+    """The contact solved together with the held contacts it reaches (resting.py); returns
+    (its impulse, whether the work budget sufficed) and lists the changed spheres."""
+    solve = begin_solve(h)
+    touch(h, ia, x, v, a, sigma, toi, integrator, drag, k, solve)
+    if ib >= 0:
+        touch(h, ib, x, v, a, sigma, toi, integrator, drag, k, solve)
+    c0 = held_find(h, kind, ia, other)
+    if c0 < 0:
+        c0 = held_add(h, kind, ia, other, nx, ny, nz, KIND_PAIR)
+    else:
+        h.normal[c0, 0] = nx
+        h.normal[c0, 1] = ny
+        h.normal[c0, 2] = nz
+    h.target[c0] = target
+    seeds = np.empty(max(h.count[0], 1), np.int64)
+    seeds[0] = c0
+    ok = solve_contacts(h, v, True, seeds, 1, x, v, a, sigma, inverse_mass, toi, integrator, drag, k, vtol,
+                        work_budget, KIND_PAIR, stick)
+    j = h.jv[c0]
+    h.target[c0] = 0.0
+    if not hold:
+        if h.lam[c0] != 0.0:
+            push_along(acc, inverse_mass, ia, ib, h.normal[c0, 0], h.normal[c0, 1], h.normal[c0, 2], -h.lam[c0])
+        held_remove(h, c0, KIND_PAIR)
+    release_loose(h, v, acc, inverse_mass, True, x, a, sigma, toi, integrator, drag, k, KIND_PAIR, vtol, atol, stick)
+    if ok:
+        ok = _solve_accelerations(h, x, v, a, acc, inverse_mass, sigma, toi, integrator, drag, k, work_budget, vtol,
+                                  atol, stick)
+    # every visited sphere whose velocity or acceleration changed takes a new path (and is
+    # re-predicted), as does one that lost a held contact
+    n_changed = 0
+    for s in range(h.touched[0]):
+        p = h.touched[1 + s]
+        moved = not anchor_is_flow or h.renew[p] == solve
+        for d in range(3):
+            if v[p, d] != h.before[p, d]:
+                moved = True
+        if path_follows_acc and (a[p, 0] != acc[p, 0] or a[p, 1] != acc[p, 1] or a[p, 2] != acc[p, 2]):
+            a[p, 0] = acc[p, 0]
+            a[p, 1] = acc[p, 1]
+            a[p, 2] = acc[p, 2]
+            moved = True
+        if moved or p == ia or p == ib:
+            n_changed += 1
+            changed[n_changed] = p
+    changed[0] = n_changed
+    return j, ok
 
 
-def reflect(v: np.ndarray, normal: np.ndarray, restitution: float) -> np.ndarray:
-    """The seed's wall reflection with restitution: v - (1 + c)(v·n) n, if approaching."""
-    vn = float(np.dot(v, normal))
-    if vn >= 0.0:
-        return v.copy()
-    return v - (1.0 + restitution) * vn * normal
+@njit(cache=True)
+def _solve_accelerations(h, x, v, a, acc, inverse_mass, sigma, when, integrator, drag, k, work_budget, vtol, atol,
+                         stick) -> bool:
+    """Solve the accelerations of the held contacts of the spheres visited so far, release
+    the contacts it leaves loose, and solve again while a release changed something (a
+    released contact's force leaves its spheres). Returns False when the budget ran out."""
+    while True:
+        touched = h.touched[1:h.touched[0] + 1].copy()
+        seeds = np.empty(max(h.count[0], 1), np.int64)
+        m = contacts_of(h, touched, touched.shape[0], seeds)
+        if not solve_contacts(h, acc, False, seeds, m, x, v, a, sigma, inverse_mass, when, integrator, drag, k, atol,
+                              work_budget, KIND_PAIR, 0.0):
+            return False
+        if release_loose(h, v, acc, inverse_mass, True, x, a, sigma, when, integrator, drag, k, KIND_PAIR, vtol,
+                         atol, stick) == 0:
+            return True
 
 
-def unit(vector: np.ndarray) -> np.ndarray:
-    """vector / |vector|; a zero vector gives +x (coincident centres need some normal)."""
-    length = math.sqrt(float(np.dot(vector, vector)))
-    if length == 0.0:
-        return np.array([1.0, 0.0, 0.0])
-    return vector / length
+@njit(cache=True)
+def _visit_all(h, v) -> None:
+    """Begin a solve in which every sphere counts as visited (all anchors at the step start)."""
+    solve = begin_solve(h)
+    n = v.shape[0]
+    for i in range(n):
+        h.mark[i] = solve
+        h.touched[1 + i] = i
+        for d in range(3):
+            h.before[i, d] = v[i, d]
+    h.touched[0] = n
+
+
+@njit(cache=True)
+def settle_held(h, x, v, a, acc, free_accel, radius, inverse_mass, sigma, dt, integrator, drag, k,
+                semi_implicit, normals, offsets, half_thickness, two_sided, contact_tolerance, work_budget, vtol,
+                atol, stick) -> bool:
+    """The forces phase of a step, for held contacts (all anchors at the step start).
+
+    Releases contacts whose gap exceeds the contact tolerance, refreshes pair normals,
+    rebuilds the accelerations from the kept multipliers (the warm start), solves them,
+    releases contacts that are pulled apart, then (semi-implicit: after the velocity
+    kick) removes any approach along held contacts from the velocities. acc (N, 3) is
+    written; a (N, 3), the path accelerations, is set to acc unless semi-implicit (0).
+    Returns False when the work budget ran out.
+    """
+    n = x.shape[0]
+    c = 0
+    while c < h.count[0]:
+        i = h.a[c]
+        if h.kind[c] == KIND_PAIR:
+            j = h.other[c]
+            d0 = x[i, 0] - x[j, 0]
+            d1 = x[i, 1] - x[j, 1]
+            d2 = x[i, 2] - x[j, 2]
+            length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            gap = length - radius[i] - radius[j]
+            if length > 0.0:
+                h.normal[c, 0] = d0 / length
+                h.normal[c, 1] = d1 / length
+                h.normal[c, 2] = d2 / length
+        else:
+            w = h.other[c]
+            side = (normals[w, 0] * x[i, 0] + normals[w, 1] * x[i, 1] + normals[w, 2] * x[i, 2] - offsets[w])
+            gap = (abs(side) if two_sided[w] else side) - half_thickness[w] - radius[i]
+        if gap > contact_tolerance:
+            held_remove(h, c, KIND_PAIR)
+        else:
+            c += 1
+    for i in range(n):
+        for d in range(3):
+            acc[i, d] = free_accel[i, d]
+    for c in range(h.count[0]):
+        if h.lam[c] != 0.0:
+            push_along(acc, inverse_mass, h.a[c], h.other[c] if h.kind[c] == KIND_PAIR else -1, h.normal[c, 0],
+                       h.normal[c, 1], h.normal[c, 2], h.lam[c])
+    _visit_all(h, v)
+    ok = _solve_accelerations(h, x, v, a, acc, inverse_mass, sigma, 0.0, integrator, drag, k, work_budget, math.inf,
+                              atol, stick)
+    if semi_implicit:
+        damp = 1.0 if drag == 1.0 else drag ** dt
+        for i in range(n):
+            for d in range(3):
+                v[i, d] = v[i, d] * damp + acc[i, d] * dt
+    if ok and h.count[0] > 0:
+        for c in range(h.count[0]):
+            h.target[c] = 0.0
+        _visit_all(h, v)  # a new solve: the impulses jv start from 0
+        seeds = np.arange(h.count[0]).astype(np.int64)
+        ok = solve_contacts(h, v, True, seeds, h.count[0], x, v, a, sigma, inverse_mass, 0.0, integrator, drag, k,
+                            vtol, work_budget, KIND_PAIR, stick)
+        if ok and release_loose(h, v, acc, inverse_mass, False, x, a, sigma, 0.0, integrator, drag, k, KIND_PAIR,
+                                vtol, math.inf, stick) > 0:
+            ok = _solve_accelerations(h, x, v, a, acc, inverse_mass, sigma, 0.0, integrator, drag, k, work_budget,
+                                      vtol, atol, stick)
+    for i in range(n):
+        for d in range(3):
+            a[i, d] = 0.0 if semi_implicit else acc[i, d]
+    return ok

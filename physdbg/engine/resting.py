@@ -1,34 +1,54 @@
-"""Resting contact: spheres lying on a wall or on each other.
+"""Resting and rapid contacts: the rules that hold spheres together, and the compiled solve.
 
 An impulse solver alone cannot hold a ball on a floor: with restitution c < 1 it bounces
 ever lower (infinitely many bounces in finite time) and with a step-sized approach
-speed (Euler) it jitters forever. The rule, applied identically under both orderings:
+speed (Euler) it jitters forever. A dense pile is worse: three or more spheres in touch
+exchange ever smaller impulses ever faster (*inelastic collapse*, McNamara & Young 1992),
+and one sphere squeezed between two takes infinitely many events with any c < 1 — even
+c = 0. Two rules turn such contacts into *held* contacts, solved all at once:
 
-1. A contact is *resting* only where something presses it: its relative acceleration
-   along the normal pushes the two together (a_n < 0: gravity, or a held neighbour), and
-   it closes no faster than that acceleration adds in a fraction of a step,
-   |a_n|·dt·(rest_fraction + f), with f = 1.5 for the two Euler integrators, whose
-   straight paths arrive with about one step of acceleration, and 0 otherwise. The
-   threshold scales with the scene (its accelerations and dt), and a contact nothing
-   presses never rests: an e = 1 gas keeps its energy at any speed. A resting contact
-   is resolved with restitution 0 (normal relative velocity set to 0) and *held*.
-2. A held contact removes the part of the particles' acceleration that would push them
-   into each other (a frictionless constraint): accelerations are projected by a
-   projected Gauss–Seidel solve of  (a_a - a_b)·n >= 0,  lambda >= 0,  complementary,
-   weighted by inverse masses (walls and immovable spheres take no share).
-3. Held contacts are not swept-tested (they are touching by definition); they persist
-   from step to step until the particle takes an impulse (all its held contacts are
-   released and swept-tested again, so a knock into the floor is itself resolved), or
-   the solve gives lambda = 0 (the acceleration pulls it away), or the gap exceeds the
-   contact tolerance.
+1. **Resting** (`rests`): a contact is resting where something presses it: its relative
+   acceleration along the normal pushes the two together (a_n < 0: gravity, or a held
+   neighbour), and it closes no faster than that acceleration adds in a fraction of a
+   step, |a_n|·dt·(rest_fraction + f), with f the integrator's rest factor (motion.py:
+   1.5 for the two Euler integrators, whose straight paths arrive with about one step of
+   acceleration; 0 otherwise). A contact nothing presses never rests: an e = 1 gas keeps
+   its energy at any speed.
+2. **Rapid** (`rapid`, the TC model of Luding & McNamara, Granular Matter 1, 113 (1998)):
+   a contact with c < 1 that comes within ``rapid_contact_time`` of either sphere's
+   previous contact is, if something presses it (a_n < 0), treated as resting; if
+   nothing presses it, it is elastic (c = 1, the original TC model: a free cluster
+   cannot collapse, and a break shot or a gas loses no energy to the rule). 0 turns the
+   rule off; with c = 1 it never acts.
 
-Hence a resting ball costs no event per step and stays exactly at its height.
+A resting contact, or a pressed rapid one, is resolved with restitution 0 and *held*:
+
+* held contacts are not swept-tested (they touch by definition);
+* every contact that involves a sphere with held contacts is solved *simultaneously*
+  with the held contacts it reaches: a projected Gauss–Seidel solve of the velocities
+  (each held contact ends with (v_a - v_b)·n >= 0, the new contact with its restitution
+  target, impulses >= 0), then of the accelerations ((a_a - a_b)·n >= 0, lambda >= 0,
+  complementary), walls and immovable spheres taking no share. The solves are worklists:
+  a contact is revisited only when a neighbour's update moved its spheres, so a ball
+  landing on a settled pile costs the contacts its weight reaches, not the whole pile;
+* a held contact is released when it separates (velocity), when the solve gives it
+  lambda = 0 while the accelerations pull it apart, or when its gap exceeds the contact
+  tolerance at the start of a step.
+
+Hence a settled pile costs no event per step: one warm-started solve that finds the
+lambdas of the last step still right, and every sphere stays exactly where it is.
+
+The held contacts live in :class:`HeldContacts` arrays; each sphere lists its own
+(``slots``), so finding one is a scan of at most a dozen entries.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from typing import NamedTuple
+
+from .motion import advance_particles
 
 
 @njit(cache=True)
@@ -40,6 +60,17 @@ def rests(closing: float, rel_acc: float, dt: float, step_factor: float, fractio
     step_factor: the integrator's f; fraction: Settings.rest_fraction.
     """
     return rel_acc < 0.0 and closing <= -rel_acc * dt * (step_factor + fraction)
+
+
+@njit(cache=True)
+def rapid(now: float, last_a: float, last_b: float, restitution: float, window: float) -> bool:
+    """The TC rule (rule 2 above), the one place it is decided.
+
+    now: the contact's time (s since the run began); last_a, last_b: the previous contact
+    of each sphere (-inf if none; last_b = -inf for a wall); restitution: the contact's
+    c; window: Settings.rapid_contact_time (s, 0 = off).
+    """
+    return window > 0.0 and restitution < 1.0 and (now - last_a < window or now - last_b < window)
 
 
 # Separation speeds below this fraction of |a_n|·dt are rounding, not separation.
@@ -61,65 +92,346 @@ def pressed_closing(closing: float, rel_acc: float, dt: float) -> float:
     return closing
 
 
-# A held contact: ("wall", particle, wall) or ("pair", a, b) with a < b.
-WallKey = tuple[str, int, int]
+# ----------------------------------------------------------------------------- the store
+class HeldContacts(NamedTuple):
+    """The held contacts of a world, as arrays (capacity C, N spheres, K per sphere).
 
+    kind, a, other: (C,) int64 — KIND_PAIR with a < other, or KIND_WALL with other = wall;
+    normal: (C, 3) unit, from other to a (walls: towards a's side); lam: (C,) acceleration
+    multiplier (N: the contact force; kept between steps as the warm start);
+    jv: (C,) impulse of the current velocity solve (N·s); target: (C,) separation speed the
+    velocity solve must reach (m/s; 0 for held contacts); seen: (C,) int64 id of the last
+    solve that used jv; count: (3,) int64 — contacts held, solve id, work done this step
+    (updates); slots: (N, K) each sphere's contact ids; deg: (N,) how many; queue: (C,) the
+    worklist; mark: (N,) int64 solve id of the last visit; touched: (N + 1,) spheres visited
+    by the current solve, count first; before: (N, 3) each visited sphere's velocity when
+    first visited (to tell which ones the solve changed); renew: (N,) int64 id of the last
+    solve that released a contact of the sphere (its pair must be swept-tested again).
 
-def solve_accelerations(free_accel: np.ndarray, inverse_mass: np.ndarray, positions: np.ndarray,
-                        held: dict[tuple, np.ndarray], iterations: int = 200,
-                        tolerance: float = 1e-15) -> tuple[np.ndarray, dict[tuple, float], int]:
-    """Accelerations (N, 3) that satisfy every held contact, each contact's lambda, and the
-    work done (sweeps × contacts, counted against Settings.max_resting_work_per_step).
-
-    free_accel: (N, 3) accelerations without contacts (m/s²). held maps a key to the
-    wall normal (3,) for wall contacts; pair normals are taken from ``positions``.
+    A NamedTuple of arrays, so compiled code takes the whole store as one argument.
     """
-    accel = free_accel.copy()
-    if not held:
-        return accel, {}, 0
-    keys = list(held)
-    normals = []
-    for key in keys:
-        if key[0] == "wall":
-            normals.append(held[key])
+
+    kind: np.ndarray
+    a: np.ndarray
+    other: np.ndarray
+    normal: np.ndarray
+    lam: np.ndarray
+    jv: np.ndarray
+    target: np.ndarray
+    seen: np.ndarray
+    count: np.ndarray
+    slots: np.ndarray
+    deg: np.ndarray
+    queue: np.ndarray
+    mark: np.ndarray
+    touched: np.ndarray
+    before: np.ndarray
+    renew: np.ndarray
+
+
+def new_held(n: int, capacity: int = 64, per_particle: int = 16) -> HeldContacts:
+    """An empty store for ``n`` spheres."""
+    return HeldContacts(np.zeros(capacity, np.int64), np.zeros(capacity, np.int64), np.zeros(capacity, np.int64),
+                        np.zeros((capacity, 3)), np.zeros(capacity), np.zeros(capacity), np.zeros(capacity),
+                        np.full(capacity, -1, np.int64), np.zeros(3, np.int64),
+                        np.zeros((n, per_particle), np.int64), np.zeros(n, np.int64), np.zeros(capacity, np.int64),
+                        np.full(n, -1, np.int64), np.zeros(n + 1, np.int64), np.zeros((n, 3)),
+                        np.full(n, -1, np.int64))
+
+
+def grow_held(h: HeldContacts) -> HeldContacts:
+    """The same contacts with twice the capacity and twice the room per sphere."""
+    c = h.kind.shape[0]
+    big = new_held(h.deg.shape[0], 2 * c, 2 * h.slots.shape[1])
+    for name in ("kind", "a", "other", "normal", "lam", "jv", "target", "seen"):
+        getattr(big, name)[:c] = getattr(h, name)
+    big.count[:] = h.count
+    big.slots[:, :h.slots.shape[1]] = h.slots
+    big.deg[:] = h.deg
+    big.mark[:] = h.mark
+    big.renew[:] = h.renew
+    return big
+
+
+@njit(cache=True)
+def held_room(h, a, b) -> bool:
+    """Whether one more contact of spheres a and b (b = -1: a wall) fits without growing."""
+    return (h.count[0] < h.kind.shape[0] and h.deg[a] < h.slots.shape[1]
+            and (b < 0 or h.deg[b] < h.slots.shape[1]))
+
+
+@njit(cache=True)
+def held_find(h, kind, a, other) -> int:
+    """The id of held contact (kind, a, other) (pairs with a < other), or -1."""
+    for s in range(h.deg[a]):
+        c = h.slots[a, s]
+        if h.kind[c] == kind and h.a[c] == a and h.other[c] == other:
+            return c
+    return -1
+
+
+@njit(cache=True)
+def held_add(h, kind, a, other, nx, ny, nz, pair_kind) -> int:
+    """Hold contact (kind, a, other) with normal n; returns its id (room checked by held_room)."""
+    c = h.count[0]
+    h.kind[c] = kind
+    h.a[c] = a
+    h.other[c] = other
+    h.normal[c, 0] = nx
+    h.normal[c, 1] = ny
+    h.normal[c, 2] = nz
+    h.lam[c] = 0.0
+    h.jv[c] = 0.0
+    h.target[c] = 0.0
+    h.seen[c] = -1
+    h.count[0] = c + 1
+    h.slots[a, h.deg[a]] = c
+    h.deg[a] += 1
+    if kind == pair_kind:
+        h.slots[other, h.deg[other]] = c
+        h.deg[other] += 1
+    return c
+
+
+@njit(cache=True)
+def _unlist(h, p, c):
+    for s in range(h.deg[p]):
+        if h.slots[p, s] == c:
+            h.deg[p] -= 1
+            h.slots[p, s] = h.slots[p, h.deg[p]]
+            return
+
+
+@njit(cache=True)
+def _relist(h, p, old, new):
+    for s in range(h.deg[p]):
+        if h.slots[p, s] == old:
+            h.slots[p, s] = new
+            return
+
+
+@njit(cache=True)
+def held_remove(h, c, pair_kind) -> None:
+    """Release contact c (the last contact takes its id)."""
+    _unlist(h, h.a[c], c)
+    if h.kind[c] == pair_kind:
+        _unlist(h, h.other[c], c)
+    last = h.count[0] - 1
+    if c != last:
+        _relist(h, h.a[last], last, c)
+        if h.kind[last] == pair_kind:
+            _relist(h, h.other[last], last, c)
+        h.kind[c] = h.kind[last]
+        h.a[c] = h.a[last]
+        h.other[c] = h.other[last]
+        for k in range(3):
+            h.normal[c, k] = h.normal[last, k]
+        h.lam[c] = h.lam[last]
+        h.jv[c] = h.jv[last]
+        h.target[c] = h.target[last]
+        h.seen[c] = h.seen[last]
+    h.count[0] = last
+
+
+# ----------------------------------------------------------------------------- solves
+# A held contact separating slower than this many solve tolerances is residue of the
+# solve (which stops waking neighbours below one tolerance), not separation.
+SEPARATION_FACTOR = 1000.0
+
+@njit(cache=True)
+def begin_solve(h) -> int:
+    """A new solve id (visits and impulses of earlier solves no longer count)."""
+    # ids go up in fours: a contact's ``seen`` holds solve (impulse jv is this solve's),
+    # -(solve + 2) (on the worklist) or -(solve + 3) (listed by contacts_of), and no
+    # marker of one solve may equal a marker of the next
+    h.count[1] += 4
+    h.touched[0] = 0
+    return h.count[1]
+
+
+@njit(cache=True)
+def touch(h, p, x, v, a, sigma, when, integrator, drag, k, solve) -> None:
+    """Bring sphere p's anchor to time ``when`` once per solve, and list it as visited."""
+    if h.mark[p] == solve:
+        return
+    h.mark[p] = solve
+    one = np.empty(1, np.int64)
+    one[0] = p
+    advance_particles(x, v, a, sigma, one, when, integrator, drag, k)
+    h.touched[0] += 1
+    h.touched[h.touched[0]] = p
+    for d in range(3):
+        h.before[p, d] = v[p, d]
+
+
+@njit(cache=True)
+def relative_normal(values, i, j, nx, ny, nz) -> float:
+    """(values_i - values_j)·n (j = -1: a wall, values_j = 0): the relative normal velocity
+    or acceleration. The one formula: the resolver's closing speed and the solves' residuals
+    must agree to the last bit, or a contact judged approaching by one is found satisfied
+    by the other and comes back for ever."""
+    if j < 0:
+        return values[i, 0] * nx + values[i, 1] * ny + values[i, 2] * nz
+    return (values[i, 0] - values[j, 0]) * nx + (values[i, 1] - values[j, 1]) * ny + (values[i, 2] - values[j, 2]) * nz
+
+
+@njit(cache=True)
+def _relative(values, h, c, pair_kind) -> float:
+    return relative_normal(values, h.a[c], h.other[c] if h.kind[c] == pair_kind else -1, h.normal[c, 0],
+                           h.normal[c, 1], h.normal[c, 2])
+
+
+@njit(cache=True)
+def push_along(values, inverse_mass, i, j, nx, ny, nz, amount) -> None:
+    """values_i += amount·w_i·n, values_j -= amount·w_j·n (j = -1: a wall): how an impulse
+    (on velocities) or a contact force per unit mass (on accelerations) acts. The one place."""
+    wi = amount * inverse_mass[i]
+    values[i, 0] += wi * nx
+    values[i, 1] += wi * ny
+    values[i, 2] += wi * nz
+    if j >= 0:
+        wj = amount * inverse_mass[j]
+        values[j, 0] -= wj * nx
+        values[j, 1] -= wj * ny
+        values[j, 2] -= wj * nz
+
+
+@njit(cache=True)
+def solve_contacts(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
+                   k, tolerance, budget, pair_kind, stick) -> bool:
+    """Projected Gauss–Seidel over the held contacts reachable from ``seeds[:n_seeds]``.
+
+    values: (N, 3) velocities (is_velocity: impulses jv, each contact ending with
+    relative normal value >= its target) or accelerations (multipliers lam, target 0).
+    Every update is applied; one that exceeds ``tolerance`` (in units of ``values``)
+    puts the contacts of its spheres back on the worklist. Every sphere read is first brought to
+    time ``when`` (touch). Returns False when the work budget (updates this step) ran out.
+
+    stick (s): in the velocity solve, a pressed held contact also *resists separation*,
+    with at most the impulse its pressing force (lam) gives in ``stick`` seconds — the
+    resting window |a_n|·dt·(rest_fraction + f) of rule 1 turned round. Without it a
+    cluster solve may leave one contact of a pile separating at a speed gravity undoes
+    within microseconds, the next contact does the same to another, and the pile
+    collapses into endless tiny events after all.
+    """
+    solve = h.count[1]
+    size = h.queue.shape[0]
+    head = 0
+    tail = 0
+    # a contact is on the worklist at most once: "queued" is seen == -(solve + 2)
+    for s in range(n_seeds):
+        c = seeds[s]
+        if h.seen[c] != -(solve + 2):
+            if is_velocity and h.seen[c] != solve:
+                h.jv[c] = 0.0
+            h.seen[c] = -(solve + 2)
+            h.queue[tail % size] = c
+            tail += 1
+    while head < tail:
+        c = h.queue[head % size]
+        head += 1
+        h.seen[c] = solve
+        if h.count[2] >= budget:
+            return False
+        h.count[2] += 1
+        i = h.a[c]
+        j = h.other[c] if h.kind[c] == pair_kind else -1
+        wsum = inverse_mass[i] + (inverse_mass[j] if j >= 0 else 0.0)
+        if wsum == 0.0:
+            continue
+        touch(h, i, x, v, a, sigma, when, integrator, drag, k, solve)
+        if j >= 0:
+            touch(h, j, x, v, a, sigma, when, integrator, drag, k, solve)
+        rel = _relative(values, h, c, pair_kind)
+        if is_velocity:
+            new = max(h.jv[c] + (h.target[c] - rel) / wsum, -h.lam[c] * stick)
+            delta = new - h.jv[c]
         else:
-            d = positions[key[1]] - positions[key[2]]
-            normals.append(d / np.linalg.norm(d))
-    lam = np.zeros(len(keys))
-    scale = max(1.0, float(np.abs(free_accel).max()))
-    sweeps = 0
-    for _ in range(iterations):
-        sweeps += 1
-        worst = 0.0
-        for c, key in enumerate(keys):
-            n = normals[c]
-            i = key[1]
-            if key[0] == "wall":
-                w_i, w_j = inverse_mass[i], 0.0
-                rel = float(accel[i] @ n)
-            else:
-                j = key[2]
-                w_i, w_j = inverse_mass[i], inverse_mass[j]
-                rel = float((accel[i] - accel[j]) @ n)
-            if w_i + w_j == 0.0:
+            new = max(h.lam[c] - rel / wsum, 0.0)
+            delta = new - h.lam[c]
+        if delta == 0.0:
+            continue
+        # every update is applied, so a visited contact ends satisfied to rounding (a
+        # skipped small one could leave a contact approaching that is found again at
+        # once, for ever); only one above the tolerance wakes its neighbours
+        if is_velocity:
+            h.jv[c] = new
+        else:
+            h.lam[c] = new
+        push_along(values, inverse_mass, i, j, h.normal[c, 0], h.normal[c, 1], h.normal[c, 2], delta)
+        if abs(delta) * wsum <= tolerance:
+            continue
+        for end in range(2):
+            p = i if end == 0 else j
+            if p < 0:
                 continue
-            new = max(lam[c] - rel / (w_i + w_j), 0.0)
-            delta = new - lam[c]
-            if delta != 0.0:
-                lam[c] = new
-                accel[i] += (w_i * delta) * n
-                if key[0] == "pair":
-                    accel[key[2]] -= (w_j * delta) * n
-            if rel < 0.0 and lam[c] > 0.0:
-                worst = max(worst, -rel)
-        if worst <= tolerance * scale:
-            break
-    # clean tiny residuals along held normals so a resting particle does not creep
-    for c, key in enumerate(keys):
-        if lam[c] > 0.0 and key[0] == "wall":
-            n = normals[c]
-            i = key[1]
-            along = float(accel[i] @ n)
-            if along < 0.0:
-                accel[i] -= along * n
-    return accel, {key: float(lam[c]) for c, key in enumerate(keys)}, sweeps * len(keys)
+            for s in range(h.deg[p]):
+                d = h.slots[p, s]
+                if d != c and h.seen[d] != -(solve + 2):
+                    if is_velocity and h.seen[d] != solve:
+                        h.jv[d] = 0.0
+                    h.seen[d] = -(solve + 2)
+                    h.queue[tail % size] = d
+                    tail += 1
+    return True
+
+
+@njit(cache=True)
+def release_loose(h, v, acc, inverse_mass, touched_only, x, a, sigma, when, integrator, drag, k, pair_kind,
+                  vtol, atol, stick) -> int:
+    """Release held contacts that separate or that no force holds while the accelerations
+    pull them apart (lam = 0, relative normal acceleration > atol).
+
+    Separating means a relative normal velocity above what the solve leaves as residue
+    (SEPARATION_FACTOR·vtol) plus, for a pressed contact, the speed its force undoes in
+    ``stick`` seconds (lam·(w_a + w_b)·stick: the solve's own allowance, see
+    solve_contacts). touched_only: only contacts with a sphere visited by the current
+    solve. A released contact's force is taken back from ``acc`` (its spheres are touched
+    first). Returns how many were released."""
+    solve = h.count[1]
+    released = 0
+    c = 0
+    while c < h.count[0]:
+        i = h.a[c]
+        j = h.other[c] if h.kind[c] == pair_kind else -1
+        if touched_only and h.mark[i] != solve and (j < 0 or h.mark[j] != solve):
+            c += 1
+            continue
+        rel_v = _relative(v, h, c, pair_kind)
+        wsum = inverse_mass[i] + (inverse_mass[j] if j >= 0 else 0.0)
+        separating = rel_v > SEPARATION_FACTOR * vtol + h.lam[c] * wsum * stick
+        # pulled apart, and not approaching by even a rounding error (released, such a
+        # contact would be found again at once)
+        pulled = h.lam[c] == 0.0 and rel_v >= 0.0 and _relative(acc, h, c, pair_kind) > atol
+        if not (separating or pulled):
+            c += 1
+            continue
+        # a released contact was never swept-tested while held: its spheres must be
+        # predicted again, or they could pass through each other later in the step
+        touch(h, i, x, v, a, sigma, when, integrator, drag, k, solve)
+        h.renew[i] = solve
+        if j >= 0:
+            touch(h, j, x, v, a, sigma, when, integrator, drag, k, solve)
+            h.renew[j] = solve
+        if h.lam[c] != 0.0:
+            push_along(acc, inverse_mass, i, j, h.normal[c, 0], h.normal[c, 1], h.normal[c, 2], -h.lam[c])
+        held_remove(h, c, pair_kind)
+        released += 1
+    return released
+
+
+@njit(cache=True)
+def contacts_of(h, spheres, n_spheres, out) -> int:
+    """The ids of every held contact of ``spheres[:n_spheres]`` into ``out`` (each once,
+    in sphere order); returns how many. out must hold h.count[0] entries."""
+    m = 0
+    solve = h.count[1]
+    for s in range(n_spheres):
+        p = spheres[s]
+        for t in range(h.deg[p]):
+            c = h.slots[p, t]
+            if h.seen[c] != -(solve + 3):
+                h.seen[c] = -(solve + 3)
+                out[m] = c
+                m += 1
+    return m

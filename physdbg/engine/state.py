@@ -23,7 +23,7 @@ BUDGETS = {
                            "sphere–sphere contacts were not tested in this step (spheres may pass through "
                            "or overlap each other); usually dt is too long for the speeds, or spheres overlap"),
     "max_swept_tests_per_step": ("swept tests", "the remaining contacts of the step were not resolved"),
-    "max_resting_work_per_step": ("resting-solve updates (iterations × held contacts)",
+    "max_resting_work_per_step": ("held-contact solve updates",
                                   "the remaining contacts of the step were not resolved"),
 }
 
@@ -36,7 +36,9 @@ class Settings:
     samples: k for ``sampled``; ordering: ``time`` or ``index``; gravity: (3,) m/s²;
     drag: d in v·d^t, in (0, 1] (1 = none); restitution_rule: see resolve.py;
     rest_fraction: a pressed contact rests when its closing speed is at most this fraction
-    of |a_n|·dt (resting.py); contact_tolerance: allowed overlap / resting gap (m).
+    of |a_n|·dt (resting.py); rapid_contact_time: a contact with restitution < 1 this soon
+    (s) after either sphere's previous one is held like a resting one (resting.py, 0 = off);
+    contact_tolerance: allowed overlap / resting gap (m).
 
     Budgets bound the work of one step (see BUDGETS); when one is reached the step still
     finishes, and a warning names the budget.
@@ -51,11 +53,12 @@ class Settings:
     drag: float = 1.0
     restitution_rule: str = "min"
     rest_fraction: float = 0.01
+    rapid_contact_time: float = 1e-4
     contact_tolerance: float = 1e-9
     max_events_per_step: int = 10_000
     max_pairs_per_step: int = 10_000_000
     max_swept_tests_per_step: int = 10_000_000
-    max_resting_work_per_step: int = 2_000_000
+    max_resting_work_per_step: int = 100_000_000
 
     @property
     def integrator_code(self) -> int:

@@ -9,15 +9,17 @@ every swept test (kind, particles, start, toi, outcome) and every contact (time,
 normal, impulse, velocities before and after ...). The world turns them into typed
 events afterwards, only if someone observes.
 
-The loop *pauses* and returns to Python for the rare cases that need the general code:
+Resolving is resolve.resolve_contact, the one resolver (it also solves resting, rapid
+and held contacts, resting.py). The spheres it changed are re-predicted one by one from
+a pending list, so the loop can pause between any two of them. It *pauses* and returns
+to Python for:
 
-* PAUSE_RESOLVE: the contact is resting, or touches a particle with held contacts
-  (the resting rule and its constraint solve live in Python, resting.py);
 * REQUERY: a new path left the swept box its broad-phase pairs were found for;
-* GROW: a buffer is nearly full.
+* GROW: a buffer, or the held-contact store, is nearly full.
 
-It stops for good with CAPPED (the contact budget, max_events_per_step) or TEST_BUDGET
-(max_swept_tests_per_step): the step's remaining predictions are marked capped.
+It stops for good with CAPPED (the contact budget, max_events_per_step), TEST_BUDGET
+(max_swept_tests_per_step) or RESTING_BUDGET (max_resting_work_per_step): the step's
+remaining predictions are marked capped.
 
 Python handles it and calls ``run_time_order`` again, which carries on where it stopped.
 """
@@ -30,9 +32,9 @@ import numpy as np
 from numba import njit
 
 from ..events import KIND_PAIR, KIND_WALL, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_SUPERSEDED
-from .motion import advance_particles, particle_box
-from .motion import path_coefficients
-from .resting import pressed_closing, rests
+from .motion import particle_box, path_coefficients
+from .resolve import CF_WIDTH, CI_WIDTH, OUT_OF_WORK, SKIPPED, resolve_contact
+from .resting import held_find, held_room
 from .toi import (
     DISCRETE,
     SWEPT,
@@ -45,39 +47,29 @@ from .toi import (
 
 # statuses
 DONE = 0
-PAUSE_RESOLVE = 1
 REQUERY = 2
 GROW = 3
 CAPPED = 4
 TEST_BUDGET = 5
+GROW_HELD = 6
+RESTING_BUDGET = 7
 
 # counters
 HEAP_SIZE = 0
 TESTS = 1
 CONTACTS = 2
 EVENTS = 3
-
-
-# contact float columns
-CF_TIME = 0
-CF_POINT = 1
-CF_NORMAL = 4
-CF_IMPULSE = 7
-CF_VA_BEFORE = 8
-CF_VA_AFTER = 11
-CF_VB_BEFORE = 14
-CF_VB_AFTER = 17
-CF_RESTITUTION = 20
-CF_CLOSING = 21
-CF_WIDTH = 22
-# contact int columns: kind, a, other, resting
-CI_WIDTH = 4
+RAPID = 4  # contacts the rapid-contact (TC) rule held
+PENDING_COUNT = 5  # spheres waiting to be re-predicted ...
+PENDING_AT = 6  # ... and how many of them are done
+BATCH = 7  # id of the current batch of re-predictions
+COUNTERS = 8
 
 
 class Buffers:
     """Growable arrays the compiled loop writes into; one set per World."""
 
-    def __init__(self, heap: int = 1024, tests: int = 4096, contacts: int = 256):
+    def __init__(self, n: int, heap: int = 1024, tests: int = 4096, contacts: int = 256):
         self.heap_toi = np.empty(heap)
         self.heap_data = np.empty((heap, 6), dtype=np.int64)  # rid, kind, a, other, version a, version b
         self.test_int = np.empty((tests, 3), dtype=np.int64)  # kind, a, other
@@ -85,14 +77,17 @@ class Buffers:
         self.test_outcome = np.empty(tests, dtype=np.int8)
         self.contact_float = np.empty((contacts, CF_WIDTH))
         self.contact_int = np.empty((contacts, CI_WIDTH), dtype=np.int64)
-        self.counters = np.zeros(4, dtype=np.int64)
-        self.pending_int = np.zeros(4, dtype=np.int64)  # kind, a, other, rid
-        self.pending_float = np.zeros(1)  # toi
-        self.requery = np.empty(2, dtype=np.int64)
+        self.counters = np.zeros(COUNTERS, dtype=np.int64)
+        self.pending = np.empty(max(n, 2), dtype=np.int64)  # spheres to re-predict
+        self.changed = np.empty(max(n, 2) + 1, dtype=np.int64)  # count, then spheres (resolve_contact)
+        self.batch_mark = np.full(max(n, 2), -1, dtype=np.int64)  # batch id of each sphere's last change
+        self.requery = np.empty(max(n, 2), dtype=np.int64)
         self.requery_count = np.zeros(1, dtype=np.int64)
 
     def reset(self) -> None:
+        batch = self.counters[BATCH]  # batch ids stay unique across steps (batch_mark keeps old ones)
         self.counters[:] = 0
+        self.counters[BATCH] = batch
         self.requery_count[0] = 0
 
     def ensure(self, heap_room: int, test_room: int, contact_room: int) -> None:
@@ -194,13 +189,11 @@ def _record(kind, i, j, start, t, step_end, version, test_int, test_float, test_
 
 @njit(cache=True, inline="always")
 def _predict_pair(i, j, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, tolerance,
-                  held_pairs, test_int, test_float, test_outcome, heap_toi, heap_data, counters, push):
-    """Swept test of pair (i, j) from the later of their anchors; record it, push a hit."""
-    if held_pairs.shape[0] > 0:
-        key = min(i, j) * x.shape[0] + max(i, j)
-        pos = np.searchsorted(held_pairs, key)
-        if pos < held_pairs.shape[0] and held_pairs[pos] == key:
-            return
+                  held, test_int, test_float, test_outcome, heap_toi, heap_data, counters, push):
+    """Swept test of pair (i, j) (i < j) from the later of their anchors; record it, push a
+    hit. A held pair is not tested."""
+    if held.deg[i] > 0 and held.deg[j] > 0 and held_find(held, KIND_PAIR, i, j) >= 0:
+        return
     start = max(sigma[i], sigma[j])
     pi1, pi2, dpi = path_coefficients(integrator, k, start - sigma[i])
     pj1, pj2, dpj = path_coefficients(integrator, k, start - sigma[j])
@@ -225,14 +218,12 @@ def _predict_pair(i, j, x, v, a, radius, sigma, version, step_end, integrator, k
 
 @njit(cache=True, inline="always")
 def _predict_wall(i, w, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, normals,
-                  offsets, half_thickness, two_sided, held_walls, test_int, test_float, test_outcome, heap_toi,
+                  offsets, half_thickness, two_sided, held, test_int, test_float, test_outcome, heap_toi,
                   heap_data, counters, push):
-    """Swept test of particle i against wall w from i's anchor; record it, push a hit."""
-    if held_walls.shape[0] > 0:
-        key = i * normals.shape[0] + w
-        pos = np.searchsorted(held_walls, key)
-        if pos < held_walls.shape[0] and held_walls[pos] == key:
-            return
+    """Swept test of particle i against wall w from i's anchor; record it, push a hit.
+    A held contact is not tested."""
+    if held.deg[i] > 0 and held_find(held, KIND_WALL, i, w) >= 0:
+        return
     g0, p, q, _ = wall_gap_terms(x, v, a, radius, i, normals[w], offsets[w], half_thickness[w], two_sided[w])
     start = sigma[i]
     horizon = step_end - start
@@ -247,51 +238,42 @@ def _predict_wall(i, w, x, v, a, radius, sigma, version, step_end, integrator, k
 
 @njit(cache=True)
 def predict_into(kind, ia, ib, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
-                 tolerance, normals, offsets, half_thickness, two_sided, held_pairs, held_walls,
+                 tolerance, normals, offsets, half_thickness, two_sided, held,
                  test_int, test_float, test_outcome, heap_toi, heap_data, counters, push):
     """Swept-test candidates (kind, ia[m], ib[m]); record each test; push hits if ``push``.
 
-    held_pairs / held_walls: sorted keys (a·N + b, particle·W + wall) of held contacts,
-    which are not tested.
+    held: the held contacts (resting.HeldContacts), which are not tested.
     """
     for m in range(ia.shape[0]):
         if kind == KIND_PAIR:
             _predict_pair(ia[m], ib[m], x, v, a, radius, sigma, version, step_end, integrator, k, detection,
-                          samples, tolerance, held_pairs, test_int, test_float, test_outcome, heap_toi,
+                          samples, tolerance, held, test_int, test_float, test_outcome, heap_toi,
                           heap_data, counters, push)
         else:
             _predict_wall(ia[m], ib[m], x, v, a, radius, sigma, version, step_end, integrator, k, detection,
-                          samples, normals, offsets, half_thickness, two_sided, held_walls, test_int, test_float,
+                          samples, normals, offsets, half_thickness, two_sided, held, test_int, test_float,
                           test_outcome, heap_toi, heap_data, counters, push)
 
 
 # ------------------------------------------------------------------------------ resolve
 @njit(cache=True)
-def _combine(rule, e_a, e_b):
-    if rule == 0:
-        return min(e_a, e_b)
-    if rule == 1:
-        return max(e_a, e_b)
-    if rule == 2:
-        return e_a * e_b
-    return 0.5 * (e_a + e_b)
-
-
-@njit(cache=True)
 def _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, tolerance,
-               normals, offsets, half_thickness, two_sided, held_pairs, held_walls, adj_start, adj,
-               other_changed, scratch, test_int, test_float, test_outcome, heap_toi, heap_data, counters):
-    """Push new predictions of particle p against its partners and the walls."""
+               normals, offsets, half_thickness, two_sided, held, adj_start, adj, batch_mark, batch, test_int,
+               test_float, test_outcome, heap_toi, heap_data, counters):
+    """Push new predictions of particle p against its partners and the walls.
+
+    A pair whose both spheres changed in this batch is predicted once, from the larger index.
+    """
     for s in range(adj_start[p], adj_start[p + 1]):
         q = adj[s]
-        if q == other_changed and q < p:
-            continue  # the pair is predicted once, from the smaller index
+        if batch_mark[q] == batch and q < p:
+            continue
         _predict_pair(min(p, q), max(p, q), x, v, a, radius, sigma, version, step_end, integrator, k, detection,
-                      samples, tolerance, held_pairs, test_int, test_float, test_outcome, heap_toi,
+                      samples, tolerance, held, test_int, test_float, test_outcome, heap_toi,
                       heap_data, counters, True)
     for w in range(normals.shape[0]):
         _predict_wall(p, w, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, normals,
-                      offsets, half_thickness, two_sided, held_walls, test_int, test_float, test_outcome, heap_toi,
+                      offsets, half_thickness, two_sided, held, test_int, test_float, test_outcome, heap_toi,
                       heap_data, counters, True)
 
 
@@ -301,6 +283,8 @@ def mark_capped(heap_data, test_outcome, counters):
     for s in range(counters[HEAP_SIZE]):
         test_outcome[heap_data[s, 0]] = OUTCOME_CAPPED
     counters[HEAP_SIZE] = 0
+    counters[PENDING_COUNT] = 0
+    counters[PENDING_AT] = 0
 
 
 @njit(cache=True)
@@ -313,21 +297,47 @@ def _inside_box(x, v, a, radius, sigma, p, step_end, integrator, k, margin, box_
 
 
 @njit(cache=True)
-def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, version, step_end, integrator, drag,
-                   k, detection, samples, tolerance, rest_fraction, rest_step_factor, rule, normals, offsets,
-                   half_thickness, two_sided, wall_restitution, held_pairs, held_walls, has_held, adj_start, adj,
-                   box_lo, box_hi, box_margin, max_degree, cap, max_tests, anchor_is_flow,
-                   heap_toi, heap_data, test_int, test_float, test_outcome, contact_float, contact_int, counters,
-                   pending_int, pending_float, requery, requery_count):
+def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, version, last_contact, run_time,
+                   step_end, integrator, drag, k, detection, samples, tolerance, rest_fraction, rest_step_factor,
+                   rule, rapid_time, normals, offsets, half_thickness, two_sided, wall_restitution, held, adj_start,
+                   adj, box_lo, box_hi, box_margin, max_degree, cap, max_tests, work_budget, anchor_is_flow,
+                   path_follows_acc, vtol, atol, heap_toi, heap_data, test_int, test_float, test_outcome,
+                   contact_float, contact_int, counters, pending, changed, batch_mark, requery, requery_count):
     """Resolve contacts in time order until done or a pause (see module doc)."""
     nw = normals.shape[0]
     room = 2 * max_degree + 2 * nw + 4
-    pair = np.empty(2, dtype=np.int64)
     scratch = np.empty((2, 3))  # the lo, hi rows of _inside_box
-    while counters[HEAP_SIZE] > 0:
+    while True:
+        # re-predict the spheres the last contact changed, pausing if a buffer fills up
+        if counters[PENDING_COUNT] > 0:
+            while counters[PENDING_AT] < counters[PENDING_COUNT]:
+                if heap_toi.shape[0] - counters[HEAP_SIZE] < room or test_outcome.shape[0] - counters[TESTS] < room:
+                    return GROW
+                p = pending[counters[PENDING_AT]]
+                counters[PENDING_AT] += 1
+                _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
+                           tolerance, normals, offsets, half_thickness, two_sided, held, adj_start, adj, batch_mark,
+                           counters[BATCH], test_int, test_float, test_outcome, heap_toi, heap_data, counters)
+            # a path that left its swept box may meet particles it was never paired with
+            out = 0
+            for s in range(counters[PENDING_COUNT]):
+                p = pending[s]
+                if not _inside_box(x, v, a, radius, sigma, p, step_end, integrator, k, box_margin, box_lo, box_hi,
+                                   scratch):
+                    requery[out] = p
+                    out += 1
+            counters[PENDING_COUNT] = 0
+            counters[PENDING_AT] = 0
+            if out:
+                requery_count[0] = out
+                return REQUERY
+        if counters[HEAP_SIZE] == 0:
+            return DONE
         if (heap_toi.shape[0] - counters[HEAP_SIZE] < room or test_outcome.shape[0] - counters[TESTS] < room
                 or contact_int.shape[0] - counters[CONTACTS] < 2):
             return GROW
+        if not held_room(held, heap_data[0, 2], heap_data[0, 3] if heap_data[0, 1] == KIND_PAIR else -1):
+            return GROW_HELD
         if counters[TESTS] >= max_tests:
             mark_capped(heap_data, test_outcome, counters)
             return TEST_BUDGET
@@ -345,132 +355,24 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
             test_outcome[rid] = OUTCOME_CAPPED
             mark_capped(heap_data, test_outcome, counters)
             return CAPPED
-        ib = other if kind == KIND_PAIR else -1
-        held = has_held[ia] or (ib >= 0 and has_held[ib])
-        # advance to the contact
-        if ib >= 0:
-            pair[0] = ia
-            pair[1] = ib
-            advance_particles(x, v, a, sigma, pair, toi, integrator, drag, k)
-        else:
-            pair[0] = ia
-            advance_particles(x, v, a, sigma, pair[:1], toi, integrator, drag, k)
-        # normal, closing speed, restitution
-        nx = 0.0
-        ny = 0.0
-        nz = 0.0
-        if ib >= 0:
-            dx0 = x[ia, 0] - x[ib, 0]
-            dx1 = x[ia, 1] - x[ib, 1]
-            dx2 = x[ia, 2] - x[ib, 2]
-            length = math.sqrt(dx0 * dx0 + dx1 * dx1 + dx2 * dx2)
-            if length == 0.0:
-                nx = 1.0
-            else:
-                nx = dx0 / length
-                ny = dx1 / length
-                nz = dx2 / length
-            closing = -((v[ia, 0] - v[ib, 0]) * nx + (v[ia, 1] - v[ib, 1]) * ny + (v[ia, 2] - v[ib, 2]) * nz)
-            rel_acc = (acc[ia, 0] - acc[ib, 0]) * nx + (acc[ia, 1] - acc[ib, 1]) * ny + (acc[ia, 2] - acc[ib, 2]) * nz
-            e = _combine(rule, restitution[ia], restitution[ib])
-        else:
-            nx = normals[other, 0]
-            ny = normals[other, 1]
-            nz = normals[other, 2]
-            if two_sided[other] and nx * x[ia, 0] + ny * x[ia, 1] + nz * x[ia, 2] - offsets[other] < 0.0:
-                nx = -nx
-                ny = -ny
-                nz = -nz
-            closing = -(v[ia, 0] * nx + v[ia, 1] * ny + v[ia, 2] * nz)
-            rel_acc = acc[ia, 0] * nx + acc[ia, 1] * ny + acc[ia, 2] * nz
-            e = _combine(rule, restitution[ia], wall_restitution[other])
-        closing = pressed_closing(closing, rel_acc, step_end)
-        if closing < 0.0 or (closing == 0.0 and not rel_acc < 0.0) or (
-                ib >= 0 and inverse_mass[ia] + inverse_mass[ib] == 0.0):
-            test_outcome[rid] = OUTCOME_SUPERSEDED
-            if not anchor_is_flow:  # Euler (and dragged Verlet) paths change with the anchor
-                version[ia] += 1
-                _repredict(ia, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
-                           tolerance, normals, offsets, half_thickness, two_sided, held_pairs, held_walls,
-                           adj_start, adj, ib, scratch, test_int, test_float, test_outcome, heap_toi, heap_data, counters)
-                if ib >= 0:
-                    version[ib] += 1
-                    _repredict(ib, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
-                               tolerance, normals, offsets, half_thickness, two_sided, held_pairs, held_walls,
-                               adj_start, adj, ia, scratch, test_int, test_float, test_outcome, heap_toi, heap_data,
-                               counters)
-            continue
-        if held or rests(closing, rel_acc, step_end, rest_step_factor, rest_fraction):
-            # the resting rule and held contacts are the Python code's (resting.py)
-            pending_int[0] = kind
-            pending_int[1] = ia
-            pending_int[2] = other
-            pending_int[3] = rid
-            pending_float[0] = toi
-            return PAUSE_RESOLVE
-        # resolve: the seed's impulse / reflection
-        row = counters[CONTACTS]
-        cf = contact_float
-        cf[row, CF_TIME] = toi
-        cf[row, CF_NORMAL] = nx
-        cf[row, CF_NORMAL + 1] = ny
-        cf[row, CF_NORMAL + 2] = nz
-        for c in range(3):
-            cf[row, CF_POINT + c] = x[ia, c] - cf[row, CF_NORMAL + c] * radius[ia]
-            cf[row, CF_VA_BEFORE + c] = v[ia, c]
-            cf[row, CF_VB_BEFORE + c] = v[ib, c] if ib >= 0 else math.nan
-        if ib >= 0:
-            j = (1.0 + e) * closing / (inverse_mass[ia] + inverse_mass[ib])
-            wa = j * inverse_mass[ia]
-            wb = j * inverse_mass[ib]
-            v[ia, 0] += wa * nx
-            v[ia, 1] += wa * ny
-            v[ia, 2] += wa * nz
-            v[ib, 0] -= wb * nx
-            v[ib, 1] -= wb * ny
-            v[ib, 2] -= wb * nz
-        else:
-            dvn = (1.0 + e) * closing
-            v[ia, 0] += dvn * nx
-            v[ia, 1] += dvn * ny
-            v[ia, 2] += dvn * nz
-            j = dvn / inverse_mass[ia] if inverse_mass[ia] > 0.0 else math.inf
-        for c in range(3):
-            cf[row, CF_VA_AFTER + c] = v[ia, c]
-            cf[row, CF_VB_AFTER + c] = v[ib, c] if ib >= 0 else math.nan
-        cf[row, CF_IMPULSE] = j
-        cf[row, CF_RESTITUTION] = e
-        cf[row, CF_CLOSING] = closing
-        contact_int[row, 0] = kind
-        contact_int[row, 1] = ia
-        contact_int[row, 2] = other
-        contact_int[row, 3] = 0
-        counters[CONTACTS] = row + 1
-        test_outcome[rid] = OUTCOME_HIT
-        # re-predict only the particles involved
-        version[ia] += 1
-        if ib >= 0:
-            version[ib] += 1
-        _repredict(ia, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, tolerance,
-                   normals, offsets, half_thickness, two_sided, held_pairs, held_walls, adj_start, adj, ib,
-                   scratch, test_int, test_float, test_outcome, heap_toi, heap_data, counters)
-        if ib >= 0:
-            _repredict(ib, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
-                       tolerance, normals, offsets, half_thickness, two_sided, held_pairs, held_walls, adj_start,
-                       adj, ia, scratch, test_int, test_float, test_outcome, heap_toi, heap_data, counters)
-        # a path that left its swept box may meet particles it was never paired with
-        out = 0
-        if not _inside_box(x, v, a, radius, sigma, ia, step_end, integrator, k, box_margin, box_lo, box_hi, scratch):
-            requery[out] = ia
-            out += 1
-        if ib >= 0 and not _inside_box(x, v, a, radius, sigma, ib, step_end, integrator, k, box_margin, box_lo,
-                                       box_hi, scratch):
-            requery[out] = ib
-            out += 1
-        if out:
-            requery_count[0] = out
-            return REQUERY
-    return DONE
+        status = resolve_contact(kind, ia, other, toi, run_time, x, v, a, acc, radius, inverse_mass, restitution,
+                                 sigma, last_contact, step_end, integrator, drag, k, anchor_is_flow,
+                                 path_follows_acc, rest_fraction, rest_step_factor, rule, rapid_time, normals,
+                                 offsets, two_sided, wall_restitution, held, contact_float, contact_int, counters,
+                                 CONTACTS, RAPID, changed, work_budget, vtol, atol)
+        test_outcome[rid] = OUTCOME_SUPERSEDED if status == SKIPPED else OUTCOME_HIT
+        # re-predict only the particles whose paths changed (next time round the loop)
+        counters[BATCH] += 1
+        for s in range(changed[0]):
+            p = changed[1 + s]
+            version[p] += 1
+            batch_mark[p] = counters[BATCH]
+            pending[s] = p
+        counters[PENDING_COUNT] = changed[0]
+        counters[PENDING_AT] = 0
+        if status == OUT_OF_WORK:
+            mark_capped(heap_data, test_outcome, counters)
+            return RESTING_BUDGET
 
 
 # ------------------------------------------------------------------------------ step helpers

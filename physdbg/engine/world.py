@@ -30,6 +30,8 @@ from time import perf_counter
 import numpy as np
 
 from ..events import (
+    HOW_RAPID,
+    HOW_RESTING,
     BroadPhaseInfo,
     KIND_PAIR,
     KIND_WALL,
@@ -44,11 +46,7 @@ from ..events import (
 )
 from .broadphase import choose_broad_phase, make_broad_phase
 from .motion import EULER, SEMI_IMPLICIT, VERLET, advance_particles, particle_box, swept_boxes
-from .resolve import RESTITUTION_RULES, apply_pair_impulse, combine_restitution, pair_impulse, reflect, unit
-from .resting import pressed_closing, rests, solve_accelerations
-from .state import BUDGETS, NonFiniteState, Settings, State, Walls, energies, first_non_finite, state_hash
-from .timeline import (
-    CAPPED,
+from .resolve import (
     CF_CLOSING,
     CF_IMPULSE,
     CF_NORMAL,
@@ -59,23 +57,38 @@ from .timeline import (
     CF_VA_BEFORE,
     CF_VB_AFTER,
     CF_VB_BEFORE,
+    OUT_OF_WORK,
+    RESTITUTION_RULES,
+    SKIPPED,
+    resolve_contact,
+    settle_held,
+)
+from .resting import grow_held, held_room, new_held
+from .state import BUDGETS, NonFiniteState, Settings, State, Walls, energies, first_non_finite, state_hash
+from .timeline import (
+    CAPPED,
     CONTACTS,
     DONE,
     EVENTS,
     GROW,
-    PAUSE_RESOLVE,
+    GROW_HELD,
+    RAPID,
     REQUERY,
+    RESTING_BUDGET,
     TEST_BUDGET,
     TESTS,
     Buffers,
     adjacency_from_pairs,
-    mark_capped,
     max_overlap,
     predict_into,
     reachable_walls,
     run_time_order,
 )
 
+# Updates of the held-contact solves smaller than this (relative to the largest free
+# acceleration, at least 1 m/s², and for velocities to that acceleration times dt) wake
+# no neighbours: they are rounding.
+SOLVE_TOLERANCE = 1e-12
 
 
 @dataclass
@@ -92,6 +105,7 @@ class StepStats:
     swept_tests: int
     events: int
     held: int
+    rapid: int
     max_overlap: float
     state_hash: str
     timings: dict[str, float]
@@ -117,7 +131,8 @@ class World:
         self.time = 0.0
         chosen, self.broad_phase_reason = choose_broad_phase(settings.broad_phase, state.radius)
         self.broad_phase = make_broad_phase(chosen)
-        self.held: dict[tuple, np.ndarray | None] = {}
+        self.held = new_held(state.count)
+        self._last_contact = np.full(state.count, -math.inf)
         self._integrator = settings.integrator_code
         self._detection = settings.detection_code
         self._drag = float(settings.drag)
@@ -136,72 +151,18 @@ class World:
             self._integrator == VERLET and self._drag == 1.0)
         # straight Euler paths arrive at a rest with about one step of acceleration (resting.py)
         self._rest_step_factor = 1.5 if self._integrator in (EULER, SEMI_IMPLICIT) else 0.0
+        self._accel_scale = max(1.0, float(np.abs(self._free_accel).max())) if state.count else 1.0
+        self._atol = SOLVE_TOLERANCE * self._accel_scale
+        self._vtol = self._atol  # set per step: SOLVE_TOLERANCE·(acceleration scale)·dt
+        self._acc = np.zeros((state.count, 3))
         self._offsets = np.ascontiguousarray(walls.offsets, dtype=np.float64)
         self._wall_restitution = np.ascontiguousarray(walls.restitution, dtype=np.float64)
-        self._buf = Buffers()
+        self._buf = Buffers(state.count)
 
-    # ------------------------------------------------------------------ helpers
-    def _wall_normal_towards(self, i: int, w: int) -> np.ndarray:
-        """The wall's normal pointing to the side particle i is on."""
-        n = self._normals[w]
-        if self._two_sided[w] and float(n @ self.state.positions[i]) - self._offsets[w] < 0.0:
-            return -n
-        return n.copy()
-
-    def _held_key_normal(self, key: tuple) -> np.ndarray:
-        if key[0] == "wall":
-            return self.held[key]
-        d = self.state.positions[key[1]] - self.state.positions[key[2]]
-        return unit(d)
-
-    def _solve_held(self):
-        """Accelerations from held contacts; contacts that no longer push are released."""
-        while True:
-            acc, lam, work = solve_accelerations(self._free_accel, self.state.inverse_mass,
-                                                 self.state.positions, self.held)
-            self._resting_work += work
-            loose = [key for key, value in lam.items() if value <= 0.0]
-            if not loose:
-                return acc
-            for key in loose:
-                del self.held[key]
-
-    def _project_held_velocities(self, particles: np.ndarray) -> None:
-        """Remove any approach along held contacts from the velocities (in place)."""
-        if not self.held:
-            return
-        projected, _, work = solve_accelerations(self.state.velocities, self.state.inverse_mass,
-                                                 self.state.positions, self.held)
-        self._resting_work += work
-        self.state.velocities[particles] = projected[particles]
-
-    def _held_gap_ok(self, key: tuple) -> bool:
-        x = self.state.positions
-        tol = self.settings.contact_tolerance
-        if key[0] == "wall":
-            i, w = key[1], key[2]
-            h = float(self._normals[w] @ x[i]) - self._offsets[w]
-            gap = (abs(h) if self._two_sided[w] else h) - self._half_thickness[w] - self.state.radius[i]
-        else:
-            i, j = key[1], key[2]
-            gap = float(np.linalg.norm(x[i] - x[j])) - self.state.radius[i] - self.state.radius[j]
-        return abs(gap) <= tol
-
-    def _held_particles(self) -> set[int]:
-        """Every particle in a held contact."""
-        return {i for key in self.held for i in ((key[1], key[2]) if key[0] == "pair" else (key[1],))}
-
-    def _sync_held(self) -> None:
-        """Held contacts as the arrays the compiled loop reads (sorted keys, flags)."""
-        n = self.state.count
-        nw = len(self.walls)
-        pairs = sorted(key[1] * n + key[2] for key in self.held if key[0] == "pair")
-        walls = sorted(key[1] * nw + key[2] for key in self.held if key[0] == "wall")
-        self._held_pairs = np.array(pairs, dtype=np.int64)
-        self._held_walls = np.array(walls, dtype=np.int64)
-        has = np.zeros(n, dtype=np.bool_)
-        has[list(self._held_particles())] = True
-        self._has_held = has
+    @property
+    def held_count(self) -> int:
+        """How many contacts are held (resting or rapid, resting.py)."""
+        return int(self.held.count[0])
 
     # ------------------------------------------------------------------ the step
     def step(self, dt: float) -> StepStats:
@@ -233,19 +194,19 @@ class World:
 
         # -- forces ---------------------------------------------------------------
         t0 = perf_counter()
-        for key in [key for key in self.held if not self._held_gap_ok(key)]:
-            del self.held[key]
-        acc = self._solve_held()
-        if self._integrator == SEMI_IMPLICIT:
-            damp = 1.0 if self._drag == 1.0 else self._drag ** dt
-            v *= damp
-            v += acc * dt
-            path_accel = np.zeros_like(acc)
-        else:
-            path_accel = acc.copy()
+        self.held.count[2] = 0  # the resting work of this step
+        # a velocity residue of vtol moves a sphere vtol·dt in a step: SOLVE_TOLERANCE·a·dt²
+        self._vtol = SOLVE_TOLERANCE * self._accel_scale * dt
+        acc = self._acc
+        path_accel = np.empty_like(acc)
         sigma = np.zeros(n)
-        self._acc = acc
-        self._held_members = self._held_particles()
+        if not settle_held(self.held, x, v, path_accel, acc, self._free_accel, st.radius, st.inverse_mass, sigma, dt,
+                           self._integrator, self._drag, self._k, self._integrator == SEMI_IMPLICIT, self._normals,
+                           self._offsets, self._half_thickness, self._two_sided, s.contact_tolerance,
+                           s.max_resting_work_per_step, self._vtol, self._atol,
+                           dt * (self._rest_step_factor + s.rest_fraction)):
+            warn("max_resting_work_per_step", _budget_message("max_resting_work_per_step",
+                                                              s.max_resting_work_per_step))
         self._a = path_accel
         self._sigma = sigma
         t1 = perf_counter()
@@ -273,9 +234,9 @@ class World:
         self._step_no = step_no
         self._dt = dt
         self._version = np.zeros(n, dtype=np.int64)
+        self._run_time = self.time
         buf = self._buf
         buf.reset()
-        self._sync_held()
         push = s.ordering == "time"
         self._predict(KIND_PAIR, pairs[:, 0].copy(), pairs[:, 1].copy(), push)
         wall_p, wall_w = reachable_walls(lo, hi, self._normals, self._offsets, self._half_thickness,
@@ -286,7 +247,7 @@ class World:
 
         # -- resolve --------------------------------------------------------------
         budget = self._resolve_in_time_order() if push else self._resolve_in_index_order()
-        if budget is not None:
+        if budget is not None and not any(w.code == budget for w in warnings):
             warn(budget, _budget_message(budget, getattr(s, budget)))
         t4 = perf_counter()
         timings["resolve"] = t4 - t3
@@ -312,15 +273,16 @@ class World:
         contacts = int(buf.counters[CONTACTS])
         tests = int(buf.counters[TESTS])
         events = int(buf.counters[EVENTS])
+        rapid = int(buf.counters[RAPID])
         stats = StepStats(step_no, self.time, dt, kinetic, potential, momentum, contacts, tests, events,
-                          len(self.held), max_overlap, digest, timings, warnings)
+                          self.held_count, rapid, max_overlap, digest, timings, warnings)
         if obs is not None:
             obs.on_event(self._contacts_event())
             obs.on_event(self._swept_tests_event())
             obs.on_event(StepEnd(step_no, self.time, dt, x.copy(), v.copy(), kinetic, potential,
                                  momentum.copy(),
                                  {"contacts": contacts, "swept_tests": tests, "events": events,
-                                  "resting": len(self.held)},
+                                  "resting": self.held_count, "rapid": rapid},
                                  max_overlap, dict(timings), digest, tuple(w.message for w in warnings)))
         if non_finite is not None:
             raise failure
@@ -396,29 +358,8 @@ class World:
         buf.ensure(ia.size, ia.size, 0)
         predict_into(kind, ia, ib, st.positions, st.velocities, self._a, st.radius, self._sigma, self._version,
                      self._dt, self._integrator, self._k, self._detection, s.samples, s.contact_tolerance * 1e-3,
-                     self._normals, self._offsets, self._half_thickness, self._two_sided, self._held_pairs,
-                     self._held_walls, buf.test_int, buf.test_float, buf.test_outcome,
-                     buf.heap_toi, buf.heap_data, buf.counters, push)
-
-    def _predict_for(self, particles: set[int]) -> None:
-        """Re-predict everything involving ``particles`` (after their paths changed)."""
-        new_pairs = []
-        for i in sorted(particles):
-            new_pairs += [(min(i, j), max(i, j)) for j in self._refresh_box(i)]
-        self._add_partners(new_pairs)
-        seen = set()
-        pa, pb = [], []
-        for i in sorted(particles):
-            for j in self._partners(i).tolist():
-                key = (i, j) if i < j else (j, i)
-                if key not in seen:
-                    seen.add(key)
-                    pa.append(key[0])
-                    pb.append(key[1])
-        plist = np.array(sorted(particles), dtype=np.int64)
-        nw = len(self.walls)
-        self._predict(KIND_PAIR, np.array(pa, dtype=np.int64), np.array(pb, dtype=np.int64), True)
-        self._predict(KIND_WALL, np.repeat(plist, nw), np.tile(np.arange(nw, dtype=np.int64), plist.size), True)
+                     self._normals, self._offsets, self._half_thickness, self._two_sided, self.held,
+                     buf.test_int, buf.test_float, buf.test_outcome, buf.heap_toi, buf.heap_data, buf.counters, push)
 
     # ------------------------------------------------------------------ policies
     def _resolve_in_time_order(self) -> str | None:
@@ -428,39 +369,32 @@ class World:
         s = self.settings
         buf = self._buf
         nw = len(self.walls)
-        cap = s.max_events_per_step
         rule = RESTITUTION_RULES.index(s.restitution_rule)
         while True:
             status = run_time_order(
                 st.positions, st.velocities, self._a, self._acc, st.radius, st.inverse_mass, st.restitution,
-                self._sigma, self._version, self._dt, self._integrator, self._drag, self._k, self._detection,
-                s.samples, s.contact_tolerance * 1e-3, s.rest_fraction, self._rest_step_factor, rule,
-                self._normals, self._offsets, self._half_thickness, self._two_sided, self._wall_restitution,
-                self._held_pairs, self._held_walls, self._has_held, self._adj_start, self._adj, self._lo, self._hi,
-                s.contact_tolerance, self._max_degree, cap, s.max_swept_tests_per_step, self._anchor_is_flow,
-                buf.heap_toi, buf.heap_data, buf.test_int, buf.test_float, buf.test_outcome, buf.contact_float,
-                buf.contact_int, buf.counters, buf.pending_int, buf.pending_float, buf.requery, buf.requery_count)
+                self._sigma, self._version, self._last_contact, self._run_time, self._dt, self._integrator,
+                self._drag, self._k, self._detection, s.samples, s.contact_tolerance * 1e-3, s.rest_fraction,
+                self._rest_step_factor, rule, s.rapid_contact_time, self._normals, self._offsets,
+                self._half_thickness, self._two_sided, self._wall_restitution, self.held, self._adj_start, self._adj,
+                self._lo, self._hi, s.contact_tolerance, self._max_degree, s.max_events_per_step,
+                s.max_swept_tests_per_step, s.max_resting_work_per_step, self._anchor_is_flow,
+                self._integrator != SEMI_IMPLICIT, self._vtol, self._atol, buf.heap_toi, buf.heap_data,
+                buf.test_int, buf.test_float, buf.test_outcome, buf.contact_float, buf.contact_int, buf.counters,
+                buf.pending, buf.changed, buf.batch_mark, buf.requery, buf.requery_count)
             if status == DONE:
                 return None
             if status == CAPPED:
                 return "max_events_per_step"
             if status == TEST_BUDGET:
                 return "max_swept_tests_per_step"
-            if self._resting_work > s.max_resting_work_per_step:
-                mark_capped(self._buf.heap_data, self._buf.test_outcome, self._buf.counters)
+            if status == RESTING_BUDGET:
                 return "max_resting_work_per_step"
             if status == GROW:
                 room = 2 * self._max_degree + 2 * nw + 4
                 buf.ensure(room, room, 2)
-            elif status == PAUSE_RESOLVE:
-                kind, a, other, rid = (int(c) for c in buf.pending_int)
-                changed, resolved = self._resolve(kind, a, other, float(buf.pending_float[0]))
-                buf.test_outcome[rid] = OUTCOME_HIT if resolved else OUTCOME_SUPERSEDED
-                self._sync_held()
-                if changed:
-                    for i in changed:
-                        self._version[i] += 1
-                    self._predict_for(changed)
+            elif status == GROW_HELD:
+                self.held = grow_held(self.held)
             elif status == REQUERY:
                 new_pairs = []
                 for i in buf.requery[: buf.requery_count[0]].tolist():
@@ -474,125 +408,39 @@ class World:
         s = self.settings
         count = int(buf.counters[TESTS])
         toi = buf.test_float[:count, 1]
-        for rid in np.nonzero(toi <= self._dt)[0].tolist():
+        hits = np.nonzero(toi <= self._dt)[0]
+        for rid in hits.tolist():
             buf.counters[EVENTS] += 1
-            over = ("max_events_per_step" if buf.counters[CONTACTS] >= s.max_events_per_step else
-                    "max_resting_work_per_step" if self._resting_work > s.max_resting_work_per_step else None)
-            if over is not None:
-                hits = np.nonzero(toi <= self._dt)[0]
+            if buf.counters[CONTACTS] >= s.max_events_per_step:
                 buf.test_outcome[hits[hits >= rid]] = OUTCOME_CAPPED
-                return over
+                return "max_events_per_step"
             kind, a, other = (int(c) for c in buf.test_int[rid])
             at = max(float(toi[rid]), self._sigma[a], self._sigma[other] if kind == KIND_PAIR else 0.0)
-            _, resolved = self._resolve(kind, a, other, at)
-            buf.test_outcome[rid] = OUTCOME_HIT if resolved else OUTCOME_SUPERSEDED
+            status = self._resolve(kind, a, other, at)
+            buf.test_outcome[rid] = OUTCOME_SUPERSEDED if status == SKIPPED else OUTCOME_HIT
+            if status == OUT_OF_WORK:
+                buf.test_outcome[hits[hits > rid]] = OUTCOME_CAPPED
+                return "max_resting_work_per_step"
         return None
 
     # ------------------------------------------------------------------ one contact
-    def _resolve(self, kind: int, a: int, other: int, when: float) -> tuple[set[int], bool]:
-        """Resolve one predicted contact at time ``when`` in the step.
-
-        Returns (particles whose paths may have changed, whether a contact was resolved);
-        a pair no longer approaching at ``when`` is left alone.
-        """
+    def _resolve(self, kind: int, a: int, other: int, when: float) -> int:
+        """Resolve one predicted contact at time ``when`` in the step (resolve.resolve_contact);
+        returns its status (SKIPPED, RESOLVED or OUT_OF_WORK)."""
         st = self.state
-        x, v, w = st.positions, st.velocities, st.inverse_mass
-        involved = np.array([a, other] if kind == KIND_PAIR else [a], dtype=np.int64)
-        # integrators that are not a flow (Euler, Verlet with drag) take a new path from a
-        # new anchor, so moving the anchor alone obliges a re-prediction
-        moved_only = {int(i) for i in involved} if not self._anchor_is_flow else set()
-        advance_particles(x, v, self._a, self._sigma, involved, when, self._integrator, self._drag, self._k)
-        dt = self._dt
-        if kind == KIND_PAIR:
-            b = other
-            normal = unit(x[a] - x[b])
-            closing = -float((v[a] - v[b]) @ normal)
-            rel_acc = float((self._acc[a] - self._acc[b]) @ normal)
-            restitution = combine_restitution(self.settings.restitution_rule, st.restitution[a], st.restitution[b])
-            key = ("pair", min(a, b), max(a, b))
-        else:
-            b = -1
-            normal = self._wall_normal_towards(a, other)
-            closing = -float(v[a] @ normal)
-            rel_acc = float(self._acc[a] @ normal)
-            restitution = combine_restitution(self.settings.restitution_rule, st.restitution[a],
-                                              float(self.walls.restitution[other]))
-            key = ("wall", a, other)
-        accelerating_in = rel_acc < 0.0
-        closing = pressed_closing(closing, rel_acc, dt)
-        if closing < 0.0 or (closing == 0.0 and not accelerating_in):
-            return moved_only, False
-        resting = rests(closing, rel_acc, dt, self._rest_step_factor, self.settings.rest_fraction)
-        used = 0.0 if resting else restitution
-        va_before = v[a].copy()
-        vb_before = v[b].copy() if b >= 0 else None
-        if kind == KIND_PAIR:
-            if w[a] + w[b] == 0.0:
-                return moved_only, False
-            j = pair_impulse(v[a], v[b], w[a], w[b], normal, used)
-            apply_pair_impulse(v, w, a, b, normal, j)
-        else:
-            v[a] = reflect(v[a], normal, used)
-            j = (1.0 + used) * closing / w[a] if w[a] > 0 else math.inf
-        changed = {int(i) for i in involved}
-        if resting:
-            self.held[key] = normal.copy() if kind == KIND_WALL else None
-        else:
-            for k_ in [k_ for k_ in self.held if k_[1] in changed or (k_[0] == "pair" and k_[2] in changed)]:
-                del self.held[k_]
-        changed |= self._rebalance_held(when)
-        self._record_contact(kind, a, other, when, x[a] - normal * st.radius[a], normal, j, va_before, v[a],
-                             vb_before, v[b] if b >= 0 else None, used, closing, resting)
-        return changed, True
-
-    def _rebalance_held(self, when: float) -> set[int]:
-        """Re-solve held contacts at time ``when``: velocities and accelerations.
-
-        Returns the particles whose velocity or acceleration changed.
-        """
-        # only particles held now or before can have an acceleration other than free fall
-        touched = self._held_particles() | self._held_members
-        if not touched:
-            return set()
-        new_acc = self._solve_held()
-        self._held_members = self._held_particles()
-        idx = np.array(sorted(touched), dtype=np.int64)
-        st = self.state
-        advance_particles(st.positions, st.velocities, self._a, self._sigma, idx, when,
-                          self._integrator, self._drag, self._k)
-        before_v = st.velocities[idx].copy()
-        self._project_held_velocities(idx)
-        self._acc = new_acc
-        if self._integrator != SEMI_IMPLICIT:
-            before_a = self._a[idx].copy()
-            self._a[idx] = new_acc[idx]
-            moved = np.any(self._a[idx] != before_a, axis=1)
-        else:
-            moved = np.zeros(idx.size, dtype=bool)
-        moved |= np.any(st.velocities[idx] != before_v, axis=1)
-        if not self._anchor_is_flow:
-            moved[:] = True
-        return {int(i) for i in idx[moved]}
-
-    def _record_contact(self, kind, a, other, when, point, normal, impulse, va_before, va_after, vb_before,
-                        vb_after, restitution, closing, resting) -> None:
-        """One row of the contact buffer (the same columns the compiled loop writes)."""
+        s = self.settings
         buf = self._buf
         buf.ensure(0, 0, 1)
-        row = int(buf.counters[CONTACTS])
-        cf = buf.contact_float[row]
-        cf[CF_TIME] = when
-        cf[CF_POINT:CF_POINT + 3] = point
-        cf[CF_NORMAL:CF_NORMAL + 3] = normal
-        cf[CF_IMPULSE] = impulse
-        cf[CF_VA_BEFORE:CF_VA_BEFORE + 3] = va_before
-        cf[CF_VA_AFTER:CF_VA_AFTER + 3] = va_after
-        cf[CF_VB_BEFORE:CF_VB_BEFORE + 3] = vb_before if vb_before is not None else np.nan
-        cf[CF_VB_AFTER:CF_VB_AFTER + 3] = vb_after if vb_after is not None else np.nan
-        cf[CF_RESTITUTION] = restitution
-        cf[CF_CLOSING] = closing
-        buf.contact_int[row] = (kind, a, other, int(resting))
-        buf.counters[CONTACTS] = row + 1
+        while not held_room(self.held, a, other if kind == KIND_PAIR else -1):
+            self.held = grow_held(self.held)
+        return resolve_contact(kind, a, other, when, self._run_time, st.positions, st.velocities, self._a, self._acc,
+                               st.radius, st.inverse_mass, st.restitution, self._sigma, self._last_contact, self._dt,
+                               self._integrator, self._drag, self._k, self._anchor_is_flow,
+                               self._integrator != SEMI_IMPLICIT, s.rest_fraction, self._rest_step_factor,
+                               RESTITUTION_RULES.index(s.restitution_rule), s.rapid_contact_time, self._normals,
+                               self._offsets, self._two_sided, self._wall_restitution, self.held, buf.contact_float,
+                               buf.contact_int, buf.counters, CONTACTS, RAPID, buf.changed,
+                               s.max_resting_work_per_step, self._vtol, self._atol)
 
     def _contacts_event(self) -> Contacts:
         buf = self._buf
@@ -606,7 +454,8 @@ class World:
         return Contacts(self._step_no, f[:, CF_TIME].copy(), ints[:, 0].astype(np.int8), ints[:, 1].astype(np.int32),
                         ints[:, 2].astype(np.int32), vec(CF_POINT), vec(CF_NORMAL), f[:, CF_IMPULSE].copy(),
                         vec(CF_VA_BEFORE), vec(CF_VA_AFTER), vec(CF_VB_BEFORE), vec(CF_VB_AFTER),
-                        f[:, CF_RESTITUTION].copy(), f[:, CF_CLOSING].copy(), ints[:, 3].astype(np.bool_))
+                        f[:, CF_RESTITUTION].copy(), f[:, CF_CLOSING].copy(),
+                        (ints[:, 3] == HOW_RESTING) | (ints[:, 3] == HOW_RAPID), ints[:, 3].astype(np.int8))
 
     # ------------------------------------------------------------------ audit
     def _max_overlap(self) -> float:

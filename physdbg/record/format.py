@@ -78,7 +78,7 @@ PARTICLE_FIELDS = [
 STATS_FIELDS = [
     ("time", "<f8", ()), ("dt", "<f8", ()), ("kinetic", "<f8", ()), ("potential", "<f8", ()),
     ("momentum", "<f8", (3,)), ("contacts", "<i8", ()), ("swept_tests", "<i8", ()), ("events", "<i8", ()),
-    ("resting", "<i8", ()), ("max_overlap", "<f8", ()),
+    ("resting", "<i8", ()), ("rapid", "<i8", ()), ("max_overlap", "<f8", ()),
     ("seconds_forces", "<f8", ()), ("seconds_broad_phase", "<f8", ()), ("seconds_narrow_phase", "<f8", ()),
     ("seconds_resolve", "<f8", ()), ("seconds_finish", "<f8", ()),
 ]

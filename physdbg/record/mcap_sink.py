@@ -110,7 +110,7 @@ class McapRecorder:
         stats = np.zeros(1, dtype=self._dtypes[fmt.TOPIC_STATS])
         stats["time"], stats["dt"] = end.time, end.dt
         stats["kinetic"], stats["potential"], stats["momentum"] = end.kinetic, end.potential, end.momentum
-        for name in ("contacts", "swept_tests", "events", "resting"):
+        for name in ("contacts", "swept_tests", "events", "resting", "rapid"):
             stats[name] = end.counts.get(name, 0)
         stats["max_overlap"] = end.max_overlap
         for name, seconds in end.timings.items():
@@ -199,6 +199,8 @@ class McapRecorder:
         rows = np.zeros(count, dtype=self._dtypes[topic])
         for name in rows.dtype.names:
             rows[name] = getattr(source, name)
+        if topic == fmt.TOPIC_CONTACTS:
+            rows["resting"] = source.how  # the column keeps how it was resolved (events.HOW_*)
         return rows.tobytes()
 
     def _broad_phase(self, info: BroadPhaseInfo, frame: int) -> None:

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import PhysdbgError
-from ..events import BroadPhaseInfo, Contacts, EngineWarning, StepBegin, StepEnd, SweptTests
+from ..events import HOW_RAPID, HOW_RESTING, BroadPhaseInfo, Contacts, EngineWarning, StepBegin, StepEnd, SweptTests
 from . import format as fmt
 from .header import RecordingHeader
 
@@ -330,7 +330,9 @@ class Recording:
         if not stats_data:
             raise RecordingError(f"{self.path}: step {k} has a state but no stats message")
         s = np.frombuffer(stats_data[0], dtype=self._dtype(fmt.TOPIC_STATS))[0]
-        counts = {name: int(s[name]) for name in ("contacts", "swept_tests", "events", "resting")}
+        # "rapid" came after format version 1's first files: older ones count 0
+        counts = {name: int(s[name]) if name in s.dtype.names else 0
+                  for name in ("contacts", "swept_tests", "events", "resting", "rapid")}
         timings = {name[len("seconds_"):]: float(s[name]) for name in s.dtype.names if name.startswith("seconds_")}
         events.append(StepEnd(step, after.time, after.dt, after.positions, after.velocities, float(s["kinetic"]),
                               float(s["potential"]), s["momentum"].copy(), counts, float(s["max_overlap"]),
@@ -339,8 +341,10 @@ class Recording:
 
     def _contacts(self, step: int, data: bytes) -> Contacts:
         rows = np.frombuffer(data, dtype=self._dtype(fmt.TOPIC_CONTACTS))
-        return Contacts(step, *(rows[name].copy() if name != "resting" else rows[name].astype(np.bool_)
-                                for name in Contacts.__dataclass_fields__ if name != "step"))
+        how = rows["resting"].astype(np.int8)  # the column holds events.HOW_* (older files: 0 or 1)
+        return Contacts(step, *(rows[name].copy() for name in Contacts.__dataclass_fields__
+                                if name not in ("step", "resting", "how")),
+                        (how == HOW_RESTING) | (how == HOW_RAPID), how)
 
     def contacts(self, k: int) -> Contacts:
         """Contacts of the k-th step (detail contacts or full)."""
