@@ -61,7 +61,8 @@ TOP_FIELDS = {
                            "contact is held like a resting one if something presses it, and elastic if not (the TC "
                            "model against inelastic collapse), seconds >= 0, 0 = off (default 1e-4)"),
     "contact_tolerance": "allowed overlap and resting gap, metres > 0",
-    "max_events_per_step": "budget: contacts resolved in one step, integer >= 1 (default 10000)",
+    "max_events_per_step": ("budget: contacts resolved in one step, integer >= 0 (default 0 = sized to the scene: "
+                            "max(10000, 20 per sphere))"),
     "max_pairs_per_step": "budget: broad-phase candidate pairs in one step, integer >= 1 (default 10000000)",
     "max_swept_tests_per_step": "budget: swept tests in one step, integer >= 1 (default 10000000)",
     "max_resting_work_per_step": ("budget: held-contact solve updates in one step, "
@@ -472,7 +473,8 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
                                     lo=0),
         contact_tolerance=c.number(raw, "contact_tolerance", "contact_tolerance",
                                    default=d.contact_tolerance, scale=True),
-        **{budget: c.number(raw, budget, budget, default=getattr(d, budget), lo=1, integer=True)
+        **{budget: c.number(raw, budget, budget, default=getattr(d, budget),
+                            lo=0 if budget == "max_events_per_step" else 1, integer=True)
            for budget in BUDGETS},
     )
 

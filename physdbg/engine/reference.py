@@ -56,14 +56,19 @@ class ReferenceWorld(World):
                         candidates.append((toi, 0 if k == KIND_WALL else 1, a, other, k))
             if not candidates:
                 return None
-            toi, _, a, other, kind = min(candidates)
+            toi, _, a, other, kind = self._first(candidates)
             self._buf.counters[EVENTS] += 1
-            if self._buf.counters[CONTACTS] >= s.max_events_per_step:
+            if self._buf.counters[CONTACTS] >= self.event_cap:
                 return "max_events_per_step"
             status = self._resolve(kind, a, other, toi)
             self._record_outcome(kind, a, other, toi, OUTCOME_SUPERSEDED if status == SKIPPED else OUTCOME_HIT)
             if status == OUT_OF_WORK:
                 return "max_resting_work_per_step"
+
+    @staticmethod
+    def _first(candidates: list[tuple]) -> tuple:
+        """The contact to resolve next: the earliest (ties: walls first, then by index)."""
+        return min(candidates)
 
     def _record_outcome(self, kind: int, a: int, other: int, toi: float, outcome: int) -> None:
         """Log the contact as a swept test (the reference keeps only those it acted on)."""

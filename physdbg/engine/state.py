@@ -15,6 +15,10 @@ from .toi import DETECTION_NAMES
 
 ORDERING_NAMES = ("time", "index")
 
+# the default contact budget of a step (Settings.event_cap)
+MIN_EVENT_CAP = 10_000
+EVENTS_PER_SPHERE = 20
+
 # The work budgets of one step (Settings fields), each with what it counts and what
 # happens to the rest of the step when it is reached.
 BUDGETS = {
@@ -41,7 +45,8 @@ class Settings:
     contact_tolerance: allowed overlap / resting gap (m).
 
     Budgets bound the work of one step (see BUDGETS); when one is reached the step still
-    finishes, and a warning names the budget.
+    finishes, and a warning names the budget. max_events_per_step = 0 (the default) is
+    sized to the scene: see ``event_cap``.
     """
 
     integrator: str = "exact"
@@ -55,10 +60,19 @@ class Settings:
     rest_fraction: float = 0.01
     rapid_contact_time: float = 1e-4
     contact_tolerance: float = 1e-9
-    max_events_per_step: int = 10_000
+    max_events_per_step: int = 0
     max_pairs_per_step: int = 10_000_000
     max_swept_tests_per_step: int = 10_000_000
     max_resting_work_per_step: int = 100_000_000
+
+    def event_cap(self, spheres: int) -> int:
+        """The contact budget of one step for this many spheres: max_events_per_step, or
+        when it is 0, max(MIN_EVENT_CAP, EVENTS_PER_SPHERE × spheres) — a settling pile
+        of N spheres legitimately resolves a few contacts per sphere in a step, so a fixed
+        cap that suits 100 spheres stops every step of a pile of 10 000."""
+        if self.max_events_per_step:
+            return int(self.max_events_per_step)
+        return max(MIN_EVENT_CAP, EVENTS_PER_SPHERE * spheres)
 
     @property
     def integrator_code(self) -> int:

@@ -158,6 +158,7 @@ class World:
         self._offsets = np.ascontiguousarray(walls.offsets, dtype=np.float64)
         self._wall_restitution = np.ascontiguousarray(walls.restitution, dtype=np.float64)
         self._buf = Buffers(state.count)
+        self.event_cap = settings.event_cap(state.count)
 
     @property
     def held_count(self) -> int:
@@ -248,7 +249,8 @@ class World:
         # -- resolve --------------------------------------------------------------
         budget = self._resolve_in_time_order() if push else self._resolve_in_index_order()
         if budget is not None and not any(w.code == budget for w in warnings):
-            warn(budget, _budget_message(budget, getattr(s, budget)))
+            warn(budget, _budget_message(budget, self.event_cap if budget == "max_events_per_step"
+                                         else getattr(s, budget)))
         t4 = perf_counter()
         timings["resolve"] = t4 - t3
 
@@ -377,7 +379,7 @@ class World:
                 self._drag, self._k, self._detection, s.samples, s.contact_tolerance * 1e-3, s.rest_fraction,
                 self._rest_step_factor, rule, s.rapid_contact_time, self._normals, self._offsets,
                 self._half_thickness, self._two_sided, self._wall_restitution, self.held, self._adj_start, self._adj,
-                self._lo, self._hi, s.contact_tolerance, self._max_degree, s.max_events_per_step,
+                self._lo, self._hi, s.contact_tolerance, self._max_degree, self.event_cap,
                 s.max_swept_tests_per_step, s.max_resting_work_per_step, self._anchor_is_flow,
                 self._integrator != SEMI_IMPLICIT, self._vtol, self._atol, buf.heap_toi, buf.heap_data,
                 buf.test_int, buf.test_float, buf.test_outcome, buf.contact_float, buf.contact_int, buf.counters,
@@ -411,7 +413,7 @@ class World:
         hits = np.nonzero(toi <= self._dt)[0]
         for rid in hits.tolist():
             buf.counters[EVENTS] += 1
-            if buf.counters[CONTACTS] >= s.max_events_per_step:
+            if buf.counters[CONTACTS] >= self.event_cap:
                 buf.test_outcome[hits[hits >= rid]] = OUTCOME_CAPPED
                 return "max_events_per_step"
             kind, a, other = (int(c) for c in buf.test_int[rid])

@@ -1,0 +1,145 @@
+"""box-rain: N spheres (r = 0.05 m, 10 % of the box's volume, e = 0.8) rain into a box.
+
+    .venv/bin/python benchmarks/box_rain.py [--count 1000] [--steps 240] [--peers]
+
+The scene of issue 10: the built-in ``rain`` scene with the box grown so the spheres fill
+10 % of it, dt = 1/240 s. Prints, for the run: steps stopped by the event cap, the
+largest overlap after any step, contacts and held contacts per step at the start, middle
+and end, rapid-contact rule counts, and ms/step (the first step, which compiles nothing
+but builds the broad phase, is counted). With --peers, pybullet and MuJoCo (PGS, 10
+iterations) step the same initial state the same number of steps, when importable, and
+the ratios are printed from this one run (these machines are noisy: compare ratios, not
+absolute times).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+
+import numpy as np
+
+from physdbg.engine.world import warm_up
+from physdbg.scene import load_scene
+
+
+def box_rain(count: int, steps: int):
+    """The scene: a box of side L with count·(4/3)πr³ = 0.1·L³."""
+    side = (count * 4.0 / 3.0 * math.pi * 0.05**3 / 0.1) ** (1.0 / 3.0)
+    return load_scene("rain", [f"generate.count={count}", "generate.radius=0.05", f"box.max=[{side},{side},{side}]",
+                               "dt=1/240", f"steps={steps}", "generate.restitution=0.8", "box.restitution=0.8"])
+
+
+def run_physdbg(scene) -> dict:
+    world = scene.build_world()
+    capped = 0
+    worst = 0.0
+    rows = []
+    started = time.perf_counter()
+    for k in range(scene.steps):
+        stats = world.step(scene.dt)
+        capped += any(w.code == "max_events_per_step" for w in stats.warnings)
+        worst = max(worst, stats.max_overlap)
+        rows.append((stats.contacts, stats.held, stats.rapid, stats.events))
+    seconds = time.perf_counter() - started
+    return {"seconds": seconds, "capped": capped, "worst_overlap": worst, "rows": rows,
+            "tolerance": scene.settings.contact_tolerance}
+
+
+def run_pybullet(scene) -> float | None:
+    try:
+        import pybullet as pb
+    except ImportError:
+        return None
+    client = pb.connect(pb.DIRECT)
+    pb.setGravity(*scene.settings.gravity, physicsClientId=client)
+    pb.setTimeStep(scene.dt, physicsClientId=client)
+    lo, hi = scene.walls.offsets[::2], -scene.walls.offsets[1::2]
+    plane = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=client)
+    for normal, offset in zip(scene.walls.normals, scene.walls.offsets):
+        pb.createMultiBody(0, plane, basePosition=(normal * offset).tolist(),
+                           baseOrientation=_plane_orientation(normal), physicsClientId=client)
+    sphere = pb.createCollisionShape(pb.GEOM_SPHERE, radius=float(scene.state.radius[0]), physicsClientId=client)
+    bodies = []
+    for x, v in zip(scene.state.positions, scene.state.velocities):
+        body = pb.createMultiBody(1.0, sphere, basePosition=x.tolist(), physicsClientId=client)
+        pb.resetBaseVelocity(body, v.tolist(), physicsClientId=client)
+        pb.changeDynamics(body, -1, restitution=0.8, physicsClientId=client)
+        bodies.append(body)
+    del lo, hi
+    started = time.perf_counter()
+    for _ in range(scene.steps):
+        pb.stepSimulation(physicsClientId=client)
+    seconds = time.perf_counter() - started
+    pb.disconnect(client)
+    return seconds
+
+
+def _plane_orientation(normal: np.ndarray) -> list[float]:
+    """Quaternion turning +z onto ``normal``."""
+    z = np.array([0.0, 0.0, 1.0])
+    axis = np.cross(z, normal)
+    s = np.linalg.norm(axis)
+    if s < 1e-12:
+        return [0.0, 0.0, 0.0, 1.0] if normal[2] > 0 else [1.0, 0.0, 0.0, 0.0]
+    angle = math.atan2(s, float(z @ normal))
+    axis /= s
+    return [*(axis * math.sin(angle / 2)).tolist(), math.cos(angle / 2)]
+
+
+def run_mujoco(scene) -> float | None:
+    try:
+        import mujoco
+    except ImportError:
+        return None
+    side = -scene.walls.offsets[1]
+    r = float(scene.state.radius[0])
+    walls = "".join(
+        f'<geom type="plane" size="{side} {side} 0.1" pos="{p}" zaxis="{n}"/>'
+        for p, n in (("0 0 0", "0 1 0"), (f"0 {side} 0", "0 -1 0"), ("0 0 0", "1 0 0"), (f"{side} 0 0", "-1 0 0"),
+                     ("0 0 0", "0 0 1"), (f"0 0 {side}", "0 0 -1")))
+    balls = "".join(f'<body pos="{x[0]} {x[1]} {x[2]}"><freejoint/><geom type="sphere" size="{r}" mass="1"/></body>'
+                    for x in scene.state.positions)
+    xml = (f'<mujoco><option timestep="{scene.dt}" gravity="0 -9.81 0" solver="PGS" iterations="10"/>'
+           f'<worldbody>{walls}{balls}</worldbody></mujoco>')
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    for i, v in enumerate(scene.state.velocities):
+        data.qvel[6 * i:6 * i + 3] = v
+    started = time.perf_counter()
+    for _ in range(scene.steps):
+        mujoco.mj_step(model, data)
+    return time.perf_counter() - started
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--count", type=int, default=1000)
+    parser.add_argument("--steps", type=int, default=240)
+    parser.add_argument("--peers", action="store_true")
+    args = parser.parse_args()
+    warm_up("grid")
+    scene = box_rain(args.count, args.steps)
+    result = run_physdbg(scene)
+    rows = np.array(result["rows"])
+    ms = 1000.0 * result["seconds"] / args.steps
+    print(f"box-rain N={args.count}, {args.steps} steps of 1/240 s")
+    print(f"physdbg: {ms:.1f} ms/step; steps at the event cap: {result['capped']}; largest overlap after any step: "
+          f"{result['worst_overlap']:.3g} m (contact tolerance {result['tolerance']:g} m)")
+    for label, k in (("first", 0), ("middle", args.steps // 2), ("last", args.steps - 1)):
+        c, h, r, e = rows[k]
+        print(f"  {label} step: {c} contacts, {h} held, {r} rapid, {e} events")
+    print(f"  last 10 steps: mean {rows[-10:, 0].mean():.0f} contacts/step, {rows[-10:, 1].mean():.0f} held")
+    if args.peers:
+        for name, runner in (("pybullet", run_pybullet), ("mujoco-PGS10", run_mujoco)):
+            seconds = runner(scene)
+            if seconds is None:
+                print(f"{name}: not importable (pip install {name.split('-')[0]})")
+            else:
+                print(f"{name}: {1000 * seconds / args.steps:.1f} ms/step; physdbg is "
+                      f"{seconds / result['seconds']:.2f}x its speed")
+
+
+if __name__ == "__main__":
+    main()
