@@ -244,3 +244,45 @@ def test_same_scene_gives_bit_identical_hashes_in_another_process():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          cwd=__file__.rsplit("/tests/", 1)[0])
     assert out.stdout.split() == here
+
+
+# ----------------------------------------------------------------------------- dense piles
+def _box_rain(count: int, *extra: str):
+    """Issue 10's box-rain: r = 0.05 m spheres filling 10 % of a box, e = 0.8, dt = 1/240."""
+    side = (count * 4.0 / 3.0 * np.pi * 0.05**3 / 0.1) ** (1.0 / 3.0)
+    return load_scene("rain", [f"generate.count={count}", "generate.radius=0.05", f"box.max=[{side},{side},{side}]",
+                               "dt=1/240", "steps=240", "generate.restitution=0.8", "box.restitution=0.8", *extra])
+
+
+def test_box_rain_piles_up_exactly_with_no_step_stopped_by_a_budget():
+    scene = _box_rain(1000)
+    world = scene.build_world()
+    rapid = held = 0
+    for _ in range(scene.steps):
+        stats = world.step(scene.dt)
+        assert not stats.warnings, stats.warnings
+        assert stats.max_overlap <= scene.settings.contact_tolerance
+        rapid += stats.rapid
+        held = stats.held
+    assert held > 100  # the first layers lie on the floor, held
+    assert rapid > 0  # and the rapid-contact rule acted (reported per step)
+
+
+def test_the_rapid_contact_rule_can_be_turned_off_and_then_never_acts():
+    scene = _box_rain(300, "rapid_contact_time=0", "steps=120")
+    world = scene.build_world()
+    assert sum(world.step(scene.dt).rapid for _ in range(scene.steps)) == 0
+
+
+def test_an_unpressed_rapid_contact_is_elastic_so_a_free_row_does_not_collapse():
+    # three spheres in a row, nothing pressing them: a hit at c = 0.5 sends contacts down the
+    # row at one instant; the second and third are rapid, hence elastic (the TC model)
+    state = make_state([[0.0, 0, 0], [0.2, 0, 0], [0.4, 0, 0]], [[1.0, 0, 0], [0, 0, 0], [0, 0, 0]], radius=0.1,
+                       restitution=0.5)
+    state.positions[0, 0] = -0.5
+    world, obs = make_world(state, gravity=(0.0, 0.0, 0.0))
+    for _ in range(10):
+        world.step(0.1)
+    rapid = [c for c in obs.contacts if c.restitution == 1.0]
+    assert rapid and all(not c.resting for c in obs.contacts)
+    assert sum(s.counts["rapid"] for s in obs.step_ends) == len(rapid)

@@ -63,7 +63,7 @@ class Settings:
     max_events_per_step: int = 0
     max_pairs_per_step: int = 10_000_000
     max_swept_tests_per_step: int = 10_000_000
-    max_resting_work_per_step: int = 20_000_000
+    max_resting_work_per_step: int = 100_000_000
 
     def event_cap(self, spheres: int) -> int:
         """The contact budget of one step for this many spheres: max_events_per_step, or
