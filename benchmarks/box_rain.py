@@ -102,7 +102,8 @@ def run_mujoco(scene) -> float | None:
                      ("0 0 0", "0 0 1"), (f"0 0 {side}", "0 0 -1")))
     balls = "".join(f'<body pos="{x[0]} {x[1]} {x[2]}"><freejoint/><geom type="sphere" size="{r}" mass="1"/></body>'
                     for x in scene.state.positions)
-    xml = (f'<mujoco><option timestep="{scene.dt}" gravity="0 -9.81 0" solver="PGS" iterations="10"/>'
+    # size memory: MuJoCo's default arena is too small for 10 000 free bodies
+    xml = (f'<mujoco><size memory="4G"/><option timestep="{scene.dt}" gravity="0 -9.81 0" solver="PGS" iterations="10"/>'
            f'<worldbody>{walls}{balls}</worldbody></mujoco>')
     model = mujoco.MjModel.from_xml_string(xml)
     data = mujoco.MjData(model)

@@ -224,7 +224,6 @@ def _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, target, hold, x, v, a
     if ib >= 0:
         touch(h, ib, x, v, a, sigma, toi, integrator, drag, k, solve)
     c0 = held_find(h, kind, ia, other)
-    existed = c0 >= 0
     if c0 < 0:
         c0 = held_add(h, kind, ia, other, nx, ny, nz, KIND_PAIR)
     else:
@@ -242,27 +241,10 @@ def _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, target, hold, x, v, a
         if h.lam[c0] != 0.0:
             push_along(acc, inverse_mass, ia, ib, h.normal[c0, 0], h.normal[c0, 1], h.normal[c0, 2], -h.lam[c0])
         held_remove(h, c0, KIND_PAIR)
-    released = release_loose(h, v, acc, inverse_mass, True, x, a, sigma, toi, integrator, drag, k, KIND_PAIR, vtol,
-                             atol, stick)
-    # the accelerations depend on which contacts are held, not on the velocities: solve
-    # them again only from where that changed (the new contact, a released one)
-    spheres = np.empty(h.touched[0] + 2, np.int64)
-    m = 0
-    if hold != existed:
-        spheres[0] = ia
-        m = 1
-        if ib >= 0:
-            spheres[1] = ib
-            m = 2
-    if released:
-        for s in range(h.touched[0]):
-            p = h.touched[1 + s]
-            if h.renew[p] == solve and p != ia and p != ib:
-                spheres[m] = p
-                m += 1
-    if ok and m > 0:
+    release_loose(h, v, acc, inverse_mass, True, x, a, sigma, toi, integrator, drag, k, KIND_PAIR, vtol, atol, stick)
+    if ok:
         ok = _solve_accelerations(h, x, v, a, acc, inverse_mass, sigma, toi, integrator, drag, k, work_budget, vtol,
-                                  atol, stick, spheres, m)
+                                  atol, stick)
     # every visited sphere whose velocity or acceleration changed takes a new path (and is
     # re-predicted), as does one that lost a held contact
     n_changed = 0
@@ -286,33 +268,20 @@ def _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, target, hold, x, v, a
 
 @njit(cache=True)
 def _solve_accelerations(h, x, v, a, acc, inverse_mass, sigma, when, integrator, drag, k, work_budget, vtol, atol,
-                         stick, spheres, n_spheres) -> bool:
-    """Solve the accelerations from the held contacts of ``spheres[:n_spheres]`` (the
-    worklist spreads as far as the changes do), release the contacts it leaves loose, and
-    solve again from their spheres while a release changed something (a released
-    contact's force leaves its spheres). Returns False when the budget ran out."""
-    solve = h.count[1]
-    from_spheres = spheres[:n_spheres].copy()
+                         stick) -> bool:
+    """Solve the accelerations of the held contacts of the spheres visited so far, release
+    the contacts it leaves loose, and solve again while a release changed something (a
+    released contact's force leaves its spheres). Returns False when the budget ran out."""
     while True:
+        touched = h.touched[1:h.touched[0] + 1].copy()
         seeds = np.empty(max(h.count[0], 1), np.int64)
-        m = contacts_of(h, from_spheres, from_spheres.shape[0], seeds)
+        m = contacts_of(h, touched, touched.shape[0], seeds)
         if not solve_contacts(h, acc, False, seeds, m, x, v, a, sigma, inverse_mass, when, integrator, drag, k, atol,
                               work_budget, KIND_PAIR, 0.0):
             return False
         if release_loose(h, v, acc, inverse_mass, True, x, a, sigma, when, integrator, drag, k, KIND_PAIR, vtol,
                          atol, stick) == 0:
             return True
-        count = 0
-        for s in range(h.touched[0]):
-            if h.renew[h.touched[1 + s]] == solve:
-                count += 1
-        from_spheres = np.empty(count, np.int64)
-        count = 0
-        for s in range(h.touched[0]):
-            p = h.touched[1 + s]
-            if h.renew[p] == solve:
-                from_spheres[count] = p
-                count += 1
 
 
 @njit(cache=True)
@@ -372,9 +341,8 @@ def settle_held(h, x, v, a, acc, free_accel, radius, inverse_mass, sigma, dt, in
             push_along(acc, inverse_mass, h.a[c], h.other[c] if h.kind[c] == KIND_PAIR else -1, h.normal[c, 0],
                        h.normal[c, 1], h.normal[c, 2], h.lam[c])
     _visit_all(h, v)
-    everyone = np.arange(n).astype(np.int64)
     ok = _solve_accelerations(h, x, v, a, acc, inverse_mass, sigma, 0.0, integrator, drag, k, work_budget, math.inf,
-                              atol, stick, everyone, n)
+                              atol, stick)
     if semi_implicit:
         damp = 1.0 if drag == 1.0 else drag ** dt
         for i in range(n):
@@ -390,7 +358,7 @@ def settle_held(h, x, v, a, acc, free_accel, radius, inverse_mass, sigma, dt, in
         if ok and release_loose(h, v, acc, inverse_mass, False, x, a, sigma, 0.0, integrator, drag, k, KIND_PAIR,
                                 vtol, math.inf, stick) > 0:
             ok = _solve_accelerations(h, x, v, a, acc, inverse_mass, sigma, 0.0, integrator, drag, k, work_budget,
-                                      vtol, atol, stick, everyone, n)
+                                      vtol, atol, stick)
     for i in range(n):
         for d in range(3):
             a[i, d] = 0.0 if semi_implicit else acc[i, d]
