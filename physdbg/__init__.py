@@ -2,6 +2,32 @@
 __version__ = "0.1.0"
 
 
+def _engine_cache_dir() -> None:
+    """Keep numba's compiled kernels in a folder named by a hash of the engine's sources.
+
+    numba's cache (``cache=True``) is checked per source file, so a compiled function is
+    reused after a function it calls *in another file* changed: the old callee runs. That
+    happened while building physdbg (tests passed on stale kernels that a fresh clone did
+    not have). A folder per version of the engine's sources makes a stale kernel
+    impossible; a NUMBA_CACHE_DIR set by the user is respected.
+    """
+    import hashlib
+    import os
+    from pathlib import Path
+
+    if "NUMBA_CACHE_DIR" in os.environ:
+        return
+    engine = Path(__file__).parent / "engine"
+    digest = hashlib.blake2b(digest_size=8)
+    for source in sorted(engine.glob("*.py")) + [Path(__file__).parent / "events.py"]:
+        digest.update(source.name.encode() + source.read_bytes())
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    os.environ["NUMBA_CACHE_DIR"] = str(base / "physdbg" / "numba" / digest.hexdigest())
+
+
+_engine_cache_dir()
+
+
 def open_recording(path):
     """Open a .mcap recording: steps as numpy arrays, events as typed records
     (see :class:`physdbg.record.Recording`)."""
