@@ -19,8 +19,8 @@ def _engine_cache_dir() -> None:
         return
     engine = Path(__file__).parent / "engine"
     digest = hashlib.blake2b(digest_size=8)
-    for source in sorted(engine.glob("*.py")) + [Path(__file__).parent / "events.py"]:
-        digest.update(source.name.encode() + source.read_bytes())
+    for source in sorted(engine.rglob("*.py")) + [Path(__file__).parent / "events.py"]:
+        digest.update(str(source.relative_to(engine.parent)).encode() + source.read_bytes())
     base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
     os.environ["NUMBA_CACHE_DIR"] = str(base / "physdbg" / "numba" / digest.hexdigest())
 

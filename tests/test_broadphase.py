@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from physdbg.engine.broadphase import BruteForce, choose_broad_phase, make_broad_phase
-from physdbg.engine.bvh import BUILD_NAMES, BVH, build, sah_cost
+from physdbg.engine.broadphase.bvh import BUILD_NAMES, BVH, build, sah_cost
 from physdbg.events import BroadPhaseInfo
 from physdbg.observe import ListObserver
 from physdbg.scene import load_scene

@@ -14,7 +14,7 @@ from pathlib import Path
 import physdbg
 
 PACKAGE = Path(physdbg.__file__).parent
-CORE_FILES = sorted((PACKAGE / "engine").glob("*.py")) + [PACKAGE / "events.py", PACKAGE / "observe.py"]
+CORE_FILES = sorted((PACKAGE / "engine").rglob("*.py")) + [PACKAGE / "events.py", PACKAGE / "observe.py"]
 ALLOWED = {"numpy", "numba", "math", "hashlib", "heapq", "dataclasses", "typing", "time", "__future__"}
 
 
@@ -34,10 +34,20 @@ def test_core_source_imports_only_numpy_numba_and_basic_stdlib():
             if level:  # relative: must stay inside engine/, or reach the typed events
                 continue
             assert module in ALLOWED, f"{path.name} imports {module}"
-    for path in sorted((PACKAGE / "engine").glob("*.py")):
+    for path in sorted((PACKAGE / "engine").rglob("*.py")):
+        depth = len(path.relative_to(PACKAGE / "engine").parts)  # 1: engine/x.py, 2: engine/pkg/x.py
         for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.ImportFrom) and node.level == 2:
-                assert node.module == "events", f"{path.name} reaches outside the core: ..{node.module}"
+            if isinstance(node, ast.ImportFrom) and node.level > depth:
+                assert node.level == depth + 1 and node.module == "events", (
+                    f"{path.name} reaches outside the core: {'.' * node.level}{node.module}")
+
+
+def test_the_broad_phase_package_has_no_import_circle():
+    """grid and bvh depend on the leaf module boxes, never on each other or on __init__."""
+    for name in ("boxes", "grid", "bvh"):
+        tree = ast.parse((PACKAGE / "engine" / "broadphase" / f"{name}.py").read_text())
+        local = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom) and node.level == 1}
+        assert local <= ({"boxes"} if name != "boxes" else set()), f"{name}.py imports {local}"
 
 
 def test_importing_the_engine_loads_no_file_or_viewer_library():

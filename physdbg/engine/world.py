@@ -468,9 +468,9 @@ class World:
 
     def _broad_phase_event(self, step_no: int, pair_count: int) -> BroadPhaseInfo:
         bp = self.broad_phase
-        stats = dict(getattr(bp, "stats", {}) or {})
+        stats = dict(bp.stats)
         stats.setdefault("pairs", pair_count)
-        tree = getattr(bp, "nodes", None)
+        tree = bp.nodes
         nodes = None
         if tree is not None:
             nodes = {name: getattr(tree, name).copy() for name in

@@ -33,7 +33,7 @@ from time import perf_counter
 import numpy as np
 from numba import njit
 
-from .grid import NO_LIMIT, boxes_overlap
+from .boxes import NO_LIMIT, boxes_overlap
 
 MEDIAN = 0
 MEAN = 1

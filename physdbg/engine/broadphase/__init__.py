@@ -17,11 +17,17 @@ from typing import Protocol
 
 import numpy as np
 
-from .grid import NO_LIMIT
+from .boxes import NO_LIMIT, overlapping
 
 
 class BroadPhase(Protocol):
+    """What World uses of a broad phase. stats: what the last ``pairs`` call measured
+    (numbers by name, shown in BroadPhaseInfo); nodes: the tree it built (BVHs:
+    bvh.BVHNodes) or None."""
+
     name: str
+    stats: dict
+    nodes: object | None
 
     def pairs(self, lo: np.ndarray, hi: np.ndarray, limit: int = ...) -> np.ndarray: ...
 
@@ -36,9 +42,11 @@ class BruteForce:
     """
 
     name = "brute-force"
+    nodes = None
 
     def __init__(self, block: int = 512):
         self.block = block
+        self.stats: dict = {}
 
     def pairs(self, lo: np.ndarray, hi: np.ndarray, limit: int = NO_LIMIT) -> np.ndarray:
         n = lo.shape[0]
@@ -65,12 +73,6 @@ class BruteForce:
     def query(self, lo: np.ndarray, hi: np.ndarray, box_lo: np.ndarray,
               box_hi: np.ndarray) -> np.ndarray:
         return overlapping(lo, hi, box_lo, box_hi)
-
-
-def overlapping(lo: np.ndarray, hi: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray) -> np.ndarray:
-    """Indices (sorted) of the boxes lo, hi (N, 3) that overlap one box: a linear scan."""
-    overlap = np.all((box_lo <= hi) & (lo <= box_hi), axis=1)
-    return np.nonzero(overlap)[0].astype(np.int64)
 
 
 BROAD_PHASE_NAMES = ("auto", "brute-force", "grid", "bvh-sah", "bvh-median", "bvh-mean", "bvh-lbvh")

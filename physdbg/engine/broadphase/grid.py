@@ -16,17 +16,7 @@ import math
 import numpy as np
 from numba import njit
 
-NO_LIMIT = 2**62  # a pair budget that is no budget (broad phases take ``limit``)
-
-
-@njit(cache=True)
-def boxes_overlap(lo, hi, i, j):
-    """Do boxes i and j of (lo, hi) (N, 3) overlap (touching counts)?"""
-    for c in range(3):
-        if lo[i, c] > hi[j, c] or lo[j, c] > hi[i, c]:
-            return False
-    return True
-
+from .boxes import NO_LIMIT, boxes_overlap, overlapping
 
 @njit(cache=True)
 def _cell_of(value, origin, cell, dim):
@@ -189,6 +179,7 @@ class UniformGrid:
     """
 
     name = "grid"
+    nodes = None  # no tree
 
     def __init__(self, cell: float | None = None):
         self.cell = cell
@@ -210,6 +201,4 @@ class UniformGrid:
 
     def query(self, lo: np.ndarray, hi: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray) -> np.ndarray:
         """Boxes overlapping one box: a linear scan (mid-step re-queries are rare)."""
-        from .broadphase import overlapping
-
         return overlapping(lo, hi, box_lo, box_hi)

@@ -1,0 +1,28 @@
+"""Axis-aligned box tests every broad phase shares: the leaf of the broad-phase package.
+
+Nothing here imports the rest of the package, so the grid, the BVHs and the interface
+(``__init__``) all depend on this module and never on each other. Boxes are (lo, hi):
+(N, 3) arrays of corners, in m.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+NO_LIMIT = 2**62  # a pair budget that is no budget (broad phases take ``limit``)
+
+
+@njit(cache=True)
+def boxes_overlap(lo, hi, i, j):
+    """Do boxes i and j of (lo, hi) (N, 3) overlap (touching counts)?"""
+    for c in range(3):
+        if lo[i, c] > hi[j, c] or lo[j, c] > hi[i, c]:
+            return False
+    return True
+
+
+def overlapping(lo: np.ndarray, hi: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray) -> np.ndarray:
+    """Indices (sorted) of the boxes lo, hi (N, 3) that overlap one box: a linear scan."""
+    overlap = np.all((box_lo <= hi) & (lo <= box_hi), axis=1)
+    return np.nonzero(overlap)[0].astype(np.int64)
