@@ -56,7 +56,6 @@ def run_pybullet(scene) -> float | None:
     client = pb.connect(pb.DIRECT)
     pb.setGravity(*scene.settings.gravity, physicsClientId=client)
     pb.setTimeStep(scene.dt, physicsClientId=client)
-    lo, hi = scene.walls.offsets[::2], -scene.walls.offsets[1::2]
     plane = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=client)
     for normal, offset in zip(scene.walls.normals, scene.walls.offsets):
         pb.createMultiBody(0, plane, basePosition=(normal * offset).tolist(),
@@ -68,7 +67,6 @@ def run_pybullet(scene) -> float | None:
         pb.resetBaseVelocity(body, v.tolist(), physicsClientId=client)
         pb.changeDynamics(body, -1, restitution=0.8, physicsClientId=client)
         bodies.append(body)
-    del lo, hi
     started = time.perf_counter()
     for _ in range(scene.steps):
         pb.stepSimulation(physicsClientId=client)

@@ -120,6 +120,8 @@ def test_fraction_dt_and_duration_give_whole_steps():
     ("dt=0", "dt", "seconds > 0"),
     ("dt=fast", "dt", '"real"'),
     ("gravity=[1, 2]", "gravity", "[x, y, z]"),
+    ("rapid_contact_time=-1", "rapid_contact_time", ">= 0"),
+    ("max_events_per_step=-1", "max_events_per_step", "an integer >= 0"),
 ])
 def test_bad_overrides_name_the_field_and_what_is_allowed(override, field, words):
     with pytest.raises(SceneError) as info:

@@ -47,6 +47,7 @@ from .resting import (
     solve_contacts,
     touch,
 )
+from .toi import wall_gap_terms
 
 RESTITUTION_RULES = ("min", "max", "product", "mean")
 
@@ -54,11 +55,6 @@ RESTITUTION_RULES = ("min", "max", "product", "mean")
 SKIPPED = 0
 RESOLVED = 1
 OUT_OF_WORK = 2
-
-# why a contact was held (the contact row's ``resting`` column: events.HOW_*)
-NOT_HELD = HOW_IMPULSE
-HELD_RESTING = HOW_RESTING
-HELD_RAPID = HOW_RAPID
 
 # contact float columns
 CF_TIME = 0
@@ -166,8 +162,8 @@ def resolve_contact(kind, ia, other, toi, run_time, x, v, a, acc, radius, invers
     # a rapid contact that something presses is held like a resting one; one that nothing
     # presses is elastic (the original TC model): a free cluster cannot collapse, and
     # nothing that never rests (a gas, a break shot) loses energy to the rule
-    held = HELD_RESTING if resting else (HELD_RAPID if is_rapid and rel_acc < 0.0 else NOT_HELD)
-    used = 0.0 if held != NOT_HELD else (1.0 if is_rapid else e)
+    held = HOW_RESTING if resting else (HOW_RAPID if is_rapid and rel_acc < 0.0 else HOW_IMPULSE)
+    used = 0.0 if held != HOW_IMPULSE else (1.0 if is_rapid else e)
     row = counters[contacts_slot]
     cf = contact_float
     cf[row, CF_TIME] = toi
@@ -182,7 +178,7 @@ def resolve_contact(kind, ia, other, toi, run_time, x, v, a, acc, radius, invers
     if ib >= 0:
         last_contact[ib] = now
     status = RESOLVED
-    with_held = not (held == NOT_HELD and h.deg[ia] == 0 and (ib < 0 or h.deg[ib] == 0))
+    with_held = not (held == HOW_IMPULSE and h.deg[ia] == 0 and (ib < 0 or h.deg[ib] == 0))
     if not with_held:
         # the seed's impulse, alone
         j = seed_impulse(closing, used, wsum)
@@ -192,7 +188,7 @@ def resolve_contact(kind, ia, other, toi, run_time, x, v, a, acc, radius, invers
         changed[2] = ib
     else:
         stick = step_end * (rest_step_factor + rest_fraction)
-        j, ok = _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, used * closing, held != NOT_HELD, x, v, a,
+        j, ok = _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, used * closing, held != HOW_IMPULSE, x, v, a,
                                  acc, inverse_mass, sigma, integrator, drag, k, anchor_is_flow, path_follows_acc, h,
                                  changed, work_budget, vtol, atol, stick)
         if not ok:
@@ -206,7 +202,7 @@ def resolve_contact(kind, ia, other, toi, run_time, x, v, a, acc, radius, invers
     contact_int[row, 0] = kind
     contact_int[row, 1] = ia
     contact_int[row, 2] = other
-    contact_int[row, 3] = held if (held != NOT_HELD or not with_held) else HOW_WITH_HELD
+    contact_int[row, 3] = held if (held != HOW_IMPULSE or not with_held) else HOW_WITH_HELD
     counters[contacts_slot] = row + 1
     if is_rapid:
         counters[rapid_slot] += 1
@@ -231,8 +227,7 @@ def _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, target, hold, x, v, a
         h.normal[c0, 1] = ny
         h.normal[c0, 2] = nz
     h.target[c0] = target
-    seeds = np.empty(max(h.count[0], 1), np.int64)
-    seeds[0] = c0
+    seeds = np.full(1, c0, np.int64)
     ok = solve_contacts(h, v, True, seeds, 1, x, v, a, sigma, inverse_mass, toi, integrator, drag, k, vtol,
                         work_budget, KIND_PAIR, stick)
     j = h.jv[c0]
@@ -327,8 +322,7 @@ def settle_held(h, x, v, a, acc, free_accel, radius, inverse_mass, sigma, dt, in
                 h.normal[c, 2] = d2 / length
         else:
             w = h.other[c]
-            side = (normals[w, 0] * x[i, 0] + normals[w, 1] * x[i, 1] + normals[w, 2] * x[i, 2] - offsets[w])
-            gap = (abs(side) if two_sided[w] else side) - half_thickness[w] - radius[i]
+            gap = wall_gap_terms(x, v, a, radius, i, normals[w], offsets[w], half_thickness[w], two_sided[w])[0]
         if gap > contact_tolerance:
             held_remove(h, c, KIND_PAIR)
         else:

@@ -407,7 +407,6 @@ class World:
         """Every contact predicted at step start, in detection order, nothing re-predicted;
         returns the budget that stopped it (a Settings field name), or None."""
         buf = self._buf
-        s = self.settings
         count = int(buf.counters[TESTS])
         toi = buf.test_float[:count, 1]
         hits = np.nonzero(toi <= self._dt)[0]

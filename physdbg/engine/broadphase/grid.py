@@ -16,7 +16,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .boxes import NO_LIMIT, boxes_overlap, overlapping
+from .boxes import NO_LIMIT, overlapping
 
 @njit(cache=True)
 def _cell_of(value, origin, cell, dim):
