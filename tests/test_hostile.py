@@ -168,7 +168,7 @@ def test_the_swept_test_budget_stops_a_step_that_would_run_long():
 
 
 def test_the_resting_work_budget_bounds_the_contact_solve():
-    scene = load_scene("rest", ["max_resting_work_per_step=50"])
+    scene = load_scene("rest", ["max_resting_work_per_step=20"])
     world = scene.build_world()
     codes = set()
     for _ in range(30):

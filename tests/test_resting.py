@@ -1,0 +1,75 @@
+"""The held-contact solve (engine/resting.py): the direct cluster solve against plain
+projected Gauss–Seidel, on the held contacts of resting stacks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from physdbg.engine.resting import HeldContacts, _gauss_seidel, _relative, begin_solve, solve_contacts
+from physdbg.events import KIND_PAIR
+
+from .conftest import make_state, make_walls, make_world
+
+
+@pytest.fixture(scope="module")
+def pile():
+    """Four stacks of eight spheres (r = 0.1 m) on a floor under gravity, settled for half
+    a second: 32 held contacts, each stack a chain that Gauss–Seidel converges on slowly
+    (rate about cos²(π/9) per sweep)."""
+    positions = [[0.5 * s, 0.1 + 0.2 * k, 0.0] for s in range(4) for k in range(8)]
+    world, _ = make_world(make_state(positions, radius=0.1, restitution=0.5), make_walls(([0, 1, 0], 0.0, 0.5)),
+                          observe=False, gravity=(0.0, -9.81, 0.0))
+    for _ in range(30):
+        stats = world.step(1 / 60)
+    assert world.held_count == 32 and stats.max_overlap <= world.settings.contact_tolerance
+    return world
+
+
+def _solve(world, contact, solver, target=0.05):
+    """Ask held contact ``contact`` to separate at ``target`` m/s and solve the velocities
+    with ``solver``; returns (velocities (N, 3), the store after, updates done)."""
+    h = HeldContacts(*[array.copy() for array in world.held])
+    v = world.state.velocities.copy()
+    x = world.state.positions.copy()
+    a = world._a.copy()
+    sigma = np.zeros(len(v))
+    begin_solve(h)
+    h.count[2] = 0
+    h.target[contact] = target
+    seeds = np.array([contact], np.int64)
+    ok = solver(h, v, True, seeds, 1, x, v, a, sigma, world.state.inverse_mass, 0.0, world._integrator, world._drag,
+                world._k, world._vtol, 10**9, KIND_PAIR, 0.0)
+    assert ok
+    return v, h, int(h.count[2])
+
+
+def test_the_direct_solve_finds_what_gauss_seidel_finds_with_a_fraction_of_the_work(pile):
+    held = int(pile.held.count[0])
+    rng = np.random.default_rng(7)
+    direct_work = sweep_work = 0
+    for contact in rng.choice(held, size=12, replace=False):
+        v_direct, h, work = _solve(pile, contact, solve_contacts)
+        v_sweeps, _, work_gs = _solve(pile, contact, _gauss_seidel)
+        direct_work += work
+        sweep_work += work_gs
+        # the velocities that satisfy the contacts are unique; both solves stop within
+        # their tolerance of them
+        assert np.abs(v_direct - v_sweeps).max() < 1e-10
+        # and every held contact the solve visited ends as it promises: pushing only
+        # where it is exactly at its target, and approaching by no more than its
+        # neighbours' last updates below the tolerance (two neighbours in a stack)
+        tol = pile._vtol
+        for c in range(held):
+            if h.seen[c] != h.count[1]:
+                continue
+            rel = _relative(v_direct, h, c, KIND_PAIR) - h.target[c]
+            assert rel >= -2 * tol
+            if h.jv[c] > 0.0:
+                assert abs(rel) <= 2 * tol
+    assert direct_work * 20 < sweep_work, (direct_work, sweep_work)
+
+
+def test_a_satisfied_seed_costs_one_update(pile):
+    _, _, work = _solve(pile, 0, solve_contacts, target=0.0)
+    assert work == 1
