@@ -351,13 +351,15 @@ def _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
     """The direct solve. The cluster starts from the seeds that are violated (a
     Gauss–Seidel update of one would exceed ``tolerance``) and every held contact of their
     spheres; its linear complementarity problem is solved exactly (:func:`_direct`), and
-    the neighbouring contacts the solution leaves violated join it, until none is.
+    the neighbouring contacts the solution leaves violated join it, with theirs, until
+    none is.
 
     Leaves the cluster's ids in ``h.queue[:m]`` and returns m; -1: no seed is violated
-    (nothing to solve); 0: the cluster outgrew MAX_DIRECT or pivoting failed before
-    anything was solved — the caller solves by Gauss–Seidel from the seeds. A cluster
-    that outgrows MAX_DIRECT after a solve is returned whole, the violated neighbours
-    included, for Gauss–Seidel to finish.
+    (nothing to solve); 0: the cluster outgrew MAX_DIRECT (or MAX_GROWTH rounds, the work
+    budget, or pivoting failed) — everything it changed is undone, bit for bit, and the
+    caller solves by Gauss–Seidel from the seeds. (Undone because a cluster solved with a
+    violated boundary held fixed can push hard against it, which Gauss–Seidel then
+    spends far longer spreading than it would have spent from the start.)
     """
     solve = h.count[1]
     inside = -(solve + 1)  # seen code: in the cluster
@@ -375,26 +377,37 @@ def _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
             m += 1
     if m == 0:
         return -1
+    # what the direct solves change, to undo it: each member's multiplier and its spheres'
+    # values as they were when it joined (restored in reverse, so the first save wins)
+    undo_x = np.empty(MAX_DIRECT)
+    undo_p = np.empty(2 * MAX_DIRECT, np.int64)
+    undo_v = np.empty((2 * MAX_DIRECT, 3))
+    saved = 0
     first = 0
     for _ in range(MAX_GROWTH):
         # with every held contact of the new members' spheres (they share the change)
         grown, fits = _add_rings(h, members, first, m, is_velocity, pair_kind, solve)
-        if not fits:
-            _leave_cluster(h, members, grown, solve)
-            return 0 if first == 0 else grown
         m = grown
+        if not fits or h.count[2] + m >= budget:
+            return _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, pair_kind, solve)
         for r in range(first, m):
             c = members[r]
             touch(h, h.a[c], x, v, a, sigma, when, integrator, drag, k, solve)
             if h.kind[c] == pair_kind:
                 touch(h, h.other[c], x, v, a, sigma, when, integrator, drag, k, solve)
-        if h.count[2] + m >= budget:
-            _leave_cluster(h, members, m, solve)
-            return 0
+        for r in range(saved, m):
+            c = members[r]
+            undo_x[r] = h.jv[c] if is_velocity else h.lam[c]
+            for e in range(2):
+                p = h.a[c] if e == 0 else (h.other[c] if h.kind[c] == pair_kind else -1)
+                undo_p[2 * r + e] = p
+                if p >= 0:
+                    for d in range(3):
+                        undo_v[2 * r + e, d] = values[p, d]
+        saved = m
         h.count[2] += m
         if not _direct(h, values, is_velocity, members, m, inverse_mass, pair_kind, stick, solve, tolerance):
-            _leave_cluster(h, members, m, solve)
-            return 0
+            return _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, pair_kind, solve)
         grown = m
         for r in range(m):
             c = members[r]
@@ -408,17 +421,34 @@ def _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
                                                          when, integrator, drag, k, tolerance, pair_kind, stick,
                                                          solve):
                         if grown == MAX_DIRECT:
-                            _leave_cluster(h, members, grown, solve)
-                            return grown
+                            return _give_up(h, values, members, grown, saved, undo_x, undo_p, undo_v, is_velocity,
+                                            pair_kind, solve)
                         _join(h, d, is_velocity, solve)
                         members[grown] = d
                         grown += 1
         if grown == m:
-            break
+            _leave_cluster(h, members, m, solve)
+            return m
         first = m
         m = grown
+    return _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, pair_kind, solve)
+
+
+@njit(cache=True)
+def _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, pair_kind, solve) -> int:
+    """Undo every direct solve of this cluster (``saved`` members were saved) and leave it; returns 0."""
+    for r in range(2 * saved - 1, -1, -1):
+        p = undo_p[r]
+        if p >= 0:
+            for d in range(3):
+                values[p, d] = undo_v[r, d]
+    for r in range(saved):
+        if is_velocity:
+            h.jv[members[r]] = undo_x[r]
+        else:
+            h.lam[members[r]] = undo_x[r]
     _leave_cluster(h, members, m, solve)
-    return m
+    return 0
 
 
 @njit(cache=True)
