@@ -330,12 +330,6 @@ MAX_GROWTH = 12
 
 
 @njit(cache=True)
-def _end_sign(h, c, p) -> float:
-    """+1 if sphere p is contact c's first sphere (the normal points at it), -1 if its other."""
-    return 1.0 if h.a[c] == p else -1.0
-
-
-@njit(cache=True)
 def _bounds(h, c, is_velocity, stick, solve, joined):
     """(current multiplier, its lower bound, target) of contact c in this solve; joined:
     c is already part of it (else a velocity solve's impulse counts from 0)."""
@@ -386,10 +380,11 @@ def _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
     first = 0
     for _ in range(MAX_GROWTH):
         # with every held contact of the new members' spheres (they share the change)
-        grown, fits = _add_rings(h, members, first, m, is_velocity, pair_kind, solve)
+        grown, fits = _add_neighbours(h, values, members, first, m, False, is_velocity, x, v, a, sigma,
+                                      inverse_mass, when, integrator, drag, k, tolerance, pair_kind, stick, solve)
         m = grown
         if not fits or h.count[2] + m >= budget:
-            return _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, pair_kind, solve)
+            return _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, solve)
         for r in range(first, m):
             c = members[r]
             touch(h, h.a[c], x, v, a, sigma, when, integrator, drag, k, solve)
@@ -399,7 +394,7 @@ def _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
             c = members[r]
             undo_x[r] = h.jv[c] if is_velocity else h.lam[c]
             for e in range(2):
-                p = h.a[c] if e == 0 else (h.other[c] if h.kind[c] == pair_kind else -1)
+                p = _end(h, c, e, pair_kind)
                 undo_p[2 * r + e] = p
                 if p >= 0:
                     for d in range(3):
@@ -407,35 +402,21 @@ def _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
         saved = m
         h.count[2] += m
         if not _direct(h, values, is_velocity, members, m, inverse_mass, pair_kind, stick, solve, tolerance):
-            return _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, pair_kind, solve)
-        grown = m
-        for r in range(m):
-            c = members[r]
-            for e in range(2):
-                p = h.a[c] if e == 0 else (h.other[c] if h.kind[c] == pair_kind else -1)
-                if p < 0:
-                    continue
-                for t in range(h.deg[p]):
-                    d = h.slots[p, t]
-                    if h.seen[d] != inside and _violated(h, values, d, is_velocity, x, v, a, sigma, inverse_mass,
-                                                         when, integrator, drag, k, tolerance, pair_kind, stick,
-                                                         solve):
-                        if grown == MAX_DIRECT:
-                            return _give_up(h, values, members, grown, saved, undo_x, undo_p, undo_v, is_velocity,
-                                            pair_kind, solve)
-                        _join(h, d, is_velocity, solve)
-                        members[grown] = d
-                        grown += 1
+            return _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, solve)
+        grown, fits = _add_neighbours(h, values, members, 0, m, True, is_velocity, x, v, a, sigma, inverse_mass,
+                                      when, integrator, drag, k, tolerance, pair_kind, stick, solve)
+        if not fits:
+            return _give_up(h, values, members, grown, saved, undo_x, undo_p, undo_v, is_velocity, solve)
         if grown == m:
             _leave_cluster(h, members, m, solve)
             return m
         first = m
         m = grown
-    return _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, pair_kind, solve)
+    return _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, solve)
 
 
 @njit(cache=True)
-def _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, pair_kind, solve) -> int:
+def _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, solve) -> int:
     """Undo every direct solve of this cluster (``saved`` members were saved) and leave it; returns 0."""
     for r in range(2 * saved - 1, -1, -1):
         p = undo_p[r]
@@ -452,25 +433,40 @@ def _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, 
 
 
 @njit(cache=True)
-def _add_rings(h, members, first, m, is_velocity, pair_kind, solve):
-    """Add every held contact of the spheres of ``members[first:m]``; returns the new
-    count and whether they all fitted in MAX_DIRECT."""
+def _end(h, c, e, pair_kind) -> int:
+    """The sphere at end e of contact c: 0 its first sphere, 1 its other (-1 for a wall)."""
+    if e == 0:
+        return h.a[c]
+    return h.other[c] if h.kind[c] == pair_kind else -1
+
+
+@njit(cache=True)
+def _add_neighbours(h, values, members, first, m, violated_only, is_velocity, x, v, a, sigma, inverse_mass, when,
+                    integrator, drag, k, tolerance, pair_kind, stick, solve):
+    """Add to the cluster ``members[:m]`` the held contacts of the spheres of
+    ``members[first:m]`` — every one, or (violated_only) those a Gauss–Seidel update would
+    move by more than ``tolerance``; returns the new count and whether all fitted in
+    MAX_DIRECT."""
     inside = -(solve + 1)
+    count = m
     for r in range(first, m):
         c = members[r]
         for e in range(2):
-            p = h.a[c] if e == 0 else (h.other[c] if h.kind[c] == pair_kind else -1)
+            p = _end(h, c, e, pair_kind)
             if p < 0:
                 continue
             for t in range(h.deg[p]):
                 d = h.slots[p, t]
-                if h.seen[d] != inside:
-                    if m == MAX_DIRECT:
-                        return m, False
-                    _join(h, d, is_velocity, solve)
-                    members[m] = d
-                    m += 1
-    return m, True
+                if h.seen[d] == inside or (violated_only and not _violated(
+                        h, values, d, is_velocity, x, v, a, sigma, inverse_mass, when, integrator, drag, k,
+                        tolerance, pair_kind, stick, solve)):
+                    continue
+                if count == MAX_DIRECT:
+                    return count, False
+                _join(h, d, is_velocity, solve)
+                members[count] = d
+                count += 1
+    return count, True
 
 
 @njit(cache=True)
@@ -538,10 +534,10 @@ def _direct(h, values, is_velocity, members, m, inverse_mass, pair_kind, stick, 
     for r in range(m):
         c = members[r]
         for e in range(2):
-            p = h.a[c] if e == 0 else (h.other[c] if h.kind[c] == pair_kind else -1)
+            p = _end(h, c, e, pair_kind)
             if p < 0 or inverse_mass[p] == 0.0:
                 continue
-            sr = _end_sign(h, c, p)
+            sr = 1.0 if e == 0 else -1.0  # the normal points at the first sphere
             for q in range(m):
                 d = members[q]
                 if h.a[d] == p:
@@ -553,10 +549,7 @@ def _direct(h, values, is_velocity, members, m, inverse_mass, pair_kind, stick, 
                 big[r, q] += inverse_mass[p] * sr * sd * (h.normal[c, 0] * h.normal[d, 0] + h.normal[c, 1] * h.normal[d, 1]
                                                          + h.normal[c, 2] * h.normal[d, 2])
     for r in range(m):
-        acc = 0.0
-        for q in range(m):
-            acc += big[r, q] * x0[q]
-        rhs[r] += acc
+        rhs[r] += _dot_row(big, r, x0, m)
     ridge = 0.0
     for r in range(m):
         ridge = max(ridge, big[r, r])
