@@ -7,8 +7,8 @@
 Prints markdown tables (docs/recording.md comes from this command):
 
 1. box-rain (the scene of benchmarks/broadphase.py): ms/step with recording off, MCAP only
-   at --detail state / contacts / full, and MCAP full + Rerun; the ratio to "off" is what
-   recording costs. Each configuration runs in a fresh subprocess, after the kernels are
+   at --detail state / contacts / full with the view channels (the default) and without
+   (--no-view), and MCAP full + Rerun; the ratio to "off" is what recording costs. Each configuration runs in a fresh subprocess, after the kernels are
    loaded, on the same steps; the configurations take turns, three rounds (two with
    --quick), and the fastest round of each is reported (the least disturbed by the rest
    of the machine).
@@ -36,16 +36,18 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from broadphase import box_rain_toml  # noqa: E402
 
-CONFIGS = [
-    ("off", None, False),
-    ("mcap state", "state", False),
-    ("mcap contacts", "contacts", False),
-    ("mcap full", "full", False),
-    ("mcap full + rerun", "full", True),
+CONFIGS = [  # (label, detail or None for off, Rerun too, view channels)
+    ("off", None, False, False),
+    ("mcap state --no-view", "state", False, False),
+    ("mcap state", "state", False, True),
+    ("mcap contacts", "contacts", False, True),
+    ("mcap full --no-view", "full", False, False),
+    ("mcap full", "full", False, True),
+    ("mcap full + rerun", "full", True, True),
 ]
 
 
-def worker(n: int, steps: int, detail: str | None, rerun: bool, folder: str) -> dict:
+def worker(n: int, steps: int, detail: str | None, rerun: bool, folder: str, view: bool = True) -> dict:
     """One configuration, in its own process: ms/step and file sizes."""
     from physdbg.engine import warm_up
     from physdbg.observe import FanOut
@@ -55,11 +57,11 @@ def worker(n: int, steps: int, detail: str | None, rerun: bool, folder: str) -> 
 
     scene = parse_scene(box_rain_toml(n, steps), "bench")
     sinks = []
-    mcap = Path(folder) / f"rain-{n}-{detail}.mcap"
+    mcap = Path(folder) / f"rain-{n}-{detail}-{view}.mcap"
     rrd = Path(folder) / f"rain-{n}.rrd"
     if detail is not None:
         header = RecordingHeader.from_scene(scene, detail)
-        sinks.append(McapRecorder(mcap, header))
+        sinks.append(McapRecorder(mcap, header, view=view))
         if rerun:
             from physdbg.record.rerun_sink import RerunSink
 
@@ -81,9 +83,9 @@ def worker(n: int, steps: int, detail: str | None, rerun: bool, folder: str) -> 
     return out
 
 
-def _in_subprocess(n: int, steps: int, detail: str | None, rerun: bool, folder: str) -> dict:
+def _in_subprocess(n: int, steps: int, detail: str | None, rerun: bool, folder: str, view: bool = True) -> dict:
     code = (f"import sys, json; sys.path.insert(0, {str(ROOT / 'benchmarks')!r}); import recording; "
-            f"print(json.dumps(recording.worker({n}, {steps}, {detail!r}, {rerun}, {folder!r})))")
+            f"print(json.dumps(recording.worker({n}, {steps}, {detail!r}, {rerun}, {folder!r}, {view})))")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
     if done.returncode != 0:
         raise SystemExit(done.stderr)
@@ -109,9 +111,10 @@ def main() -> None:
     if args.size:
         n, steps = args.size
         with tempfile.TemporaryDirectory() as folder:
-            r = _in_subprocess(n, steps, "state", False, folder)
+            r = _in_subprocess(n, steps, "state", False, folder, view=False)
         print(f"box-rain N = {n}, {steps} steps, --detail state: {r['mcap_bytes'] / 1e6:.2f} MB, "
-              f"{r['bytes_per_particle_step']:.1f} bytes per particle-step (raw positions + velocities: 48)")
+              f"{r['bytes_per_particle_step']:.1f} bytes per particle-step (raw positions + velocities: 48), "
+              "without the view channels")
         return
     sizes = [(1000, 60 if args.quick else 240), (10_000, 24 if args.quick else 120)]
     print(f"box-rain, dt = 1/240, swept, time ordering; {os.cpu_count()} cores\n")
@@ -122,12 +125,12 @@ def main() -> None:
         for n, steps in sizes:
             best: dict[str, dict] = {}
             for _ in range(rounds):
-                for label, detail, rerun in CONFIGS:
-                    r = _in_subprocess(n, steps, detail, rerun, folder)
+                for label, detail, rerun, view in CONFIGS:
+                    r = _in_subprocess(n, steps, detail, rerun, folder, view)
                     if label not in best or r["ms_per_step"] < best[label]["ms_per_step"]:
                         best[label] = r
             base = best["off"]["ms_per_step"]
-            for label, _, _ in CONFIGS:
+            for label, _, _, _ in CONFIGS:
                 r = best[label]
                 mcap = f"{r['mcap_bytes'] / 1e6:.2f}" if "mcap_bytes" in r else "-"
                 per = f"{r['bytes_per_particle_step']:.1f}" if "bytes_per_particle_step" in r else "-"

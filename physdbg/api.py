@@ -195,6 +195,21 @@ class RecordResult:
     bytes_mcap: int
     bytes_rrd: int
     bvh_note: str = ""
+    view_note: str = ""
+
+
+VIEW_AUTO_MAX_SPHERES = 2000  # above this the view channels cost more than the record (docs/recording.md)
+
+
+def view_choice(view: bool | None, spheres: int) -> tuple[bool, str]:
+    """Whether to write the view channels, and the note that says so: as asked, or (None)
+    up to VIEW_AUTO_MAX_SPHERES spheres, where they cost less than the record itself."""
+    if view is not None:
+        return view, "Foxglove view channels written" if view else "view channels left out (--no-view)"
+    if spheres <= VIEW_AUTO_MAX_SPHERES:
+        return True, "Foxglove view channels written (--no-view leaves them out)"
+    return False, (f"view channels left out: {spheres} spheres > {VIEW_AUTO_MAX_SPHERES}, where they would cost "
+                   "more than the record (--view writes them)")
 
 
 class RecordingInterrupted(PhysdbgError):
@@ -230,9 +245,12 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
            rrd_path: str | None = None, rrd: bool = True, detail: str = "full", force: bool = False,
            spawn: bool = False, bvh_max_nodes: int | None = None, dts: Sequence[float] | None = None,
            on_step: Callable[[int, int | None], None] | None = None,
-           on_status: Callable[[str], None] | None = None) -> RecordResult:
+           on_status: Callable[[str], None] | None = None, view: bool | None = None) -> RecordResult:
     """Run a scene and record every step to MCAP (and Rerun unless rrd=False).
 
+    view: also write the view channels (Foxglove's SceneUpdate, PointCloud and Log; see
+    docs/recording-format.md), which Foxglove and ``rerun mcap convert`` show; None: up to
+    VIEW_AUTO_MAX_SPHERES spheres (``view_choice``).
     bvh_max_nodes: log at most this many BVH nodes a step, whole levels from the root
     (None: the default cap, 0: no cap). Ctrl-C ends the run with valid files up to the
     last complete step and raises RecordingInterrupted.
@@ -252,6 +270,7 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
     check_writable([mcap_out, rrd_out], force)
     cap = DEFAULT_BVH_MAX_NODES if bvh_max_nodes is None else (bvh_max_nodes or None)
     header = RecordingHeader.from_scene(scene, detail, cap)
+    view, view_note = view_choice(view, header.count)
     sinks = []
     summary = None
     mcap_sink = None
@@ -268,7 +287,7 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
             except RuntimeError as err:  # rerun's file sink: an unwritable folder or file
                 raise PhysdbgError(f"{rrd_out}: cannot write the Rerun file ({err})") from None
         try:
-            mcap_sink = McapRecorder(mcap_out, header)
+            mcap_sink = McapRecorder(mcap_out, header, view=view)
         except OSError as err:
             raise PhysdbgError(f"{mcap_out}: cannot write the recording ({err.strerror or err})") from None
         sinks.insert(0, mcap_sink)
@@ -300,7 +319,7 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
                 f"{mcap_sink.bvh_capped_steps} steps; use --bvh-max-nodes 0 for every node")
     result = RecordResult(summary, str(mcap_out), str(rrd_out) if rrd_out else None, detail, mcap_sink.frames,
                           mcap_out.stat().st_size, rrd_out.stat().st_size if rrd_out and rrd_out.exists() else 0,
-                          note)
+                          note, view_note)
     if interrupted:
         raise RecordingInterrupted(
             f"interrupted: {mcap_out} holds steps 1..{mcap_sink.frames - 1} (every step completed)")
@@ -449,7 +468,7 @@ def info(path: str | Path) -> dict:
             "physdbg_version": meta["physdbg_version"], "format_version": meta["format_version"],
             "detail": rec.detail, "particles": n, "walls": list(rec.header.walls.names),
             "steps": rec.steps, "sim_time": last.time, "final_hash": last.state_hash,
-            "settings": meta["settings"], "dt": meta["dt"], "bvh_max_nodes": meta.get("bvh_max_nodes"),
+            "settings": meta["settings"], "dt": meta.get("dt"), "bvh_max_nodes": meta.get("bvh_max_nodes"),
             "bytes_per_particle_step": size / (n * rec.frames) if n and rec.frames else None,
             "channels": [{"topic": c.topic, "encoding": c.message_encoding, "schema": c.schema_name,
                           "messages": c.messages} for c in rec.channels()],

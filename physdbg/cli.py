@@ -147,6 +147,10 @@ def record(
     detail: Annotated[str, typer.Option(
         "--detail", help="What to record: state (states, stats, warnings), contacts (+ every contact), "
                          "full (+ swept tests, broad phase, BVH nodes).")] = "full",
+    view: Annotated[Optional[bool], typer.Option(
+        "--view/--no-view", help="Write the view channels (Foxglove 3D scene, point cloud, log) in the MCAP file, "
+                                 "or leave them out (smaller, quicker; physdbg's own tools do not need them). "
+                                 "Default: written up to 2000 spheres.", show_default=False)] = None,
     bvh_max_nodes: Annotated[Optional[int], typer.Option(
         "--bvh-max-nodes", min=0, help="Log at most this many BVH nodes a step, whole levels from the root "
                                 "(default 4095; 0 = all).")] = None,
@@ -179,7 +183,7 @@ def record(
             result = record_scene(loaded, mcap_path=str(output) if output else None,
                                   rrd_path=str(rrd) if rrd else None, rrd=not no_rrd, detail=detail,
                                   force=force, spawn=spawn, bvh_max_nodes=bvh_max_nodes, dts=step_lengths,
-                                  on_step=bar.update, on_status=bar.status)
+                                  on_step=bar.update, on_status=bar.status, view=view)
         finally:
             bar.close()
         typer.echo(format_summary(result.summary))
@@ -187,6 +191,7 @@ def record(
         typer.echo(f"mcap        {result.mcap}  ({_size(result.bytes_mcap)})")
         if result.rrd:
             typer.echo(f"rerun       {result.rrd}  ({_size(result.bytes_rrd)})")
+        typer.echo(f"view        {result.view_note}")
         if result.bvh_note:
             typer.echo(f"note        {result.bvh_note}")
         me = _command("physdbg")

@@ -175,24 +175,52 @@ def test_bvh_nodes_are_recorded_and_a_big_tree_is_capped_by_whole_levels(tmp_pat
 
 # ----------------------------------------------------------------------------- plain mcap
 PLAIN_READER = textwrap.dedent('''
-    """Reads a physdbg recording with the mcap library and numpy only, from the format doc."""
-    import hashlib, json, struct, sys
+    """Reads every channel of a physdbg recording with standard decoders only: the mcap
+    library, its protobuf decoder (mcap-protobuf-support), json and numpy; the packed
+    state's words as docs/recording-format.md describes them."""
+    import hashlib, json, sys
     import numpy as np
     from mcap.reader import make_reader
+    from mcap.decoder import DecoderFactory as McapDecoderFactory
+    from mcap_protobuf.decoder import DecoderFactory
 
-    def dtype(schema):
-        return np.dtype([(n, k, tuple(s)) if s else (n, k) for n, k, s in json.loads(schema.data)["fields"]])
+    class JsonDecoderFactory(McapDecoderFactory):
+        def decoder_for(self, message_encoding, schema):
+            return json.loads if message_encoding == "json" and schema.encoding == "jsonschema" else None
 
     def zigzag_decode(z):
         return ((z >> np.uint64(1)).view(np.int64)) ^ (-(z & np.uint64(1)).view(np.int64))
 
-    out = {"hashes": [], "recomputed": [], "positions_at_5": None, "contacts": []}
+    def undescribed(value, schema, path):
+        """Fields of a JSON value that its JSON Schema does not describe (Foxglove's subset)."""
+        kind = schema.get("type")
+        if isinstance(value, dict):
+            if kind != "object" or "properties" not in schema:
+                return [path]
+            return [p for k, v in value.items() for p in (undescribed(v, schema["properties"][k], path + "." + k)
+                                                          if k in schema["properties"] else [path + "." + k])]
+        if isinstance(value, list):
+            return [path] if kind != "array" else [p for v in value for p in undescribed(v, schema["items"], path + "[]")]
+        want = {bool: "boolean", str: "string", int: "number", float: "number"}[type(value)]
+        return [] if kind == want else [path]
+
+    out = {"hashes": [], "recomputed": [], "positions_at_5": None, "points_at_5": None, "contacts": [],
+           "kinetic": [], "energy": [], "encodings": {}, "undescribed": [], "steps_match": True, "log_times": []}
     prev = prev2 = None
     with open(sys.argv[1], "rb") as f:
-        for schema, channel, message in make_reader(f).iter_messages(log_time_order=True):
+        reader = make_reader(f, decoder_factories=[DecoderFactory(), JsonDecoderFactory()])
+        for schema, channel, message, decoded in reader.iter_decoded_messages(log_time_order=True):
+            out["encodings"][channel.topic] = [channel.message_encoding, schema.encoding]
+            if channel.message_encoding == "json":
+                out["undescribed"] += undescribed(decoded, json.loads(schema.data), channel.topic)
+                step = decoded.get("step")
+            else:
+                step = getattr(decoded, "step", None)
+            if channel.topic.startswith("/physdbg/") and channel.topic != "/physdbg/frame_index":
+                out["steps_match"] &= step == message.sequence
             if channel.topic == "/physdbg/state":
-                magic, version, codec, _, n, frame, t, dt, digest = struct.unpack_from("<4sHBBIQdd16s", message.data)
-                planes = np.frombuffer(message.data, np.uint8, offset=52).reshape(8, 6 * n)
+                n, codec, dt = decoded.count, decoded.codec, decoded.dt
+                planes = np.frombuffer(decoded.words, np.uint8).reshape(8, 6 * n)
                 words = np.ascontiguousarray(planes.T).view("<u8").reshape(n, 6)
                 if codec == 0:
                     state = words.view(np.float64).copy()
@@ -206,31 +234,61 @@ PLAIN_READER = textwrap.dedent('''
                 prev2, prev = prev, state
                 h = hashlib.blake2b(digest_size=16)
                 h.update(np.ascontiguousarray(state[:, :3]).tobytes()); h.update(np.ascontiguousarray(state[:, 3:]).tobytes())
-                out["hashes"].append(digest.hex()); out["recomputed"].append(h.hexdigest())
-                if frame == 5:
+                out["hashes"].append(decoded.state_hash.hex()); out["recomputed"].append(h.hexdigest())
+                out["log_times"].append([message.log_time, message.publish_time, decoded.time])
+                if decoded.step == 5:
                     out["positions_at_5"] = state[:, :3].tolist()
+            elif channel.topic == "/view/points" and message.sequence == 5:
+                fields = {fl.name: fl.offset for fl in decoded.fields}
+                raw = np.frombuffer(decoded.data, np.uint8).reshape(-1, decoded.point_stride)
+                out["points_at_5"] = np.stack([raw[:, fields[a]:fields[a] + 4].copy().view("<f4")[:, 0]
+                                               for a in "xyz"], axis=1).tolist()  # FLOAT32 fields
+            elif channel.topic == "/physdbg/stats":
+                out["kinetic"].append(decoded.kinetic); out["energy"].append(decoded.energy)
             elif channel.topic == "/physdbg/contacts":
-                for row in np.frombuffer(message.data, dtype(schema)):
-                    out["contacts"].append([message.log_time, int(row["a"]), int(row["other"]),
-                                            float(row["time_in_step"]), float(row["impulse"]), row["normal"].tolist()])
+                for i in range(len(decoded.a)):
+                    out["contacts"].append([decoded.step, decoded.a[i], decoded.other[i], decoded.time_in_step[i],
+                                            decoded.impulse[i], [decoded.normal_x[i], decoded.normal_y[i],
+                                                                 decoded.normal_z[i]]])
     assert "physdbg" not in sys.modules
     print(json.dumps(out))
 ''')
 
 
-def test_a_program_with_only_mcap_and_numpy_reads_states_hashes_and_contacts(tmp_path):
+def test_a_program_with_standard_decoders_only_reads_every_channel(tmp_path):
+    """Every channel decodes with the mcap protobuf decoder or JSON (whose schemas describe
+    every field in the subset Foxglove parses), and gives the engine's states, hashes,
+    stats and contacts without importing physdbg."""
     path, live = record_with_events(tmp_path, "billiards")
     script = tmp_path / "plain_reader.py"
     script.write_text(PLAIN_READER)
     done = subprocess.run([sys.executable, str(script), str(path)], capture_output=True, text=True,
                           cwd=tmp_path, check=True)
     got = json.loads(done.stdout)
+    assert set(got["encodings"]) == set(fmt.topics_for("full", view=True)) - {
+        fmt.TOPIC_BVH, fmt.TOPIC_BVH_ORDER, fmt.TOPIC_WARNINGS}  # billiards uses a grid and warns of nothing
+    assert all(enc in (["protobuf", "protobuf"], ["json", "jsonschema"]) for enc in got["encodings"].values())
+    assert got["undescribed"] == [] and got["steps_match"]
     initial = load_scene("billiards").state
     expected = [state_hash(initial.positions, initial.velocities)] + [e.state_hash for e in live.step_ends]
     assert got["hashes"] == expected and got["recomputed"] == expected
     assert got["positions_at_5"] == live.step_ends[4].positions.tolist()
+    assert got["points_at_5"] == live.step_ends[4].positions.astype(np.float32).tolist()
+    assert got["kinetic"] == [e.kinetic for e in live.step_ends]
+    assert got["energy"] == [e.kinetic + e.potential for e in live.step_ends]
     want = [[c.step + 1, c.a, c.other, c.time_in_step, c.impulse, c.normal.tolist()] for c in live.contacts]
     assert got["contacts"] == want and len(want) > 0
+    # time is simulated time: log and publish time are the frame's time in ns, increasing
+    log_ns = [row[0] for row in got["log_times"]]
+    assert all(row[0] == row[1] == round(row[2] * 1e9) for row in got["log_times"])
+    assert all(b > a for a, b in zip(log_ns, log_ns[1:]))
+    # the other channels: a BVH run whose budget warns
+    path, _ = record_with_events(tmp_path, "rain", ["steps=3", "broad_phase=bvh-sah", "max_swept_tests_per_step=20"])
+    done = subprocess.run([sys.executable, str(script), str(path)], capture_output=True, text=True,
+                          cwd=tmp_path, check=True)
+    got = json.loads(done.stdout)
+    assert set(got["encodings"]) == set(fmt.topics_for("full", view=True))
+    assert got["undescribed"] == [] and got["steps_match"]
 
 
 # ----------------------------------------------------------------------------- damage
@@ -277,7 +335,7 @@ def test_a_truncated_file_reads_up_to_its_last_whole_chunk(tmp_path):
 def _start_recording(tmp_path, extra=()):
     out = tmp_path / "long.mcap"
     args = [sys.executable, "-m", "physdbg.cli", "record", "rain", "--set", "generate.count=2000",
-            "--set", "steps=100000", "-o", str(out), "--no-rrd", "--detail", "state", *extra]
+            "--set", "steps=100000", "-o", str(out), "--no-rrd", "--detail", "state", "--no-view", *extra]  # size below: state chunks
     proc = subprocess.Popen(args, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 120
     while time.time() < deadline:  # wait until a few chunks are on disk
@@ -363,13 +421,14 @@ def _rewrite_state(src: Path, dst: Path, frame: int, x, v, digest: str) -> None:
                                                                schemas[channel.id])
             data = message.data
             if channel.topic == fmt.TOPIC_STATE:
-                s = rec.state(message.log_time)
-                if message.log_time == frame:
+                s = rec.state(message.sequence)
+                if message.sequence == frame:
                     data = fmt.encode_state(frame, s.time, s.dt, digest, x, v, fmt.CODEC_RAW)
                 else:
                     data = fmt.encode_state(s.frame, s.time, s.dt, s.state_hash, s.positions, s.velocities,
                                             fmt.CODEC_RAW)
-            writer.add_message(channels[channel.id], message.log_time, data, message.publish_time)
+            writer.add_message(channels[channel.id], message.log_time, data, message.publish_time,
+                               sequence=message.sequence)
         writer.finish()
 
 
@@ -383,15 +442,17 @@ def test_the_recorded_scene_repeats_the_run(tmp_path):
 
 def test_the_format_document_names_every_channel_and_field():
     doc = (ROOT / "docs" / "recording-format.md").read_text()
-    topics = {t for level in fmt.DETAIL_LEVELS for t in fmt.TOPICS_BY_DETAIL[level]}
-    for topic in topics:
+    for topic in fmt.topics_for("full", view=True):
         assert f"`{topic}`" in doc, topic
-    for _, fields in fmt.ARRAY_SCHEMAS.values():
+    for fields, _ in fmt.PROTOBUF_MESSAGES.values():
         for name, _, _ in fields:
             assert f"`{name}`" in doc, name
-    for name in fmt.STATE_SCHEMA["header"]["fields"]:
+    for name, _ in fmt.STATE_MESSAGE_FIELDS:
         assert f"`{name}`" in doc, name
-    assert fmt.STATE_SCHEMA["header"]["struct"] in doc
+    for name in [*fmt.MESSAGE_OF_TOPIC.values(), *fmt.VIEW_SCHEMAS.values()]:
+        assert f"`{name}`" in doc, name
+    for name in fmt.BROAD_PHASE_STATS:
+        assert f"`{name}`" in doc, name
     assert str(fmt.KEYFRAME_INTERVAL) in doc
 
 

@@ -143,10 +143,10 @@ def test_the_event_log_line_quoted_in_the_readme_is_what_cradle_writes(tmp_path)
 
 
 def test_a_step_with_more_contacts_than_are_drawn_says_so(tmp_path, monkeypatch):
-    from physdbg.record import rerun_sink
+    from physdbg.record import view
 
-    monkeypatch.setattr(rerun_sink, "DRAWN_CONTACTS_PER_STEP", 2)
-    monkeypatch.setattr(rerun_sink, "LOG_LINES_PER_STEP", 1)
+    monkeypatch.setattr(view, "DRAWN_CONTACTS_PER_STEP", 2)
+    monkeypatch.setattr(view, "LOG_LINES_PER_STEP", 1)
     rec = api.record("cradle", mcap_path=str(tmp_path / "c.mcap"), rrd_path=str(tmp_path / "c.rrd"))
     rows = read_rrd(Path(rec.rrd))
     ghosts = rows[("/world/contacts/ghosts", 44)]["Points3D:positions"][0]

@@ -4,32 +4,32 @@ Everything a reader needs to know lives here and in docs/recording-format.md (a 
 checks that the document names every channel and field defined below). Nothing in this
 module touches files; :mod:`.mcap_sink` writes and :mod:`.reader` reads.
 
-Time base: an MCAP message's ``log_time`` is the **frame**: the number of steps completed
-(0 = the initial state, k = after the k-th step). Messages about the k-th step (its
-contacts, swept tests, ...) have ``log_time`` k, so "everything about step k" is a time
-range query. ``publish_time`` is the simulated time at that frame in integer nanoseconds.
-The engine's events number steps from 0 (``event.step`` = k - 1).
+Every channel uses a standard MCAP encoding, so any MCAP tool decodes every message:
+``protobuf`` (the FileDescriptorSet is the schema; built from the field lists below by
+:mod:`.proto`) or ``json`` with a JSON Schema that has ``properties`` for every field.
+
+Time base: an MCAP message's ``log_time`` (and ``publish_time``) is the **simulated time**
+of its frame in nanoseconds, made strictly increasing (a frame whose rounded time does not
+exceed the previous frame's gets the previous one + 1 ns), so MCAP tools show the run's
+real duration. The step number is a field of every message (``step``; also the MCAP
+``sequence``): frame 0 is the initial state, frame k the state after the k-th step, and
+every message about the k-th step has ``step`` k and frame k's ``log_time``. The
+/physdbg/frame_index message maps steps to log times for random access.
 """
 
 from __future__ import annotations
 
 import json
-import struct
 
 import numpy as np
 
 FORMAT_NAME = "physdbg-recording"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 PROFILE = "physdbg"
 
-# Message encodings (MCAP allows any string; these are documented in the format doc).
+ENCODING_PROTOBUF = "protobuf"  # message and schema encoding (schema data: a FileDescriptorSet)
 ENCODING_JSON = "json"  # UTF-8 JSON object; schema encoding "jsonschema"
-ENCODING_ARRAY = "physdbg.array"  # rows of a numpy structured array, little-endian, no padding
-ENCODING_STATE = "physdbg.state"  # STATE_HEADER + byte-shuffled words (see encode_state)
-
 SCHEMA_JSON = "jsonschema"
-SCHEMA_ARRAY = "physdbg.dtype"  # JSON: {"fields": [[name, dtype, shape?], ...], "units": {...}}
-SCHEMA_STATE = "physdbg.state"  # JSON describing the header and codecs
 
 # Detail levels: what each level records (each includes the one before).
 DETAIL_LEVELS = ("state", "contacts", "full")
@@ -46,7 +46,21 @@ TOPIC_SWEPT = "/physdbg/swept_tests"  # detail full: every narrow-phase test (ar
 TOPIC_BROAD_PHASE = "/physdbg/broad_phase"  # detail full: structure, reason, stats (JSON)
 TOPIC_BVH = "/physdbg/bvh"  # detail full, BVH broad phases: node rows (array)
 TOPIC_BVH_ORDER = "/physdbg/bvh_order"  # detail full, uncapped BVH: particle of each leaf slot
-TOPIC_FRAME_INDEX = "/physdbg/frame_index"  # once, at the end: every frame's time, dt and state hash
+TOPIC_FRAME_INDEX = "/physdbg/frame_index"  # once, at the end: every frame's time, log time, dt and hash
+
+# View channels (Foxglove's published schemas), written unless --no-view: what Foxglove's
+# 3D, Plot and Log panels and rerun's MCAP importer show without knowing physdbg.
+TOPIC_VIEW_SCENE = "/view/scene"  # foxglove.SceneUpdate: spheres, walls, contact arrows
+TOPIC_VIEW_POINTS = "/view/points"  # foxglove.PointCloud: sphere centres (float64 x, y, z), radius, id
+TOPIC_VIEW_LOG = "/view/log"  # foxglove.Log: contacts and warnings in words
+TOPIC_VIEW_TRANSFORM = "/view/transform"  # foxglove.FrameTransform: the scene's frame in Foxglove's z-up world
+VIEW_TOPICS = (TOPIC_VIEW_SCENE, TOPIC_VIEW_POINTS, TOPIC_VIEW_LOG, TOPIC_VIEW_TRANSFORM)
+VIEW_SCHEMAS = {
+    TOPIC_VIEW_SCENE: "foxglove.SceneUpdate", TOPIC_VIEW_POINTS: "foxglove.PointCloud",
+    TOPIC_VIEW_LOG: "foxglove.Log", TOPIC_VIEW_TRANSFORM: "foxglove.FrameTransform",
+}
+VIEW_WORLD_FRAME = "world"  # Foxglove's display frame (z up)
+VIEW_SCENE_FRAME = "scene"  # the engine's coordinates (y up unless gravity points down z)
 
 # The bulky per-step channels are written in chunks of their own, so reading states,
 # stats and contacts (diff, explain, a replay at detail "state") never decompresses them.
@@ -60,13 +74,13 @@ TOPICS_BY_DETAIL = {
 }
 
 
-def topics_for(detail: str) -> tuple[str, ...]:
-    """Every topic a recording at ``detail`` may hold."""
+def topics_for(detail: str, view: bool = False) -> tuple[str, ...]:
+    """Every topic a recording at ``detail`` may hold (with the view channels if ``view``)."""
     out: tuple[str, ...] = ()
     for level in DETAIL_LEVELS:
         out += TOPICS_BY_DETAIL[level]
         if level == detail:
-            return out
+            return out + (VIEW_TOPICS if view else ())
     raise ValueError(f"unknown detail level {detail!r}")
 
 
@@ -77,7 +91,7 @@ PARTICLE_FIELDS = [
 ]
 STATS_FIELDS = [
     ("time", "<f8", ()), ("dt", "<f8", ()), ("kinetic", "<f8", ()), ("potential", "<f8", ()),
-    ("momentum", "<f8", (3,)), ("contacts", "<i8", ()), ("swept_tests", "<i8", ()), ("events", "<i8", ()),
+    ("energy", "<f8", ()), ("momentum", "<f8", (3,)), ("contacts", "<i8", ()), ("swept_tests", "<i8", ()), ("events", "<i8", ()),
     ("resting", "<i8", ()), ("rapid", "<i8", ()), ("max_overlap", "<f8", ()),
     ("seconds_forces", "<f8", ()), ("seconds_broad_phase", "<f8", ()), ("seconds_narrow_phase", "<f8", ()),
     ("seconds_resolve", "<f8", ()), ("seconds_finish", "<f8", ()),
@@ -98,31 +112,109 @@ BVH_FIELDS = [
     ("start", "<i4", ()), ("count", "<i4", ()), ("lo", "<f8", (3,)), ("hi", "<f8", (3,)),
 ]
 BVH_ORDER_FIELDS = [("particle", "<i4", ())]
-FRAME_INDEX_FIELDS = [("time", "<f8", ()), ("dt", "<f8", ()), ("state_hash", "u1", (16,))]
+FRAME_INDEX_FIELDS = [("time", "<f8", ()), ("log_time", "<u8", ()), ("dt", "<f8", ()), ("state_hash", "u1", (16,))]
 
-UNITS = {
-    "radius": "m", "inverse_mass": "1/kg (0 = immovable)", "time": "s", "dt": "s", "kinetic": "J",
-    "potential": "J", "momentum": "kg·m/s", "max_overlap": "m", "seconds_*": "s (wall clock)",
-    "time_in_step": "s after the step began", "point": "m", "normal": "unit vector from b (or wall) to a",
-    "impulse": "N·s", "velocity_*": "m/s", "start": "s after the step began",
-    "toi": "s after the step began, NaN = no contact in the step", "lo": "m", "hi": "m",
+
+# The protobuf message of each channel: name -> (field list, table?). A table holds many
+# rows per message (repeated fields); a row message holds one record (plain fields).
+MESSAGE_OF_TOPIC = {
+    TOPIC_PARTICLES: "physdbg.Particles", TOPIC_STATS: "physdbg.StepStats", TOPIC_CONTACTS: "physdbg.Contacts",
+    TOPIC_SWEPT: "physdbg.SweptTests", TOPIC_BVH: "physdbg.BvhNodes", TOPIC_BVH_ORDER: "physdbg.BvhOrder",
+    TOPIC_FRAME_INDEX: "physdbg.FrameIndex", TOPIC_STATE: "physdbg.State",
 }
+PROTOBUF_MESSAGES = {
+    "physdbg.Particles": (PARTICLE_FIELDS, True),
+    "physdbg.StepStats": (STATS_FIELDS, False),
+    "physdbg.Contacts": (CONTACT_FIELDS, True),
+    "physdbg.SweptTests": (SWEPT_FIELDS, True),
+    "physdbg.BvhNodes": (BVH_FIELDS, True),
+    "physdbg.BvhOrder": (BVH_ORDER_FIELDS, True),
+    "physdbg.FrameIndex": (FRAME_INDEX_FIELDS, True),
+}
+STATE_MESSAGE = "physdbg.State"
+# after ``step``: (name, numpy kind or "bytes"); ``words`` is the packed state below
+STATE_MESSAGE_FIELDS = [("time", "<f8"), ("dt", "<f8"), ("state_hash", "bytes"), ("codec", "<u4"),
+                        ("count", "<u4"), ("words", "bytes")]
 
-ARRAY_SCHEMAS = {
-    TOPIC_PARTICLES: ("physdbg.Particles", PARTICLE_FIELDS),
-    TOPIC_STATS: ("physdbg.StepStats", STATS_FIELDS),
-    TOPIC_CONTACTS: ("physdbg.Contacts", CONTACT_FIELDS),
-    TOPIC_SWEPT: ("physdbg.SweptTests", SWEPT_FIELDS),
-    TOPIC_BVH: ("physdbg.BvhNodes", BVH_FIELDS),
-    TOPIC_BVH_ORDER: ("physdbg.BvhOrder", BVH_ORDER_FIELDS),
-    TOPIC_FRAME_INDEX: ("physdbg.FrameIndex", FRAME_INDEX_FIELDS),
+# JSON channels. /physdbg/scene and /physdbg/walls are written once and their schema is
+# made from the message itself (json_schema_of), so it names every field of that file's
+# scene table; the per-step ones have fixed schemas. Foxglove's JSON Schema parser takes
+# one "type" per field (no "null", no type lists) and no nested arrays; null values are
+# therefore left out of every JSON message (a missing key reads as None).
+BROAD_PHASE_STATS = {
+    "pairs": "number", "cell": "number", "cells_used": "number", "rebuilt": "boolean", "build_seconds": "number",
+    "sah_cost": "number", "nodes": "number", "depth": "number", "query_seconds": "number",
+    "nodes_visited": "number", "box_tests": "number",
 }
 JSON_SCHEMAS = {
-    TOPIC_SCENE: ("physdbg.Scene", {"type": "object", "required": ["format", "format_version", "scene"]}),
-    TOPIC_WALLS: ("physdbg.Walls", {"type": "object", "required": ["names", "normals", "offsets"]}),
-    TOPIC_WARNINGS: ("physdbg.Warning", {"type": "object", "required": ["step", "code", "message"]}),
-    TOPIC_BROAD_PHASE: ("physdbg.BroadPhase", {"type": "object", "required": ["name", "reason", "stats"]}),
+    TOPIC_WARNINGS: ("physdbg.Warning", {"type": "object", "properties": {
+        "step": {"type": "number"}, "code": {"type": "string"}, "message": {"type": "string"}},
+        "required": ["step", "code", "message"]}),
+    TOPIC_BROAD_PHASE: ("physdbg.BroadPhase", {"type": "object", "properties": {
+        "step": {"type": "number"}, "name": {"type": "string"}, "reason": {"type": "string"},
+        "stats": {"type": "object", "properties": {k: {"type": t} for k, t in BROAD_PHASE_STATS.items()}},
+        "bvh_nodes": {"type": "number"}, "bvh_depth": {"type": "number"}, "bvh_logged_depth": {"type": "number"}},
+        "required": ["step", "name", "reason", "stats"]}),
 }
+JSON_SCHEMAS[TOPIC_WALLS] = ("physdbg.Walls", {"type": "object", "properties": {
+    "step": {"type": "number"},
+    "walls": {"type": "array", "items": {"type": "object", "properties": {
+        "name": {"type": "string"}, "normal": {"type": "array", "items": {"type": "number"}},
+        "offset": {"type": "number"}, "restitution": {"type": "number"}, "two_sided": {"type": "boolean"},
+        "thickness": {"type": "number"}}}}},
+    "required": ["step", "walls"]})
+SCENE_SCHEMA_NAME = "physdbg.Scene"  # its JSON Schema is json_schema_of(the message)
+
+
+def without_nulls(value):
+    """``value`` with every None (and non-finite float) dict entry left out, recursively."""
+    if isinstance(value, dict):
+        return {k: without_nulls(v) for k, v in value.items()
+                if v is not None and not (isinstance(v, float) and not np.isfinite(v))}
+    if isinstance(value, list):
+        return [without_nulls(v) for v in value]
+    return value
+
+
+def json_schema_of(value) -> dict:
+    """A JSON Schema with ``properties`` for every field of ``value`` (a JSON object with
+    no nulls), in the subset Foxglove parses: objects, arrays of one item type, strings,
+    numbers (every number is "number": Foxglove reads "integer" as uint32), booleans.
+    Lists of objects get the union of their items' properties; a list of lists (which
+    Foxglove cannot show) is described as an array of strings and written as such by
+    ``foxglove_json``."""
+    if isinstance(value, bool):
+        return {"type": "boolean"}
+    if isinstance(value, (int, float)):
+        return {"type": "number"}
+    if isinstance(value, str):
+        return {"type": "string"}
+    if isinstance(value, dict):
+        return {"type": "object", "properties": {k: json_schema_of(v) for k, v in value.items()}}
+    if isinstance(value, list):
+        if any(isinstance(v, list) for v in value):
+            return {"type": "array", "items": {"type": "string"}}
+        objects = [v for v in value if isinstance(v, dict)]
+        if objects:
+            merged: dict = {}
+            for item in objects:
+                merged.update(item)
+            return {"type": "array", "items": json_schema_of(merged)}
+        return {"type": "array", "items": json_schema_of(value[0]) if value else {"type": "string"}}
+    raise TypeError(f"no JSON Schema for {type(value).__name__}")
+
+
+def foxglove_json(value):
+    """``value`` as json_schema_of describes it: nulls left out, a list of lists written as
+    a list of JSON strings (e.g. a scene table's grid of positions)."""
+    value = without_nulls(value)
+    if isinstance(value, dict):
+        return {k: foxglove_json(v) for k, v in value.items()}
+    if isinstance(value, list):
+        if any(isinstance(v, list) for v in value):
+            return [json.dumps(v) for v in value]
+        return [foxglove_json(v) for v in value]
+    return value
 
 
 def dtype_of(fields) -> np.dtype:
@@ -130,45 +222,29 @@ def dtype_of(fields) -> np.dtype:
     return np.dtype([(name, kind, shape) if shape else (name, kind) for name, kind, shape in fields])
 
 
-def array_schema_data(fields) -> bytes:
-    """Schema data of an ENCODING_ARRAY channel: the field list as JSON."""
-    return json.dumps({"fields": [[name, kind, list(shape)] for name, kind, shape in fields],
-                       "byte_order": "little", "units": UNITS}).encode()
+MAX_NANOSECONDS = 2**64 - 1
 
 
-def dtype_from_schema(data: bytes) -> np.dtype:
-    """Rebuild the row dtype from schema data (what any reader of the format does)."""
-    fields = json.loads(data)["fields"]
-    return np.dtype([(name, kind, tuple(shape)) if shape else (name, kind) for name, kind, shape in fields])
+def frame_nanoseconds(seconds: float, previous: int) -> int:
+    """The log time (ns) of a frame at ``seconds`` after a frame logged at ``previous`` ns
+    (-1 for the first frame): the rounded time, saturating, and at least previous + 1."""
+    try:
+        ns = int(round(float(seconds) * 1e9))
+    except (ValueError, OverflowError):  # NaN or infinite time: keep the order, nothing else
+        ns = previous + 1
+    return min(max(ns, previous + 1, 0), MAX_NANOSECONDS)
 
 
 # ----------------------------------------------------------------------------- state codec
-# Header of every /physdbg/state message, little-endian, 52 bytes:
-#   magic b"PDST", version u16, codec u8, reserved u8, count u32 (N), frame u64,
-#   time f64 (s, simulated, at this frame), dt f64 (s, of the step that led here; 0 at frame 0),
-#   state_hash 16 bytes (BLAKE2b-128 of positions bytes then velocities bytes).
-STATE_HEADER = struct.Struct("<4sHBBIQdd16s")
-STATE_MAGIC = b"PDST"
-STATE_VERSION = 1
+# A /physdbg/state message is a protobuf physdbg.State: step, time (s, simulated, at this
+# frame), dt (s, of the step that led here; 0 at frame 0), state_hash (16 bytes, BLAKE2b-128
+# of positions bytes then velocities bytes), codec, count (N) and words: the 6N 64-bit
+# words below, byte-shuffled.
 # Codecs: which prediction the stored words are residuals from.
 CODEC_RAW = 0  # words are the float64 bits themselves (a key frame)
 CODEC_PREVIOUS = 1  # v_pred = v[k-1]; x_pred = x[k-1] + (dt*0.5)*(v[k-1] + v[k])
 CODEC_TWO_PREVIOUS = 2  # v_pred = 2*v[k-1] - v[k-2]; x_pred as above
 KEYFRAME_INTERVAL = 64  # a raw frame every this many frames, so frame k decodes from <= 63 back
-
-STATE_SCHEMA = {
-    "header": {"struct": "<4sHBBIQdd16s", "fields": ["magic", "version", "codec", "reserved", "count",
-                                                      "frame", "time", "dt", "state_hash"]},
-    "words": "6N uint64, particle-major: x, y, z, vx, vy, vz of particle 0, then particle 1, ...",
-    "shuffle": "byte plane b (0..7) holds byte b (little-endian) of every word, planes in order",
-    "codecs": {
-        "0": "raw: word = bits of the float64",
-        "1": "word = zigzag(int64(bits(value)) - int64(bits(prediction))), v_pred = v[k-1], "
-             "x_pred = x[k-1] + (dt*0.5)*(v[k-1] + v[k])",
-        "2": "as 1 with v_pred = 2*v[k-1] - v[k-2]",
-    },
-    "zigzag": "z = (r << 1) ^ (r >> 63); r = (z >> 1) ^ -(z & 1)  (64-bit, wrapping)",
-}
 
 
 def _zigzag(r: np.ndarray) -> np.ndarray:
@@ -209,6 +285,8 @@ def encode_state(frame: int, time: float, dt: float, state_hash: str, positions:
                  before_previous: np.ndarray | None = None) -> bytes:
     """One /physdbg/state message. positions, velocities: (N, 3) float64; previous,
     before_previous: (N, 6) float64 states of frames k-1 and k-2 (as codec needs)."""
+    from .proto import message_class
+
     n = positions.shape[0]
     state = np.empty((n, 6))
     state[:, :3] = positions
@@ -221,20 +299,27 @@ def encode_state(frame: int, time: float, dt: float, state_hash: str, positions:
         words[:, :3] -= x_pred.view(np.int64)
         words[:, 3:] -= v_pred.view(np.int64)
         words = _zigzag(words)
-    header = STATE_HEADER.pack(STATE_MAGIC, STATE_VERSION, codec, 0, n, frame, time, dt, bytes.fromhex(state_hash))
-    return header + _shuffle(words.reshape(-1))
+    message = message_class(STATE_MESSAGE)(step=frame, time=time, dt=dt, state_hash=bytes.fromhex(state_hash),
+                                           codec=codec, count=n, words=_shuffle(words.reshape(-1)))
+    return message.SerializeToString()
 
 
-def decode_state_header(data: bytes) -> tuple[int, int, int, float, float, str]:
-    """(codec, count, frame, time, dt, state_hash hex) of a state message."""
-    if len(data) < STATE_HEADER.size:
-        raise ValueError("state message shorter than its header")
-    magic, version, codec, _, count, frame, time, dt, digest = STATE_HEADER.unpack_from(data)
-    if magic != STATE_MAGIC or version != STATE_VERSION or codec > CODEC_TWO_PREVIOUS:
-        raise ValueError("not a physdbg state message (bad magic, version or codec)")
-    if len(data) != STATE_HEADER.size + 48 * count:
-        raise ValueError(f"state message of {len(data)} bytes, expected {STATE_HEADER.size + 48 * count}")
-    return codec, count, frame, time, dt, digest.hex()
+def decode_state_header(data: bytes):
+    """The parsed physdbg.State message (step, time, dt, state_hash, codec, count, words);
+    ValueError if it is not one."""
+    from google.protobuf.message import DecodeError
+
+    from .proto import message_class
+
+    try:
+        message = message_class(STATE_MESSAGE).FromString(data)
+    except DecodeError as err:
+        raise ValueError(f"not a physdbg state message ({err})") from None
+    if message.codec > CODEC_TWO_PREVIOUS or len(message.state_hash) != 16:
+        raise ValueError("not a physdbg state message (bad codec or hash)")
+    if len(message.words) != 48 * message.count:
+        raise ValueError(f"state words of {len(message.words)} bytes, expected {48 * message.count}")
+    return message
 
 
 def decode_state(data: bytes, previous: np.ndarray | None = None,
@@ -244,8 +329,9 @@ def decode_state(data: bytes, previous: np.ndarray | None = None,
     previous / before_previous: decoded (N, 6) states of the frames before, as the
     message's codec needs (ValueError if missing).
     """
-    codec, count, frame, time, dt, digest = decode_state_header(data)
-    words = _unshuffle(memoryview(data)[STATE_HEADER.size:], 6 * count).reshape(count, 6)
+    m = decode_state_header(data)
+    codec, count, frame, time, dt, digest = m.codec, m.count, m.step, m.time, m.dt, m.state_hash.hex()
+    words = _unshuffle(m.words, 6 * count).reshape(count, 6)
     if codec == CODEC_RAW:
         return words.view(np.float64).copy(), frame, time, dt, digest
     if previous is None or (codec == CODEC_TWO_PREVIOUS and before_previous is None):

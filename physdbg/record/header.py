@@ -17,6 +17,7 @@ from .. import __version__
 from ..engine import Walls, state_hash
 from .format import DETAIL_LEVELS, FORMAT_NAME, FORMAT_VERSION
 
+NULLABLE_META = ("dt", "bvh_max_nodes")  # None in meta: left out of the file (Foxglove has no null type)
 DEFAULT_BVH_MAX_NODES = 4095  # a full tree of depth 11; deeper levels are left out unless asked
 
 
@@ -90,16 +91,43 @@ class RecordingHeader:
         return " ".join(part for part in parts if part)
 
     def walls_json(self) -> dict:
+        """The /physdbg/walls message: one object per wall (Foxglove shows no nested arrays)."""
         w = self.walls
-        return {"names": list(w.names), "normals": w.normals.tolist(), "offsets": w.offsets.tolist(),
-                "restitution": w.restitution.tolist(), "two_sided": [bool(b) for b in w.two_sided],
-                "thickness": w.thickness.tolist()}
+        return {"step": 0, "walls": [
+            {"name": name, "normal": [float(x) for x in normal], "offset": float(offset),
+             "restitution": float(restitution), "two_sided": bool(two_sided), "thickness": float(thickness)}
+            for name, normal, offset, restitution, two_sided, thickness
+            in zip(w.names, w.normals, w.offsets, w.restitution, w.two_sided, w.thickness, strict=True)]}
 
     @staticmethod
     def walls_from_json(data: dict) -> Walls:
-        return Walls(list(data["names"]), np.array(data["normals"], dtype=np.float64).reshape(-1, 3),
-                     np.array(data["offsets"], dtype=np.float64), np.array(data["restitution"], dtype=np.float64),
-                     np.array(data["two_sided"], dtype=np.bool_), np.array(data["thickness"], dtype=np.float64))
+        walls = data["walls"]
+        return Walls([w["name"] for w in walls], np.array([w["normal"] for w in walls], dtype=np.float64).reshape(-1, 3),
+                     np.array([w["offset"] for w in walls], dtype=np.float64),
+                     np.array([w["restitution"] for w in walls], dtype=np.float64),
+                     np.array([w["two_sided"] for w in walls], dtype=np.bool_),
+                     np.array([w["thickness"] for w in walls], dtype=np.float64))
+
+    def scene_json(self) -> dict:
+        """The /physdbg/scene message: meta with the scene table as a JSON string (a TOML
+        table may hold what Foxglove's schema subset cannot: lists of lists, mixed lists)
+        and no nulls (a missing key reads back as None)."""
+        meta = dict(self.meta, step=0)
+        meta["scene"] = dict(meta["scene"], table=json.dumps(meta["scene"]["table"]))
+        return meta
+
+    @staticmethod
+    def meta_from_json(data: dict) -> dict:
+        """The meta dict of a recording from its /physdbg/scene message."""
+        meta = dict(data)
+        meta.pop("step", None)
+        scene = dict(meta["scene"])
+        if isinstance(scene.get("table"), str):
+            scene["table"] = json.loads(scene["table"])
+        meta["scene"] = scene
+        for key in NULLABLE_META:
+            meta.setdefault(key, None)
+        return meta
 
 
 def _plain(value):

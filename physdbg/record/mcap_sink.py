@@ -10,7 +10,11 @@ Chunks: the bulky channels (swept tests, broad phase, BVH nodes) go in chunks of
 own, written just before the chunk of states, stats and contacts for the same frames, so
 "a frame whose state is in the file is complete" still holds and a reader of states
 never decompresses swept tests. At close, one /physdbg/frame_index message lists every
-frame's time, dt and state hash (what ``diff`` compares first).
+frame's time, log time, dt and state hash (what ``diff`` compares first, and how a
+reader finds step k's messages: their log time is frame k's simulated time in ns).
+
+With ``view=True`` (the default) the view channels in Foxglove's schemas are written too
+(:mod:`.foxglove_view`).
 
 The observer only encodes (numpy to bytes); a writer thread hands the messages to the
 mcap library, which compresses each chunk with zstd. zstd releases the GIL, so on two
@@ -29,6 +33,7 @@ import numpy as np
 
 from ..events import BroadPhaseInfo, Contacts, EngineWarning, StepEnd, SweptTests
 from . import format as fmt
+from . import proto
 from .header import RecordingHeader
 
 CHUNK_BYTES = 1 << 20  # mcap's default; chunks are the unit that survives a killed process
@@ -43,7 +48,8 @@ class McapRecorder:
     bvh_logged_depth (deepest level written when capped, else None), bytes_written.
     """
 
-    def __init__(self, path: str | Path, header: RecordingHeader, chunk_bytes: int = CHUNK_BYTES):
+    def __init__(self, path: str | Path, header: RecordingHeader, chunk_bytes: int = CHUNK_BYTES,
+                 view: bool = True):
         from mcap.writer import CompressionType, Writer
 
         self.path = Path(path)
@@ -55,13 +61,18 @@ class McapRecorder:
         self._writer = Writer(self._file, chunk_size=chunk_bytes, compression=CompressionType.ZSTD)
         self._writer.start(profile=fmt.PROFILE, library=f"physdbg {header.meta['physdbg_version']}")
         self._channels: dict[str, int] = {}
-        self._dtypes: dict[str, np.dtype] = {}
-        for topic in fmt.topics_for(self.detail):
-            self._register(topic)
+        self.view = None
+        if view:
+            from .foxglove_view import FoxgloveView
+
+            self.view = FoxgloveView(header, self.detail)
+        scene_json = fmt.foxglove_json(header.scene_json())
+        for topic in fmt.topics_for(self.detail, view=view):
+            self._register(topic, scene_json)
         self._writer.add_metadata("physdbg", {
             "format": fmt.FORMAT_NAME, "format_version": str(fmt.FORMAT_VERSION),
             "physdbg_version": header.meta["physdbg_version"], "scene": header.name,
-            "detail": self.detail, "particles": str(header.count)})
+            "detail": self.detail, "particles": str(header.count), "view": str(view).lower()})
         self._pending: list[tuple[str, bytes]] = []
         self._queue: queue.Queue = queue.Queue(maxsize=QUEUE_STEPS)
         self._error: BaseException | None = None
@@ -69,7 +80,10 @@ class McapRecorder:
         self._history: list[np.ndarray] = []  # the last two frames' (N, 6) states, for the codec
         self._chunk_bytes = chunk_bytes
         self._heavy = {self._channels[t] for t in fmt.HEAVY_TOPICS if t in self._channels}
-        self._index_rows: list[tuple[float, float, bytes]] = []  # (time, dt, hash) of every frame
+        self._index_rows: list[tuple[float, int, float, bytes]] = []  # (time, log ns, dt, hash) of every frame
+        self._last_ns = -1  # log time of the last frame: the next is later by at least 1 ns
+        self._contacts: Contacts | None = None
+        self._warnings: list[EngineWarning] = []
         self._sent_frames = 0
         self.frames = 0
         self.bvh_capped_steps = 0
@@ -77,10 +91,14 @@ class McapRecorder:
         self.closed = False
         self._thread = threading.Thread(target=self._drain, name="physdbg-mcap-writer", daemon=True)
         self._thread.start()
-        self._write(fmt.TOPIC_SCENE, 0, 0, json.dumps(header.meta).encode())
-        self._write(fmt.TOPIC_PARTICLES, 0, 0, self._rows(fmt.TOPIC_PARTICLES, header, header.count))
-        self._write(fmt.TOPIC_WALLS, 0, 0, json.dumps(header.walls_json()).encode())
-        self._write_state(0, 0.0, 0.0, header.state_hash, header.positions, header.velocities)
+        ns = self._frame_time(0.0)
+        self._write(fmt.TOPIC_SCENE, 0, ns, json.dumps(scene_json).encode())
+        self._write(fmt.TOPIC_PARTICLES, 0, ns, self._table(fmt.TOPIC_PARTICLES, 0, header))
+        self._write(fmt.TOPIC_WALLS, 0, ns, json.dumps(fmt.foxglove_json(header.walls_json())).encode())
+        if self.view is not None:
+            for topic, data in self.view.first(ns):
+                self._write(topic, 0, ns, data)
+        self._write_state(0, 0.0, 0.0, header.state_hash, header.positions, header.velocities, ns)
         self._send()
 
     # ------------------------------------------------------------------ observer
@@ -90,50 +108,65 @@ class McapRecorder:
             self._end_step(event)
         elif isinstance(event, Contacts):
             if fmt.TOPIC_CONTACTS in self._channels:
-                self._pending.append((fmt.TOPIC_CONTACTS, self._rows(fmt.TOPIC_CONTACTS, event, len(event))))
+                self._contacts = event
+                self._pending.append((fmt.TOPIC_CONTACTS, self._table(fmt.TOPIC_CONTACTS, frame, event)))
         elif isinstance(event, SweptTests):
             if fmt.TOPIC_SWEPT in self._channels:
-                self._pending.append((fmt.TOPIC_SWEPT, self._rows(fmt.TOPIC_SWEPT, event, len(event))))
+                self._pending.append((fmt.TOPIC_SWEPT, self._table(fmt.TOPIC_SWEPT, frame, event)))
         elif isinstance(event, BroadPhaseInfo):
             if fmt.TOPIC_BROAD_PHASE in self._channels:
                 self._broad_phase(event, frame)
         elif isinstance(event, EngineWarning):
-            self._pending.append((fmt.TOPIC_WARNINGS, json.dumps(
-                {"step": frame, "code": event.code, "message": event.message}).encode()))
+            self._warnings.append(event)
+            self._pending.append((fmt.TOPIC_WARNINGS, json.dumps(fmt.foxglove_json(
+                {"step": frame, "code": event.code, "message": event.message})).encode()))
 
     def _end_step(self, end: StepEnd) -> None:
         frame = end.step + 1
-        publish = _nanoseconds(end.time)
+        ns = self._frame_time(end.time)
         for topic, data in self._pending:
-            self._write(topic, frame, publish, data)
+            self._write(topic, frame, ns, data)
         self._pending.clear()
-        stats = np.zeros(1, dtype=self._dtypes[fmt.TOPIC_STATS])
-        stats["time"], stats["dt"] = end.time, end.dt
-        stats["kinetic"], stats["potential"], stats["momentum"] = end.kinetic, end.potential, end.momentum
+        stats = {"time": end.time, "dt": end.dt, "kinetic": end.kinetic, "potential": end.potential,
+                 "energy": end.kinetic + end.potential, "momentum": np.asarray(end.momentum),
+                 "max_overlap": end.max_overlap}
         for name in ("contacts", "swept_tests", "events", "resting", "rapid"):
             stats[name] = end.counts.get(name, 0)
-        stats["max_overlap"] = end.max_overlap
-        for name, seconds in end.timings.items():
-            if "seconds_" + name in stats.dtype.names:
-                stats["seconds_" + name] = seconds
-        self._write(fmt.TOPIC_STATS, frame, publish, stats.tobytes())
+        for name, _, _ in fmt.STATS_FIELDS:
+            if name.startswith("seconds_"):
+                stats[name] = end.timings.get(name[len("seconds_"):], 0.0)
+        self._write(fmt.TOPIC_STATS, frame, ns, proto.encode_table(
+            fmt.MESSAGE_OF_TOPIC[fmt.TOPIC_STATS], frame, stats.__getitem__))
+        if self.view is not None:
+            for topic, data in self.view.step(frame, ns, end, self._contacts, self._warnings):
+                self._write(topic, frame, ns, data)
+        self._contacts, self._warnings = None, []
         # The state goes last: a frame whose state is in the file is a complete step.
-        self._write_state(frame, end.time, end.dt, end.state_hash, end.positions, end.velocities)
+        self._write_state(frame, end.time, end.dt, end.state_hash, end.positions, end.velocities, ns)
         self._send()
 
+    def _frame_time(self, seconds: float) -> int:
+        """The log time (ns) of the next frame: its simulated time, strictly after the last."""
+        self._last_ns = fmt.frame_nanoseconds(seconds, self._last_ns)
+        return self._last_ns
+
     # ------------------------------------------------------------------ pieces
-    def _register(self, topic: str) -> None:
+    def _register(self, topic: str, scene_json: dict) -> None:
         w = self._writer
-        if topic == fmt.TOPIC_STATE:
-            schema = w.register_schema("physdbg.State", fmt.SCHEMA_STATE, json.dumps(fmt.STATE_SCHEMA).encode())
-            encoding = fmt.ENCODING_STATE
-        elif topic in fmt.ARRAY_SCHEMAS:
-            name, fields = fmt.ARRAY_SCHEMAS[topic]
-            schema = w.register_schema(name, fmt.SCHEMA_ARRAY, fmt.array_schema_data(fields))
-            self._dtypes[topic] = fmt.dtype_of(fields)
-            encoding = fmt.ENCODING_ARRAY
+        if topic in fmt.MESSAGE_OF_TOPIC:
+            name = fmt.MESSAGE_OF_TOPIC[topic]
+            schema = w.register_schema(name, fmt.ENCODING_PROTOBUF, proto.schema_data(name))
+            encoding = fmt.ENCODING_PROTOBUF
+        elif topic in fmt.VIEW_SCHEMAS:
+            from mcap_protobuf.schema import register_schema
+
+            schema = register_schema(w, self.view.classes[topic])
+            encoding = fmt.ENCODING_PROTOBUF
         else:
-            name, jsonschema = fmt.JSON_SCHEMAS[topic]
+            if topic == fmt.TOPIC_SCENE:
+                name, jsonschema = fmt.SCENE_SCHEMA_NAME, fmt.json_schema_of(scene_json)
+            else:
+                name, jsonschema = fmt.JSON_SCHEMAS[topic]
             schema = w.register_schema(name, fmt.SCHEMA_JSON, json.dumps(jsonschema).encode())
             encoding = fmt.ENCODING_JSON
         self._channels[topic] = w.register_channel(topic, encoding, schema)
@@ -170,8 +203,8 @@ class McapRecorder:
                 if step is None or first or max(sizes) >= self._chunk_bytes:
                     first = False
                     for batch in batches:
-                        for channel, frame, publish_ns, data in batch:
-                            self._writer.add_message(channel, log_time=frame, data=data, publish_time=publish_ns,
+                        for channel, frame, ns, data in batch:
+                            self._writer.add_message(channel, log_time=ns, data=data, publish_time=ns,
                                                      sequence=frame)
                         self._writer.flush()  # finish this chunk: bulky and light never share one
                         batch.clear()
@@ -182,26 +215,27 @@ class McapRecorder:
             if step is None:
                 return
 
-    def _write_state(self, frame: int, time: float, dt: float, digest: str, x: np.ndarray, v: np.ndarray) -> None:
+    def _write_state(self, frame: int, time: float, dt: float, digest: str, x: np.ndarray, v: np.ndarray,
+                     ns: int) -> None:
         codec = fmt.codec_for(frame, len(self._history))
         previous = self._history[-1] if self._history else None
         before = self._history[-2] if len(self._history) > 1 else None
         data = fmt.encode_state(frame, time, dt, digest, x, v, codec, previous, before)
-        self._write(fmt.TOPIC_STATE, frame, _nanoseconds(time), data)
-        self._index_rows.append((time, dt, bytes.fromhex(digest)))
+        self._write(fmt.TOPIC_STATE, frame, ns, data)
+        self._index_rows.append((time, ns, dt, bytes.fromhex(digest)))
         state = np.empty((x.shape[0], 6))
         state[:, :3], state[:, 3:] = x, v
         self._history = [*self._history[-1:], state]
         self.frames = frame + 1
 
-    def _rows(self, topic: str, source, count: int) -> bytes:
-        """The channel's packed rows, each field taken from the attribute of that name."""
-        rows = np.zeros(count, dtype=self._dtypes[topic])
-        for name in rows.dtype.names:
-            rows[name] = getattr(source, name)
-        if topic == fmt.TOPIC_CONTACTS:
-            rows["resting"] = source.how  # the column keeps how it was resolved (events.HOW_*)
-        return rows.tobytes()
+    def _table(self, topic: str, frame: int, source) -> bytes:
+        """The channel's table message, each column taken from the attribute of that name."""
+        def column(name):
+            if topic == fmt.TOPIC_CONTACTS and name == "resting":
+                return source.how  # the column keeps how it was resolved (events.HOW_*)
+            return getattr(source, name)
+
+        return proto.encode_table(fmt.MESSAGE_OF_TOPIC[topic], frame, column)
 
     def _broad_phase(self, info: BroadPhaseInfo, frame: int) -> None:
         meta = {"name": info.name, "reason": info.reason, "stats": _plain_stats(info.stats)}
@@ -219,16 +253,13 @@ class McapRecorder:
                 self.bvh_capped_steps += 1
                 self.bvh_logged_depth = logged
             index = np.nonzero(keep)[0]
-            rows = np.zeros(len(index), dtype=self._dtypes[fmt.TOPIC_BVH])
-            rows["node"] = index
-            for name in ("depth", "left", "right", "parent", "start", "count", "lo", "hi"):
-                rows[name] = nodes[name][index]
-            self._pending.append((fmt.TOPIC_BVH, rows.tobytes()))
+            self._pending.append((fmt.TOPIC_BVH, proto.encode_table(
+                fmt.MESSAGE_OF_TOPIC[fmt.TOPIC_BVH], frame, lambda name: index if name == "node" else nodes[name][index])))
             if keep.all():
-                order = np.zeros(len(nodes["order"]), dtype=self._dtypes[fmt.TOPIC_BVH_ORDER])
-                order["particle"] = nodes["order"]
-                self._pending.append((fmt.TOPIC_BVH_ORDER, order.tobytes()))
-        self._pending.append((fmt.TOPIC_BROAD_PHASE, json.dumps(meta).encode()))
+                self._pending.append((fmt.TOPIC_BVH_ORDER, proto.encode_table(
+                    fmt.MESSAGE_OF_TOPIC[fmt.TOPIC_BVH_ORDER], frame, lambda name: nodes["order"])))
+        meta["step"] = frame
+        self._pending.append((fmt.TOPIC_BROAD_PHASE, json.dumps(fmt.foxglove_json(meta)).encode()))
 
     # ------------------------------------------------------------------ end
     def close(self) -> None:
@@ -240,15 +271,13 @@ class McapRecorder:
         self._outbox = []
         self.frames = self._sent_frames  # a state encoded but never sent is not in the file
         del self._index_rows[self.frames:]
-        if self._error is None and fmt.TOPIC_FRAME_INDEX in self._channels:
-            rows = np.zeros(len(self._index_rows), dtype=self._dtypes[fmt.TOPIC_FRAME_INDEX])
-            if len(rows):
-                times, dts, digests = zip(*self._index_rows, strict=True)
-                rows["time"], rows["dt"] = times, dts
-                rows["state_hash"] = np.frombuffer(b"".join(digests), dtype=np.uint8).reshape(-1, 16)
-            last = len(rows) - 1
-            self._queue.put([(self._channels[fmt.TOPIC_FRAME_INDEX], last,
-                              _nanoseconds(self._index_rows[-1][0]) if len(rows) else 0, rows.tobytes())])
+        if self._error is None and fmt.TOPIC_FRAME_INDEX in self._channels and self._index_rows:
+            times, log_ns, dts, digests = zip(*self._index_rows, strict=True)
+            columns = {"time": np.array(times), "log_time": np.array(log_ns, dtype=np.uint64), "dt": np.array(dts),
+                       "state_hash": np.frombuffer(b"".join(digests), dtype=np.uint8).reshape(-1, 16)}
+            last = len(times) - 1
+            data = proto.encode_table(fmt.MESSAGE_OF_TOPIC[fmt.TOPIC_FRAME_INDEX], last, columns.__getitem__)
+            self._queue.put([(self._channels[fmt.TOPIC_FRAME_INDEX], last, int(log_ns[-1]), data)])
         self._queue.put(None)
         self._thread.join()
         try:
@@ -281,15 +310,6 @@ class McapRecorder:
 
     def __exit__(self, *exc) -> None:
         self.close()
-
-
-MAX_NANOSECONDS = 2**64 - 1
-
-
-def _nanoseconds(seconds: float) -> int:
-    """An MCAP time (uint64 ns) for a simulated time, saturating past ~585 years; the exact
-    time (float64 s) is in every message, so nothing is lost."""
-    return min(max(int(round(seconds * 1e9)), 0), MAX_NANOSECONDS)
 
 
 def _plain_stats(stats: dict) -> dict:

@@ -4,15 +4,16 @@
 >>> rec.steps, rec.state(120).positions[0]                  # doctest: +SKIP
 
 Frames count steps completed: frame 0 is the initial state, frame k the state after the
-k-th step (see :mod:`.format`). ``state(k)`` reads only the chunks holding frames from the
-key frame before k up to k. A file whose writer was killed (no summary) is read
+k-th step (see :mod:`.format`). Every message carries its step number (the MCAP
+``sequence``) and frame k's simulated time as its log time; the /physdbg/frame_index
+message maps one to the other, so ``state(k)`` reads only the chunks holding frames from
+the key frame before k up to k. A file whose writer was killed (no summary) is read
 sequentially up to its last complete chunk and its last complete step; ``truncated`` says so.
 """
 
 from __future__ import annotations
 
 import json
-import struct
 from collections import defaultdict
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -23,6 +24,7 @@ import numpy as np
 from ..errors import PhysdbgError
 from ..events import HOW_RAPID, HOW_RESTING, BroadPhaseInfo, Contacts, EngineWarning, StepBegin, StepEnd, SweptTests
 from . import format as fmt
+from . import proto
 from .header import RecordingHeader
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -118,7 +120,49 @@ class Recording:
             if fmt.TOPIC_STATE not in self._channels:
                 raise RecordingError(f"{self.path}: an MCAP file, but not a physdbg recording (no {fmt.TOPIC_STATE} channel)")
             self.frames = self._counts[fmt.TOPIC_STATE]
+            self._check_version(self._first(fmt.TOPIC_SCENE))
+            self._read_log_times()
         self._read_header()
+
+    def _first(self, topic: str) -> bytes | None:
+        """The first message of a topic, found by the summary's index (no time range)."""
+        if self._memory is not None:
+            rows = self._memory.get(topic)
+            return rows[0][1] if rows else None
+        if topic not in self._channels:
+            return None
+        for _, _, message in self._reader.iter_messages(topics=[topic]):
+            return message.data
+        return None
+
+    def _check_version(self, scene: bytes | None) -> None:
+        if scene is None:
+            raise RecordingError(f"{self.path}: an MCAP file, but its physdbg scene is missing")
+        meta = json.loads(scene)
+        if meta.get("format") != fmt.FORMAT_NAME:
+            raise RecordingError(f"{self.path}: an MCAP file, but not a physdbg recording")
+        if meta.get("format_version") != fmt.FORMAT_VERSION:
+            raise RecordingError(f"{self.path}: recording format version {meta.get('format_version')}; "
+                                 f"this physdbg reads version {fmt.FORMAT_VERSION} (record the run again)")
+
+    def _read_log_times(self) -> None:
+        """Every frame's MCAP log time, from the frame index (one small read); a file whose
+        index is missing or short is scanned (log times and step numbers of its states)."""
+        data = self._first(fmt.TOPIC_FRAME_INDEX)
+        if data is not None:
+            _, rows = proto.decode_table(fmt.MESSAGE_OF_TOPIC[fmt.TOPIC_FRAME_INDEX], data)
+            if len(rows) == self.frames:
+                self._log_ns = rows["log_time"].copy()
+                self._frame_table = FrameTable(rows["time"].copy(), rows["dt"].copy(), rows["state_hash"].copy())
+                return
+        log_ns = np.zeros(self.frames, dtype=np.uint64)
+        seen = 0
+        for _, _, message in self._reader.iter_messages(topics=[fmt.TOPIC_STATE]):
+            if message.sequence != seen:
+                raise RecordingError(f"{self.path}: frame {seen} is missing (found frame {message.sequence})")
+            log_ns[seen] = message.log_time
+            seen += 1
+        self._log_ns = log_ns
 
     def _recover(self) -> None:
         """Read a file with no summary (its writer was killed) as far as it is whole."""
@@ -137,7 +181,7 @@ class Recording:
                 elif isinstance(record, Channel):
                     channels[record.id] = record
                 elif isinstance(record, Message) and record.channel_id in channels:
-                    memory[channels[record.channel_id].topic].append((record.log_time, record.data))
+                    memory[channels[record.channel_id].topic].append((record.sequence, record.data))
         except Exception:  # the torn end of the file: keep what came before it
             pass
         self._channels = {c.topic: c for c in channels.values()}
@@ -148,6 +192,7 @@ class Recording:
         self._memory = {topic: [(f, d) for f, d in rows if f <= last] for topic, rows in memory.items()}
         self._counts = {topic: len(rows) for topic, rows in self._memory.items()}
         self.frames = last + 1
+        self._check_version(self._first(fmt.TOPIC_SCENE))
 
     def _read_header(self) -> None:
         scene = self._one(fmt.TOPIC_SCENE)
@@ -155,13 +200,8 @@ class Recording:
         walls = self._one(fmt.TOPIC_WALLS)
         if scene is None or particles is None or walls is None:
             raise RecordingError(f"{self.path}: an MCAP file, but its physdbg scene, particles or walls are missing")
-        meta = json.loads(scene)
-        if meta.get("format") != fmt.FORMAT_NAME:
-            raise RecordingError(f"{self.path}: an MCAP file, but not a physdbg recording")
-        if meta.get("format_version") != fmt.FORMAT_VERSION:
-            raise RecordingError(f"{self.path}: recording format version {meta.get('format_version')}; "
-                                 f"this physdbg reads version {fmt.FORMAT_VERSION}")
-        rows = np.frombuffer(particles, dtype=self._dtype(fmt.TOPIC_PARTICLES))
+        meta = RecordingHeader.meta_from_json(json.loads(scene))
+        rows = self._table(fmt.TOPIC_PARTICLES, particles)
         first = self._decode_states(0, 0)[0]
         self.header = RecordingHeader(meta, rows["radius"].copy(), rows["inverse_mass"].copy(),
                                       rows["restitution"].copy(), rows["gravity_scale"].copy(),
@@ -183,7 +223,8 @@ class Recording:
             for f, _, t, d in merged:
                 yield t, f, d
             return
-        messages = self._reader.iter_messages(topics=topics, starting_at=first, ending_before=last + 1)
+        end = int(self._log_ns[last + 1]) if last + 1 < self.frames else int(self._log_ns[last]) + 1
+        messages = self._reader.iter_messages(topics=topics, starting_at=int(self._log_ns[first]), ending_before=end)
         while True:
             try:
                 _, channel, message = next(messages)
@@ -192,16 +233,19 @@ class Recording:
             except Exception as err:  # a damaged chunk: say where, never a traceback
                 raise RecordingError(f"{self.path}: damaged between frames {first} and {last} "
                                      f"({type(err).__name__}: {err})") from None
-            yield channel.topic, message.log_time, message.data
+            yield channel.topic, message.sequence, message.data
 
     def _one(self, topic: str) -> bytes | None:
         for _, _, data in self._messages([topic], 0, 0):
             return data
         return None
 
-    def _dtype(self, topic: str) -> np.dtype:
-        channel = self._channels[topic]
-        return fmt.dtype_from_schema(self._schemas[channel.schema_id].data)
+    def _table(self, topic: str, data: bytes) -> np.ndarray:
+        """The rows of a protobuf table (or row) message, as a numpy structured array."""
+        try:
+            return proto.decode_table(fmt.MESSAGE_OF_TOPIC[topic], data)[1]
+        except Exception as err:  # a damaged message: say which, never a traceback
+            raise RecordingError(f"{self.path}: damaged {topic} message ({type(err).__name__}: {err})") from None
 
     def _check_frame(self, k: int) -> int:
         k = int(k)
@@ -221,7 +265,7 @@ class Recording:
             try:
                 state, frame_no, time, dt, digest = fmt.decode_state(
                     data, history[-1] if history else None, history[-2] if len(history) > 1 else None)
-            except (ValueError, struct.error) as err:
+            except ValueError as err:
                 raise RecordingError(f"{self.path}: frame {frame}: damaged state message ({err})") from None
             history = [*history[-1:], state]
             if frame_no >= first:
@@ -252,22 +296,17 @@ class Recording:
         return self._frame_table
 
     def _read_frame_table(self) -> FrameTable:
-        if fmt.TOPIC_FRAME_INDEX in self._channels and self._memory is None:
-            for _, _, data in self._messages([fmt.TOPIC_FRAME_INDEX], 0, self.frames):
-                rows = np.frombuffer(data, dtype=self._dtype(fmt.TOPIC_FRAME_INDEX))
-                if len(rows) == self.frames:
-                    return FrameTable(rows["time"].copy(), rows["dt"].copy(), rows["state_hash"].copy())
         times, dts, hashes = np.empty(self.frames), np.empty(self.frames), np.empty((self.frames, 16), np.uint8)
         seen = 0
         for _, frame, data in self._messages([fmt.TOPIC_STATE], 0, self.frames - 1):
             try:
-                _, _, frame_no, time, dt, digest = fmt.decode_state_header(data)
-            except (ValueError, struct.error) as err:
+                m = fmt.decode_state_header(data)
+            except ValueError as err:
                 raise RecordingError(f"{self.path}: frame {frame}: damaged state message ({err})") from None
-            if frame_no != seen:
-                raise RecordingError(f"{self.path}: frame {seen} is missing (found frame {frame_no})")
-            times[seen], dts[seen] = time, dt
-            hashes[seen] = np.frombuffer(bytes.fromhex(digest), dtype=np.uint8)
+            if m.step != seen:
+                raise RecordingError(f"{self.path}: frame {seen} is missing (found frame {m.step})")
+            times[seen], dts[seen] = m.time, m.dt
+            hashes[seen] = np.frombuffer(m.state_hash, dtype=np.uint8)
             seen += 1
         if seen != self.frames:
             raise RecordingError(f"{self.path}: frames {seen}..{self.frames - 1} are not in the file")
@@ -307,12 +346,11 @@ class Recording:
             meta = json.loads(parts[fmt.TOPIC_BROAD_PHASE][0])
             nodes = None
             if parts.get(fmt.TOPIC_BVH):
-                rows = np.frombuffer(parts[fmt.TOPIC_BVH][0], dtype=self._dtype(fmt.TOPIC_BVH))
+                rows = self._table(fmt.TOPIC_BVH, parts[fmt.TOPIC_BVH][0])
                 nodes = {name: rows[name].copy() for name in ("lo", "hi", "left", "right", "parent", "depth",
                                                               "start", "count", "node")}
                 if parts.get(fmt.TOPIC_BVH_ORDER):
-                    order = np.frombuffer(parts[fmt.TOPIC_BVH_ORDER][0], dtype=self._dtype(fmt.TOPIC_BVH_ORDER))
-                    nodes["order"] = order["particle"].copy()
+                    nodes["order"] = self._table(fmt.TOPIC_BVH_ORDER, parts[fmt.TOPIC_BVH_ORDER][0])["particle"].copy()
             stats = dict(meta["stats"])
             for key in ("bvh_nodes", "bvh_depth", "bvh_logged_depth"):
                 if key in meta:
@@ -323,16 +361,14 @@ class Recording:
         if fmt.TOPIC_CONTACTS in self._channels and fmt.TOPIC_CONTACTS in topics:
             events.append(self._contacts(step, parts.get(fmt.TOPIC_CONTACTS, [b""])[0]))
         if fmt.TOPIC_SWEPT in self._channels and fmt.TOPIC_SWEPT in topics:
-            rows = np.frombuffer(parts.get(fmt.TOPIC_SWEPT, [b""])[0], dtype=self._dtype(fmt.TOPIC_SWEPT))
+            rows = self._table(fmt.TOPIC_SWEPT, parts.get(fmt.TOPIC_SWEPT, [b""])[0])
             events.append(SweptTests(step, rows["kind"].copy(), rows["a"].copy(), rows["other"].copy(),
                                      rows["start"].copy(), rows["toi"].copy(), rows["outcome"].copy()))
         stats_data = parts.get(fmt.TOPIC_STATS)
         if not stats_data:
             raise RecordingError(f"{self.path}: step {k} has a state but no stats message")
-        s = np.frombuffer(stats_data[0], dtype=self._dtype(fmt.TOPIC_STATS))[0]
-        # "rapid" came after format version 1's first files: older ones count 0
-        counts = {name: int(s[name]) if name in s.dtype.names else 0
-                  for name in ("contacts", "swept_tests", "events", "resting", "rapid")}
+        s = self._table(fmt.TOPIC_STATS, stats_data[0])[0]
+        counts = {name: int(s[name]) for name in ("contacts", "swept_tests", "events", "resting", "rapid")}
         timings = {name[len("seconds_"):]: float(s[name]) for name in s.dtype.names if name.startswith("seconds_")}
         events.append(StepEnd(step, after.time, after.dt, after.positions, after.velocities, float(s["kinetic"]),
                               float(s["potential"]), s["momentum"].copy(), counts, float(s["max_overlap"]),
@@ -340,8 +376,8 @@ class Recording:
         return events
 
     def _contacts(self, step: int, data: bytes) -> Contacts:
-        rows = np.frombuffer(data, dtype=self._dtype(fmt.TOPIC_CONTACTS))
-        how = rows["resting"].astype(np.int8)  # the column holds events.HOW_* (older files: 0 or 1)
+        rows = self._table(fmt.TOPIC_CONTACTS, data)
+        how = rows["resting"].astype(np.int8)  # the column holds events.HOW_*
         return Contacts(step, *(rows[name].copy() for name in Contacts.__dataclass_fields__
                                 if name not in ("step", "resting", "how")),
                         (how == HOW_RESTING) | (how == HOW_RAPID), how)

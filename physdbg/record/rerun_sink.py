@@ -12,7 +12,7 @@ Entities (timelines ``step`` = frame, steps completed, and ``sim_time`` in secon
     world/paths              LineStrips3D: each particle's path through the step,
                              through the centres where its contacts happened
     world/contacts/ghosts    Points3D: where each sphere was at each contact (the first
-                             DRAWN_CONTACTS_PER_STEP of a step; the log says when more)
+                             view.DRAWN_CONTACTS_PER_STEP of a step; the log says when more)
     world/contacts/normals   Arrows3D: contact normals (length = the sphere's radius)
     world/contacts/impulses  Arrows3D: velocity change of sphere a, × IMPULSE_ARROW_SECONDS
     world/findings           Points3D: a red marker where the audit found a problem
@@ -33,12 +33,12 @@ import numpy as np
 from ..errors import PhysdbgError
 from ..events import KIND_PAIR, BroadPhaseInfo, Contacts, EngineWarning, StepEnd
 from .header import RecordingHeader
+from . import view
+from .view import contact_centres, describe_contacts, scene_bounds, sphere_colors, up_axis, wall_outlines
 
 APPLICATION_ID = "physdbg"
 IMPULSE_ARROW_SECONDS = 0.05  # an impulse arrow shows how far its velocity change moves a in 50 ms
-LOG_LINES_PER_STEP = 20  # contacts described in words per step; the rest are counted
 PATHS_ALL_UP_TO = 2000  # above this many particles, only paths of particles with contacts are drawn
-DRAWN_CONTACTS_PER_STEP = 1000  # ghosts and arrows for the first this many contacts of a step (all are in the MCAP)
 SERIES_BATCH = 128
 BVH_LEVELS_SHOWN = 3  # levels 0..2 are drawn when the file opens; deeper ones are a click away  # steps of scalar series buffered before one send_columns
 
@@ -113,16 +113,16 @@ class RerunSink:
     # ------------------------------------------------------------------ static
     def _log_static(self, h: RecordingHeader) -> None:
         rr, rec = self.rr, self.rec
-        up = _up_axis(h)
+        up = up_axis(h)
         rec.log(self.root + "world", rr.ViewCoordinates.RIGHT_HAND_Z_UP if up[2] else rr.ViewCoordinates.RIGHT_HAND_Y_UP,
                 static=True)
-        lo, hi = _scene_bounds(h)
-        for name, strip in _wall_outlines(h.walls, lo, hi):
+        lo, hi = scene_bounds(h)
+        for name, strip in wall_outlines(h.walls, lo, hi):
             rec.log(self.root + f"world/walls/{rr.escape_entity_path_part(name)}", rr.LineStrips3D([strip], colors=[[150, 150, 160]], radii=[-1.5]),
                     static=True)
         self._set_time(0, 0.0)
         rec.log(self.root + "world/spheres", rr.Points3D(np.asarray(h.positions, dtype=np.float32), radii=self.radius,
-                                             colors=_sphere_colors(h.inverse_mass)))
+                                             colors=sphere_colors(h.inverse_mass)))
         settings = " ".join(f"{key}={value}" for key, value in h.meta.get("settings", {}).items())
         rec.log(self.root + "log", rr.TextLog(f"{h.name}: {h.count} spheres, {len(h.walls)} walls; {settings}", level="INFO"))
 
@@ -155,7 +155,7 @@ class RerunSink:
         self._paths(end, contacts)
         lines = [(f"step {frame}: {warning.message}", "WARN") for warning in self._warnings]
         if contacts is not None:
-            self._draw_contacts(_first_contacts(contacts, DRAWN_CONTACTS_PER_STEP))
+            self._draw_contacts(_first_contacts(contacts, view.DRAWN_CONTACTS_PER_STEP))
             lines += self._describe(frame, contacts, end.dt)
         self._log_lines(frame, end.time, lines)
         self._warnings = []
@@ -190,7 +190,7 @@ class RerunSink:
             radius = self.header.radius
             pair = contacts.kind == KIND_PAIR
             who = np.concatenate([contacts.a, contacts.other[pair]]).astype(np.int64)
-            where = np.concatenate([_contact_centres(contacts, radius),
+            where = np.concatenate([contact_centres(contacts, radius),
                                     contacts.point[pair] - contacts.normal[pair] * radius[contacts.other[pair]][:, None]])
             order = np.concatenate([np.arange(len(contacts)), np.nonzero(pair)[0]])
             sort = np.lexsort((order, who))
@@ -217,7 +217,7 @@ class RerunSink:
     def _draw_contacts(self, c: Contacts) -> None:
         rr, rec = self.rr, self.rec
         radius = self.header.radius[c.a] if len(c) else np.zeros(0)
-        centres = _contact_centres(c, self.header.radius)
+        centres = contact_centres(c, self.header.radius)
         rec.log(self.root + "world/contacts/ghosts", rr.Points3D(centres.astype(np.float32), radii=radius.astype(np.float32),
                                                      colors=[[255, 200, 60, 90]]))
         rec.log(self.root + "world/contacts/normals", rr.Arrows3D(origins=c.point.astype(np.float32),
@@ -232,22 +232,9 @@ class RerunSink:
                                                        colors=[[255, 90, 60]]))
 
     def _describe(self, frame: int, c: Contacts, dt: float) -> list[tuple[str, str]]:
-        """(text, level) lines for the step's first contacts, in words."""
-        names = self.header.walls.names
-        lines = []
-        for row in range(min(len(c), LOG_LINES_PER_STEP)):
-            other = (f"sphere {int(c.other[row])}" if c.kind[row] == KIND_PAIR
-                     else f"wall {names[int(c.other[row])]}")
-            verb = "rests on" if c.resting[row] else "hit"
-            lines.append((
-                f"step {frame}: sphere {int(c.a[row])} {verb} {other} at {c.time_in_step[row] / dt:.3f}·dt "
-                f"({c.time_in_step[row]:.4g} s into the step), "
-                f"j = {c.impulse[row]:.3g} N·s, closing {c.closing_speed[row]:.3g} m/s, e = {c.restitution[row]:.3g}",
-                "DEBUG" if c.resting[row] else "INFO"))
-        if len(c) > LOG_LINES_PER_STEP:
-            drawn = (f"; ghosts and arrows for the first {DRAWN_CONTACTS_PER_STEP}"
-                     if len(c) > DRAWN_CONTACTS_PER_STEP else "")
-            lines.append((f"step {frame}: ... and {len(c) - LOG_LINES_PER_STEP} more contacts{drawn}", "INFO"))
+        lines = describe_contacts(frame, c, dt, self.header.walls.names)
+        if len(c) > view.DRAWN_CONTACTS_PER_STEP and len(c) > view.LOG_LINES_PER_STEP:  # the last line counts the rest
+            lines[-1] = (lines[-1][0] + f"; ghosts and arrows for the first {view.DRAWN_CONTACTS_PER_STEP}", lines[-1][1])
         return lines
 
     def _log_lines(self, frame: int, time: float, lines: list[tuple[str, str]]) -> None:
@@ -316,9 +303,9 @@ def blueprint(header: RecordingHeader):
     camera looks at the whole scene from above and to the side, up against gravity."""
     import rerun.blueprint as rrb
 
-    lo, hi = _scene_bounds(header)
+    lo, hi = scene_bounds(header)
     centre = (lo + hi) / 2
-    up = _up_axis(header)
+    up = up_axis(header)
     helper = np.array([0.0, 0.0, 1.0]) if not up[2] else np.array([0.0, -1.0, 0.0])
     side = np.cross(up, helper)
     front = np.cross(side, up)
@@ -363,64 +350,12 @@ def _line_strips(points: np.ndarray, offsets: np.ndarray):
     return rr.DescribedComponentBatch(_ArrowBatch(strips), rr.LineStrips3D.descriptor_strips())
 
 
-def _up_axis(h: RecordingHeader) -> np.ndarray:
-    """+z when gravity points down z, else +y (the engine's default gravity is -y)."""
-    gravity = np.asarray(h.meta.get("settings", {}).get("gravity", (0.0, -9.81, 0.0)), dtype=float)
-    if abs(gravity[2]) > abs(gravity[1]) and abs(gravity[2]) >= abs(gravity[0]) and gravity[2] < 0:
-        return np.array([0.0, 0.0, 1.0])
-    return np.array([0.0, 1.0, 0.0])
-
-
 def _first_contacts(c: Contacts, count: int) -> Contacts:
     """The first ``count`` contacts of a step (all of them when there are no more)."""
     if len(c) <= count:
         return c
     return dataclasses.replace(c, **{name: getattr(c, name)[:count] for name in Contacts.__dataclass_fields__
                                      if name != "step"})
-
-
-def _contact_centres(c: Contacts, radius: np.ndarray) -> np.ndarray:
-    """(M, 3) centre of sphere a at each contact: the point lies on a's surface, against the normal."""
-    if not len(c):
-        return np.zeros((0, 3))
-    return c.point + c.normal * radius[c.a][:, None]
-
-
-def _scene_bounds(h: RecordingHeader) -> tuple[np.ndarray, np.ndarray]:
-    """A box around the initial spheres and every axis-aligned wall, at least half as deep
-    on each axis as on its longest, so a lone floor is drawn bigger than one ball."""
-    r = float(h.radius.max()) if h.count else 0.5
-    lo = h.positions.min(axis=0) - r if h.count else np.full(3, -1.0)
-    hi = h.positions.max(axis=0) + r if h.count else np.full(3, 1.0)
-    for normal, offset in zip(h.walls.normals, h.walls.offsets, strict=True):
-        axis = int(np.argmax(np.abs(normal)))
-        if abs(normal[axis]) > 1 - 1e-12:
-            coordinate = offset / normal[axis]
-            lo[axis], hi[axis] = min(lo[axis], coordinate), max(hi[axis], coordinate)
-    centre, half = (lo + hi) / 2, (hi - lo) / 2
-    half = np.maximum(half, max(half.max() / 2, r))
-    return centre - half, centre + half
-
-
-def _wall_outlines(walls, lo: np.ndarray, hi: np.ndarray):
-    """(name, (5, 3) closed outline) of each wall inside the box lo..hi."""
-    centre, half = (lo + hi) / 2, (hi - lo) / 2
-    for name, normal, offset in zip(walls.names, walls.normals, walls.offsets, strict=True):
-        on_plane = centre + (offset - normal @ centre) * normal
-        helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
-        u = np.cross(normal, helper)
-        u /= np.linalg.norm(u)
-        w = np.cross(normal, u)
-        su, sw = float(np.abs(u) @ half), float(np.abs(w) @ half)
-        corners = [on_plane + a * su * u + b * sw * w for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1), (-1, -1))]
-        yield name, np.asarray(corners, dtype=np.float32)
-
-
-def _sphere_colors(inverse_mass: np.ndarray) -> np.ndarray:
-    """Immovable spheres grey, the rest a warm orange."""
-    colors = np.tile(np.array([[240, 140, 50]], dtype=np.uint8), (len(inverse_mass), 1))
-    colors[inverse_mass == 0] = (140, 140, 140)
-    return colors
 
 
 def _level_color(level: int) -> list[int]:

@@ -1,0 +1,84 @@
+"""What a run looks like, shared by every picture of it (the Rerun sink and the Foxglove
+channels of the MCAP file): which way is up, the box around the scene, the walls'
+outlines, the spheres' colours, and each contact in words.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..events import KIND_PAIR, Contacts
+from .header import RecordingHeader
+
+LOG_LINES_PER_STEP = 20  # contacts described in words per step; the rest are counted
+DRAWN_CONTACTS_PER_STEP = 1000  # contacts drawn (ghosts, arrows) per step; all are in the MCAP channel
+
+
+def up_axis(h: RecordingHeader) -> np.ndarray:
+    """+z when gravity points down z, else +y (the engine's default gravity is -y)."""
+    gravity = np.asarray(h.meta.get("settings", {}).get("gravity", (0.0, -9.81, 0.0)), dtype=float)
+    if abs(gravity[2]) > abs(gravity[1]) and abs(gravity[2]) >= abs(gravity[0]) and gravity[2] < 0:
+        return np.array([0.0, 0.0, 1.0])
+    return np.array([0.0, 1.0, 0.0])
+
+
+def contact_centres(c: Contacts, radius: np.ndarray) -> np.ndarray:
+    """(M, 3) centre of sphere a at each contact: the point lies on a's surface, against the normal."""
+    if not len(c):
+        return np.zeros((0, 3))
+    return c.point + c.normal * radius[c.a][:, None]
+
+
+def scene_bounds(h: RecordingHeader) -> tuple[np.ndarray, np.ndarray]:
+    """A box around the initial spheres and every axis-aligned wall, at least half as deep
+    on each axis as on its longest, so a lone floor is drawn bigger than one ball."""
+    r = float(h.radius.max()) if h.count else 0.5
+    lo = h.positions.min(axis=0) - r if h.count else np.full(3, -1.0)
+    hi = h.positions.max(axis=0) + r if h.count else np.full(3, 1.0)
+    for normal, offset in zip(h.walls.normals, h.walls.offsets, strict=True):
+        axis = int(np.argmax(np.abs(normal)))
+        if abs(normal[axis]) > 1 - 1e-12:
+            coordinate = offset / normal[axis]
+            lo[axis], hi[axis] = min(lo[axis], coordinate), max(hi[axis], coordinate)
+    centre, half = (lo + hi) / 2, (hi - lo) / 2
+    half = np.maximum(half, max(half.max() / 2, r))
+    return centre - half, centre + half
+
+
+def wall_outlines(walls, lo: np.ndarray, hi: np.ndarray):
+    """(name, (5, 3) closed outline) of each wall inside the box lo..hi."""
+    centre, half = (lo + hi) / 2, (hi - lo) / 2
+    for name, normal, offset in zip(walls.names, walls.normals, walls.offsets, strict=True):
+        on_plane = centre + (offset - normal @ centre) * normal
+        helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+        u = np.cross(normal, helper)
+        u /= np.linalg.norm(u)
+        w = np.cross(normal, u)
+        su, sw = float(np.abs(u) @ half), float(np.abs(w) @ half)
+        corners = [on_plane + a * su * u + b * sw * w for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1), (-1, -1))]
+        yield name, np.asarray(corners, dtype=np.float32)
+
+
+def sphere_colors(inverse_mass: np.ndarray) -> np.ndarray:
+    """Immovable spheres grey, the rest a warm orange."""
+    colors = np.tile(np.array([[240, 140, 50]], dtype=np.uint8), (len(inverse_mass), 1))
+    colors[inverse_mass == 0] = (140, 140, 140)
+    return colors
+
+
+def describe_contacts(frame: int, c: Contacts, dt: float, wall_names) -> list[tuple[str, str]]:
+    """(text, level) lines for a step's first LOG_LINES_PER_STEP contacts, in words, and
+    one line counting the rest. level: "INFO" for impacts, "DEBUG" for held contacts."""
+    lines = []
+    for row in range(min(len(c), LOG_LINES_PER_STEP)):
+        other = (f"sphere {int(c.other[row])}" if c.kind[row] == KIND_PAIR
+                 else f"wall {wall_names[int(c.other[row])]}")
+        verb = "rests on" if c.resting[row] else "hit"
+        lines.append((
+            f"step {frame}: sphere {int(c.a[row])} {verb} {other} at {c.time_in_step[row] / dt:.3f}·dt "
+            f"({c.time_in_step[row]:.4g} s into the step), "
+            f"j = {c.impulse[row]:.3g} N·s, closing {c.closing_speed[row]:.3g} m/s, e = {c.restitution[row]:.3g}",
+            "DEBUG" if c.resting[row] else "INFO"))
+    if len(c) > LOG_LINES_PER_STEP:
+        lines.append((f"step {frame}: ... and {len(c) - LOG_LINES_PER_STEP} more contacts", "INFO"))
+    return lines
