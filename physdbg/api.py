@@ -498,3 +498,51 @@ def overlay(a: str | Path, b: str | Path, report=None, rrd_path: str | None = No
     if rrd_path is not None:
         check_writable([Path(rrd_path)], force)
     return write_overlay(a, b, report if report is not None else diff(a, b), rrd_path, spawn=spawn)
+
+
+# ----------------------------------------------------------------------------- benchmarks
+@dataclass
+class AccuracyResult:
+    """What ``bench_accuracy`` wrote: files (paths), runs (analysis.accuracy.Run), seconds."""
+
+    files: list[str]
+    runs: list
+    seconds: float
+
+
+ACCURACY_FILES = ("accuracy.csv", "accuracy.md", "accuracy.png", "accuracy.svg")
+
+
+def bench_accuracy(out_dir: str | Path = "accuracy", quick: bool = False, force: bool = False, chart: bool = True,
+                   rrd_path: str | None = None, problems: Sequence[str] | None = None,
+                   on_run: Callable | None = None, command: str = "physdbg bench accuracy") -> AccuracyResult:
+    """Every method on the reference problems (analysis.accuracy): accuracy.csv, accuracy.md
+    and (chart) accuracy.png / .svg in out_dir; rrd_path: the same chart for Rerun."""
+    from .analysis import accuracy
+
+    unknown = [p for p in problems or () if p not in accuracy.PROBLEMS]
+    if unknown:
+        raise PhysdbgError(f"no accuracy problem {unknown[0]!r}; the problems are: {', '.join(accuracy.PROBLEMS)}")
+    out = Path(out_dir)
+    names = ACCURACY_FILES if chart else ACCURACY_FILES[:2]
+    paths = [out / name for name in names]
+    check_writable([*paths, Path(rrd_path) if rrd_path else None], force)
+    if chart:
+        from .analysis.charts import _pyplot
+
+        _pyplot()  # say that matplotlib is missing before the runs, not after
+    started = time.perf_counter()
+    runs = accuracy.run_all(list(problems) if problems else None, quick=quick, on_run=on_run)
+    paths[0].write_text(accuracy.to_csv(runs))
+    paths[1].write_text(accuracy.to_markdown(runs, command))
+    if chart:
+        from .analysis.charts import accuracy_chart
+
+        accuracy_chart(runs, paths[2:], f"Accuracy against cost ({'quick: ' if quick else ''}"
+                                         f"{len(runs)} runs; `{command}`)")
+    if rrd_path:
+        from .analysis.charts import accuracy_rrd
+
+        accuracy_rrd(runs, Path(rrd_path))
+        paths.append(Path(rrd_path))
+    return AccuracyResult([str(p) for p in paths], runs, time.perf_counter() - started)

@@ -376,6 +376,58 @@ def _serve_web(rrd: Path, port: int) -> None:
                 viewer.kill()
 
 
+bench_app = typer.Typer(help="Benchmarks users run: methods charted against each other.", no_args_is_help=True)
+app.add_typer(bench_app, name="bench")
+
+
+@bench_app.command("accuracy")
+def bench_accuracy(
+    out: Annotated[Path, typer.Option("--out", "-o", help="Folder for accuracy.csv, .md, .png and .svg.")]
+    = Path("accuracy"),
+    quick: Annotated[bool, typer.Option("--quick", help="Two dt per method instead of four (under a minute).")]
+    = False,
+    problem: Annotated[Optional[list[str]], typer.Option(
+        "--problem", help="Only this problem (repeat for more); default all.")] = None,
+    no_chart: Annotated[bool, typer.Option("--no-chart", help="Only the CSV and the table (no matplotlib needed).")]
+    = False,
+    rrd: Annotated[Optional[Path], typer.Option("--rrd", help="Also write the chart as a Rerun file.")] = None,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite files from an earlier run.")] = False,
+    progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")]
+    = sys.stderr.isatty(),
+) -> None:
+    """Every integrator × detection × ordering on reference problems with known answers:
+    error against the answer and wall time per simulated second, as a table, a CSV and a
+    chart (error against cost, Pareto front drawn).
+
+    Example: physdbg bench accuracy --quick -o docs/accuracy
+    """
+    with _user_errors():
+        from .api import bench_accuracy as run_accuracy
+
+        bar = _progress_bar(None, show=progress)
+        command = "physdbg bench accuracy" + (" --quick" if quick else "")
+        try:
+            result = run_accuracy(out, quick=quick, force=force, chart=not no_chart, rrd_path=str(rrd) if rrd else None,
+                                  problems=problem, on_run=lambda run, done, total: bar.update(done, total),
+                                  command=command)
+        finally:
+            bar.close()
+        from .analysis.accuracy import PROBLEMS, pareto
+
+        typer.echo(f"{len(result.runs)} runs in {result.seconds:.1f} s")
+        for name in PROBLEMS:
+            mine = [r for r in result.runs if r.problem == name]
+            if not mine:
+                continue
+            best = pareto(mine)
+            failed = sum(1 for r in mine if r.failure)
+            typer.echo(f"{name:15} {len(best)} on the Pareto front; most accurate {best[-1].method} at "
+                       f"dt 1/{round(1 / best[-1].dt)} ({best[-1].error:.1e} {best[-1].unit})"
+                       + (f"; {failed} of {len(mine)} runs failed" if failed else ""))
+        for path in result.files:
+            typer.echo(f"wrote       {path}")
+
+
 @app.command()
 def info(
     recording: Annotated[Path, typer.Argument(help="A .mcap recording.")],

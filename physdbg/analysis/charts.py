@@ -1,0 +1,119 @@
+"""Charts of benchmark results (matplotlib, the optional extra ``physdbg[charts]``).
+
+Imported only when a chart is drawn; without matplotlib, ``ChartsMissing`` says how to
+install it (``--no-chart`` skips the chart).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from ..errors import PhysdbgError
+from .accuracy import PROBLEMS, Run, pareto
+
+ERROR_FLOOR = 1e-17  # an error of exactly 0 is drawn here (a log axis has no 0)
+MARKERS = {"euler": "o", "semi-implicit": "s", "verlet": "^", "exact": "D"}
+COLORS = {"swept": "#1f77b4", "sampled": "#ff7f0e", "discrete": "#d62728"}
+
+
+class ChartsMissing(PhysdbgError):
+    """matplotlib is not installed."""
+
+
+def _pyplot():
+    try:
+        import matplotlib
+    except ImportError:
+        raise ChartsMissing("the chart needs matplotlib: pip install 'physdbg[charts]' "
+                            "(or pass --no-chart for the CSV and the table alone)") from None
+    matplotlib.use("Agg")  # files only, never a window
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def accuracy_chart(runs: list[Run], paths: list[Path], title: str) -> None:
+    """Error against cost, log–log, one panel per problem: marker shape = integrator, colour
+    = detection, hollow = index ordering; runs that blew up as a black x at the top of
+    their panel; each panel's Pareto front as a line. Written to every path (.png, .svg)."""
+    plt = _pyplot()
+    from matplotlib import ticker
+
+    names = [name for name in PROBLEMS if any(r.problem == name for r in runs)]
+    columns = min(4, len(names))
+    rows = math.ceil(len(names) / columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(4.2 * columns, 3.6 * rows), squeeze=False)
+    for ax, name in zip(axes.flat, names, strict=False):
+        mine = [r for r in runs if r.problem == name]
+        finite = [r.error for r in mine if math.isfinite(r.error)]
+        top = max([max(finite) * 10 if finite else 1.0, ERROR_FLOOR * 100])
+        for run in mine:
+            error = run.error if math.isfinite(run.error) else top
+            if not math.isfinite(run.error):
+                ax.scatter(run.ms_per_second, error, marker="x", color="black", s=30, zorder=3)
+                continue
+            hollow = run.ordering == "index"
+            color = COLORS[run.detection]
+            ax.scatter(run.ms_per_second, max(error, ERROR_FLOOR), marker=MARKERS[run.integrator], s=28,
+                       facecolors="none" if hollow else color, edgecolors=color, linewidths=1.0, alpha=0.85,
+                       zorder=2)
+        front = [r for r in pareto(mine) if math.isfinite(r.error)]
+        if front:
+            ax.step([r.ms_per_second for r in front], [max(r.error, ERROR_FLOOR) for r in front], where="post",
+                    color="#444444", linewidth=1.0, zorder=1)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.xaxis.set_major_formatter(ticker.FuncFormatter(lambda value, _: f"{value:g}"))
+        ax.xaxis.set_minor_formatter(ticker.NullFormatter())
+        ax.set_title(name, fontsize=10)
+        ax.set_xlabel("wall ms per simulated s", fontsize=8)
+        ax.set_ylabel(f"error ({PROBLEMS[name].unit})", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(True, which="major", alpha=0.3)
+    for ax in list(axes.flat)[len(names):]:
+        ax.axis("off")
+    handles = [plt.Line2D([], [], linestyle="", marker=m, color="#555555", label=name) for name, m in MARKERS.items()]
+    handles += [plt.Line2D([], [], linestyle="", marker="o", color=c, label=name) for name, c in COLORS.items()]
+    handles += [plt.Line2D([], [], linestyle="", marker="o", markerfacecolor="none", color="#555555",
+                           label="index ordering"),
+                plt.Line2D([], [], linestyle="", marker="x", color="black", label="blew up"),
+                plt.Line2D([], [], color="#444444", label="Pareto front")]
+    fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8, frameon=False)
+    fig.suptitle(title, fontsize=11)
+    fig.tight_layout(rect=(0, 0.05, 1, 0.96))
+    for path in paths:
+        fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def accuracy_rrd(runs: list[Run], path: Path) -> None:
+    """The same chart for the Rerun viewer: per problem a 2D view of log10(cost) against
+    log10(error), each run a point labelled with its method and dt, the Pareto front a line."""
+    import rerun as rr
+    import rerun.blueprint as rrb
+
+    rec = rr.RecordingStream("physdbg-accuracy")
+    rec.set_sinks(rr.FileSink(str(path)))
+    names = [name for name in PROBLEMS if any(r.problem == name for r in runs)]
+    rec.send_blueprint(rrb.Blueprint(rrb.Grid(*[rrb.Spatial2DView(origin=f"/accuracy/{name}", name=name)
+                                                for name in names])), make_active=True, make_default=True)
+    for name in names:
+        mine = [r for r in runs if r.problem == name]
+        top = max([r.error for r in mine if math.isfinite(r.error)] + [ERROR_FLOOR]) * 10
+        points = [[math.log10(r.ms_per_second), -math.log10(max(r.error if math.isfinite(r.error) else top,
+                                                                   ERROR_FLOOR))] for r in mine]
+        colors = [[int(COLORS[r.detection][i:i + 2], 16) for i in (1, 3, 5)] for r in mine]
+        labels = [f"{r.method} 1/{round(1 / r.dt)}: {r.error:.2g} {r.unit}" + (f" ({r.failure})" if r.failure else "")
+                  for r in mine]
+        rec.log(f"accuracy/{name}/runs", rr.Points2D(points, colors=colors, labels=labels, radii=[-4.0]), static=True)
+        front = [r for r in pareto(mine) if math.isfinite(r.error)]
+        if len(front) > 1:
+            rec.log(f"accuracy/{name}/pareto", rr.LineStrips2D(
+                [[[math.log10(r.ms_per_second), -math.log10(max(r.error, ERROR_FLOOR))] for r in front]]),
+                static=True)
+        rec.log(f"accuracy/{name}/axes", rr.TextDocument(
+            f"x: log10(wall ms per simulated s); y: -log10(error in {PROBLEMS[name].unit}) (up = more accurate)"),
+            static=True)
+    rec.flush()
+    rec.disconnect()
