@@ -503,7 +503,8 @@ def overlay(a: str | Path, b: str | Path, report=None, rrd_path: str | None = No
 # ----------------------------------------------------------------------------- benchmarks
 @dataclass
 class AccuracyResult:
-    """What ``bench_accuracy`` wrote: files (paths), runs (analysis.accuracy.Run), seconds."""
+    """What a ``bench_*`` function wrote: files (paths), runs (analysis.accuracy.Run or
+    analysis.stability.Cell), seconds."""
 
     files: list[str]
     runs: list
@@ -546,3 +547,33 @@ def bench_accuracy(out_dir: str | Path = "accuracy", quick: bool = False, force:
         accuracy_rrd(runs, Path(rrd_path))
         paths.append(Path(rrd_path))
     return AccuracyResult([str(p) for p in paths], runs, time.perf_counter() - started)
+
+
+STABILITY_FILES = ("stability.csv", "stability.md", "stability-impact.png", "stability-impact.svg",
+                   "stability-stack.png", "stability-stack.svg")
+
+
+def bench_stability(out_dir: str | Path = "stability", quick: bool = False, force: bool = False, chart: bool = True,
+                    on_cell: Callable | None = None, command: str = "physdbg bench stability") -> AccuracyResult:
+    """Where each method breaks (analysis.stability): stability.csv, stability.md and (chart)
+    a heatmap per map as PNG and SVG in out_dir."""
+    from .analysis import stability
+
+    out = Path(out_dir)
+    names = STABILITY_FILES if chart else STABILITY_FILES[:2]
+    paths = [out / name for name in names]
+    check_writable(paths, force)
+    if chart:
+        from .analysis.charts import _pyplot
+
+        _pyplot()  # say that matplotlib is missing before the runs, not after
+    started = time.perf_counter()
+    cells = stability.maps(quick=quick, on_cell=on_cell)
+    paths[0].write_text(stability.to_csv(cells))
+    paths[1].write_text(stability.to_markdown(cells, command))
+    if chart:
+        from .analysis.charts import stability_chart
+
+        stability_chart(cells, "impact", paths[2:4], f"Impact: a sphere at a thin wall, pass or fail (`{command}`)")
+        stability_chart(cells, "stack", paths[4:6], f"Resting stacks for 1 s at dt = 1/60 (`{command}`)")
+    return AccuracyResult([str(p) for p in paths], cells, time.perf_counter() - started)

@@ -9,6 +9,7 @@ never a traceback. Heavy modules (numpy, numba) are imported inside the commands
 from __future__ import annotations
 
 import json
+import math
 import sys
 from contextlib import contextmanager
 from pathlib import Path
@@ -61,6 +62,8 @@ def _user_errors():
                    "(docs/scenes.md)", err=True)
         raise typer.Exit(2) from None
     except (typer.Exit, typer.Abort, SystemExit):
+        raise
+    except BrokenPipeError:  # `physdbg ... | head`: the reader has all it wanted. click ends quietly (exit 1)
         raise
     except Exception as err:  # a bug in physdbg: still one line, with how to see the rest
         import os
@@ -424,6 +427,47 @@ def bench_accuracy(
             typer.echo(f"{name:15} {len(best)} on the Pareto front; most accurate {best[-1].method} at "
                        f"dt 1/{round(1 / best[-1].dt)} ({best[-1].error:.1e} {best[-1].unit})"
                        + (f"; {failed} of {len(mine)} runs failed" if failed else ""))
+        for path in result.files:
+            typer.echo(f"wrote       {path}")
+
+
+@bench_app.command("stability")
+def bench_stability(
+    out: Annotated[Path, typer.Option("--out", "-o", help="Folder for stability.csv, .md and the heatmaps.")]
+    = Path("stability"),
+    quick: Annotated[bool, typer.Option("--quick", help="A coarser grid.")] = False,
+    no_chart: Annotated[bool, typer.Option("--no-chart", help="Only the CSV and the table (no matplotlib needed).")]
+    = False,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite files from an earlier run.")] = False,
+    progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")]
+    = sys.stderr.isatty(),
+) -> None:
+    """Where each integrator × detection breaks: pass or fail over (dt, impact speed) at a
+    thin wall and over (restitution, height) for resting stacks, each failure named.
+
+    Example: physdbg bench stability --quick -o docs/stability
+    """
+    with _user_errors():
+        from .api import bench_stability as run_stability
+
+        bar = _progress_bar(None, show=progress)
+        command = "physdbg bench stability" + (" --quick" if quick else "")
+        try:
+            result = run_stability(out, quick=quick, force=force, chart=not no_chart,
+                                   on_cell=lambda cell, done, total: bar.update(done, total), command=command)
+        finally:
+            bar.close()
+        from .analysis.stability import REACH, first_step
+
+        typer.echo(f"{len(result.runs)} cells in {result.seconds:.1f} s; REACH = wall thickness/2 + r = {REACH:g} m")
+        for method in dict.fromkeys(c.method for c in result.runs):
+            step = first_step(result.runs, method)
+            impact = [c for c in result.runs if c.map == "impact" and c.method == method]
+            stack = [c for c in result.runs if c.map == "stack" and c.method == method]
+            typer.echo(f"{method:22} impact {sum(c.outcome == 'pass' for c in impact)}/{len(impact)} pass, "
+                       + ("never tunnels" if math.isinf(step) else
+                          f"tunnels from v·dt = {step:.3g} m ({step / REACH:.2g} × REACH)")
+                       + f"; stacks {sum(c.outcome == 'pass' for c in stack)}/{len(stack)} pass")
         for path in result.files:
             typer.echo(f"wrote       {path}")
 

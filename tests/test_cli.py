@@ -316,3 +316,21 @@ def test_record_spawn_streams_to_a_viewer_it_starts(tmp_path, virtual_display):
         assert viewers.stdout.split(), "no viewer was started"
     finally:
         subprocess.run(["pkill", "-f", "rerun_cli/rerun --port=9876"], check=False)
+
+
+def test_output_into_a_closed_pipe_stops_quietly(tmp_path):
+    """`physdbg ... | head` closes the pipe early: no 'internal error', no traceback."""
+    import os
+    import subprocess
+    import sys
+
+    read_end, write_end = os.pipe()
+    os.close(read_end)  # the reader is gone before the first line
+    try:
+        done = subprocess.run([sys.executable, "-m", "physdbg.cli", "bench", "accuracy", "--quick", "--problem",
+                               "bounce", "--no-chart", "-o", str(tmp_path)], stdout=write_end,
+                              stderr=subprocess.PIPE, text=True, timeout=60)
+    finally:
+        os.close(write_end)
+    assert "internal error" not in done.stderr and "Traceback" not in done.stderr, done.stderr
+    assert done.returncode in (0, 1)  # click's own handling of a closed pipe: exit 1, nothing printed

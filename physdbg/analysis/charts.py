@@ -9,6 +9,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import PhysdbgError
 from .accuracy import PROBLEMS, Run, pareto
 
@@ -79,12 +81,7 @@ def accuracy_chart(runs: list[Run], paths: list[Path], title: str) -> None:
                            label="index ordering"),
                 plt.Line2D([], [], linestyle="", marker="x", color="black", label="blew up"),
                 plt.Line2D([], [], color="#444444", label="Pareto front")]
-    fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8, frameon=False)
-    fig.suptitle(title, fontsize=11)
-    fig.tight_layout(rect=(0, 0.05, 1, 0.96))
-    for path in paths:
-        fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(plt, fig, handles, title, paths, bottom=0.05, dpi=110)
 
 
 def accuracy_rrd(runs: list[Run], path: Path) -> None:
@@ -117,3 +114,79 @@ def accuracy_rrd(runs: list[Run], path: Path) -> None:
             static=True)
     rec.flush()
     rec.disconnect()
+
+
+OUTCOME_COLORS = {"pass": "#2ca02c", "blew up": "#000000", "tunnelled": "#d62728", "budget hit": "#9467bd",
+                  "overlap left": "#ff7f0e", "energy changed": "#1f77b4", "sank": "#8c564b"}
+
+
+def stability_chart(cells, which: str, paths: list[Path], title: str) -> None:
+    """A heatmap per integrator × detection (rows × columns) of one map's outcomes. The
+    impact map is drawn on log dt × log speed with the boundaries the geometry predicts
+    (analysis.stability): v·dt = REACH/(7/8) for discrete detection, 2k·REACH for sampled."""
+    plt = _pyplot()
+    from matplotlib.colors import ListedColormap
+
+    from .stability import OUTCOMES, PHASES, REACH
+
+    mine = [c for c in cells if c.map == which]
+    integrators = list(dict.fromkeys(c.integrator for c in mine))
+    detections = list(dict.fromkeys(c.detection for c in mine))
+    xs, ys = sorted({c.x for c in mine}), sorted({c.y for c in mine})
+    cmap = ListedColormap([OUTCOME_COLORS[o] for o in OUTCOMES])
+    fig, axes = plt.subplots(len(integrators), len(detections), figsize=(3.4 * len(detections),
+                                                                      2.7 * len(integrators)), squeeze=False)
+    for row, integrator in enumerate(integrators):
+        for col, detection in enumerate(detections):
+            ax = axes[row][col]
+            grid = np.full((len(ys), len(xs)), np.nan)
+            for c in mine:
+                if c.integrator == integrator and c.detection == detection:
+                    grid[ys.index(c.y), xs.index(c.x)] = OUTCOMES.index(c.outcome)
+            ax.pcolormesh(_edges(xs, which == "impact"), _edges(ys, which == "impact"), grid, cmap=cmap,
+                          vmin=-0.5, vmax=len(OUTCOMES) - 0.5, shading="flat")
+            if which == "impact":
+                ax.set_xscale("log")
+                ax.set_yscale("log")
+                dts = np.array([xs[0] / 1.5, xs[-1] * 1.5])
+                if detection == "discrete":
+                    ax.plot(dts, REACH / (1 - PHASES[0]) / dts, color="white", linewidth=1.2, linestyle="--")
+                if detection == "sampled":
+                    ax.plot(dts, 2 * 4 * REACH / dts, color="white", linewidth=1.2, linestyle="--")
+                ax.set_xlim(dts[0], dts[1])
+                ax.set_ylim(ys[0] / 1.5, ys[-1] * 1.5)
+            else:
+                ax.set_yscale("log", base=2)
+            ax.set_title(f"{integrator} / {detection}", fontsize=9)
+            ax.tick_params(labelsize=7)
+            if row == len(integrators) - 1:
+                ax.set_xlabel("dt (s)" if which == "impact" else "restitution", fontsize=8)
+            if col == 0:
+                ax.set_ylabel("impact speed (m/s)" if which == "impact" else "spheres in the stack", fontsize=8)
+    handles = [plt.Line2D([], [], linestyle="", marker="s", markersize=9, color=OUTCOME_COLORS[o], label=o)
+               for o in OUTCOMES if any(c.outcome == o for c in mine)]
+    if which == "impact":
+        handles += [plt.Line2D([], [], color="#555555", linestyle="--",
+                               label="predicted: v·dt = (t/2 + r)/(7/8) discrete, 8 (t/2 + r) sampled (k = 4)")]
+    _finish(plt, fig, handles, title, paths, bottom=0.04, dpi=100)
+
+
+def _finish(plt, fig, handles, title: str, paths: list[Path], bottom: float, dpi: int) -> None:
+    """Legend below the panels, title above, written to every path, closed."""
+    fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8, frameon=False)
+    fig.suptitle(title, fontsize=11)
+    fig.tight_layout(rect=(0, bottom, 1, 0.96))
+    for path in paths:
+        fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
+def _edges(centres: list[float], log: bool) -> np.ndarray:
+    """Cell edges around sorted centres (geometric midpoints on a log axis)."""
+    c = np.log(centres) if log else np.asarray(centres, dtype=float)
+    if len(c) == 1:
+        edges = np.array([c[0] - 0.5, c[0] + 0.5])
+    else:
+        mid = (c[1:] + c[:-1]) / 2
+        edges = np.concatenate([[c[0] - (mid[0] - c[0])], mid, [c[-1] + (c[-1] - mid[-1])]])
+    return np.exp(edges) if log else edges
