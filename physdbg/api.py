@@ -69,6 +69,7 @@ class RunSummary:
     finding_counts: dict[str, int] = field(default_factory=dict)
     findings: list[str] = field(default_factory=list)
     dts: list[float] = field(default_factory=list, repr=False)
+    auto: dict[str, str] = field(default_factory=dict)  # setting -> "value: why" for settings given as auto
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -144,6 +145,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     drift = (e1 - e0) / abs(e0) if e0 != 0 else (e1 - e0)
     n_steps = len(used)
     return RunSummary(
+        auto=dict(scene.auto),
         scene=scene.name, source=scene.source, integrator=scene.settings.integrator,
         detection=scene.settings.detection, ordering=scene.settings.ordering,
         broad_phase=world.broad_phase.name,
@@ -498,6 +500,38 @@ def overlay(a: str | Path, b: str | Path, report=None, rrd_path: str | None = No
     if rrd_path is not None:
         check_writable([Path(rrd_path)], force)
     return write_overlay(a, b, report if report is not None else diff(a, b), rrd_path, spawn=spawn)
+
+
+# ----------------------------------------------------------------------------- advice
+@dataclass
+class CheckResult:
+    """What ``check`` found. advice: analysis.advisor.Advice; current: the scene's own
+    integrator, detection and ordering; problems: the predictions against them that fail
+    (tunnels, overlap left) and warnings (inexact)."""
+
+    scene: Scene
+    advice: object
+    current: dict[str, str]
+    problems: list
+    warnings: list
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems
+
+
+def check(scene: Scene | str, overrides: Sequence[str] = ()) -> CheckResult:
+    """The advisor on a scene: which methods fail on it, the cheapest safe settings, and
+    whether the scene's own settings are among the safe ones."""
+    from .analysis.advisor import advise
+
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene, overrides)
+    advice = advise(scene)
+    current = {name: getattr(scene.settings, name) for name in ("integrator", "detection", "ordering")}
+    mine = [p for name, value in current.items() for p in advice.fails(name, value)]
+    return CheckResult(scene, advice, current, [p for p in mine if p.outcome != "inexact"],
+                       [p for p in mine if p.outcome == "inexact"])
 
 
 # ----------------------------------------------------------------------------- benchmarks

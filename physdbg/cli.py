@@ -379,6 +379,56 @@ def _serve_web(rrd: Path, port: int) -> None:
                 viewer.kill()
 
 
+@app.command()
+def check(
+    scene: Annotated[str, typer.Argument(help="Built-in scene name or a .toml file.")],
+    set_: SetOption = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print as JSON.")] = False,
+) -> None:
+    """Advise on a scene from the scene alone: which methods fail on it and why, the
+    cheapest safe settings, and whether the scene's own settings are safe (exit 1 when
+    they are predicted to tunnel or leave overlaps). `integrator = "auto"` (and detection,
+    ordering) in a scene takes this advice.
+
+    Example: physdbg check bullet-wall -s detection=discrete
+    """
+    with _user_errors():
+        from dataclasses import asdict
+
+        from .api import check as check_scene
+
+        result = check_scene(scene, set_ or [])
+        advice = result.advice
+        if as_json:
+            typer.echo(json.dumps({"scene": result.scene.name, "ok": result.ok, "current": result.current,
+                                   "recommended": advice.recommended, "reasons": advice.reasons,
+                                   "facts": advice.facts, "predictions": [asdict(p) for p in advice.predictions]},
+                                  indent=2))
+        else:
+            f = advice.facts
+            dt = f"dt {f['dt']:.6g} s" if result.scene.dt is not None else f"real-time steps up to {f['dt']:.6g} s"
+            lines = [f"scene       {result.scene.name}  ({result.scene.source})",
+                     f"facts       {_count(f['particles'], 'particle')}, {_count(f['walls'], 'wall')}; {dt}; "
+                     f"{f['duration']:.6g} s; speeds up to {f['speed_bound']:.3g} m/s ({f['speed_bound_why']}); "
+                     + ("contacts can happen" if f["contacts_possible"] else "no contact can happen")]
+            for setting in ("integrator", "detection", "ordering"):
+                for k, p in enumerate(x for x in advice.predictions if x.setting == setting):
+                    mark = "*" if result.current[setting] == p.value else " "
+                    lines.append(f"{setting if k == 0 else '':<11} {mark}{p.value:<14} {p.outcome:<13} {p.why}")
+            lines.append("recommended " + " ".join(f"{k}={v}" for k, v in advice.recommended.items()))
+            lines += [f"  {k:<12}{advice.reasons[k]}" for k in advice.recommended]
+            settings = " ".join(f"{k}={v}" for k, v in result.current.items())
+            if result.ok:
+                lines.append(f"this scene  {settings} (*): predicted safe"
+                             + (f"; {', '.join(p.value for p in result.warnings)} inexact" if result.warnings else ""))
+            else:
+                lines.append(f"this scene  {settings} (*): predicted to fail: "
+                             + "; ".join(f"{p.setting}={p.value} {p.outcome}" for p in result.problems))
+            typer.echo("\n".join(lines))
+        if not result.ok:
+            raise typer.Exit(1)
+
+
 bench_app = typer.Typer(help="Benchmarks users run: methods charted against each other.", no_args_is_help=True)
 app.add_typer(bench_app, name="bench")
 
@@ -627,6 +677,7 @@ def format_summary(s) -> str:
     lines = [
         f"scene       {s.scene}  ({s.source})",
         f"methods     integrator={s.integrator} detection={s.detection} ordering={s.ordering}",
+        *[f"auto        {name}={why}" for name, why in s.auto.items()],
         f"broad phase {s.broad_phase}: {s.broad_phase_reason}",
         f"bodies      {_count(s.particles, 'particle')}, {_count(len(s.walls), 'wall')}",
         f"steps       {s.steps}  ({s.sim_time:.6g} s simulated, {dt_text})",

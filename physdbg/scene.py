@@ -47,10 +47,10 @@ TOP_FIELDS = {
     "steps": "number of steps, integer >= 1 (give steps or duration)",
     "duration": "simulated seconds > 0 (give steps or duration)",
     "seed": "random seed for generated initial conditions, integer >= 0",
-    "integrator": "one of " + ", ".join(INTEGRATOR_NAMES),
-    "detection": "one of " + ", ".join(DETECTION_NAMES),
+    "integrator": "one of " + ", ".join(INTEGRATOR_NAMES) + ", or auto (the advisor decides: physdbg check)",
+    "detection": "one of " + ", ".join(DETECTION_NAMES) + ", or auto",
     "samples": "samples along each path for detection = \"sampled\", integer >= 1",
-    "ordering": "one of " + ", ".join(ORDERING_NAMES),
+    "ordering": "one of " + ", ".join(ORDERING_NAMES) + ", or auto",
     "broad_phase": "one of " + ", ".join(BROAD_PHASE_NAMES) + " (auto picks by size: docs/broadphase.md)",
     "gravity": "gravity vector [x, y, z] in m/s²",
     "drag": "drag d in v·d^t, 0 < d <= 1 (1 = none)",
@@ -153,6 +153,7 @@ class Scene:
     walls: Walls
     raw: dict[str, Any] = field(repr=False)
     overrides: tuple[str, ...] = ()  # the --set KEY=VALUE strings applied to the scene file
+    auto: dict[str, str] = field(default_factory=dict)  # setting -> "value: why", for settings given as "auto"
 
     def build_world(self, observer=None) -> World:
         """A fresh World on a copy of the initial state (the scene itself never changes)."""
@@ -459,10 +460,10 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
 
     d = _SETTINGS_DEFAULTS
     settings = Settings(
-        integrator=c.choice(raw, "integrator", "integrator", INTEGRATOR_NAMES, d.integrator),
-        detection=c.choice(raw, "detection", "detection", DETECTION_NAMES, d.detection),
+        integrator=c.choice(raw, "integrator", "integrator", (*INTEGRATOR_NAMES, "auto"), d.integrator),
+        detection=c.choice(raw, "detection", "detection", (*DETECTION_NAMES, "auto"), d.detection),
         samples=c.number(raw, "samples", "samples", default=d.samples, lo=1, hi=MAX_SAMPLES, integer=True),
-        ordering=c.choice(raw, "ordering", "ordering", ORDERING_NAMES, d.ordering),
+        ordering=c.choice(raw, "ordering", "ordering", (*ORDERING_NAMES, "auto"), d.ordering),
         broad_phase=c.choice(raw, "broad_phase", "broad_phase", BROAD_PHASE_NAMES, d.broad_phase),
         gravity=tuple(c.vector(raw, "gravity", "gravity", d.gravity).tolist()),
         drag=c.number(raw, "drag", "drag", default=d.drag, hi=1, scale=True),
@@ -559,7 +560,11 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
                   np.array(inv), np.array(rad), np.array(res), np.array(gs))
     walls = Walls(names, np.array(normals, dtype=np.float64).reshape(-1, 3), np.array(offsets, dtype=np.float64),
                   np.array(rest, dtype=np.float64), np.array(two, dtype=np.bool_), np.array(thick, dtype=np.float64))
-    return Scene(name, description, source, settings, dt, max_dt, steps, duration, seed, state, walls, raw)
+    scene = Scene(name, description, source, settings, dt, max_dt, steps, duration, seed, state, walls, raw)
+    from .analysis.advisor import resolve_auto  # "auto" settings: decided from the scene (physdbg check)
+
+    scene.auto = resolve_auto(scene)
+    return scene
 
 
 def _check_resources(c: _Checker, particles: int, steps: int | None, max_memory: float,

@@ -1,0 +1,206 @@
+"""The advisor: from a scene alone, which methods fail on it and the cheapest safe settings.
+
+What it knows comes from the measured maps and charts (docs/accuracy.md,
+docs/stability.md), turned into rules over facts of the scene:
+
+* a **speed bound**: no contact (e <= 1) or drag adds energy, so no sphere can move
+  faster than if it held all the scene's kinetic energy plus the potential energy every
+  sphere can still lose before it rests on a floor: v <= sqrt(2 E / m_min). Without a
+  floor under gravity nothing bounds the fall, and the advisor says it uses an estimate
+  (the fastest initial speed plus |g| times the duration). Closing speeds between two
+  spheres are at most twice the bound;
+* **whether any contact can happen at all**: each sphere stays within bound × duration of
+  where it starts, so two spheres whose reachable balls do not meet, and a sphere whose
+  ball does not reach a wall, can never touch;
+* the **slabs a step must land in**: a discrete test pushes an overlapping sphere out on
+  the side its centre is on, so it tunnels once a step carries the centre past a two-sided
+  wall's mid-plane (thickness/2 + r) or past another sphere's centre (r_a + r_b relative);
+  a one-sided wall is a half-space and cannot be tunnelled.
+
+Rules: the **exact** integrator whenever only gravity and drag act (always, in physdbg:
+it is exact at any dt and costs what Euler costs per step); **swept** detection whenever
+a contact can happen (discrete and sampled find contacts only after the overlap, at every
+speed: the stability maps), **discrete** when none can (no swept tests to pay for);
+**time** ordering when a step can hold more than one contact (index ordering resolves a
+later contact first: overlaps in the cradle and the gas); the broad phase ``auto`` picks
+by size and radius spread (docs/broadphase.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..engine.broadphase import choose_broad_phase
+from ..engine.motion import INTEGRATOR_NAMES
+from ..engine.toi import DETECTION_NAMES
+
+AUTO = "auto"
+CHOSEN = ("integrator", "detection", "ordering")  # what ``auto`` may decide in a scene
+
+
+@dataclass
+class Prediction:
+    """What a method will do on the scene: outcome "safe", "inexact", "overlap left" or
+    "tunnels", and why in words."""
+
+    setting: str
+    value: str
+    outcome: str
+    why: str
+
+
+@dataclass
+class Advice:
+    """recommended: setting -> value; reasons: setting -> why; predictions: per choice;
+    facts: what the rules were applied to (speed_bound m/s, dt s, ...)."""
+
+    recommended: dict[str, str]
+    reasons: dict[str, str]
+    predictions: list[Prediction]
+    facts: dict = field(default_factory=dict)
+
+    def fails(self, setting: str, value: str) -> list[Prediction]:
+        return [p for p in self.predictions if p.setting == setting and p.value == value and p.outcome != "safe"]
+
+
+def advise(scene) -> Advice:
+    """The advice for a scene (a physdbg.scene.Scene; its own settings are not read, only
+    its bodies, walls, forces and time step)."""
+    state, walls, s = scene.state, scene.walls, scene.settings
+    n = state.count
+    movable = state.inverse_mass > 0
+    gravity = float(np.linalg.norm(s.gravity))
+    duration = scene.duration if scene.duration is not None else (scene.steps or 0) * (scene.dt or 0.0)
+    dt = scene.dt if scene.dt is not None else scene.max_dt  # a real-time run's steps are at most max_dt
+    bound, bound_why = _speed_bound(state, walls, np.asarray(s.gravity, dtype=float), duration)
+    reach = bound * duration  # how far any sphere can get from where it starts
+    r = state.radius
+    r_min = float(r.min()) if n else 0.0
+    contacts_possible = _contacts_possible(state.positions, r, movable, reach, walls)
+    two_sided = [(name, float(t)) for name, two, t in zip(walls.names, walls.two_sided, walls.thickness, strict=True)
+                 if two]
+    several = n >= 3 or (n >= 2 and len(walls) > 0)  # a step can hold more than one contact
+    facts = {"particles": n, "walls": len(walls), "speed_bound": bound, "speed_bound_why": bound_why, "dt": dt, "duration": duration,
+             "gravity": gravity, "drag": s.drag, "radius_min": r_min, "radius_max": float(r.max()) if n else 0.0,
+             "contacts_possible": contacts_possible, "samples": s.samples}
+
+    predictions: list[Prediction] = []
+    # integrators
+    forces = "gravity and drag" if s.drag < 1 else "gravity"
+    act = "act" if s.drag < 1 else "acts"
+    for name in INTEGRATOR_NAMES:
+        if gravity == 0 and s.drag == 1:
+            predictions.append(Prediction("integrator", name, "safe", "no force acts: every integrator is exact"))
+        elif name == "exact":
+            predictions.append(Prediction("integrator", name, "safe", f"exact under {forces} at any dt"))
+        elif name == "verlet" and s.drag == 1:
+            predictions.append(Prediction("integrator", name, "safe", "exact under gravity alone (its parabola)"))
+        else:
+            predictions.append(Prediction("integrator", name, "inexact",
+                                          f"first-order error in flight under {forces} (docs/accuracy.md)"))
+    # detection
+    for name in DETECTION_NAMES:
+        predictions.append(_detection(name, contacts_possible, bound, dt, s.samples, r_min, two_sided, n))
+    # ordering
+    for name in ("time", "index"):
+        if name == "index" and several and contacts_possible:
+            predictions.append(Prediction("ordering", name, "overlap left",
+                                          "a step can hold several contacts; index order may resolve a later one "
+                                          "first (overlaps in the cradle and the gas: docs/accuracy.md)"))
+        else:
+            predictions.append(Prediction("ordering", name, "safe", "contacts in the order they happen"
+                                          if name == "time" else "at most one contact a step can hold"))
+
+    recommended = {"integrator": "exact"}
+    reasons = {"integrator": f"only {forces} {act} on physdbg's spheres: exact at any dt, and no dearer per step "
+                             "than Euler (docs/accuracy.md)" if gravity or s.drag < 1 else
+               "no force acts; exact is as cheap as any"}
+    if contacts_possible:
+        recommended["detection"] = "swept"
+        reasons["detection"] = (f"contacts can happen (speeds up to {bound:.3g} m/s over {duration:.3g} s): only "
+                                "swept tests find them at their time of impact, at every speed and dt "
+                                "(docs/stability.md)")
+    else:
+        recommended["detection"] = "discrete"
+        reasons["detection"] = ("no contact can happen: no sphere can reach another or a wall within the run "
+                                f"(at most {reach:.3g} m from where it starts), so no swept test is needed")
+    recommended["ordering"] = "time"
+    reasons["ordering"] = ("a step can hold several contacts: time order resolves them as they happen"
+                           if several and contacts_possible else "time order (the default); nothing to reorder")
+    broad, why = choose_broad_phase("auto", r)
+    recommended["broad_phase"] = broad
+    reasons["broad_phase"] = why
+    return Advice(recommended, reasons, predictions, facts)
+
+
+def _detection(name, contacts_possible, bound, dt, samples, r_min, two_sided, n) -> Prediction:
+    if name == "swept":
+        return Prediction("detection", name, "safe", "every contact at its time of impact, at any speed and dt")
+    if not contacts_possible:
+        return Prediction("detection", name, "safe", "no contact can happen in this run")
+    travel = bound * dt / (samples if name == "sampled" else 1)  # the most a test's interval can carry a centre
+    tunnels = [f"wall '{wall}' (t/2 + r = {t / 2 + r_min:.3g} m)" for wall, t in two_sided if travel > t / 2 + r_min]
+    if n >= 2 and 2 * travel > 2 * r_min:
+        tunnels.append(f"another sphere (r_a + r_b = {2 * r_min:.3g} m at closing speeds up to {2 * bound:.3g} m/s)")
+    step = f"{travel:.3g} m a {'sample' if name == 'sampled' else 'step'} at {bound:.3g} m/s"
+    if tunnels:
+        return Prediction("detection", name, "tunnels", f"can tunnel through {', '.join(tunnels)}: up to {step}")
+    return Prediction("detection", name, "overlap left",
+                      "finds each contact only after the spheres overlap (docs/stability.md); up to " + step)
+
+
+def _speed_bound(state, walls, gravity: np.ndarray, duration: float) -> tuple[float, str]:
+    """(m/s, how it was found) no sphere can exceed during the run (see module doc)."""
+    movable = state.inverse_mass > 0
+    if not np.any(movable):
+        return 0.0, "nothing can move"
+    v = state.velocities[movable]
+    mass = 1.0 / state.inverse_mass[movable]
+    kinetic = float(np.sum(0.5 * mass * np.sum(v * v, axis=1)))
+    g = float(np.linalg.norm(gravity))
+    if g == 0.0:
+        return float(np.sqrt(2 * kinetic / mass.min())), "energy: all the kinetic energy in the lightest sphere"
+    down = gravity / g
+    floors = [offset for normal, offset, two in zip(walls.normals, walls.offsets, walls.two_sided, strict=True)
+              if not two and normal @ down < -1 + 1e-12]  # a one-sided plane facing up, against gravity
+    if not floors:  # nothing bounds the fall: an estimate, not a bound
+        fastest = float(np.linalg.norm(v, axis=1).max())
+        return fastest + g * duration, "an estimate (no floor under gravity): the fastest start plus |g| × duration"
+    floor = max(floors)  # the highest floor: every centre stays at least r above it
+    height = -(state.positions[movable] @ down) - (floor + state.radius[movable])  # above where it would rest
+    energy = kinetic + float(np.sum(mass * g * np.maximum(height, 0.0)))
+    return float(np.sqrt(2 * energy / mass.min())), "energy: all the kinetic and fall energy in the lightest sphere"
+
+
+def _contacts_possible(x, r, movable, reach, walls) -> bool:
+    """Whether any two spheres, or a sphere and a wall, can touch within the run: each
+    movable sphere stays within ``reach`` of where it starts."""
+    n = len(r)
+    if n == 0:
+        return False
+    extent = np.where(movable, reach, 0.0) + r
+    if n >= 2:
+        d = np.linalg.norm(x[:, None, :] - x[None, :, :], axis=2)
+        np.fill_diagonal(d, np.inf)
+        if np.any(d <= extent[:, None] + extent[None, :]):
+            return True
+    for normal, offset, two, t in zip(walls.normals, walls.offsets, walls.two_sided, walls.thickness, strict=True):
+        gap = x @ normal - offset  # signed distance of each centre from the plane
+        distance = np.abs(gap) - t / 2 if two else gap  # a one-sided wall is a half-space: behind it is touching
+        if np.any(distance <= extent):
+            return True
+    return False
+
+
+def resolve_auto(scene) -> dict[str, str]:
+    """Replace ``auto`` in a scene's integrator, detection and ordering by the advice;
+    returns setting -> "value: why" for each one decided (empty when none was auto)."""
+    asked = [name for name in CHOSEN if getattr(scene.settings, name) == AUTO]
+    if not asked:
+        return {}
+    advice = advise(scene)
+    for name in asked:
+        setattr(scene.settings, name, advice.recommended[name])
+    return {name: f"{advice.recommended[name]}: {advice.reasons[name]}" for name in asked}
