@@ -13,6 +13,7 @@ what is allowed.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import difflib
 import math
 import tomllib
@@ -47,6 +48,7 @@ TOP_FIELDS = {
     "steps": "number of steps, integer >= 1 (give steps or duration)",
     "duration": "simulated seconds > 0 (give steps or duration)",
     "seed": "random seed for generated initial conditions, integer >= 0",
+    "method": "auto: integrator, detection and ordering not given are all auto (the advisor decides: physdbg check)",
     "integrator": "one of " + ", ".join(INTEGRATOR_NAMES) + ", or auto (the advisor decides: physdbg check)",
     "detection": "one of " + ", ".join(DETECTION_NAMES) + ", or auto",
     "samples": "samples along each path for detection = \"sampled\", integer >= 1",
@@ -459,6 +461,8 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
                                   default=DEFAULT_MAX_PARTICLE_STEPS, lo=1, hi=1e18)
 
     d = _SETTINGS_DEFAULTS
+    if c.choice(raw, "method", "method", ("auto", "given"), "given") == "auto":
+        d = dataclasses.replace(d, integrator="auto", detection="auto", ordering="auto")
     settings = Settings(
         integrator=c.choice(raw, "integrator", "integrator", (*INTEGRATOR_NAMES, "auto"), d.integrator),
         detection=c.choice(raw, "detection", "detection", (*DETECTION_NAMES, "auto"), d.detection),

@@ -86,6 +86,19 @@ def test_auto_settings_are_decided_said_and_repeat_on_replay(tmp_path):
     # five steps (83 ms) cannot bring the ball down 1 m: no sweep needed
     done = CliRunner().invoke(app, ["run", "bounce", "-s", "detection=auto", "-s", "steps=5"])
     assert done.exit_code == 0 and "auto        detection=discrete: no contact can happen" in done.output
+    scene = parse_scene('''
+        method = "auto"
+        integrator = "verlet"
+        dt = 0.01
+        duration = 1.0
+        [[particles]]
+        position = [0.0, 0.5, 0.0]
+        radius = 0.5
+        [[planes]]
+        normal = [0.0, 1.0, 0.0]
+    ''')
+    assert set(scene.auto) == {"detection", "ordering"}  # integrator was given, so not decided
+    assert (scene.settings.integrator, scene.settings.detection) == ("verlet", "swept")
     done = CliRunner().invoke(app, ["run", "bounce", "-s", "detection=automatic"])
     assert done.exit_code == 2 and "allowed: swept, sampled, discrete, auto" in done.output
 
