@@ -550,9 +550,11 @@ ACCURACY_FILES = ("accuracy.csv", "accuracy.md", "accuracy.png", "accuracy.svg")
 
 def bench_accuracy(out_dir: str | Path = "accuracy", quick: bool = False, force: bool = False, chart: bool = True,
                    rrd_path: str | None = None, problems: Sequence[str] | None = None,
-                   on_run: Callable | None = None, command: str = "physdbg bench accuracy") -> AccuracyResult:
+                   on_run: Callable | None = None, command: str = "physdbg bench accuracy",
+                   workers: int | None = None, dask: str | None = None) -> AccuracyResult:
     """Every method on the reference problems (analysis.accuracy): accuracy.csv, accuracy.md
-    and (chart) accuracy.png / .svg in out_dir; rrd_path: the same chart for Rerun."""
+    and (chart) accuracy.png / .svg in out_dir; rrd_path: the same chart for Rerun.
+    workers: local processes (None: every core, 1: this process); dask: a scheduler address."""
     from .analysis import accuracy
 
     unknown = [p for p in problems or () if p not in accuracy.PROBLEMS]
@@ -567,7 +569,8 @@ def bench_accuracy(out_dir: str | Path = "accuracy", quick: bool = False, force:
 
         _pyplot()  # say that matplotlib is missing before the runs, not after
     started = time.perf_counter()
-    runs = accuracy.run_all(list(problems) if problems else None, quick=quick, on_run=on_run)
+    runs = accuracy.run_all(list(problems) if problems else None, quick=quick, on_run=on_run, workers=workers,
+                            dask=dask)
     paths[0].write_text(accuracy.to_csv(runs))
     paths[1].write_text(accuracy.to_markdown(runs, command))
     if chart:
@@ -588,9 +591,10 @@ STABILITY_FILES = ("stability.csv", "stability.md", "stability-impact.png", "sta
 
 
 def bench_stability(out_dir: str | Path = "stability", quick: bool = False, force: bool = False, chart: bool = True,
-                    on_cell: Callable | None = None, command: str = "physdbg bench stability") -> AccuracyResult:
+                    on_cell: Callable | None = None, command: str = "physdbg bench stability",
+                    workers: int | None = None, dask: str | None = None) -> AccuracyResult:
     """Where each method breaks (analysis.stability): stability.csv, stability.md and (chart)
-    a heatmap per map as PNG and SVG in out_dir."""
+    a heatmap per map as PNG and SVG in out_dir. workers, dask: as bench_accuracy."""
     from .analysis import stability
 
     out = Path(out_dir)
@@ -602,7 +606,7 @@ def bench_stability(out_dir: str | Path = "stability", quick: bool = False, forc
 
         _pyplot()  # say that matplotlib is missing before the runs, not after
     started = time.perf_counter()
-    cells = stability.maps(quick=quick, on_cell=on_cell)
+    cells = stability.maps(quick=quick, on_cell=on_cell, workers=workers, dask=dask)
     paths[0].write_text(stability.to_csv(cells))
     paths[1].write_text(stability.to_markdown(cells, command))
     if chart:

@@ -429,6 +429,11 @@ def check(
             raise typer.Exit(1)
 
 
+JobsOption = Annotated[Optional[int], typer.Option(
+    "--jobs", "-j", min=1, help="Local processes to run the sweep in (default: every core; 1: this one).")]
+DaskOption = Annotated[Optional[str], typer.Option(
+    "--dask", help="Run the sweep on an existing Dask cluster: its scheduler's address (tcp://host:8786); "
+                   "needs pip install 'physdbg[dask]'.")]
 bench_app = typer.Typer(help="Benchmarks users run: methods charted against each other.", no_args_is_help=True)
 app.add_typer(bench_app, name="bench")
 
@@ -444,6 +449,8 @@ def bench_accuracy(
     no_chart: Annotated[bool, typer.Option("--no-chart", help="Only the CSV and the table (no matplotlib needed).")]
     = False,
     rrd: Annotated[Optional[Path], typer.Option("--rrd", help="Also write the chart as a Rerun file.")] = None,
+    jobs: JobsOption = None,
+    dask: DaskOption = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite files from an earlier run.")] = False,
     progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")]
     = sys.stderr.isatty(),
@@ -462,7 +469,7 @@ def bench_accuracy(
         try:
             result = run_accuracy(out, quick=quick, force=force, chart=not no_chart, rrd_path=str(rrd) if rrd else None,
                                   problems=problem, on_run=lambda run, done, total: bar.update(done, total),
-                                  command=command)
+                                  command=command, workers=jobs, dask=dask)
         finally:
             bar.close()
         from .analysis.accuracy import PROBLEMS, pareto
@@ -488,6 +495,8 @@ def bench_stability(
     quick: Annotated[bool, typer.Option("--quick", help="A coarser grid.")] = False,
     no_chart: Annotated[bool, typer.Option("--no-chart", help="Only the CSV and the table (no matplotlib needed).")]
     = False,
+    jobs: JobsOption = None,
+    dask: DaskOption = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite files from an earlier run.")] = False,
     progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")]
     = sys.stderr.isatty(),
@@ -504,7 +513,8 @@ def bench_stability(
         command = "physdbg bench stability" + (" --quick" if quick else "")
         try:
             result = run_stability(out, quick=quick, force=force, chart=not no_chart,
-                                   on_cell=lambda cell, done, total: bar.update(done, total), command=command)
+                                   on_cell=lambda cell, done, total: bar.update(done, total), command=command,
+                                   workers=jobs, dask=dask)
         finally:
             bar.close()
         from .analysis.stability import REACH, first_step

@@ -108,7 +108,11 @@ def test_bench_accuracy_writes_the_table_csv_and_chart_and_never_overwrites(tmp_
     tunnelled = [r for r in rows if r["failure"] == "tunnelled through the wall"]
     assert tunnelled and all(r["detection"] != "swept" for r in tunnelled)
     table = (out / "accuracy.md").read_text()
-    assert "### bounce" in table and "| exact/swept/time |" in table and "physdbg bench accuracy --quick" in table
+    assert "### bounce" in table and "physdbg bench accuracy --quick" in table
+    bounce = table.split("### bounce")[1].split("###")[0]
+    front = [line for line in bounce.splitlines() if line.startswith("| ") and not line.startswith("| method")]
+    # which of the exact methods is cheapest depends on the machine's timing; that they are swept does not
+    assert front and all("/swept/" in line for line in front)
     assert (out / "accuracy.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "<svg" in (out / "accuracy.svg").read_text()[:2000]
     import rerun.chunk as rerun_chunk

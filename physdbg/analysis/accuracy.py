@@ -261,22 +261,22 @@ def _kinetic(v: np.ndarray, inverse_mass: np.ndarray) -> float:
     return float(0.5 * np.sum(np.sum(v[movable] ** 2, axis=1) / inverse_mass[movable]))
 
 
-def run_all(problems: list[str] | None = None, quick: bool = False,
-            on_run: Callable[[Run, int, int], None] | None = None) -> list[Run]:
-    """Every method on every problem (or the named ones) at every dt (QUICK_DTS if quick).
-    on_run(run, done, total) after each."""
-    from ..engine import warm_up
+def run_named(problem: str, integrator: str, detection: str, ordering: str, dt: float) -> Run:
+    """run_one by the problem's name (what a sweep's worker process is sent)."""
+    return run_one(PROBLEMS[problem], integrator, detection, ordering, dt)
 
-    chosen = [PROBLEMS[name] for name in (problems or PROBLEMS)]
+
+def run_all(problems: list[str] | None = None, quick: bool = False,
+            on_run: Callable[[Run, int, int], None] | None = None, workers: int | None = None,
+            dask: str | None = None) -> list[Run]:
+    """Every method on every problem (or the named ones) at every dt (QUICK_DTS if quick),
+    in this process (workers=1), on local cores or on Dask (analysis.sweep; the kernels are
+    loaded first, so cost is the stepping, not the compiler). on_run(run, done, total)."""
+    from .sweep import run_jobs
+
     dts = QUICK_DTS if quick else DTS
-    jobs = [(p, m, dt) for p in chosen for m in methods(p) for dt in dts]
-    warm_up()  # compile (or load) the kernels first: cost is the stepping, not the compiler
-    out = []
-    for done, (problem, (integrator, detection, ordering), dt) in enumerate(jobs, start=1):
-        out.append(run_one(problem, integrator, detection, ordering, dt))
-        if on_run is not None:
-            on_run(out[-1], done, len(jobs))
-    return out
+    jobs = [(name, *m, dt) for name in (problems or PROBLEMS) for m in methods(PROBLEMS[name]) for dt in dts]
+    return run_jobs(run_named, jobs, workers=workers, dask=dask, on_done=on_run)
 
 
 def pareto(runs: list[Run]) -> list[Run]:

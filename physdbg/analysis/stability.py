@@ -165,24 +165,25 @@ def _overlapping(positions: np.ndarray) -> bool:
     return bool(y[0] < STACK_RADIUS - 1e-9 or np.any(np.diff(y) < 2 * STACK_RADIUS - 1e-9))
 
 
-def maps(quick: bool = False, on_cell: Callable[[Cell, int, int], None] | None = None) -> list[Cell]:
-    """Both maps for every integrator × detection."""
-    from ..engine import warm_up
+def cell(which: str, integrator: str, detection: str, x: float, y: float) -> Cell:
+    """One cell of a map by its name (what a sweep's worker process is sent)."""
+    return impact_cell(integrator, detection, x, y) if which == "impact" else stack_cell(integrator, detection, x, y)
+
+
+def maps(quick: bool = False, on_cell: Callable[[Cell, int, int], None] | None = None, workers: int | None = None,
+         dask: str | None = None) -> list[Cell]:
+    """Both maps for every integrator × detection, on local cores by default or on Dask
+    (analysis.sweep)."""
+    from .sweep import run_jobs
 
     dts, speeds = (QUICK_IMPACT_DTS, QUICK_IMPACT_SPEEDS) if quick else (IMPACT_DTS, IMPACT_SPEEDS)
     heights = QUICK_STACK_HEIGHTS if quick else STACK_HEIGHTS
-    jobs: list[tuple[Callable, tuple]] = []
+    jobs: list[tuple] = []
     for integrator in INTEGRATOR_NAMES:
         for detection in DETECTION_NAMES:
-            jobs += [(impact_cell, (integrator, detection, dt, v)) for dt in dts for v in speeds]
-            jobs += [(stack_cell, (integrator, detection, e, n)) for e in STACK_RESTITUTIONS for n in heights]
-    warm_up()
-    out = []
-    for done, (make, args) in enumerate(jobs, start=1):
-        out.append(make(*args))
-        if on_cell is not None:
-            on_cell(out[-1], done, len(jobs))
-    return out
+            jobs += [("impact", integrator, detection, dt, v) for dt in dts for v in speeds]
+            jobs += [("stack", integrator, detection, e, n) for e in STACK_RESTITUTIONS for n in heights]
+    return run_jobs(cell, jobs, workers=workers, dask=dask, on_done=on_cell)
 
 
 def to_csv(cells: list[Cell]) -> str:

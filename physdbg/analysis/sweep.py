@@ -1,0 +1,85 @@
+"""Running the many small runs of a benchmark sweep: here, on local cores, or on Dask.
+
+``run_jobs(call, jobs)`` runs ``call(*args)`` for every ``args`` in ``jobs`` and returns
+the results in the order of ``jobs``:
+
+* ``workers=1``: in this process, one after another;
+* otherwise on local cores (``workers=None``: all of them) in a process pool, each worker
+  loading the compiled kernels once before its first job (so no job's cost includes it);
+* ``dask="tcp://host:port"``: on an existing Dask cluster (the optional extra
+  ``physdbg[dask]``), each worker warmed up the same way. No job system of physdbg's own.
+
+Every job is deterministic, so where it ran changes nothing but the wall time it reports.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+
+from ..errors import PhysdbgError
+
+
+class DaskMissing(PhysdbgError):
+    """--dask without dask.distributed installed, or a scheduler that cannot be reached."""
+
+
+def _warm() -> None:
+    from ..engine import warm_up
+
+    warm_up()
+
+
+def _call(call, args):
+    return call(*args)
+
+
+def run_jobs(call: Callable, jobs: Sequence[tuple], workers: int | None = None, dask: str | None = None,
+             on_done: Callable[[object, int, int], None] | None = None) -> list:
+    """The results of call(*args) for each args in jobs, in order (see module doc).
+    on_done(result, done, total) after each, in the order they finish."""
+    total = len(jobs)
+    if dask:
+        return _on_dask(call, jobs, dask, on_done)
+    workers = (os.cpu_count() or 1) if workers is None else workers
+    if workers <= 1 or total <= 1:
+        _warm()
+        out = []
+        for done, args in enumerate(jobs, start=1):
+            out.append(call(*args))
+            if on_done is not None:
+                on_done(out[-1], done, total)
+        return out
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    results: list = [None] * total
+    with ProcessPoolExecutor(max_workers=min(workers, total), initializer=_warm) as pool:
+        futures = {pool.submit(_call, call, args): k for k, args in enumerate(jobs)}
+        for done, future in enumerate(as_completed(futures), start=1):
+            results[futures[future]] = future.result()
+            if on_done is not None:
+                on_done(results[futures[future]], done, total)
+    return results
+
+
+def _on_dask(call, jobs, address: str, on_done) -> list:
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise DaskMissing("--dask needs dask.distributed: pip install 'physdbg[dask]'") from None
+    try:
+        client = Client(address, timeout="5s")
+    except (OSError, TimeoutError) as err:
+        raise DaskMissing(f"cannot reach the Dask scheduler at {address} ({err})") from None
+    try:
+        client.run(_warm)  # every worker loads the kernels before its first job
+        futures = [client.submit(_call, call, args, pure=False) for args in jobs]
+        index = {future.key: k for k, future in enumerate(futures)}
+        results: list = [None] * len(jobs)
+        for done, future in enumerate(as_completed(futures), start=1):
+            results[index[future.key]] = future.result()
+            if on_done is not None:
+                on_done(results[index[future.key]], done, len(jobs))
+        return results
+    finally:
+        client.close()
