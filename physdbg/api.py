@@ -474,7 +474,21 @@ def info(path: str | Path) -> dict:
             "bytes_per_particle_step": size / (n * rec.frames) if n and rec.frames else None,
             "channels": [{"topic": c.topic, "encoding": c.message_encoding, "schema": c.schema_name,
                           "messages": c.messages} for c in rec.channels()],
+            "equation_of_state": _equation_of_state(rec),
         }
+
+
+def _equation_of_state(rec) -> dict | None:
+    """Z and kT from the collisions (analysis.pressure), for a run of several moving spheres
+    that collided; None otherwise."""
+    from dataclasses import asdict
+
+    from .analysis.pressure import BLOCKS, equation_of_state
+
+    if rec.steps < 2 * BLOCKS or int(np.count_nonzero(rec.header.inverse_mass > 0)) < 2:
+        return None
+    eos = equation_of_state(rec)
+    return asdict(eos) if eos.z_virial != 1.0 else None
 
 
 # ----------------------------------------------------------------------------- analysis

@@ -560,12 +560,29 @@ def info(
             if data["bytes_per_particle_step"] else "size        -",
             f"final hash  {data['final_hash']}",
             f"written by  physdbg {data['physdbg_version']}, format {data['format_version']}",
+            *_eos_lines(data["equation_of_state"]),
             "channels",
         ]
         width = max(len(c["topic"]) for c in data["channels"])
         for c in data["channels"]:
             lines.append(f"  {c['topic']:<{width}}  {c['messages']:>7} messages  {c['encoding']:<14} {c['schema']}")
         typer.echo("\n".join(lines))
+
+
+def _eos_lines(eos: dict | None) -> list[str]:
+    """The equation of state read off the collisions (physdbg.analysis.pressure), if any."""
+    if eos is None:
+        return []
+    first, last = eos["steps"]
+    line = f"pressure    Z = PV/NkT = {eos['z_virial']:.4g} ± {eos['z_virial_error']:.2g} from the collisions"
+    if eos["z_wall"] is not None:
+        line += f", {eos['z_wall']:.4g} ± {eos['z_wall_error']:.2g} from the walls"
+    line += f" (steps {first}..{last})"
+    lines = [line, f"temperature kT = {eos['kT']:.4g} J"]
+    if eos["z_carnahan_starling"] is not None:
+        lines.append(f"reference   Carnahan–Starling at packing fraction {eos['packing_fraction']:.4g}: "
+                     f"Z = {eos['z_carnahan_starling']:.4f} (a bulk fluid; walls shift a small box's Z)")
+    return lines
 
 
 def _command(name: str) -> str:

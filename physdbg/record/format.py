@@ -95,6 +95,7 @@ STATS_FIELDS = [
     ("resting", "<i8", ()), ("rapid", "<i8", ()), ("max_overlap", "<f8", ()),
     ("seconds_forces", "<f8", ()), ("seconds_broad_phase", "<f8", ()), ("seconds_narrow_phase", "<f8", ()),
     ("seconds_resolve", "<f8", ()), ("seconds_finish", "<f8", ()),
+    ("temperature", "<f8", ()), ("virial", "<f8", ()), ("wall_impulse", "<f8", ()),
 ]
 CONTACT_FIELDS = [
     ("time_in_step", "<f8", ()), ("kind", "i1", ()), ("resting", "i1", ()), ("a", "<i4", ()), ("other", "<i4", ()),

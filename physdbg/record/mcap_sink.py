@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..analysis.pressure import collision_sums
 from ..events import BroadPhaseInfo, Contacts, EngineWarning, StepEnd, SweptTests
 from . import format as fmt
 from . import proto
@@ -84,6 +85,9 @@ class McapRecorder:
         self._last_ns = -1  # log time of the last frame: the next is later by at least 1 ns
         self._contacts: Contacts | None = None
         self._warnings: list[EngineWarning] = []
+        self._collisions = (0.0, 0.0)  # (virial J·s, wall impulse N·s) of the step so far
+        movable = int(np.count_nonzero(header.inverse_mass > 0))
+        self._kT_per_kinetic = 2.0 / (3.0 * movable) if movable else 0.0  # kT = 2 KE / (3 N), J
         self._sent_frames = 0
         self.frames = 0
         self.bvh_capped_steps = 0
@@ -107,6 +111,7 @@ class McapRecorder:
         if isinstance(event, StepEnd):
             self._end_step(event)
         elif isinstance(event, Contacts):
+            self._collisions = collision_sums(event, self.header.radius)
             if fmt.TOPIC_CONTACTS in self._channels:
                 self._contacts = event
                 self._pending.append((fmt.TOPIC_CONTACTS, self._table(fmt.TOPIC_CONTACTS, frame, event)))
@@ -135,6 +140,9 @@ class McapRecorder:
         for name, _, _ in fmt.STATS_FIELDS:
             if name.startswith("seconds_"):
                 stats[name] = end.timings.get(name[len("seconds_"):], 0.0)
+        stats["virial"], stats["wall_impulse"] = self._collisions
+        stats["temperature"] = self._kT_per_kinetic * end.kinetic
+        self._collisions = (0.0, 0.0)
         self._write(fmt.TOPIC_STATS, frame, ns, proto.encode_table(
             fmt.MESSAGE_OF_TOPIC[fmt.TOPIC_STATS], frame, stats.__getitem__))
         if self.view is not None:

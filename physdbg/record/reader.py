@@ -312,6 +312,16 @@ class Recording:
             raise RecordingError(f"{self.path}: frames {seen}..{self.frames - 1} are not in the file")
         return FrameTable(times, dts, hashes)
 
+    def stats(self, start: int = 1, stop: int | None = None) -> np.ndarray:
+        """The step statistics of steps start..stop-1 (frames), one row each: a numpy
+        structured array with the fields of /physdbg/stats (time, dt, kinetic, potential,
+        energy, momentum (3,), counts, max_overlap, timings, temperature, virial,
+        wall_impulse; see docs/recording-format.md)."""
+        stop = self.frames if stop is None else min(stop, self.frames)
+        rows = [self._table(fmt.TOPIC_STATS, data)
+                for _, _, data in self._messages([fmt.TOPIC_STATS], max(start, 1), stop - 1)] if stop > start else []
+        return np.concatenate(rows) if rows else np.zeros(0, dtype=fmt.dtype_of(fmt.STATS_FIELDS))
+
     # ------------------------------------------------------------------ step events
     def step_events(self, k: int) -> list:
         """The engine events of the k-th step (frame k >= 1), in the engine's order."""

@@ -32,6 +32,7 @@ import numpy as np
 
 from ..errors import PhysdbgError
 from ..events import KIND_PAIR, BroadPhaseInfo, Contacts, EngineWarning, StepEnd
+from ..analysis.pressure import collision_sums
 from .header import RecordingHeader
 from . import view
 from .view import contact_centres, describe_contacts, scene_bounds, sphere_colors, up_axis, wall_outlines
@@ -108,6 +109,8 @@ class RerunSink:
         self._broad_phase: BroadPhaseInfo | None = None
         self._warnings: list[EngineWarning] = []
         self._last_time = (0, 0.0)
+        self._virial = 0.0
+        self._movable = int(np.count_nonzero(header.inverse_mass > 0))
         self._log_static(header)
 
     # ------------------------------------------------------------------ static
@@ -136,6 +139,7 @@ class RerunSink:
             self._end_step(event)
         elif isinstance(event, Contacts):
             self._contacts = event
+            self._virial = collision_sums(event, self.header.radius)[0]
         elif isinstance(event, EngineWarning):
             self._warnings.append(event)
         elif isinstance(event, BroadPhaseInfo) and self.detail == "full":
@@ -270,6 +274,9 @@ class RerunSink:
             "stats/momentum/z": end.momentum[2],
             "stats/contacts": end.counts.get("contacts", 0),
         }
+        if self._movable > 1 and end.kinetic > 0:  # Z = PV/NkT of this step, from its collisions
+            values["stats/pressure/z"] = 1 + self._virial / (2 * end.kinetic * end.dt)
+        self._virial = 0.0
         for path, value in values.items():
             self._series.setdefault(path, []).append(float(value))
         self._series_steps.append(frame)

@@ -1,0 +1,115 @@
+"""Pressure and temperature from the collisions of a recorded run: an equation of state
+read off a recording.
+
+Each step's statistics hold the collisional virial W = Σ r_ab·J_a over its sphere–sphere
+contacts (J·s) and the sum of the impulses at walls (N·s). Over the steps averaged, of
+total time T, with kinetic energy K (time-averaged) of N moving spheres (kT = 2K/3N):
+
+* **from the collisions**: Z = PV/(NkT) = 1 + ΣW / (2 ∫K dt) — the virial theorem for
+  impulsive forces; it needs no walls and no volume;
+* **from the walls** (scenes whose walls close a box): P = Σ wall impulses / (A T) with A
+  the box's inside area, and Z = PV/(NkT) with V the box's volume.
+
+The error bars are the standard error of the mean over BLOCKS consecutive blocks of steps
+(collisions correlate over a few mean free times; blocks much longer than that are
+independent). With walls, the density next to them differs from the bulk, so Z from the
+collisions of a small walled gas is not quite the bulk's (periodic boundaries are not
+built yet; docs/accuracy.md).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..events import KIND_PAIR, Contacts
+
+BLOCKS = 10
+
+
+def collision_sums(contacts: Contacts, radius: np.ndarray) -> tuple[float, float]:
+    """(virial, wall impulse) of a step's contacts: the sum over sphere pairs of
+    r_ab · J_a = (r_a + r_b) j (J·s; r_ab from b to a at contact, J_a = j n the impulse on a),
+    and the sum of the impulses on spheres at walls (N·s). Over a time T, the collisional
+    virial gives PV = N kT + sum / (3 T), the wall impulses P = sum / (area T)."""
+    if not len(contacts):
+        return 0.0, 0.0
+    pair = contacts.kind == KIND_PAIR
+    impulse = np.nan_to_num(contacts.impulse, nan=0.0)
+    reach = radius[contacts.a[pair]] + radius[contacts.other[pair]]
+    return float(reach @ impulse[pair]), float(impulse[~pair].sum())
+
+
+def carnahan_starling(phi: float) -> float:
+    """Z of the hard-sphere fluid at packing fraction phi (Carnahan & Starling 1969)."""
+    return (1 + phi + phi * phi - phi**3) / (1 - phi) ** 3
+
+
+@dataclass
+class EquationOfState:
+    """What a run's collisions say. z_virial, z_virial_error: from the collisions; z_wall,
+    z_wall_error: from the walls (None without a closed box); kT: J, time-averaged;
+    packing_fraction: sphere volume / box volume (None without a box); z_carnahan_starling
+    at that packing fraction (equal radii only); steps: (first, last) averaged over."""
+
+    z_virial: float
+    z_virial_error: float
+    z_wall: float | None
+    z_wall_error: float | None
+    kT: float
+    packing_fraction: float | None
+    z_carnahan_starling: float | None
+    steps: tuple[int, int]
+
+
+def box_of(walls) -> tuple[np.ndarray, np.ndarray] | None:
+    """(lo, hi) of the axis-aligned box closed by one-sided walls, one facing in on each side
+    of each axis, or None."""
+    lo, hi = np.full(3, np.nan), np.full(3, np.nan)
+    for normal, offset, two in zip(walls.normals, walls.offsets, walls.two_sided, strict=True):
+        axis = int(np.argmax(np.abs(normal)))
+        if two or abs(abs(normal[axis]) - 1) > 1e-12:
+            continue
+        if normal[axis] > 0:
+            lo[axis] = offset
+        else:
+            hi[axis] = -offset
+    if np.any(np.isnan(lo)) or np.any(np.isnan(hi)) or np.any(hi <= lo):
+        return None
+    return lo, hi
+
+
+def equation_of_state(rec, skip: float = 0.5) -> EquationOfState:
+    """Z of a recording (physdbg.Recording) over its steps after the first ``skip`` fraction
+    (the gas forgets how it was set up)."""
+    first = max(1, int(rec.steps * skip) + 1)
+    stats = rec.stats(first)
+    if len(stats) < BLOCKS:
+        raise ValueError(f"{len(stats)} steps to average; an equation of state needs at least {BLOCKS}")
+    header = rec.header
+    movable = header.inverse_mass > 0
+    n = int(np.count_nonzero(movable))
+    dt, kinetic = stats["dt"], stats["kinetic"]
+    blocks = np.array_split(np.arange(len(stats)), BLOCKS)
+
+    def mean_and_error(values: np.ndarray) -> tuple[float, float]:
+        return float(values.mean()), float(values.std(ddof=1) / math.sqrt(len(values)))
+
+    z_blocks = np.array([1 + stats["virial"][b].sum() / (2 * (kinetic[b] * dt[b]).sum()) for b in blocks])
+    z_virial, z_virial_error = mean_and_error(z_blocks)
+    kT = float((2 * kinetic * dt).sum() / (3 * n * dt.sum()))
+    box = box_of(header.walls)
+    z_wall = z_wall_error = phi = z_cs = None
+    if box is not None:
+        side = box[1] - box[0]
+        volume = float(np.prod(side))
+        area = 2 * float(side[0] * side[1] + side[1] * side[2] + side[0] * side[2])
+        wall_blocks = np.array([stats["wall_impulse"][b].sum() / (area * dt[b].sum()) * volume
+                                / (n * 2 * (kinetic[b] * dt[b]).sum() / (3 * n * dt[b].sum())) for b in blocks])
+        z_wall, z_wall_error = mean_and_error(wall_blocks)
+        phi = float((4 / 3) * math.pi * np.sum(header.radius[movable] ** 3) / volume)
+        if np.ptp(header.radius) == 0:
+            z_cs = carnahan_starling(phi)
+    return EquationOfState(z_virial, z_virial_error, z_wall, z_wall_error, kT, phi, z_cs, (first, rec.steps))
