@@ -397,6 +397,11 @@ def verify(path: str | Path, on_step: Callable[[int, int | None], None] | None =
     from .record import open_recording
 
     with open_recording(path) as rec:
+        foreign = rec.meta.get("foreign")
+        if foreign:
+            raise PhysdbgError(f"{path} is a run of another engine (imported from {foreign['source']}): there is no "
+                               "physdbg run to repeat. `physdbg explain` audits it; `physdbg diff` compares it "
+                               "with a physdbg recording of the same scene")
         world = rec.scene.build_world()
         warm_up(world.broad_phase.name)
         first = rec.state(0)
@@ -514,6 +519,38 @@ def overlay(a: str | Path, b: str | Path, report=None, rrd_path: str | None = No
     if rrd_path is not None:
         check_writable([Path(rrd_path)], force)
     return write_overlay(a, b, report if report is not None else diff(a, b), rrd_path, spawn=spawn)
+
+
+# ----------------------------------------------------------------------------- other engines
+@dataclass
+class ImportResult:
+    """What ``import_run`` wrote: mcap (path), frames (steps + 1), bodies, velocities
+    ("given" or "estimated" from positions), bytes."""
+
+    mcap: str
+    frames: int
+    bodies: int
+    velocities: str
+    bytes: int
+
+
+def import_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str] = (),
+               mcap_path: str | Path | None = None, force: bool = False) -> ImportResult:
+    """Turn a run of another engine (a .csv or .jsonl trajectory, docs/foreign-runs.md) of
+    ``scene`` into a physdbg recording, so explain, diff and replay work on it."""
+    from .record.foreign import import_run as write_run
+    from .record.foreign import read_run
+
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene, overrides)
+    out = Path(mcap_path) if mcap_path else Path(run_path).with_suffix(".mcap")
+    if out.resolve() == Path(run_path).resolve():
+        raise PhysdbgError(f"the run and the recording are the same file: {out}")
+    check_writable([out], force)
+    run = read_run(run_path, scene.state.count)
+    frames = write_run(run, scene, out)
+    return ImportResult(str(out), frames, scene.state.count, "given" if run.velocities is not None else "estimated",
+                        out.stat().st_size)
 
 
 # ----------------------------------------------------------------------------- advice

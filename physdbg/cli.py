@@ -379,6 +379,32 @@ def _serve_web(rrd: Path, port: int) -> None:
                 viewer.kill()
 
 
+@app.command("import")
+def import_(
+    run: Annotated[Path, typer.Argument(help="The other engine's run: a .csv or .jsonl trajectory "
+                                              "(docs/foreign-runs.md).")],
+    scene: Annotated[str, typer.Option("--scene", help="The scene it ran: a built-in name or a .toml file.")],
+    set_: SetOption = None,
+    output: Annotated[Optional[Path], typer.Option(
+        "--output", "-o", help="The recording to write (default: the run's name, ending .mcap).")] = None,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing recording.")] = False,
+) -> None:
+    """Turn a run of another engine (your own, pybullet, MuJoCo) into a physdbg recording,
+    so explain, diff and replay work on it.
+
+    Example: physdbg import my-engine.csv --scene bullet-wall -o mine.mcap
+    """
+    with _user_errors():
+        from .api import import_run
+
+        result = import_run(run, scene, set_ or [], output, force)
+        me = _command("physdbg")
+        bodies = f"{result.bodies} body" if result.bodies == 1 else f"{result.bodies} bodies"
+        typer.echo(f"imported    {result.frames - 1} steps of {bodies} from {run} (velocities {result.velocities})")
+        typer.echo(f"mcap        {result.mcap}  ({_size(result.bytes)})")
+        typer.echo(f"then try    {me} explain {result.mcap}   |   {me} replay {result.mcap} --spawn")
+
+
 @app.command()
 def check(
     scene: Annotated[str, typer.Argument(help="Built-in scene name or a .toml file.")],

@@ -35,6 +35,7 @@ EXAMPLES_PER_KIND = 5
 COLLAPSE_CONTACTS_PER_SPHERE = 10
 COLLAPSE_MIN_CONTACTS = 200
 ENERGY_GAIN_RELATIVE = 1e-9  # rounding in one impulse is ~1e-16 relative; this is a real gain
+FOREIGN_ENERGY_GAIN = 1e-3  # a run without contact records: a step's gain beyond this is a contact's doing
 
 
 @dataclass
@@ -140,7 +141,10 @@ class Auditor:
                 self._check_order(step, end.dt, contacts)
                 self._check_energy(step, contacts)
                 self._check_collapse(step, contacts)
+            elif self.header.meta.get("foreign"):
+                self._check_energy_of_states(step, end)
         self._x, self._v = end.positions, end.velocities
+        self._energy = end.kinetic + end.potential
         self._contacts = None
         self._warnings = []
         self.steps = step
@@ -171,13 +175,17 @@ class Auditor:
 
     def _check_crossings(self, step: int, end: StepEnd, contacts: Contacts | None) -> None:
         for c in self.checker.check(self._x, self._v, end.positions, end.dt, contacts):
-            detection = self.settings.get("detection", "swept")
+            detection = "foreign" if self.header.meta.get("foreign") else self.settings.get("detection", "swept")
             how = {"discrete": "detection = discrete tests only where each step ends",
                    "sampled": f"detection = sampled tests only {self.settings.get('samples', 4)} instants a step"}
             budgets = [w.code for w in self._warnings if w.code != "non-finite" and w.code != "overlap"]
             if budgets:
                 advice = (f"this step hit the {budgets[0]} budget, so contacts after it were not resolved: "
                           f"raise it, or let slow contacts rest (rest_fraction)")
+            elif detection == "foreign":
+                advice = ("the other engine let it cross within one step with no contact: test for contacts along "
+                          "the path through the step (a swept test, as physdbg does), not where the step ends, or "
+                          "take shorter steps")
             elif detection != "swept":
                 advice = "use detection = swept (exact time of impact), or a shorter dt"
             elif self.settings.get("ordering") == "index" and c.kind == KIND_PAIR:
@@ -241,6 +249,28 @@ class Auditor:
             return f"{int(c.a[i])}–{int(c.other[i])}"
         return f"{int(c.a[i])}–wall '{self.names[int(c.other[i])]}'"
 
+    def _check_energy_of_states(self, step: int, end: StepEnd) -> None:
+        """A run of another engine has no contact records: a step that gains more mechanical
+        energy than FOREIGN_ENERGY_GAIN of what it had is a contact that added energy (an
+        integrator's drift in flight is orders of magnitude smaller per step)."""
+        before, after = getattr(self, "_energy", None), end.kinetic + end.potential
+        if before is None or not np.isfinite(before) or not np.isfinite(after):
+            return
+        scale = max(abs(before), 0.5 * float(np.sum(self.mass[np.isfinite(self.mass)] *
+                                                     np.einsum("ij,ij->i", end.velocities, end.velocities)
+                                                     [np.isfinite(self.mass)])), 1e-12)
+        if after - before > FOREIGN_ENERGY_GAIN * scale:
+            moved = np.linalg.norm(end.velocities - self._v, axis=1)
+            who = [int(i) for i in np.argsort(-moved)[:2] if moved[i] > 0]
+            self._add(Finding("energy-gain", step, who,
+                              f"the run gained {after - before:.3g} J in this step ({before:.4g} -> {after:.4g} J, "
+                              f"+{100 * (after - before) / scale:.2g} %), more than any integrator drifts in one step; "
+                              f"spheres {', '.join(map(str, who))} changed velocity most",
+                              "an impulse with the wrong sign, or restitution above 1: the impulse on a is "
+                              "j = -(1 + e) (v_rel · n) / (1/m_a + 1/m_b) along n from b to a",
+                              [float(q) for q in end.positions[who[0]]] if who else None,
+                              {"before": before, "after": after}))
+
     def _check_energy(self, step: int, c: Contacts) -> None:
         ma = self.mass[c.a]
         finite_a = np.isfinite(ma)
@@ -283,7 +313,11 @@ class Auditor:
     # ------------------------------------------------------------------ result
     def report(self, source: str, total_steps: int | None = None) -> AuditReport:
         notes = list(self.notes)
-        if not self._saw_contacts and self.steps:
+        foreign = self.header.meta.get("foreign")
+        if foreign and self.steps:
+            notes.append(f"a run of another engine (from {foreign['source']}, velocities {foreign['velocities']}): "
+                         "crossings and overlaps are judged from its states, energy from each step's total")
+        elif not self._saw_contacts and self.steps:
             notes.append("no contacts recorded (detail state): crossings are judged from states alone, and "
                          "order, energy and collapse checks need --detail contacts")
         examples = sorted(self.examples, key=lambda f: (f.step, FINDING_KINDS.index(f.kind)))

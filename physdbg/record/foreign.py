@@ -1,0 +1,260 @@
+"""Runs of other engines: read a trajectory file and write it as a physdbg recording.
+
+The format (docs/foreign-runs.md) is what any language writes easily:
+
+* **CSV** with the header ``step,time,body,x,y,z`` and optionally ``vx,vy,vz``: one row
+  per body per step; step 0 is the initial state; steps count up by one; every step
+  lists every body 0..N-1 once.
+* **JSON Lines**, one object per step: ``{"step": k, "time": t, "positions": [[x, y, z],
+  ...], "velocities": [[vx, vy, vz], ...]}`` (velocities optional).
+
+Units: metres, seconds, metres per second. The scene (a physdbg TOML scene) says what
+the bodies are: radii, masses, restitution, walls, gravity. Without velocities, each
+step's velocity is estimated as the step's displacement over its dt (energies are then
+approximate, and the audit says so).
+
+Every number may be NaN or infinite (an engine that blew up is worth explaining); what
+may not be wrong is the structure: a wrong body count, a step missing or repeated, time
+that does not increase. Each such error names the file, the line and the field.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import PhysdbgError
+
+MAX_RUN_BYTES = 2**31  # 2 GiB: a trajectory larger than this is refused before it is read
+CSV_COLUMNS = ("step", "time", "body", "x", "y", "z")
+CSV_VELOCITY = ("vx", "vy", "vz")
+
+
+class ForeignRunError(PhysdbgError):
+    """A trajectory file that does not fit the format or the scene."""
+
+
+@dataclass
+class ForeignRun:
+    """A trajectory: times (F,) s; positions (F, N, 3) m; velocities (F, N, 3) m/s or None;
+    source: the file; format: "csv" or "jsonl"."""
+
+    times: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray | None
+    source: str
+    format: str
+
+
+def read_run(path: str | Path, bodies: int) -> ForeignRun:
+    """Read a trajectory of ``bodies`` bodies (the scene's count) from a .csv or .jsonl file."""
+    path = Path(path)
+    if not path.is_file():
+        raise ForeignRunError(f"{path}: no such file (a foreign run is a .csv or .jsonl file)")
+    if path.stat().st_size > MAX_RUN_BYTES:
+        raise ForeignRunError(f"{path}: {path.stat().st_size} bytes is more than a run may be "
+                              f"({MAX_RUN_BYTES // 2**30} GiB)")
+    suffix = path.suffix.lower()
+    try:
+        with open(path, encoding="utf-8", newline="") as f:
+            if suffix == ".csv":
+                return _read_csv(f, path, bodies)
+            if suffix in (".jsonl", ".ndjson"):
+                return _read_jsonl(f, path, bodies)
+    except UnicodeDecodeError as err:
+        raise ForeignRunError(f"{path}: not UTF-8 text ({err.reason})") from None
+    raise ForeignRunError(f"{path}: unknown kind of file {suffix or '(no suffix)'}; give a .csv or .jsonl run "
+                          "(docs/foreign-runs.md)")
+
+
+def _number(text: str, where: str, field: str, integer: bool = False):
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        raise ForeignRunError(f"{where}: field '{field}' is {str(text)[:40]!r}, not a number") from None
+    if integer:
+        if not value.is_integer():
+            raise ForeignRunError(f"{where}: field '{field}' is {text!r}; expected a whole number")
+        return int(value)
+    return value
+
+
+def _read_csv(f, path: Path, bodies: int) -> ForeignRun:
+    reader = csv.reader(f)
+    header = next(reader, None)
+    if header is None:
+        raise ForeignRunError(f"{path}: empty file; expected the header {','.join(CSV_COLUMNS)}")
+    header = [h.strip() for h in header]
+    missing = [c for c in CSV_COLUMNS if c not in header]
+    if missing:
+        raise ForeignRunError(f"{path}, line 1: the header lacks {', '.join(missing)}; expected "
+                              f"{','.join(CSV_COLUMNS)}[,{','.join(CSV_VELOCITY)}]")
+    has_v = all(c in header for c in CSV_VELOCITY)
+    col = {name: header.index(name) for name in (*CSV_COLUMNS, *(CSV_VELOCITY if has_v else ()))}
+    times: list[float] = []
+    frames: list[np.ndarray] = []
+    vframes: list[np.ndarray] = []
+    current = -1
+    seen: np.ndarray | None = None
+    for line, row in enumerate(reader, start=2):
+        if not row or all(not cell.strip() for cell in row):
+            continue
+        where = f"{path}, line {line}"
+        if len(row) != len(header):
+            raise ForeignRunError(f"{where}: {len(row)} fields; the header has {len(header)}")
+        step = _number(row[col["step"]], where, "step", integer=True)
+        body = _number(row[col["body"]], where, "body", integer=True)
+        time = _number(row[col["time"]], where, "time")
+        if step != current:
+            if step != current + 1:
+                raise ForeignRunError(f"{where}: field 'step' is {step}; expected {current + 1} (steps count up by "
+                                      "one from 0, all rows of a step together)")
+            _check_complete(seen, path, line - 1, current, bodies)
+            current = step
+            _check_time(times, time, where)
+            times.append(time)
+            frames.append(np.full((bodies, 3), np.nan))
+            vframes.append(np.full((bodies, 3), np.nan))
+            seen = np.zeros(bodies, dtype=bool)
+        elif time != times[-1]:
+            raise ForeignRunError(f"{where}: field 'time' is {time!r}; the other rows of step {step} say {times[-1]!r}")
+        if not 0 <= body < bodies:
+            raise ForeignRunError(f"{where}: field 'body' is {body}; the scene has {_bodies(bodies)} (0..{bodies - 1})")
+        if seen[body]:
+            raise ForeignRunError(f"{where}: body {body} appears twice in step {step}")
+        seen[body] = True
+        frames[-1][body] = [_number(row[col[a]], where, a) for a in "xyz"]
+        if has_v:
+            vframes[-1][body] = [_number(row[col[a]], where, a) for a in CSV_VELOCITY]
+    _check_complete(seen, path, "end", current, bodies)
+    if not frames:
+        raise ForeignRunError(f"{path}: no rows after the header")
+    return ForeignRun(np.array(times), np.array(frames), np.array(vframes) if has_v else None, str(path), "csv")
+
+
+def _read_jsonl(f, path: Path, bodies: int) -> ForeignRun:
+    times, frames, vframes = [], [], []
+    has_v: bool | None = None
+    for line, text in enumerate(f, start=1):
+        if not text.strip():
+            continue
+        where = f"{path}, line {line}"
+        try:
+            record = json.loads(text)
+        except json.JSONDecodeError as err:
+            raise ForeignRunError(f"{where}: not JSON ({err.msg})") from None
+        if not isinstance(record, dict):
+            raise ForeignRunError(f"{where}: expected an object {{\"step\", \"time\", \"positions\"}}")
+        step = _number(record.get("step"), where, "step", integer=True)
+        if step != len(frames):
+            raise ForeignRunError(f"{where}: field 'step' is {step}; expected {len(frames)} (one line per step, "
+                                  "counting up from 0)")
+        time = _number(record.get("time"), where, "time")
+        _check_time(times, time, where)
+        times.append(time)
+        frames.append(_vectors(record.get("positions"), where, "positions", bodies))
+        if has_v is None:
+            has_v = "velocities" in record
+        if has_v != ("velocities" in record):
+            raise ForeignRunError(f"{where}: field 'velocities' is {'missing' if has_v else 'present'} here but "
+                                  f"{'present' if has_v else 'missing'} on the first line; give it on every line or none")
+        if has_v:
+            vframes.append(_vectors(record.get("velocities"), where, "velocities", bodies))
+    if not frames:
+        raise ForeignRunError(f"{path}: no steps in the file")
+    return ForeignRun(np.array(times), np.array(frames), np.array(vframes) if has_v else None, str(path), "jsonl")
+
+
+def _vectors(value, where: str, field: str, bodies: int) -> np.ndarray:
+    if not isinstance(value, list) or len(value) != bodies:
+        got = f"{len(value)} entries" if isinstance(value, list) else type(value).__name__
+        raise ForeignRunError(f"{where}: field '{field}' has {got}; the scene has {_bodies(bodies)}")
+    out = np.empty((bodies, 3))
+    for i, vec in enumerate(value):
+        if not isinstance(vec, list) or len(vec) != 3:
+            raise ForeignRunError(f"{where}: field '{field}' entry {i} is not [x, y, z]")
+        out[i] = [_number(x, where, f"{field}[{i}]") if not isinstance(x, (int, float)) else float(x) for x in vec]
+    return out
+
+
+def _bodies(n: int) -> str:
+    return f"{n} body" if n == 1 else f"{n} bodies"
+
+
+def _check_time(times: list[float], time: float, where: str) -> None:
+    if not math.isfinite(time):
+        raise ForeignRunError(f"{where}: field 'time' is {time}; times must be finite seconds")
+    if not times and time != 0.0:
+        raise ForeignRunError(f"{where}: field 'time' is {time!r}; step 0 is the initial state at time 0")
+    if times and time <= times[-1]:
+        raise ForeignRunError(f"{where}: field 'time' is {time!r}, not after the step before ({times[-1]!r}); "
+                              "time must increase (seconds, not milliseconds or frames?)")
+
+
+def _check_complete(seen, path: Path, line, step: int, bodies: int) -> None:
+    if seen is not None and not seen.all():
+        lost = np.flatnonzero(~seen)
+        raise ForeignRunError(f"{path}, line {line}: step {step} lists {int(seen.sum())} of the scene's "
+                              f"{_bodies(bodies)} (missing: {', '.join(map(str, lost[:5]))}{' ...' if len(lost) > 5 else ''})")
+
+
+def import_run(run: ForeignRun, scene, out: Path) -> int:
+    """Write a foreign run as a physdbg recording (detail state, no view) of ``scene``;
+    returns the frames written. The recording's scene keeps the scene's table and marks
+    the run as foreign, so ``verify`` says it cannot be re-simulated."""
+    from ..engine import state_hash
+    from ..events import StepEnd
+    from .header import RecordingHeader
+    from .mcap_sink import McapRecorder
+
+    st = scene.state
+    if run.positions.shape[1] != st.count:
+        raise ForeignRunError(f"{run.source}: {_bodies(run.positions.shape[1])}; the scene has {st.count}")
+    velocities = run.velocities
+    if velocities is None:  # each step's displacement over its dt; the first step's for step 0
+        dts = np.diff(run.times)[:, None, None]
+        velocities = np.empty_like(run.positions)
+        velocities[1:] = (run.positions[1:] - run.positions[:-1]) / dts if len(dts) else 0.0
+        velocities[0] = velocities[1] if len(run.times) > 1 else st.velocities
+    header = RecordingHeader.from_scene(scene, "state", None)
+    header.positions, header.velocities = run.positions[0].copy(), velocities[0].copy()
+    header.state_hash = state_hash(header.positions, header.velocities)
+    header.meta["foreign"] = {"source": Path(run.source).name, "format": run.format,
+                              "velocities": "given" if run.velocities is not None else "estimated"}
+    gravity = np.asarray(scene.settings.gravity, dtype=float)
+    movable = st.inverse_mass > 0
+    mass = np.where(movable, 1.0 / np.where(movable, st.inverse_mass, 1.0), 0.0)
+    with McapRecorder(out, header, view=False) as recorder:
+        for k in range(1, len(run.times)):
+            x, v = run.positions[k], velocities[k]
+            kinetic = 0.5 * float(np.sum(mass * np.einsum("ij,ij->i", v, v)))
+            potential = -float(np.sum(mass * np.einsum("ij,ij->i", st.gravity_scale[:, None] * gravity[None], x)))
+            momentum = (mass[:, None] * v).sum(axis=0)
+            recorder.on_event(StepEnd(k - 1, float(run.times[k]), float(run.times[k] - run.times[k - 1]), x.copy(),
+                                      v.copy(), kinetic, potential, momentum, {}, _max_overlap(x, st.radius, scene.walls),
+                                      {}, state_hash(x, v)))
+        return recorder.frames
+
+
+def _max_overlap(x: np.ndarray, radius: np.ndarray, walls) -> float:
+    """Deepest sphere–sphere or sphere–wall penetration (m, 0 when none), from positions alone."""
+    finite = np.all(np.isfinite(x), axis=1)
+    x, r = x[finite], radius[finite]
+    deepest = 0.0
+    for normal, offset, two, t in zip(walls.normals, walls.offsets, walls.two_sided, walls.thickness, strict=True):
+        gap = x @ normal - offset
+        depth = r + t / 2 - np.abs(gap) if two else r - gap
+        deepest = max(deepest, float(depth.max(initial=0.0)))
+    block = 128  # pairs in blocks of rows: memory stays small (O(N²) work: fine for the runs people debug)
+    for start in range(0, len(x), block):
+        d = np.linalg.norm(x[start:start + block, None, :] - x[None, :, :], axis=2)
+        reach = r[start:start + block, None] + r[None, :]
+        idx = np.arange(start, min(start + block, len(x)))
+        d[np.arange(len(idx)), idx] = np.inf
+        deepest = max(deepest, float((reach - d).max(initial=0.0)))
+    return deepest
