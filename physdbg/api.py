@@ -587,7 +587,7 @@ def check(scene: Scene | str, overrides: Sequence[str] = ()) -> CheckResult:
 
 # ----------------------------------------------------------------------------- benchmarks
 @dataclass
-class AccuracyResult:
+class BenchResult:
     """What a ``bench_*`` function wrote: files (paths), runs (analysis.accuracy.Run or
     analysis.stability.Cell), seconds."""
 
@@ -599,10 +599,23 @@ class AccuracyResult:
 ACCURACY_FILES = ("accuracy.csv", "accuracy.md", "accuracy.png", "accuracy.svg")
 
 
+def _bench_paths(out_dir: str | Path, names: Sequence[str], chart: bool, force: bool,
+                 extra: Sequence[Path | None] = ()) -> list[Path]:
+    """The files a benchmark will write (its first two, the CSV and the table, without the
+    chart), checked writable; and matplotlib checked before any run, not after."""
+    paths = [Path(out_dir) / name for name in (names if chart else names[:2])]
+    check_writable([*paths, *extra], force)
+    if chart:
+        from .analysis.charts import _pyplot
+
+        _pyplot()
+    return paths
+
+
 def bench_accuracy(out_dir: str | Path = "accuracy", quick: bool = False, force: bool = False, chart: bool = True,
                    rrd_path: str | None = None, problems: Sequence[str] | None = None,
                    on_run: Callable | None = None, command: str = "physdbg bench accuracy",
-                   workers: int | None = None, dask: str | None = None) -> AccuracyResult:
+                   workers: int | None = None, dask: str | None = None) -> BenchResult:
     """Every method on the reference problems (analysis.accuracy): accuracy.csv, accuracy.md
     and (chart) accuracy.png / .svg in out_dir; rrd_path: the same chart for Rerun.
     workers: local processes (None: every core, 1: this process); dask: a scheduler address."""
@@ -611,14 +624,7 @@ def bench_accuracy(out_dir: str | Path = "accuracy", quick: bool = False, force:
     unknown = [p for p in problems or () if p not in accuracy.PROBLEMS]
     if unknown:
         raise PhysdbgError(f"no accuracy problem {unknown[0]!r}; the problems are: {', '.join(accuracy.PROBLEMS)}")
-    out = Path(out_dir)
-    names = ACCURACY_FILES if chart else ACCURACY_FILES[:2]
-    paths = [out / name for name in names]
-    check_writable([*paths, Path(rrd_path) if rrd_path else None], force)
-    if chart:
-        from .analysis.charts import _pyplot
-
-        _pyplot()  # say that matplotlib is missing before the runs, not after
+    paths = _bench_paths(out_dir, ACCURACY_FILES, chart, force, [Path(rrd_path) if rrd_path else None])
     started = time.perf_counter()
     runs = accuracy.run_all(list(problems) if problems else None, quick=quick, on_run=on_run, workers=workers,
                             dask=dask)
@@ -634,7 +640,7 @@ def bench_accuracy(out_dir: str | Path = "accuracy", quick: bool = False, force:
 
         accuracy_rrd(runs, Path(rrd_path))
         paths.append(Path(rrd_path))
-    return AccuracyResult([str(p) for p in paths], runs, time.perf_counter() - started)
+    return BenchResult([str(p) for p in paths], runs, time.perf_counter() - started)
 
 
 STABILITY_FILES = ("stability.csv", "stability.md", "stability-impact.png", "stability-impact.svg",
@@ -643,19 +649,12 @@ STABILITY_FILES = ("stability.csv", "stability.md", "stability-impact.png", "sta
 
 def bench_stability(out_dir: str | Path = "stability", quick: bool = False, force: bool = False, chart: bool = True,
                     on_cell: Callable | None = None, command: str = "physdbg bench stability",
-                    workers: int | None = None, dask: str | None = None) -> AccuracyResult:
+                    workers: int | None = None, dask: str | None = None) -> BenchResult:
     """Where each method breaks (analysis.stability): stability.csv, stability.md and (chart)
     a heatmap per map as PNG and SVG in out_dir. workers, dask: as bench_accuracy."""
     from .analysis import stability
 
-    out = Path(out_dir)
-    names = STABILITY_FILES if chart else STABILITY_FILES[:2]
-    paths = [out / name for name in names]
-    check_writable(paths, force)
-    if chart:
-        from .analysis.charts import _pyplot
-
-        _pyplot()  # say that matplotlib is missing before the runs, not after
+    paths = _bench_paths(out_dir, STABILITY_FILES, chart, force)
     started = time.perf_counter()
     cells = stability.maps(quick=quick, on_cell=on_cell, workers=workers, dask=dask)
     paths[0].write_text(stability.to_csv(cells))
@@ -665,4 +664,4 @@ def bench_stability(out_dir: str | Path = "stability", quick: bool = False, forc
 
         stability_chart(cells, "impact", paths[2:4], f"Impact: a sphere at a thin wall, pass or fail (`{command}`)")
         stability_chart(cells, "stack", paths[4:6], f"Resting stacks for 1 s at dt = 1/60 (`{command}`)")
-    return AccuracyResult([str(p) for p in paths], cells, time.perf_counter() - started)
+    return BenchResult([str(p) for p in paths], cells, time.perf_counter() - started)

@@ -460,6 +460,9 @@ JobsOption = Annotated[Optional[int], typer.Option(
 DaskOption = Annotated[Optional[str], typer.Option(
     "--dask", help="Run the sweep on an existing Dask cluster: its scheduler's address (tcp://host:8786); "
                    "needs pip install 'physdbg[dask]'.")]
+NoChartOption = Annotated[bool, typer.Option("--no-chart", help="Only the CSV and the table (no matplotlib needed).")]
+BenchForceOption = Annotated[bool, typer.Option("--force", help="Overwrite files from an earlier run.")]
+BenchProgressOption = Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")]
 bench_app = typer.Typer(help="Benchmarks users run: methods charted against each other.", no_args_is_help=True)
 app.add_typer(bench_app, name="bench")
 
@@ -472,14 +475,12 @@ def bench_accuracy(
     = False,
     problem: Annotated[Optional[list[str]], typer.Option(
         "--problem", help="Only this problem (repeat for more); default all.")] = None,
-    no_chart: Annotated[bool, typer.Option("--no-chart", help="Only the CSV and the table (no matplotlib needed).")]
-    = False,
+    no_chart: NoChartOption = False,
     rrd: Annotated[Optional[Path], typer.Option("--rrd", help="Also write the chart as a Rerun file.")] = None,
     jobs: JobsOption = None,
     dask: DaskOption = None,
-    force: Annotated[bool, typer.Option("--force", help="Overwrite files from an earlier run.")] = False,
-    progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")]
-    = sys.stderr.isatty(),
+    force: BenchForceOption = False,
+    progress: BenchProgressOption = sys.stderr.isatty(),
 ) -> None:
     """Every integrator × detection × ordering on reference problems with known answers:
     error against the answer and wall time per simulated second, as a table, a CSV and a
@@ -519,13 +520,11 @@ def bench_stability(
     out: Annotated[Path, typer.Option("--out", "-o", help="Folder for stability.csv, .md and the heatmaps.")]
     = Path("stability"),
     quick: Annotated[bool, typer.Option("--quick", help="A coarser grid.")] = False,
-    no_chart: Annotated[bool, typer.Option("--no-chart", help="Only the CSV and the table (no matplotlib needed).")]
-    = False,
+    no_chart: NoChartOption = False,
     jobs: JobsOption = None,
     dask: DaskOption = None,
-    force: Annotated[bool, typer.Option("--force", help="Overwrite files from an earlier run.")] = False,
-    progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")]
-    = sys.stderr.isatty(),
+    force: BenchForceOption = False,
+    progress: BenchProgressOption = sys.stderr.isatty(),
 ) -> None:
     """Where each integrator × detection breaks: pass or fail over (dt, impact speed) at a
     thin wall and over (restitution, height) for resting stacks, each failure named.

@@ -137,7 +137,7 @@ def test_without_matplotlib_the_chart_says_how_to_get_it_and_no_chart_still_work
     done = runner.invoke(app, ["bench", "accuracy", "--quick", "--problem", "resting", "-o", str(tmp_path / "a")])
     assert done.exit_code == 2 and "pip install 'physdbg[charts]'" in done.output and "--no-chart" in done.output
     assert not (tmp_path / "a" / "accuracy.csv").exists()  # refused before any run
-    done = runner.invoke(app, ["bench", "accuracy", "--quick", "--problem", "resting", "--no-chart",
+    done = runner.invoke(app, ["bench", "accuracy", "--quick", "--problem", "resting", "--no-chart", "-j", "2",
                                "-o", str(tmp_path / "a")])
     assert done.exit_code == 0, done.output
     assert (tmp_path / "a" / "accuracy.csv").exists() and not (tmp_path / "a" / "accuracy.png").exists()

@@ -23,6 +23,11 @@ def test_the_student_engine_tunnels_the_thin_wall_and_explain_says_so(tmp_path, 
     done = CliRunner().invoke(app, ["import", str(run), "--scene", "bullet-wall", "-o", str(tmp_path / "s.mcap")])
     assert done.exit_code == 0, done.output
     assert "imported    3 steps of 1 body" in done.output and "velocities given" in done.output
+    again = CliRunner().invoke(app, ["import", str(run), "--scene", "bullet-wall", "-o", str(tmp_path / "s.mcap")])
+    assert again.exit_code == 2 and "already exists; pass --force" in again.output
+    forced = CliRunner().invoke(app, ["import", str(run), "--scene", "bullet-wall", "-o", str(tmp_path / "s.mcap"),
+                                      "--force"])
+    assert forced.exit_code == 0, forced.output
     rec = open_recording(tmp_path / "s.mcap")
     assert np.array_equal(rec.state(2).positions, xs[2]) and rec.meta["foreign"]["format"] == fmt
     report = explain(rec)

@@ -216,6 +216,7 @@ def methods(problem: Problem) -> Iterator[tuple[str, str, str]]:
 # ----------------------------------------------------------------------------- running
 def run_one(problem: Problem, integrator: str, detection: str, ordering: str, dt: float) -> Run:
     """Run one method on a problem at dt: its error and cost."""
+    from ..engine import energies
     from ..scene import scene_from_dict
 
     table = problem.table()
@@ -228,7 +229,7 @@ def run_one(problem: Problem, integrator: str, detection: str, ordering: str, dt
     n = scene.state.count
     times, positions, kinetic = np.empty(steps + 1), np.empty((steps + 1, n, 3)), np.empty(steps + 1)
     times[0], positions[0] = 0.0, scene.state.positions
-    kinetic[0] = _kinetic(scene.state.velocities, scene.state.inverse_mass)
+    kinetic[0] = energies(scene.state, np.asarray(scene.settings.gravity))[0]
     failure = ""
     elapsed, overlap = 0.0, 0.0
     for k in range(1, steps + 1):
@@ -241,8 +242,7 @@ def run_one(problem: Problem, integrator: str, detection: str, ordering: str, dt
             break
         elapsed += time.perf_counter() - started
         overlap = max(overlap, stats.max_overlap)
-        times[k], positions[k] = world.time, world.state.positions
-        kinetic[k] = _kinetic(world.state.velocities, world.state.inverse_mass)
+        times[k], positions[k], kinetic[k] = world.time, world.state.positions, stats.kinetic
         if not np.all(np.isfinite(positions[k])):
             failure = f"blew up at step {k}"
             break
@@ -254,11 +254,6 @@ def run_one(problem: Problem, integrator: str, detection: str, ordering: str, dt
         failure = "left spheres overlapping"
     return Run(problem.name, integrator, detection, ordering, dt, steps, error, problem.unit,
                1e3 * elapsed / (steps * dt), failure, overlap)
-
-
-def _kinetic(v: np.ndarray, inverse_mass: np.ndarray) -> float:
-    movable = inverse_mass > 0
-    return float(0.5 * np.sum(np.sum(v[movable] ** 2, axis=1) / inverse_mass[movable]))
 
 
 def run_named(problem: str, integrator: str, detection: str, ordering: str, dt: float) -> Run:

@@ -119,6 +119,7 @@ class Auditor:
         self._warnings: list[EngineWarning] = []
         self._in_overlap = False  # the step before ended overlapping: the same overlap goes on
         self._saw_contacts = False
+        self._energy: float | None = None  # kinetic + potential after the last step (J)
 
     # ------------------------------------------------------------------ observer
     def on_event(self, event) -> None:
@@ -253,12 +254,10 @@ class Auditor:
         """A run of another engine has no contact records: a step that gains more mechanical
         energy than FOREIGN_ENERGY_GAIN of what it had is a contact that added energy (an
         integrator's drift in flight is orders of magnitude smaller per step)."""
-        before, after = getattr(self, "_energy", None), end.kinetic + end.potential
+        before, after = self._energy, end.kinetic + end.potential
         if before is None or not np.isfinite(before) or not np.isfinite(after):
             return
-        scale = max(abs(before), 0.5 * float(np.sum(self.mass[np.isfinite(self.mass)] *
-                                                     np.einsum("ij,ij->i", end.velocities, end.velocities)
-                                                     [np.isfinite(self.mass)])), 1e-12)
+        scale = max(abs(before), end.kinetic, 1e-12)
         if after - before > FOREIGN_ENERGY_GAIN * scale:
             moved = np.linalg.norm(end.velocities - self._v, axis=1)
             who = [int(i) for i in np.argsort(-moved)[:2] if moved[i] > 0]

@@ -106,8 +106,9 @@ def equation_of_state(rec, skip: float = 0.5) -> EquationOfState:
         side = box[1] - box[0]
         volume = float(np.prod(side))
         area = 2 * float(side[0] * side[1] + side[1] * side[2] + side[0] * side[2])
-        wall_blocks = np.array([stats["wall_impulse"][b].sum() / (area * dt[b].sum()) * volume
-                                / (n * 2 * (kinetic[b] * dt[b]).sum() / (3 * n * dt[b].sum())) for b in blocks])
+        # P = wall impulses / (area × time); N kT = 2/3 of the time-averaged kinetic energy
+        wall_blocks = np.array([(stats["wall_impulse"][b].sum() / (area * dt[b].sum())) * volume
+                                / ((2 / 3) * (kinetic[b] * dt[b]).sum() / dt[b].sum()) for b in blocks])
         z_wall, z_wall_error = mean_and_error(wall_blocks)
         phi = float((4 / 3) * math.pi * np.sum(header.radius[movable] ** 3) / volume)
         if np.ptp(header.radius) == 0:

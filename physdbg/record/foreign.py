@@ -207,7 +207,7 @@ def import_run(run: ForeignRun, scene, out: Path) -> int:
     """Write a foreign run as a physdbg recording (detail state, no view) of ``scene``;
     returns the frames written. The recording's scene keeps the scene's table and marks
     the run as foreign, so ``verify`` says it cannot be re-simulated."""
-    from ..engine import state_hash
+    from ..engine import energies, state_hash
     from ..events import StepEnd
     from .header import RecordingHeader
     from .mcap_sink import McapRecorder
@@ -227,34 +227,27 @@ def import_run(run: ForeignRun, scene, out: Path) -> int:
     header.meta["foreign"] = {"source": Path(run.source).name, "format": run.format,
                               "velocities": "given" if run.velocities is not None else "estimated"}
     gravity = np.asarray(scene.settings.gravity, dtype=float)
-    movable = st.inverse_mass > 0
-    mass = np.where(movable, 1.0 / np.where(movable, st.inverse_mass, 1.0), 0.0)
+    state = st.copy()  # the scene's bodies, at the run's positions and velocities step by step
     with McapRecorder(out, header, view=False) as recorder:
         for k in range(1, len(run.times)):
-            x, v = run.positions[k], velocities[k]
-            kinetic = 0.5 * float(np.sum(mass * np.einsum("ij,ij->i", v, v)))
-            potential = -float(np.sum(mass * np.einsum("ij,ij->i", st.gravity_scale[:, None] * gravity[None], x)))
-            momentum = (mass[:, None] * v).sum(axis=0)
-            recorder.on_event(StepEnd(k - 1, float(run.times[k]), float(run.times[k] - run.times[k - 1]), x.copy(),
-                                      v.copy(), kinetic, potential, momentum, {}, _max_overlap(x, st.radius, scene.walls),
-                                      {}, state_hash(x, v)))
+            state.positions, state.velocities = run.positions[k].copy(), velocities[k].copy()
+            kinetic, potential, momentum = energies(state, gravity)
+            recorder.on_event(StepEnd(k - 1, float(run.times[k]), float(run.times[k] - run.times[k - 1]),
+                                      state.positions, state.velocities, kinetic, potential, momentum, {},
+                                      _max_overlap(state.positions, st.radius, scene.walls), {},
+                                      state_hash(state.positions, state.velocities)))
         return recorder.frames
 
 
 def _max_overlap(x: np.ndarray, radius: np.ndarray, walls) -> float:
-    """Deepest sphere–sphere or sphere–wall penetration (m, 0 when none), from positions alone."""
+    """Deepest sphere–sphere or sphere–wall penetration (m, 0 when none), from positions
+    alone: the engine's own measure (timeline.max_overlap) over the grid's candidate pairs;
+    a sphere past a thin wall's middle went through it (the audit's tunnelling), not into it."""
+    from ..engine import make_broad_phase
+    from ..engine.timeline import max_overlap
+
     finite = np.all(np.isfinite(x), axis=1)
-    x, r = x[finite], radius[finite]
-    deepest = 0.0
-    for normal, offset, two, t in zip(walls.normals, walls.offsets, walls.two_sided, walls.thickness, strict=True):
-        gap = x @ normal - offset
-        depth = r + t / 2 - np.abs(gap) if two else r - gap
-        deepest = max(deepest, float(depth.max(initial=0.0)))
-    block = 128  # pairs in blocks of rows: memory stays small (O(N²) work: fine for the runs people debug)
-    for start in range(0, len(x), block):
-        d = np.linalg.norm(x[start:start + block, None, :] - x[None, :, :], axis=2)
-        reach = r[start:start + block, None] + r[None, :]
-        idx = np.arange(start, min(start + block, len(x)))
-        d[np.arange(len(idx)), idx] = np.inf
-        deepest = max(deepest, float((reach - d).max(initial=0.0)))
-    return deepest
+    x, r = np.ascontiguousarray(x[finite]), np.ascontiguousarray(radius[finite])
+    pairs = make_broad_phase("grid").pairs(x - r[:, None], x + r[:, None]) if len(x) > 1 else np.zeros((0, 2), np.int64)
+    return float(max_overlap(x, r, pairs, np.ascontiguousarray(walls.normals), np.ascontiguousarray(walls.offsets),
+                             np.ascontiguousarray(walls.thickness * 0.5), np.ascontiguousarray(walls.two_sided), True))

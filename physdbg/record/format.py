@@ -19,7 +19,6 @@ every message about the k-th step has ``step`` k and frame k's ``log_time``. The
 
 from __future__ import annotations
 
-import json
 
 import numpy as np
 
@@ -167,13 +166,14 @@ JSON_SCHEMAS[TOPIC_WALLS] = ("physdbg.Walls", {"type": "object", "properties": {
 SCENE_SCHEMA_NAME = "physdbg.Scene"  # its JSON Schema is json_schema_of(the message)
 
 
-def without_nulls(value):
-    """``value`` with every None (and non-finite float) dict entry left out, recursively."""
+def foxglove_json(value):
+    """``value`` as a JSON message for Foxglove: every None (and non-finite float) dict
+    entry left out, recursively (its schema subset has no null)."""
     if isinstance(value, dict):
-        return {k: without_nulls(v) for k, v in value.items()
+        return {k: foxglove_json(v) for k, v in value.items()
                 if v is not None and not (isinstance(v, float) and not np.isfinite(v))}
     if isinstance(value, list):
-        return [without_nulls(v) for v in value]
+        return [foxglove_json(v) for v in value]
     return value
 
 
@@ -181,9 +181,8 @@ def json_schema_of(value) -> dict:
     """A JSON Schema with ``properties`` for every field of ``value`` (a JSON object with
     no nulls), in the subset Foxglove parses: objects, arrays of one item type, strings,
     numbers (every number is "number": Foxglove reads "integer" as uint32), booleans.
-    Lists of objects get the union of their items' properties; a list of lists (which
-    Foxglove cannot show) is described as an array of strings and written as such by
-    ``foxglove_json``."""
+    Lists of objects get the union of their items' properties. Foxglove cannot show a list
+    of lists, so none is written (the scene's table, which may hold them, is a string)."""
     if isinstance(value, bool):
         return {"type": "boolean"}
     if isinstance(value, (int, float)):
@@ -193,29 +192,16 @@ def json_schema_of(value) -> dict:
     if isinstance(value, dict):
         return {"type": "object", "properties": {k: json_schema_of(v) for k, v in value.items()}}
     if isinstance(value, list):
-        if any(isinstance(v, list) for v in value):
-            return {"type": "array", "items": {"type": "string"}}
         objects = [v for v in value if isinstance(v, dict)]
         if objects:
             merged: dict = {}
             for item in objects:
                 merged.update(item)
             return {"type": "array", "items": json_schema_of(merged)}
+        if any(isinstance(v, list) for v in value):
+            raise TypeError("a list of lists has no schema Foxglove can read")
         return {"type": "array", "items": json_schema_of(value[0]) if value else {"type": "string"}}
     raise TypeError(f"no JSON Schema for {type(value).__name__}")
-
-
-def foxglove_json(value):
-    """``value`` as json_schema_of describes it: nulls left out, a list of lists written as
-    a list of JSON strings (e.g. a scene table's grid of positions)."""
-    value = without_nulls(value)
-    if isinstance(value, dict):
-        return {k: foxglove_json(v) for k, v in value.items()}
-    if isinstance(value, list):
-        if any(isinstance(v, list) for v in value):
-            return [json.dumps(v) for v in value]
-        return [foxglove_json(v) for v in value]
-    return value
 
 
 def dtype_of(fields) -> np.dtype:
