@@ -50,3 +50,6 @@ def test_an_unreachable_scheduler_is_a_clear_error(tmp_path):
                                     "-o", str(tmp_path)])
     assert done.exit_code == 2 and "cannot reach the Dask scheduler at tcp://127.0.0.1:9" in done.output
     assert "Traceback" not in done.output
+    done = CliRunner().invoke(app, ["bench", "stability", "--quick", "--no-chart", "--dask", "notanaddress",
+                                    "-o", str(tmp_path)])
+    assert done.exit_code == 2 and "cannot reach the Dask scheduler at notanaddress" in done.output

@@ -69,7 +69,7 @@ def _on_dask(call, jobs, address: str, on_done) -> list:
         raise DaskMissing("--dask needs dask.distributed: pip install 'physdbg[dask]'") from None
     try:
         client = Client(address, timeout="5s")
-    except (OSError, TimeoutError) as err:
+    except (OSError, TimeoutError, ValueError) as err:  # ValueError: not an address (no port, bad scheme)
         raise DaskMissing(f"cannot reach the Dask scheduler at {address} ({err})") from None
     try:
         client.run(_warm)  # every worker loads the kernels before its first job
