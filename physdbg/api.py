@@ -480,6 +480,7 @@ def info(path: str | Path) -> dict:
             "channels": [{"topic": c.topic, "encoding": c.message_encoding, "schema": c.schema_name,
                           "messages": c.messages} for c in rec.channels()],
             "equation_of_state": _equation_of_state(rec),
+            "foreign": meta.get("foreign"),
         }
 
 
@@ -551,6 +552,97 @@ def import_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str
     frames = write_run(run, scene, out)
     return ImportResult(str(out), frames, scene.state.count, "given" if run.velocities is not None else "estimated",
                         out.stat().st_size)
+
+
+@dataclass
+class CheckRunResult:
+    """What ``check_run`` did: report (analysis.departure.CheckRunReport); run and
+    reference: the two recordings it compared (kept only when ``keep`` named a folder)."""
+
+    report: object
+    run: str | None
+    reference: str | None
+    velocities: str
+
+
+def check_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str] = (), atol: float | None = None,
+              rtol: float | None = None, keep: str | Path | None = None, force: bool = False,
+              on_status: Callable[[str], None] | None = None) -> CheckRunResult:
+    """Record physdbg's exact run of ``scene`` with the foreign run's own time steps and
+    say where the foreign run (a .csv, .jsonl or .mcap trajectory) departs from it and why
+    (analysis.departure). keep: a folder to keep both recordings in (run.mcap and
+    reference.mcap, for replay, diff and overlay); otherwise they are temporary."""
+    import tempfile
+
+    import numpy as np
+
+    from .analysis.departure import compare
+    from .record.foreign import import_run as write_run
+    from .record.foreign import read_run
+
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene, overrides)
+    run = read_run(run_path, scene.state.count)
+    if len(run.times) < 2:
+        raise PhysdbgError(f"{run_path}: the run has only its initial state; there is no step to check")
+    with tempfile.TemporaryDirectory(prefix="physdbg-check-run-") as scratch:
+        folder = Path(keep) if keep is not None else Path(scratch)
+        if keep is not None:
+            if folder.exists() and not folder.is_dir():
+                raise PhysdbgError(f"{folder}: exists and is not a folder")
+            folder.mkdir(parents=True, exist_ok=True)
+        run_out, reference_out = folder / "run.mcap", folder / "reference.mcap"
+        check_writable([run_out, reference_out], force)
+        if on_status is not None:
+            on_status("importing")
+        write_run(run, scene, run_out)
+        dts = np.diff(run.times)
+        if scene.dt is not None and np.all(np.abs(dts - scene.dt) <= 1e-9 * scene.dt):
+            # the scene's steps, summed up in the run's time column: take the scene's dt itself,
+            # as the differences of the sums are a bit off it and a chaotic scene grows that
+            dts = np.full(len(dts), scene.dt)
+        record(scene, mcap_path=str(reference_out), rrd=False, detail="contacts", force=True, dts=dts.tolist(),
+               view=False, on_status=on_status)
+        if on_status is not None:
+            on_status("comparing")
+        report = compare(run_out, reference_out, atol, rtol)
+        report.run = str(run_path)
+        kept = keep is not None
+        return CheckRunResult(report, str(run_out) if kept else None, str(reference_out) if kept else None,
+                              "given" if run.velocities is not None else "estimated")
+
+
+@dataclass
+class PeerResult:
+    """What ``record_peer`` wrote: mcap (path), peer, frames (steps + 1), bodies, notes
+    (what the translation set), seconds (the peer's wall time)."""
+
+    mcap: str
+    peer: str
+    frames: int
+    bodies: int
+    notes: list[str]
+    seconds: float
+
+
+def record_peer(peer: str, scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | Path | None = None,
+                force: bool = False) -> PeerResult:
+    """Run ``scene`` in a peer engine (pybullet or mujoco, optional extras) from the same
+    initial state and write it as a foreign-run recording (see physdbg.peers)."""
+    import time as clock
+
+    from .peers import run_peer
+    from .record.foreign import import_run as write_run
+
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene, overrides)
+    out = Path(mcap_path) if mcap_path else Path(f"{scene.name}-{peer}.mcap")
+    check_writable([out], force)
+    started = clock.perf_counter()
+    run, notes = run_peer(peer, scene)
+    seconds = clock.perf_counter() - started
+    frames = write_run(run, scene, out, notes=notes)
+    return PeerResult(str(out), peer, frames, scene.state.count, notes, seconds)
 
 
 # ----------------------------------------------------------------------------- advice

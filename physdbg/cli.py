@@ -405,6 +405,71 @@ def import_(
         typer.echo(f"then try    {me} explain {result.mcap}   |   {me} replay {result.mcap} --spawn")
 
 
+@app.command("check-run")
+def check_run(
+    run: Annotated[Path, typer.Argument(help="The other engine's run: a .csv, .jsonl or .mcap trajectory "
+                                              "(docs/foreign-runs.md).")],
+    scene: Annotated[str, typer.Option("--scene", help="The scene it ran: a built-in name or a .toml file.")],
+    set_: SetOption = None,
+    atol: Annotated[Optional[float], typer.Option(
+        "--atol", min=0.0, help="A body departs when its position (m) or velocity (m/s) is off by more than "
+                                "atol + rtol·|physdbg's| (default 1e-6).")] = None,
+    rtol: Annotated[Optional[float], typer.Option("--rtol", min=0.0, help="Relative tolerance (default 1e-6).")]
+    = None,
+    keep: Annotated[Optional[Path], typer.Option(
+        "--keep", help="Keep both recordings in this folder (run.mcap and reference.mcap) for replay, diff and "
+                       "overlay.")] = None,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite recordings already in the --keep folder.")]
+    = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the report as JSON.")] = False,
+    markdown: Annotated[bool, typer.Option("--markdown", help="Print the report as Markdown.")] = False,
+    output_format: OutputFormat = "text",
+) -> None:
+    """Run physdbg's exact version of the scene with the run's own time steps and say where
+    the run departs and why: tunnelling, a bounce at the wrong time, energy at a contact,
+    contacts out of order, the integrator. Exit 0 same within tolerance, 1 departs, 2 error.
+
+    Example: physdbg check-run docs/examples/student-bounce.csv --scene bounce
+    """
+    with _user_errors():
+        from . import api
+
+        result = api.check_run(run, scene, set_ or [], atol=atol, rtol=rtol, keep=keep, force=force)
+        typer.echo(_render(result.report, "check_run", output_format, as_json, markdown))
+        if result.run and not (as_json or markdown or output_format != "text"):
+            me = _command("physdbg")
+            typer.echo(f"kept       {result.run}, {result.reference}")
+            typer.echo(f"then try   {me} diff {result.run} {result.reference} --rrd both.rrd   |   {me} replay {result.run} --spawn")
+        raise typer.Exit(result.report.exit_code)
+
+
+@app.command("record-peer")
+def record_peer(
+    peer: Annotated[str, typer.Argument(help="The peer engine: pybullet or mujoco (pip install 'physdbg[peers]').")],
+    scene: Annotated[str, typer.Argument(help="Built-in scene name or a .toml file.")],
+    set_: SetOption = None,
+    output: Annotated[Optional[Path], typer.Option(
+        "--output", "-o", help="The recording to write (default: SCENE-PEER.mcap).")] = None,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing recording.")] = False,
+) -> None:
+    """Run a scene in pybullet or MuJoCo from the same initial state and record it as a
+    foreign run, to check-run, diff, explain and replay against physdbg's.
+
+    Example: physdbg record-peer pybullet bounce -o bounce-pybullet.mcap
+    """
+    with _user_errors():
+        from .api import record_peer as run_peer
+
+        result = run_peer(peer, scene, set_ or [], output, force)
+        me = _command("physdbg")
+        bodies = f"{result.bodies} body" if result.bodies == 1 else f"{result.bodies} bodies"
+        typer.echo(f"ran         {result.frames - 1} steps of {bodies} in {peer} ({result.seconds:.3g} s)")
+        for note in result.notes:
+            typer.echo(f"how         {note}")
+        typer.echo(f"mcap        {result.mcap}")
+        typer.echo(f"then try    {me} check-run {result.mcap} --scene {scene}   |   {me} replay {result.mcap} --spawn")
+
+
 @app.command()
 def check(
     scene: Annotated[str, typer.Argument(help="Built-in scene name or a .toml file.")],
@@ -585,6 +650,9 @@ def info(
             if data["bytes_per_particle_step"] else "size        -",
             f"final hash  {data['final_hash']}",
             f"written by  physdbg {data['physdbg_version']}, format {data['format_version']}",
+            *([f"foreign     another engine's run, from {data['foreign']['source']} ({data['foreign']['format']}, "
+               f"velocities {data['foreign']['velocities']})"] if data.get("foreign") else []),
+            *[f"how         {note}" for note in (data.get("foreign") or {}).get("notes", [])],
             *_eos_lines(data["equation_of_state"]),
             "channels",
         ]

@@ -51,7 +51,9 @@ class SettingDifference:
 class Cause:
     """One reason the runs part. kind: settings | engine-version | engine-limits |
     non-finite | tunnelling | collision-order | missed-contact | contact-outcome |
-    method-drift | outside-change | length; text: the sentence; evidence: its numbers."""
+    method-drift | outside-change | length; where one run is another engine's, the kinds of
+    analysis.departure (bounce-time, contact-energy, extra-contact, drift, integrator,
+    foreign); text: the sentence; evidence: its numbers."""
 
     kind: str
     text: str
@@ -183,11 +185,39 @@ def diff(a, b, atol: float | None = None, rtol: float | None = None,
     ra = a if isinstance(a, Recording) else open_recording(a)
     rb = b if isinstance(b, Recording) else open_recording(b)
     try:
-        return _Differ(ra, rb, atol, rtol).run()
+        report = _Differ(ra, rb, atol, rtol).run()
+        foreign = [label for label, rec in (("A", ra), ("B", rb)) if rec.meta.get("foreign")]
+        if len(foreign) == 1 and not report.equivalent:
+            _explain_foreign(report, ra, rb, foreign[0], atol, rtol)
+        return report
     finally:
         for rec, given in ((ra, a), (rb, b)):
             if rec is not given:
                 rec.close()
+
+
+def _explain_foreign(report: DiffReport, ra, rb, label: str, atol, rtol) -> None:
+    """One run is another engine's: say why it departs as check-run does (analysis.departure),
+    step by step from its own states, instead of comparing contact records it does not have."""
+    from .departure import CheckRunError, compare
+
+    foreign, reference = (ra, rb) if label == "A" else (rb, ra)
+    try:
+        found = compare(foreign, reference, atol or None, rtol or None)
+    except CheckRunError as err:
+        report.causes.append(Cause("foreign", f"run {label} is another engine's; it could not be judged step by "
+                                              f"step ({err})"))
+        return
+    other = "B" if label == "A" else "A"
+    causes = [c for c in report.causes if c.kind in ("settings", "engine-version", "length")]
+    for d in found.departures:
+        causes.append(Cause(d.kind, f"step {d.step}: in run {label} (another engine's), {d.text}. What to do: "
+                                    f"{d.advice}", {"departure": asdict(d)}))
+    if found.integrator is not None:
+        causes.append(Cause("integrator", f"run {label}: {found.integrator['sentence']}", found.integrator))
+    report.causes = causes
+    report.headline = found.headline.replace("the run departs from physdbg's",
+                                             f"run {label} (another engine's) departs from run {other}")
 
 
 class _Differ:

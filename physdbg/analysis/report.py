@@ -10,6 +10,7 @@ import json
 import math
 
 from .audit import AuditReport
+from .departure import CheckRunReport
 from .diff import DiffReport
 
 
@@ -125,6 +126,60 @@ def explain_markdown(r: AuditReport) -> str:
         lines += ["| kind | count |", "|---|---|"] + [f"| {k} | {v} |" for k, v in r.counts.items()] + [""]
         lines += [f"- **step {f.step}** *{f.kind}*: {f.message}" + (f" — {f.advice}" if f.advice else "")
                   for f in r.findings]
+    lines += [f"> {n}" for n in r.notes]
+    return "\n".join(lines) + "\n"
+
+
+def check_run_json(report: CheckRunReport) -> str:
+    return json.dumps(_clean(report.as_dict()), indent=2, default=_plain)
+
+
+def _first(r: CheckRunReport) -> str:
+    f = r.first
+    return (f"step {f.step} (t = {f.time:.6g} s), sphere {f.body}: position off by {f.position:.3g} m, velocity by "
+            f"{f.velocity:.3g} m/s; {f.bodies} of {r.bodies} bod{'y' if r.bodies == 1 else 'ies'} beyond the "
+            f"tolerance; cause: {f.cause}")
+
+
+def _more(more: int) -> str:
+    return f" ({more} more like it later)" if more else ""
+
+
+def check_run_text(r: CheckRunReport) -> str:
+    lines = [f"run        {r.run}  ({r.scene}, {r.steps} steps of {r.bodies} bod{'y' if r.bodies == 1 else 'ies'}, "
+             f"velocities {r.velocities})",
+             f"against    physdbg's exact run with the same steps ({r.reference_contacts} contact"
+             f"{'' if r.reference_contacts == 1 else 's'})",
+             f"result     {'DEPARTS' if r.first else 'SAME'}: {r.headline}",
+             f"tolerance  atol {r.atol:g}, rtol {r.rtol:g} (m, m/s)"]
+    if r.first is not None:
+        lines.append("first      " + _first(r))
+    if r.integrator is not None:
+        lines.append("integrator " + r.integrator["sentence"])
+    if r.departures:
+        lines.append("departures, in step order:")
+        for d in r.departures:
+            lines.append(f"  - step {d.step} [{d.kind}] {d.text}{_more(d.more)}")
+            lines.append(f"      what to do: {d.advice}")
+    lines.extend(f"note       {n}" for n in r.notes)
+    return "\n".join(lines)
+
+
+def check_run_markdown(r: CheckRunReport) -> str:
+    icon = "✅" if r.first is None else "❌"
+    lines = [f"### {icon} physdbg check-run: {'same as physdbg' if r.first is None else 'departs'}", "",
+             f"**{r.headline}**", "",
+             f"`{r.run}` ({r.scene}, {r.steps} steps, velocities {r.velocities}) against physdbg's exact run with "
+             f"the same steps; tolerance atol {r.atol:g}, rtol {r.rtol:g}.", ""]
+    if r.first is not None:
+        lines += [f"- **first departure**: {_first(r)}"]
+    if r.integrator is not None:
+        lines += [f"- **integrator**: {r.integrator['sentence']}"]
+    lines.append("")
+    if r.departures:
+        lines += ["| step | kind | what happened | what to do |", "|---|---|---|---|"]
+        lines += [f"| {d.step} | {d.kind} | {d.text}{_more(d.more)} | {d.advice} |" for d in r.departures]
+        lines.append("")
     lines += [f"> {n}" for n in r.notes]
     return "\n".join(lines) + "\n"
 

@@ -7,6 +7,8 @@ The format (docs/foreign-runs.md) is what any language writes easily:
   lists every body 0..N-1 once.
 * **JSON Lines**, one object per step: ``{"step": k, "time": t, "positions": [[x, y, z],
   ...], "velocities": [[vx, vy, vz], ...]}`` (velocities optional).
+* **MCAP**: the same objects as JSON messages on the channel ``/foreign/frames`` (schema
+  ``physdbg.ForeignFrame``, FOREIGN_FRAME_SCHEMA), or a physdbg recording (its states).
 
 Units: metres, seconds, metres per second. The scene (a physdbg TOML scene) says what
 the bodies are: radii, masses, restitution, walls, gravity. Without velocities, each
@@ -35,6 +37,24 @@ CSV_COLUMNS = ("step", "time", "body", "x", "y", "z")
 CSV_VELOCITY = ("vx", "vy", "vz")
 
 
+FOREIGN_TOPIC = "/foreign/frames"  # an MCAP run: one JSON message per step on this channel
+FOREIGN_SCHEMA_NAME = "physdbg.ForeignFrame"
+FOREIGN_FRAME_SCHEMA = {
+    "title": FOREIGN_SCHEMA_NAME,
+    "description": "One step of a run of another engine: the state after the step (step 0: the initial state)",
+    "type": "object",
+    "properties": {
+        "step": {"type": "integer", "description": "0 for the initial state, then 1, 2, ... in order"},
+        "time": {"type": "number", "description": "simulated time, s (0 at step 0, increasing)"},
+        "positions": {"type": "array", "description": "each body's centre [x, y, z], m, in the scene's order",
+                      "items": {"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3}},
+        "velocities": {"type": "array", "description": "optional: each body's velocity [vx, vy, vz], m/s",
+                       "items": {"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3}},
+    },
+    "required": ["step", "time", "positions"],
+}
+
+
 class ForeignRunError(PhysdbgError):
     """A trajectory file that does not fit the format or the scene."""
 
@@ -42,7 +62,7 @@ class ForeignRunError(PhysdbgError):
 @dataclass
 class ForeignRun:
     """A trajectory: times (F,) s; positions (F, N, 3) m; velocities (F, N, 3) m/s or None;
-    source: the file; format: "csv" or "jsonl"."""
+    source: the file; format: "csv", "jsonl", "mcap" or "physdbg" (a recording's states)."""
 
     times: np.ndarray
     positions: np.ndarray
@@ -52,14 +72,16 @@ class ForeignRun:
 
 
 def read_run(path: str | Path, bodies: int) -> ForeignRun:
-    """Read a trajectory of ``bodies`` bodies (the scene's count) from a .csv or .jsonl file."""
+    """Read a trajectory of ``bodies`` bodies (the scene's count) from a .csv, .jsonl or .mcap file."""
     path = Path(path)
     if not path.is_file():
-        raise ForeignRunError(f"{path}: no such file (a foreign run is a .csv or .jsonl file)")
+        raise ForeignRunError(f"{path}: no such file (a foreign run is a .csv, .jsonl or .mcap file)")
     if path.stat().st_size > MAX_RUN_BYTES:
         raise ForeignRunError(f"{path}: {path.stat().st_size} bytes is more than a run may be "
                               f"({MAX_RUN_BYTES // 2**30} GiB)")
     suffix = path.suffix.lower()
+    if suffix == ".mcap":
+        return _read_mcap(path, bodies)
     try:
         with open(path, encoding="utf-8", newline="") as f:
             if suffix == ".csv":
@@ -68,8 +90,8 @@ def read_run(path: str | Path, bodies: int) -> ForeignRun:
                 return _read_jsonl(f, path, bodies)
     except UnicodeDecodeError as err:
         raise ForeignRunError(f"{path}: not UTF-8 text ({err.reason})") from None
-    raise ForeignRunError(f"{path}: unknown kind of file {suffix or '(no suffix)'}; give a .csv or .jsonl run "
-                          "(docs/foreign-runs.md)")
+    raise ForeignRunError(f"{path}: unknown kind of file {suffix or '(no suffix)'}; give a .csv, .jsonl or .mcap "
+                          "run (docs/foreign-runs.md)")
 
 
 def _number(text: str, where: str, field: str, integer: bool = False):
@@ -137,37 +159,102 @@ def _read_csv(f, path: Path, bodies: int) -> ForeignRun:
     return ForeignRun(np.array(times), np.array(frames), np.array(vframes) if has_v else None, str(path), "csv")
 
 
-def _read_jsonl(f, path: Path, bodies: int) -> ForeignRun:
-    times, frames, vframes = [], [], []
-    has_v: bool | None = None
-    for line, text in enumerate(f, start=1):
-        if not text.strip():
-            continue
-        where = f"{path}, line {line}"
+class _Frames:
+    """Frames as JSON objects {"step", "time", "positions", "velocities"?}, one at a time
+    (a JSON Lines line or an MCAP message), checked as they come."""
+
+    def __init__(self, path: Path, bodies: int, unit: str):
+        self.path, self.bodies, self.unit = path, bodies, unit
+        self.times: list[float] = []
+        self.frames: list[np.ndarray] = []
+        self.vframes: list[np.ndarray] = []
+        self.has_v: bool | None = None
+
+    def add(self, text: str | bytes, where: str) -> None:
         try:
             record = json.loads(text)
-        except json.JSONDecodeError as err:
-            raise ForeignRunError(f"{where}: not JSON ({err.msg})") from None
+        except (json.JSONDecodeError, UnicodeDecodeError) as err:
+            raise ForeignRunError(f"{where}: not JSON ({getattr(err, 'msg', None) or err})") from None
         if not isinstance(record, dict):
             raise ForeignRunError(f"{where}: expected an object {{\"step\", \"time\", \"positions\"}}")
         step = _number(record.get("step"), where, "step", integer=True)
-        if step != len(frames):
-            raise ForeignRunError(f"{where}: field 'step' is {step}; expected {len(frames)} (one line per step, "
-                                  "counting up from 0)")
+        if step != len(self.frames):
+            raise ForeignRunError(f"{where}: field 'step' is {step}; expected {len(self.frames)} (one {self.unit} "
+                                  f"per step, counting up from 0)")
         time = _number(record.get("time"), where, "time")
-        _check_time(times, time, where)
-        times.append(time)
-        frames.append(_vectors(record.get("positions"), where, "positions", bodies))
-        if has_v is None:
-            has_v = "velocities" in record
-        if has_v != ("velocities" in record):
-            raise ForeignRunError(f"{where}: field 'velocities' is {'missing' if has_v else 'present'} here but "
-                                  f"{'present' if has_v else 'missing'} on the first line; give it on every line or none")
-        if has_v:
-            vframes.append(_vectors(record.get("velocities"), where, "velocities", bodies))
-    if not frames:
-        raise ForeignRunError(f"{path}: no steps in the file")
-    return ForeignRun(np.array(times), np.array(frames), np.array(vframes) if has_v else None, str(path), "jsonl")
+        _check_time(self.times, time, where)
+        self.times.append(time)
+        self.frames.append(_vectors(record.get("positions"), where, "positions", self.bodies))
+        if self.has_v is None:
+            self.has_v = "velocities" in record
+        if self.has_v != ("velocities" in record):
+            raise ForeignRunError(f"{where}: field 'velocities' is {'missing' if self.has_v else 'present'} here but "
+                                  f"{'present' if self.has_v else 'missing'} in the first {self.unit}; give it in "
+                                  f"every {self.unit} or none")
+        if self.has_v:
+            self.vframes.append(_vectors(record.get("velocities"), where, "velocities", self.bodies))
+
+    def run(self, fmt: str) -> ForeignRun:
+        if not self.frames:
+            raise ForeignRunError(f"{self.path}: no steps in the file")
+        return ForeignRun(np.array(self.times), np.array(self.frames),
+                          np.array(self.vframes) if self.has_v else None, str(self.path), fmt)
+
+
+def _read_jsonl(f, path: Path, bodies: int) -> ForeignRun:
+    frames = _Frames(path, bodies, "line")
+    for line, text in enumerate(f, start=1):
+        if text.strip():
+            frames.add(text, f"{path}, line {line}")
+    return frames.run("jsonl")
+
+
+def _read_mcap(path: Path, bodies: int) -> ForeignRun:
+    """An MCAP file with the channel FOREIGN_TOPIC (JSON messages, the JSON Lines object),
+    or a physdbg recording (its states are the run)."""
+    import struct
+
+    from mcap.exceptions import McapError
+    from mcap.stream_reader import StreamReader
+    from mcap.records import Channel, Message
+
+    frames = _Frames(path, bodies, "message")
+    channels: dict[int, Channel] = {}
+    physdbg = False
+    count = 0
+    try:
+        with open(path, "rb") as f:
+            for record in StreamReader(f, skip_magic=False).records:
+                if isinstance(record, Channel):
+                    channels[record.id] = record
+                    physdbg |= record.topic == "/physdbg/scene"
+                    if record.topic == FOREIGN_TOPIC and record.message_encoding != "json":
+                        raise ForeignRunError(f"{path}: channel {FOREIGN_TOPIC} has message encoding "
+                                              f"{record.message_encoding!r}; expected 'json'")
+                elif isinstance(record, Message) and channels[record.channel_id].topic == FOREIGN_TOPIC:
+                    count += 1
+                    frames.add(record.data, f"{path}, message {count} of {FOREIGN_TOPIC}")
+    except (McapError, ValueError, KeyError, EOFError, struct.error) as err:
+        if not (count or physdbg):
+            why = "it ends early" if type(err).__name__ == "EndOfFile" else f"{type(err).__name__}: {err}"
+            raise ForeignRunError(f"{path}: not a readable MCAP file ({why})") from None
+    if count:
+        return frames.run("mcap")
+    if physdbg:
+        return _read_recording(path, bodies)
+    raise ForeignRunError(f"{path}: no {FOREIGN_TOPIC} channel and not a physdbg recording "
+                          "(docs/foreign-runs.md gives the MCAP form of a run)")
+
+
+def _read_recording(path: Path, bodies: int) -> ForeignRun:
+    from . import open_recording
+
+    with open_recording(path) as rec:
+        if rec.header.count != bodies:
+            raise ForeignRunError(f"{path}: a recording of {_bodies(rec.header.count)}; the scene has {bodies}")
+        states = list(rec.states())
+    return ForeignRun(np.array([s.time for s in states]), np.array([s.positions for s in states]),
+                      np.array([s.velocities for s in states]), str(path), "physdbg")
 
 
 def _vectors(value, where: str, field: str, bodies: int) -> np.ndarray:
@@ -203,10 +290,11 @@ def _check_complete(seen, path: Path, line, step: int, bodies: int) -> None:
                               f"{_bodies(bodies)} (missing: {', '.join(map(str, lost[:5]))}{' ...' if len(lost) > 5 else ''})")
 
 
-def import_run(run: ForeignRun, scene, out: Path) -> int:
+def import_run(run: ForeignRun, scene, out: Path, notes: list[str] | None = None) -> int:
     """Write a foreign run as a physdbg recording (detail state, no view) of ``scene``;
     returns the frames written. The recording's scene keeps the scene's table and marks
-    the run as foreign, so ``verify`` says it cannot be re-simulated."""
+    the run as foreign, so ``verify`` says it cannot be re-simulated. notes: how the run
+    was made (a peer adapter's translation), kept in the recording."""
     from ..engine import energies, state_hash
     from ..events import StepEnd
     from .header import RecordingHeader
@@ -225,7 +313,8 @@ def import_run(run: ForeignRun, scene, out: Path) -> int:
     header.positions, header.velocities = run.positions[0].copy(), velocities[0].copy()
     header.state_hash = state_hash(header.positions, header.velocities)
     header.meta["foreign"] = {"source": Path(run.source).name, "format": run.format,
-                              "velocities": "given" if run.velocities is not None else "estimated"}
+                              "velocities": "given" if run.velocities is not None else "estimated",
+                              "notes": list(notes or [])}
     gravity = np.asarray(scene.settings.gravity, dtype=float)
     state = st.copy()  # the scene's bodies, at the run's positions and velocities step by step
     with McapRecorder(out, header, view=False) as recorder:
@@ -251,3 +340,23 @@ def _max_overlap(x: np.ndarray, radius: np.ndarray, walls) -> float:
     pairs = make_broad_phase("grid").pairs(x - r[:, None], x + r[:, None]) if len(x) > 1 else np.zeros((0, 2), np.int64)
     return float(max_overlap(x, r, pairs, np.ascontiguousarray(walls.normals), np.ascontiguousarray(walls.offsets),
                              np.ascontiguousarray(walls.thickness * 0.5), np.ascontiguousarray(walls.two_sided), True))
+
+
+def write_mcap_run(path: str | Path, times, positions, velocities=None) -> None:
+    """Write a trajectory as an MCAP run (FOREIGN_TOPIC, JSON): times (F,) s, positions
+    (F, N, 3) m, velocities (F, N, 3) m/s or None. What docs/foreign-runs.md shows, as used
+    by the peer adapters."""
+    from mcap.writer import Writer
+
+    with open(path, "wb") as f:
+        writer = Writer(f)
+        writer.start(profile="", library="physdbg")
+        schema = writer.register_schema(FOREIGN_SCHEMA_NAME, "jsonschema", json.dumps(FOREIGN_FRAME_SCHEMA).encode())
+        channel = writer.register_channel(FOREIGN_TOPIC, "json", schema)
+        for k, t in enumerate(times):
+            frame = {"step": k, "time": float(t), "positions": np.asarray(positions[k], dtype=float).tolist()}
+            if velocities is not None:
+                frame["velocities"] = np.asarray(velocities[k], dtype=float).tolist()
+            ns = round(float(t) * 1e9) + k  # strictly increasing even where steps are under 1 ns
+            writer.add_message(channel, log_time=ns, publish_time=ns, sequence=k, data=json.dumps(frame).encode())
+        writer.finish()

@@ -1,0 +1,842 @@
+"""Where a run of another engine departs from physdbg's exact run of the same scene, and why.
+
+``physdbg check-run`` records physdbg's run of the scene with the foreign run's own time
+steps; ``compare`` then finds the **first departure** (the first frame where a body is off
+by more than the tolerance) and judges **every step on its own**: physdbg takes one exact
+step from the foreign run's state at the step's start (so a difference made earlier is not
+blamed again), and where the foreign step ends elsewhere, the two are compared.
+
+A foreign run has no contact records, so its contacts are read off its trajectory: a
+**kick** is a step in which a body's velocity changed by more than the scene's forces
+explain (KICK_FRACTION of its speed). physdbg's contacts in the step are matched with the
+kicks of the same bodies (in the step or the next), and judged:
+
+* no kick and the body went through the wall or sphere: **tunnelling**;
+* a kick at another time than physdbg's exact time of impact: **bounce-time** (the depth
+  the body had reached when it was kicked says that the engine tested where steps end);
+* a kick that leaves the contact at another normal speed than the restitution gives:
+  **contact-energy** (an effective restitution below 0 is an impulse of the wrong sign,
+  above 1 an energy gain);
+* contacts of one step that share a body (a chain, as in a cradle) are judged as a group:
+  momentum kept and no energy gained but other velocities is **collision-order**;
+* a kick where physdbg has no contact: **extra-contact**; physdbg's contact with neither a
+  kick nor a crossing: **missed-contact**;
+* a step with neither that still ends elsewhere: **drift**; the foreign engine's
+  **integrator** is named from its free steps (which velocity moved the body: the step's
+  first, its last, or their mean).
+
+Every judgement is made from positions and velocities alone, so it works for any engine
+whose run can be written in the foreign-run format (docs/foreign-runs.md).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from ..errors import PhysdbgError
+from ..events import KIND_PAIR, KIND_WALL
+
+DEFAULT_ATOL = 1e-6  # m and m/s: a body departs when |Δx| or |Δv| exceeds atol + rtol·|reference|
+DEFAULT_RTOL = 1e-6
+KICK_FRACTION = 0.02  # a velocity change beyond this share of (speed + |a|·dt) that forces do not explain
+TIME_TOLERANCE = 0.02  # of dt: a kick this close to physdbg's time of impact is on time (a kick's instant is
+# read off two frames, so it is known only to about this)
+RESTING_SPEED_STEPS = 2.0  # a contact closing slower than the speed the forces give in this many steps is resting
+RESTITUTION_TOLERANCE = 0.02  # an effective restitution this close to the scene's is right
+MAX_BODY_STEPS = 4_000_000  # frames × bodies compared at once (4 arrays of this many 3-vectors)
+MAX_CONTACTS_JUDGED = 20_000  # physdbg contacts matched one by one; the rest are counted
+MAX_LISTED = 12  # departures listed; more of a kind are counted on its first
+FIT_SLACK = 1e-9  # m: an integrator's free-step residual this small counts as exact
+
+# integrator families, as each moves a body through a step with no contact:
+# (name, words, the velocity it moves by, as weights of (v at the start, v at the end))
+INTEGRATOR_FITS = (
+    ("explicit-euler", "explicit Euler (x += v·dt with the velocity of the step's start, then v += a·dt)", (1.0, 0.0)),
+    ("semi-implicit-euler", "semi-implicit Euler (v += a·dt first, then x += v·dt with the new velocity)", (0.0, 1.0)),
+    ("exact", "the exact path for a constant force (x += v·dt + a·dt²/2, as physdbg's exact and verlet integrators)",
+     (0.5, 0.5)),
+)
+PHYSDBG_FIT = {"euler": "explicit-euler", "semi-implicit": "semi-implicit-euler", "verlet": "exact", "exact": "exact"}
+
+
+class CheckRunError(PhysdbgError):
+    """The two runs cannot be compared (different bodies or steps, or too large)."""
+
+
+@dataclass
+class Departure:
+    """One way the foreign run departs. kind: tunnelling | bounce-time | contact-energy |
+    collision-order | missed-contact | extra-contact | drift | non-finite; step: the
+    step (1 = the first); body: the sphere; other: the other sphere (pairs) or None; wall:
+    the wall's name or None; text: what happened; advice: what to change; evidence: the
+    numbers; more: how many later departures of the same kind on the same bodies."""
+
+    kind: str
+    step: int
+    body: int
+    text: str
+    advice: str
+    other: int | None = None
+    wall: str | None = None
+    evidence: dict = field(default_factory=dict)
+    more: int = 0
+
+
+@dataclass
+class FirstDeparture:
+    """The first frame where some body differs beyond the tolerance: step, time (s), body
+    (the most different), position (m) and velocity (m/s) gaps of that body, bodies (how
+    many differ), cause: the departure that explains it (kind), or "drift"."""
+
+    step: int
+    time: float
+    body: int
+    position: float
+    velocity: float
+    bodies: int
+    cause: str
+
+
+@dataclass
+class CheckRunReport:
+    """What ``check-run`` (or ``diff`` of a foreign run against physdbg's) found.
+
+    exit_code: 0 when no body departs beyond the tolerance, 1 otherwise."""
+
+    run: str
+    reference: str
+    scene: str
+    steps: int
+    bodies: int
+    atol: float
+    rtol: float
+    velocities: str
+    first: FirstDeparture | None
+    departures: list[Departure]
+    integrator: dict | None
+    judged_contacts: int
+    reference_contacts: int
+    headline: str
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def exit_code(self) -> int:
+        return 0 if self.first is None else 1
+
+    def as_dict(self) -> dict:
+        out = asdict(self)
+        out["exit_code"] = self.exit_code
+        return out
+
+
+# ----------------------------------------------------------------------------- loading
+@dataclass
+class _Runs:
+    """Both runs as arrays: x*, v* (F, N, 3); t (F,), dt (F,) with dt[0] = 0."""
+
+    xf: np.ndarray
+    vf: np.ndarray
+    xr: np.ndarray
+    vr: np.ndarray
+    t: np.ndarray
+    dt: np.ndarray
+
+
+def _load(foreign, reference) -> _Runs:
+    n, frames = reference.header.count, min(foreign.frames, reference.frames)
+    if foreign.header.count != n:
+        raise CheckRunError(f"the runs have different numbers of bodies ({foreign.header.count} and {n})")
+    if frames * n > MAX_BODY_STEPS:
+        raise CheckRunError(f"{frames} frames of {n} bodies is {frames * n:,} body-steps; check-run compares at most "
+                            f"{MAX_BODY_STEPS:,} at once (cut the run shorter, or use physdbg diff, which streams)")
+    tf, tr = foreign.frame_table(), reference.frame_table()
+    mismatch = np.flatnonzero(np.abs(tf.time[:frames] - tr.time[:frames]) > 1e-9 * np.maximum(tr.dt[:frames], 1e-300))
+    if len(mismatch):
+        k = int(mismatch[0])
+        raise CheckRunError(f"frame {k} is at t = {tf.time[k]!r} s in the run and {tr.time[k]!r} s in physdbg's: the "
+                            f"reference must be recorded with the run's own steps (physdbg check-run does this)")
+    xf, vf = np.empty((frames, n, 3)), np.empty((frames, n, 3))
+    xr, vr = np.empty((frames, n, 3)), np.empty((frames, n, 3))
+    for target_x, target_v, rec in ((xf, vf, foreign), (xr, vr, reference)):
+        for s in rec.states(0, frames):
+            target_x[s.frame], target_v[s.frame] = s.positions, s.velocities
+    dt = np.concatenate([[0.0], np.diff(tr.time[:frames])])
+    return _Runs(xf, vf, xr, vr, tr.time[:frames].copy(), dt)
+
+
+# ----------------------------------------------------------------------------- compare
+def compare(foreign, reference, atol: float | None = None, rtol: float | None = None) -> CheckRunReport:
+    """Compare a foreign run's recording with physdbg's recording of the same scene and
+    steps (paths or open Recordings; any detail level)."""
+    from ..record import open_recording
+    from ..record.reader import Recording
+
+    rf = foreign if isinstance(foreign, Recording) else open_recording(foreign)
+    rr = reference if isinstance(reference, Recording) else open_recording(reference)
+    try:
+        return _Comparison(rf, rr, DEFAULT_ATOL if atol is None else float(atol),
+                           DEFAULT_RTOL if rtol is None else float(rtol)).run()
+    finally:
+        for rec, given in ((rf, foreign), (rr, reference)):
+            if rec is not given:
+                rec.close()
+
+
+class _StepContacts:
+    """Observer of one local step: its Contacts event, or None."""
+
+    def __init__(self):
+        self.contacts = None
+
+    def on_event(self, event) -> None:
+        from ..events import Contacts
+
+        if isinstance(event, Contacts):
+            self.contacts = event
+
+
+class _Comparison:
+    def __init__(self, rf, rr, atol: float, rtol: float):
+        self.rf, self.rr, self.atol, self.rtol = rf, rr, atol, rtol
+        self.runs = _load(rf, rr)
+        h = rr.header
+        self.scene = rr.scene
+        self.radius, self.inv, self.walls = h.radius, h.inverse_mass, h.walls
+        self.names = list(h.walls.names)
+        settings = rr.meta["settings"]
+        self.settings = settings
+        gravity = np.asarray(settings.get("gravity", (0.0, 0.0, 0.0)), dtype=float)
+        self.acc = np.where((h.inverse_mass > 0)[:, None], h.gravity_scale[:, None] * gravity[None, :], 0.0)
+        self.drag = float(settings.get("drag", 1.0))
+        foreign = rf.meta.get("foreign") or {}
+        self.estimated = foreign.get("velocities") == "estimated"
+        self.departures: list[Departure] = []
+        self.notes: list[str] = []
+        self.judged = 0
+
+    def run(self) -> CheckRunReport:
+        first = self._first_departure()
+        self.integrator = self._integrator()
+        self._non_finite()
+        kicks = self._kicks()
+        self._kick_index = kicks
+        if first is not None:  # before it the runs agree, so there is nothing to judge
+            self._judge_steps(kicks, max(first.step, 1))
+        listed = self._fold(self.departures)
+        if first is not None:
+            first.cause = self._cause_of(first)
+        contacts = int(self.rr.stats()["contacts"].sum()) if self.rr.frames > 1 else 0
+        return CheckRunReport(str(self.rf.path), str(self.rr.path), self.rr.header.name, len(self.runs.t) - 1,
+                              self.rr.header.count, self.atol, self.rtol,
+                              "estimated" if self.estimated else "given", first, listed, self.integrator, self.judged,
+                              contacts, self._headline(first, listed), self.notes)
+
+    def _beyond(self, x, v, x_ref, v_ref) -> np.ndarray:
+        """(..., N) bool: bodies off by more than the tolerance (velocities skipped when estimated)."""
+        dx = np.linalg.norm(x - x_ref, axis=-1)
+        off = (dx > self.atol + self.rtol * np.linalg.norm(x_ref, axis=-1)) | ~np.isfinite(dx)
+        if not self.estimated:
+            dv = np.linalg.norm(v - v_ref, axis=-1)
+            off |= (dv > self.atol + self.rtol * np.linalg.norm(v_ref, axis=-1)) | ~np.isfinite(dv)
+        return off
+
+    # ------------------------------------------------------------------ the first departure
+    def _first_departure(self) -> FirstDeparture | None:
+        r = self.runs
+        if self.estimated:
+            self.notes.append("velocities estimated from positions: bodies compared by position only")
+        beyond = self._beyond(r.xf, r.vf, r.xr, r.vr)
+        frames = np.flatnonzero(beyond.any(axis=1))
+        if not len(frames):
+            return None
+        k = int(frames[0])
+        dx = np.linalg.norm(r.xf[k] - r.xr[k], axis=1)
+        dv = np.linalg.norm(r.vf[k] - r.vr[k], axis=1)
+        score = np.where(beyond[k], np.nan_to_num(dx, nan=np.inf) + np.nan_to_num(dv, nan=np.inf), -1.0)
+        body = int(np.argmax(score))
+        return FirstDeparture(k, float(r.t[k]), body, float(dx[body]), float(dv[body]), int(beyond[k].sum()), "")
+
+    def _cause_of(self, first: FirstDeparture) -> str:
+        """The kind of the earliest local departure of the body at or before the first
+        departure, the most telling kind first where several fall in that step."""
+        own = [d for d in self.departures if first.body in (d.body, d.other) and d.step <= first.step]
+        if own:
+            step = min(d.step for d in own)
+            return min((d for d in own if d.step == step), key=lambda d: _PRIORITY.index(d.kind)).kind
+        return "drift"
+
+    # ------------------------------------------------------------------ integrator
+    def _integrator(self) -> dict | None:
+        """Which integrator family moved the foreign bodies in their free steps (None when
+        nothing accelerates, so every family moves them alike)."""
+        r = self.runs
+        if len(r.t) < 2 or not np.any(self.acc):
+            return None
+        kick = self._kick_sizes() > self._kick_thresholds()
+        free = ~kick & np.isfinite(r.xf[1:]).all(axis=2) & np.isfinite(r.xf[:-1]).all(axis=2)
+        free &= (self.inv > 0)[None, :]
+        disp = r.xf[1:] - r.xf[:-1]
+        v0, v1 = r.vf[:-1], r.vf[1:]
+        if self.estimated:  # only step 1 has a known starting velocity (the scene's)
+            free[1:] = False
+            v0 = r.vr[:-1]
+            v1 = v0 + self.acc[None, :, :] * r.dt[1:, None, None]
+        if not free.any():
+            return None
+        dt = r.dt[1:, None, None]
+        residual = {}
+        for name, _, (w0, w1) in INTEGRATOR_FITS:
+            miss = np.linalg.norm(disp - (w0 * v0 + w1 * v1) * dt, axis=2)[free]
+            residual[name] = float(np.sqrt(np.mean(miss ** 2)))
+        ranked = sorted(residual, key=residual.get)
+        best, second = ranked[0], ranked[1]
+        a = float(np.max(np.linalg.norm(self.acc, axis=1)))
+        step_error = 0.5 * a * float(np.median(r.dt[1:])) ** 2
+        if residual[best] > 0.25 * step_error + FIT_SLACK:
+            words = (f"none of the usual integrators fits its free steps (the nearest, {best}, misses by "
+                     f"{residual[best]:.3g} m a step on average): forces or drag differ from the scene's")
+            return {"name": None, "residual": residual, "differs": True, "sentence": words}
+        ours = PHYSDBG_FIT[self.settings.get("integrator", "exact")]
+        described = dict((n, w) for n, w, _ in INTEGRATOR_FITS)[best]
+        differs = best != ours
+        sentence = f"your engine moves bodies like {described}"
+        if differs:
+            sentence += (f"; the scene's integrator ({self.settings.get('integrator')}) is {ours}, so in free flight "
+                         f"under {a:.3g} m/s² the paths part by {step_error:.3g} m a step (a·dt²/2), growing as "
+                         f"they go")
+        else:
+            sentence += f", the same family as the scene's integrator ({self.settings.get('integrator')})"
+        if residual[second] - residual[best] < 1e-3 * step_error:
+            sentence += "; its free steps fit two families equally, so this is a guess"
+        return {"name": best, "residual": residual, "differs": differs, "sentence": sentence,
+                "physdbg": ours, "step_error": step_error}
+
+    # ------------------------------------------------------------------ kicks
+    def _kick_sizes(self) -> np.ndarray:
+        """(F-1, N) |Δv − the forces' Δv| over each step (estimated velocities: between
+        the step's average and the next step's, assigned to the step's end)."""
+        r = self.runs
+        if self.estimated:
+            out = np.zeros((len(r.t) - 1, r.xf.shape[1]))
+            if len(r.t) > 2:
+                change = r.vf[2:] - r.vf[1:-1] - self.acc[None, :, :] * r.dt[2:, None, None]
+                out[:-1] = np.linalg.norm(change, axis=2)
+            return np.nan_to_num(out, nan=0.0)
+        dt = r.dt[1:, None, None]
+        factor = self.drag ** dt if 0.0 < self.drag < 1.0 else 1.0
+        forces = r.vf[:-1] * (factor - 1.0) + self.acc[None, :, :] * dt
+        return np.nan_to_num(np.linalg.norm(r.vf[1:] - r.vf[:-1] - forces, axis=2), nan=0.0)
+
+    def _kick_thresholds(self) -> np.ndarray:
+        r = self.runs
+        speed = np.nan_to_num(np.linalg.norm(r.vf[:-1], axis=2))
+        return KICK_FRACTION * (speed + np.linalg.norm(self.acc, axis=1)[None, :] * r.dt[1:, None]) + 1e-12
+
+    def _kicks(self) -> dict[tuple[int, int], dict]:
+        """{(step, body): kick} with "tau" (s into the step), "time" (s), "matched"."""
+        r = self.runs
+        steps, bodies = np.nonzero(self._kick_sizes() > self._kick_thresholds())
+        out = {}
+        for s0, i in zip(steps.tolist(), bodies.tolist(), strict=True):
+            s = s0 + 1
+            tau = self._kick_time(s, i)
+            out[(s, i)] = {"step": s, "body": i, "tau": tau, "time": float(r.t[s - 1] + tau), "matched": False}
+        return out
+
+    def _kick_time(self, s: int, i: int) -> float:
+        """When in step s body i was kicked (s after the step began): the instant that
+        splits the step's displacement between the velocity before and after the kick."""
+        r = self.runs
+        dt = float(r.dt[s])
+        if self.estimated:
+            return dt  # the change shows between two step averages: at the frame between them
+        fit = (self.integrator or {}).get("name") or "exact"
+        a, v0, v1 = self.acc[i], r.vf[s - 1, i], r.vf[s, i]
+        disp = r.xf[s, i] - r.xf[s - 1, i]
+        if fit == "exact":  # x1 − x0 = v0·τ + aτ²/2 + (v1 − a(dt − τ))(dt − τ) + a(dt − τ)²/2, solved for τ
+            along = v0 - v1 + a * dt
+            lever = disp - v1 * dt + 0.5 * a * dt * dt
+        else:  # a straight path: the velocity after the forces' update, then the kicked one
+            _, w1 = dict((n, w) for n, _, w in INTEGRATOR_FITS)[fit]
+            along = v0 + w1 * a * dt - v1
+            lever = disp - v1 * dt
+        size = float(along @ along)
+        if not size > 0 or not math.isfinite(size):
+            return dt
+        return float(np.clip((lever @ along) / size, 0.0, dt))
+
+    # ------------------------------------------------------------------ step by step
+    def _local_step(self, s: int):
+        """physdbg's exact step s from the foreign state at its start: (x, v, contacts as dicts)."""
+        from ..engine import NonFiniteState, World
+        from ..engine.state import State
+
+        r, st = self.runs, self.scene.state
+        state = State(r.xf[s - 1].copy(), r.vf[s - 1].copy(), st.inverse_mass, st.radius, st.restitution,
+                      st.gravity_scale)
+        if self.estimated:  # the velocity at the step's start: the step's average less half the forces' change
+            state.velocities = np.ascontiguousarray(r.vf[s] - 0.5 * self.acc * float(r.dt[s]))
+        seen = _StepContacts()
+        world = World(state, self.scene.walls, self.scene.settings, seen)
+        world.time = float(r.t[s - 1])
+        try:
+            world.step(float(r.dt[s]))
+        except NonFiniteState:
+            return None
+        out = []
+        c = seen.contacts
+        for k in range(len(c) if c is not None else 0):
+            out.append({"step": s, "index": k, "kind": int(c.kind[k]), "a": int(c.a[k]), "other": int(c.other[k]),
+                        "tau": float(c.time_in_step[k]), "time": float(r.t[s - 1] + c.time_in_step[k]),
+                        "normal": c.normal[k].copy(), "restitution": float(c.restitution[k]),
+                        "resting": bool(c.resting[k]), "closing": abs(float(c.closing_speed[k]))})
+        return state.positions, state.velocities, out
+
+    def _judge_steps(self, kicks: dict, start: int) -> None:
+        """Each step from ``start`` on where the foreign run ends elsewhere than physdbg's
+        step from the same state."""
+        r = self.runs
+        drift: dict[int, list[int]] = {}  # body -> steps that drift with no contact
+        for s in range(start, len(r.t)):
+            if not (np.isfinite(r.xf[s - 1]).all() and np.isfinite(r.vf[s - 1]).all()):
+                break  # the non-finite departure says it
+            local = self._local_step(s)
+            if local is None:
+                continue
+            x, v, contacts = local
+            off = self._beyond(r.xf[s], r.vf[s], x, v)
+            if not off.any():
+                for c in contacts:
+                    for b in self._bodies(c):
+                        if (s, b) in kicks:
+                            kicks[(s, b)]["matched"] = True
+                continue
+            resting = {b for c in contacts if c["resting"] or self._slow(c, s) for b in self._bodies(c)}
+            for b in resting:
+                for k in (s, s + 1):
+                    if (k, b) in kicks:
+                        kicks[(k, b)]["matched"] = True
+            moving = [c for c in contacts if not (c["resting"] or self._slow(c, s))]
+            touched = set()
+            for group in _chains(moving):
+                bodies = {b for c in group for b in self._bodies(c)}
+                touched |= bodies
+                if not any(off[b] for b in bodies):
+                    for b in bodies:
+                        if (s, b) in kicks:
+                            kicks[(s, b)]["matched"] = True
+                    continue
+                self.judged += len(group)
+                if len(group) == 1:
+                    self._judge_one(group[0], kicks)
+                else:
+                    self._judge_chain(s, group, kicks, v)
+            for b in np.flatnonzero(off).tolist():
+                if b in touched or b in resting:
+                    continue
+                kick = kicks.get((s, b))
+                if kick is not None and not kick["matched"]:
+                    kick["matched"] = True
+                    crossing = self._crossing_of(s, b)
+                    self._extra(kick, crossing)
+                elif kick is None and self.inv[b] > 0:
+                    drift.setdefault(b, []).append(s)
+        self._drift(drift)
+
+    def _slow(self, c: dict, s: int) -> bool:
+        """Not judged one by one: a contact closing slower than the forces' speed over
+        RESTING_SPEED_STEPS steps (a resting contact, whose handling differs between engines
+        by design), or one at the very start of a step right after the foreign run kicked
+        the body (the aftermath of that kick, already judged)."""
+        if c["tau"] <= TIME_TOLERANCE * float(self.runs.dt[s]) and any(
+                self._kick_index.get((k, b), {}).get("matched") for b in self._bodies(c) for k in (s - 1, s)):
+            return True
+        a = max(float(np.linalg.norm(self.acc[b])) for b in self._bodies(c))
+        return a > 0 and c["closing"] < RESTING_SPEED_STEPS * a * float(self.runs.dt[s])
+
+    def _bodies(self, c: dict) -> tuple[int, ...]:
+        return (c["a"], c["other"]) if c["kind"] == KIND_PAIR else (c["a"],)
+
+    def _kick_for(self, c: dict, kicks: dict) -> dict | None:
+        """The foreign kick of contact c: on its sphere (or the other sphere of a pair), in
+        its step or the next."""
+        for s in (c["step"], c["step"] + 1):
+            for b in self._bodies(c):
+                k = kicks.get((s, b))
+                if k is not None and not k["matched"] and self.inv[b] > 0:
+                    return k
+        return None
+
+    def _judge_one(self, c: dict, kicks: dict) -> None:
+        r = self.runs
+        kick = self._kick_for(c, kicks)
+        s, dt = c["step"], float(r.dt[c["step"]])
+        if kick is None:
+            crossing = self._crossing(c)
+            if crossing is not None:
+                self._tunnelled(c, crossing)
+            else:
+                self._add("missed-contact", s, c, f"{self._subject(c)}: physdbg, stepping from the same state, "
+                                                  f"touches {self._what(c)} at t = {c['time']:.6g} s "
+                                                  f"({c['tau'] / dt:.2f}·dt); your run shows no change of velocity",
+                          "look for contacts along each step's whole path; a contact within the step that your "
+                          "engine did not see changes everything after it", {"time": c["time"]})
+            return
+        for b in self._bodies(c):
+            k = kicks.get((kick["step"], b))
+            if k is not None:
+                k["matched"] = True
+        # how well a kick's instant is known: TIME_TOLERANCE, plus the part of the step's velocity
+        # change that the forces make, since when the engine applied them is not known
+        i, k = kick["body"], kick["step"] + (1 if self.estimated else 0)  # estimated: between two averages
+        change = float(np.linalg.norm(r.vf[min(k, len(r.t) - 1), i] - r.vf[k - 1, i]))
+        slack = float(np.linalg.norm(self.acc[i])) * dt / change if change > 0 else 0.0
+        late = abs(kick["time"] - c["time"]) > (TIME_TOLERANCE + slack) * dt
+        if late:
+            self._late(c, kick)
+        self._judge_energy(c, kick, quiet_if_late=late)
+
+    def _late(self, c: dict, kick: dict) -> None:
+        r = self.runs
+        s, a = kick["step"], kick["body"]
+        dt = float(r.dt[c["step"]])
+        x = r.xf[s - 1, a] + (r.xf[s, a] - r.xf[s - 1, a]) * (kick["tau"] / float(r.dt[s]))
+        depth = -self._gap(c, a, x, s, kick["tau"])
+        shift = kick["time"] - c["time"]
+        fraction = kick["tau"] / float(r.dt[s])
+        where = (f"at the end of step {s}" if fraction >= 1 - TIME_TOLERANCE else
+                 f"at the start of step {s}" if fraction <= TIME_TOLERANCE else f"{fraction:.2f}·dt into step {s}")
+        text = (f"{self._subject(c)} bounced off {self._what(c)} at t = {kick['time']:.6g} s ({where}), "
+                f"{abs(shift) * 1000:.3g} ms ({abs(shift) / dt:.2f}·dt) {'after' if shift > 0 else 'before'} the "
+                f"exact time of impact t = {c['time']:.6g} s")
+        if depth > 0:
+            text += f", when it was already {depth * 1000:.3g} mm inside"
+            advice = ("your engine tests for contact where each step ends (discrete detection) and bounces there, "
+                      "late and from inside: find the time of impact within the step (solve |x + v·t − c| = r for "
+                      "t, the swept test) and bounce at that instant")
+        elif shift < 0:
+            advice = ("the bounce came before the bodies touched: check the contact distance (the sum of the radii) "
+                      "and that contacts are tested where the body is, not ahead of it")
+        else:
+            advice = ("the bounce came after the touch but before an overlap showed: find the time of impact "
+                      "within the step (the swept test) instead of testing at sampled instants")
+        self._add("bounce-time", c["step"], c, text, advice, {"physdbg_time": c["time"], "time": kick["time"],
+                                                                "shift": shift, "depth": max(depth, 0.0)})
+
+    def _judge_energy(self, c: dict, kick: dict, quiet_if_late: bool) -> None:
+        """Compare the contact's outgoing normal speed with the restitution's. After a late
+        bounce, only a clear error is reported (below 0 or above 1): the speeds of a body
+        bounced from inside are not the exact contact's."""
+        r = self.runs
+        s = kick["step"]
+        tau, dt = kick["tau"], float(r.dt[s])
+        n = c["normal"]
+        # a soft contact (MuJoCo's) spreads its impulse over steps: the contact lasts while the
+        # kicks go on, and its outcome is the velocity after the last of them
+        end = s
+
+        def normal_speed(k):
+            v = r.vf[k, c["a"]] - (r.vf[k, c["other"]] if c["kind"] == KIND_PAIR else 0.0)
+            return float(v @ n)
+
+        def pushing_apart(k):  # step k's kick pushes the bodies apart while they touch or approach
+            gap = self._gap(c, c["a"], r.xf[k - 1, c["a"]], k, 0.0)
+            return normal_speed(k) > normal_speed(k - 1) and (gap <= 0.0 or normal_speed(k - 1) < 0.0)
+
+        while (not self.estimated and pushing_apart(s) and end + 1 < len(r.t)
+               and any((end + 1, b) in self._kick_index for b in self._bodies(c)) and pushing_apart(end + 1)):
+            end += 1
+            for b in self._bodies(c):
+                if (end, b) in self._kick_index:
+                    self._kick_index[(end, b)]["matched"] = True
+        span = float(r.t[end] - r.t[s - 1])
+
+        def readings(i):
+            """(velocity just before, just after) the contact, as each way of applying the
+            forces around it would have them; which one the engine used is not known."""
+            if self.estimated:  # the kick is at the step's end, between its average and the next step's
+                if end + 1 >= len(r.t):
+                    return []
+                return [(r.vf[s, i] + 0.5 * self.acc[i] * dt,
+                         r.vf[end + 1, i] - 0.5 * self.acc[i] * float(r.dt[end + 1]))]
+            v0, v1, a = r.vf[s - 1, i], r.vf[end, i], self.acc[i]
+            return [(v0 + a * tau, v1 - a * (span - tau)), (v0 + a * dt, v1 - a * (span - dt)), (v0, v1 - a * span)]
+
+        want = c["restitution"]
+        options = []
+        for (before_a, after_a), other in zip(readings(c["a"]), readings(c["other"]) if c["kind"] == KIND_PAIR
+                                              else [(0.0, 0.0)] * 3):
+            before, after = (before_a - other[0]) @ n, (after_a - other[1]) @ n
+            if math.isfinite(before) and math.isfinite(after) and before < 0:
+                options.append((abs(-after / before - want), -after / before, before, after))
+        if not options:
+            return
+        _, e, before, after = min(options)  # the reading kindest to the run: report only what none explains
+        if abs(e - want) <= RESTITUTION_TOLERANCE + 1e-3 * want or (quiet_if_late and 0.0 <= e <= 1.0):
+            return
+        if e < 0:
+            text = (f"{self._both(c)}: after the contact they still approach, at {abs(after):.3g} m/s where they "
+                    f"met at {abs(before):.3g} m/s (an effective restitution of {e:.2f}; the scene's is {want:g}): "
+                    f"energy gained")
+            advice = ("the impulse points the wrong way: j = −(1 + e)·(v_rel·n)/(1/m_a + 1/m_b) pushes a along n "
+                      "(from b towards a) and b against it; check its sign and the normal's direction")
+        else:
+            gained = e > 1.0
+            verdict = ("energy gained at the contact" if gained else
+                       "more energy kept than that restitution allows" if e > want else
+                       "more energy lost than that restitution takes")
+            text = (f"{self._subject(c)}: the contact with {self._what(c)} sent it off at {abs(after):.3g} m/s for "
+                    f"{abs(before):.3g} m/s coming in, an effective restitution of {e:.3g} where physdbg applies "
+                    f"{want:g}: {verdict}")
+            advice = ("restitution above 1 adds energy: check the impulse and the restitution of both bodies"
+                      if gained else
+                      "check the restitution your engine was given and how it combines two bodies' (physdbg's "
+                      f"rule here: restitution_rule = {self.settings.get('restitution_rule', 'min')})")
+        self._add("contact-energy", c["step"], c, text, advice,
+                  {"restitution": e, "expected": want, "speed_in": abs(before), "speed_out": abs(after)})
+
+    def _judge_chain(self, s: int, group: list[dict], kicks: dict, v_local: np.ndarray) -> None:
+        """Contacts of one step that share bodies: the group's outcome as a whole."""
+        r = self.runs
+        bodies = sorted({b for c in group for b in self._bodies(c) if self.inv[b] > 0})
+        for b in bodies:
+            for k in (s, s + 1):
+                if (k, b) in kicks:
+                    kicks[(k, b)]["matched"] = True
+        idx = np.array(bodies)
+        vf, vr = r.vf[s, idx], v_local[idx]
+        gap = np.linalg.norm(vf - vr, axis=1)
+        if not np.any(gap > self.atol + self.rtol * np.linalg.norm(vr, axis=1)):
+            return  # the chain's outcome is physdbg's; what differs is where the bodies are (drift)
+        mass = 1.0 / self.inv[idx]
+        momentum_f, momentum_r = (mass[:, None] * vf).sum(axis=0), (mass[:, None] * vr).sum(axis=0)
+        energy_f, energy_r = 0.5 * float(mass @ (vf * vf).sum(axis=1)), 0.5 * float(mass @ (vr * vr).sum(axis=1))
+        scale = max(float(np.sum(mass * np.linalg.norm(vr, axis=1))), 1e-300)
+        kept = float(np.linalg.norm(momentum_f - momentum_r)) <= 1e-3 * scale
+        order = ", then ".join(f"{self._pair_words(c)} at {c['tau'] / float(r.dt[s]):.2f}·dt" for c in group[:6])
+        worst = int(idx[int(np.argmax(gap))])
+        evidence = {"bodies": bodies, "physdbg_order": [[c["a"], c["other"], c["kind"]] for c in group],
+                    "energy": energy_f, "physdbg_energy": energy_r, "momentum_kept": kept}
+        first = group[0]
+        if energy_f > energy_r * (1 + 1e-3) + 1e-12:
+            self._add("contact-energy", s, first, f"in the chain {order}, the bodies leave with {energy_f:.4g} J of "
+                                                  f"kinetic energy where physdbg's leave with {energy_r:.4g} J: "
+                                                  f"energy gained",
+                      "check each impulse's sign and that restitution is at most 1", evidence)
+        elif kept:
+            self._add("collision-order", s, first,
+                      f"physdbg resolves {order}; your run gives sphere {worst} a velocity {gap.max():.3g} m/s "
+                      f"away, with momentum kept and no energy gained: the same contacts in another order (or all "
+                      f"at once)",
+                      "resolve contacts one at a time in the order they happen (earliest time of impact first), "
+                      "looking again for new contacts after each: a chain of touching spheres passes its impulse "
+                      "along only in that order", evidence)
+        else:
+            self._add("contact-energy", s, first, f"in the chain {order}, momentum is not kept (off by "
+                                                  f"{float(np.linalg.norm(momentum_f - momentum_r)):.3g} N·s)",
+                      "apply each impulse to both bodies, equal and opposite, scaled by their inverse masses",
+                      evidence)
+
+    def _extra(self, kick: dict, crossing) -> None:
+        r = self.runs
+        s, i = kick["step"], kick["body"]
+        size = float(np.linalg.norm(r.vf[s, i] - r.vf[s - 1, i]))
+        c = {"kind": KIND_WALL, "a": i, "other": -1}
+        self._add("extra-contact", s, c,
+                  f"sphere {i} changed velocity by {size:.3g} m/s at t ≈ {kick['time']:.6g} s; physdbg, stepping "
+                  f"from the same state, touches nothing in that step",
+                  "a contact physdbg does not see: a test that fires too early or against the wrong body, or a "
+                  "body that was already inside another (look at the step before)", {"change": size})
+
+    def _drift(self, drift: dict[int, list[int]]) -> None:
+        """Free steps that end elsewhere: one departure for all bodies, with the counts."""
+        if not drift:
+            return
+        integrator = self.integrator or {}
+        b = min(drift, key=lambda i: (drift[i][0], i))
+        steps = sorted({k for ks in drift.values() for k in ks})
+        who = f"sphere {b} drifts" if len(drift) == 1 else f"{len(drift)} spheres (sphere {b} first) drift"
+        text = (f"{who} in free flight ({len(steps)} steps with no contact end elsewhere than physdbg's from the "
+                f"same start)")
+        if integrator.get("differs") and integrator.get("name"):
+            text += ": the integrator"
+            advice = (f"integrate as the scene says (integrator = {self.settings.get('integrator')}), or set the "
+                      f"scene's integrator to your engine's to compare the contacts alone")
+        else:
+            advice = (f"check gravity ({self.settings.get('gravity')} m/s²), drag ({self.drag:g}) and the gravity "
+                      f"scale against the scene's")
+        self.departures.append(Departure("drift", steps[0], b, text, advice,
+                                         evidence={"steps": len(steps), "bodies": sorted(drift)}))
+
+    # ------------------------------------------------------------------ crossings
+    def _crossings_in(self, s: int):
+        if not hasattr(self, "_checker"):
+            from .tunnel import StepChecker
+
+            settings = dict(self.settings)
+            settings["integrator"] = {"explicit-euler": "euler", "semi-implicit-euler": "semi-implicit"}.get(
+                (self.integrator or {}).get("name"), "exact")
+            self._checker = StepChecker(self.radius, self.inv, self.rr.header.gravity_scale, self.walls, settings)
+        r = self.runs
+        if not (np.isfinite(r.xf[s]).all() and np.isfinite(r.xf[s - 1]).all()):
+            return []
+        return self._checker.check(r.xf[s - 1], r.vf[s - 1], r.xf[s], float(r.dt[s]), None)
+
+    def _crossing(self, c: dict):
+        """The foreign crossing of contact c's bodies in its step or the next, or None."""
+        for s in (c["step"], c["step"] + 1):
+            if s >= len(self.runs.t):
+                break
+            for x in self._crossings_in(s):
+                if x.kind == c["kind"] and {x.a, x.other} == ({c["a"], c["other"]} if c["kind"] == KIND_PAIR
+                                                              else {x.a, c["other"]}) and x.a in self._bodies(c):
+                    return s, x
+        return None
+
+    def _crossing_of(self, s: int, body: int):
+        for x in self._crossings_in(s):
+            if body in (x.a, x.other if x.kind == KIND_PAIR else -1):
+                return s, x
+        return None
+
+    def _tunnelled(self, c: dict, crossing) -> None:
+        r = self.runs
+        s, x = crossing
+        a, dt = c["a"], float(r.dt[c["step"]])
+        speed = float(np.linalg.norm(r.vf[s - 1, a]))
+        if c["kind"] == KIND_WALL:
+            room = float(self.walls.thickness[c["other"]]) + 2 * float(self.radius[a])
+            what = f"more than the wall's thickness plus the sphere's diameter ({room:.3g} m)"
+        else:
+            room = 2 * float(self.radius[a] + self.radius[c["other"]])
+            what = f"more than the two spheres' diameters ({room:.3g} m)"
+        text = (f"{self._subject(c)} went through {self._what(c)} with no contact; physdbg's swept test, from the "
+                f"same state, finds the touch at t = {c['time']:.6g} s ({c['tau'] / dt:.2f}·dt) and bounces it back")
+        advice = _TUNNEL_ADVICE
+        carried = speed * float(r.dt[s])
+        inside = -self._gap(c, a, r.xf[s - 1, a], s, 0.0)
+        if inside > self.settings.get("contact_tolerance", 0.0) and c["kind"] == KIND_PAIR:
+            text += f"; it was already {inside * 1000:.3g} mm inside at the step's start"
+            advice = ("it started the step inside the other sphere, after a contact resolved late or with the wrong "
+                      "impulse: fix that first (see the departure before this one)")
+        elif carried > room:
+            text += f". At {speed:.3g} m/s a step of {float(r.dt[s]):.3g} s carries it {carried:.3g} m, {what}"
+            advice += f" (steps under {room / max(speed, 1e-300):.3g} s here)"
+        self._add("tunnelling", s, c, text, advice, {"physdbg_time": c["time"], "speed": speed, "depth": x.depth})
+
+    def _non_finite(self) -> None:
+        r = self.runs
+        bad = ~(np.isfinite(r.xf).all(axis=2) & np.isfinite(r.vf).all(axis=2))
+        frames, bodies = np.nonzero(bad)
+        if len(frames):
+            k, i = int(frames[0]), int(bodies[0])
+            self._add("non-finite", k, {"kind": KIND_WALL, "a": i, "other": -1},
+                      f"sphere {i}'s {'position' if not np.isfinite(r.xf[k, i]).all() else 'velocity'} is NaN or "
+                      f"infinite from t = {r.t[k]:.6g} s ({int(bad[k].sum())} bodies then)",
+                      "look at the step before: a division by a zero distance (two centres at one point) or a "
+                      "zero mass is the usual start", {"frame": k})
+
+    # ------------------------------------------------------------------ words
+    def _gap(self, c: dict, a: int, x: np.ndarray, s: int, tau: float) -> float:
+        """Distance from contact (m; negative inside) of body a at x, the other body where
+        the foreign run had it at that instant."""
+        r = self.runs
+        if c["kind"] == KIND_WALL:
+            w = c["other"]
+            h = float(x @ self.walls.normals[w] - self.walls.offsets[w])
+            if self.walls.two_sided[w]:
+                return abs(h) - 0.5 * float(self.walls.thickness[w]) - float(self.radius[a])
+            return h - float(self.radius[a])
+        b = c["other"] if a == c["a"] else c["a"]
+        xb = r.xf[s - 1, b] + (r.xf[s, b] - r.xf[s - 1, b]) * (tau / float(r.dt[s]))
+        return float(np.linalg.norm(x - xb)) - float(self.radius[a] + self.radius[b])
+
+    def _what(self, c: dict) -> str:
+        return f"wall '{self.names[c['other']]}'" if c["kind"] == KIND_WALL else f"sphere {c['other']}"
+
+    def _subject(self, c: dict) -> str:
+        return f"sphere {c['a']}"
+
+    def _both(self, c: dict) -> str:
+        return f"spheres {c['a']} and {c['other']}" if c["kind"] == KIND_PAIR else f"sphere {c['a']}"
+
+    def _pair_words(self, c: dict) -> str:
+        return f"{c['a']}–{c['other']}" if c["kind"] == KIND_PAIR else f"{c['a']}–wall '{self.names[c['other']]}'"
+
+    def _add(self, kind: str, step: int, c: dict, text: str, advice: str, evidence: dict | None = None) -> None:
+        other = c["other"] if c["kind"] == KIND_PAIR else None
+        wall = self.names[c["other"]] if c["kind"] == KIND_WALL and c["other"] >= 0 else None
+        self.departures.append(Departure(kind, step, c["a"], text, advice, other, wall, evidence or {}))
+
+    @staticmethod
+    def _fold(departures: list[Departure]) -> list[Departure]:
+        """The first departure of each kind on each body (and other), with a count of the
+        rest, in step order, the most telling first within a step; at most MAX_LISTED."""
+        departures = sorted(departures, key=lambda d: (d.step, _PRIORITY.index(d.kind), d.body))
+        firsts: dict[tuple, Departure] = {}
+        for d in departures:
+            key = (d.kind, d.body, d.other, d.wall)
+            if key in firsts:
+                firsts[key].more += 1
+            else:
+                firsts[key] = d
+        return list(firsts.values())[:MAX_LISTED]
+
+    def _headline(self, first: FirstDeparture | None, listed: list[Departure]) -> str:
+        if first is None:
+            return (f"no departure: every body stays within atol={self.atol:g}, rtol={self.rtol:g} of physdbg's "
+                    f"exact run for all {len(self.runs.t) - 1} steps")
+        cause = next((d for d in listed if d.kind == first.cause and first.body in (d.body, d.other)), None)
+        if first.cause == "drift" and self.integrator is not None and self.integrator["differs"]:
+            why = "integrator: " + self.integrator["sentence"]
+        elif cause is not None:
+            why = f"{_KIND_WORDS[cause.kind]}: {cause.text}"
+        elif not self.departures:
+            why = ("yet every step, taken from the run's own state at its start, ends where physdbg's exact step "
+                   "does (within the tolerance): the runs part because differences below the tolerance grew, as "
+                   "they do in a chaotic scene (a gas, a pile); a step length a bit off the scene's, or rounding, "
+                   "is enough")
+        else:
+            why = "the states drift apart with no contact to blame (forces, drag or integration differ)"
+        out = f"the run departs from physdbg's in step {first.step}, sphere {first.body}: {why}"
+        contact = next((d for d in listed if d.kind not in ("drift", first.cause)), None)
+        if contact is not None and first.cause == "drift":
+            out += f". The first contact that goes wrong: step {contact.step}, {_KIND_WORDS[contact.kind]}"
+        return out
+
+
+_TUNNEL_ADVICE = ("test for contacts along the path through the step (a swept test: solve for the time of impact), "
+                  "not where the step ends, or take shorter steps")
+_PRIORITY = ("non-finite", "tunnelling", "contact-energy", "collision-order", "bounce-time", "missed-contact",
+             "extra-contact", "drift")
+_KIND_WORDS = {
+    "tunnelling": "tunnelling", "bounce-time": "bounced at the wrong time", "contact-energy": "energy at a contact",
+    "collision-order": "contacts resolved out of order", "missed-contact": "a contact missed",
+    "extra-contact": "a contact physdbg does not have", "non-finite": "NaN or infinity", "drift": "drift in free flight",
+}
+
+
+def _chains(contacts: list[dict]) -> list[list[dict]]:
+    """Contacts of one step grouped by shared bodies (walls do not join groups), in order."""
+    parent: dict[int, int] = {}
+
+    def find(i: int) -> int:
+        while parent.setdefault(i, i) != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for c in contacts:
+        find(c["a"])
+        if c["kind"] == KIND_PAIR:
+            parent[find(c["a"])] = find(c["other"])
+    groups: dict[int, list[dict]] = {}
+    for c in contacts:
+        groups.setdefault(find(c["a"]), []).append(c)
+    return sorted(groups.values(), key=lambda g: g[0]["index"])
+
+
+__all__ = ["CheckRunError", "CheckRunReport", "Departure", "FirstDeparture", "compare"]

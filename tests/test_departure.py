@@ -1,0 +1,142 @@
+"""check-run: a foreign run compared step by step with physdbg's exact run of the same scene
+(analysis.departure), through the library and the CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from physdbg import api, open_recording
+from physdbg.cli import app
+from physdbg.scene import load_scene
+from tests.student_engine import simulate, write_csv, write_jsonl
+
+HEAD_ON = ["particles.2.position=[20.0, 0.0, 0.0]", "particles.3.position=[30.0, 0.0, 0.0]",
+           "particles.4.position=[40.0, 0.0, 0.0]"]
+
+
+def kinds(report) -> list[str]:
+    return [d.kind for d in report.departures]
+
+
+@pytest.mark.parametrize("fmt", ["csv", "jsonl"])
+def test_check_run_names_tunnelling_on_the_thin_wall(tmp_path, fmt):
+    times, xs, vs = simulate(load_scene("bullet-wall"), 3, 0.1)
+    run = tmp_path / f"student.{fmt}"
+    (write_csv if fmt == "csv" else write_jsonl)(run, times, xs, vs)
+    report = api.check_run(run, "bullet-wall").report
+    assert report.exit_code == 1 and report.first.step == 1 and report.first.cause == "tunnelling"
+    tunnel = report.departures[0]
+    assert tunnel.kind == "tunnelling" and tunnel.wall == "thin wall" and tunnel.body == 0
+    # physdbg's own swept test from the same state: the touch 0.9 m − 0.1 m away at 100 m/s
+    assert tunnel.evidence["physdbg_time"] == pytest.approx(0.009, abs=1e-12)
+    assert "carries it 10 m" in tunnel.text and "steps under 0.002 s" in tunnel.advice
+
+
+@pytest.mark.parametrize("velocities", [True, False])
+def test_check_run_names_the_late_bounce_and_the_integrator_on_bounce(tmp_path, velocities):
+    scene = load_scene("bounce")
+    times, xs, vs = simulate(scene, 60, 1 / 60)
+    write_csv(tmp_path / "bounce.csv", times, xs, vs if velocities else None)
+    report = api.check_run(tmp_path / "bounce.csv", scene).report
+    # explicit Euler falls behind the exact parabola by g·dt²/2 in the very first step
+    assert report.first.step == 1 and report.first.cause == "drift"
+    assert report.first.position == pytest.approx(9.81 / 2 / 3600, rel=1e-9)
+    assert report.integrator["name"] == "explicit-euler" and report.integrator["differs"]
+    late = next(d for d in report.departures if d.kind == "bounce-time")
+    # from the state at the step's start the exact ball touches the floor inside step 28; the
+    # student's tests where the step ends, so it bounces at the step's end, already inside
+    assert late.step == 28 and late.wall == "floor"
+    assert late.evidence["time"] == pytest.approx(28 / 60, abs=1e-12)
+    assert 0 < late.evidence["shift"] < 1 / 60 and late.evidence["depth"] > 0.02
+    assert "tests for contact where each step ends" in late.advice
+    assert "contact-energy" not in kinds(report)  # its restitution is the scene's
+    assert "first contact that goes wrong: step 28, bounced at the wrong time" in report.headline
+
+
+def test_check_run_names_the_energy_a_flipped_impulse_adds(tmp_path):
+    scene = load_scene("cradle", HEAD_ON)
+    times, xs, vs = simulate(scene, 60, 1 / 60, flip=True)
+    write_jsonl(tmp_path / "flip.jsonl", times, xs, vs)
+    report = api.check_run(tmp_path / "flip.jsonl", scene).report
+    assert report.first.cause == "contact-energy" and report.first.step == 44
+    energy = report.departures[0]
+    assert energy.kind == "contact-energy" and {energy.body, energy.other} == {0, 1}
+    # the flipped impulse adds (1 + e)·closing instead of removing it: they still approach at 3 m/s
+    assert energy.evidence["restitution"] == pytest.approx(-3.0, rel=1e-9)
+    assert "wrong way" in energy.advice
+    unflipped = tmp_path / "unflipped.jsonl"
+    write_jsonl(unflipped, *simulate(scene, 60, 1 / 60))
+    assert "contact-energy" not in kinds(api.check_run(unflipped, scene).report)
+
+
+def test_physdbg_s_own_run_does_not_depart_and_its_index_order_does(tmp_path):
+    for overrides, departs in (([], False), (["ordering=index"], True)):
+        rec = open_recording(api.record("cradle", overrides, mcap_path=str(tmp_path / "c.mcap"), rrd=False,
+                                        detail="state", force=True).mcap)
+        states = list(rec.states())
+        write_jsonl(tmp_path / "own.jsonl", np.array([s.time for s in states]),
+                    np.array([s.positions for s in states]), np.array([s.velocities for s in states]))
+        report = api.check_run(tmp_path / "own.jsonl", "cradle").report
+        assert (report.exit_code == 1) == departs
+        if not departs:
+            assert report.first is None and report.departures == [] and "no departure" in report.headline
+        else:  # index order passes the blow one ball a step: momentum kept, energy kept, order wrong
+            assert report.first.cause == "collision-order"
+            order = report.departures[0]
+            assert order.kind == "collision-order" and order.evidence["momentum_kept"]
+            assert order.evidence["physdbg_order"][:2] == [[0, 1, 0], [1, 2, 0]]
+
+
+def test_a_gas_run_with_the_scene_s_steps_does_not_depart(tmp_path):
+    """The run's time column sums dt; check-run steps with the scene's dt itself, so a
+    chaotic gas does not part over the last bit of each step's length."""
+    rec = open_recording(api.record("gas", mcap_path=str(tmp_path / "g.mcap"), rrd=False, detail="state").mcap)
+    states = list(rec.states())
+    times = np.cumsum([0.0] + [s.dt for s in states[1:]])
+    write_jsonl(tmp_path / "gas.jsonl", times, np.array([s.positions for s in states]),
+                np.array([s.velocities for s in states]))
+    assert api.check_run(tmp_path / "gas.jsonl", "gas").report.first is None
+
+
+def test_check_run_from_the_command_line(tmp_path):
+    times, xs, vs = simulate(load_scene("bullet-wall"), 3, 0.1)
+    write_csv(tmp_path / "s.csv", times, xs, vs)
+    runner = CliRunner()
+    done = runner.invoke(app, ["check-run", str(tmp_path / "s.csv"), "--scene", "bullet-wall", "--keep",
+                               str(tmp_path / "kept")])
+    assert done.exit_code == 1, done.output
+    assert "result     DEPARTS: the run departs from physdbg's in step 1, sphere 0: tunnelling" in done.output
+    assert "what to do: test for contacts along the path" in done.output
+    assert (tmp_path / "kept" / "run.mcap").exists() and (tmp_path / "kept" / "reference.mcap").exists()
+    again = runner.invoke(app, ["check-run", str(tmp_path / "s.csv"), "--scene", "bullet-wall", "--keep",
+                                str(tmp_path / "kept")])
+    assert again.exit_code == 2 and "already exists; pass --force" in again.output
+    as_json = runner.invoke(app, ["check-run", str(tmp_path / "s.csv"), "--scene", "bullet-wall", "--json"])
+    data = json.loads(as_json.output)
+    assert data["exit_code"] == 1 and data["departures"][0]["kind"] == "tunnelling"
+    markdown = runner.invoke(app, ["check-run", str(tmp_path / "s.csv"), "--scene", "bullet-wall", "--markdown"])
+    assert markdown.output.startswith("### ❌ physdbg check-run: departs") and "| 1 | tunnelling |" in markdown.output
+    wrong = runner.invoke(app, ["check-run", str(tmp_path / "s.csv"), "--scene", "cradle"])
+    assert wrong.exit_code == 2 and "field 'body' is 0" not in wrong.output and "line 2" in wrong.output
+    only_start = tmp_path / "start.csv"
+    only_start.write_text("step,time,body,x,y,z\n0,0,0,0,0,0\n")
+    short = runner.invoke(app, ["check-run", str(only_start), "--scene", "bullet-wall"])
+    assert short.exit_code == 2 and "only its initial state" in short.output
+
+
+def test_an_mcap_run_is_read_like_the_others_and_a_bad_one_is_refused(tmp_path):
+    from physdbg.record.foreign import write_mcap_run
+
+    times, xs, vs = simulate(load_scene("bullet-wall"), 3, 0.1)
+    write_mcap_run(tmp_path / "s.mcap", times, xs, vs)
+    report = api.check_run(tmp_path / "s.mcap", "bullet-wall").report
+    assert report.first.cause == "tunnelling" and report.velocities == "given"
+    (tmp_path / "junk.mcap").write_bytes(b"not an mcap file")
+    done = CliRunner().invoke(app, ["check-run", str(tmp_path / "junk.mcap"), "--scene", "bullet-wall"])
+    assert done.exit_code == 2 and "junk.mcap: not a readable MCAP file" in done.output
+    own = api.record("bullet-wall", mcap_path=str(tmp_path / "own.mcap"), rrd=False, detail="state").mcap
+    assert api.check_run(own, "bullet-wall").report.first is None  # a physdbg recording is a run too

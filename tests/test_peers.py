@@ -1,0 +1,58 @@
+"""record-peer: a scene run in pybullet and MuJoCo, recorded as a foreign run that opens,
+replays, diffs and check-runs against physdbg's."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from physdbg import api, open_recording
+from physdbg.cli import app
+from physdbg.peers import PeerError, run_peer
+from physdbg.scene import load_scene
+
+
+def _need(module: str) -> None:
+    try:
+        __import__(module)
+    except ImportError:
+        pytest.skip(f"{module} is not installed (pip install 'physdbg[peers]'); the adapter cannot be run")
+
+
+@pytest.mark.parametrize("peer", ["pybullet", "mujoco"])
+def test_a_peer_s_bounce_opens_replays_diffs_and_check_runs(tmp_path, peer):
+    _need(peer)
+    runner = CliRunner()
+    out = tmp_path / f"bounce-{peer}.mcap"
+    done = runner.invoke(app, ["record-peer", peer, "bounce", "-o", str(out)])
+    assert done.exit_code == 0, done.output
+    assert "build time" not in done.output and f"ran         300 steps of 1 body in {peer}" in done.output
+    rec = open_recording(out)
+    assert rec.meta["foreign"]["format"] == peer and rec.meta["foreign"]["notes"]
+    start, fall = rec.state(0), rec.state(20)
+    assert np.array_equal(start.positions, load_scene("bounce").state.positions)
+    # free fall for 1/3 s from rest: every engine gets g·t within its integrator's step
+    assert fall.velocities[0, 1] == pytest.approx(-9.81 * 20 / 60, rel=1e-9)
+    assert fall.positions[0, 1] == pytest.approx(1.1 - 9.81 / 2 * (20 / 60) ** 2, abs=9.81 * 20 / 3600)
+    assert min(s.positions[0, 1] for s in rec.states()) > 0.0  # the floor holds the ball up
+    assert runner.invoke(app, ["replay", str(out), "--rrd", str(tmp_path / "peer.rrd")]).exit_code == 0
+    assert "foreign     another engine's run" in runner.invoke(app, ["info", str(out)]).output
+    reference = api.record("bounce", mcap_path=str(tmp_path / "ref.mcap"), rrd=False, detail="contacts").mcap
+    diffed = runner.invoke(app, ["diff", reference, str(out)])
+    assert diffed.exit_code == 1 and "run B (another engine's) departs from run A in step 1" in diffed.output
+    report = api.check_run(out, "bounce").report
+    assert report.integrator["name"] == "semi-implicit-euler"  # both step v first, then x
+    late = next(d for d in report.departures if d.kind == "bounce-time")
+    # both find the floor where a step ends: the first bounce comes late, from inside it
+    assert late.step in (27, 28) and late.evidence["shift"] > 0 and late.evidence["depth"] > 0.01
+
+
+def test_a_peer_is_refused_clearly(tmp_path):
+    with pytest.raises(PeerError, match="unknown peer 'bullet'; choose one of pybullet, mujoco"):
+        run_peer("bullet", load_scene("bounce"))
+    with pytest.raises(PeerError, match='dt = "real"'):
+        run_peer("pybullet", load_scene("bounce", ['dt="real"']))
+    done = CliRunner().invoke(app, ["record-peer", "pybullet", "bounce", "-s", "duration=500000",
+                                    "-o", str(tmp_path / "x.mcap")])
+    assert done.exit_code == 2 and "more than a peer run may take" in done.output
