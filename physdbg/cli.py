@@ -379,6 +379,9 @@ def _serve_web(rrd: Path, port: int) -> None:
                 viewer.kill()
 
 
+OverwriteRecording = Annotated[bool, typer.Option("--force", help="Overwrite an existing recording.")]
+
+
 @app.command("import")
 def import_(
     run: Annotated[Path, typer.Argument(help="The other engine's run: a .csv or .jsonl trajectory "
@@ -387,7 +390,7 @@ def import_(
     set_: SetOption = None,
     output: Annotated[Optional[Path], typer.Option(
         "--output", "-o", help="The recording to write (default: the run's name, ending .mcap).")] = None,
-    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing recording.")] = False,
+    force: OverwriteRecording = False,
 ) -> None:
     """Turn a run of another engine (your own, pybullet, MuJoCo) into a physdbg recording,
     so explain, diff and replay work on it.
@@ -450,7 +453,7 @@ def record_peer(
     set_: SetOption = None,
     output: Annotated[Optional[Path], typer.Option(
         "--output", "-o", help="The recording to write (default: SCENE-PEER.mcap).")] = None,
-    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing recording.")] = False,
+    force: OverwriteRecording = False,
 ) -> None:
     """Run a scene in pybullet or MuJoCo from the same initial state and record it as a
     foreign run, to check-run, diff, explain and replay against physdbg's.

@@ -47,7 +47,6 @@ TIME_TOLERANCE = 0.02  # of dt: a kick this close to physdbg's time of impact is
 RESTING_SPEED_STEPS = 2.0  # a contact closing slower than the speed the forces give in this many steps is resting
 RESTITUTION_TOLERANCE = 0.02  # an effective restitution this close to the scene's is right
 MAX_BODY_STEPS = 4_000_000  # frames × bodies compared at once (4 arrays of this many 3-vectors)
-MAX_CONTACTS_JUDGED = 20_000  # physdbg contacts matched one by one; the rest are counted
 MAX_LISTED = 12  # departures listed; more of a kind are counted on its first
 FIT_SLACK = 1e-9  # m: an integrator's free-step residual this small counts as exact
 
@@ -185,19 +184,6 @@ def compare(foreign, reference, atol: float | None = None, rtol: float | None = 
                 rec.close()
 
 
-class _StepContacts:
-    """Observer of one local step: its Contacts event, or None."""
-
-    def __init__(self):
-        self.contacts = None
-
-    def on_event(self, event) -> None:
-        from ..events import Contacts
-
-        if isinstance(event, Contacts):
-            self.contacts = event
-
-
 class _Comparison:
     def __init__(self, rf, rr, atol: float, rtol: float):
         self.rf, self.rr, self.atol, self.rtol = rf, rr, atol, rtol
@@ -219,12 +205,12 @@ class _Comparison:
 
     def run(self) -> CheckRunReport:
         first = self._first_departure()
-        self.integrator = self._integrator()
+        kicked = self._kick_sizes() > self._kick_thresholds()  # (F-1, N)
+        self.integrator = self._integrator(kicked)
         self._non_finite()
-        kicks = self._kicks()
-        self._kick_index = kicks
+        self.kicks = self._kicks(kicked)
         if first is not None:  # before it the runs agree, so there is nothing to judge
-            self._judge_steps(kicks, max(first.step, 1))
+            self._judge_steps(max(first.step, 1))
         listed = self._fold(self.departures)
         if first is not None:
             first.cause = self._cause_of(first)
@@ -269,14 +255,13 @@ class _Comparison:
         return "drift"
 
     # ------------------------------------------------------------------ integrator
-    def _integrator(self) -> dict | None:
+    def _integrator(self, kicked: np.ndarray) -> dict | None:
         """Which integrator family moved the foreign bodies in their free steps (None when
         nothing accelerates, so every family moves them alike)."""
         r = self.runs
         if len(r.t) < 2 or not np.any(self.acc):
             return None
-        kick = self._kick_sizes() > self._kick_thresholds()
-        free = ~kick & np.isfinite(r.xf[1:]).all(axis=2) & np.isfinite(r.xf[:-1]).all(axis=2)
+        free = ~kicked & np.isfinite(r.xf[1:]).all(axis=2) & np.isfinite(r.xf[:-1]).all(axis=2)
         free &= (self.inv > 0)[None, :]
         disp = r.xf[1:] - r.xf[:-1]
         v0, v1 = r.vf[:-1], r.vf[1:]
@@ -335,10 +320,10 @@ class _Comparison:
         speed = np.nan_to_num(np.linalg.norm(r.vf[:-1], axis=2))
         return KICK_FRACTION * (speed + np.linalg.norm(self.acc, axis=1)[None, :] * r.dt[1:, None]) + 1e-12
 
-    def _kicks(self) -> dict[tuple[int, int], dict]:
+    def _kicks(self, kicked: np.ndarray) -> dict[tuple[int, int], dict]:
         """{(step, body): kick} with "tau" (s into the step), "time" (s), "matched"."""
         r = self.runs
-        steps, bodies = np.nonzero(self._kick_sizes() > self._kick_thresholds())
+        steps, bodies = np.nonzero(kicked)
         out = {}
         for s0, i in zip(steps.tolist(), bodies.tolist(), strict=True):
             s = s0 + 1
@@ -373,13 +358,15 @@ class _Comparison:
         """physdbg's exact step s from the foreign state at its start: (x, v, contacts as dicts)."""
         from ..engine import NonFiniteState, World
         from ..engine.state import State
+        from ..events import Contacts
+        from ..observe import ListObserver
 
         r, st = self.runs, self.scene.state
         state = State(r.xf[s - 1].copy(), r.vf[s - 1].copy(), st.inverse_mass, st.radius, st.restitution,
                       st.gravity_scale)
         if self.estimated:  # the velocity at the step's start: the step's average less half the forces' change
             state.velocities = np.ascontiguousarray(r.vf[s] - 0.5 * self.acc * float(r.dt[s]))
-        seen = _StepContacts()
+        seen = ListObserver()
         world = World(state, self.scene.walls, self.scene.settings, seen)
         world.time = float(r.t[s - 1])
         try:
@@ -387,7 +374,8 @@ class _Comparison:
         except NonFiniteState:
             return None
         out = []
-        c = seen.contacts
+        batches = seen.of_type(Contacts)
+        c = batches[0] if batches else None
         for k in range(len(c) if c is not None else 0):
             out.append({"step": s, "index": k, "kind": int(c.kind[k]), "a": int(c.a[k]), "other": int(c.other[k]),
                         "tau": float(c.time_in_step[k]), "time": float(r.t[s - 1] + c.time_in_step[k]),
@@ -395,10 +383,10 @@ class _Comparison:
                         "resting": bool(c.resting[k]), "closing": abs(float(c.closing_speed[k]))})
         return state.positions, state.velocities, out
 
-    def _judge_steps(self, kicks: dict, start: int) -> None:
+    def _judge_steps(self, start: int) -> None:
         """Each step from ``start`` on where the foreign run ends elsewhere than physdbg's
         step from the same state."""
-        r = self.runs
+        r, kicks = self.runs, self.kicks
         drift: dict[int, list[int]] = {}  # body -> steps that drift with no contact
         for s in range(start, len(r.t)):
             if not (np.isfinite(r.xf[s - 1]).all() and np.isfinite(r.vf[s - 1]).all()):
@@ -431,17 +419,16 @@ class _Comparison:
                     continue
                 self.judged += len(group)
                 if len(group) == 1:
-                    self._judge_one(group[0], kicks)
+                    self._judge_one(group[0])
                 else:
-                    self._judge_chain(s, group, kicks, v)
+                    self._judge_chain(s, group, v)
             for b in np.flatnonzero(off).tolist():
                 if b in touched or b in resting:
                     continue
                 kick = kicks.get((s, b))
                 if kick is not None and not kick["matched"]:
                     kick["matched"] = True
-                    crossing = self._crossing_of(s, b)
-                    self._extra(kick, crossing)
+                    self._extra(kick)
                 elif kick is None and self.inv[b] > 0:
                     drift.setdefault(b, []).append(s)
         self._drift(drift)
@@ -452,7 +439,7 @@ class _Comparison:
         by design), or one at the very start of a step right after the foreign run kicked
         the body (the aftermath of that kick, already judged)."""
         if c["tau"] <= TIME_TOLERANCE * float(self.runs.dt[s]) and any(
-                self._kick_index.get((k, b), {}).get("matched") for b in self._bodies(c) for k in (s - 1, s)):
+                self.kicks.get((k, b), {}).get("matched") for b in self._bodies(c) for k in (s - 1, s)):
             return True
         a = max(float(np.linalg.norm(self.acc[b])) for b in self._bodies(c))
         return a > 0 and c["closing"] < RESTING_SPEED_STEPS * a * float(self.runs.dt[s])
@@ -460,19 +447,19 @@ class _Comparison:
     def _bodies(self, c: dict) -> tuple[int, ...]:
         return (c["a"], c["other"]) if c["kind"] == KIND_PAIR else (c["a"],)
 
-    def _kick_for(self, c: dict, kicks: dict) -> dict | None:
+    def _kick_for(self, c: dict) -> dict | None:
         """The foreign kick of contact c: on its sphere (or the other sphere of a pair), in
         its step or the next."""
         for s in (c["step"], c["step"] + 1):
             for b in self._bodies(c):
-                k = kicks.get((s, b))
+                k = self.kicks.get((s, b))
                 if k is not None and not k["matched"] and self.inv[b] > 0:
                     return k
         return None
 
-    def _judge_one(self, c: dict, kicks: dict) -> None:
-        r = self.runs
-        kick = self._kick_for(c, kicks)
+    def _judge_one(self, c: dict) -> None:
+        r, kicks = self.runs, self.kicks
+        kick = self._kick_for(c)
         s, dt = c["step"], float(r.dt[c["step"]])
         if kick is None:
             crossing = self._crossing(c)
@@ -547,11 +534,11 @@ class _Comparison:
             return normal_speed(k) > normal_speed(k - 1) and (gap <= 0.0 or normal_speed(k - 1) < 0.0)
 
         while (not self.estimated and pushing_apart(s) and end + 1 < len(r.t)
-               and any((end + 1, b) in self._kick_index for b in self._bodies(c)) and pushing_apart(end + 1)):
+               and any((end + 1, b) in self.kicks for b in self._bodies(c)) and pushing_apart(end + 1)):
             end += 1
             for b in self._bodies(c):
-                if (end, b) in self._kick_index:
-                    self._kick_index[(end, b)]["matched"] = True
+                if (end, b) in self.kicks:
+                    self.kicks[(end, b)]["matched"] = True
         span = float(r.t[end] - r.t[s - 1])
 
         def readings(i):
@@ -598,14 +585,14 @@ class _Comparison:
         self._add("contact-energy", c["step"], c, text, advice,
                   {"restitution": e, "expected": want, "speed_in": abs(before), "speed_out": abs(after)})
 
-    def _judge_chain(self, s: int, group: list[dict], kicks: dict, v_local: np.ndarray) -> None:
+    def _judge_chain(self, s: int, group: list[dict], v_local: np.ndarray) -> None:
         """Contacts of one step that share bodies: the group's outcome as a whole."""
         r = self.runs
         bodies = sorted({b for c in group for b in self._bodies(c) if self.inv[b] > 0})
         for b in bodies:
             for k in (s, s + 1):
-                if (k, b) in kicks:
-                    kicks[(k, b)]["matched"] = True
+                if (k, b) in self.kicks:
+                    self.kicks[(k, b)]["matched"] = True
         idx = np.array(bodies)
         vf, vr = r.vf[s, idx], v_local[idx]
         gap = np.linalg.norm(vf - vr, axis=1)
@@ -640,7 +627,7 @@ class _Comparison:
                       "apply each impulse to both bodies, equal and opposite, scaled by their inverse masses",
                       evidence)
 
-    def _extra(self, kick: dict, crossing) -> None:
+    def _extra(self, kick: dict) -> None:
         r = self.runs
         s, i = kick["step"], kick["body"]
         size = float(np.linalg.norm(r.vf[s, i] - r.vf[s - 1, i]))
@@ -694,12 +681,6 @@ class _Comparison:
                 if x.kind == c["kind"] and {x.a, x.other} == ({c["a"], c["other"]} if c["kind"] == KIND_PAIR
                                                               else {x.a, c["other"]}) and x.a in self._bodies(c):
                     return s, x
-        return None
-
-    def _crossing_of(self, s: int, body: int):
-        for x in self._crossings_in(s):
-            if body in (x.a, x.other if x.kind == KIND_PAIR else -1):
-                return s, x
         return None
 
     def _tunnelled(self, c: dict, crossing) -> None:
