@@ -494,7 +494,7 @@ def _equation_of_state(rec) -> dict | None:
     if rec.steps < 2 * BLOCKS or int(np.count_nonzero(rec.header.inverse_mass > 0)) < 2:
         return None
     eos = equation_of_state(rec)
-    return asdict(eos) if eos.z_virial != 1.0 else None
+    return dict(asdict(eos), periodic=rec.header.walls.periodic) if eos.z_virial != 1.0 else None
 
 
 # ----------------------------------------------------------------------------- analysis
@@ -582,6 +582,9 @@ def check_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str]
 
     if not isinstance(scene, Scene):
         scene = load_scene(scene, overrides)
+    if scene.walls.periodic:
+        raise PhysdbgError(f"scene '{scene.name}' has a periodic box; check-run reads a run's steps from consecutive "
+                           f"positions, which wrap there, and does not compare periodic runs yet")
     run = read_run(run_path, scene.state.count)
     if len(run.times) < 2:
         raise PhysdbgError(f"{run_path}: the run has only its initial state; there is no step to check")

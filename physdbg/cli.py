@@ -675,9 +675,15 @@ def _eos_lines(eos: dict | None) -> list[str]:
         line += f", {eos['z_wall']:.4g} ± {eos['z_wall_error']:.2g} from the walls"
     line += f" (steps {first}..{last})"
     lines = [line, f"temperature kT = {eos['kT']:.4g} J"]
+    if eos["collision_rate"]:
+        line = (f"collisions  {eos['collision_rate']:.4g} ± {eos['collision_rate_error']:.2g} per sphere per second")
+        if eos["collision_rate_enskog"] is not None:
+            line += f" (Enskog: {eos['collision_rate_enskog']:.4g})"
+        lines.append(line)
     if eos["z_carnahan_starling"] is not None:
+        walls = "a periodic box has none" if eos["periodic"] else "walls shift a small box's Z"
         lines.append(f"reference   Carnahan–Starling at packing fraction {eos['packing_fraction']:.4g}: "
-                     f"Z = {eos['z_carnahan_starling']:.4f} (a bulk fluid; walls shift a small box's Z)")
+                     f"Z = {eos['z_carnahan_starling']:.4f} (a bulk fluid; {walls})")
     return lines
 
 

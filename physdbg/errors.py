@@ -23,6 +23,9 @@ class SceneError(PhysdbgError):
         where = f"{source}: field '{field}'" if field else source
         super().__init__(f"{where}: {problem}")
 
+    def __reduce__(self):  # so a worker process can hand it back (sweeps, benchmarks)
+        return type(self), (self.source, self.field, self.problem)
+
 
 class UnknownSceneError(PhysdbgError):
     """The scene is neither a built-in name nor a readable file."""

@@ -74,6 +74,9 @@ def run_peer(name: str, scene) -> tuple[ForeignRun, list[str]]:
         raise PeerError(f"unknown peer {name!r}; choose one of {', '.join(PEERS)}")
     if scene.dt is None:
         raise PeerError(f"scene '{scene.name}' has dt = \"real\"; a peer run needs a fixed dt (--set dt=1/60)")
+    if scene.walls.periodic:
+        raise PeerError(f"scene '{scene.name}' has a periodic box, which {name} has no counterpart for; "
+                        f"record-peer translates closed boxes and planes only")
     if scene.state.count * scene.steps > MAX_PEER_BODY_STEPS:
         bodies = "1 body" if scene.state.count == 1 else f"{scene.state.count} bodies"
         raise PeerError(f"{bodies} × {scene.steps} steps is more than a peer run may take "

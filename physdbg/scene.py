@@ -73,7 +73,7 @@ TOP_FIELDS = {
     "max_particle_steps": "refuse a run of more particle-steps (particles × steps) than this (default 1e10)",
     "particles": "array of [[particles]] tables",
     "planes": "array of [[planes]] tables",
-    "box": "[box] table: closed axis-aligned container",
+    "box": "[box] table: axis-aligned container, closed by walls or periodic on the axes box.periodic names",
     "generate": "[generate] table: generated particles",
 }
 PARTICLE_FIELDS = {
@@ -97,6 +97,8 @@ BOX_FIELDS = {
     "min": "[x, y, z] lower corner (m)",
     "max": "[x, y, z] upper corner (m), larger than min on every axis",
     "restitution": "0 <= e <= 1 for all six walls (default 1)",
+    "periodic": ("true, false, or [x, y, z] of true/false: the periodic axes, which get no walls (a sphere "
+                 "leaving comes back on the other side; default false)"),
 }
 GENERATE_FIELDS = {
     "kind": 'one of "rain" (in the [box]) or "gas" (makes its own box)',
@@ -503,13 +505,27 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
             c.fail(p + "thickness", "only a two-sided wall has a thickness; set two_sided = true")
     box = c.table(raw, "box", "box")
     box_lo = box_hi = None
+    periodic = np.zeros(3, dtype=bool)
+    gas = isinstance(raw.get("generate"), dict) and raw["generate"].get("kind") == "gas"
     if box:
         c.known(box, BOX_FIELDS, "box.")
-        box_lo = c.vector(box, "min", "box.min")
-        box_hi = c.vector(box, "max", "box.max")
-        if not np.all(box_hi > box_lo):
-            c.fail("box.max", f"got {box_hi.tolist()}; must exceed box.min {box_lo.tolist()} on every axis")
+        periodic = _periodic_axes(c, box)
         e_box = c.number(box, "restitution", "box.restitution", default=1.0, lo=0, hi=1)
+        if gas:
+            for key in ("min", "max"):
+                if key in box:
+                    c.fail(f"box.{key}", 'generate.kind = "gas" makes its own box from packing_fraction; a [box] '
+                                         'with a gas sets only periodic and restitution')
+        else:
+            box_lo = c.vector(box, "min", "box.min")
+            box_hi = c.vector(box, "max", "box.max")
+            if not np.all(box_hi > box_lo):
+                c.fail("box.max", f"got {box_hi.tolist()}; must exceed box.min {box_lo.tolist()} on every axis")
+    for k, normal in enumerate(normals):
+        across = np.nonzero(periodic & (np.abs(normal) > 0))[0]
+        if across.size:
+            c.fail(f"planes.{k}.normal", f"got {normal.tolist()}; axis {'xyz'[int(across[0])]} is periodic "
+                                         f"(box.periodic), so a plane's normal must have no component along it")
 
     # particles
     pos, vel, inv, rad, res, gs = [], [], [], [], [], []
@@ -539,17 +555,26 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
     if gen:
         g = _generate(c, gen, kind, count, seed, box_lo, box_hi)
         if kind == "gas":
-            if box:
-                c.fail("box", "generate.kind = \"gas\" makes its own box from packing_fraction; remove [box]")
-            box_lo, box_hi, e_box = g.pop("box")
+            box_lo, box_hi, e_gas = g.pop("box")
+            e_box = e_box if box else e_gas
         pos += list(g["position"])
         vel += list(g["velocity"])
         rad += list(g["radius"])
         inv += list(g["inverse_mass"])
         res += list(g["restitution"])
         gs += [1.0] * len(g["radius"])
+    period = np.zeros(3)
     if box_lo is not None:
+        period = np.where(periodic, box_hi - box_lo, 0.0)
+        smallest = 8.0 * max(rad, default=0.0)
+        for axis in np.nonzero(periodic)[0]:
+            if period[axis] < smallest:
+                c.fail("box.periodic", f"the box is {period[axis]:g} m on periodic axis {'xyz'[axis]}, less than "
+                                       f"4 diameters of the largest sphere ({smallest:g} m): a sphere would meet "
+                                       f"its own image; make the box larger on that axis")
         for axis, label in enumerate("xyz"):
+            if periodic[axis]:
+                continue
             for sign, lim in ((1.0, box_lo), (-1.0, box_hi)):
                 n = np.zeros(3)
                 n[axis] = sign
@@ -563,12 +588,24 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
     state = State(np.array(pos, dtype=np.float64).reshape(-1, 3), np.array(vel, dtype=np.float64).reshape(-1, 3),
                   np.array(inv), np.array(rad), np.array(res), np.array(gs))
     walls = Walls(names, np.array(normals, dtype=np.float64).reshape(-1, 3), np.array(offsets, dtype=np.float64),
-                  np.array(rest, dtype=np.float64), np.array(two, dtype=np.bool_), np.array(thick, dtype=np.float64))
+                  np.array(rest, dtype=np.float64), np.array(two, dtype=np.bool_), np.array(thick, dtype=np.float64),
+                  period, box_lo if box_lo is not None else np.zeros(3))
     scene = Scene(name, description, source, settings, dt, max_dt, steps, duration, seed, state, walls, raw)
     from .analysis.advisor import resolve_auto  # "auto" settings: decided from the scene (physdbg check)
 
     scene.auto = resolve_auto(scene)
     return scene
+
+
+def _periodic_axes(c: _Checker, box: dict) -> np.ndarray:
+    """box.periodic as (3,) bool: true (every axis), false, or [x, y, z] of true/false."""
+    value = box.get("periodic", False)
+    if isinstance(value, bool):
+        return np.full(3, value)
+    if isinstance(value, list) and len(value) == 3 and all(isinstance(v, bool) for v in value):
+        return np.array(value, dtype=bool)
+    c.fail("box.periodic", f"got {_short(value)}; expected true, false or [x, y, z] of true/false "
+                           f"(e.g. [true, true, false])")
 
 
 def _check_resources(c: _Checker, particles: int, steps: int | None, max_memory: float,

@@ -24,9 +24,9 @@ def _contacts(kind, a, other, impulse):
 def test_the_sums_are_r_dot_j_over_pairs_and_the_impulses_at_walls():
     radius = np.array([0.1, 0.2, 0.3])
     c = _contacts([KIND_PAIR, KIND_PAIR, KIND_WALL], [0, 1, 2], [1, 2, 0], [2.0, 3.0, 5.0])
-    virial, wall = collision_sums(c, radius)
-    assert virial == pytest.approx(0.3 * 2.0 + 0.5 * 3.0) and wall == 5.0
-    assert collision_sums(_contacts([], [], [], []), radius) == (0.0, 0.0)
+    virial, wall, collisions = collision_sums(c, radius)
+    assert virial == pytest.approx(0.3 * 2.0 + 0.5 * 3.0) and wall == 5.0 and collisions == 2
+    assert collision_sums(_contacts([], [], [], []), radius) == (0.0, 0.0, 0)
 
 
 def test_a_head_on_collision_records_its_virial(tmp_path):

@@ -6,6 +6,7 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from physdbg.engine.periodic import minimum_image
 from physdbg.engine.reference import ReferenceWorld
 from physdbg.engine.state import Settings, State, Walls
 from physdbg.engine.world import World
@@ -23,30 +24,39 @@ class _Contacts:
                                   float(event.time_in_step[i]), int(event.how[i])))
 
 
-def _box(side: float, restitution: float) -> Walls:
+def _box(side: float, restitution: float, periodic=(False, False, False)) -> Walls:
+    """A box [0, side]³: walls on each axis, or none on the periodic ones."""
     names, normals, offsets = [], [], []
     for axis in range(3):
+        if periodic[axis]:
+            continue
         for sign in (1.0, -1.0):
             n = np.zeros(3)
             n[axis] = sign
             names.append(f"{'xyz'[axis]}{'-' if sign > 0 else '+'}")
             normals.append(n)
             offsets.append(0.0 if sign > 0 else -side)
-    return Walls(names, np.array(normals), np.array(offsets), np.full(6, restitution), np.zeros(6, dtype=np.bool_),
-                 np.zeros(6))
+    w = len(names)
+    return Walls(names, np.array(normals).reshape(-1, 3), np.array(offsets), np.full(w, restitution),
+                 np.zeros(w, dtype=np.bool_), np.zeros(w), np.where(periodic, side, 0.0), np.zeros(3))
 
 
 @st.composite
 def scenes(draw):
-    """A few spheres at random in a 1 m box, moving at random, with one of the methods."""
+    """A few spheres at random in a box (1 m, or 2 m periodic on some axes, where pairs
+    meet across the faces), moving at random, with one of the methods."""
     n = draw(st.integers(2, 12))
     rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    periodic = draw(st.sampled_from([(False, False, False), (False, False, False), (True, True, True),
+                                     (True, False, True)]))
+    side = 2.0 if any(periodic) else 1.0
+    period = np.where(periodic, side, 0.0)
     radius = rng.uniform(0.05, 0.15, n)
     positions = []
-    for r in radius:  # rejection sampling: no overlaps at the start
+    for r in radius:  # rejection sampling: no overlaps at the start (through the faces, too)
         for _ in range(1000):
-            x = rng.uniform(r, 1.0 - r, 3)
-            if all(np.linalg.norm(x - y) > r + s for y, s in zip(positions, radius)):
+            x = np.where(periodic, rng.uniform(0.0, side, 3), rng.uniform(r, side - r, 3))
+            if all(np.linalg.norm(minimum_image(x - y, period)) > r + s for y, s in zip(positions, radius)):
                 positions.append(x)
                 break
         else:
@@ -59,7 +69,7 @@ def scenes(draw):
                       gravity=draw(st.sampled_from([(0.0, 0.0, 0.0), (0.0, -9.81, 0.0)])),
                       drag=draw(st.sampled_from([1.0, 0.7])),
                       restitution_rule=draw(st.sampled_from(["min", "product"])))
-    return state, _box(1.0, draw(st.floats(0.5, 1.0))), method, draw(st.sampled_from([1 / 60, 1 / 240]))
+    return state, _box(side, draw(st.floats(0.5, 1.0)), periodic), method, draw(st.sampled_from([1 / 60, 1 / 240]))
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])

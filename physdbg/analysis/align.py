@@ -20,6 +20,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ..engine.periodic import minimum_image
+
 from ..engine.state import state_hash
 
 
@@ -38,9 +40,11 @@ class StateDifference:
         return asdict(self)
 
 
-def state_difference(xa, va, xb, vb, atol: float = 0.0, rtol: float = 0.0) -> StateDifference:
-    """Compare two states (N, 3) each; with atol = rtol = 0 any bit of difference counts."""
-    dx = np.linalg.norm(xa - xb, axis=1)
+def state_difference(xa, va, xb, vb, atol: float = 0.0, rtol: float = 0.0, period=None) -> StateDifference:
+    """Compare two states (N, 3) each; with atol = rtol = 0 any bit of difference counts.
+    period: (3,) m of a periodic box (0 = not periodic; None = none), whose positions
+    differ through the minimum image (a sphere wrapped in one run only is near)."""
+    dx = np.linalg.norm(position_gap(xa, xb, period), axis=1)
     dv = np.linalg.norm(va - vb, axis=1)
     if atol == 0.0 and rtol == 0.0:
         beyond = np.any(xa != xb, axis=1) | np.any(va != vb, axis=1)
@@ -81,14 +85,22 @@ def check_stored_hash(rec, frame) -> None:
                              f"(the file was altered or damaged)")
 
 
-def hermite(t: float, a, b):
-    """State (x (N, 3), v (N, 3)) at time t between two FrameStates a (earlier) and b."""
+def position_gap(xa, xb, period=None):
+    """xa - xb (N, 3), through the minimum image on the periodic axes of period (3,) m."""
+    return xa - xb if period is None else minimum_image(xa - xb, period)
+
+
+def hermite(t: float, a, b, period=None):
+    """State (x (N, 3), v (N, 3)) at time t between two FrameStates a (earlier) and b
+    (in a periodic box of period (3,) m, b's positions taken next to a's: a sphere that
+    wrapped between the frames is interpolated along its path, not across the box)."""
     h = b.time - a.time
     if h <= 0.0:
         return a.positions, a.velocities
     s = (t - a.time) / h
     h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
-    x = h00 * a.positions + h10 * h * a.velocities + h01 * b.positions + h11 * h * b.velocities
+    xb = b.positions if period is None else a.positions + minimum_image(b.positions - a.positions, period)
+    x = h00 * a.positions + h10 * h * a.velocities + h01 * xb + h11 * h * b.velocities
     v = (1 - s) * a.velocities + s * b.velocities
     return x, v
 

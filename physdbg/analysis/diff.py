@@ -234,6 +234,8 @@ class _Differ:
         self.rtol = default if rtol is None else float(rtol)
         self.by_step = align.same_steps(self.ta.dt, self.tb.dt)
         self.names_a = list(ra.header.walls.names)
+        # positions of a periodic box differ through the minimum image (None: no box)
+        self.period = ra.header.walls.period if ra.header.walls.periodic else None
         movable = ra.header.inverse_mass > 0
         self.radius = float(ra.header.radius[movable].min()) if movable.any() else float(ra.header.radius.min())
 
@@ -259,7 +261,7 @@ class _Differ:
                                     {"steps_a": ra.steps, "steps_b": rb.steps}))
             return self._report(None, None, causes, compared)
         fa, fb, xa, va, xb, vb, prev_a, prev_b = found
-        state = align.state_difference(xa, va, xb, vb, self.atol, self.rtol)
+        state = align.state_difference(xa, va, xb, vb, self.atol, self.rtol, self.period)
         event, contacts_a, contacts_b = self._first_event(fa, fb)
         divergence = Divergence(fa, fb, float(self.ta.time[fa]), state, event)
         growth = self._growth(fa, fb)
@@ -299,6 +301,10 @@ class _Differ:
         return abs(end_a - end_b) <= 1e-9 * max(float(self.ta.dt[-1]), float(self.tb.dt[-1]), 1e-300)
 
     # ------------------------------------------------------------------ finding the step
+    def _gap(self, xa: np.ndarray, xb: np.ndarray) -> float:
+        """The largest distance (m) between a sphere's positions in the two runs."""
+        return float(np.nanmax(np.linalg.norm(align.position_gap(xa, xb, self.period), axis=1)))
+
     def _first_by_step(self):
         ra, rb = self.ra, self.rb
         start = align.first_differing_frame(self.ta.hashes, self.tb.hashes)
@@ -316,7 +322,7 @@ class _Differ:
                 align.check_stored_hash(ra, sa)
                 align.check_stored_hash(rb, sb)
             d = align.state_difference(sa.positions, sa.velocities, sb.positions, sb.velocities, self.atol,
-                                       self.rtol)
+                                       self.rtol, self.period)
             if d.count:
                 prev_a, prev_b = previous if previous else (None, None)
                 return (sa.frame, sb.frame, sa.positions, sa.velocities, sb.positions, sb.velocities,
@@ -347,11 +353,11 @@ class _Differ:
             elif abs(before.time - t) <= 1e-9 * max(before.dt, sc.dt, 1e-300):
                 xf, vf, match = before.positions, before.velocities, before
             else:
-                xf, vf = align.hermite(t, before, after)
+                xf, vf = align.hermite(t, before, after, self.period)
                 match = after
             compared += 1
             xa, va, xb, vb = (xf, vf, sc.positions, sc.velocities) if swap else (sc.positions, sc.velocities, xf, vf)
-            d = align.state_difference(xa, va, xb, vb, self.atol, self.rtol)
+            d = align.state_difference(xa, va, xb, vb, self.atol, self.rtol, self.period)
             if d.count:
                 fa, fb = (match.frame, sc.frame) if swap else (sc.frame, match.frame)
                 return (fa, fb, xa, va, xb, vb, None, None), compared
@@ -412,10 +418,10 @@ class _Differ:
             later = [later[int(i)] for i in np.linspace(0, len(later) - 1, GROWTH_MAX_SAMPLES)]
         gaps = {}
         for sa, sb in zip(ra.states(frames[0], frames[-1] + 1), rb.states(frames[0], frames[-1] + 1), strict=True):
-            gaps[sa.frame] = float(np.nanmax(np.linalg.norm(sa.positions - sb.positions, axis=1)))
+            gaps[sa.frame] = self._gap(sa.positions, sb.positions)
         for k in later:
             sa, sb = ra.state(k), rb.state(k)
-            gaps[k] = float(np.nanmax(np.linalg.norm(sa.positions - sb.positions, axis=1)))
+            gaps[k] = self._gap(sa.positions, sb.positions)
         self._refine(gaps, 1e-3)
         self._refine(gaps, self.radius)
         steps = np.array(sorted(gaps))
@@ -434,7 +440,7 @@ class _Differ:
         if not below or first - below[-1] <= 1:
             return
         for sa, sb in zip(self.ra.states(below[-1] + 1, first), self.rb.states(below[-1] + 1, first), strict=True):
-            gaps[sa.frame] = float(np.nanmax(np.linalg.norm(sa.positions - sb.positions, axis=1)))
+            gaps[sa.frame] = self._gap(sa.positions, sb.positions)
 
     def _growth_by_time(self, fa: int) -> align.Growth | None:
         """Gaps at the frames of A (aligned by time, as for the divergence)."""
@@ -452,10 +458,10 @@ class _Differ:
             if abs(after.time - t) <= 1e-9 * max(after.dt, 1e-300):
                 xb = after.positions
             else:
-                xb, _ = align.hermite(t, before, after)
+                xb, _ = align.hermite(t, before, after, self.period)
             steps.append(sa.frame)
             times.append(t)
-            gaps.append(float(np.nanmax(np.linalg.norm(sa.positions - xb, axis=1))))
+            gaps.append(self._gap(sa.positions, xb))
         if not steps:
             return None
         return align.fit_growth(np.array(steps), np.array(times), np.array(gaps), self.radius, fa,

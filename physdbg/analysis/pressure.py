@@ -13,14 +13,15 @@ total time T, with kinetic energy K (time-averaged) of N moving spheres (kT = 2K
 The error bars are the standard error of the mean over BLOCKS consecutive blocks of steps
 (collisions correlate over a few mean free times; blocks much longer than that are
 independent). With walls, the density next to them differs from the bulk, so Z from the
-collisions of a small walled gas is not quite the bulk's (periodic boundaries are not
-built yet; docs/accuracy.md).
+collisions of a small walled gas is not quite the bulk's; a periodic box (``[box]
+periodic = true``) has no walls and gives the bulk's (docs/pressure.md, the EOS table).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -29,17 +30,29 @@ from ..events import KIND_PAIR, Contacts
 BLOCKS = 10
 
 
-def collision_sums(contacts: Contacts, radius: np.ndarray) -> tuple[float, float]:
-    """(virial, wall impulse) of a step's contacts: the sum over sphere pairs of
-    r_ab · J_a = (r_a + r_b) j (J·s; r_ab from b to a at contact, J_a = j n the impulse on a),
-    and the sum of the impulses on spheres at walls (N·s). Over a time T, the collisional
+class CollisionSums(NamedTuple):
+    """What a step's contacts add to the equation of state: virial (J·s), wall_impulse
+    (N·s) and collisions (sphere–sphere contacts)."""
+
+    virial: float
+    wall_impulse: float
+    collisions: int
+
+
+NO_COLLISIONS = CollisionSums(0.0, 0.0, 0)
+
+
+def collision_sums(contacts: Contacts, radius: np.ndarray) -> CollisionSums:
+    """The sums of a step's contacts: over sphere pairs r_ab · J_a = (r_a + r_b) j (J·s;
+    r_ab from b to a at contact, J_a = j n the impulse on a), the impulses on spheres at
+    walls (N·s), and the number of sphere–sphere contacts. Over a time T, the collisional
     virial gives PV = N kT + sum / (3 T), the wall impulses P = sum / (area T)."""
     if not len(contacts):
-        return 0.0, 0.0
+        return NO_COLLISIONS
     pair = contacts.kind == KIND_PAIR
     impulse = np.nan_to_num(contacts.impulse, nan=0.0)
     reach = radius[contacts.a[pair]] + radius[contacts.other[pair]]
-    return float(reach @ impulse[pair]), float(impulse[~pair].sum())
+    return CollisionSums(float(reach @ impulse[pair]), float(impulse[~pair].sum()), int(np.count_nonzero(pair)))
 
 
 def carnahan_starling(phi: float) -> float:
@@ -47,12 +60,26 @@ def carnahan_starling(phi: float) -> float:
     return (1 + phi + phi * phi - phi**3) / (1 - phi) ** 3
 
 
+def contact_value(phi: float) -> float:
+    """g(σ), the pair distribution at contact, from Carnahan–Starling: Z - 1 = 4 phi g(σ)."""
+    return (1 - phi / 2) / (1 - phi) ** 3
+
+
+def enskog_collision_rate(phi: float, diameter: float, kT: float, mass: float) -> float:
+    """Collisions per sphere per second in a hard-sphere fluid (Enskog): 4 n σ² g(σ)
+    sqrt(π kT / m), with n = 6 phi / (π σ³) and g(σ) from Carnahan–Starling (1/s)."""
+    density = 6 * phi / (math.pi * diameter**3)
+    return 4 * density * diameter**2 * contact_value(phi) * math.sqrt(math.pi * kT / mass)
+
+
 @dataclass
 class EquationOfState:
     """What a run's collisions say. z_virial, z_virial_error: from the collisions; z_wall,
     z_wall_error: from the walls (None without a closed box); kT: J, time-averaged;
     packing_fraction: sphere volume / box volume (None without a box); z_carnahan_starling
-    at that packing fraction (equal radii only); steps: (first, last) averaged over."""
+    at that packing fraction (equal radii only); steps: (first, last) averaged over;
+    collision_rate, collision_rate_error: sphere–sphere collisions per sphere per second;
+    collision_rate_enskog: Enskog's at that packing fraction and kT (equal spheres only)."""
 
     z_virial: float
     z_virial_error: float
@@ -62,12 +89,18 @@ class EquationOfState:
     packing_fraction: float | None
     z_carnahan_starling: float | None
     steps: tuple[int, int]
+    collision_rate: float | None = None
+    collision_rate_error: float | None = None
+    collision_rate_enskog: float | None = None
 
 
 def box_of(walls) -> tuple[np.ndarray, np.ndarray] | None:
-    """(lo, hi) of the axis-aligned box closed by one-sided walls, one facing in on each side
-    of each axis, or None."""
+    """(lo, hi) of the axis-aligned box on each axis periodic or closed by one-sided walls,
+    one facing in on each side, or None."""
     lo, hi = np.full(3, np.nan), np.full(3, np.nan)
+    periodic = walls.period > 0
+    lo[periodic] = walls.period_origin[periodic]
+    hi[periodic] = walls.period_origin[periodic] + walls.period[periodic]
     for normal, offset, two in zip(walls.normals, walls.offsets, walls.two_sided, strict=True):
         axis = int(np.argmax(np.abs(normal)))
         if two or abs(abs(normal[axis]) - 1) > 1e-12:
@@ -105,12 +138,19 @@ def equation_of_state(rec, skip: float = 0.5) -> EquationOfState:
     if box is not None:
         side = box[1] - box[0]
         volume = float(np.prod(side))
+        phi = float((4 / 3) * math.pi * np.sum(header.radius[movable] ** 3) / volume)
+        if np.ptp(header.radius) == 0:
+            z_cs = carnahan_starling(phi)
+    if box is not None and not header.walls.periodic:
         area = 2 * float(side[0] * side[1] + side[1] * side[2] + side[0] * side[2])
         # P = wall impulses / (area × time); N kT = 2/3 of the time-averaged kinetic energy
         wall_blocks = np.array([(stats["wall_impulse"][b].sum() / (area * dt[b].sum())) * volume
                                 / ((2 / 3) * (kinetic[b] * dt[b]).sum() / dt[b].sum()) for b in blocks])
         z_wall, z_wall_error = mean_and_error(wall_blocks)
-        phi = float((4 / 3) * math.pi * np.sum(header.radius[movable] ** 3) / volume)
-        if np.ptp(header.radius) == 0:
-            z_cs = carnahan_starling(phi)
-    return EquationOfState(z_virial, z_virial_error, z_wall, z_wall_error, kT, phi, z_cs, (first, rec.steps))
+    rate_blocks = np.array([2 * stats["collisions"][b].sum() / (n * dt[b].sum()) for b in blocks])
+    rate, rate_error = mean_and_error(rate_blocks)
+    enskog = None
+    if z_cs is not None and np.ptp(header.inverse_mass[movable]) == 0:
+        enskog = enskog_collision_rate(phi, 2 * float(header.radius[0]), kT, 1 / float(header.inverse_mass[movable][0]))
+    return EquationOfState(z_virial, z_virial_error, z_wall, z_wall_error, kT, phi, z_cs, (first, rec.steps),
+                           rate, rate_error, enskog)

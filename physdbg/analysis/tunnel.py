@@ -26,6 +26,7 @@ import numpy as np
 from numba import njit
 
 from ..engine.motion import EULER, SEMI_IMPLICIT, path_coefficients, velocity_coefficients
+from ..engine.periodic import unwrap_near
 from ..engine.toi import INF, pair_toi_swept_scalar
 from ..events import KIND_PAIR, KIND_WALL
 
@@ -186,7 +187,16 @@ class StepChecker:
 
     def check(self, x0, v0, x1, dt: float, contacts) -> list[Crossing]:
         """Crossings in one step from frame state (x0, v0) to positions x1 (all (N, 3));
-        contacts: the step's Contacts (None when not recorded)."""
+        contacts: the step's Contacts (None when not recorded).
+
+        In a periodic box the engine wraps each end position into the box and records a
+        pair contact's point next to sphere a, whichever image of b it met: every position
+        is first moved by whole periods next to where its sphere began the step (a step
+        carries no sphere half a period), so each sphere's path is continuous. Pairs that
+        meet across a periodic face are not tested (the check stays conservative).
+        """
+        if self.walls.periodic:
+            x1 = unwrap_near(x1, x0, self.walls.period)
         out = self._walls(x0, x1, contacts)
         if self.n > 1:
             out += self._pairs(x0, v0, x1, dt, contacts)
@@ -241,6 +251,8 @@ class StepChecker:
         when = np.concatenate(when)
         where = np.concatenate(where)
         speed = np.concatenate(speed)
+        if self.walls.periodic:
+            where = unwrap_near(where, x0[who], self.walls.period)
         order = np.lexsort((np.arange(len(who)), when, who))
         who, when, where, speed = who[order], when[order], where[order], speed[order]
         start = np.zeros(n + 1, dtype=np.int64)

@@ -46,7 +46,7 @@ class ReferenceWorld(World):
                 predict_into(kind, ia, ib, st.positions, st.velocities, self._a, st.radius, self._sigma,
                              self._version, self._dt, self._integrator, self._k, self._detection, s.samples,
                              s.contact_tolerance * 1e-3, self._normals, self._offsets, self._half_thickness,
-                             self._two_sided, self.held, scratch.test_int, scratch.test_float,
+                             self._two_sided, self._period, self.held, scratch.test_int, scratch.test_float,
                              scratch.test_outcome, scratch.heap_toi, scratch.heap_data, scratch.counters, False)
                 m = int(scratch.counters[TESTS])
                 for row in range(m):

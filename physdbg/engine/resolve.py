@@ -32,6 +32,7 @@ from numba import njit
 
 from ..events import HOW_IMPULSE, HOW_RAPID, HOW_RESTING, HOW_WITH_HELD, KIND_PAIR
 from .motion import advance_particles
+from .periodic import image
 from .resting import (
     begin_solve,
     contacts_of,
@@ -99,13 +100,20 @@ def seed_impulse(closing, restitution, inverse_mass_sum):
 
 
 @njit(cache=True)
-def contact_normal(x, ia, ib, other, normals, offsets, two_sided):
+def pair_separation(x, ia, ib, period):
+    """Centre of a minus centre of b (3 floats, m) at the anchors, through the minimum
+    image on periodic axes (period (3,), 0 = not periodic), and its length."""
+    d0 = image(x[ia, 0] - x[ib, 0], period[0])
+    d1 = image(x[ia, 1] - x[ib, 1], period[1])
+    d2 = image(x[ia, 2] - x[ib, 2], period[2])
+    return d0, d1, d2, math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+
+
+@njit(cache=True)
+def contact_normal(x, ia, ib, other, normals, offsets, two_sided, period):
     """Unit normal (3 floats) from b (or the wall) to a at the anchors; coincident centres give +x."""
     if ib >= 0:
-        d0 = x[ia, 0] - x[ib, 0]
-        d1 = x[ia, 1] - x[ib, 1]
-        d2 = x[ia, 2] - x[ib, 2]
-        length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        d0, d1, d2, length = pair_separation(x, ia, ib, period)
         if length == 0.0:
             return 1.0, 0.0, 0.0
         return d0 / length, d1 / length, d2 / length
@@ -120,7 +128,7 @@ def contact_normal(x, ia, ib, other, normals, offsets, two_sided):
 @njit(cache=True)
 def resolve_contact(kind, ia, other, toi, run_time, x, v, a, acc, radius, inverse_mass, restitution, sigma,
                     last_contact, step_end, integrator, drag, k, anchor_is_flow, path_follows_acc, rest_fraction,
-                    rest_step_factor, rule, rapid_time, normals, offsets, two_sided, wall_restitution, h,
+                    rest_step_factor, rule, rapid_time, normals, offsets, two_sided, wall_restitution, period, h,
                     contact_float, contact_int, counters, contacts_slot, rapid_slot, changed, work_budget,
                     vtol, atol):
     """Resolve the predicted contact (kind, ia, other) at time ``toi`` in the step.
@@ -131,7 +139,9 @@ def resolve_contact(kind, ia, other, toi, run_time, x, v, a, acc, radius, invers
     (count first) the spheres whose paths changed. run_time: the run's time at step start
     (s); path_follows_acc: the path acceleration is the contact-solved acceleration (every
     integrator but semi-implicit). Returns SKIPPED (not approaching: nothing resolved),
-    RESOLVED, or OUT_OF_WORK (the held-contact solve ran out of its budget).
+    RESOLVED, or OUT_OF_WORK (the held-contact solve ran out of its budget). period: (3,)
+    m, the periodic axes (0 = not periodic); the contact point is on a's surface next to
+    a's centre, whichever image of b it met.
     """
     ib = other if kind == KIND_PAIR else -1
     changed[0] = 0
@@ -139,7 +149,7 @@ def resolve_contact(kind, ia, other, toi, run_time, x, v, a, acc, radius, invers
     one[0] = ia
     one[1] = ib
     advance_particles(x, v, a, sigma, one[:2] if ib >= 0 else one[:1], toi, integrator, drag, k)
-    nx, ny, nz = contact_normal(x, ia, ib, other, normals, offsets, two_sided)
+    nx, ny, nz = contact_normal(x, ia, ib, other, normals, offsets, two_sided, period)
     closing = -relative_normal(v, ia, ib, nx, ny, nz)
     rel_acc = relative_normal(acc, ia, ib, nx, ny, nz)
     if ib >= 0:
@@ -294,8 +304,8 @@ def _visit_all(h, v) -> None:
 
 @njit(cache=True)
 def settle_held(h, x, v, a, acc, free_accel, radius, inverse_mass, sigma, dt, integrator, drag, k,
-                semi_implicit, normals, offsets, half_thickness, two_sided, contact_tolerance, work_budget, vtol,
-                atol, stick) -> bool:
+                semi_implicit, normals, offsets, half_thickness, two_sided, period, contact_tolerance, work_budget,
+                vtol, atol, stick) -> bool:
     """The forces phase of a step, for held contacts (all anchors at the step start).
 
     Releases contacts whose gap exceeds the contact tolerance, refreshes pair normals,
@@ -311,10 +321,7 @@ def settle_held(h, x, v, a, acc, free_accel, radius, inverse_mass, sigma, dt, in
         i = h.a[c]
         if h.kind[c] == KIND_PAIR:
             j = h.other[c]
-            d0 = x[i, 0] - x[j, 0]
-            d1 = x[i, 1] - x[j, 1]
-            d2 = x[i, 2] - x[j, 2]
-            length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            d0, d1, d2, length = pair_separation(x, i, j, period)
             gap = length - radius[i] - radius[j]
             if length > 0.0:
                 h.normal[c, 0] = d0 / length

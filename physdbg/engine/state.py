@@ -89,6 +89,11 @@ class Walls:
 
     One-sided walls keep spheres where n·x - d >= r; two-sided walls are thin slabs of
     ``thickness`` centred on the plane that spheres bounce off from either side.
+
+    period, period_origin: (3,) m: an axis with period L > 0 is periodic, spheres leaving
+    [origin, origin + L) come back on the other side and pairs meet through the minimum
+    image (periodic.py); 0 = not periodic. No wall's normal may have a component along
+    a periodic axis.
     """
 
     names: list[str] = field(default_factory=list)
@@ -97,9 +102,20 @@ class Walls:
     restitution: np.ndarray = field(default_factory=lambda: np.zeros(0))
     two_sided: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.bool_))
     thickness: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    period: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    period_origin: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def __post_init__(self) -> None:
+        self.period = np.ascontiguousarray(self.period, dtype=np.float64).reshape(3)
+        self.period_origin = np.ascontiguousarray(self.period_origin, dtype=np.float64).reshape(3)
 
     def __len__(self) -> int:
         return len(self.names)
+
+    @property
+    def periodic(self) -> bool:
+        """Is any axis periodic?"""
+        return bool(np.any(self.period > 0))
 
 
 @dataclass

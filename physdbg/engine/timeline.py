@@ -33,7 +33,8 @@ from numba import njit
 
 from ..events import KIND_PAIR, KIND_WALL, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_SUPERSEDED
 from .motion import particle_box, path_coefficients
-from .resolve import CF_WIDTH, CI_WIDTH, OUT_OF_WORK, SKIPPED, resolve_contact
+from .periodic import image
+from .resolve import CF_WIDTH, CI_WIDTH, OUT_OF_WORK, SKIPPED, pair_separation, resolve_contact
 from .resting import held_find, held_room
 from .toi import (
     DISCRETE,
@@ -189,7 +190,7 @@ def _record(kind, i, j, start, t, step_end, version, test_int, test_float, test_
 
 @njit(cache=True, inline="always")
 def _predict_pair(i, j, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, tolerance,
-                  held, test_int, test_float, test_outcome, heap_toi, heap_data, counters, push):
+                  period, held, test_int, test_float, test_outcome, heap_toi, heap_data, counters, push):
     """Swept test of pair (i, j) (i < j) from the later of their anchors; record it, push a
     hit. A held pair is not tested."""
     if held.deg[i] > 0 and held.deg[j] > 0 and held_find(held, KIND_PAIR, i, j) >= 0:
@@ -197,10 +198,11 @@ def _predict_pair(i, j, x, v, a, radius, sigma, version, step_end, integrator, k
     start = max(sigma[i], sigma[j])
     pi1, pi2, dpi = path_coefficients(integrator, k, start - sigma[i])
     pj1, pj2, dpj = path_coefficients(integrator, k, start - sigma[j])
-    # relative position and path velocity at the common start (see motion.path_state)
-    dx0 = (x[i, 0] + v[i, 0] * pi1 + a[i, 0] * pi2) - (x[j, 0] + v[j, 0] * pj1 + a[j, 0] * pj2)
-    dx1 = (x[i, 1] + v[i, 1] * pi1 + a[i, 1] * pi2) - (x[j, 1] + v[j, 1] * pj1 + a[j, 1] * pj2)
-    dx2 = (x[i, 2] + v[i, 2] * pi1 + a[i, 2] * pi2) - (x[j, 2] + v[j, 2] * pj1 + a[j, 2] * pj2)
+    # relative position (the minimum image on periodic axes) and path velocity at the
+    # common start (see motion.path_state)
+    dx0 = image((x[i, 0] + v[i, 0] * pi1 + a[i, 0] * pi2) - (x[j, 0] + v[j, 0] * pj1 + a[j, 0] * pj2), period[0])
+    dx1 = image((x[i, 1] + v[i, 1] * pi1 + a[i, 1] * pi2) - (x[j, 1] + v[j, 1] * pj1 + a[j, 1] * pj2), period[1])
+    dx2 = image((x[i, 2] + v[i, 2] * pi1 + a[i, 2] * pi2) - (x[j, 2] + v[j, 2] * pj1 + a[j, 2] * pj2), period[2])
     dv0 = (v[i, 0] * dpi + a[i, 0] * pi1) - (v[j, 0] * dpj + a[j, 0] * pj1)
     dv1 = (v[i, 1] * dpi + a[i, 1] * pi1) - (v[j, 1] * dpj + a[j, 1] * pj1)
     dv2 = (v[i, 2] * dpi + a[i, 2] * pi1) - (v[j, 2] * dpj + a[j, 2] * pj1)
@@ -238,16 +240,17 @@ def _predict_wall(i, w, x, v, a, radius, sigma, version, step_end, integrator, k
 
 @njit(cache=True)
 def predict_into(kind, ia, ib, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
-                 tolerance, normals, offsets, half_thickness, two_sided, held,
+                 tolerance, normals, offsets, half_thickness, two_sided, period, held,
                  test_int, test_float, test_outcome, heap_toi, heap_data, counters, push):
     """Swept-test candidates (kind, ia[m], ib[m]); record each test; push hits if ``push``.
 
-    held: the held contacts (resting.HeldContacts), which are not tested.
+    held: the held contacts (resting.HeldContacts), which are not tested; period: (3,)
+    m, the periodic axes (0 = not periodic).
     """
     for m in range(ia.shape[0]):
         if kind == KIND_PAIR:
             _predict_pair(ia[m], ib[m], x, v, a, radius, sigma, version, step_end, integrator, k, detection,
-                          samples, tolerance, held, test_int, test_float, test_outcome, heap_toi,
+                          samples, tolerance, period, held, test_int, test_float, test_outcome, heap_toi,
                           heap_data, counters, push)
         else:
             _predict_wall(ia[m], ib[m], x, v, a, radius, sigma, version, step_end, integrator, k, detection,
@@ -258,7 +261,7 @@ def predict_into(kind, ia, ib, x, v, a, radius, sigma, version, step_end, integr
 # ------------------------------------------------------------------------------ resolve
 @njit(cache=True)
 def _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, tolerance,
-               normals, offsets, half_thickness, two_sided, held, adj_start, adj, batch_mark, batch, test_int,
+               normals, offsets, half_thickness, two_sided, period, held, adj_start, adj, batch_mark, batch, test_int,
                test_float, test_outcome, heap_toi, heap_data, counters):
     """Push new predictions of particle p against its partners and the walls.
 
@@ -269,7 +272,7 @@ def _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, dete
         if batch_mark[q] == batch and q < p:
             continue
         _predict_pair(min(p, q), max(p, q), x, v, a, radius, sigma, version, step_end, integrator, k, detection,
-                      samples, tolerance, held, test_int, test_float, test_outcome, heap_toi,
+                      samples, tolerance, period, held, test_int, test_float, test_outcome, heap_toi,
                       heap_data, counters, True)
     for w in range(normals.shape[0]):
         _predict_wall(p, w, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, normals,
@@ -299,7 +302,8 @@ def _inside_box(x, v, a, radius, sigma, p, step_end, integrator, k, margin, box_
 @njit(cache=True)
 def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, version, last_contact, run_time,
                    step_end, integrator, drag, k, detection, samples, tolerance, rest_fraction, rest_step_factor,
-                   rule, rapid_time, normals, offsets, half_thickness, two_sided, wall_restitution, held, adj_start,
+                   rule, rapid_time, normals, offsets, half_thickness, two_sided, wall_restitution, period, held,
+                   adj_start,
                    adj, box_lo, box_hi, box_margin, max_degree, cap, max_tests, work_budget, anchor_is_flow,
                    path_follows_acc, vtol, atol, heap_toi, heap_data, test_int, test_float, test_outcome,
                    contact_float, contact_int, counters, pending, changed, batch_mark, requery, requery_count):
@@ -316,7 +320,8 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
                 p = pending[counters[PENDING_AT]]
                 counters[PENDING_AT] += 1
                 _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
-                           tolerance, normals, offsets, half_thickness, two_sided, held, adj_start, adj, batch_mark,
+                           tolerance, normals, offsets, half_thickness, two_sided, period, held, adj_start, adj,
+                           batch_mark,
                            counters[BATCH], test_int, test_float, test_outcome, heap_toi, heap_data, counters)
             # a path that left its swept box may meet particles it was never paired with
             out = 0
@@ -358,7 +363,7 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
         status = resolve_contact(kind, ia, other, toi, run_time, x, v, a, acc, radius, inverse_mass, restitution,
                                  sigma, last_contact, step_end, integrator, drag, k, anchor_is_flow,
                                  path_follows_acc, rest_fraction, rest_step_factor, rule, rapid_time, normals,
-                                 offsets, two_sided, wall_restitution, held, contact_float, contact_int, counters,
+                                 offsets, two_sided, wall_restitution, period, held, contact_float, contact_int, counters,
                                  CONTACTS, RAPID, changed, work_budget, vtol, atol)
         test_outcome[rid] = OUTCOME_SUPERSEDED if status == SKIPPED else OUTCOME_HIT
         # re-predict only the particles whose paths changed (next time round the loop)
@@ -433,8 +438,9 @@ def reachable_walls(lo, hi, normals, offsets, half_thickness, two_sided):
 
 
 @njit(cache=True)
-def max_overlap(x, radius, pairs, normals, offsets, half_thickness, two_sided, ignore_tunnelled):
-    """Deepest penetration (m, >= 0) among the candidate pairs and every particle–wall pair.
+def max_overlap(x, radius, pairs, normals, offsets, half_thickness, two_sided, period, ignore_tunnelled):
+    """Deepest penetration (m, >= 0) among the candidate pairs and every particle–wall pair
+    (pairs through the minimum image on the periodic axes of period (3,), 0 = not periodic).
 
     ignore_tunnelled: a sphere past the middle of a thin wall went through it (discrete or
     sampled detection) and is not counted as overlapping it.
@@ -443,7 +449,7 @@ def max_overlap(x, radius, pairs, normals, offsets, half_thickness, two_sided, i
     for m in range(pairs.shape[0]):
         i = pairs[m, 0]
         j = pairs[m, 1]
-        d = math.sqrt((x[i, 0] - x[j, 0]) ** 2 + (x[i, 1] - x[j, 1]) ** 2 + (x[i, 2] - x[j, 2]) ** 2)
+        d = pair_separation(x, i, j, period)[3]
         worst = max(worst, radius[i] + radius[j] - d)
     for i in range(x.shape[0]):
         for w in range(normals.shape[0]):

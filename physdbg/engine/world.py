@@ -45,7 +45,10 @@ from ..events import (
     SweptTests,
 )
 from .broadphase import choose_broad_phase, make_broad_phase
+from .broadphase.boxes import boxes_meet
+from .broadphase.periodic import PeriodicBroadPhase
 from .motion import EULER, SEMI_IMPLICIT, VERLET, advance_particles, particle_box, swept_boxes
+from .periodic import wrap_positions
 from .resolve import (
     CF_CLOSING,
     CF_IMPULSE,
@@ -157,6 +160,11 @@ class World:
         self._acc = np.zeros((state.count, 3))
         self._offsets = np.ascontiguousarray(walls.offsets, dtype=np.float64)
         self._wall_restitution = np.ascontiguousarray(walls.restitution, dtype=np.float64)
+        self._period = np.ascontiguousarray(walls.period, dtype=np.float64)
+        self._period_origin = np.ascontiguousarray(walls.period_origin, dtype=np.float64)
+        if walls.periodic:
+            wrap_positions(state.positions, self._period_origin, self._period)
+            self.broad_phase = PeriodicBroadPhase(self.broad_phase, self._period_origin, self._period)
         self._buf = Buffers(state.count)
         self.event_cap = settings.event_cap(state.count)
 
@@ -203,7 +211,7 @@ class World:
         sigma = np.zeros(n)
         if not settle_held(self.held, x, v, path_accel, acc, self._free_accel, st.radius, st.inverse_mass, sigma, dt,
                            self._integrator, self._drag, self._k, self._integrator == SEMI_IMPLICIT, self._normals,
-                           self._offsets, self._half_thickness, self._two_sided, s.contact_tolerance,
+                           self._offsets, self._half_thickness, self._two_sided, self._period, s.contact_tolerance,
                            s.max_resting_work_per_step, self._vtol, self._atol,
                            dt * (self._rest_step_factor + s.rest_fraction)):
             warn("max_resting_work_per_step", _budget_message("max_resting_work_per_step",
@@ -219,7 +227,12 @@ class World:
         swept_boxes(x, v, path_accel, st.radius, sigma, dt, self._integrator, self._k,
                     s.contact_tolerance, lo, hi)
         self._add_reach(lo, hi, dt)
-        pairs = self.broad_phase.pairs(lo, hi, s.max_pairs_per_step)
+        too_wide = self._too_wide_for_the_period(lo, hi)
+        if too_wide:
+            warn("periodic", too_wide)
+            pairs = np.empty((0, 2), dtype=np.int64)
+        else:
+            pairs = self.broad_phase.pairs(lo, hi, s.max_pairs_per_step)
         if len(pairs) > s.max_pairs_per_step:
             warn("max_pairs_per_step", _budget_message("max_pairs_per_step", s.max_pairs_per_step))
             pairs = np.empty((0, 2), dtype=np.int64)
@@ -258,6 +271,8 @@ class World:
         advance_particles(x, v, self._a, sigma, np.arange(n, dtype=np.int64), dt, self._integrator,
                           self._drag, self._k)
         sigma[:] = 0.0
+        if self.walls.periodic:  # the paths were continuous through the step; the state is in the box
+            wrap_positions(x, self._period_origin, self._period)
         max_overlap = self._max_overlap()
         if s.detection == "swept" and max_overlap > s.contact_tolerance and not warnings:
             warn("overlap", f"spheres overlap by {max_overlap:.3g} m, more than the contact tolerance "
@@ -315,6 +330,24 @@ class World:
         np.minimum(lo, st.positions - reach, out=lo)
         np.maximum(hi, st.positions + reach, out=hi)
 
+    def _too_wide_for_the_period(self, lo: np.ndarray, hi: np.ndarray) -> str | None:
+        """Why this step's swept boxes (N, 3) break the minimum image, or None.
+
+        The minimum image is the true separation of every pair whose boxes overlap only
+        while each box is narrower than half the period (periodic.py); a step whose
+        box is wider would test the wrong images, so its pairs are not tested at all.
+        """
+        if not self.walls.periodic or lo.shape[0] == 0:
+            return None
+        width = (hi - lo).max(axis=0)
+        bad = np.nonzero((self._period > 0) & (width >= 0.5 * self._period))[0]
+        if not bad.size:
+            return None
+        axis = int(bad[0])
+        return (f"a sphere's swept box is {width[axis]:.3g} m wide on periodic axis {'xyz'[axis]}, at least half "
+                f"the period {self._period[axis]:g} m: pairs cannot be told apart from their images, so "
+                f"sphere–sphere contacts were not tested in this step; make the box larger or dt shorter")
+
     def _partners(self, i: int) -> np.ndarray:
         return self._adj[self._adj_start[i]:self._adj_start[i + 1]]
 
@@ -333,7 +366,7 @@ class World:
         # a structure built at step start knows the old boxes: check grown ones directly
         if self._grown:
             grown = np.fromiter(self._grown, dtype=np.int64)
-            hit = np.all((self._lo[grown] <= self._hi[i]) & (self._lo[i] <= self._hi[grown]), axis=1)
+            hit = boxes_meet(self._lo[grown], self._hi[grown], self._lo[i], self._hi[i], self._period)
             found.update(grown[hit].tolist())
         self._grown.add(i)
         known = set(self._partners(i).tolist())
@@ -360,7 +393,7 @@ class World:
         buf.ensure(ia.size, ia.size, 0)
         predict_into(kind, ia, ib, st.positions, st.velocities, self._a, st.radius, self._sigma, self._version,
                      self._dt, self._integrator, self._k, self._detection, s.samples, s.contact_tolerance * 1e-3,
-                     self._normals, self._offsets, self._half_thickness, self._two_sided, self.held,
+                     self._normals, self._offsets, self._half_thickness, self._two_sided, self._period, self.held,
                      buf.test_int, buf.test_float, buf.test_outcome, buf.heap_toi, buf.heap_data, buf.counters, push)
 
     # ------------------------------------------------------------------ policies
@@ -378,7 +411,8 @@ class World:
                 self._sigma, self._version, self._last_contact, self._run_time, self._dt, self._integrator,
                 self._drag, self._k, self._detection, s.samples, s.contact_tolerance * 1e-3, s.rest_fraction,
                 self._rest_step_factor, rule, s.rapid_contact_time, self._normals, self._offsets,
-                self._half_thickness, self._two_sided, self._wall_restitution, self.held, self._adj_start, self._adj,
+                self._half_thickness, self._two_sided, self._wall_restitution, self._period, self.held,
+                self._adj_start, self._adj,
                 self._lo, self._hi, s.contact_tolerance, self._max_degree, self.event_cap,
                 s.max_swept_tests_per_step, s.max_resting_work_per_step, self._anchor_is_flow,
                 self._integrator != SEMI_IMPLICIT, self._vtol, self._atol, buf.heap_toi, buf.heap_data,
@@ -439,7 +473,8 @@ class World:
                                self._integrator, self._drag, self._k, self._anchor_is_flow,
                                self._integrator != SEMI_IMPLICIT, s.rest_fraction, self._rest_step_factor,
                                RESTITUTION_RULES.index(s.restitution_rule), s.rapid_contact_time, self._normals,
-                               self._offsets, self._two_sided, self._wall_restitution, self.held, buf.contact_float,
+                               self._offsets, self._two_sided, self._wall_restitution, self._period, self.held,
+                               buf.contact_float,
                                buf.contact_int, buf.counters, CONTACTS, RAPID, buf.changed,
                                s.max_resting_work_per_step, self._vtol, self._atol)
 
@@ -462,7 +497,7 @@ class World:
     def _max_overlap(self) -> float:
         """Deepest penetration (m) among candidate pairs and particle–wall pairs."""
         return float(max_overlap(self.state.positions, self.state.radius, self._pairs, self._normals,
-                                 self._offsets, self._half_thickness, self._two_sided,
+                                 self._offsets, self._half_thickness, self._two_sided, self._period,
                                  self.settings.detection != "swept"))
 
     def _broad_phase_event(self, step_no: int, pair_count: int) -> BroadPhaseInfo:

@@ -94,7 +94,7 @@ STATS_FIELDS = [
     ("resting", "<i8", ()), ("rapid", "<i8", ()), ("max_overlap", "<f8", ()),
     ("seconds_forces", "<f8", ()), ("seconds_broad_phase", "<f8", ()), ("seconds_narrow_phase", "<f8", ()),
     ("seconds_resolve", "<f8", ()), ("seconds_finish", "<f8", ()),
-    ("temperature", "<f8", ()), ("virial", "<f8", ()), ("wall_impulse", "<f8", ()),
+    ("temperature", "<f8", ()), ("virial", "<f8", ()), ("wall_impulse", "<f8", ()), ("collisions", "<i8", ()),
 ]
 CONTACT_FIELDS = [
     ("time_in_step", "<f8", ()), ("kind", "i1", ()), ("resting", "i1", ()), ("a", "<i4", ()), ("other", "<i4", ()),
@@ -144,7 +144,7 @@ STATE_MESSAGE_FIELDS = [("time", "<f8"), ("dt", "<f8"), ("state_hash", "bytes"),
 BROAD_PHASE_STATS = {
     "pairs": "number", "cell": "number", "cells_used": "number", "rebuilt": "boolean", "build_seconds": "number",
     "sah_cost": "number", "nodes": "number", "depth": "number", "query_seconds": "number",
-    "nodes_visited": "number", "box_tests": "number",
+    "nodes_visited": "number", "box_tests": "number", "images": "number",
 }
 JSON_SCHEMAS = {
     TOPIC_WARNINGS: ("physdbg.Warning", {"type": "object", "properties": {
@@ -161,7 +161,10 @@ JSON_SCHEMAS[TOPIC_WALLS] = ("physdbg.Walls", {"type": "object", "properties": {
     "walls": {"type": "array", "items": {"type": "object", "properties": {
         "name": {"type": "string"}, "normal": {"type": "array", "items": {"type": "number"}},
         "offset": {"type": "number"}, "restitution": {"type": "number"}, "two_sided": {"type": "boolean"},
-        "thickness": {"type": "number"}}}}},
+        "thickness": {"type": "number"}}}},
+    # periodic axes: period (m, 0 = not periodic) and the box's lower corner on them
+    "period": {"type": "array", "items": {"type": "number"}},
+    "period_origin": {"type": "array", "items": {"type": "number"}}},
     "required": ["step", "walls"]})
 SCENE_SCHEMA_NAME = "physdbg.Scene"  # its JSON Schema is json_schema_of(the message)
 

@@ -124,6 +124,13 @@ class FoxgloveView:
                 x, y, z = outline[corner].tolist()
                 face.points.add(x=x, y=y, z=z)
             entity.metadata.add(key="wall", value=name)
+        for name, outline in view.periodic_faces(self.header.walls, lo, hi):  # outlines only, blue
+            line = entity.lines.add(type=LinePrimitive.LINE_STRIP, thickness=1.0, scale_invariant=True)
+            line.pose.orientation.w = 1.0
+            line.color.r, line.color.g, line.color.b, line.color.a = 0.3, 0.55, 0.9, 1.0
+            for x, y, z in outline.tolist():
+                line.points.add(x=x, y=y, z=z)
+            entity.metadata.add(key="periodic face", value=name)
         return update.SerializeToString()
 
     def _spheres(self, ns: int, positions: np.ndarray, contacts: Contacts | None = None) -> bytes:

@@ -97,7 +97,8 @@ class RecordingHeader:
             {"name": name, "normal": [float(x) for x in normal], "offset": float(offset),
              "restitution": float(restitution), "two_sided": bool(two_sided), "thickness": float(thickness)}
             for name, normal, offset, restitution, two_sided, thickness
-            in zip(w.names, w.normals, w.offsets, w.restitution, w.two_sided, w.thickness, strict=True)]}
+            in zip(w.names, w.normals, w.offsets, w.restitution, w.two_sided, w.thickness, strict=True)],
+            "period": [float(x) for x in w.period], "period_origin": [float(x) for x in w.period_origin]}
 
     @staticmethod
     def walls_from_json(data: dict) -> Walls:
@@ -106,7 +107,9 @@ class RecordingHeader:
                      np.array([w["offset"] for w in walls], dtype=np.float64),
                      np.array([w["restitution"] for w in walls], dtype=np.float64),
                      np.array([w["two_sided"] for w in walls], dtype=np.bool_),
-                     np.array([w["thickness"] for w in walls], dtype=np.float64))
+                     np.array([w["thickness"] for w in walls], dtype=np.float64),
+                     np.array(data.get("period", (0.0, 0.0, 0.0)), dtype=np.float64),
+                     np.array(data.get("period_origin", (0.0, 0.0, 0.0)), dtype=np.float64))
 
     def scene_json(self) -> dict:
         """The /physdbg/scene message: meta with the scene table as a JSON string (a TOML

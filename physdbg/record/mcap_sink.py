@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.pressure import collision_sums
+from ..analysis.pressure import NO_COLLISIONS, collision_sums
 from ..events import BroadPhaseInfo, Contacts, EngineWarning, StepEnd, SweptTests
 from . import format as fmt
 from . import proto
@@ -85,7 +85,7 @@ class McapRecorder:
         self._last_ns = -1  # log time of the last frame: the next is later by at least 1 ns
         self._contacts: Contacts | None = None
         self._warnings: list[EngineWarning] = []
-        self._collisions = (0.0, 0.0)  # (virial J·s, wall impulse N·s) of the step so far
+        self._collisions = NO_COLLISIONS  # virial, wall impulse and collisions of the step so far
         movable = int(np.count_nonzero(header.inverse_mass > 0))
         self._kT_per_kinetic = 2.0 / (3.0 * movable) if movable else 0.0  # kT = 2 KE / (3 N), J
         self._sent_frames = 0
@@ -140,9 +140,9 @@ class McapRecorder:
         for name, _, _ in fmt.STATS_FIELDS:
             if name.startswith("seconds_"):
                 stats[name] = end.timings.get(name[len("seconds_"):], 0.0)
-        stats["virial"], stats["wall_impulse"] = self._collisions
+        stats["virial"], stats["wall_impulse"], stats["collisions"] = self._collisions
         stats["temperature"] = self._kT_per_kinetic * end.kinetic
-        self._collisions = (0.0, 0.0)
+        self._collisions = NO_COLLISIONS
         self._write(fmt.TOPIC_STATS, frame, ns, proto.encode_table(
             fmt.MESSAGE_OF_TOPIC[fmt.TOPIC_STATS], frame, stats.__getitem__))
         if self.view is not None:

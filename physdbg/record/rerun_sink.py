@@ -7,6 +7,7 @@ Entities (timelines ``step`` = frame, steps completed, and ``sim_time`` in secon
 
     world/spheres            Points3D, one per particle, with radii (float32 copies)
     world/walls/<name>       LineStrips3D outline of each wall, so walls never hide spheres
+    world/periodic/<face>    LineStrips3D outline (blue) of each face of a periodic axis
     world/bvh/level_<d>      Boxes3D wireframes, one entity per BVH level (toggle levels;
                              the blueprint shows the first BVH_LEVELS_SHOWN)
     world/paths              LineStrips3D: each particle's path through the step,
@@ -33,9 +34,11 @@ import numpy as np
 from ..errors import PhysdbgError
 from ..events import KIND_PAIR, BroadPhaseInfo, Contacts, EngineWarning, StepEnd
 from ..analysis.pressure import collision_sums
+from ..engine.periodic import unwrap_near
 from .header import RecordingHeader
 from . import view
-from .view import contact_centres, describe_contacts, scene_bounds, sphere_colors, up_axis, wall_outlines
+from .view import (contact_centres, describe_contacts, periodic_faces, scene_bounds, sphere_colors, up_axis,
+                   wall_outlines)
 
 APPLICATION_ID = "physdbg"
 IMPULSE_ARROW_SECONDS = 0.05  # an impulse arrow shows how far its velocity change moves a in 50 ms
@@ -123,6 +126,9 @@ class RerunSink:
         for name, strip in wall_outlines(h.walls, lo, hi):
             rec.log(self.root + f"world/walls/{rr.escape_entity_path_part(name)}", rr.LineStrips3D([strip], colors=[[150, 150, 160]], radii=[-1.5]),
                     static=True)
+        for name, strip in periodic_faces(h.walls, lo, hi):  # faces a sphere passes through: blue, thin
+            rec.log(self.root + f"world/periodic/{rr.escape_entity_path_part(name)}", rr.LineStrips3D([strip], colors=[[80, 140, 230]], radii=[-1.0]),
+                    static=True)
         self._set_time(0, 0.0)
         rec.log(self.root + "world/spheres", rr.Points3D(np.asarray(h.positions, dtype=np.float32), radii=self.radius,
                                              colors=sphere_colors(h.inverse_mass)))
@@ -189,6 +195,9 @@ class RerunSink:
         contacts in order, where it ended. Built as one Arrow array (rerun converts a list
         of small arrays one by one, ~25 µs each)."""
         before, after = self.previous, end.positions
+        periodic = self.header.walls.periodic
+        if periodic:  # the end was wrapped into the box: draw the path the sphere took
+            after = unwrap_near(after, before, self.header.walls.period)
         n = len(after)
         if contacts is not None and len(contacts):
             radius = self.header.radius
@@ -196,6 +205,8 @@ class RerunSink:
             who = np.concatenate([contacts.a, contacts.other[pair]]).astype(np.int64)
             where = np.concatenate([contact_centres(contacts, radius),
                                     contacts.point[pair] - contacts.normal[pair] * radius[contacts.other[pair]][:, None]])
+            if periodic:  # b's centre at a contact is next to a, in whichever image a met
+                where = unwrap_near(where, before[who], self.header.walls.period)
             order = np.concatenate([np.arange(len(contacts)), np.nonzero(pair)[0]])
             sort = np.lexsort((order, who))
             who, where = who[sort], where[sort]

@@ -40,6 +40,9 @@ def scene_bounds(h: RecordingHeader) -> tuple[np.ndarray, np.ndarray]:
         if abs(normal[axis]) > 1 - 1e-12:
             coordinate = offset / normal[axis]
             lo[axis], hi[axis] = min(lo[axis], coordinate), max(hi[axis], coordinate)
+    periodic = h.walls.period > 0
+    lo[periodic] = np.minimum(lo, h.walls.period_origin)[periodic]
+    hi[periodic] = np.maximum(hi, h.walls.period_origin + h.walls.period)[periodic]
     centre, half = (lo + hi) / 2, (hi - lo) / 2
     half = np.maximum(half, max(half.max() / 2, r))
     return centre - half, centre + half
@@ -57,6 +60,20 @@ def wall_outlines(walls, lo: np.ndarray, hi: np.ndarray):
         su, sw = float(np.abs(u) @ half), float(np.abs(w) @ half)
         corners = [on_plane + a * su * u + b * sw * w for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1), (-1, -1))]
         yield name, np.asarray(corners, dtype=np.float32)
+
+
+def periodic_faces(walls, lo: np.ndarray, hi: np.ndarray):
+    """(name, (5, 3) closed outline) of the two faces of each periodic axis (where a sphere
+    leaves and comes back), inside the box lo..hi."""
+    for axis in np.nonzero(walls.period > 0)[0]:
+        for side, at in (("-", walls.period_origin[axis]), ("+", walls.period_origin[axis] + walls.period[axis])):
+            u, w = [c for c in range(3) if c != axis]
+            corners = np.empty((5, 3))
+            corners[:, axis] = at
+            for k, (a, b) in enumerate(((0, 0), (1, 0), (1, 1), (0, 1), (0, 0))):
+                corners[k, u] = (lo, hi)[a][u]
+                corners[k, w] = (lo, hi)[b][w]
+            yield f"{'xyz'[axis]}{side}", corners.astype(np.float32)
 
 
 def sphere_colors(inverse_mass: np.ndarray) -> np.ndarray:

@@ -26,3 +26,19 @@ def overlapping(lo: np.ndarray, hi: np.ndarray, box_lo: np.ndarray, box_hi: np.n
     """Indices (sorted) of the boxes lo, hi (N, 3) that overlap one box: a linear scan."""
     overlap = np.all((box_lo <= hi) & (lo <= box_hi), axis=1)
     return np.nonzero(overlap)[0].astype(np.int64)
+
+
+def boxes_meet(lo: np.ndarray, hi: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray,
+               period: np.ndarray) -> np.ndarray:
+    """(N,) bool: does each box lo, hi (N, 3) overlap one box, on periodic axes (period (3,)
+    m, 0 = not periodic) through any whole-period shift? Boxes narrower than half a period
+    need only the shifts -L, 0 and +L."""
+    meet = np.ones(lo.shape[0], dtype=bool)
+    for c in range(3):
+        axis = (box_lo[c] <= hi[:, c]) & (lo[:, c] <= box_hi[c])
+        length = period[c]
+        if length > 0:
+            for shift in (-length, length):
+                axis |= (box_lo[c] + shift <= hi[:, c]) & (lo[:, c] <= box_hi[c] + shift)
+        meet &= axis
+    return meet
