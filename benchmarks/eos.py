@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/eos.py             # N = 1000, phi 0.1-0.4 (docs/pressure.md comes from this)
     .venv/bin/python benchmarks/eos.py --quick     # N = 500, 1e5 collisions: wider error bars
-    .venv/bin/python benchmarks/eos.py --count 2000 --collisions 2e6 --jobs 2
+    .venv/bin/python benchmarks/eos.py --count 2000 --collisions 1e6 --jobs 2
 
 For each packing fraction, the built-in ``gas`` scene (e = 1, exact integrator, swept
 detection, time order) is recorded in a periodic box (``-s box.periodic=true``): the
@@ -69,18 +69,21 @@ def one(phi: float, count: int, collisions: float, skip: float, dt: str, folder:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--count", type=int, default=1000, help="spheres (default 1000)")
-    parser.add_argument("--collisions", type=float, default=1e6, help="pair collisions averaged over (default 1e6)")
+    parser.add_argument("--collisions", type=float, default=5e5, help="pair collisions averaged over (default 5e5)")
     parser.add_argument("--skip", type=float, default=0.2, help="fraction of each run left out (default 0.2)")
     parser.add_argument("--dt", default="1/50", help="recorded step (default 1/50 s; exact at any dt)")
     parser.add_argument("--jobs", type=int, default=2, help="packing fractions run at once (default 2)")
     parser.add_argument("--quick", action="store_true", help="N = 500 and 1e5 collisions")
+    parser.add_argument("--packing", type=float, nargs="+", default=list(PACKING),
+                        help="packing fractions (default 0.1 0.2 0.3 0.4)")
     args = parser.parse_args(argv)
+    k = len(args.packing)
     if args.quick:
         args.count, args.collisions = 500, 1e5
     with tempfile.TemporaryDirectory(prefix="physdbg-eos-") as folder:
         with ProcessPoolExecutor(max_workers=max(1, args.jobs), mp_context=multiprocessing.get_context("spawn")) as pool:
-            rows = list(pool.map(one, PACKING, [args.count] * 4, [args.collisions] * 4, [args.skip] * 4,
-                                 [args.dt] * 4, [folder] * 4))
+            rows = list(pool.map(one, args.packing, [args.count] * k, [args.collisions] * k, [args.skip] * k,
+                                 [args.dt] * k, [folder] * k))
     print(f"Hard spheres, N = {args.count}, periodic box, e = 1, exact integrator; averaged over the last "
           f"{1 - args.skip:.0%} of each run (about {args.collisions:.3g} collisions); ± is one standard error "
           f"over 10 blocks.\n")

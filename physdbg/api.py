@@ -676,6 +676,7 @@ def check(scene: Scene | str, overrides: Sequence[str] = ()) -> CheckResult:
     advice = advise(scene)
     current = {name: getattr(scene.settings, name) for name in ("integrator", "detection", "ordering")}
     mine = [p for name, value in current.items() for p in advice.fails(name, value)]
+    mine += [p for p in advice.predictions if p.setting == "dt"]  # a periodic box too small for dt
     return CheckResult(scene, advice, current, [p for p in mine if p.outcome != "inexact"],
                        [p for p in mine if p.outcome == "inexact"])
 

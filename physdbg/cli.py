@@ -505,6 +505,8 @@ def check(
                      f"facts       {_count(f['particles'], 'particle')}, {_count(f['walls'], 'wall')}; {dt}; "
                      f"{f['duration']:.6g} s; speeds up to {f['speed_bound']:.3g} m/s ({f['speed_bound_why']}); "
                      + ("contacts can happen" if f["contacts_possible"] else "no contact can happen")]
+            if f["periodic"] is not None:
+                lines.append(f"periodic    {f['periodic']['why']}")
             for setting in ("integrator", "detection", "ordering"):
                 for k, p in enumerate(x for x in advice.predictions if x.setting == setting):
                     mark = "*" if result.current[setting] == p.value else " "

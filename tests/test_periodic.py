@@ -249,3 +249,20 @@ def test_the_rerun_view_draws_the_faces_and_unwrapped_paths(tmp_path):
     assert longest < 0.25 * side
     # and some sphere did leave the box in a step: its path ends outside it
     assert any(np.any((np.array(s)[-1] < 0) | (np.array(s)[-1] >= side)) for s in strips)
+
+
+def test_the_advisor_says_whether_a_step_fits_half_a_period_and_the_run_agrees():
+    fits = runner.invoke(app, ["check", "gas", "-s", "box.periodic=true"])
+    assert fits.exit_code == 0 and "under half the period" in fits.output
+    too_long = runner.invoke(app, ["check", "gas", "-s", "box.periodic=true", "-s", "dt=0.1"])
+    assert too_long.exit_code == 1
+    assert "not under half the period" in too_long.output and "use dt < " in too_long.output
+    # the run: steps with a too-wide swept box are refused with the warning the advice names
+    scene = load_scene("gas", ["box.periodic=true", "dt=0.1", "steps=5"])
+    world = scene.build_world()
+    codes = [w.code for _ in range(scene.steps) for w in world.step(scene.dt).warnings]
+    assert "periodic" in codes
+    longest = float(too_long.output.split("use dt < ")[1].split(" s")[0])
+    scene = load_scene("gas", ["box.periodic=true", f"dt={longest * 0.9}", "steps=20"])
+    world = scene.build_world()
+    assert not [w for _ in range(scene.steps) for w in world.step(scene.dt).warnings]

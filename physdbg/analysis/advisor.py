@@ -28,12 +28,14 @@ by size and radius spread (docs/broadphase.md).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..engine.broadphase import choose_broad_phase
 from ..engine.motion import INTEGRATOR_NAMES
+from ..engine.periodic import minimum_image
 from ..engine.toi import DETECTION_NAMES
 
 AUTO = "auto"
@@ -79,12 +81,13 @@ def advise(scene) -> Advice:
     r = state.radius
     r_min = float(r.min()) if n else 0.0
     contacts_possible = _contacts_possible(state.positions, r, movable, reach, walls)
+    periodic = _periodic_fit(walls, r, bound, dt)
     two_sided = [(name, float(t)) for name, two, t in zip(walls.names, walls.two_sided, walls.thickness, strict=True)
                  if two]
     several = n >= 3 or (n >= 2 and len(walls) > 0)  # a step can hold more than one contact
     facts = {"particles": n, "walls": len(walls), "speed_bound": bound, "speed_bound_why": bound_why, "dt": dt, "duration": duration,
              "gravity": gravity, "drag": s.drag, "radius_min": r_min, "radius_max": float(r.max()) if n else 0.0,
-             "contacts_possible": contacts_possible, "samples": s.samples}
+             "contacts_possible": contacts_possible, "samples": s.samples, "periodic": periodic}
 
     predictions: list[Prediction] = []
     # integrators
@@ -112,6 +115,9 @@ def advise(scene) -> Advice:
         else:
             predictions.append(Prediction("ordering", name, "safe", "contacts in the order they happen"
                                           if name == "time" else "at most one contact a step can hold"))
+
+    if periodic is not None and not periodic["fits"]:
+        predictions.append(Prediction("dt", f"{dt:.6g}", "pairs untested", periodic["why"]))
 
     recommended = {"integrator": "exact"}
     reasons = {"integrator": f"only {forces} {act} on physdbg's spheres: exact at any dt, and no dearer per step "
@@ -174,15 +180,35 @@ def _speed_bound(state, walls, gravity: np.ndarray, duration: float) -> tuple[fl
     return float(np.sqrt(2 * energy / mass.min())), "energy: all the kinetic and fall energy in the lightest sphere"
 
 
+def _periodic_fit(walls, r, bound: float, dt: float) -> dict | None:
+    """In a periodic box: the widest swept box a step can make (2 r + 2 v dt at the speed
+    bound) against half the shortest period, which the minimum image needs (World refuses
+    a step otherwise); None without periodic axes."""
+    if not walls.periodic:
+        return None
+    period = float(walls.period[walls.period > 0].min())
+    width = 2.0 * (float(r.max()) if len(r) else 0.0) + 2.0 * bound * dt
+    axes = ", ".join(a for a, length in zip("xyz", walls.period, strict=True) if length > 0)
+    fits = width < 0.5 * period
+    why = (f"periodic on {axes}: a step's swept box is at most {width:.3g} m wide, "
+           + ("under" if fits else "not under") + f" half the period ({0.5 * period:.3g} m)")
+    if not fits:
+        longest = (0.5 * period - 2.0 * float(r.max())) / (2.0 * bound) if bound > 0 else math.inf
+        why += ("; steps where it is wider test no pairs (their images cannot be told apart): "
+                + (f"use dt < {longest:.3g} s" if longest > 0 else "make the box larger"))
+    return {"axes": axes, "period": period, "width": width, "fits": fits, "why": why}
+
+
 def _contacts_possible(x, r, movable, reach, walls) -> bool:
     """Whether any two spheres, or a sphere and a wall, can touch within the run: each
-    movable sphere stays within ``reach`` of where it starts."""
+    movable sphere stays within ``reach`` of where it starts (in a periodic box, pairs
+    are as near as their nearest images)."""
     n = len(r)
     if n == 0:
         return False
     extent = np.where(movable, reach, 0.0) + r
     if n >= 2:
-        d = np.linalg.norm(x[:, None, :] - x[None, :, :], axis=2)
+        d = np.linalg.norm(minimum_image(x[:, None, :] - x[None, :, :], walls.period), axis=2)
         np.fill_diagonal(d, np.inf)
         if np.any(d <= extent[:, None] + extent[None, :]):
             return True
