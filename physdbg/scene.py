@@ -36,6 +36,7 @@ from .engine import (
     Walls,
     World,
 )
+from .engine.periodic import wrap_positions
 from .errors import SceneError, UnknownSceneError
 from .scenes import builtin_descriptions, builtin_names, builtin_text  # noqa: F401
 
@@ -590,6 +591,8 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
     walls = Walls(names, np.array(normals, dtype=np.float64).reshape(-1, 3), np.array(offsets, dtype=np.float64),
                   np.array(rest, dtype=np.float64), np.array(two, dtype=np.bool_), np.array(thick, dtype=np.float64),
                   period, box_lo if box_lo is not None else np.zeros(3))
+    if walls.periodic:  # a sphere placed outside the box on a periodic axis is the same sphere inside it
+        wrap_positions(state.positions, walls.period_origin, walls.period)
     scene = Scene(name, description, source, settings, dt, max_dt, steps, duration, seed, state, walls, raw)
     from .analysis.advisor import resolve_auto  # "auto" settings: decided from the scene (physdbg check)
 

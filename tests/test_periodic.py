@@ -266,3 +266,20 @@ def test_the_advisor_says_whether_a_step_fits_half_a_period_and_the_run_agrees()
     scene = load_scene("gas", ["box.periodic=true", f"dt={longest * 0.9}", "steps=20"])
     world = scene.build_world()
     assert not [w for _ in range(scene.steps) for w in world.step(scene.dt).warnings]
+
+
+def test_a_box_that_a_contact_grows_past_half_a_period_is_reported():
+    """A heavy sphere drives a chain of lighter ones (masses 100, 10, 1): the last leaves
+    at about 3.3 times the first's speed: their paths outgrow every box the step began
+    with, and past half the period; the step says which sphere."""
+    state = State(np.array([[1.0, 1.0, 1.0], [1.11, 1.0, 1.0], [1.22, 1.0, 1.0]]),
+                  np.array([[10.0, 0, 0], [0, 0, 0], [0, 0, 0]]), np.array([0.01, 0.1, 1.0]), np.full(3, 0.05),
+                  np.ones(3), np.ones(3))
+    world = World(state, periodic_walls(5.2), Settings(gravity=(0, 0, 0)))
+    stats = world.step(0.1)
+    assert stats.contacts == 2
+    assert [w.code for w in stats.warnings] == ["periodic"]
+    assert "sphere 1's later contacts" in stats.warnings[0].message  # the first box to outgrow it
+    calm = World(state_of([[1.0, 1.0, 1.0], [1.11, 1.0, 1.0]], [[10.0, 0, 0], [0, 0, 0]], radius=0.05),
+                 periodic_walls(5.2), Settings(gravity=(0, 0, 0)))
+    assert not calm.step(0.1).warnings  # equal masses: nothing outgrows the step's boxes

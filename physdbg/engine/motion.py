@@ -4,7 +4,7 @@ Every integrator is written as a path from an *anchor* (position x, velocity v, 
 acceleration a, all (3,) in m, m/s, m/s²) over a local time tau >= 0::
 
     position(tau)      = x + v * P1(tau) + a * P2(tau)
-    path_velocity(tau) = v * dP1(tau) + a * P1(tau)          (d position / d tau)
+    path_velocity(tau) = v * dP1(tau) + a * dP2(tau)         (d position / d tau)
     velocity(tau)      = v * V0(tau) + a * V1(tau)           (the integrator's velocity)
 
 with drag written as the seed writes it, v_new = v * d**t, and k = -ln(d) >= 0:
@@ -20,8 +20,11 @@ exact          phi1(tau)   phi2(tau)    e^(-k tau)  phi1(tau)
 
 phi1 = (1 - e^(-k tau)) / k and phi2 = (tau - phi1) / k are the closed form of
 dv/dt = a - k v, which gives exactly v·d^t when a = 0 (phi1 -> tau, phi2 -> tau²/2 when
-k = 0). Because P2' = P1 and P1' = e^(-k tau) in every row, n·position(tau) has a second
-derivative of constant sign, which the swept tests in :mod:`toi` rely on.
+k = 0). dP1 = P1' = e^(-k tau) (1 without drag), and dP2 = P2' is P1 on the curved paths
+(verlet, exact) and 0 on the straight ones (euler, semi-implicit: their position does not
+follow the acceleration inside the step, their velocity does): ``path_velocity_weights``.
+So n·position(tau) has a second derivative of constant sign, which the swept tests in
+:mod:`toi` rely on.
 
 Explicit Euler moves on the straight line of its anchor velocity (the seed's
 ``P_new = P_old + v t``), semi-implicit on the straight line of the already-updated
@@ -69,6 +72,15 @@ def path_coefficients(integrator, k, tau):
     if integrator == VERLET:
         return tau, 0.5 * tau * tau, 1.0
     return tau, 0.0, 1.0
+
+
+@njit(cache=True)
+def path_velocity_weights(integrator, k, tau):
+    """(dP1, dP2) at local time tau: the path's velocity (d position / d tau) is
+    v * dP1 + a * dP2 (the table above). On Euler's straight line it is the anchor
+    velocity, not the integrator's velocity v + a tau."""
+    p1, _, dp1 = path_coefficients(integrator, k, tau)
+    return dp1, (p1 if integrator >= VERLET else 0.0)
 
 
 @njit(cache=True)

@@ -32,7 +32,7 @@ import numpy as np
 from numba import njit
 
 from ..events import KIND_PAIR, KIND_WALL, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_SUPERSEDED
-from .motion import particle_box, path_coefficients
+from .motion import particle_box, path_coefficients, path_velocity_weights
 from .periodic import image
 from .resolve import CF_WIDTH, CI_WIDTH, OUT_OF_WORK, SKIPPED, pair_separation, resolve_contact
 from .resting import held_find, held_room
@@ -196,16 +196,18 @@ def _predict_pair(i, j, x, v, a, radius, sigma, version, step_end, integrator, k
     if held.deg[i] > 0 and held.deg[j] > 0 and held_find(held, KIND_PAIR, i, j) >= 0:
         return
     start = max(sigma[i], sigma[j])
-    pi1, pi2, dpi = path_coefficients(integrator, k, start - sigma[i])
-    pj1, pj2, dpj = path_coefficients(integrator, k, start - sigma[j])
+    pi1, pi2, _ = path_coefficients(integrator, k, start - sigma[i])
+    pj1, pj2, _ = path_coefficients(integrator, k, start - sigma[j])
+    dpi, wi = path_velocity_weights(integrator, k, start - sigma[i])
+    dpj, wj = path_velocity_weights(integrator, k, start - sigma[j])
     # relative position (the minimum image on periodic axes) and path velocity at the
     # common start (see motion.path_state)
     dx0 = image((x[i, 0] + v[i, 0] * pi1 + a[i, 0] * pi2) - (x[j, 0] + v[j, 0] * pj1 + a[j, 0] * pj2), period[0])
     dx1 = image((x[i, 1] + v[i, 1] * pi1 + a[i, 1] * pi2) - (x[j, 1] + v[j, 1] * pj1 + a[j, 1] * pj2), period[1])
     dx2 = image((x[i, 2] + v[i, 2] * pi1 + a[i, 2] * pi2) - (x[j, 2] + v[j, 2] * pj1 + a[j, 2] * pj2), period[2])
-    dv0 = (v[i, 0] * dpi + a[i, 0] * pi1) - (v[j, 0] * dpj + a[j, 0] * pj1)
-    dv1 = (v[i, 1] * dpi + a[i, 1] * pi1) - (v[j, 1] * dpj + a[j, 1] * pj1)
-    dv2 = (v[i, 2] * dpi + a[i, 2] * pi1) - (v[j, 2] * dpj + a[j, 2] * pj1)
+    dv0 = (v[i, 0] * dpi + a[i, 0] * wi) - (v[j, 0] * dpj + a[j, 0] * wj)
+    dv1 = (v[i, 1] * dpi + a[i, 1] * wi) - (v[j, 1] * dpj + a[j, 1] * wj)
+    dv2 = (v[i, 2] * dpi + a[i, 2] * wi) - (v[j, 2] * dpj + a[j, 2] * wj)
     horizon = step_end - start
     if detection == SWEPT:
         t = pair_toi_swept_scalar(dx0, dx1, dx2, dv0, dv1, dv2, a[i, 0] - a[j, 0], a[i, 1] - a[j, 1],

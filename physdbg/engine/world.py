@@ -238,6 +238,7 @@ class World:
             pairs = np.empty((0, 2), dtype=np.int64)
         self._lo, self._hi = lo, hi
         self._grown: set[int] = set()
+        self._too_wide_mid_step: str | None = None  # a box grown mid-step past half a period (periodic)
         self._build_adjacency(pairs, n)
         t2 = perf_counter()
         timings["broad_phase"] = t2 - t1
@@ -261,6 +262,8 @@ class World:
 
         # -- resolve --------------------------------------------------------------
         budget = self._resolve_in_time_order() if push else self._resolve_in_index_order()
+        if self._too_wide_mid_step and not any(w.code == "periodic" for w in warnings):
+            warn("periodic", self._too_wide_mid_step)
         if budget is not None and not any(w.code == budget for w in warnings):
             warn(budget, _budget_message(budget, self.event_cap if budget == "max_events_per_step"
                                          else getattr(s, budget)))
@@ -330,7 +333,9 @@ class World:
         np.minimum(lo, st.positions - reach, out=lo)
         np.maximum(hi, st.positions + reach, out=hi)
 
-    def _too_wide_for_the_period(self, lo: np.ndarray, hi: np.ndarray) -> str | None:
+    def _too_wide_for_the_period(self, lo: np.ndarray, hi: np.ndarray,
+                                 consequence: str = "sphere–sphere contacts were not tested in this step"
+                                 ) -> str | None:
         """Why this step's swept boxes (N, 3) break the minimum image, or None.
 
         The minimum image is the true separation of every pair whose boxes overlap only
@@ -346,7 +351,7 @@ class World:
         axis = int(bad[0])
         return (f"a sphere's swept box is {width[axis]:.3g} m wide on periodic axis {'xyz'[axis]}, at least half "
                 f"the period {self._period[axis]:g} m: pairs cannot be told apart from their images, so "
-                f"sphere–sphere contacts were not tested in this step; make the box larger or dt shorter")
+                f"{consequence}; make the box larger or dt shorter")
 
     def _partners(self, i: int) -> np.ndarray:
         return self._adj[self._adj_start[i]:self._adj_start[i + 1]]
@@ -362,6 +367,10 @@ class World:
             return []
         self._lo[i] = np.minimum(self._lo[i], lo)
         self._hi[i] = np.maximum(self._hi[i], hi)
+        if self.walls.periodic and self._too_wide_mid_step is None:
+            self._too_wide_mid_step = self._too_wide_for_the_period(
+                self._lo[i:i + 1], self._hi[i:i + 1], f"sphere {i}'s later contacts in this step (after a contact "
+                                                      f"sent it out of its box) may have met the wrong image")
         found = set(self.broad_phase.query(self._lo, self._hi, self._lo[i], self._hi[i]).tolist())
         # a structure built at step start knows the old boxes: check grown ones directly
         if self._grown:
