@@ -162,7 +162,8 @@ class World:
         self._wall_restitution = np.ascontiguousarray(walls.restitution, dtype=np.float64)
         self._period = np.ascontiguousarray(walls.period, dtype=np.float64)
         self._period_origin = np.ascontiguousarray(walls.period_origin, dtype=np.float64)
-        if walls.periodic:
+        self._periodic = walls.periodic
+        if self._periodic:
             wrap_positions(state.positions, self._period_origin, self._period)
             self.broad_phase = PeriodicBroadPhase(self.broad_phase, self._period_origin, self._period)
         self._buf = Buffers(state.count)
@@ -274,7 +275,7 @@ class World:
         advance_particles(x, v, self._a, sigma, np.arange(n, dtype=np.int64), dt, self._integrator,
                           self._drag, self._k)
         sigma[:] = 0.0
-        if self.walls.periodic:  # the paths were continuous through the step; the state is in the box
+        if self._periodic:  # the paths were continuous through the step; the state is in the box
             wrap_positions(x, self._period_origin, self._period)
         max_overlap = self._max_overlap()
         if s.detection == "swept" and max_overlap > s.contact_tolerance and not warnings:
@@ -342,7 +343,7 @@ class World:
         while each box is narrower than half the period (periodic.py); a step whose
         box is wider would test the wrong images, so its pairs are not tested at all.
         """
-        if not self.walls.periodic or lo.shape[0] == 0:
+        if not self._periodic or lo.shape[0] == 0:
             return None
         width = (hi - lo).max(axis=0)
         bad = np.nonzero((self._period > 0) & (width >= 0.5 * self._period))[0]
@@ -367,7 +368,7 @@ class World:
             return []
         self._lo[i] = np.minimum(self._lo[i], lo)
         self._hi[i] = np.maximum(self._hi[i], hi)
-        if self.walls.periodic and self._too_wide_mid_step is None:
+        if self._periodic and self._too_wide_mid_step is None:
             self._too_wide_mid_step = self._too_wide_for_the_period(
                 self._lo[i:i + 1], self._hi[i:i + 1], f"sphere {i}'s later contacts in this step (after a contact "
                                                       f"sent it out of its box) may have met the wrong image")

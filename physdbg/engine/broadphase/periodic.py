@@ -73,8 +73,12 @@ class PeriodicBroadPhase:
         a, b = owner[found[:, 0]], owner[found[:, 1]]
         keep = a != b
         first, second = np.minimum(a[keep], b[keep]), np.maximum(a[keep], b[keep])
-        keys = np.unique(first * n + second)
-        return np.column_stack((keys // n, keys % n)).astype(np.int64)
+        keys = np.sort(first * n + second)  # a pair found through several images comes once
+        keys = keys[np.concatenate(([True], keys[1:] != keys[:-1]))] if len(keys) else keys
+        out = np.empty((len(keys), 2), dtype=np.int64)
+        np.floor_divide(keys, n, out=out[:, 0])
+        np.remainder(keys, n, out=out[:, 1])
+        return out
 
     def query(self, lo: np.ndarray, hi: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray) -> np.ndarray:
         """Boxes that overlap one box through any shift: a linear scan (re-queries are rare)."""
