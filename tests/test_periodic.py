@@ -4,7 +4,6 @@ recordings that replay, verify and audit."""
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 import pytest

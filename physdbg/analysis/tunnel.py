@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..engine.motion import EULER, SEMI_IMPLICIT, path_coefficients, velocity_coefficients
+from ..engine.motion import KICK_AT_STEP_START, STRAIGHT_PATH, path_coefficients, velocity_coefficients
 from ..engine.periodic import unwrap_near
 from ..engine.toi import INF, pair_toi_swept_scalar
 from ..events import KIND_PAIR, KIND_WALL
@@ -179,7 +179,7 @@ class StepChecker:
         gravity = np.asarray(settings.get("gravity", (0.0, 0.0, 0.0)), dtype=np.float64)
         movable = np.asarray(inverse_mass) > 0
         self.gravity_acc = np.where(movable[:, None], np.asarray(gravity_scale)[:, None] * gravity[None, :], 0.0)
-        self.path_acc = np.zeros_like(self.gravity_acc) if self.integrator in (EULER, SEMI_IMPLICIT) \
+        self.path_acc = np.zeros_like(self.gravity_acc) if STRAIGHT_PATH[self.integrator] \
             else self.gravity_acc
         self.tolerance = max(float(settings.get("contact_tolerance", 1e-9)), 0.0)
         self.two_sided = np.asarray(walls.two_sided, dtype=bool)
@@ -226,7 +226,7 @@ class StepChecker:
         n = self.n
         radius = self.radius
         v_start = v0
-        if self.integrator == SEMI_IMPLICIT:  # the step's kick comes first, then straight lines
+        if KICK_AT_STEP_START[self.integrator]:  # the step's kick comes first, then straight lines
             v_start = v0 * (self.drag ** dt if self.drag != 1.0 else 1.0) + self.gravity_acc * dt
         who = [np.arange(n)]
         when = [np.zeros(n)]

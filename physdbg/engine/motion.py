@@ -43,6 +43,24 @@ VERLET = 2
 EXACT = 3
 INTEGRATOR_NAMES = ("euler", "semi-implicit", "verlet", "exact")
 
+# What the rest of the engine asks about an integrator: one entry per integrator, indexed
+# by its code, so a new integrator is its row here and its path in the functions below
+# (path_coefficients, curvature_scale, velocity_coefficients), and nothing elsewhere
+# branches on which integrator it is (docs/engine.md, "Adding an integrator").
+#   STRAIGHT_PATH       the position moves on the straight line of the anchor velocity
+#                       inside a step (P2 = 0), whatever the acceleration does to v
+#   KICK_AT_STEP_START  the velocity is updated once, before the paths (semi-implicit):
+#                       the path acceleration is 0 and the velocity kick is the forces phase's
+#   FLOW                re-anchoring mid-path leaves the path unchanged (without drag, index 0;
+#                       with drag, index 1): Euler's straight line restarts from the new
+#                       velocity, Verlet's parabola ignores drag's curve
+#   REST_STEP_FACTOR    a straight path arrives at a rest with about one step of acceleration
+#                       still in its velocity: how many dt of it count as resting (resting.py)
+STRAIGHT_PATH = (True, True, False, False)
+KICK_AT_STEP_START = (False, True, False, False)
+FLOW = ((False, False), (True, True), (True, False), (True, True))
+REST_STEP_FACTOR = (1.5, 1.5, 0.0, 0.0)
+
 # Below this k*tau, phi1 and phi2 come from their Taylor series (truncation < 1e-17
 # relative); above it the closed forms lose at most ~1e-14 to cancellation.
 _SERIES_LIMIT = 1e-2
@@ -80,7 +98,7 @@ def path_velocity_weights(integrator, k, tau):
     v * dP1 + a * dP2 (the table above). On Euler's straight line it is the anchor
     velocity, not the integrator's velocity v + a tau."""
     p1, _, dp1 = path_coefficients(integrator, k, tau)
-    return dp1, (p1 if integrator >= VERLET else 0.0)
+    return dp1, (0.0 if STRAIGHT_PATH[integrator] else p1)
 
 
 @njit(cache=True)
@@ -145,7 +163,7 @@ def particle_box(x, v, a, radius, sigma, i, step_end, integrator, k, margin, out
         x1 = x0 + v[i, c] * p1e + a[i, c] * p2e
         mn = min(x0, x1)
         mx = max(x0, x1)
-        if a[i, c] != 0.0 and integrator >= VERLET:
+        if a[i, c] != 0.0 and not STRAIGHT_PATH[integrator]:
             # interior extremum where v*dP1 + a*P1 = 0; bisection on the monotone derivative
             lo_t = 0.0
             hi_t = tau_end

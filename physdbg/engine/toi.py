@@ -32,7 +32,7 @@ import math
 
 from numba import njit
 
-from .motion import EULER, EXACT, SEMI_IMPLICIT, curvature_scale, path_coefficients
+from .motion import EXACT, STRAIGHT_PATH, curvature_scale, path_coefficients
 
 INF = math.inf
 
@@ -53,7 +53,7 @@ def _root_in_bracket(g0, p, q, integrator, k, lo, hi):
     """The one root of the gap in [lo, hi], where the gap falls from >= 0 to <= 0."""
     if integrator != EXACT or k == 0.0:
         # g0 + p*t + (q/2)*t² (q = 0 for Euler paths): numerically stable quadratic.
-        aa = 0.5 * q if integrator >= 2 else 0.0
+        aa = 0.0 if STRAIGHT_PATH[integrator] else 0.5 * q
         if aa == 0.0:
             t = -g0 / p if p != 0.0 else lo
         else:
@@ -119,7 +119,7 @@ def wall_toi_swept(g0, p, q, integrator, k, horizon):
 
     g0: gap at the start (m, negative = overlapping); p = n·v (m/s); q = n·a (m/s²).
     """
-    if integrator <= SEMI_IMPLICIT:
+    if STRAIGHT_PATH[integrator]:
         q = 0.0
     cq, cp = curvature_scale(integrator, k)
     curv = cq * q + cp * p  # sign of g''
@@ -162,7 +162,7 @@ def wall_toi_sampled(g0, p, q, integrator, k, horizon, samples, depth):
     for a one-sided wall (a half-space), 2·(r + h) for a two-sided slab. A sample beyond
     the slab is no overlap: the sphere is through, and the test is a miss (it tunnelled).
     """
-    if integrator <= SEMI_IMPLICIT:
+    if STRAIGHT_PATH[integrator]:
         q = 0.0
     for m in range(1, samples + 1):
         t = horizon * m / samples
@@ -228,7 +228,7 @@ def pair_toi_swept(dx, dv, da, radius_sum, integrator, k, horizon, tolerance):
 def pair_toi_swept_scalar(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, radius_sum, integrator, k, horizon,
                           tolerance):
     """pair_toi_swept on scalars (the form the compiled loop calls: no arrays to pass)."""
-    linear = integrator == EULER or integrator == SEMI_IMPLICIT or (da0 == 0.0 and da1 == 0.0 and da2 == 0.0)
+    linear = STRAIGHT_PATH[integrator] or (da0 == 0.0 and da1 == 0.0 and da2 == 0.0)
     if linear:
         u = _linear_pair_u(dx0, dx1, dx2, dv0, dv1, dv2, radius_sum)
         if u == INF:
@@ -280,7 +280,7 @@ def pair_toi_sampled(dx, dv, da, radius_sum, integrator, k, horizon, samples):
 def pair_toi_sampled_scalar(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, radius_sum, integrator, k, horizon,
                             samples):
     """pair_toi_sampled on scalars."""
-    if integrator == EULER or integrator == SEMI_IMPLICIT:
+    if STRAIGHT_PATH[integrator]:
         da0 = 0.0
         da1 = 0.0
         da2 = 0.0

@@ -47,7 +47,7 @@ from ..events import (
 from .broadphase import choose_broad_phase, make_broad_phase
 from .broadphase.boxes import boxes_meet
 from .broadphase.periodic import PeriodicBroadPhase
-from .motion import EULER, SEMI_IMPLICIT, VERLET, advance_particles, particle_box, swept_boxes
+from .motion import FLOW, KICK_AT_STEP_START, REST_STEP_FACTOR, advance_particles, particle_box, swept_boxes
 from .periodic import wrap_positions
 from .resolve import (
     CF_CLOSING,
@@ -149,11 +149,10 @@ class World:
         self._half_thickness = np.ascontiguousarray(walls.thickness * 0.5, dtype=np.float64)
         self._two_sided = np.ascontiguousarray(walls.two_sided, dtype=np.bool_)
         self._normals = np.ascontiguousarray(walls.normals, dtype=np.float64).reshape(-1, 3)
-        # exact and semi-implicit paths are flows: re-anchoring mid-path changes nothing
-        self._anchor_is_flow = self._integrator not in (EULER, VERLET) or (
-            self._integrator == VERLET and self._drag == 1.0)
-        # straight Euler paths arrive at a rest with about one step of acceleration (resting.py)
-        self._rest_step_factor = 1.5 if self._integrator in (EULER, SEMI_IMPLICIT) else 0.0
+        # the integrator's traits (motion.py's table): no branch on which integrator it is
+        self._anchor_is_flow = FLOW[self._integrator][self._drag != 1.0]
+        self._rest_step_factor = REST_STEP_FACTOR[self._integrator]
+        self._kick_first = KICK_AT_STEP_START[self._integrator]
         self._accel_scale = max(1.0, float(np.abs(self._free_accel).max())) if state.count else 1.0
         self._atol = SOLVE_TOLERANCE * self._accel_scale
         self._vtol = self._atol  # set per step: SOLVE_TOLERANCE·(acceleration scale)·dt
@@ -211,7 +210,7 @@ class World:
         path_accel = np.empty_like(acc)
         sigma = np.zeros(n)
         if not settle_held(self.held, x, v, path_accel, acc, self._free_accel, st.radius, st.inverse_mass, sigma, dt,
-                           self._integrator, self._drag, self._k, self._integrator == SEMI_IMPLICIT, self._normals,
+                           self._integrator, self._drag, self._k, self._kick_first, self._normals,
                            self._offsets, self._half_thickness, self._two_sided, self._period, s.contact_tolerance,
                            s.max_resting_work_per_step, self._vtol, self._atol,
                            dt * (self._rest_step_factor + s.rest_fraction)):
@@ -425,7 +424,7 @@ class World:
                 self._adj_start, self._adj,
                 self._lo, self._hi, s.contact_tolerance, self._max_degree, self.event_cap,
                 s.max_swept_tests_per_step, s.max_resting_work_per_step, self._anchor_is_flow,
-                self._integrator != SEMI_IMPLICIT, self._vtol, self._atol, buf.heap_toi, buf.heap_data,
+                not self._kick_first, self._vtol, self._atol, buf.heap_toi, buf.heap_data,
                 buf.test_int, buf.test_float, buf.test_outcome, buf.contact_float, buf.contact_int, buf.counters,
                 buf.pending, buf.changed, buf.batch_mark, buf.requery, buf.requery_count)
             if status == DONE:
@@ -481,7 +480,7 @@ class World:
         return resolve_contact(kind, a, other, when, self._run_time, st.positions, st.velocities, self._a, self._acc,
                                st.radius, st.inverse_mass, st.restitution, self._sigma, self._last_contact, self._dt,
                                self._integrator, self._drag, self._k, self._anchor_is_flow,
-                               self._integrator != SEMI_IMPLICIT, s.rest_fraction, self._rest_step_factor,
+                               not self._kick_first, s.rest_fraction, self._rest_step_factor,
                                RESTITUTION_RULES.index(s.restitution_rule), s.rapid_contact_time, self._normals,
                                self._offsets, self._two_sided, self._wall_restitution, self._period, self.held,
                                buf.contact_float,
