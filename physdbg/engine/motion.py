@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 EULER = 0
@@ -188,6 +189,55 @@ def particle_box(x, v, a, radius, sigma, i, step_end, integrator, k, margin, out
         r = radius[i] + margin
         out_lo[c] = mn - r
         out_hi[c] = mx + r
+
+
+@njit(cache=True)
+def _quantile_99(values):
+    """np.quantile(values, 0.99) (its default, linear interpolation) to the bit, NaN if
+    any value is NaN; values (N,), N >= 1."""
+    ordered = np.sort(values)
+    n = ordered.shape[0]
+    if ordered[n - 1] != ordered[n - 1]:
+        return math.nan
+    virtual = (n - 1) * 0.99
+    below = math.floor(virtual)
+    if virtual >= n - 1:
+        return ordered[n - 1]
+    gamma = virtual - below
+    x = ordered[int(below)]
+    y = ordered[int(below) + 1]
+    step = y - x
+    return y - step * (1.0 - gamma) if gamma >= 0.5 else x + step * gamma
+
+
+@njit(cache=True)
+def grow_to_reach(x, v, a, radius, dt, margin, lo, hi):
+    """Grow each swept box lo, hi (N, 3) to the cube x ± (reach + r + margin) with reach =
+    max(own speed, the 99th-percentile speed) · dt, speed = |v| + |a| dt (see
+    World._add_reach), in place; NaN speeds give NaN boxes, as numpy's would."""
+    n = x.shape[0]
+    if n == 0:
+        return
+    speed = np.empty(n)
+    for i in range(n):
+        speed[i] = (math.sqrt(v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2])
+                    + math.sqrt(a[i, 0] * a[i, 0] + a[i, 1] * a[i, 1] + a[i, 2] * a[i, 2]) * dt)
+    typical = _quantile_99(speed)
+    for i in range(n):
+        s = speed[i]
+        fastest = math.nan if (s != s or typical != typical) else (s if s > typical else typical)
+        reach = fastest * dt + radius[i] + margin
+        for c in range(3):
+            low = x[i, c] - reach
+            high = x[i, c] + reach
+            if low != low or lo[i, c] != lo[i, c]:
+                lo[i, c] = math.nan
+            elif low < lo[i, c]:
+                lo[i, c] = low
+            if high != high or hi[i, c] != hi[i, c]:
+                hi[i, c] = math.nan
+            elif high > hi[i, c]:
+                hi[i, c] = high
 
 
 @njit(cache=True)

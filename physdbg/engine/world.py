@@ -47,7 +47,15 @@ from ..events import (
 from .broadphase import choose_broad_phase, make_broad_phase
 from .broadphase.boxes import boxes_meet
 from .broadphase.periodic import PeriodicBroadPhase
-from .motion import FLOW, KICK_AT_STEP_START, REST_STEP_FACTOR, advance_particles, particle_box, swept_boxes
+from .motion import (
+    FLOW,
+    KICK_AT_STEP_START,
+    REST_STEP_FACTOR,
+    advance_particles,
+    grow_to_reach,
+    particle_box,
+    swept_boxes,
+)
 from .periodic import wrap_positions
 from .resolve import (
     CF_CLOSING,
@@ -325,13 +333,8 @@ class World:
         does is queried again (timeline.REQUERY). In place on lo, hi (N, 3).
         """
         st = self.state
-        if st.count == 0:
-            return
-        speed = np.linalg.norm(st.velocities, axis=1) + np.linalg.norm(self._a, axis=1) * dt
-        typical = float(np.quantile(speed, 0.99))
-        reach = (np.maximum(speed, typical) * dt + st.radius + self.settings.contact_tolerance)[:, None]
-        np.minimum(lo, st.positions - reach, out=lo)
-        np.maximum(hi, st.positions + reach, out=hi)
+        # compiled (motion.grow_to_reach): np.quantile alone was a third of a small step
+        grow_to_reach(st.positions, st.velocities, self._a, st.radius, dt, self.settings.contact_tolerance, lo, hi)
 
     def _too_wide_for_the_period(self, lo: np.ndarray, hi: np.ndarray,
                                  consequence: str = "sphere–sphere contacts were not tested in this step"
