@@ -20,8 +20,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..engine.periodic import minimum_image
-
+from ..engine.periodic import minimum_image, unwrap_near
 from ..engine.state import state_hash
 
 
@@ -99,7 +98,7 @@ def hermite(t: float, a, b, period=None):
         return a.positions, a.velocities
     s = (t - a.time) / h
     h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
-    xb = b.positions if period is None else a.positions + minimum_image(b.positions - a.positions, period)
+    xb = b.positions if period is None else unwrap_near(b.positions, a.positions, period)
     x = h00 * a.positions + h10 * h * a.velocities + h01 * xb + h11 * h * b.velocities
     v = (1 - s) * a.velocities + s * b.velocities
     return x, v

@@ -22,7 +22,7 @@ phi1 = (1 - e^(-k tau)) / k and phi2 = (tau - phi1) / k are the closed form of
 dv/dt = a - k v, which gives exactly v·d^t when a = 0 (phi1 -> tau, phi2 -> tau²/2 when
 k = 0). dP1 = P1' = e^(-k tau) (1 without drag), and dP2 = P2' is P1 on the curved paths
 (verlet, exact) and 0 on the straight ones (euler, semi-implicit: their position does not
-follow the acceleration inside the step, their velocity does): ``path_velocity_weights``.
+follow the acceleration inside the step, their velocity does): ``path_acceleration_weight``.
 So n·position(tau) has a second derivative of constant sign, which the swept tests in
 :mod:`toi` rely on.
 
@@ -93,13 +93,12 @@ def path_coefficients(integrator, k, tau):
     return tau, 0.0, 1.0
 
 
-@njit(cache=True)
-def path_velocity_weights(integrator, k, tau):
-    """(dP1, dP2) at local time tau: the path's velocity (d position / d tau) is
-    v * dP1 + a * dP2 (the table above). On Euler's straight line it is the anchor
-    velocity, not the integrator's velocity v + a tau."""
-    p1, _, dp1 = path_coefficients(integrator, k, tau)
-    return dp1, (0.0 if STRAIGHT_PATH[integrator] else p1)
+@njit(cache=True, inline="always")
+def path_acceleration_weight(integrator, p1):
+    """dP2 = d P2 / d tau from P1 (path_coefficients at the same tau): the path's velocity
+    is v * dP1 + a * dP2 (the table above). P1 on the curved paths, 0 on the straight
+    ones: on Euler's line it is the anchor velocity, not the integrator's v + a tau."""
+    return 0.0 if STRAIGHT_PATH[integrator] else p1
 
 
 @njit(cache=True)

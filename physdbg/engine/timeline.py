@@ -32,7 +32,7 @@ import numpy as np
 from numba import njit
 
 from ..events import KIND_PAIR, KIND_WALL, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_SUPERSEDED
-from .motion import particle_box, path_coefficients, path_velocity_weights
+from .motion import particle_box, path_acceleration_weight, path_coefficients
 from .periodic import image
 from .resolve import CF_WIDTH, CI_WIDTH, OUT_OF_WORK, SKIPPED, pair_separation, resolve_contact
 from .resting import held_find, held_room
@@ -196,10 +196,10 @@ def _predict_pair(i, j, x, v, a, radius, sigma, version, step_end, integrator, k
     if held.deg[i] > 0 and held.deg[j] > 0 and held_find(held, KIND_PAIR, i, j) >= 0:
         return
     start = max(sigma[i], sigma[j])
-    pi1, pi2, _ = path_coefficients(integrator, k, start - sigma[i])
-    pj1, pj2, _ = path_coefficients(integrator, k, start - sigma[j])
-    dpi, wi = path_velocity_weights(integrator, k, start - sigma[i])
-    dpj, wj = path_velocity_weights(integrator, k, start - sigma[j])
+    pi1, pi2, dpi = path_coefficients(integrator, k, start - sigma[i])
+    pj1, pj2, dpj = path_coefficients(integrator, k, start - sigma[j])
+    wi = path_acceleration_weight(integrator, pi1)
+    wj = path_acceleration_weight(integrator, pj1)
     # relative position (the minimum image on periodic axes) and path velocity at the
     # common start (see motion.path_state)
     dx0 = image((x[i, 0] + v[i, 0] * pi1 + a[i, 0] * pi2) - (x[j, 0] + v[j, 0] * pj1 + a[j, 0] * pj2), period[0])
@@ -305,8 +305,7 @@ def _inside_box(x, v, a, radius, sigma, p, step_end, integrator, k, margin, box_
 def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, version, last_contact, run_time,
                    step_end, integrator, drag, k, detection, samples, tolerance, rest_fraction, rest_step_factor,
                    rule, rapid_time, normals, offsets, half_thickness, two_sided, wall_restitution, period, held,
-                   adj_start,
-                   adj, box_lo, box_hi, box_margin, max_degree, cap, max_tests, work_budget, anchor_is_flow,
+                   adj_start, adj, box_lo, box_hi, box_margin, max_degree, cap, max_tests, work_budget, anchor_is_flow,
                    path_follows_acc, vtol, atol, heap_toi, heap_data, test_int, test_float, test_outcome,
                    contact_float, contact_int, counters, pending, changed, batch_mark, requery, requery_count):
     """Resolve contacts in time order until done or a pause (see module doc)."""
@@ -323,8 +322,7 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
                 counters[PENDING_AT] += 1
                 _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
                            tolerance, normals, offsets, half_thickness, two_sided, period, held, adj_start, adj,
-                           batch_mark,
-                           counters[BATCH], test_int, test_float, test_outcome, heap_toi, heap_data, counters)
+                           batch_mark, counters[BATCH], test_int, test_float, test_outcome, heap_toi, heap_data, counters)
             # a path that left its swept box may meet particles it was never paired with
             out = 0
             for s in range(counters[PENDING_COUNT]):

@@ -424,8 +424,7 @@ class World:
                 self._drag, self._k, self._detection, s.samples, s.contact_tolerance * 1e-3, s.rest_fraction,
                 self._rest_step_factor, rule, s.rapid_contact_time, self._normals, self._offsets,
                 self._half_thickness, self._two_sided, self._wall_restitution, self._period, self.held,
-                self._adj_start, self._adj,
-                self._lo, self._hi, s.contact_tolerance, self._max_degree, self.event_cap,
+                self._adj_start, self._adj, self._lo, self._hi, s.contact_tolerance, self._max_degree, self.event_cap,
                 s.max_swept_tests_per_step, s.max_resting_work_per_step, self._anchor_is_flow,
                 not self._kick_first, self._vtol, self._atol, buf.heap_toi, buf.heap_data,
                 buf.test_int, buf.test_float, buf.test_outcome, buf.contact_float, buf.contact_int, buf.counters,
@@ -486,8 +485,7 @@ class World:
                                not self._kick_first, s.rest_fraction, self._rest_step_factor,
                                RESTITUTION_RULES.index(s.restitution_rule), s.rapid_contact_time, self._normals,
                                self._offsets, self._two_sided, self._wall_restitution, self._period, self.held,
-                               buf.contact_float,
-                               buf.contact_int, buf.counters, CONTACTS, RAPID, buf.changed,
+                               buf.contact_float, buf.contact_int, buf.counters, CONTACTS, RAPID, buf.changed,
                                s.max_resting_work_per_step, self._vtol, self._atol)
 
     def _contacts_event(self) -> Contacts:
