@@ -24,7 +24,7 @@ import numpy as np
 KIND_PAIR = 0
 KIND_WALL = 1
 
-# how a contact was resolved (Contacts.how; the recording's contacts ``resting`` column)
+# how a contact was resolved (Contacts.how; the recording's contacts ``how`` column)
 HOW_IMPULSE = 0  # the seed's impulse (or reflection), alone
 HOW_RESTING = 1  # held by the resting rule, restitution 0
 HOW_RAPID = 2  # held by the rapid-contact (TC) rule, restitution 0
@@ -105,46 +105,88 @@ class ContactResolved:
     how: int = 0
 
 
+# The contact row: one schema for the compiled loop's buffer, the Contacts event and the
+# recording's /physdbg/contacts table (format.py takes this list as it is). Packed, so the
+# row is the same bytes whatever the platform's alignment. (name, numpy kind, shape):
+CONTACT_FIELDS = [
+    ("time_in_step", "<f8", ()), ("kind", "i1", ()), ("how", "i1", ()), ("a", "<i4", ()), ("other", "<i4", ()),
+    ("point", "<f8", (3,)), ("normal", "<f8", (3,)), ("impulse", "<f8", ()),
+    ("velocity_a_before", "<f8", (3,)), ("velocity_a_after", "<f8", (3,)),
+    ("velocity_b_before", "<f8", (3,)), ("velocity_b_after", "<f8", (3,)),
+    ("restitution", "<f8", ()), ("closing_speed", "<f8", ()),
+]
+CONTACT_ROW = np.dtype([(name, kind, shape) if shape else (name, kind) for name, kind, shape in CONTACT_FIELDS])
+
+
+def _column(name: str):
+    return property(lambda self: self.rows[name], doc=f"the ``{name}`` column of ``rows`` (a view)")
+
+
 @dataclass(frozen=True)
 class Contacts:
-    """Every contact resolved during one step, as parallel arrays of length M, in the
-    order they were resolved (row i is contact ``order`` i). Box2D-style buffered events:
-    one object per step however many contacts, so observing stays cheap.
+    """Every contact resolved during one step, in the order they were resolved (row i is
+    contact ``order`` i). Box2D-style buffered events: one object per step however many
+    contacts, so observing stays cheap.
 
+    rows: (M,) structured array of :data:`CONTACT_ROW`, the very rows the compiled loop
+    wrote (a copy). Each field is also an attribute, a view of its column:
     time_in_step: (M,) s; kind: (M,) int8; a, other: (M,) int32; point, normal,
     velocity_a_before, velocity_a_after: (M, 3); velocity_b_before/after: (M, 3), NaN rows
-    for walls; impulse, restitution, closing_speed: (M,); resting: (M,) bool. Meanings as
-    in :class:`ContactResolved`; ``record(i)`` or iteration gives one contact as that type.
+    for walls; impulse, restitution, closing_speed: (M,); how: (M,) int8 HOW_*. resting:
+    (M,) bool, derived from ``how`` (held by the resting or the rapid-contact rule).
+    Meanings as in :class:`ContactResolved`; ``record(i)`` or iteration gives one contact
+    as that type.
     """
 
     step: int
-    time_in_step: np.ndarray
-    kind: np.ndarray
-    a: np.ndarray
-    other: np.ndarray
-    point: np.ndarray
-    normal: np.ndarray
-    impulse: np.ndarray
-    velocity_a_before: np.ndarray
-    velocity_a_after: np.ndarray
-    velocity_b_before: np.ndarray
-    velocity_b_after: np.ndarray
-    restitution: np.ndarray
-    closing_speed: np.ndarray
-    resting: np.ndarray
-    how: np.ndarray
+    rows: np.ndarray
+
+    def __post_init__(self) -> None:
+        if self.rows.dtype != CONTACT_ROW:
+            raise TypeError(f"Contacts.rows must have dtype CONTACT_ROW, not {self.rows.dtype}")
+
+    time_in_step = _column("time_in_step")
+    kind = _column("kind")
+    how = _column("how")
+    a = _column("a")
+    other = _column("other")
+    point = _column("point")
+    normal = _column("normal")
+    impulse = _column("impulse")
+    velocity_a_before = _column("velocity_a_before")
+    velocity_a_after = _column("velocity_a_after")
+    velocity_b_before = _column("velocity_b_before")
+    velocity_b_after = _column("velocity_b_after")
+    restitution = _column("restitution")
+    closing_speed = _column("closing_speed")
+
+    @property
+    def resting(self) -> np.ndarray:
+        """(M,) bool: held with restitution 0 (HOW_RESTING or HOW_RAPID)."""
+        return (self.how == HOW_RESTING) | (self.how == HOW_RAPID)
+
+    @classmethod
+    def empty(cls, step: int, count: int = 0) -> Contacts:
+        """``count`` zeroed rows (to fill column by column: tests, importers)."""
+        return cls(step, np.zeros(count, CONTACT_ROW))
+
+    def first(self, count: int) -> Contacts:
+        """The first ``count`` contacts (all of them when there are fewer)."""
+        return self if len(self) <= count else Contacts(self.step, self.rows[:count])
 
     def __len__(self) -> int:
-        return len(self.kind)
+        return len(self.rows)
 
     def record(self, i: int) -> ContactResolved:
-        pair = int(self.kind[i]) == KIND_PAIR
+        r = self.rows[i]
+        pair = int(r["kind"]) == KIND_PAIR
+        how = int(r["how"])
         return ContactResolved(
-            self.step, i, float(self.time_in_step[i]), int(self.kind[i]), int(self.a[i]), int(self.other[i]),
-            self.point[i].copy(), self.normal[i].copy(), float(self.impulse[i]),
-            self.velocity_a_before[i].copy(), self.velocity_a_after[i].copy(),
-            self.velocity_b_before[i].copy() if pair else None, self.velocity_b_after[i].copy() if pair else None,
-            float(self.restitution[i]), float(self.closing_speed[i]), bool(self.resting[i]), int(self.how[i]))
+            self.step, i, float(r["time_in_step"]), int(r["kind"]), int(r["a"]), int(r["other"]),
+            r["point"].copy(), r["normal"].copy(), float(r["impulse"]),
+            r["velocity_a_before"].copy(), r["velocity_a_after"].copy(),
+            r["velocity_b_before"].copy() if pair else None, r["velocity_b_after"].copy() if pair else None,
+            float(r["restitution"]), float(r["closing_speed"]), how in (HOW_RESTING, HOW_RAPID), how)
 
     def __iter__(self):
         return (self.record(i) for i in range(len(self)))

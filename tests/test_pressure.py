@@ -14,11 +14,10 @@ from physdbg.events import KIND_PAIR, KIND_WALL, Contacts
 
 
 def _contacts(kind, a, other, impulse):
-    m = len(kind)
-    vec = np.zeros((m, 3))
-    return Contacts(0, np.zeros(m), np.array(kind, np.int8), np.array(a, np.int32), np.array(other, np.int32), vec,
-                    vec, np.array(impulse, float), vec, vec, vec, vec, np.ones(m), np.ones(m), np.zeros(m, bool),
-                    np.zeros(m, np.int8))
+    c = Contacts.empty(0, len(kind))
+    c.kind[:], c.a[:], c.other[:], c.impulse[:] = kind, a, other, impulse
+    c.restitution[:] = c.closing_speed[:] = 1.0
+    return c
 
 
 def test_the_sums_are_r_dot_j_over_pairs_and_the_impulses_at_walls():

@@ -112,7 +112,9 @@ def test_reader_gives_back_every_state_hash_and_event_of_the_live_run(tmp_path):
         live_step = [e for e in live.events if e.step == k - 1]
         assert [type(e) for e in events] == [type(e) for e in live_step]
         for mine, theirs in zip(events, live_step, strict=True):
-            if isinstance(mine, (Contacts, SweptTests)):
+            if isinstance(mine, Contacts):  # the row the loop wrote, to the bit
+                assert mine.rows.tobytes() == theirs.rows.tobytes()
+            if isinstance(mine, SweptTests):
                 for name in mine.__dataclass_fields__:
                     np.testing.assert_array_equal(getattr(mine, name), getattr(theirs, name))
             if isinstance(mine, StepEnd):
@@ -472,3 +474,29 @@ def test_a_real_time_run_is_recorded_with_its_step_lengths_and_verifies(tmp_path
     dts = [rec.state(k).dt for k in range(1, rec.frames)]
     assert len(set(dts)) > 1  # real elapsed times, not a fixed dt
     assert rec.meta["dt"] is None and api.verify(result.mcap).ok
+
+
+def test_the_contact_row_is_one_schema_from_the_loop_to_the_file():
+    """The loop's buffer, the Contacts event and the recording's table are one dtype, and a
+    file written while the ``how`` column was still named ``resting`` (the golden bounce)
+    gives the engine's own rows back to the bit: held contacts included."""
+    from physdbg.events import CONTACT_FIELDS, CONTACT_ROW, HOW_RESTING
+
+    assert fmt.PROTOBUF_MESSAGES["physdbg.Contacts"][0] is CONTACT_FIELDS
+    assert fmt.dtype_of(CONTACT_FIELDS) == CONTACT_ROW
+    rec = open_recording(ROOT / "recordings" / "golden" / "bounce.mcap")
+    schema = next(s for s in rec._reader.get_summary().schemas.values() if s.name == "physdbg.Contacts")
+    assert b"resting" in schema.data and b"how" not in schema.data  # the old name, in the file
+    obs = ListObserver()
+    world = rec.scene.build_world()
+    world.observer = obs
+    assert world._buf.contacts.dtype == CONTACT_ROW
+    held = 0
+    for k in range(1, rec.frames):
+        world.step(rec.state(k).dt)
+        live = [e for e in obs.of_type(Contacts) if e.step == k - 1]
+        recorded = rec.contacts(k)
+        assert recorded.rows.dtype == CONTACT_ROW
+        assert recorded.rows.tobytes() == (live[0].rows.tobytes() if live else b"")
+        held += int(np.count_nonzero(recorded.how == HOW_RESTING))
+    assert held > 0 and np.array_equal(recorded.resting, recorded.how == HOW_RESTING)

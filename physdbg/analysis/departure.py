@@ -376,11 +376,12 @@ class _Comparison:
         out = []
         batches = seen.of_type(Contacts)
         c = batches[0] if batches else None
+        resting = c.resting if c is not None else None
         for k in range(len(c) if c is not None else 0):
             out.append({"step": s, "index": k, "kind": int(c.kind[k]), "a": int(c.a[k]), "other": int(c.other[k]),
                         "tau": float(c.time_in_step[k]), "time": float(r.t[s - 1] + c.time_in_step[k]),
                         "normal": c.normal[k].copy(), "restitution": float(c.restitution[k]),
-                        "resting": bool(c.resting[k]), "closing": abs(float(c.closing_speed[k]))})
+                        "resting": bool(resting[k]), "closing": abs(float(c.closing_speed[k]))})
         return state.positions, state.velocities, out
 
     def _judge_steps(self, start: int) -> None:

@@ -378,11 +378,12 @@ class _Differ:
         for k in range(first, frame + 1):
             c = rec.contacts(k)
             base = float(table.time[k - 1])
+            resting = c.resting
             for i in range(len(c)):
                 rows.append({"step": k, "index": i, "time": base + float(c.time_in_step[i]),
                              "time_in_step": float(c.time_in_step[i]), "dt": float(table.dt[k]),
                              "kind": int(c.kind[i]), "a": int(c.a[i]), "other": int(c.other[i]),
-                             "resting": bool(c.resting[i]), "impulse": float(c.impulse[i]),
+                             "resting": bool(resting[i]), "impulse": float(c.impulse[i]),
                              "restitution": float(c.restitution[i]),
                              "velocity_a_after": [float(q) for q in c.velocity_a_after[i]]})
         return rows

@@ -57,22 +57,6 @@ SKIPPED = 0
 RESOLVED = 1
 OUT_OF_WORK = 2
 
-# contact float columns
-CF_TIME = 0
-CF_POINT = 1
-CF_NORMAL = 4
-CF_IMPULSE = 7
-CF_VA_BEFORE = 8
-CF_VA_AFTER = 11
-CF_VB_BEFORE = 14
-CF_VB_AFTER = 17
-CF_RESTITUTION = 20
-CF_CLOSING = 21
-CF_WIDTH = 22
-# contact int columns: kind, a, other, how (events.HOW_*)
-CI_WIDTH = 4
-
-
 @njit(cache=True)
 def combine(rule, e_a, e_b):
     """The restitution of a contact: rule is an index into RESTITUTION_RULES."""
@@ -129,13 +113,13 @@ def contact_normal(x, ia, ib, other, normals, offsets, two_sided, period):
 def resolve_contact(kind, ia, other, toi, run_time, x, v, a, acc, radius, inverse_mass, restitution, sigma,
                     last_contact, step_end, integrator, drag, k, anchor_is_flow, path_follows_acc, rest_fraction,
                     rest_step_factor, rule, rapid_time, normals, offsets, two_sided, wall_restitution, period, h,
-                    contact_float, contact_int, counters, contacts_slot, rapid_slot, changed, work_budget,
+                    contacts, counters, contacts_slot, rapid_slot, changed, work_budget,
                     vtol, atol):
     """Resolve the predicted contact (kind, ia, other) at time ``toi`` in the step.
 
     Advances the spheres to the contact, judges it (approaching? resting? rapid?),
     applies the seed's impulse or the simultaneous solve with held contacts, writes one
-    contact row (contact_float/int at counters[contacts_slot]) and lists in ``changed``
+    contact row (events.CONTACT_ROW, ``contacts[counters[contacts_slot]]``) and lists in ``changed``
     (count first) the spheres whose paths changed. run_time: the run's time at step start
     (s); path_follows_acc: the path acceleration is the contact-solved acceleration (every
     integrator but semi-implicit). Returns SKIPPED (not approaching: nothing resolved),
@@ -174,16 +158,16 @@ def resolve_contact(kind, ia, other, toi, run_time, x, v, a, acc, radius, invers
     # nothing that never rests (a gas, a break shot) loses energy to the rule
     held = HOW_RESTING if resting else (HOW_RAPID if is_rapid and rel_acc < 0.0 else HOW_IMPULSE)
     used = 0.0 if held != HOW_IMPULSE else (1.0 if is_rapid else e)
-    row = counters[contacts_slot]
-    cf = contact_float
-    cf[row, CF_TIME] = toi
-    cf[row, CF_NORMAL] = nx
-    cf[row, CF_NORMAL + 1] = ny
-    cf[row, CF_NORMAL + 2] = nz
+    slot = counters[contacts_slot]
+    row = contacts[slot]
+    row.time_in_step = toi
+    row.normal[0] = nx
+    row.normal[1] = ny
+    row.normal[2] = nz
     for c in range(3):
-        cf[row, CF_POINT + c] = x[ia, c] - cf[row, CF_NORMAL + c] * radius[ia]
-        cf[row, CF_VA_BEFORE + c] = v[ia, c]
-        cf[row, CF_VB_BEFORE + c] = v[ib, c] if ib >= 0 else math.nan
+        row.point[c] = x[ia, c] - row.normal[c] * radius[ia]
+        row.velocity_a_before[c] = v[ia, c]
+        row.velocity_b_before[c] = v[ib, c] if ib >= 0 else math.nan
     last_contact[ia] = now
     if ib >= 0:
         last_contact[ib] = now
@@ -204,16 +188,16 @@ def resolve_contact(kind, ia, other, toi, run_time, x, v, a, acc, radius, invers
         if not ok:
             status = OUT_OF_WORK
     for c in range(3):
-        cf[row, CF_VA_AFTER + c] = v[ia, c]
-        cf[row, CF_VB_AFTER + c] = v[ib, c] if ib >= 0 else math.nan
-    cf[row, CF_IMPULSE] = j
-    cf[row, CF_RESTITUTION] = used
-    cf[row, CF_CLOSING] = closing
-    contact_int[row, 0] = kind
-    contact_int[row, 1] = ia
-    contact_int[row, 2] = other
-    contact_int[row, 3] = held if (held != HOW_IMPULSE or not with_held) else HOW_WITH_HELD
-    counters[contacts_slot] = row + 1
+        row.velocity_a_after[c] = v[ia, c]
+        row.velocity_b_after[c] = v[ib, c] if ib >= 0 else math.nan
+    row.impulse = j
+    row.restitution = used
+    row.closing_speed = closing
+    row.kind = kind
+    row.a = ia
+    row.other = other
+    row.how = held if (held != HOW_IMPULSE or not with_held) else HOW_WITH_HELD
+    counters[contacts_slot] = slot + 1
     if is_rapid:
         counters[rapid_slot] += 1
     return status

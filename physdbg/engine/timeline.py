@@ -31,10 +31,10 @@ import math
 import numpy as np
 from numba import njit
 
-from ..events import KIND_PAIR, KIND_WALL, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_SUPERSEDED
+from ..events import CONTACT_ROW, KIND_PAIR, KIND_WALL, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_SUPERSEDED
 from .motion import particle_box, path_acceleration_weight, path_coefficients
 from .periodic import image
-from .resolve import CF_WIDTH, CI_WIDTH, OUT_OF_WORK, SKIPPED, pair_separation, resolve_contact
+from .resolve import OUT_OF_WORK, SKIPPED, pair_separation, resolve_contact
 from .resting import held_find, held_room
 from .toi import (
     DISCRETE,
@@ -76,8 +76,7 @@ class Buffers:
         self.test_int = np.empty((tests, 3), dtype=np.int64)  # kind, a, other
         self.test_float = np.empty((tests, 2))  # start, toi
         self.test_outcome = np.empty(tests, dtype=np.int8)
-        self.contact_float = np.empty((contacts, CF_WIDTH))
-        self.contact_int = np.empty((contacts, CI_WIDTH), dtype=np.int64)
+        self.contacts = np.empty(contacts, dtype=CONTACT_ROW)  # the rows of the Contacts event
         self.counters = np.zeros(COUNTERS, dtype=np.int64)
         self.pending = np.empty(max(n, 2), dtype=np.int64)  # spheres to re-predict
         self.changed = np.empty(max(n, 2) + 1, dtype=np.int64)  # count, then spheres (resolve_contact)
@@ -101,9 +100,8 @@ class Buffers:
             self.test_int = _grown(self.test_int)
             self.test_float = _grown(self.test_float)
             self.test_outcome = _grown(self.test_outcome)
-        while self.contact_int.shape[0] - c[CONTACTS] < contact_room:
-            self.contact_float = _grown(self.contact_float)
-            self.contact_int = _grown(self.contact_int)
+        while self.contacts.shape[0] - c[CONTACTS] < contact_room:
+            self.contacts = _grown(self.contacts)
 
 
 def _grown(array: np.ndarray) -> np.ndarray:
@@ -307,7 +305,7 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
                    rule, rapid_time, normals, offsets, half_thickness, two_sided, wall_restitution, period, held,
                    adj_start, adj, box_lo, box_hi, box_margin, max_degree, cap, max_tests, work_budget, anchor_is_flow,
                    path_follows_acc, vtol, atol, heap_toi, heap_data, test_int, test_float, test_outcome,
-                   contact_float, contact_int, counters, pending, changed, batch_mark, requery, requery_count):
+                   contacts, counters, pending, changed, batch_mark, requery, requery_count):
     """Resolve contacts in time order until done or a pause (see module doc)."""
     nw = normals.shape[0]
     room = 2 * max_degree + 2 * nw + 4
@@ -339,7 +337,7 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
         if counters[HEAP_SIZE] == 0:
             return DONE
         if (heap_toi.shape[0] - counters[HEAP_SIZE] < room or test_outcome.shape[0] - counters[TESTS] < room
-                or contact_int.shape[0] - counters[CONTACTS] < 2):
+                or contacts.shape[0] - counters[CONTACTS] < 2):
             return GROW
         if not held_room(held, heap_data[0, 2], heap_data[0, 3] if heap_data[0, 1] == KIND_PAIR else -1):
             return GROW_HELD
@@ -363,7 +361,7 @@ def run_time_order(x, v, a, acc, radius, inverse_mass, restitution, sigma, versi
         status = resolve_contact(kind, ia, other, toi, run_time, x, v, a, acc, radius, inverse_mass, restitution,
                                  sigma, last_contact, step_end, integrator, drag, k, anchor_is_flow,
                                  path_follows_acc, rest_fraction, rest_step_factor, rule, rapid_time, normals,
-                                 offsets, two_sided, wall_restitution, period, held, contact_float, contact_int, counters,
+                                 offsets, two_sided, wall_restitution, period, held, contacts, counters,
                                  CONTACTS, RAPID, changed, work_budget, vtol, atol)
         test_outcome[rid] = OUTCOME_SUPERSEDED if status == SKIPPED else OUTCOME_HIT
         # re-predict only the particles whose paths changed (next time round the loop)

@@ -30,8 +30,6 @@ from time import perf_counter
 import numpy as np
 
 from ..events import (
-    HOW_RAPID,
-    HOW_RESTING,
     BroadPhaseInfo,
     KIND_PAIR,
     KIND_WALL,
@@ -58,16 +56,6 @@ from .motion import (
 )
 from .periodic import wrap_positions
 from .resolve import (
-    CF_CLOSING,
-    CF_IMPULSE,
-    CF_NORMAL,
-    CF_POINT,
-    CF_RESTITUTION,
-    CF_TIME,
-    CF_VA_AFTER,
-    CF_VA_BEFORE,
-    CF_VB_AFTER,
-    CF_VB_BEFORE,
     OUT_OF_WORK,
     RESTITUTION_RULES,
     SKIPPED,
@@ -427,7 +415,7 @@ class World:
                 self._adj_start, self._adj, self._lo, self._hi, s.contact_tolerance, self._max_degree, self.event_cap,
                 s.max_swept_tests_per_step, s.max_resting_work_per_step, self._anchor_is_flow,
                 not self._kick_first, self._vtol, self._atol, buf.heap_toi, buf.heap_data,
-                buf.test_int, buf.test_float, buf.test_outcome, buf.contact_float, buf.contact_int, buf.counters,
+                buf.test_int, buf.test_float, buf.test_outcome, buf.contacts, buf.counters,
                 buf.pending, buf.changed, buf.batch_mark, buf.requery, buf.requery_count)
             if status == DONE:
                 return None
@@ -485,23 +473,11 @@ class World:
                                not self._kick_first, s.rest_fraction, self._rest_step_factor,
                                RESTITUTION_RULES.index(s.restitution_rule), s.rapid_contact_time, self._normals,
                                self._offsets, self._two_sided, self._wall_restitution, self._period, self.held,
-                               buf.contact_float, buf.contact_int, buf.counters, CONTACTS, RAPID, buf.changed,
+                               buf.contacts, buf.counters, CONTACTS, RAPID, buf.changed,
                                s.max_resting_work_per_step, self._vtol, self._atol)
 
     def _contacts_event(self) -> Contacts:
-        buf = self._buf
-        m = int(buf.counters[CONTACTS])
-        f = buf.contact_float[:m]
-        ints = buf.contact_int[:m]
-
-        def vec(col: int) -> np.ndarray:
-            return f[:, col:col + 3].copy()
-
-        return Contacts(self._step_no, f[:, CF_TIME].copy(), ints[:, 0].astype(np.int8), ints[:, 1].astype(np.int32),
-                        ints[:, 2].astype(np.int32), vec(CF_POINT), vec(CF_NORMAL), f[:, CF_IMPULSE].copy(),
-                        vec(CF_VA_BEFORE), vec(CF_VA_AFTER), vec(CF_VB_BEFORE), vec(CF_VB_AFTER),
-                        f[:, CF_RESTITUTION].copy(), f[:, CF_CLOSING].copy(),
-                        (ints[:, 3] == HOW_RESTING) | (ints[:, 3] == HOW_RAPID), ints[:, 3].astype(np.int8))
+        return Contacts(self._step_no, self._buf.contacts[:int(self._buf.counters[CONTACTS])].copy())
 
     # ------------------------------------------------------------------ audit
     def _max_overlap(self) -> float:

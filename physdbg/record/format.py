@@ -19,8 +19,9 @@ every message about the k-th step has ``step`` k and frame k's ``log_time``. The
 
 from __future__ import annotations
 
-
 import numpy as np
+
+from ..events import CONTACT_FIELDS
 
 FORMAT_NAME = "physdbg-recording"
 FORMAT_VERSION = 2
@@ -96,13 +97,10 @@ STATS_FIELDS = [
     ("seconds_resolve", "<f8", ()), ("seconds_finish", "<f8", ()),
     ("temperature", "<f8", ()), ("virial", "<f8", ()), ("wall_impulse", "<f8", ()), ("collisions", "<i8", ()),
 ]
-CONTACT_FIELDS = [
-    ("time_in_step", "<f8", ()), ("kind", "i1", ()), ("resting", "i1", ()), ("a", "<i4", ()), ("other", "<i4", ()),
-    ("point", "<f8", (3,)), ("normal", "<f8", (3,)), ("impulse", "<f8", ()),
-    ("velocity_a_before", "<f8", (3,)), ("velocity_a_after", "<f8", (3,)),
-    ("velocity_b_before", "<f8", (3,)), ("velocity_b_after", "<f8", (3,)),
-    ("restitution", "<f8", ()), ("closing_speed", "<f8", ()),
-]
+# CONTACT_FIELDS is the engine's own contact row (imported from events: the loop's buffer,
+# the event and this table are one schema). Files written before its ``how`` column was
+# named hold the same column, under the same protobuf field number, as ``resting``;
+# messages are decoded by field number, so they read the same.
 SWEPT_FIELDS = [
     ("kind", "i1", ()), ("outcome", "i1", ()), ("a", "<i4", ()), ("other", "<i4", ()),
     ("start", "<f8", ()), ("toi", "<f8", ()),

@@ -238,12 +238,7 @@ class McapRecorder:
 
     def _table(self, topic: str, frame: int, source) -> bytes:
         """The channel's table message, each column taken from the attribute of that name."""
-        def column(name):
-            if topic == fmt.TOPIC_CONTACTS and name == "resting":
-                return source.how  # the column keeps how it was resolved (events.HOW_*)
-            return getattr(source, name)
-
-        return proto.encode_table(fmt.MESSAGE_OF_TOPIC[topic], frame, column)
+        return proto.encode_table(fmt.MESSAGE_OF_TOPIC[topic], frame, lambda name: getattr(source, name))
 
     def _broad_phase(self, info: BroadPhaseInfo, frame: int) -> None:
         meta = {"name": info.name, "reason": info.reason, "stats": _plain_stats(info.stats)}

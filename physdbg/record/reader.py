@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import PhysdbgError
-from ..events import HOW_RAPID, HOW_RESTING, BroadPhaseInfo, Contacts, EngineWarning, StepBegin, StepEnd, SweptTests
+from ..events import BroadPhaseInfo, Contacts, EngineWarning, StepBegin, StepEnd, SweptTests
 from . import format as fmt
 from . import proto
 from .header import RecordingHeader
@@ -386,11 +386,7 @@ class Recording:
         return events
 
     def _contacts(self, step: int, data: bytes) -> Contacts:
-        rows = self._table(fmt.TOPIC_CONTACTS, data)
-        how = rows["resting"].astype(np.int8)  # the column holds events.HOW_*
-        return Contacts(step, *(rows[name].copy() for name in Contacts.__dataclass_fields__
-                                if name not in ("step", "resting", "how")),
-                        (how == HOW_RESTING) | (how == HOW_RAPID), how)
+        return Contacts(step, self._table(fmt.TOPIC_CONTACTS, data))
 
     def contacts(self, k: int) -> Contacts:
         """Contacts of the k-th step (detail contacts or full)."""

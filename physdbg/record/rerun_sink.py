@@ -25,7 +25,6 @@ A default blueprint (3D view, energy and contact plots, the event log) goes in t
 
 from __future__ import annotations
 
-import dataclasses
 import uuid
 from pathlib import Path
 
@@ -165,7 +164,7 @@ class RerunSink:
         self._paths(end, contacts)
         lines = [(f"step {frame}: {warning.message}", "WARN") for warning in self._warnings]
         if contacts is not None:
-            self._draw_contacts(_first_contacts(contacts, view.DRAWN_CONTACTS_PER_STEP))
+            self._draw_contacts(contacts.first(view.DRAWN_CONTACTS_PER_STEP))
             lines += self._describe(frame, contacts, end.dt)
         self._log_lines(frame, end.time, lines)
         self._warnings = []
@@ -366,14 +365,6 @@ def _line_strips(points: np.ndarray, offsets: np.ndarray):
     strips = pa.ListArray.from_arrays(pa.array(offsets, type=pa.int32()), values)
     strips = strips.cast(rr.components.LineStrip3DBatch([]).as_arrow_array().type)
     return rr.DescribedComponentBatch(_ArrowBatch(strips), rr.LineStrips3D.descriptor_strips())
-
-
-def _first_contacts(c: Contacts, count: int) -> Contacts:
-    """The first ``count`` contacts of a step (all of them when there are no more)."""
-    if len(c) <= count:
-        return c
-    return dataclasses.replace(c, **{name: getattr(c, name)[:count] for name in Contacts.__dataclass_fields__
-                                     if name != "step"})
 
 
 def _level_color(level: int) -> list[int]:

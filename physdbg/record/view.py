@@ -87,15 +87,16 @@ def describe_contacts(frame: int, c: Contacts, dt: float, wall_names) -> list[tu
     """(text, level) lines for a step's first LOG_LINES_PER_STEP contacts, in words, and
     one line counting the rest. level: "INFO" for impacts, "DEBUG" for held contacts."""
     lines = []
+    resting = c.resting
     for row in range(min(len(c), LOG_LINES_PER_STEP)):
         other = (f"sphere {int(c.other[row])}" if c.kind[row] == KIND_PAIR
                  else f"wall {wall_names[int(c.other[row])]}")
-        verb = "rests on" if c.resting[row] else "hit"
+        verb = "rests on" if resting[row] else "hit"
         lines.append((
             f"step {frame}: sphere {int(c.a[row])} {verb} {other} at {c.time_in_step[row] / dt:.3f}·dt "
             f"({c.time_in_step[row]:.4g} s into the step), "
             f"j = {c.impulse[row]:.3g} N·s, closing {c.closing_speed[row]:.3g} m/s, e = {c.restitution[row]:.3g}",
-            "DEBUG" if c.resting[row] else "INFO"))
+            "DEBUG" if resting[row] else "INFO"))
     if len(c) > LOG_LINES_PER_STEP:
         lines.append((f"step {frame}: ... and {len(c) - LOG_LINES_PER_STEP} more contacts", "INFO"))
     return lines
