@@ -32,14 +32,14 @@ def _solve(world, contact, solver, target=0.05):
     h = HeldContacts(*[array.copy() for array in world.held])
     v = world.state.velocities.copy()
     x = world.state.positions.copy()
-    a = world._a.copy()
+    a = world.last_step.path_accel.copy()
     sigma = np.zeros(len(v))
     begin_solve(h)
     h.count[2] = 0
     h.target[contact] = target
     seeds = np.array([contact], np.int64)
     ok = solver(h, v, True, seeds, 1, x, v, a, sigma, world.state.inverse_mass, 0.0, world._integrator, world._drag,
-                world._k, world._vtol, 10**9, KIND_PAIR, 0.0)
+                world._k, world.last_step.vtol, 10**9, KIND_PAIR, 0.0)
     assert ok
     return v, h, int(h.count[2])
 
@@ -59,7 +59,7 @@ def test_the_direct_solve_finds_what_gauss_seidel_finds_with_a_fraction_of_the_w
         # and every held contact the solve visited ends as it promises: pushing only
         # where it is exactly at its target, and approaching by no more than its
         # neighbours' last updates below the tolerance (two neighbours in a stack)
-        tol = pile._vtol
+        tol = pile.last_step.vtol
         for c in range(held):
             if h.seen[c] != h.count[1]:
                 continue

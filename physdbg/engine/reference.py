@@ -21,6 +21,7 @@ import numpy as np
 
 from ..events import KIND_PAIR, KIND_WALL, OUTCOME_HIT, OUTCOME_SUPERSEDED
 from .resolve import OUT_OF_WORK, SKIPPED
+from .step_context import StepContext
 from .timeline import CONTACTS, EVENTS, TESTS, Buffers, predict_into
 from .world import World
 
@@ -28,7 +29,7 @@ from .world import World
 class ReferenceWorld(World):
     """A World whose time-ordered resolve phase is the O(N²) reference loop (module doc)."""
 
-    def _resolve_in_time_order(self) -> str | None:
+    def _resolve_in_time_order(self, ctx: StepContext) -> str | None:
         st = self.state
         s = self.settings
         n = st.count
@@ -43,15 +44,15 @@ class ReferenceWorld(World):
             candidates = []
             for kind, ia, ib in ((KIND_WALL, wall_p, wall_w), (KIND_PAIR, pair_a, pair_b)):
                 scratch.reset()
-                predict_into(kind, ia, ib, st.positions, st.velocities, self._a, st.radius, self._sigma,
-                             self._version, self._dt, self._integrator, self._k, self._detection, s.samples,
+                predict_into(kind, ia, ib, st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma,
+                             ctx.version, ctx.dt, self._integrator, self._k, self._detection, s.samples,
                              s.contact_tolerance * 1e-3, self._normals, self._offsets, self._half_thickness,
                              self._two_sided, self._period, self.held, scratch.test_int, scratch.test_float,
                              scratch.test_outcome, scratch.heap_toi, scratch.heap_data, scratch.counters, False)
                 m = int(scratch.counters[TESTS])
                 for row in range(m):
                     toi = float(scratch.test_float[row, 1])
-                    if toi <= self._dt:
+                    if toi <= ctx.dt:
                         k, a, other = (int(c) for c in scratch.test_int[row])
                         candidates.append((toi, 0 if k == KIND_WALL else 1, a, other, k))
             if not candidates:
@@ -60,8 +61,8 @@ class ReferenceWorld(World):
             self._buf.counters[EVENTS] += 1
             if self._buf.counters[CONTACTS] >= self.event_cap:
                 return "max_events_per_step"
-            status = self._resolve(kind, a, other, toi)
-            self._record_outcome(kind, a, other, toi, OUTCOME_SUPERSEDED if status == SKIPPED else OUTCOME_HIT)
+            status = self._resolve_one(ctx, kind, a, other, toi)
+            self._record_outcome(ctx, kind, a, other, toi, OUTCOME_SUPERSEDED if status == SKIPPED else OUTCOME_HIT)
             if status == OUT_OF_WORK:
                 return "max_resting_work_per_step"
 
@@ -70,12 +71,12 @@ class ReferenceWorld(World):
         """The contact to resolve next: the earliest (ties: walls first, then by index)."""
         return min(candidates)
 
-    def _record_outcome(self, kind: int, a: int, other: int, toi: float, outcome: int) -> None:
+    def _record_outcome(self, ctx: StepContext, kind: int, a: int, other: int, toi: float, outcome: int) -> None:
         """Log the contact as a swept test (the reference keeps only those it acted on)."""
         buf = self._buf
         buf.ensure(0, 1, 0)
         row = int(buf.counters[TESTS])
         buf.test_int[row] = (kind, a, other)
-        buf.test_float[row] = (self._sigma[a], toi)
+        buf.test_float[row] = (ctx.sigma[a], toi)
         buf.test_outcome[row] = outcome
         buf.counters[TESTS] = row + 1

@@ -14,6 +14,10 @@
     finish        advance every particle to the end of the step; audit overlaps;
                   energies, momentum and the state hash
 
+Each phase is a method over one :class:`~.step_context.StepContext`, which holds what
+lives for the step (the path accelerations, the swept boxes, the candidate pairs, the
+warnings, the timings); the world keeps only what lasts the run.
+
 Each particle carries an *anchor*: its position and velocity at a time sigma inside the
 step, from which :mod:`motion` gives its path. Resolving a contact at time t advances the
 anchors of the particles involved to t, so the rest of their step runs over exactly the
@@ -64,6 +68,7 @@ from .resolve import (
 )
 from .resting import grow_held, held_room, new_held
 from .state import BUDGETS, NonFiniteState, Settings, State, Walls, energies, first_non_finite, state_hash
+from .step_context import StepContext
 from .timeline import (
     CAPPED,
     CONTACTS,
@@ -151,7 +156,6 @@ class World:
         self._kick_first = KICK_AT_STEP_START[self._integrator]
         self._accel_scale = max(1.0, float(np.abs(self._free_accel).max())) if state.count else 1.0
         self._atol = SOLVE_TOLERANCE * self._accel_scale
-        self._vtol = self._atol  # set per step: SOLVE_TOLERANCE·(acceleration scale)·dt
         self._acc = np.zeros((state.count, 3))
         self._offsets = np.ascontiguousarray(walls.offsets, dtype=np.float64)
         self._wall_restitution = np.ascontiguousarray(walls.restitution, dtype=np.float64)
@@ -163,6 +167,7 @@ class World:
             self.broad_phase = PeriodicBroadPhase(self.broad_phase, self._period_origin, self._period)
         self._buf = Buffers(state.count)
         self.event_cap = settings.event_cap(state.count)
+        self.last_step: StepContext | None = None  # the context of the latest step (for inspection)
 
     @property
     def held_count(self) -> int:
@@ -176,153 +181,151 @@ class World:
         Raises NonFiniteState (after reporting the step) when a position or velocity
         became NaN or infinite: the world cannot go on from there.
         """
-        if isinstance(dt, bool) or not isinstance(dt, (int, float, np.floating)) or not 0.0 < dt < math.inf:
-            raise ValueError(f"World.step needs dt, a positive finite number of seconds; got {dt!r} (a scene with "
-                             f'dt = "real" gives each step\'s length through Scene.step_lengths())')
-        dt = float(dt)
-        st = self.state
-        s = self.settings
-        obs = self.observer
-        n = st.count
-        step_no = self.step_index
-        if obs is not None:
-            obs.on_event(StepBegin(step_no, self.time, dt))
-        timings: dict[str, float] = {}
-        warnings: list[EngineWarning] = []
-        self._resting_work = 0
-        x, v = st.positions, st.velocities
+        ctx = self._begin(_checked_step_length(dt))
+        self._timed(ctx, "forces", self._forces)
+        self._timed(ctx, "broad_phase", self._broad_phase)
+        if ctx.observer is not None:
+            ctx.observer.on_event(self._broad_phase_event(ctx))
+        self._timed(ctx, "narrow_phase", self._narrow_phase)
+        self._timed(ctx, "resolve", self._resolve)
+        self._timed(ctx, "finish", self._finish)
+        return self._end(ctx)
 
-        def warn(code: str, message: str) -> None:
-            warnings.append(EngineWarning(step_no, code, message))
-            if obs is not None:
-                obs.on_event(warnings[-1])
-
-        # -- forces ---------------------------------------------------------------
-        t0 = perf_counter()
-        self.held.count[2] = 0  # the resting work of this step
+    def _begin(self, dt: float) -> StepContext:
         # a velocity residue of vtol moves a sphere vtol·dt in a step: SOLVE_TOLERANCE·a·dt²
-        self._vtol = SOLVE_TOLERANCE * self._accel_scale * dt
-        acc = self._acc
-        path_accel = np.empty_like(acc)
-        sigma = np.zeros(n)
-        if not settle_held(self.held, x, v, path_accel, acc, self._free_accel, st.radius, st.inverse_mass, sigma, dt,
-                           self._integrator, self._drag, self._k, self._kick_first, self._normals,
-                           self._offsets, self._half_thickness, self._two_sided, self._period, s.contact_tolerance,
-                           s.max_resting_work_per_step, self._vtol, self._atol,
-                           dt * (self._rest_step_factor + s.rest_fraction)):
-            warn("max_resting_work_per_step", _budget_message("max_resting_work_per_step",
-                                                              s.max_resting_work_per_step))
-        self._a = path_accel
-        self._sigma = sigma
-        t1 = perf_counter()
-        timings["forces"] = t1 - t0
+        ctx = StepContext(self.step_index, dt, self.time, SOLVE_TOLERANCE * self._accel_scale * dt, self.observer)
+        self.last_step = ctx
+        if ctx.observer is not None:
+            ctx.observer.on_event(StepBegin(ctx.step, ctx.run_time, dt))
+        return ctx
 
-        # -- broad phase --------------------------------------------------------
-        lo = np.empty((n, 3))
-        hi = np.empty((n, 3))
-        swept_boxes(x, v, path_accel, st.radius, sigma, dt, self._integrator, self._k,
-                    s.contact_tolerance, lo, hi)
-        self._add_reach(lo, hi, dt)
-        too_wide = self._too_wide_for_the_period(lo, hi)
+    @staticmethod
+    def _timed(ctx: StepContext, name: str, phase) -> None:
+        started = perf_counter()
+        phase(ctx)
+        ctx.timings[name] = perf_counter() - started
+
+    def _forces(self, ctx: StepContext) -> None:
+        """Held contacts -> the accelerations the paths follow (resolve.settle_held)."""
+        st, s, n, dt = self.state, self.settings, self.state.count, ctx.dt
+        self.held.count[2] = 0  # the resting work of this step
+        ctx.path_accel = np.empty_like(self._acc)
+        ctx.sigma = np.zeros(n)
+        if not settle_held(self.held, st.positions, st.velocities, ctx.path_accel, self._acc, self._free_accel,
+                           st.radius, st.inverse_mass, ctx.sigma, dt, self._integrator, self._drag, self._k,
+                           self._kick_first, self._normals, self._offsets, self._half_thickness, self._two_sided,
+                           self._period, s.contact_tolerance, s.max_resting_work_per_step, ctx.vtol, self._atol,
+                           dt * (self._rest_step_factor + s.rest_fraction)):
+            ctx.warn("max_resting_work_per_step", _budget_message("max_resting_work_per_step",
+                                                                  s.max_resting_work_per_step))
+
+    def _broad_phase(self, ctx: StepContext) -> None:
+        """Each path's swept box over the step, grown to its reach -> candidate pairs."""
+        st, s, n = self.state, self.settings, self.state.count
+        ctx.lo = np.empty((n, 3))
+        ctx.hi = np.empty((n, 3))
+        swept_boxes(st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma, ctx.dt, self._integrator,
+                    self._k, s.contact_tolerance, ctx.lo, ctx.hi)
+        self._add_reach(ctx)
+        too_wide = self._too_wide_for_the_period(ctx.lo, ctx.hi)
         if too_wide:
-            warn("periodic", too_wide)
+            ctx.warn("periodic", too_wide)
             pairs = np.empty((0, 2), dtype=np.int64)
         else:
-            pairs = self.broad_phase.pairs(lo, hi, s.max_pairs_per_step)
+            pairs = self.broad_phase.pairs(ctx.lo, ctx.hi, s.max_pairs_per_step)
         if len(pairs) > s.max_pairs_per_step:
-            warn("max_pairs_per_step", _budget_message("max_pairs_per_step", s.max_pairs_per_step))
+            ctx.warn("max_pairs_per_step", _budget_message("max_pairs_per_step", s.max_pairs_per_step))
             pairs = np.empty((0, 2), dtype=np.int64)
-        self._lo, self._hi = lo, hi
-        self._grown: set[int] = set()
-        self._too_wide_mid_step: str | None = None  # a box grown mid-step past half a period (periodic)
-        self._build_adjacency(pairs, n)
-        t2 = perf_counter()
-        timings["broad_phase"] = t2 - t1
-        if obs is not None:
-            obs.on_event(self._broad_phase_event(step_no, len(pairs)))
+        self._build_adjacency(ctx, pairs)
 
-        # -- narrow phase ---------------------------------------------------------
-        self._step_no = step_no
-        self._dt = dt
-        self._version = np.zeros(n, dtype=np.int64)
-        self._run_time = self.time
-        buf = self._buf
-        buf.reset()
-        push = s.ordering == "time"
-        self._predict(KIND_PAIR, pairs[:, 0].copy(), pairs[:, 1].copy(), push)
-        wall_p, wall_w = reachable_walls(lo, hi, self._normals, self._offsets, self._half_thickness,
+    def _narrow_phase(self, ctx: StepContext) -> None:
+        """The swept test of every candidate pair and every sphere–wall pair in reach."""
+        ctx.version = np.zeros(self.state.count, dtype=np.int64)
+        self._buf.reset()
+        push = self.settings.ordering == "time"
+        self._predict(ctx, KIND_PAIR, ctx.pairs[:, 0].copy(), ctx.pairs[:, 1].copy(), push)
+        wall_p, wall_w = reachable_walls(ctx.lo, ctx.hi, self._normals, self._offsets, self._half_thickness,
                                          self._two_sided)
-        self._predict(KIND_WALL, wall_p, wall_w, push)
-        t3 = perf_counter()
-        timings["narrow_phase"] = t3 - t2
+        self._predict(ctx, KIND_WALL, wall_p, wall_w, push)
 
-        # -- resolve --------------------------------------------------------------
-        budget = self._resolve_in_time_order() if push else self._resolve_in_index_order()
-        if self._too_wide_mid_step and not any(w.code == "periodic" for w in warnings):
-            warn("periodic", self._too_wide_mid_step)
-        if budget is not None and not any(w.code == budget for w in warnings):
-            warn(budget, _budget_message(budget, self.event_cap if budget == "max_events_per_step"
-                                         else getattr(s, budget)))
-        t4 = perf_counter()
-        timings["resolve"] = t4 - t3
+    def _resolve(self, ctx: StepContext) -> None:
+        """The contacts, in the order of the policy (``settings.ordering``)."""
+        s = self.settings
+        budget = self._resolve_in_time_order(ctx) if s.ordering == "time" else self._resolve_in_index_order(ctx)
+        if ctx.too_wide_mid_step and not ctx.warned("periodic"):
+            ctx.warn("periodic", ctx.too_wide_mid_step)
+        if budget is not None and not ctx.warned(budget):
+            ctx.warn(budget, _budget_message(budget, self.event_cap if budget == "max_events_per_step"
+                                             else getattr(s, budget)))
+        ctx.budget = budget
 
-        # -- finish -------------------------------------------------------------
-        advance_particles(x, v, self._a, sigma, np.arange(n, dtype=np.int64), dt, self._integrator,
+    def _finish(self, ctx: StepContext) -> None:
+        """Every sphere to the end of the step; the overlap audit, energies and state hash."""
+        st, s, n = self.state, self.settings, self.state.count
+        x, v = st.positions, st.velocities
+        advance_particles(x, v, ctx.path_accel, ctx.sigma, np.arange(n, dtype=np.int64), ctx.dt, self._integrator,
                           self._drag, self._k)
-        sigma[:] = 0.0
+        ctx.sigma[:] = 0.0
         if self._periodic:  # the paths were continuous through the step; the state is in the box
             wrap_positions(x, self._period_origin, self._period)
-        max_overlap = self._max_overlap()
-        if s.detection == "swept" and max_overlap > s.contact_tolerance and not warnings:
-            warn("overlap", f"spheres overlap by {max_overlap:.3g} m, more than the contact tolerance "
-                            f"{s.contact_tolerance:g} m")
-        non_finite = first_non_finite(x, v)
-        if non_finite is not None:
-            failure = NonFiniteState(step_no, *non_finite)
-            warn("non-finite", str(failure))
-        kinetic, potential, momentum = energies(st, self.gravity)
-        digest = state_hash(x, v)
-        self.time += dt
+        ctx.max_overlap = self._max_overlap(ctx)
+        if s.detection == "swept" and ctx.max_overlap > s.contact_tolerance and not ctx.warnings:
+            ctx.warn("overlap", f"spheres overlap by {ctx.max_overlap:.3g} m, more than the contact tolerance "
+                                f"{s.contact_tolerance:g} m")
+        ctx.non_finite = first_non_finite(x, v)
+        if ctx.non_finite is not None:
+            ctx.warn("non-finite", str(NonFiniteState(ctx.step, *ctx.non_finite)))
+        ctx.kinetic, ctx.potential, ctx.momentum = energies(st, self.gravity)
+        ctx.state_hash = state_hash(x, v)
+        self.time += ctx.dt
         self.step_index += 1
-        t5 = perf_counter()
-        timings["finish"] = t5 - t4
+
+    def _end(self, ctx: StepContext) -> StepStats:
+        """The step's stats and its closing events; raises NonFiniteState after reporting."""
+        buf = self._buf
         contacts = int(buf.counters[CONTACTS])
         tests = int(buf.counters[TESTS])
         events = int(buf.counters[EVENTS])
         rapid = int(buf.counters[RAPID])
-        stats = StepStats(step_no, self.time, dt, kinetic, potential, momentum, contacts, tests, events,
-                          self.held_count, rapid, max_overlap, digest, timings, warnings)
+        stats = StepStats(ctx.step, self.time, ctx.dt, ctx.kinetic, ctx.potential, ctx.momentum, contacts, tests,
+                          events, self.held_count, rapid, ctx.max_overlap, ctx.state_hash, ctx.timings, ctx.warnings)
+        obs = ctx.observer
         if obs is not None:
-            obs.on_event(self._contacts_event())
-            obs.on_event(self._swept_tests_event())
-            obs.on_event(StepEnd(step_no, self.time, dt, x.copy(), v.copy(), kinetic, potential,
-                                 momentum.copy(),
+            x, v = self.state.positions, self.state.velocities
+            obs.on_event(self._contacts_event(ctx))
+            obs.on_event(self._swept_tests_event(ctx))
+            obs.on_event(StepEnd(ctx.step, self.time, ctx.dt, x.copy(), v.copy(), ctx.kinetic, ctx.potential,
+                                 ctx.momentum.copy(),
                                  {"contacts": contacts, "swept_tests": tests, "events": events,
                                   "resting": self.held_count, "rapid": rapid},
-                                 max_overlap, dict(timings), digest, tuple(w.message for w in warnings)))
-        if non_finite is not None:
-            raise failure
+                                 ctx.max_overlap, dict(ctx.timings), ctx.state_hash,
+                                 tuple(w.message for w in ctx.warnings)))
+        if ctx.non_finite is not None:
+            raise NonFiniteState(ctx.step, *ctx.non_finite)
         return stats
 
     # ------------------------------------------------------------------ candidates
-    def _build_adjacency(self, pairs: np.ndarray, n: int) -> None:
+    @staticmethod
+    def _build_adjacency(ctx: StepContext, pairs: np.ndarray) -> None:
         """CSR lists of each particle's broad-phase partners (pairs must be sorted)."""
-        self._adj_start, self._adj = adjacency_from_pairs(np.ascontiguousarray(pairs, dtype=np.int64), n)
-        self._max_degree = int(np.diff(self._adj_start).max()) if n else 0
-        self._pairs = pairs
+        n = ctx.sigma.shape[0]
+        ctx.adj_start, ctx.adj = adjacency_from_pairs(np.ascontiguousarray(pairs, dtype=np.int64), n)
+        ctx.max_degree = int(np.diff(ctx.adj_start).max()) if n else 0
+        ctx.pairs = pairs
 
-    def _add_reach(self, lo: np.ndarray, hi: np.ndarray, dt: float) -> None:
+    def _add_reach(self, ctx: StepContext) -> None:
         """Grow each swept box to the cube a sphere could reach this step at a typical speed.
 
         A contact turns a path, so a box around the old path alone would send nearly every
         particle back to the broad phase after its first contact. The cube x ± (reach + r)
         with reach = max(own speed, the scene's 99th-percentile speed) · dt (speed counting
         one step of acceleration) holds any path that does not outrun it; the rare one that
-        does is queried again (timeline.REQUERY). In place on lo, hi (N, 3).
+        does is queried again (timeline.REQUERY). In place on ctx.lo, ctx.hi (N, 3).
         """
         st = self.state
         # compiled (motion.grow_to_reach): np.quantile alone was a third of a small step
-        grow_to_reach(st.positions, st.velocities, self._a, st.radius, dt, self.settings.contact_tolerance, lo, hi)
+        grow_to_reach(st.positions, st.velocities, ctx.path_accel, st.radius, ctx.dt, self.settings.contact_tolerance,
+                      ctx.lo, ctx.hi)
 
     def _too_wide_for_the_period(self, lo: np.ndarray, hi: np.ndarray,
                                  consequence: str = "sphere–sphere contacts were not tested in this step"
@@ -344,46 +347,43 @@ class World:
                 f"the period {self._period[axis]:g} m: pairs cannot be told apart from their images, so "
                 f"{consequence}; make the box larger or dt shorter")
 
-    def _partners(self, i: int) -> np.ndarray:
-        return self._adj[self._adj_start[i]:self._adj_start[i + 1]]
-
-    def _refresh_box(self, i: int) -> list[int]:
+    def _refresh_box(self, ctx: StepContext, i: int) -> list[int]:
         """Grow i's swept box to hold its new path; return partners it did not have."""
         st = self.state
         lo = np.empty(3)
         hi = np.empty(3)
-        particle_box(st.positions, st.velocities, self._a, st.radius, self._sigma, i, self._dt, self._integrator,
+        particle_box(st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma, i, ctx.dt, self._integrator,
                      self._k, self.settings.contact_tolerance, lo, hi)
-        if np.all(lo >= self._lo[i]) and np.all(hi <= self._hi[i]):
+        if np.all(lo >= ctx.lo[i]) and np.all(hi <= ctx.hi[i]):
             return []
-        self._lo[i] = np.minimum(self._lo[i], lo)
-        self._hi[i] = np.maximum(self._hi[i], hi)
-        if self._periodic and self._too_wide_mid_step is None:
-            self._too_wide_mid_step = self._too_wide_for_the_period(
-                self._lo[i:i + 1], self._hi[i:i + 1], f"sphere {i}'s later contacts in this step (after a contact "
-                                                      f"sent it out of its box) may have met the wrong image")
-        found = set(self.broad_phase.query(self._lo, self._hi, self._lo[i], self._hi[i]).tolist())
+        ctx.lo[i] = np.minimum(ctx.lo[i], lo)
+        ctx.hi[i] = np.maximum(ctx.hi[i], hi)
+        if self._periodic and ctx.too_wide_mid_step is None:
+            ctx.too_wide_mid_step = self._too_wide_for_the_period(
+                ctx.lo[i:i + 1], ctx.hi[i:i + 1], f"sphere {i}'s later contacts in this step (after a contact "
+                                                  f"sent it out of its box) may have met the wrong image")
+        found = set(self.broad_phase.query(ctx.lo, ctx.hi, ctx.lo[i], ctx.hi[i]).tolist())
         # a structure built at step start knows the old boxes: check grown ones directly
-        if self._grown:
-            grown = np.fromiter(self._grown, dtype=np.int64)
-            hit = boxes_meet(self._lo[grown], self._hi[grown], self._lo[i], self._hi[i], self._period)
+        if ctx.grown:
+            grown = np.fromiter(ctx.grown, dtype=np.int64)
+            hit = boxes_meet(ctx.lo[grown], ctx.hi[grown], ctx.lo[i], ctx.hi[i], self._period)
             found.update(grown[hit].tolist())
-        self._grown.add(i)
-        known = set(self._partners(i).tolist())
+        ctx.grown.add(i)
+        known = set(ctx.partners(i).tolist())
         return sorted(j for j in found if j != i and j not in known)
 
-    def _add_partners(self, new_pairs: list[tuple[int, int]]) -> None:
+    def _add_partners(self, ctx: StepContext, new_pairs: list[tuple[int, int]]) -> None:
         """Add broad-phase pairs found mid-step, and predict them."""
         if not new_pairs:
             return
         extra = np.array(sorted(set(new_pairs)), dtype=np.int64).reshape(-1, 2)
-        merged = np.concatenate((self._pairs, extra))
+        merged = np.concatenate((ctx.pairs, extra))
         merged = merged[np.lexsort((merged[:, 1], merged[:, 0]))]
-        self._build_adjacency(merged, self.state.count)
-        self._predict(KIND_PAIR, extra[:, 0].copy(), extra[:, 1].copy(), True)
+        self._build_adjacency(ctx, merged)
+        self._predict(ctx, KIND_PAIR, extra[:, 0].copy(), extra[:, 1].copy(), True)
 
     # ------------------------------------------------------------------ narrow phase
-    def _predict(self, kind: int, ia: np.ndarray, ib: np.ndarray, push: bool) -> None:
+    def _predict(self, ctx: StepContext, kind: int, ia: np.ndarray, ib: np.ndarray, push: bool) -> None:
         """Swept-test candidates (kind, ia[m], ib[m]) into the buffers (held ones skipped)."""
         if ia.size == 0:
             return
@@ -391,13 +391,13 @@ class World:
         s = self.settings
         buf = self._buf
         buf.ensure(ia.size, ia.size, 0)
-        predict_into(kind, ia, ib, st.positions, st.velocities, self._a, st.radius, self._sigma, self._version,
-                     self._dt, self._integrator, self._k, self._detection, s.samples, s.contact_tolerance * 1e-3,
+        predict_into(kind, ia, ib, st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma, ctx.version,
+                     ctx.dt, self._integrator, self._k, self._detection, s.samples, s.contact_tolerance * 1e-3,
                      self._normals, self._offsets, self._half_thickness, self._two_sided, self._period, self.held,
                      buf.test_int, buf.test_float, buf.test_outcome, buf.heap_toi, buf.heap_data, buf.counters, push)
 
     # ------------------------------------------------------------------ policies
-    def _resolve_in_time_order(self) -> str | None:
+    def _resolve_in_time_order(self, ctx: StepContext) -> str | None:
         """The compiled loop, with Python taking the pauses (see timeline.py); returns the
         budget that stopped it (a Settings field name), or None."""
         st = self.state
@@ -407,14 +407,14 @@ class World:
         rule = RESTITUTION_RULES.index(s.restitution_rule)
         while True:
             status = run_time_order(
-                st.positions, st.velocities, self._a, self._acc, st.radius, st.inverse_mass, st.restitution,
-                self._sigma, self._version, self._last_contact, self._run_time, self._dt, self._integrator,
+                st.positions, st.velocities, ctx.path_accel, self._acc, st.radius, st.inverse_mass, st.restitution,
+                ctx.sigma, ctx.version, self._last_contact, ctx.run_time, ctx.dt, self._integrator,
                 self._drag, self._k, self._detection, s.samples, s.contact_tolerance * 1e-3, s.rest_fraction,
                 self._rest_step_factor, rule, s.rapid_contact_time, self._normals, self._offsets,
                 self._half_thickness, self._two_sided, self._wall_restitution, self._period, self.held,
-                self._adj_start, self._adj, self._lo, self._hi, s.contact_tolerance, self._max_degree, self.event_cap,
+                ctx.adj_start, ctx.adj, ctx.lo, ctx.hi, s.contact_tolerance, ctx.max_degree, self.event_cap,
                 s.max_swept_tests_per_step, s.max_resting_work_per_step, self._anchor_is_flow,
-                not self._kick_first, self._vtol, self._atol, buf.heap_toi, buf.heap_data,
+                not self._kick_first, ctx.vtol, self._atol, buf.heap_toi, buf.heap_data,
                 buf.test_int, buf.test_float, buf.test_outcome, buf.contacts, buf.counters,
                 buf.pending, buf.changed, buf.batch_mark, buf.requery, buf.requery_count)
             if status == DONE:
@@ -426,31 +426,31 @@ class World:
             if status == RESTING_BUDGET:
                 return "max_resting_work_per_step"
             if status == GROW:
-                room = 2 * self._max_degree + 2 * nw + 4
+                room = 2 * ctx.max_degree + 2 * nw + 4
                 buf.ensure(room, room, 2)
             elif status == GROW_HELD:
                 self.held = grow_held(self.held)
             elif status == REQUERY:
                 new_pairs = []
                 for i in buf.requery[: buf.requery_count[0]].tolist():
-                    new_pairs += [(min(i, j), max(i, j)) for j in self._refresh_box(i)]
-                self._add_partners(new_pairs)
+                    new_pairs += [(min(i, j), max(i, j)) for j in self._refresh_box(ctx, i)]
+                self._add_partners(ctx, new_pairs)
 
-    def _resolve_in_index_order(self) -> str | None:
+    def _resolve_in_index_order(self, ctx: StepContext) -> str | None:
         """Every contact predicted at step start, in detection order, nothing re-predicted;
         returns the budget that stopped it (a Settings field name), or None."""
         buf = self._buf
         count = int(buf.counters[TESTS])
         toi = buf.test_float[:count, 1]
-        hits = np.nonzero(toi <= self._dt)[0]
+        hits = np.nonzero(toi <= ctx.dt)[0]
         for rid in hits.tolist():
             buf.counters[EVENTS] += 1
             if buf.counters[CONTACTS] >= self.event_cap:
                 buf.test_outcome[hits[hits >= rid]] = OUTCOME_CAPPED
                 return "max_events_per_step"
             kind, a, other = (int(c) for c in buf.test_int[rid])
-            at = max(float(toi[rid]), self._sigma[a], self._sigma[other] if kind == KIND_PAIR else 0.0)
-            status = self._resolve(kind, a, other, at)
+            at = max(float(toi[rid]), ctx.sigma[a], ctx.sigma[other] if kind == KIND_PAIR else 0.0)
+            status = self._resolve_one(ctx, kind, a, other, at)
             buf.test_outcome[rid] = OUTCOME_SUPERSEDED if status == SKIPPED else OUTCOME_HIT
             if status == OUT_OF_WORK:
                 buf.test_outcome[hits[hits > rid]] = OUTCOME_CAPPED
@@ -458,7 +458,7 @@ class World:
         return None
 
     # ------------------------------------------------------------------ one contact
-    def _resolve(self, kind: int, a: int, other: int, when: float) -> int:
+    def _resolve_one(self, ctx: StepContext, kind: int, a: int, other: int, when: float) -> int:
         """Resolve one predicted contact at time ``when`` in the step (resolve.resolve_contact);
         returns its status (SKIPPED, RESOLVED or OUT_OF_WORK)."""
         st = self.state
@@ -467,44 +467,52 @@ class World:
         buf.ensure(0, 0, 1)
         while not held_room(self.held, a, other if kind == KIND_PAIR else -1):
             self.held = grow_held(self.held)
-        return resolve_contact(kind, a, other, when, self._run_time, st.positions, st.velocities, self._a, self._acc,
-                               st.radius, st.inverse_mass, st.restitution, self._sigma, self._last_contact, self._dt,
-                               self._integrator, self._drag, self._k, self._anchor_is_flow,
+        return resolve_contact(kind, a, other, when, ctx.run_time, st.positions, st.velocities, ctx.path_accel,
+                               self._acc, st.radius, st.inverse_mass, st.restitution, ctx.sigma, self._last_contact,
+                               ctx.dt, self._integrator, self._drag, self._k, self._anchor_is_flow,
                                not self._kick_first, s.rest_fraction, self._rest_step_factor,
                                RESTITUTION_RULES.index(s.restitution_rule), s.rapid_contact_time, self._normals,
                                self._offsets, self._two_sided, self._wall_restitution, self._period, self.held,
                                buf.contacts, buf.counters, CONTACTS, RAPID, buf.changed,
-                               s.max_resting_work_per_step, self._vtol, self._atol)
+                               s.max_resting_work_per_step, ctx.vtol, self._atol)
 
-    def _contacts_event(self) -> Contacts:
-        return Contacts(self._step_no, self._buf.contacts[:int(self._buf.counters[CONTACTS])].copy())
+    # ------------------------------------------------------------------ events
+    def _contacts_event(self, ctx: StepContext) -> Contacts:
+        return Contacts(ctx.step, self._buf.contacts[:int(self._buf.counters[CONTACTS])].copy())
 
-    # ------------------------------------------------------------------ audit
-    def _max_overlap(self) -> float:
+    def _max_overlap(self, ctx: StepContext) -> float:
         """Deepest penetration (m) among candidate pairs and particle–wall pairs."""
-        return float(max_overlap(self.state.positions, self.state.radius, self._pairs, self._normals,
+        return float(max_overlap(self.state.positions, self.state.radius, ctx.pairs, self._normals,
                                  self._offsets, self._half_thickness, self._two_sided, self._period,
                                  self.settings.detection != "swept"))
 
-    def _broad_phase_event(self, step_no: int, pair_count: int) -> BroadPhaseInfo:
+    def _broad_phase_event(self, ctx: StepContext) -> BroadPhaseInfo:
         bp = self.broad_phase
         stats = dict(bp.stats)
-        stats.setdefault("pairs", pair_count)
+        stats.setdefault("pairs", len(ctx.pairs))
         tree = bp.nodes
         nodes = None
         if tree is not None:
             nodes = {name: getattr(tree, name).copy() for name in
                      ("lo", "hi", "left", "right", "parent", "depth", "start", "count", "order")}
-        return BroadPhaseInfo(step_no, bp.name, self.broad_phase_reason, stats, nodes)
+        return BroadPhaseInfo(ctx.step, bp.name, self.broad_phase_reason, stats, nodes)
 
-    def _swept_tests_event(self) -> SweptTests:
+    def _swept_tests_event(self, ctx: StepContext) -> SweptTests:
         buf = self._buf
         count = int(buf.counters[TESTS])
         toi = buf.test_float[:count, 1].copy()
-        return SweptTests(self._step_no, buf.test_int[:count, 0].astype(np.int8),
+        return SweptTests(ctx.step, buf.test_int[:count, 0].astype(np.int8),
                           buf.test_int[:count, 1].astype(np.int32), buf.test_int[:count, 2].astype(np.int32),
-                          buf.test_float[:count, 0].copy(), np.where(toi <= self._dt, toi, np.nan),
+                          buf.test_float[:count, 0].copy(), np.where(toi <= ctx.dt, toi, np.nan),
                           buf.test_outcome[:count].copy())
+
+
+def _checked_step_length(dt) -> float:
+    if isinstance(dt, bool) or not isinstance(dt, (int, float, np.floating)) or not 0.0 < dt < math.inf:
+        raise ValueError(f"World.step needs dt, a positive finite number of seconds; got {dt!r} (a scene with "
+                         f'dt = "real" gives each step\'s length through Scene.step_lengths())')
+    return float(dt)
+
 
 def _budget_message(budget: str, value: int) -> str:
     """What a warning says when a budget stopped a step: which, what happened, what to change."""

@@ -1,0 +1,75 @@
+"""What lives for one step: made when ``World.step`` begins, dropped when the next begins.
+
+The world keeps what lasts a run (the state, the walls, the settings, the held contacts,
+each sphere's last contact time, the loop's buffers); everything a step computes for
+itself and the phases hand on to each other is here, so the step's pipeline reads as
+phases over one context (Box2D's b2StepContext) and nothing step-scoped sits on the world.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..events import EngineWarning
+
+
+@dataclass
+class StepContext:
+    """One step's working set.
+
+    step: index of the step (0-based); dt: its length (s); run_time: the run's time at its
+    start (s); vtol: the velocity tolerance of this step's held-contact solves (m/s);
+    observer: where events go (None: nobody listens).
+    Set by the phases, in order:
+    forces: path_accel (N, 3) m/s², the acceleration each path follows (contact-solved);
+    sigma (N,) s, each sphere's anchor time in the step (motion.py).
+    broad_phase: lo, hi (N, 3) m, the swept boxes (grown mid-step when a contact sends a
+    sphere out of its box); pairs (P, 2) int64, sorted candidate pairs; adj_start (N+1,),
+    adj (2P,) their CSR adjacency and max_degree; grown, the spheres whose boxes grew;
+    too_wide_mid_step, why a grown box broke the periodic minimum image (or None).
+    narrow_phase: version (N,) int64, predictions made of each sphere (stale heap entries).
+    resolve: budget, the Settings field of the budget that stopped the step (or None).
+    finish: max_overlap (m), kinetic, potential (J), momentum (3,), state_hash, non_finite.
+    warnings and timings (s per phase) collect through the step.
+    """
+
+    step: int
+    dt: float
+    run_time: float
+    vtol: float
+    observer: object | None = None
+    path_accel: np.ndarray | None = None
+    sigma: np.ndarray | None = None
+    lo: np.ndarray | None = None
+    hi: np.ndarray | None = None
+    pairs: np.ndarray | None = None
+    adj_start: np.ndarray | None = None
+    adj: np.ndarray | None = None
+    max_degree: int = 0
+    grown: set[int] = field(default_factory=set)
+    too_wide_mid_step: str | None = None
+    version: np.ndarray | None = None
+    budget: str | None = None
+    max_overlap: float = 0.0
+    kinetic: float = 0.0
+    potential: float = 0.0
+    momentum: np.ndarray | None = None
+    state_hash: str = ""
+    non_finite: tuple | None = None
+    warnings: list[EngineWarning] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def warn(self, code: str, message: str) -> None:
+        """Note a warning for this step and report it at once."""
+        self.warnings.append(EngineWarning(self.step, code, message))
+        if self.observer is not None:
+            self.observer.on_event(self.warnings[-1])
+
+    def warned(self, code: str) -> bool:
+        return any(w.code == code for w in self.warnings)
+
+    def partners(self, i: int) -> np.ndarray:
+        """Sphere i's broad-phase partners (int64 indices)."""
+        return self.adj[self.adj_start[i]:self.adj_start[i + 1]]
