@@ -122,6 +122,9 @@ def test_console_script_runs(tmp_path):
     assert "steps       3" in out.stdout
     bad = subprocess.run(exe[:3] + ["run", "nope"], capture_output=True, text=True)
     assert bad.returncode == 2 and "Traceback" not in bad.stderr and "error:" in bad.stderr
+    # ``python -m physdbg`` is the same command line
+    package = subprocess.run([sys.executable, "-m", "physdbg", "--help"], capture_output=True, text=True)
+    assert package.returncode == 0 and "Usage: physdbg" in package.stdout and "record" in package.stdout
 
 
 def test_long_runs_show_progress_on_stderr_and_keep_stdout_clean(monkeypatch):
