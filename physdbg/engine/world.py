@@ -82,6 +82,11 @@ from .timeline import (
     TEST_BUDGET,
     TESTS,
     Buffers,
+    LoopBudgets,
+    LoopCandidates,
+    LoopMethod,
+    LoopParticles,
+    LoopWalls,
     adjacency_from_pairs,
     max_overlap,
     predict_into,
@@ -405,18 +410,18 @@ class World:
         buf = self._buf
         nw = len(self.walls)
         rule = RESTITUTION_RULES.index(s.restitution_rule)
+        particles = LoopParticles(st.positions, st.velocities, ctx.path_accel, self._acc, st.radius, st.inverse_mass,
+                                  st.restitution, ctx.sigma, ctx.version, self._last_contact)
+        method = LoopMethod(ctx.run_time, ctx.dt, self._integrator, self._drag, self._k, self._detection, s.samples,
+                            s.contact_tolerance * 1e-3, s.rest_fraction, self._rest_step_factor, rule,
+                            s.rapid_contact_time, self._anchor_is_flow, not self._kick_first, ctx.vtol, self._atol)
+        walls = LoopWalls(self._normals, self._offsets, self._half_thickness, self._two_sided, self._wall_restitution,
+                          self._period)
+        budgets = LoopBudgets(self.event_cap, s.max_swept_tests_per_step, s.max_resting_work_per_step)
         while True:
-            status = run_time_order(
-                st.positions, st.velocities, ctx.path_accel, self._acc, st.radius, st.inverse_mass, st.restitution,
-                ctx.sigma, ctx.version, self._last_contact, ctx.run_time, ctx.dt, self._integrator,
-                self._drag, self._k, self._detection, s.samples, s.contact_tolerance * 1e-3, s.rest_fraction,
-                self._rest_step_factor, rule, s.rapid_contact_time, self._normals, self._offsets,
-                self._half_thickness, self._two_sided, self._wall_restitution, self._period, self.held,
-                ctx.adj_start, ctx.adj, ctx.lo, ctx.hi, s.contact_tolerance, ctx.max_degree, self.event_cap,
-                s.max_swept_tests_per_step, s.max_resting_work_per_step, self._anchor_is_flow,
-                not self._kick_first, ctx.vtol, self._atol, buf.heap_toi, buf.heap_data,
-                buf.test_int, buf.test_float, buf.test_outcome, buf.contacts, buf.counters,
-                buf.pending, buf.changed, buf.batch_mark, buf.requery, buf.requery_count)
+            # the held store, the adjacency and the buffers are replaced when they grow
+            candidates = LoopCandidates(ctx.adj_start, ctx.adj, ctx.lo, ctx.hi, s.contact_tolerance, ctx.max_degree)
+            status = run_time_order(particles, method, walls, self.held, candidates, budgets, buf.loop())
             if status == DONE:
                 return None
             if status == CAPPED:
