@@ -484,6 +484,7 @@ def test_the_contact_row_is_one_schema_from_the_loop_to_the_file():
 
     assert fmt.PROTOBUF_MESSAGES["physdbg.Contacts"][0] is CONTACT_FIELDS
     assert fmt.dtype_of(CONTACT_FIELDS) == CONTACT_ROW
+    assert all(isinstance(getattr(Contacts, name), property) for name, _, _ in CONTACT_FIELDS)  # every column
     rec = open_recording(ROOT / "recordings" / "golden" / "bounce.mcap")
     schema = next(s for s in rec._reader.get_summary().schemas.values() if s.name == "physdbg.Contacts")
     assert b"resting" in schema.data and b"how" not in schema.data  # the old name, in the file

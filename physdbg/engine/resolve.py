@@ -110,23 +110,25 @@ def contact_normal(x, ia, ib, other, normals, offsets, two_sided, period):
 
 
 @njit(cache=True)
-def resolve_contact(kind, ia, other, toi, run_time, x, v, a, acc, radius, inverse_mass, restitution, sigma,
-                    last_contact, step_end, integrator, drag, k, anchor_is_flow, path_follows_acc, rest_fraction,
-                    rest_step_factor, rule, rapid_time, normals, offsets, two_sided, wall_restitution, period, h,
-                    contacts, counters, contacts_slot, rapid_slot, changed, work_budget,
-                    vtol, atol):
+def resolve_contact(kind, ia, other, toi, particles, method, walls, h, contacts, counters, contacts_slot, rapid_slot,
+                    changed, work_budget):
     """Resolve the predicted contact (kind, ia, other) at time ``toi`` in the step.
 
     Advances the spheres to the contact, judges it (approaching? resting? rapid?),
     applies the seed's impulse or the simultaneous solve with held contacts, writes one
     contact row (events.CONTACT_ROW, ``contacts[counters[contacts_slot]]``) and lists in ``changed``
-    (count first) the spheres whose paths changed. run_time: the run's time at step start
-    (s); path_follows_acc: the path acceleration is the contact-solved acceleration (every
-    integrator but semi-implicit). Returns SKIPPED (not approaching: nothing resolved),
-    RESOLVED, or OUT_OF_WORK (the held-contact solve ran out of its budget). period: (3,)
-    m, the periodic axes (0 = not periodic); the contact point is on a's surface next to
-    a's centre, whichever image of b it met.
+    (count first) the spheres whose paths changed. particles, method, walls: the groups of
+    kernel_args (LoopParticles, LoopMethod, LoopWalls; method.path_follows_acc: the path
+    acceleration is the contact-solved acceleration, every integrator but semi-implicit);
+    h: the held store. Returns SKIPPED (not approaching: nothing resolved), RESOLVED, or
+    OUT_OF_WORK (the held-contact solve ran out of its budget). On periodic axes the
+    contact point is on a's surface next to a's centre, whichever image of b it met.
     """
+    # (unpacked to distinct names: numba types each variable once)
+    x, v, a, acc, radius, inverse_mass, restitution, sigma, _version, last_contact = particles
+    (run_time, step_end, integrator, drag, k, _detection, _samples, _tolerance, rest_fraction, rest_step_factor, rule,
+     rapid_time, anchor_is_flow, path_follows_acc, vtol, atol) = method
+    normals, offsets, _half_thickness, two_sided, wall_restitution, period = walls
     ib = other if kind == KIND_PAIR else -1
     changed[0] = 0
     one = np.empty(2, np.int64)

@@ -27,12 +27,12 @@ Python handles it and calls ``run_time_order`` again, which carries on where it 
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from ..events import CONTACT_ROW, KIND_PAIR, KIND_WALL, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_SUPERSEDED
+from .kernel_args import LoopBuffers
 from .motion import particle_box, path_acceleration_weight, path_coefficients
 from .periodic import image
 from .resolve import OUT_OF_WORK, SKIPPED, pair_separation, resolve_contact
@@ -85,11 +85,12 @@ class Buffers:
         self.requery = np.empty(max(n, 2), dtype=np.int64)
         self.requery_count = np.zeros(1, dtype=np.int64)
 
-    def loop(self) -> LoopBuffers:
-        """The arrays as run_time_order takes them (again after any growth)."""
-        return LoopBuffers(self.heap_toi, self.heap_data, self.test_int, self.test_float, self.test_outcome,
-                           self.contacts, self.counters, self.pending, self.changed, self.batch_mark, self.requery,
-                           self.requery_count)
+    def loop(self) -> tuple:
+        """The arrays as run_time_order takes them (kernel_args.LoopBuffers, as a plain
+        tuple; again after any growth)."""
+        return tuple(LoopBuffers(self.heap_toi, self.heap_data, self.test_int, self.test_float, self.test_outcome,
+                                 self.contacts, self.counters, self.pending, self.changed, self.batch_mark,
+                                 self.requery, self.requery_count))
 
     def reset(self) -> None:
         batch = self.counters[BATCH]  # batch ids stay unique across steps (batch_mark keeps old ones)
@@ -306,107 +307,16 @@ def _inside_box(x, v, a, radius, sigma, p, step_end, integrator, k, margin, box_
     return True
 
 
-# The loop's arguments, in the groups the world hands over (compiled as numba named
-# tuples; each kernel below still takes plain arrays).
-class LoopParticles(NamedTuple):
-    """Per-sphere arrays (N rows): positions, velocities (N, 3), path and contact-solved
-    accelerations a, acc (N, 3) m/s², radius, inverse_mass, restitution, anchor time sigma
-    (s), prediction version (int64), last contact time (s since the run began)."""
-
-    x: np.ndarray
-    v: np.ndarray
-    a: np.ndarray
-    acc: np.ndarray
-    radius: np.ndarray
-    inverse_mass: np.ndarray
-    restitution: np.ndarray
-    sigma: np.ndarray
-    version: np.ndarray
-    last_contact: np.ndarray
-
-
-class LoopMethod(NamedTuple):
-    """The step and its methods: run_time (s, at step start), step_end (dt, s), the
-    integrator and detection codes, drag and k = -ln(drag), samples, the swept tests'
-    tolerance (m), the resting and rapid rules (rest_fraction, rest_step_factor, rule (an
-    index into RESTITUTION_RULES), rapid_time (s)), the integrator's traits
-    (anchor_is_flow, path_follows_acc) and the held solves' tolerances vtol, atol."""
-
-    run_time: float
-    step_end: float
-    integrator: int
-    drag: float
-    k: float
-    detection: int
-    samples: int
-    tolerance: float
-    rest_fraction: float
-    rest_step_factor: float
-    rule: int
-    rapid_time: float
-    anchor_is_flow: bool
-    path_follows_acc: bool
-    vtol: float
-    atol: float
-
-
-class LoopWalls(NamedTuple):
-    """The planes (W rows): normals (W, 3), offsets, half_thickness (m), two_sided,
-    restitution; and period (3,) m (0 = not periodic)."""
-
-    normals: np.ndarray
-    offsets: np.ndarray
-    half_thickness: np.ndarray
-    two_sided: np.ndarray
-    restitution: np.ndarray
-    period: np.ndarray
-
-
-class LoopCandidates(NamedTuple):
-    """The broad phase's answer: CSR partners (adj_start (N+1,), adj), the swept boxes
-    box_lo, box_hi (N, 3) m with their margin (m), and the largest partner count."""
-
-    adj_start: np.ndarray
-    adj: np.ndarray
-    box_lo: np.ndarray
-    box_hi: np.ndarray
-    box_margin: float
-    max_degree: int
-
-
-class LoopBudgets(NamedTuple):
-    """cap: contacts (max_events_per_step); max_tests: swept tests; work_budget: held-solve updates."""
-
-    cap: int
-    max_tests: int
-    work_budget: int
-
-
-class LoopBuffers(NamedTuple):
-    """Buffers' arrays, as the loop writes them (see :class:`Buffers`)."""
-
-    heap_toi: np.ndarray
-    heap_data: np.ndarray
-    test_int: np.ndarray
-    test_float: np.ndarray
-    test_outcome: np.ndarray
-    contacts: np.ndarray
-    counters: np.ndarray
-    pending: np.ndarray
-    changed: np.ndarray
-    batch_mark: np.ndarray
-    requery: np.ndarray
-    requery_count: np.ndarray
-
-
 @njit(cache=True)
 def run_time_order(particles, method, walls, held, candidates, budgets, buffers):
     """Resolve contacts in time order until done or a pause (see module doc); the groups
-    are the Loop* named tuples above, held the store (resting.HeldContacts)."""
-    x, v, a, acc, radius, inverse_mass, restitution, sigma, version, last_contact = particles
-    (run_time, step_end, integrator, drag, k, detection, samples, tolerance, rest_fraction, rest_step_factor, rule,
-     rapid_time, anchor_is_flow, path_follows_acc, vtol, atol) = method
-    normals, offsets, half_thickness, two_sided, wall_restitution, period = walls
+    are kernel_args' (as plain tuples), held the store (resting.HeldContacts)."""
+    # positional, in kernel_args' field order (the groups come as plain tuples, see there);
+    # distinct names for what the loop does not read itself: numba types each name once
+    x, v, a, _acc, radius, _inverse_mass, _restitution, sigma, version, _last_contact = particles
+    (_run_time, step_end, integrator, _drag, k, detection, samples, tolerance, _rest_fraction, _rest_step_factor,
+     _rule, _rapid_time, _anchor_is_flow, _path_follows_acc, _vtol, _atol) = method
+    normals, offsets, half_thickness, two_sided, _wall_restitution, period = walls
     adj_start, adj, box_lo, box_hi, box_margin, max_degree = candidates
     cap, max_tests, work_budget = budgets
     (heap_toi, heap_data, test_int, test_float, test_outcome, contacts, counters, pending, changed, batch_mark,
@@ -462,11 +372,8 @@ def run_time_order(particles, method, walls, held, candidates, budgets, buffers)
             test_outcome[rid] = OUTCOME_CAPPED
             mark_capped(heap_data, test_outcome, counters)
             return CAPPED
-        status = resolve_contact(kind, ia, other, toi, run_time, x, v, a, acc, radius, inverse_mass, restitution,
-                                 sigma, last_contact, step_end, integrator, drag, k, anchor_is_flow,
-                                 path_follows_acc, rest_fraction, rest_step_factor, rule, rapid_time, normals,
-                                 offsets, two_sided, wall_restitution, period, held, contacts, counters,
-                                 CONTACTS, RAPID, changed, work_budget, vtol, atol)
+        status = resolve_contact(kind, ia, other, toi, particles, method, walls, held, contacts, counters, CONTACTS,
+                                 RAPID, changed, work_budget)
         test_outcome[rid] = OUTCOME_SUPERSEDED if status == SKIPPED else OUTCOME_HIT
         # re-predict only the particles whose paths changed (next time round the loop)
         counters[BATCH] += 1

@@ -49,6 +49,7 @@ from ..events import (
 from .broadphase import choose_broad_phase, make_broad_phase
 from .broadphase.boxes import boxes_meet
 from .broadphase.periodic import PeriodicBroadPhase
+from .kernel_args import LoopBudgets, LoopCandidates, LoopMethod, LoopParticles, LoopWalls
 from .motion import (
     FLOW,
     KICK_AT_STEP_START,
@@ -82,11 +83,6 @@ from .timeline import (
     TEST_BUDGET,
     TESTS,
     Buffers,
-    LoopBudgets,
-    LoopCandidates,
-    LoopMethod,
-    LoopParticles,
-    LoopWalls,
     adjacency_from_pairs,
     max_overlap,
     predict_into,
@@ -171,6 +167,9 @@ class World:
             wrap_positions(state.positions, self._period_origin, self._period)
             self.broad_phase = PeriodicBroadPhase(self.broad_phase, self._period_origin, self._period)
         self._buf = Buffers(state.count)
+        # the planes never change in a run: their kernel group is built once
+        self._walls_group = tuple(LoopWalls(self._normals, self._offsets, self._half_thickness, self._two_sided,
+                                            self._wall_restitution, self._period))
         self.event_cap = settings.event_cap(state.count)
         self.last_step: StepContext | None = None  # the context of the latest step (for inspection)
 
@@ -405,22 +404,15 @@ class World:
     def _resolve_in_time_order(self, ctx: StepContext) -> str | None:
         """The compiled loop, with Python taking the pauses (see timeline.py); returns the
         budget that stopped it (a Settings field name), or None."""
-        st = self.state
         s = self.settings
         buf = self._buf
         nw = len(self.walls)
-        rule = RESTITUTION_RULES.index(s.restitution_rule)
-        particles = LoopParticles(st.positions, st.velocities, ctx.path_accel, self._acc, st.radius, st.inverse_mass,
-                                  st.restitution, ctx.sigma, ctx.version, self._last_contact)
-        method = LoopMethod(ctx.run_time, ctx.dt, self._integrator, self._drag, self._k, self._detection, s.samples,
-                            s.contact_tolerance * 1e-3, s.rest_fraction, self._rest_step_factor, rule,
-                            s.rapid_contact_time, self._anchor_is_flow, not self._kick_first, ctx.vtol, self._atol)
-        walls = LoopWalls(self._normals, self._offsets, self._half_thickness, self._two_sided, self._wall_restitution,
-                          self._period)
-        budgets = LoopBudgets(self.event_cap, s.max_swept_tests_per_step, s.max_resting_work_per_step)
+        particles, method, walls = self._kernel_groups(ctx)
+        budgets = tuple(LoopBudgets(self.event_cap, s.max_swept_tests_per_step, s.max_resting_work_per_step))
         while True:
             # the held store, the adjacency and the buffers are replaced when they grow
-            candidates = LoopCandidates(ctx.adj_start, ctx.adj, ctx.lo, ctx.hi, s.contact_tolerance, ctx.max_degree)
+            candidates = tuple(LoopCandidates(ctx.adj_start, ctx.adj, ctx.lo, ctx.hi, s.contact_tolerance,
+                                              ctx.max_degree))
             status = run_time_order(particles, method, walls, self.held, candidates, budgets, buf.loop())
             if status == DONE:
                 return None
@@ -466,20 +458,25 @@ class World:
     def _resolve_one(self, ctx: StepContext, kind: int, a: int, other: int, when: float) -> int:
         """Resolve one predicted contact at time ``when`` in the step (resolve.resolve_contact);
         returns its status (SKIPPED, RESOLVED or OUT_OF_WORK)."""
-        st = self.state
-        s = self.settings
         buf = self._buf
         buf.ensure(0, 0, 1)
         while not held_room(self.held, a, other if kind == KIND_PAIR else -1):
             self.held = grow_held(self.held)
-        return resolve_contact(kind, a, other, when, ctx.run_time, st.positions, st.velocities, ctx.path_accel,
-                               self._acc, st.radius, st.inverse_mass, st.restitution, ctx.sigma, self._last_contact,
-                               ctx.dt, self._integrator, self._drag, self._k, self._anchor_is_flow,
-                               not self._kick_first, s.rest_fraction, self._rest_step_factor,
-                               RESTITUTION_RULES.index(s.restitution_rule), s.rapid_contact_time, self._normals,
-                               self._offsets, self._two_sided, self._wall_restitution, self._period, self.held,
-                               buf.contacts, buf.counters, CONTACTS, RAPID, buf.changed,
-                               s.max_resting_work_per_step, ctx.vtol, self._atol)
+        particles, method, walls = self._kernel_groups(ctx)
+        return resolve_contact(kind, a, other, when, particles, method, walls, self.held, buf.contacts, buf.counters,
+                               CONTACTS, RAPID, buf.changed, self.settings.max_resting_work_per_step)
+
+    def _kernel_groups(self, ctx: StepContext) -> tuple[tuple, tuple, tuple]:
+        """The step's arrays and settings as the compiled loop and resolver take them:
+        kernel_args' LoopParticles, LoopMethod and LoopWalls, as plain tuples."""
+        st, s = self.state, self.settings
+        particles = LoopParticles(st.positions, st.velocities, ctx.path_accel, self._acc, st.radius, st.inverse_mass,
+                                  st.restitution, ctx.sigma, ctx.version, self._last_contact)
+        method = LoopMethod(ctx.run_time, ctx.dt, self._integrator, self._drag, self._k, self._detection, s.samples,
+                            s.contact_tolerance * 1e-3, s.rest_fraction, self._rest_step_factor,
+                            RESTITUTION_RULES.index(s.restitution_rule), s.rapid_contact_time, self._anchor_is_flow,
+                            not self._kick_first, ctx.vtol, self._atol)
+        return tuple(particles), tuple(method), self._walls_group
 
     # ------------------------------------------------------------------ events
     def _contacts_event(self, ctx: StepContext) -> Contacts:
