@@ -1,6 +1,6 @@
 """box-rain: N spheres (r = 0.05 m, 10 % of the box's volume, e = 0.8) rain into a box.
 
-    .venv/bin/python benchmarks/box_rain.py [--count 1000] [--steps 240] [--peers]
+    .venv/bin/python benchmarks/box_rain.py [--count 1000] [--steps 240] [--peers] [--trace] [--stop-above-gb G]
 
 The scene of issue 10: the built-in ``rain`` scene with the box grown so the spheres fill
 10 % of it, dt = 1/240 s. Prints, for the run: steps stopped by a budget (the event
@@ -32,20 +32,39 @@ def box_rain(count: int, steps: int):
                                "dt=1/240", f"steps={steps}", "generate.restitution=0.8", "box.restitution=0.8"])
 
 
-def run_physdbg(scene) -> dict:
+def peak_memory_mb() -> float:
+    """This process's peak resident memory so far (MB; Linux reports ru_maxrss in kB)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def run_physdbg(scene, trace: bool = False, stop_above_gb: float | None = None) -> dict:
+    """Step the scene; trace: print every step (ms, contacts, held, rapid, events, overlap,
+    warnings, peak memory); stop_above_gb: stop early once the peak memory passes it."""
     world = scene.build_world()
     capped = 0
     worst = 0.0
     rows = []
+    if trace:
+        print("step  ms  contacts  held  rapid  events  overlap(m)  warnings  peak-MB", flush=True)
     started = time.perf_counter()
     for k in range(scene.steps):
+        t0 = time.perf_counter()
         stats = world.step(scene.dt)
         capped += any(w.code.startswith("max_") for w in stats.warnings)
         worst = max(worst, stats.max_overlap)
         rows.append((stats.contacts, stats.held, stats.rapid, stats.events))
+        if trace:
+            print(f"{k + 1} {1000 * (time.perf_counter() - t0):.0f} {stats.contacts} {stats.held} {stats.rapid} "
+                  f"{stats.events} {stats.max_overlap:.2g} {[w.code for w in stats.warnings]} {peak_memory_mb():.0f}",
+                  flush=True)
+        if stop_above_gb is not None and peak_memory_mb() > 1024.0 * stop_above_gb:
+            print(f"stopped after step {k + 1}: peak memory {peak_memory_mb():.0f} MB > {stop_above_gb:g} GB")
+            break
     seconds = time.perf_counter() - started
-    return {"seconds": seconds, "capped": capped, "worst_overlap": worst, "rows": rows,
-            "tolerance": scene.settings.contact_tolerance}
+    return {"seconds": seconds, "capped": capped, "worst_overlap": worst, "rows": rows, "steps": len(rows),
+            "tolerance": scene.settings.contact_tolerance, "peak_mb": peak_memory_mb()}
 
 
 def run_pybullet(scene) -> float | None:
@@ -118,16 +137,20 @@ def main() -> None:
     parser.add_argument("--count", type=int, default=1000)
     parser.add_argument("--steps", type=int, default=240)
     parser.add_argument("--peers", action="store_true")
+    parser.add_argument("--trace", action="store_true", help="print every step, with the peak memory")
+    parser.add_argument("--stop-above-gb", type=float, default=None, help="stop once peak memory passes this")
     args = parser.parse_args()
     warm_up("grid")
     scene = box_rain(args.count, args.steps)
-    result = run_physdbg(scene)
+    result = run_physdbg(scene, args.trace, args.stop_above_gb)
     rows = np.array(result["rows"])
-    ms = 1000.0 * result["seconds"] / args.steps
-    print(f"box-rain N={args.count}, {args.steps} steps of 1/240 s")
+    steps = result["steps"]
+    ms = 1000.0 * result["seconds"] / steps
+    print(f"box-rain N={args.count}, {steps} of {args.steps} steps of 1/240 s")
     print(f"physdbg: {ms:.1f} ms/step; steps stopped by a budget: {result['capped']}; largest overlap after any step: "
-          f"{result['worst_overlap']:.3g} m (contact tolerance {result['tolerance']:g} m)")
-    for label, k in (("first", 0), ("middle", args.steps // 2), ("last", args.steps - 1)):
+          f"{result['worst_overlap']:.3g} m (contact tolerance {result['tolerance']:g} m); peak memory "
+          f"{result['peak_mb']:.0f} MB")
+    for label, k in (("first", 0), ("middle", steps // 2), ("last", steps - 1)):
         c, h, r, e = rows[k]
         print(f"  {label} step: {c} contacts, {h} held, {r} rapid, {e} events")
     print(f"  last 10 steps: mean {rows[-10:, 0].mean():.0f} contacts/step, {rows[-10:, 1].mean():.0f} held")
