@@ -30,7 +30,8 @@ class StepContext:
     adj (2P,) their CSR adjacency and max_degree; grown, the spheres whose boxes grew;
     too_wide_mid_step, why a grown box broke the periodic minimum image (or None).
     narrow_phase: version (N,) int64, predictions made of each sphere (stale heap entries).
-    resolve: budget, the Settings field of the budget that stopped the step (or None).
+    resolve: kernel_groups, the step's arrays as the compiled kernels take them (built
+    once, World._kernel_groups).
     finish: max_overlap (m), kinetic, potential (J), momentum (3,), state_hash, non_finite.
     warnings and timings (s per phase) collect through the step.
     """
@@ -51,7 +52,7 @@ class StepContext:
     grown: set[int] = field(default_factory=set)
     too_wide_mid_step: str | None = None
     version: np.ndarray | None = None
-    budget: str | None = None
+    kernel_groups: tuple | None = None
     max_overlap: float = 0.0
     kinetic: float = 0.0
     potential: float = 0.0

@@ -261,7 +261,6 @@ class World:
         if budget is not None and not ctx.warned(budget):
             ctx.warn(budget, _budget_message(budget, self.event_cap if budget == "max_events_per_step"
                                              else getattr(s, budget)))
-        ctx.budget = budget
 
     def _finish(self, ctx: StepContext) -> None:
         """Every sphere to the end of the step; the overlap audit, energies and state hash."""
@@ -468,7 +467,14 @@ class World:
 
     def _kernel_groups(self, ctx: StepContext) -> tuple[tuple, tuple, tuple]:
         """The step's arrays and settings as the compiled loop and resolver take them:
-        kernel_args' LoopParticles, LoopMethod and LoopWalls, as plain tuples."""
+        kernel_args' LoopParticles, LoopMethod and LoopWalls, as plain tuples. Built once
+        a step (the index-ordered policy asks for them at every contact): none of their
+        arrays is replaced after the narrow phase."""
+        if ctx.kernel_groups is None:
+            ctx.kernel_groups = self._build_kernel_groups(ctx)
+        return ctx.kernel_groups
+
+    def _build_kernel_groups(self, ctx: StepContext) -> tuple[tuple, tuple, tuple]:
         st, s = self.state, self.settings
         particles = LoopParticles(st.positions, st.velocities, ctx.path_accel, self._acc, st.radius, st.inverse_mass,
                                   st.restitution, ctx.sigma, ctx.version, self._last_contact)
