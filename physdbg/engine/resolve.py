@@ -47,6 +47,7 @@ from .resting import (
     rests,
     solve_contacts,
     touch,
+    velocity_scale,
 )
 from .toi import wall_gap_terms
 
@@ -144,7 +145,7 @@ def resolve_contact(kind, ia, other, toi, particles, method, walls, h, contacts,
     else:
         e = combine(rule, restitution[ia], wall_restitution[other])
         wsum = inverse_mass[ia]
-    closing = pressed_closing(closing, rel_acc, step_end)
+    closing = pressed_closing(closing, rel_acc, step_end, velocity_scale(v, ia, ib))
     if closing < 0.0 or (closing == 0.0 and not rel_acc < 0.0) or wsum == 0.0:
         if not anchor_is_flow:  # Euler (and dragged Verlet) paths change with the anchor
             changed[0] = 2 if ib >= 0 else 1

@@ -30,7 +30,10 @@ A resting contact, or a pressed rapid one, is resolved with restitution 0 and *h
   target, impulses >= 0), then of the accelerations ((a_a - a_b)·n >= 0, lambda >= 0,
   complementary), walls and immovable spheres taking no share. The solves are worklists:
   a contact is revisited only when a neighbour's update moved its spheres, so a ball
-  landing on a settled pile costs the contacts its weight reaches, not the whole pile;
+  landing on a settled pile costs the contacts its weight reaches, not the whole pile.
+  A small cluster is solved exactly (dense pivoting); where the change spreads through a
+  large jammed one, the whole connected cluster is solved by conjugate gradients
+  (bound_qp.py) and Gauss–Seidel only confirms it (solve_contacts);
 * a held contact is released when it separates (velocity), when the solve gives it
   lambda = 0 while the accelerations pull it apart, or when its gap exceeds the contact
   tolerance at the start of a step.
@@ -50,6 +53,7 @@ import numpy as np
 from numba import njit
 from typing import NamedTuple
 
+from .bound_qp import solve_bound_qp
 from .motion import advance_particles
 
 
@@ -77,18 +81,42 @@ def rapid(now: float, last_a: float, last_b: float, restitution: float, window: 
 
 # Separation speeds below this fraction of |a_n|·dt are rounding, not separation.
 ROUNDING_FRACTION = 1e-9
+# Closing speeds within this many rounding errors (units in the last place) of the two
+# spheres' velocities are rounding, not approach.
+ROUNDING_ULPS = 16.0
+EPSILON = 2.220446049250313e-16
 
 
 @njit(cache=True)
-def pressed_closing(closing: float, rel_acc: float, dt: float) -> float:
-    """The closing speed to judge a contact by (m/s): 0 for a rounding-sized separation
-    (below ROUNDING_FRACTION·|a_n|·dt) while an acceleration presses the two together.
+def velocity_scale(v, i, j) -> float:
+    """The size of spheres i's and j's velocities (j = -1: a wall), m/s: the sum of their
+    largest components, the scale a relative normal speed is rounded at."""
+    scale = max(abs(v[i, 0]), abs(v[i, 1]), abs(v[i, 2]))
+    if j >= 0:
+        scale += max(abs(v[j, 0]), abs(v[j, 1]), abs(v[j, 2]))
+    return scale
 
-    A swept test finds such a contact at the instant the pair stops separating, but its
-    time rounds to the anchor, where the velocity still points (by ~1e-16 m/s) away: taken
-    as separating, the contact would be dropped and, with nothing re-predicted, the sphere
-    would fall through what it rests on for the rest of the step.
+
+@njit(cache=True)
+def pressed_closing(closing: float, rel_acc: float, dt: float, scale: float) -> float:
+    """The closing speed to judge a contact by (m/s): 0 for a rounding-sized one.
+
+    Rounding-sized is either of:
+
+    * within ROUNDING_ULPS rounding errors of the velocities (``scale``, velocity_scale).
+      An impulse that small cannot change them: each component absorbs it, so the pair
+      would be found approaching at once, again, for ever (a pile once spent its whole
+      event budget, 8 477 contacts at one instant, on one pair closing at 4e-106 m/s
+      between spheres moving at 1e-13 m/s);
+    * a separation below ROUNDING_FRACTION·|a_n|·dt while an acceleration presses the
+      two together. A swept test finds such a contact at the instant the pair stops
+      separating, but its time rounds to the anchor, where the velocity still points
+      (by ~1e-16 m/s) away: taken as separating, the contact would be dropped and, with
+      nothing re-predicted, the sphere would fall through what it rests on for the rest
+      of the step.
     """
+    if abs(closing) <= ROUNDING_ULPS * EPSILON * scale:
+        return 0.0
     if rel_acc < 0.0 and closing < 0.0 and -closing <= -rel_acc * dt * ROUNDING_FRACTION:
         return 0.0
     return closing
@@ -103,12 +131,15 @@ class HeldContacts(NamedTuple):
     multiplier (N: the contact force; kept between steps as the warm start);
     jv: (C,) impulse of the current velocity solve (N·s); target: (C,) separation speed the
     velocity solve must reach (m/s; 0 for held contacts); seen: (C,) int64 id of the last
-    solve that used jv; count: (3,) int64 — contacts held, solve id, work done this step
-    (updates); slots: (N, K) each sphere's contact ids; deg: (N,) how many; queue: (C,) the
+    solve that used jv; count: (4,) int64 — contacts held, solve id, work done this step
+    (updates), clusters solved whole this step (_solve_connected); slots: (N, K) each
+    sphere's contact ids; deg: (N,) how many; queue: (C,) the
     worklist; mark: (N,) int64 solve id of the last visit; touched: (N + 1,) spheres visited
     by the current solve, count first; before: (N, 3) each visited sphere's velocity when
     first visited (to tell which ones the solve changed); renew: (N,) int64 id of the last
-    solve that released a contact of the sphere (its pair must be swept-tested again).
+    solve that released a contact of the sphere (its pair must be swept-tested again);
+    place: (N,) int64 the sphere's number in the current connected solve (-1 between
+    solves).
 
     A NamedTuple of arrays, so compiled code takes the whole store as one argument.
     """
@@ -129,16 +160,17 @@ class HeldContacts(NamedTuple):
     touched: np.ndarray
     before: np.ndarray
     renew: np.ndarray
+    place: np.ndarray
 
 
 def new_held(n: int, capacity: int = 64, per_particle: int = 16) -> HeldContacts:
     """An empty store for ``n`` spheres."""
     return HeldContacts(np.zeros(capacity, np.int64), np.zeros(capacity, np.int64), np.zeros(capacity, np.int64),
                         np.zeros((capacity, 3)), np.zeros(capacity), np.zeros(capacity), np.zeros(capacity),
-                        np.full(capacity, -1, np.int64), np.zeros(3, np.int64),
+                        np.full(capacity, -1, np.int64), np.zeros(4, np.int64),
                         np.zeros((n, per_particle), np.int64), np.zeros(n, np.int64), np.zeros(capacity, np.int64),
                         np.full(n, -1, np.int64), np.zeros(n + 1, np.int64), np.zeros((n, 3)),
-                        np.full(n, -1, np.int64))
+                        np.full(n, -1, np.int64), np.full(n, -1, np.int64))
 
 
 def grow_held(h: HeldContacts) -> HeldContacts:
@@ -315,26 +347,157 @@ def solve_contacts(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
                    k, tolerance, budget, pair_kind, stick) -> bool:
     """Solve the held contacts reachable from ``seeds[:n_seeds]`` (arguments as in
     :func:`_gauss_seidel`): exactly on the small cluster the change reaches
-    (:func:`_solve_cluster`), then a Gauss–Seidel pass over that cluster that confirms it
-    (and carries on, as the whole solve, where the cluster grew too large).
+    (:func:`_solve_cluster`), then a Gauss–Seidel pass over that cluster that confirms it.
+    Where the cluster grows beyond MAX_DIRECT: Gauss–Seidel from the seeds for at most
+    LOCAL_SWEEP_WORK updates, and if the change has not died out by then, the whole
+    connected cluster by conjugate gradients (:func:`_solve_connected`, bound_qp.py),
+    confirmed by a Gauss–Seidel pass over it.
 
-    Why both: projected Gauss–Seidel converges linearly, at a rate set by the cluster's
+    Why three: projected Gauss–Seidel converges linearly, at a rate set by the cluster's
     conditioning; to the solve tolerance (about 1e-11 of a typical closing speed) a
     cluster of a dozen contacts takes 50–150 sweeps, and a dense pile takes thousands of
-    such solves per step. A direct solve of the same cluster costs about one sweep's work
-    per contact and leaves the confirming pass nothing to do.
+    such solves per step. A direct solve of a small cluster costs about one sweep's work
+    per contact and leaves the confirming pass nothing to do; but its cost grows as m³
+    (with a refactorisation per pivoting round), and from a few dozen contacts conjugate
+    gradients, at 15–60 products K·d of about a sweep each, cost less (in rain-500's
+    jammed steps, MAX_DIRECT = 48 ran 3× faster than 192: docs/benchmarks.md).
     """
     m = _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
                        k, tolerance, budget, pair_kind, stick)
     if m > 0:
         return _gauss_seidel(h, values, is_velocity, h.queue[:m].copy(), m, x, v, a, sigma, inverse_mass, when,
                              integrator, drag, k, tolerance, budget, pair_kind, stick)
-    return _gauss_seidel(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator,
+    if m < 0:  # nothing violated: one pass confirms it
+        return _gauss_seidel(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator,
+                             drag, k, tolerance, budget, pair_kind, stick)
+    # too large to solve directly: Gauss–Seidel while the change stays local, and where it
+    # does not, the whole connected cluster by conjugate gradients (bound_qp.py)
+    local = min(budget, h.count[2] + max(LOCAL_SWEEP_WORK, 8 * n_seeds))
+    if _gauss_seidel(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
+                     k, tolerance, local, pair_kind, stick):
+        return True
+    if h.count[2] >= budget:
+        return False
+    m = _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator,
                          drag, k, tolerance, budget, pair_kind, stick)
+    return _gauss_seidel(h, values, is_velocity, h.queue[:m].copy(), m, x, v, a, sigma, inverse_mass, when,
+                         integrator, drag, k, tolerance, budget, pair_kind, stick)
 
 
-# The largest cluster solved directly (contacts): its dense factorisation costs m³/6.
-MAX_DIRECT = 192
+# The Gauss–Seidel updates a solve too large to solve directly may spend before the whole
+# connected cluster is solved by conjugate gradients instead (in rain-500, a change that
+# stays local takes at most a few hundred updates; one into a jammed pile 16 000–130 000).
+LOCAL_SWEEP_WORK = 1024
+
+
+@njit(cache=True)
+def _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
+                     k, tolerance, budget, pair_kind, stick) -> int:
+    """Solve every held contact connected to ``seeds[:n_seeds]`` (through movable spheres)
+    by MPRGP (bound_qp.py), from the multipliers the solve has reached so far; leaves their
+    ids in ``h.queue[:m]`` (for the confirming Gauss–Seidel pass) and returns m. Each
+    product K·d counts m updates of work."""
+    solve = h.count[1]
+    inside = -(solve + 1)
+    members = h.queue
+    m = 0
+    for s in range(n_seeds):
+        c = seeds[s]
+        if h.seen[c] != inside:
+            _join_connected(h, c, is_velocity, solve)
+            members[m] = c
+            m += 1
+    head = 0
+    while head < m:
+        c = members[head]
+        head += 1
+        for e in range(2):
+            p = _end(h, c, e, pair_kind)
+            if p < 0:
+                continue
+            touch(h, p, x, v, a, sigma, when, integrator, drag, k, solve)
+            if inverse_mass[p] == 0.0:
+                continue  # an immovable sphere passes nothing on
+            for t in range(h.deg[p]):
+                d = h.slots[p, t]
+                if h.seen[d] != inside:
+                    _join_connected(h, d, is_velocity, solve)
+                    members[m] = d
+                    m += 1
+    # the problem's arrays: contacts with a movable sphere, their spheres numbered locally
+    place = h.place  # -1 everywhere between solves
+    spheres = np.empty(2 * m, np.int64)
+    n_spheres = 0
+    rows = np.empty(m, np.int64)
+    end_a = np.empty(m, np.int64)
+    end_b = np.empty(m, np.int64)
+    n = 0
+    for r in range(m):
+        c = members[r]
+        for e in range(2):
+            p = _end(h, c, e, pair_kind)
+            local = -1
+            if p >= 0 and inverse_mass[p] > 0.0:
+                if place[p] < 0:
+                    place[p] = n_spheres
+                    spheres[n_spheres] = p
+                    n_spheres += 1
+                local = place[p]
+            if e == 0:
+                end_a[n] = local
+            else:
+                end_b[n] = local
+        if end_a[n] >= 0 or end_b[n] >= 0:
+            rows[n] = r
+            n += 1
+    weight = np.empty(n_spheres)
+    for s in range(n_spheres):
+        weight[s] = inverse_mass[spheres[s]]
+    normal = np.empty((n, 3))
+    start = np.empty(n)
+    lower = np.empty(n)
+    grad = np.empty(n)
+    for q in range(n):
+        c = members[rows[q]]
+        current, low, target = _bounds(h, c, is_velocity, stick, solve, True)
+        start[q] = current
+        lower[q] = low
+        grad[q] = _relative(values, h, c, pair_kind) - target
+        for d in range(3):
+            normal[q, d] = h.normal[c, d]
+    room = max((budget - h.count[2]) // max(n, 1), 0)
+    answer = start.copy()
+    used, _ = solve_bound_qp(end_a, end_b, normal, weight, answer, lower, grad, tolerance, room)
+    h.count[3] += 1
+    h.count[2] += used * n
+    for q in range(n):
+        c = members[rows[q]]
+        delta = answer[q] - _bounds(h, c, is_velocity, stick, solve, True)[0]
+        if delta != 0.0:
+            push_along(values, inverse_mass, h.a[c], h.other[c] if h.kind[c] == pair_kind else -1, h.normal[c, 0],
+                       h.normal[c, 1], h.normal[c, 2], delta)
+        if is_velocity:
+            h.jv[c] = answer[q]
+        else:
+            h.lam[c] = answer[q]
+    for s in range(n_spheres):
+        place[spheres[s]] = -1
+    _leave_cluster(h, members, m, solve)
+    return m
+
+
+@njit(cache=True)
+def _join_connected(h, c, is_velocity, solve) -> None:
+    """Contact c joins the connected solve: a velocity solve's impulse counts from 0 unless
+    this solve already used it (seen == solve) or queued it (seen == -(solve + 2))."""
+    if is_velocity and h.seen[c] != solve and h.seen[c] != -(solve + 2):
+        h.jv[c] = 0.0
+    h.seen[c] = -(solve + 1)
+
+
+# The largest cluster solved directly (contacts): its dense factorisation costs m³/6 per
+# pivoting round; beyond it the connected solve by conjugate gradients costs less.
+MAX_DIRECT = 48
 # Pivoting rounds of one direct solve before it gives way to Gauss–Seidel.
 MAX_PIVOTS = 24
 # Cluster growth rounds (each adds the contacts a solve left violated next to it).

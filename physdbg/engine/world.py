@@ -212,7 +212,7 @@ class World:
     def _forces(self, ctx: StepContext) -> None:
         """Held contacts -> the accelerations the paths follow (resolve.settle_held)."""
         st, s, n, dt = self.state, self.settings, self.state.count, ctx.dt
-        self.held.count[2] = 0  # the resting work of this step
+        self.held.count[2:4] = 0  # the resting work of this step, and its whole-cluster solves
         ctx.path_accel = np.empty_like(self._acc)
         ctx.sigma = np.zeros(n)
         if not settle_held(self.held, st.positions, st.velocities, ctx.path_accel, self._acc, self._free_accel,
