@@ -73,6 +73,26 @@ def _product(end_a, end_b, normal, inverse_mass, scale, d, u, out) -> None:
 
 
 @njit(cache=True)
+def _along(end_a, end_b, normal, inverse_mass, scale, d, u, kd, g):
+    """kd = K·d (scaled, as _product), and (dᵀKd, gᵀd): the curvature and the slope along d."""
+    _product(end_a, end_b, normal, inverse_mass, scale, d, u, kd)
+    curvature = 0.0
+    slope = 0.0
+    for r in range(d.shape[0]):
+        curvature += d[r] * kd[r]
+        slope += g[r] * d[r]
+    return curvature, slope
+
+
+@njit(cache=True)
+def _move(y, g, d, kd, alpha) -> None:
+    """A step of length alpha along -d: y -= alpha·d, and the gradient with it, g -= alpha·K·d."""
+    for r in range(y.shape[0]):
+        y[r] -= alpha * d[r]
+        g[r] -= alpha * kd[r]
+
+
+@njit(cache=True)
 def _worst_violation(y, lower, grad, scale) -> float:
     """The largest change a Gauss–Seidel update would make, in the units of the relative
     values: max_r scale_r²·|max(x_r - g_r/K_rr, lower_r) - x_r| (scaled: scale·|max(y - g, l) - y|)."""
@@ -180,14 +200,9 @@ def solve_bound_qp(end_a, end_b, normal, inverse_mass, x, lower, grad, tolerance
             break
         if bb <= pf:
             # conjugate gradient step on the free contacts, or an expansion step
-            _product(end_a, end_b, normal, inverse_mass, scale, p, u, kp)
+            pkp, gp = _along(end_a, end_b, normal, inverse_mass, scale, p, u, kp, g)
             products += 1
             since_refresh += 1
-            pkp = 0.0
-            gp = 0.0
-            for r in range(m):
-                pkp += p[r] * kp[r]
-                gp += g[r] * p[r]
             if not pkp > 0.0:
                 break  # no curvature along p (a singular K and a rounding-sized p)
             alpha_cg = gp / pkp
@@ -196,9 +211,7 @@ def solve_bound_qp(end_a, end_b, normal, inverse_mass, x, lower, grad, tolerance
                 if p[r] > 0.0:
                     alpha_f = min(alpha_f, (y[r] - ly[r]) / p[r])
             if alpha_cg <= alpha_f:
-                for r in range(m):
-                    y[r] -= alpha_cg * p[r]
-                    g[r] -= alpha_cg * kp[r]
+                _move(y, g, p, kp, alpha_cg)
                 bb, pf = split(y, g)
                 gamma = 0.0
                 for r in range(m):
@@ -208,9 +221,7 @@ def solve_bound_qp(end_a, end_b, normal, inverse_mass, x, lower, grad, tolerance
                     p[r] = phi[r] - gamma * p[r]
             else:
                 # expansion: to the bound along p, then a projected gradient step
-                for r in range(m):
-                    y[r] -= alpha_f * p[r]
-                    g[r] -= alpha_f * kp[r]
+                _move(y, g, p, kp, alpha_f)
                 bb, pf = split(y, g)
                 for r in range(m):
                     y[r] = max(y[r] - step_length * phi[r], ly[r])
@@ -221,20 +232,12 @@ def solve_bound_qp(end_a, end_b, normal, inverse_mass, x, lower, grad, tolerance
                     p[r] = phi[r]
         else:
             # proportioning: free the contacts whose bounds hold them wrongly
-            _product(end_a, end_b, normal, inverse_mass, scale, beta, u, kp)
+            dkd, gd = _along(end_a, end_b, normal, inverse_mass, scale, beta, u, kp, g)
             products += 1
             since_refresh += 1
-            dkd = 0.0
-            gd = 0.0
-            for r in range(m):
-                dkd += beta[r] * kp[r]
-                gd += g[r] * beta[r]
             if not dkd > 0.0:
                 break
-            alpha = gd / dkd
-            for r in range(m):
-                y[r] -= alpha * beta[r]
-                g[r] -= alpha * kp[r]
+            _move(y, g, beta, kp, gd / dkd)
             bb, pf = split(y, g)
             for r in range(m):
                 p[r] = phi[r]

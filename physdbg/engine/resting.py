@@ -107,7 +107,12 @@ def pressed_closing(closing: float, rel_acc: float, dt: float, scale: float) -> 
       An impulse that small cannot change them: each component absorbs it, so the pair
       would be found approaching at once, again, for ever (a pile once spent its whole
       event budget, 8 477 contacts at one instant, on one pair closing at 4e-106 m/s
-      between spheres moving at 1e-13 m/s);
+      between spheres moving at 1e-13 m/s). The resolver passes scale = 0 (the rule
+      off) where a contact judged no approach is predicted again at once (Euler paths
+      change with the anchor): the narrow phase would find it again, approaching by the
+      same rounding, for ever — an Euler stack with discrete detection did, where the
+      seed's impulse of 1e-17 m/s moves velocities of 0.16 m/s by an ulp and separates
+      the pair;
     * a separation below ROUNDING_FRACTION·|a_n|·dt while an acceleration presses the
       two together. A swept test finds such a contact at the instant the pair stops
       separating, but its time rounds to the anchor, where the velocity still points
