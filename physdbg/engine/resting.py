@@ -363,9 +363,11 @@ def solve_contacts(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
     cluster of a dozen contacts takes 50–150 sweeps, and a dense pile takes thousands of
     such solves per step. A direct solve of a small cluster costs about one sweep's work
     per contact and leaves the confirming pass nothing to do; but its cost grows as m³
-    (with a refactorisation per pivoting round), and from a few dozen contacts conjugate
-    gradients, at 15–60 products K·d of about a sweep each, cost less (in rain-500's
-    jammed steps, MAX_DIRECT = 48 ran 3× faster than 192: docs/benchmarks.md).
+    (with a refactorisation per pivoting round), and conjugate gradients, at 15–60
+    products K·d of about a sweep each, cost less on large clusters. Where the line
+    falls depends on the scene: in rain-500's jammed steps MAX_DIRECT = 48 ran about 2×
+    faster than 192, in box-rain 10k's last steps about 2.5× slower (docs/benchmarks.md);
+    192 is kept.
     """
     m = _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
                        k, tolerance, budget, pair_kind, stick)
@@ -385,7 +387,11 @@ def solve_contacts(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
         return False
     m = _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator,
                          drag, k, tolerance, budget, pair_kind, stick)
-    return _gauss_seidel(h, values, is_velocity, h.queue[:m].copy(), m, x, v, a, sigma, inverse_mass, when,
+    # confirmed from the contacts it changed and the seeds (a contact is queued once)
+    confirm = np.empty(m + n_seeds, np.int64)
+    confirm[:m] = h.queue[:m]
+    confirm[m:] = seeds[:n_seeds]
+    return _gauss_seidel(h, values, is_velocity, confirm, m + n_seeds, x, v, a, sigma, inverse_mass, when,
                          integrator, drag, k, tolerance, budget, pair_kind, stick)
 
 
@@ -399,9 +405,10 @@ LOCAL_SWEEP_WORK = 1024
 def _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
                      k, tolerance, budget, pair_kind, stick) -> int:
     """Solve every held contact connected to ``seeds[:n_seeds]`` (through movable spheres)
-    by MPRGP (bound_qp.py), from the multipliers the solve has reached so far; leaves their
-    ids in ``h.queue[:m]`` (for the confirming Gauss–Seidel pass) and returns m. Each
-    product K·d counts m updates of work."""
+    by MPRGP (bound_qp.py), from the multipliers the solve has reached so far; a contact
+    takes the answer where it moves its relative value by more than ``tolerance``. Leaves
+    the ids of the contacts it changed in ``h.queue[:m]`` (for the confirming Gauss–Seidel
+    pass) and returns m. Each product K·d counts a cluster's contacts of work."""
     solve = h.count[1]
     inside = -(solve + 1)
     members = h.queue
@@ -475,20 +482,32 @@ def _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inv
     used, _ = solve_bound_qp(end_a, end_b, normal, weight, answer, lower, grad, tolerance, room)
     h.count[3] += 1
     h.count[2] += used * n
+    # a contact takes its new multiplier only where the change moves its relative value by
+    # more than the tolerance (the rule by which Gauss–Seidel wakes a neighbour): the rest
+    # of the cluster keeps its velocities to the bit, so its spheres keep their paths and
+    # need no new predictions (box-rain 10k, with every change applied: 557 580 queue
+    # entries and the swept-test budget spent in its last step)
+    applied = np.empty(n, np.int64)
+    k_applied = 0
     for q in range(n):
         c = members[rows[q]]
-        delta = answer[q] - _bounds(h, c, is_velocity, stick, solve, True)[0]
-        if delta != 0.0:
-            push_along(values, inverse_mass, h.a[c], h.other[c] if h.kind[c] == pair_kind else -1, h.normal[c, 0],
-                       h.normal[c, 1], h.normal[c, 2], delta)
+        delta = answer[q] - start[q]
+        wsum = (weight[end_a[q]] if end_a[q] >= 0 else 0.0) + (weight[end_b[q]] if end_b[q] >= 0 else 0.0)
+        if abs(delta) * wsum <= tolerance:
+            continue
+        push_along(values, inverse_mass, h.a[c], h.other[c] if h.kind[c] == pair_kind else -1, h.normal[c, 0],
+                   h.normal[c, 1], h.normal[c, 2], delta)
         if is_velocity:
             h.jv[c] = answer[q]
         else:
             h.lam[c] = answer[q]
+        applied[k_applied] = c
+        k_applied += 1
     for s in range(n_spheres):
         place[spheres[s]] = -1
     _leave_cluster(h, members, m, solve)
-    return m
+    members[:k_applied] = applied[:k_applied]
+    return k_applied
 
 
 @njit(cache=True)
@@ -501,8 +520,8 @@ def _join_connected(h, c, is_velocity, solve) -> None:
 
 
 # The largest cluster solved directly (contacts): its dense factorisation costs m³/6 per
-# pivoting round; beyond it the connected solve by conjugate gradients costs less.
-MAX_DIRECT = 48
+# pivoting round; beyond it Gauss–Seidel, then the connected solve by conjugate gradients.
+MAX_DIRECT = 192
 # Pivoting rounds of one direct solve before it gives way to Gauss–Seidel.
 MAX_PIVOTS = 24
 # Cluster growth rounds (each adds the contacts a solve left violated next to it).
