@@ -84,7 +84,7 @@ ROUNDING_FRACTION = 1e-9
 # Closing speeds within this many rounding errors (units in the last place) of the two
 # spheres' velocities are rounding, not approach.
 ROUNDING_ULPS = 16.0
-EPSILON = 2.220446049250313e-16
+EPSILON = 2.220446049250313e-16  # float64's machine epsilon (np.finfo(float).eps)
 
 
 @njit(cache=True)
