@@ -416,7 +416,7 @@ def _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inv
     for s in range(n_seeds):
         c = seeds[s]
         if h.seen[c] != inside:
-            _join_connected(h, c, is_velocity, solve)
+            _join(h, c, is_velocity, solve)
             members[m] = c
             m += 1
     head = 0
@@ -433,7 +433,7 @@ def _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inv
             for t in range(h.deg[p]):
                 d = h.slots[p, t]
                 if h.seen[d] != inside:
-                    _join_connected(h, d, is_velocity, solve)
+                    _join(h, d, is_velocity, solve)
                     members[m] = d
                     m += 1
     # the problem's arrays: contacts with a movable sphere, their spheres numbered locally
@@ -508,15 +508,6 @@ def _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inv
     _leave_cluster(h, members, m, solve)
     members[:k_applied] = applied[:k_applied]
     return k_applied
-
-
-@njit(cache=True)
-def _join_connected(h, c, is_velocity, solve) -> None:
-    """Contact c joins the connected solve: a velocity solve's impulse counts from 0 unless
-    this solve already used it (seen == solve) or queued it (seen == -(solve + 2))."""
-    if is_velocity and h.seen[c] != solve and h.seen[c] != -(solve + 2):
-        h.jv[c] = 0.0
-    h.seen[c] = -(solve + 1)
 
 
 # The largest cluster solved directly (contacts): its dense factorisation costs m³/6 per
@@ -670,8 +661,10 @@ def _add_neighbours(h, values, members, first, m, violated_only, is_velocity, x,
 
 @njit(cache=True)
 def _join(h, c, is_velocity, solve) -> None:
-    """Contact c joins the cluster (a velocity solve's impulse counts from 0 the first time)."""
-    if is_velocity and h.seen[c] != solve:
+    """Contact c joins the cluster (direct or connected): a velocity solve's impulse counts
+    from 0 unless this solve already used it (seen == solve) or queued it (seen ==
+    -(solve + 2), which only a Gauss–Seidel pass before a connected solve leaves)."""
+    if is_velocity and h.seen[c] != solve and h.seen[c] != -(solve + 2):
         h.jv[c] = 0.0
     h.seen[c] = -(solve + 1)
 
