@@ -33,14 +33,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from .jit import borrowing, kernel
 
 # The gradient is recomputed from the multipliers every this many iterations (the
 # recurrence drifts by rounding), and always before the answer is accepted.
 REFRESH_EVERY = 50
 
 
-@njit(cache=True)
+@borrowing
 def _product(end_a, end_b, normal, inverse_mass, scale, d, u, out) -> None:
     """out = S⁻¹ K S⁻¹ d for the scaled variables (S = diag(scale)); u (n_spheres, 3) scratch."""
     m = d.shape[0]
@@ -72,7 +73,7 @@ def _product(end_a, end_b, normal, inverse_mass, scale, d, u, out) -> None:
         out[r] = acc / scale[r]
 
 
-@njit(cache=True)
+@borrowing
 def _along(end_a, end_b, normal, inverse_mass, scale, d, u, kd, g):
     """kd = K·d (scaled, as _product), and (dᵀKd, gᵀd): the curvature and the slope along d."""
     _product(end_a, end_b, normal, inverse_mass, scale, d, u, kd)
@@ -84,7 +85,7 @@ def _along(end_a, end_b, normal, inverse_mass, scale, d, u, kd, g):
     return curvature, slope
 
 
-@njit(cache=True)
+@borrowing
 def _move(y, g, d, kd, alpha) -> None:
     """A step of length alpha along -d: y -= alpha·d, and the gradient with it, g -= alpha·K·d."""
     for r in range(y.shape[0]):
@@ -92,7 +93,7 @@ def _move(y, g, d, kd, alpha) -> None:
         g[r] -= alpha * kd[r]
 
 
-@njit(cache=True)
+@borrowing
 def _worst_violation(y, lower, grad, scale) -> float:
     """The largest change a Gauss–Seidel update would make, in the units of the relative
     values: max_r scale_r²·|max(x_r - g_r/K_rr, lower_r) - x_r| (scaled: scale·|max(y - g, l) - y|)."""
@@ -103,7 +104,7 @@ def _worst_violation(y, lower, grad, scale) -> float:
     return worst
 
 
-@njit(cache=True)
+@kernel
 def solve_bound_qp(end_a, end_b, normal, inverse_mass, x, lower, grad, tolerance, max_products):
     """Minimise ½ xᵀKx - bᵀx over x >= lower by MPRGP, from a feasible x.
 

@@ -38,6 +38,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .jit import borrowing, kernel
+
 EULER = 0
 SEMI_IMPLICIT = 1
 VERLET = 2
@@ -67,7 +69,7 @@ REST_STEP_FACTOR = (1.5, 1.5, 0.0, 0.0)
 _SERIES_LIMIT = 1e-2
 
 
-@njit(cache=True)
+@borrowing
 def path_coefficients(integrator, k, tau):
     """(P1, P2, dP1) of the table above at local time tau (s)."""
     if integrator == EXACT:
@@ -101,7 +103,7 @@ def path_acceleration_weight(integrator, p1):
     return 0.0 if STRAIGHT_PATH[integrator] else p1
 
 
-@njit(cache=True)
+@borrowing
 def curvature_scale(integrator, k):
     """How the second derivative of n·position relates to (q, p) = (n·a, n·v).
 
@@ -114,7 +116,7 @@ def curvature_scale(integrator, k):
     return 0.0, 0.0
 
 
-@njit(cache=True)
+@borrowing
 def velocity_coefficients(integrator, drag, k, tau):
     """(V0, V1) of the table above: the integrator's velocity after tau seconds."""
     if integrator == EXACT:
@@ -126,28 +128,34 @@ def velocity_coefficients(integrator, drag, k, tau):
     return damp, tau
 
 
-@njit(cache=True)
-def advance_particles(x, v, a, sigma, indices, to_time, integrator, drag, k):
-    """Move the anchors of particles ``indices`` forward to time ``to_time`` in the step.
+@borrowing
+def advance_particle(x, v, a, sigma, i, to_time, integrator, drag, k) -> None:
+    """Move particle i's anchor forward to time ``to_time`` in the step (s).
 
     x, v, a: (N, 3) anchor positions, velocities and path accelerations; sigma: (N,)
-    time in the step of each anchor (s). Updated in place.
+    time in the step of each anchor (s). Updated in place; an anchor already at or past
+    ``to_time`` stays.
     """
+    tau = to_time - sigma[i]
+    if tau <= 0.0:
+        return
+    p1, p2, _ = path_coefficients(integrator, k, tau)
+    v0, v1 = velocity_coefficients(integrator, drag, k, tau)
+    for c in range(3):
+        xc = x[i, c] + v[i, c] * p1 + a[i, c] * p2
+        v[i, c] = v[i, c] * v0 + a[i, c] * v1
+        x[i, c] = xc
+    sigma[i] = to_time
+
+
+@borrowing
+def advance_particles(x, v, a, sigma, indices, to_time, integrator, drag, k) -> None:
+    """advance_particle for each of ``indices`` (M,) int64."""
     for m in range(indices.shape[0]):
-        i = indices[m]
-        tau = to_time - sigma[i]
-        if tau <= 0.0:
-            continue
-        p1, p2, _ = path_coefficients(integrator, k, tau)
-        v0, v1 = velocity_coefficients(integrator, drag, k, tau)
-        for c in range(3):
-            xc = x[i, c] + v[i, c] * p1 + a[i, c] * p2
-            v[i, c] = v[i, c] * v0 + a[i, c] * v1
-            x[i, c] = xc
-        sigma[i] = to_time
+        advance_particle(x, v, a, sigma, indices[m], to_time, integrator, drag, k)
 
 
-@njit(cache=True)
+@borrowing
 def particle_box(x, v, a, radius, sigma, i, step_end, integrator, k, margin, out_lo, out_hi):
     """AABB (out_lo, out_hi: (3,)) of particle i's path from its anchor to ``step_end``.
 
@@ -190,7 +198,7 @@ def particle_box(x, v, a, radius, sigma, i, step_end, integrator, k, margin, out
         out_hi[c] = mx + r
 
 
-@njit(cache=True)
+@kernel
 def _quantile_99(values):
     """np.quantile(values, 0.99) (its default, linear interpolation) to the bit, NaN if
     any value is NaN; values (N,), N >= 1."""
@@ -209,7 +217,7 @@ def _quantile_99(values):
     return y - step * (1.0 - gamma) if gamma >= 0.5 else x + step * gamma
 
 
-@njit(cache=True)
+@kernel
 def grow_to_reach(x, v, a, radius, dt, margin, lo, hi):
     """Grow each swept box lo, hi (N, 3) to the cube x ± (reach + r + margin) with reach =
     max(own speed, the 99th-percentile speed) · dt, speed = |v| + |a| dt (see
@@ -239,7 +247,7 @@ def grow_to_reach(x, v, a, radius, dt, margin, lo, hi):
                 hi[i, c] = high
 
 
-@njit(cache=True)
+@borrowing
 def swept_boxes(x, v, a, radius, sigma, step_end, integrator, k, margin, lo, hi):
     """particle_box for every particle: lo, hi (N, 3) out, padded by radius + margin (m)."""
     for i in range(x.shape[0]):

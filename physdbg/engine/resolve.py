@@ -28,10 +28,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from ..events import HOW_IMPULSE, HOW_RAPID, HOW_RESTING, HOW_WITH_HELD, KIND_PAIR
-from .motion import advance_particles
+from .jit import borrowing, kernel
+from .motion import advance_particle
 from .periodic import image
 from .resting import (
     begin_solve,
@@ -58,7 +58,7 @@ SKIPPED = 0
 RESOLVED = 1
 OUT_OF_WORK = 2
 
-@njit(cache=True)
+@borrowing
 def combine(rule, e_a, e_b):
     """The restitution of a contact: rule is an index into RESTITUTION_RULES."""
     if rule == 0:
@@ -77,14 +77,14 @@ def combine_restitution(rule: str, e_a: float, e_b: float) -> float:
     return float(combine(RESTITUTION_RULES.index(rule), e_a, e_b))
 
 
-@njit(cache=True)
+@borrowing
 def seed_impulse(closing, restitution, inverse_mass_sum):
     """The seed's impulse j = (1 + c)·closing / (w_a + w_b) (N·s, >= 0 for closing >= 0);
     a wall is a partner with w_b = 0, which makes it the reflection."""
     return (1.0 + restitution) * closing / inverse_mass_sum
 
 
-@njit(cache=True)
+@borrowing
 def pair_separation(x, ia, ib, period):
     """Centre of a minus centre of b (3 floats, m) at the anchors, through the minimum
     image on periodic axes (period (3,), 0 = not periodic), and its length."""
@@ -94,7 +94,7 @@ def pair_separation(x, ia, ib, period):
     return d0, d1, d2, math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
 
 
-@njit(cache=True)
+@borrowing
 def contact_normal(x, ia, ib, other, normals, offsets, two_sided, period):
     """Unit normal (3 floats) from b (or the wall) to a at the anchors; coincident centres give +x."""
     if ib >= 0:
@@ -110,7 +110,7 @@ def contact_normal(x, ia, ib, other, normals, offsets, two_sided, period):
     return nx, ny, nz
 
 
-@njit(cache=True)
+@kernel
 def resolve_contact(kind, ia, other, toi, particles, method, walls, h, contacts, counters, contacts_slot, rapid_slot,
                     changed, work_budget):
     """Resolve the predicted contact (kind, ia, other) at time ``toi`` in the step.
@@ -132,10 +132,9 @@ def resolve_contact(kind, ia, other, toi, particles, method, walls, h, contacts,
     normals, offsets, _half_thickness, two_sided, wall_restitution, period = walls
     ib = other if kind == KIND_PAIR else -1
     changed[0] = 0
-    one = np.empty(2, np.int64)
-    one[0] = ia
-    one[1] = ib
-    advance_particles(x, v, a, sigma, one[:2] if ib >= 0 else one[:1], toi, integrator, drag, k)
+    advance_particle(x, v, a, sigma, ia, toi, integrator, drag, k)
+    if ib >= 0:
+        advance_particle(x, v, a, sigma, ib, toi, integrator, drag, k)
     nx, ny, nz = contact_normal(x, ia, ib, other, normals, offsets, two_sided, period)
     closing = -relative_normal(v, ia, ib, nx, ny, nz)
     rel_acc = relative_normal(acc, ia, ib, nx, ny, nz)
@@ -209,7 +208,7 @@ def resolve_contact(kind, ia, other, toi, particles, method, walls, h, contacts,
     return status
 
 
-@njit(cache=True)
+@kernel
 def _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, target, hold, x, v, a, acc, inverse_mass, sigma,
                      integrator, drag, k, anchor_is_flow, path_follows_acc, h, changed, work_budget, vtol, atol,
                      stick):
@@ -261,7 +260,7 @@ def _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, target, hold, x, v, a
     return j, ok
 
 
-@njit(cache=True)
+@kernel
 def _solve_accelerations(h, x, v, a, acc, inverse_mass, sigma, when, integrator, drag, k, work_budget, vtol, atol,
                          stick) -> bool:
     """Solve the accelerations of the held contacts of the spheres visited so far, release
@@ -279,7 +278,7 @@ def _solve_accelerations(h, x, v, a, acc, inverse_mass, sigma, when, integrator,
             return True
 
 
-@njit(cache=True)
+@borrowing
 def _visit_all(h, v) -> None:
     """Begin a solve in which every sphere counts as visited (all anchors at the step start)."""
     solve = begin_solve(h)
@@ -292,7 +291,7 @@ def _visit_all(h, v) -> None:
     h.touched[0] = n
 
 
-@njit(cache=True)
+@kernel
 def settle_held(h, x, v, a, acc, free_accel, radius, inverse_mass, sigma, dt, integrator, drag, k,
                 semi_implicit, normals, offsets, half_thickness, two_sided, period, contact_tolerance, work_budget,
                 vtol, atol, stick) -> bool:

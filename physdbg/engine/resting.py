@@ -50,14 +50,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 from typing import NamedTuple
 
 from .bound_qp import solve_bound_qp
-from .motion import advance_particles
+from .jit import borrowing, kernel
+from .motion import advance_particle
 
 
-@njit(cache=True)
+@borrowing
 def rests(closing: float, rel_acc: float, dt: float, step_factor: float, fraction: float) -> bool:
     """The resting rule (rule 1 above), the one place it is decided.
 
@@ -68,7 +68,7 @@ def rests(closing: float, rel_acc: float, dt: float, step_factor: float, fractio
     return rel_acc < 0.0 and closing <= -rel_acc * dt * (step_factor + fraction)
 
 
-@njit(cache=True)
+@borrowing
 def rapid(now: float, last_a: float, last_b: float, restitution: float, window: float) -> bool:
     """The TC rule (rule 2 above), the one place it is decided.
 
@@ -87,7 +87,7 @@ ROUNDING_ULPS = 16.0
 EPSILON = 2.220446049250313e-16  # float64's machine epsilon (np.finfo(float).eps)
 
 
-@njit(cache=True)
+@borrowing
 def velocity_scale(v, i, j) -> float:
     """The size of spheres i's and j's velocities (j = -1: a wall), m/s: the sum of their
     largest components, the scale a relative normal speed is rounded at."""
@@ -97,7 +97,7 @@ def velocity_scale(v, i, j) -> float:
     return scale
 
 
-@njit(cache=True)
+@borrowing
 def pressed_closing(closing: float, rel_acc: float, dt: float, scale: float) -> float:
     """The closing speed to judge a contact by (m/s): 0 for a rounding-sized one.
 
@@ -204,14 +204,14 @@ def grow_held(h: HeldContacts) -> HeldContacts:
     return big
 
 
-@njit(cache=True)
+@borrowing
 def held_room(h, a, b) -> bool:
     """Whether one more contact of spheres a and b (b = -1: a wall) fits without growing."""
     return (h.count[0] < h.kind.shape[0] and h.deg[a] < h.slots.shape[1]
             and (b < 0 or h.deg[b] < h.slots.shape[1]))
 
 
-@njit(cache=True)
+@borrowing
 def held_find(h, kind, a, other) -> int:
     """The id of held contact (kind, a, other) (pairs with a < other), or -1."""
     for s in range(h.deg[a]):
@@ -221,7 +221,7 @@ def held_find(h, kind, a, other) -> int:
     return -1
 
 
-@njit(cache=True)
+@borrowing
 def held_add(h, kind, a, other, nx, ny, nz, pair_kind) -> int:
     """Hold contact (kind, a, other) with normal n; returns its id (room checked by held_room)."""
     c = h.count[0]
@@ -244,7 +244,7 @@ def held_add(h, kind, a, other, nx, ny, nz, pair_kind) -> int:
     return c
 
 
-@njit(cache=True)
+@borrowing
 def _unlist(h, p, c):
     for s in range(h.deg[p]):
         if h.slots[p, s] == c:
@@ -253,7 +253,7 @@ def _unlist(h, p, c):
             return
 
 
-@njit(cache=True)
+@borrowing
 def _relist(h, p, old, new):
     for s in range(h.deg[p]):
         if h.slots[p, s] == old:
@@ -261,7 +261,7 @@ def _relist(h, p, old, new):
             return
 
 
-@njit(cache=True)
+@borrowing
 def held_remove(h, c, pair_kind) -> None:
     """Release contact c (the last contact takes its id)."""
     _unlist(h, h.a[c], c)
@@ -289,7 +289,7 @@ def held_remove(h, c, pair_kind) -> None:
 # solve (which stops waking neighbours below one tolerance), not separation.
 SEPARATION_FACTOR = 1000.0
 
-@njit(cache=True)
+@borrowing
 def begin_solve(h) -> int:
     """A new solve id (visits and impulses of earlier solves no longer count)."""
     # ids go up in fours: a contact's ``seen`` holds solve (impulse jv is this solve's),
@@ -300,22 +300,20 @@ def begin_solve(h) -> int:
     return h.count[1]
 
 
-@njit(cache=True)
+@borrowing
 def touch(h, p, x, v, a, sigma, when, integrator, drag, k, solve) -> None:
     """Bring sphere p's anchor to time ``when`` once per solve, and list it as visited."""
     if h.mark[p] == solve:
         return
     h.mark[p] = solve
-    one = np.empty(1, np.int64)
-    one[0] = p
-    advance_particles(x, v, a, sigma, one, when, integrator, drag, k)
+    advance_particle(x, v, a, sigma, p, when, integrator, drag, k)
     h.touched[0] += 1
     h.touched[h.touched[0]] = p
     for d in range(3):
         h.before[p, d] = v[p, d]
 
 
-@njit(cache=True)
+@borrowing
 def relative_normal(values, i, j, nx, ny, nz) -> float:
     """(values_i - values_j)·n (j = -1: a wall, values_j = 0): the relative normal velocity
     or acceleration. The one formula: the resolver's closing speed and the solves' residuals
@@ -326,13 +324,13 @@ def relative_normal(values, i, j, nx, ny, nz) -> float:
     return (values[i, 0] - values[j, 0]) * nx + (values[i, 1] - values[j, 1]) * ny + (values[i, 2] - values[j, 2]) * nz
 
 
-@njit(cache=True)
+@borrowing
 def _relative(values, h, c, pair_kind) -> float:
     return relative_normal(values, h.a[c], h.other[c] if h.kind[c] == pair_kind else -1, h.normal[c, 0],
                            h.normal[c, 1], h.normal[c, 2])
 
 
-@njit(cache=True)
+@borrowing
 def push_along(values, inverse_mass, i, j, nx, ny, nz, amount) -> None:
     """values_i += amount·w_i·n, values_j -= amount·w_j·n (j = -1: a wall): how an impulse
     (on velocities) or a contact force per unit mass (on accelerations) acts. The one place."""
@@ -347,7 +345,7 @@ def push_along(values, inverse_mass, i, j, nx, ny, nz, amount) -> None:
         values[j, 2] -= wj * nz
 
 
-@njit(cache=True)
+@kernel
 def solve_contacts(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
                    k, tolerance, budget, pair_kind, stick) -> bool:
     """Solve the held contacts reachable from ``seeds[:n_seeds]`` (arguments as in
@@ -401,7 +399,7 @@ def solve_contacts(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
 LOCAL_SWEEP_WORK = 1024
 
 
-@njit(cache=True)
+@kernel
 def _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
                      k, tolerance, budget, pair_kind, stick) -> int:
     """Solve every held contact connected to ``seeds[:n_seeds]`` (through movable spheres)
@@ -519,7 +517,7 @@ MAX_PIVOTS = 24
 MAX_GROWTH = 12
 
 
-@njit(cache=True)
+@borrowing
 def _bounds(h, c, is_velocity, stick, solve, joined):
     """(current multiplier, its lower bound, target) of contact c in this solve; joined:
     c is already part of it (else a velocity solve's impulse counts from 0)."""
@@ -529,7 +527,7 @@ def _bounds(h, c, is_velocity, stick, solve, joined):
     return h.lam[c], 0.0, 0.0
 
 
-@njit(cache=True)
+@kernel
 def _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
                    k, tolerance, budget, pair_kind, stick) -> int:
     """The direct solve. The cluster starts from the seeds that are violated (a
@@ -605,7 +603,7 @@ def _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
     return _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, solve)
 
 
-@njit(cache=True)
+@borrowing
 def _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, solve) -> int:
     """Undo every direct solve of this cluster (``saved`` members were saved) and leave it; returns 0."""
     for r in range(2 * saved - 1, -1, -1):
@@ -622,7 +620,7 @@ def _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, 
     return 0
 
 
-@njit(cache=True)
+@borrowing
 def _end(h, c, e, pair_kind) -> int:
     """The sphere at end e of contact c: 0 its first sphere, 1 its other (-1 for a wall)."""
     if e == 0:
@@ -630,7 +628,7 @@ def _end(h, c, e, pair_kind) -> int:
     return h.other[c] if h.kind[c] == pair_kind else -1
 
 
-@njit(cache=True)
+@borrowing
 def _add_neighbours(h, values, members, first, m, violated_only, is_velocity, x, v, a, sigma, inverse_mass, when,
                     integrator, drag, k, tolerance, pair_kind, stick, solve):
     """Add to the cluster ``members[:m]`` the held contacts of the spheres of
@@ -659,7 +657,7 @@ def _add_neighbours(h, values, members, first, m, violated_only, is_velocity, x,
     return count, True
 
 
-@njit(cache=True)
+@borrowing
 def _join(h, c, is_velocity, solve) -> None:
     """Contact c joins the cluster (direct or connected): a velocity solve's impulse counts
     from 0 unless this solve already used it (seen == solve) or queued it (seen ==
@@ -669,7 +667,7 @@ def _join(h, c, is_velocity, solve) -> None:
     h.seen[c] = -(solve + 1)
 
 
-@njit(cache=True)
+@borrowing
 def _violated(h, values, c, is_velocity, x, v, a, sigma, inverse_mass, when, integrator, drag, k, tolerance,
               pair_kind, stick, solve) -> bool:
     """Whether a Gauss–Seidel update of contact c would exceed ``tolerance`` (its spheres
@@ -687,14 +685,14 @@ def _violated(h, values, c, is_velocity, x, v, a, sigma, inverse_mass, when, int
     return abs(new - current) * wsum > tolerance
 
 
-@njit(cache=True)
+@borrowing
 def _leave_cluster(h, members, m, solve) -> None:
     """Members' seen codes back to 'used in this solve' (their jv counts)."""
     for r in range(m):
         h.seen[members[r]] = solve
 
 
-@njit(cache=True)
+@kernel
 def _direct(h, values, is_velocity, members, m, inverse_mass, pair_kind, stick, solve, tolerance) -> bool:
     """Solve the complementarity problem of contacts ``members[:m]`` exactly, the others fixed.
 
@@ -808,7 +806,7 @@ def _direct(h, values, is_velocity, members, m, inverse_mass, pair_kind, stick, 
     return False
 
 
-@njit(cache=True)
+@borrowing
 def _infeasible(big, rhs, xs, lower, active, wsum, r, m, tolerance) -> bool:
     """Whether contact r breaks the solution by more than half the tolerance: an active one
     below its bound, or an inactive one left approaching (rel(x) - target = K x - rhs < 0)."""
@@ -817,7 +815,7 @@ def _infeasible(big, rhs, xs, lower, active, wsum, r, m, tolerance) -> bool:
     return _dot_row(big, r, xs, m) - rhs[r] < -0.5 * tolerance
 
 
-@njit(cache=True)
+@borrowing
 def _dot_row(big, r, xs, m) -> float:
     acc = 0.0
     for q in range(m):
@@ -825,7 +823,7 @@ def _dot_row(big, r, xs, m) -> float:
     return acc
 
 
-@njit(cache=True)
+@borrowing
 def _cholesky_solve(big, idx, n, ridge, chol, xs) -> bool:
     """Solve (K_AA + ridge·I) y = xs[idx] in place (A = idx[:n]); False if not positive."""
     for u in range(n):
@@ -853,7 +851,7 @@ def _cholesky_solve(big, idx, n, ridge, chol, xs) -> bool:
     return True
 
 
-@njit(cache=True)
+@borrowing
 def _gauss_seidel(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
                   k, tolerance, budget, pair_kind, stick) -> bool:
     """Projected Gauss–Seidel over the held contacts reachable from ``seeds[:n_seeds]``.
@@ -933,7 +931,7 @@ def _gauss_seidel(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, invers
     return True
 
 
-@njit(cache=True)
+@borrowing
 def release_loose(h, v, acc, inverse_mass, touched_only, x, a, sigma, when, integrator, drag, k, pair_kind,
                   vtol, atol, stick) -> int:
     """Release held contacts that separate or that no force holds while the accelerations
@@ -977,7 +975,7 @@ def release_loose(h, v, acc, inverse_mass, touched_only, x, a, sigma, when, inte
     return released
 
 
-@njit(cache=True)
+@borrowing
 def contacts_of(h, spheres, n_spheres, out) -> int:
     """The ids of every held contact of ``spheres[:n_spheres]`` into ``out`` (each once,
     in sphere order); returns how many. out must hold h.count[0] entries."""

@@ -32,6 +32,7 @@ import numpy as np
 from numba import njit
 
 from ..events import CONTACT_ROW, KIND_PAIR, KIND_WALL, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_SUPERSEDED
+from .jit import borrowing, kernel
 from .kernel_args import LoopBuffers
 from .motion import particle_box, path_acceleration_weight, path_coefficients
 from .periodic import image
@@ -155,7 +156,7 @@ def heap_push(toi, data, counters, t, rid, kind, a, other, va, vb):
             break
 
 
-@njit(cache=True)
+@borrowing
 def heap_pop(toi, data, counters):
     """Move the smallest entry to the slot just past the heap and return that slot."""
     n = counters[HEAP_SIZE] - 1
@@ -246,7 +247,7 @@ def _predict_wall(i, w, x, v, a, radius, sigma, version, step_end, integrator, k
             counters, push)
 
 
-@njit(cache=True)
+@borrowing
 def predict_into(kind, ia, ib, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
                  tolerance, normals, offsets, half_thickness, two_sided, period, held,
                  test_int, test_float, test_outcome, heap_toi, heap_data, counters, push):
@@ -267,7 +268,7 @@ def predict_into(kind, ia, ib, x, v, a, radius, sigma, version, step_end, integr
 
 
 # ------------------------------------------------------------------------------ resolve
-@njit(cache=True)
+@borrowing
 def _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, tolerance,
                normals, offsets, half_thickness, two_sided, period, held, adj_start, adj, batch_mark, batch, test_int,
                test_float, test_outcome, heap_toi, heap_data, counters):
@@ -288,7 +289,7 @@ def _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, dete
                       heap_data, counters, True)
 
 
-@njit(cache=True)
+@borrowing
 def mark_capped(heap_data, test_outcome, counters):
     """Every prediction still queued is left unresolved by a budget: mark it, empty the heap."""
     for s in range(counters[HEAP_SIZE]):
@@ -298,7 +299,7 @@ def mark_capped(heap_data, test_outcome, counters):
     counters[PENDING_AT] = 0
 
 
-@njit(cache=True)
+@borrowing
 def _inside_box(x, v, a, radius, sigma, p, step_end, integrator, k, margin, box_lo, box_hi, scratch):
     particle_box(x, v, a, radius, sigma, p, step_end, integrator, k, margin, scratch[0], scratch[1])
     for c in range(3):
@@ -307,7 +308,7 @@ def _inside_box(x, v, a, radius, sigma, p, step_end, integrator, k, margin, box_
     return True
 
 
-@njit(cache=True)
+@kernel
 def run_time_order(particles, method, walls, held, candidates, budgets, buffers):
     """Resolve contacts in time order until done or a pause (see module doc); the groups
     are kernel_args' (as plain tuples), held the store (resting.HeldContacts)."""
@@ -390,7 +391,7 @@ def run_time_order(particles, method, walls, held, candidates, budgets, buffers)
 
 
 # ------------------------------------------------------------------------------ step helpers
-@njit(cache=True)
+@kernel
 def adjacency_from_pairs(pairs, n):
     """CSR partner lists (start (N+1,), partners (2M,)) from sorted pairs i < j.
 
@@ -415,7 +416,7 @@ def adjacency_from_pairs(pairs, n):
     return start, partners
 
 
-@njit(cache=True)
+@kernel
 def reachable_walls(lo, hi, normals, offsets, half_thickness, two_sided):
     """Particle–wall candidates (particles (K,), walls (K,)) whose swept box reaches the wall.
 
@@ -446,7 +447,7 @@ def reachable_walls(lo, hi, normals, offsets, half_thickness, two_sided):
     return ip[:m], iw[:m]
 
 
-@njit(cache=True)
+@borrowing
 def max_overlap(x, radius, pairs, normals, offsets, half_thickness, two_sided, period, ignore_tunnelled):
     """Deepest penetration (m, >= 0) among the candidate pairs and every particle–wall pair
     (pairs through the minimum image on the periodic axes of period (3,), 0 = not periodic).

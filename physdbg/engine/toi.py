@@ -30,8 +30,8 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
 
+from .jit import borrowing, kernel
 from .motion import EXACT, STRAIGHT_PATH, curvature_scale, path_coefficients
 
 INF = math.inf
@@ -42,13 +42,13 @@ DISCRETE = 2
 DETECTION_NAMES = ("swept", "sampled", "discrete")
 
 
-@njit(cache=True)
+@borrowing
 def _gap(g0, p, q, integrator, k, tau):
     p1, p2, dp1 = path_coefficients(integrator, k, tau)
     return g0 + p * p1 + q * p2, p * dp1 + q * p1
 
 
-@njit(cache=True)
+@borrowing
 def _root_in_bracket(g0, p, q, integrator, k, lo, hi):
     """The one root of the gap in [lo, hi], where the gap falls from >= 0 to <= 0."""
     if integrator != EXACT or k == 0.0:
@@ -89,7 +89,7 @@ def _root_in_bracket(g0, p, q, integrator, k, lo, hi):
     return t
 
 
-@njit(cache=True)
+@borrowing
 def _stationary_point(g0, p, q, integrator, k, horizon):
     """Where the gap's derivative (monotone, by the constant curvature) crosses zero."""
     if integrator != EXACT or k == 0.0:
@@ -113,7 +113,7 @@ def _stationary_point(g0, p, q, integrator, k, horizon):
     return 0.5 * (lo + hi)
 
 
-@njit(cache=True)
+@borrowing
 def wall_toi_swept(g0, p, q, integrator, k, horizon):
     """First time in [0, horizon] the gap g0 + p·P1 + q·P2 crosses 0 going down, or INF.
 
@@ -154,7 +154,7 @@ def wall_toi_swept(g0, p, q, integrator, k, horizon):
     return _root_in_bracket(g0, p, q, integrator, k, 0.0, horizon)
 
 
-@njit(cache=True)
+@borrowing
 def wall_toi_sampled(g0, p, q, integrator, k, horizon, samples, depth):
     """First of ``samples`` evenly spaced instants in (0, horizon] with overlap and approach.
 
@@ -172,7 +172,7 @@ def wall_toi_sampled(g0, p, q, integrator, k, horizon, samples, depth):
     return INF
 
 
-@njit(cache=True)
+@borrowing
 def _linear_pair_u(dx0, dx1, dx2, dv0, dv1, dv2, radius_sum):
     """The seed's quadratic: first u >= 0 with |dx + dv·u| = R while approaching, or INF."""
     a = dv0 * dv0 + dv1 * dv1 + dv2 * dv2
@@ -189,7 +189,7 @@ def _linear_pair_u(dx0, dx1, dx2, dv0, dv1, dv2, radius_sum):
     return c / (-b + math.sqrt(disc))
 
 
-@njit(cache=True)
+@borrowing
 def _u_to_tau(integrator, k, u):
     if integrator == EXACT and k > 0.0:
         ku = k * u
@@ -199,7 +199,7 @@ def _u_to_tau(integrator, k, u):
     return u
 
 
-@njit(cache=True)
+@borrowing
 def _relative_path(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, integrator, k, t):
     """Relative position D(t) = dx + dv·P1 + da·P2 and its rate D'(t), as six floats."""
     p1, p2, dp1 = path_coefficients(integrator, k, t)
@@ -207,12 +207,12 @@ def _relative_path(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, integrator, k, t
             dv0 * dp1 + da0 * p1, dv1 * dp1 + da1 * p1, dv2 * dp1 + da2 * p1)
 
 
-@njit(cache=True)
+@borrowing
 def _norm(x0, x1, x2):
     return math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
 
 
-@njit(cache=True)
+@kernel
 def pair_toi_swept(dx, dv, da, radius_sum, integrator, k, horizon, tolerance):
     """First time in [0, horizon] the spheres touch while approaching, or INF.
 
@@ -224,7 +224,7 @@ def pair_toi_swept(dx, dv, da, radius_sum, integrator, k, horizon, tolerance):
                                  integrator, k, horizon, tolerance)
 
 
-@njit(cache=True)
+@borrowing
 def pair_toi_swept_scalar(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, radius_sum, integrator, k, horizon,
                           tolerance):
     """pair_toi_swept on scalars (the form the compiled loop calls: no arrays to pass)."""
@@ -269,14 +269,14 @@ def pair_toi_swept_scalar(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, radius_su
     return t if t <= horizon else INF
 
 
-@njit(cache=True)
+@kernel
 def pair_toi_sampled(dx, dv, da, radius_sum, integrator, k, horizon, samples):
     """First of ``samples`` instants in (0, horizon] with overlap while approaching."""
     return pair_toi_sampled_scalar(dx[0], dx[1], dx[2], dv[0], dv[1], dv[2], da[0], da[1], da[2], radius_sum,
                                    integrator, k, horizon, samples)
 
 
-@njit(cache=True)
+@borrowing
 def pair_toi_sampled_scalar(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, radius_sum, integrator, k, horizon,
                             samples):
     """pair_toi_sampled on scalars."""
@@ -292,7 +292,7 @@ def pair_toi_sampled_scalar(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, radius_
     return INF
 
 
-@njit(cache=True)
+@borrowing
 def wall_gap_terms(x, v, a, radius, i, normal, offset, half_thickness, two_sided):
     """(g0, p, q, side) of particle i's anchor against a wall n·x = d.
 

@@ -14,11 +14,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from ..jit import borrowing, kernel
 from .boxes import NO_LIMIT, overlapping
 
-@njit(cache=True)
+@borrowing
 def _cell_of(value, origin, cell, dim):
     k = int(math.floor((value - origin) / cell))
     if k < 0:
@@ -28,7 +28,7 @@ def _cell_of(value, origin, cell, dim):
     return k
 
 
-@njit(cache=True)
+@kernel
 def grid_pairs(lo, hi, cell, limit):
     """(M, 2) int64 pairs i < j of overlapping boxes, sorted; and the number of cells used.
 
@@ -137,7 +137,7 @@ def grid_pairs(lo, hi, cell, limit):
     return sort_pairs(out_i[:found], out_j[:found], n), used
 
 
-@njit(cache=True)
+@kernel
 def bucket_starts(keys, buckets):
     """Counting-sort offsets: items with key k go to [start[k], start[k+1]); (buckets + 1,)."""
     start = np.zeros(buckets + 1, dtype=np.int64)
@@ -148,7 +148,7 @@ def bucket_starts(keys, buckets):
     return start
 
 
-@njit(cache=True)
+@kernel
 def sort_pairs(first, second, n):
     """(M, 2) pairs in lexicographic order: counting sort on the first index (O(M + N)),
     then an insertion sort of each row's few second indices."""
