@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from physdbg.engine.resting import HeldContacts, _gauss_seidel, _relative, begin_solve, solve_contacts
+from physdbg.engine.resting import HeldContacts, _cholesky_solve, _gauss_seidel, _relative, begin_solve, solve_contacts
 from physdbg.events import KIND_PAIR
 
 from .conftest import make_state, make_walls, make_world
@@ -96,3 +96,56 @@ def test_the_held_store_grows_only_what_ran_out():
     for c, (a, b) in enumerate([(0, 1), (2, 3), (0, 2), (0, 3)]):
         assert held_find(h, KIND_PAIR, a, b) == c and held_find(h, KIND_PAIR, b, a) == -1
     assert h.normal[2].tolist() == [0.0, 0.0, 1.0] and h.count[0] == 4 and h.deg.tolist() == [3, 1, 2, 2]
+
+
+def _left_looking_cholesky_solve(big, idx, n, ridge, xs):
+    """The row-by-row (left-looking) Cholesky solve, in plain Python: the reference the
+    compiled right-looking one must match to the bit."""
+    chol = np.zeros((n, n))
+    for u in range(n):
+        for w in range(u + 1):
+            s = big[idx[u], idx[w]]
+            for t in range(w):
+                s -= chol[u, t] * chol[w, t]
+            if u == w:
+                s += ridge
+                if not s > 0.0:
+                    return False
+                chol[u, u] = np.sqrt(s)
+            else:
+                chol[u, w] = s / chol[w, w]
+    for u in range(n):
+        s = xs[idx[u]]
+        for t in range(u):
+            s -= chol[u, t] * xs[idx[t]]
+        xs[idx[u]] = s / chol[u, u]
+    for u in range(n - 1, -1, -1):
+        s = xs[idx[u]]
+        for t in range(u + 1, n):
+            s -= chol[t, u] * xs[idx[t]]
+        xs[idx[u]] = s / chol[u, u]
+    return True
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_cholesky_solve_equals_the_row_by_row_form_to_the_bit(seed):
+    rng = np.random.default_rng(seed)
+    m = int(rng.integers(1, 40))
+    jac = rng.normal(size=(m, m + 3))
+    big = jac @ jac.T  # symmetric positive definite, like K = J W Jᵀ
+    if seed % 2:  # redundant rows (a sphere touching more than three others): only the ridge keeps it solvable
+        big[-1] = big[0]
+        big[:, -1] = big[:, 0]
+    idx = np.sort(rng.choice(m, size=int(rng.integers(1, m + 1)), replace=False)).astype(np.int64)
+    ridge = 1e-13 * big.diagonal().max()
+    rhs = rng.normal(size=m)
+    expected = rhs.copy()
+    got = rhs.copy()
+    assert _cholesky_solve(big, idx, idx.shape[0], ridge, np.empty((m, m)), got) == \
+        _left_looking_cholesky_solve(big, idx, idx.shape[0], ridge, expected)
+    assert got.tobytes() == expected.tobytes()
+
+
+def test_the_cholesky_solve_refuses_a_matrix_that_is_not_positive():
+    big = np.array([[1.0, 2.0], [2.0, 1.0]])
+    assert not _cholesky_solve(big, np.arange(2), 2, 0.0, np.empty((2, 2)), np.ones(2))
