@@ -85,10 +85,35 @@ def grid_pairs(lo, hi, cell, limit):
     out_i = np.empty(max(16, 4 * n), dtype=np.int64)
     out_j = np.empty(max(16, 4 * n), dtype=np.int64)
     found = 0
-    plane = dims[1] * dims[2]
-    for k in range(n):
-        if found > limit:
+    k = 0
+    while True:
+        k, found = _collect_pairs(k, found, filed, sorted_keys, cell_start, dense, dims, slo, shi, limit, out_i,
+                                  out_j)
+        if k >= n:
             break
+        bigger_i = np.empty(2 * out_i.shape[0], dtype=np.int64)
+        bigger_j = np.empty(2 * out_j.shape[0], dtype=np.int64)
+        bigger_i[:found] = out_i[:found]
+        bigger_j[:found] = out_j[:found]
+        out_i = bigger_i
+        out_j = bigger_j
+    return sort_pairs(out_i[:found], out_j[:found], n), used
+
+
+@borrowing
+def _collect_pairs(first_box, found, filed, sorted_keys, cell_start, dense, dims, slo, shi, limit, out_i, out_j):
+    """The pairs of boxes ``first_box`` onwards (in cell order) into out_i, out_j from
+    ``found`` on; returns (the box to go on from, pairs found): n when done (or past
+    ``limit``), else the box whose pairs did not fit, whose pairs are dropped, to be
+    collected again into larger arrays. (Growing the arrays inside this loop made the
+    whole loop about twice as slow: an array variable reassigned in a loop is reloaded,
+    and reference-counted, on every pass.)"""
+    n = filed.shape[0]
+    plane = dims[1] * dims[2]
+    for k in range(first_box, n):
+        if found > limit:
+            return n, found
+        box_start = found
         i = filed[k]
         own = sorted_keys[k]
         own_x = own // plane
@@ -122,19 +147,14 @@ def grid_pairs(lo, hi, cell, limit):
                                 or slo[t, 1] > shi[k, 1] or slo[k, 2] > shi[t, 2] or slo[t, 2] > shi[k, 2]):
                             continue
                         if found == out_i.shape[0]:
-                            bigger_i = np.empty(2 * found, dtype=np.int64)
-                            bigger_j = np.empty(2 * found, dtype=np.int64)
-                            bigger_i[:found] = out_i[:found]
-                            bigger_j[:found] = out_j[:found]
-                            out_i = bigger_i
-                            out_j = bigger_j
+                            return k, box_start
                         j = filed[t]
                         out_i[found] = min(i, j)
                         out_j[found] = max(i, j)
                         found += 1
                         if found > limit:
-                            break
-    return sort_pairs(out_i[:found], out_j[:found], n), used
+                            return n, found
+    return n, found
 
 
 @kernel
