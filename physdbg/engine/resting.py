@@ -363,9 +363,9 @@ def solve_contacts(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
     per contact and leaves the confirming pass nothing to do; but its cost grows as m³
     (with a refactorisation per pivoting round), and conjugate gradients, at 15–60
     products K·d of about a sweep each, cost less on large clusters. Where the line
-    falls depends on the scene: in rain-500's jammed steps MAX_DIRECT = 48 ran about 2×
-    faster than 192, in box-rain 10k's last steps about 2.5× slower (docs/benchmarks.md);
-    192 is kept.
+    falls depends on the scene: in rain-500's jammed steps MAX_DIRECT = 48 ran about 3×
+    faster than 192, but in box-rain 10k it left a step stopped by the swept-test budget
+    (docs/benchmarks.md); 192 is kept.
     """
     m = _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
                        k, tolerance, budget, pair_kind, stick)
