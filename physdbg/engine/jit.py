@@ -1,5 +1,8 @@
 """How the engine's functions are compiled: ``kernel`` or ``borrowing`` (numba).
 
+Both compile in nopython mode, cache on disk, and compile *one version per argument
+type*: a constant passed from compiled code does not get a version of its own (below).
+
 * ``kernel``: an ordinary compiled function (``njit(cache=True)``); it may allocate
   arrays, and numba's runtime (NRT) counts the references to every array it is handed.
 * ``borrowing``: a compiled function that allocates nothing and only *borrows* the arrays
@@ -18,11 +21,47 @@ only functions that do not allocate: numba compiles its callees with its flags a
 refuses an allocation in them at compile time, so a wrong mark cannot pass silently.
 Mark the callees of a borrowing function ``borrowing`` too, or numba compiles them a
 second time (once per set of flags).
+
+One version per type: numba's own dispatcher compiles a callee afresh for each constant a
+compiled caller passes it (a literal ``True``, ``0``, a module constant), and each version
+brings its whole call tree. Before this rule the cold compile built 159 versions, three of
+``solve_contacts`` and nine of ``_give_up``, in 189 s; with it, 118 s
+(docs/benchmarks.md). The flags such constants carry are branched on at run time instead:
+the same arithmetic in the same order, so no result changes by a bit (the golden hashes).
 """
 
 from __future__ import annotations
 
-from numba import njit
+from numba.core import types
+from numba.core.registry import CPUDispatcher
 
-kernel = njit(cache=True)
-borrowing = njit(cache=True, _nrt=False)
+
+class _OneVersionPerType(CPUDispatcher):
+    """numba's CPU dispatcher, compiling a call from compiled code for its argument *types*.
+
+    numba types a constant argument in a compiled call (``solve(..., True)``, a module
+    constant like ``KIND_PAIR``) as a literal, and by default compiles the callee afresh
+    for every literal value: ``solve_contacts`` and the whole solve beneath it were
+    compiled three times, ``_give_up`` nine. Dropping the literal before the callee is
+    looked up leaves one version per argument type, compiled once; the branch on a flag
+    is taken at run time instead, which costs nothing next to the work it selects and
+    changes no result. Calls from Python are unliteral in numba already.
+    """
+
+    def get_call_template(self, args, kws):
+        return super().get_call_template(tuple(types.unliteral(a) for a in args),
+                                         {name: types.unliteral(t) for name, t in kws.items()})
+
+
+def _compiled(**options):
+    """A decorator compiling with numba in nopython mode, cached on disk, one version per type."""
+    def decorate(function):
+        dispatcher = _OneVersionPerType(py_func=function, locals={},
+                                        targetoptions={"nopython": True, "boundscheck": None, **options})
+        dispatcher.enable_caching()
+        return dispatcher
+    return decorate
+
+
+kernel = _compiled()
+borrowing = _compiled(_nrt=False)

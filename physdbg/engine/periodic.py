@@ -21,6 +21,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .jit import kernel
+
 
 @njit(cache=True, inline="always")
 def image(d, length):
@@ -31,7 +33,7 @@ def image(d, length):
     return d
 
 
-@njit(cache=True)
+@kernel
 def wrap_positions(x, origin, period):
     """Wrap the positions x (N, 3) into [origin, origin + period) on each periodic axis, in place."""
     for c in range(3):

@@ -8,12 +8,13 @@ Nothing here imports the rest of the package, so the grid, the BVHs and the inte
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from ..jit import kernel
 
 NO_LIMIT = 2**62  # a pair budget that is no budget (broad phases take ``limit``)
 
 
-@njit(cache=True)
+@kernel
 def boxes_overlap(lo, hi, i, j):
     """Do boxes i and j of (lo, hi) (N, 3) overlap (touching counts)?"""
     for c in range(3):

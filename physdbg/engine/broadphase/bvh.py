@@ -31,7 +31,8 @@ from dataclasses import dataclass, field
 from time import perf_counter
 
 import numpy as np
-from numba import njit
+
+from ..jit import kernel
 
 from .boxes import NO_LIMIT, boxes_overlap
 
@@ -43,7 +44,7 @@ BUILD_NAMES = ("median", "mean", "sah", "lbvh")
 _SAH_BINS = 16
 
 
-@njit(cache=True)
+@kernel
 def _area(lo0, lo1, lo2, hi0, hi1, hi2):
     dx = hi0 - lo0
     dy = hi1 - lo1
@@ -51,7 +52,7 @@ def _area(lo0, lo1, lo2, hi0, hi1, hi2):
     return 2.0 * (dx * dy + dy * dz + dz * dx)
 
 
-@njit(cache=True)
+@kernel
 def _fit_leaf(lo, hi, order, s, cnt, node_lo, node_hi, node):
     for c in range(3):
         mn = np.inf
@@ -64,7 +65,7 @@ def _fit_leaf(lo, hi, order, s, cnt, node_lo, node_hi, node):
         node_hi[node, c] = mx
 
 
-@njit(cache=True)
+@kernel
 def _empty_nodes(cap):
     """Node arrays for up to ``cap`` nodes: lo, hi, left, right, parent, depth, start, count."""
     return (np.empty((cap, 3)), np.empty((cap, 3)), np.full(cap, -1, dtype=np.int64),
@@ -72,7 +73,7 @@ def _empty_nodes(cap):
             np.zeros(cap, dtype=np.int64), np.zeros(cap, dtype=np.int64))
 
 
-@njit(cache=True)
+@kernel
 def build_top_down(lo, hi, method, leaf_size):
     """Top-down build; returns (node_lo, node_hi, left, right, parent, depth, start, count, order)."""
     n = lo.shape[0]
@@ -206,7 +207,7 @@ def build_top_down(lo, hi, method, leaf_size):
             start[:used], count[:used], order)
 
 
-@njit(cache=True)
+@kernel
 def _expand_bits(v):
     v = (v * 0x00010001) & 0xFF0000FF
     v = (v * 0x00000101) & 0x0F00F00F
@@ -215,7 +216,7 @@ def _expand_bits(v):
     return v
 
 
-@njit(cache=True)
+@kernel
 def _clz64(x):
     """Leading zero bits of a non-negative int64 (keys here stay below 2**62)."""
     if x == 0:
@@ -227,14 +228,14 @@ def _clz64(x):
     return n
 
 
-@njit(cache=True)
+@kernel
 def _delta(keys, i, j):
     if j < 0 or j >= keys.shape[0]:
         return -1
     return _clz64(keys[i] ^ keys[j])
 
 
-@njit(cache=True)
+@kernel
 def build_lbvh(lo, hi):
     """Karras' binary radix tree over Morton codes; same layout as build_top_down.
 
@@ -320,7 +321,7 @@ def build_lbvh(lo, hi):
     return node_lo, node_hi, left, right, parent, depth, start, count, order
 
 
-@njit(cache=True)
+@kernel
 def refit(lo, hi, node_lo, node_hi, left, right, parent, start, count, order):
     """New bounds for the same topology (children are fitted before their parents)."""
     m = node_lo.shape[0]
@@ -356,7 +357,7 @@ def refit(lo, hi, node_lo, node_hi, left, right, parent, start, count, order):
                 node_hi[node, c] = max(node_hi[left[node], c], node_hi[right[node], c])
 
 
-@njit(cache=True)
+@kernel
 def _emit(out, count, i, j):
     if count == out.shape[0]:
         bigger = np.empty((2 * count + 16, 2), dtype=np.int64)
@@ -367,7 +368,7 @@ def _emit(out, count, i, j):
     return out, count + 1
 
 
-@njit(cache=True)
+@kernel
 def self_pairs(lo, hi, node_lo, node_hi, left, right, start, count, order, root, limit):
     """All overlapping primitive pairs by simultaneous descent; (pairs, nodes visited, box tests).
 
@@ -451,7 +452,7 @@ def self_pairs(lo, hi, node_lo, node_hi, left, right, start, count, order, root,
     return pairs, visited, tests
 
 
-@njit(cache=True)
+@kernel
 def query_box(node_lo, node_hi, left, right, start, count, order, lo, hi, box_lo, box_hi, root):
     """Primitives whose boxes overlap one box, sorted."""
     out = np.empty(16, dtype=np.int64)
@@ -492,7 +493,7 @@ def query_box(node_lo, node_hi, left, right, start, count, order, lo, hi, box_lo
     return np.sort(out[:found])
 
 
-@njit(cache=True)
+@kernel
 def sah_cost(node_lo, node_hi, left, count, root):
     """SAH cost with unit traversal and test costs: sum A(node)/A(root) · (1 or leaf count)."""
     if node_lo.shape[0] == 0:
