@@ -312,3 +312,39 @@ def test_an_euler_pair_is_predicted_along_the_straight_lines_after_a_partner_bou
     s = (-qb - math.sqrt(qb * qb - 4 * qa * qc)) / (2 * qa)
     assert pair.time_in_step == pytest.approx(t_b + s, abs=1e-12)
     assert stats.max_overlap <= 1e-9 and not stats.warnings
+
+
+# ----------------------------------------------------------------------------- re-prediction
+def test_a_contact_far_from_the_walls_re_predicts_no_wall():
+    """After a contact the two spheres are predicted again against each other, and against
+    only the walls their swept boxes reach: none, in the middle of a unit box (every wall
+    used to be tested again, 12 misses here)."""
+    box = make_walls(([1, 0, 0], 0.0, 1.0), ([-1, 0, 0], -1.0, 1.0), ([0, 1, 0], 0.0, 1.0),
+                     ([0, -1, 0], -1.0, 1.0), ([0, 0, 1], 0.0, 1.0), ([0, 0, -1], -1.0, 1.0))
+    state = make_state([[0.4, 0.5, 0.5], [0.6, 0.5, 0.5]], [[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]], radius=0.05)
+    world, obs = make_world(state, box, gravity=(0.0, 0.0, 0.0))
+    stats = world.step(0.1)
+    assert stats.contacts == 1
+    tests = obs.swept_tests[-1]
+    # the step-start pair test (a hit) and the pair predicted once after the contact
+    assert list(tests.kind) == [KIND_PAIR, KIND_PAIR] and stats.swept_tests == 2
+    # elastic, equal masses: they meet at 0.05 s and are back where they started at 0.1 s
+    np.testing.assert_allclose(world.state.positions[:, 0], [0.4, 0.6], atol=1e-15)
+    np.testing.assert_allclose(world.state.velocities[:, 0], [-1.0, 1.0], atol=1e-15)
+
+
+def test_a_sphere_sent_out_of_its_box_is_still_stopped_by_a_wall():
+    """A contact that sends a sphere beyond its swept box (here: hit at 30 m/s by a heavy
+    sphere, towards a wall its box did not reach) tests every wall again, so the wall
+    still stops it within the step."""
+    box = make_walls(([1, 0, 0], 0.0, 1.0), ([-1, 0, 0], -1.0, 1.0))
+    state = make_state([[0.5, 0.5, 0.5], [0.62, 0.5, 0.5]], [[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]], radius=0.05,
+                       inverse_mass=[0.001, 1.0])
+    state.velocities[0, 0] = 30.0
+    world, obs = make_world(state, box, gravity=(0.0, 0.0, 0.0))
+    for _ in range(3):
+        world.step(0.01)
+        assert np.all(world.state.positions[:, 0] >= 0.05 - 1e-12)
+        assert np.all(world.state.positions[:, 0] <= 0.95 + 1e-12)
+    walls_hit = [c for c in obs.contacts if c.kind == KIND_WALL]
+    assert walls_hit and walls_hit[0].a == 1
