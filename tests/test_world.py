@@ -348,3 +348,29 @@ def test_a_sphere_sent_out_of_its_box_is_still_stopped_by_a_wall():
         assert np.all(world.state.positions[:, 0] <= 0.95 + 1e-12)
     walls_hit = [c for c in obs.contacts if c.kind == KIND_WALL]
     assert walls_hit and walls_hit[0].a == 1
+
+
+def test_a_changed_sphere_skips_a_partner_its_new_path_cannot_reach():
+    """B is a broad-phase partner of C (their swept boxes meet at step start), but after B's
+    contact with A its new path's box misses C's box: B is not tested against C again."""
+    state = make_state([[0.3, 0.5, 0.5], [0.5, 0.5, 0.5], [0.75, 0.5, 0.5]],
+                       [[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]], radius=0.05)
+    world, obs = make_world(state, gravity=(0.0, 0.0, 0.0), broad_phase="brute-force")
+    stats = world.step(0.1)
+    assert stats.contacts == 1
+    tests = obs.swept_tests[-1]
+    pairs = [(int(a), int(o)) for a, o in zip(tests.a, tests.other)]
+    # step start: A–B (a hit) and B–C (a miss); after the contact A–B once, B–C no more
+    assert sorted(pairs[:2]) == [(0, 1), (1, 2)] and pairs[2:] == [(0, 1)]
+    np.testing.assert_allclose(world.state.positions[:, 0], [0.3, 0.5, 0.75], atol=1e-15)
+
+
+def test_a_sphere_sent_towards_a_partner_still_meets_it():
+    """The partner test keeps what can happen: B, knocked out of its swept box towards C at
+    60 m/s, meets C within the step."""
+    state = make_state([[0.3, 0.5, 0.5], [0.42, 0.5, 0.5], [0.9, 0.5, 0.5]],
+                       [[30.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]], radius=0.05,
+                       inverse_mass=[0.001, 1.0, 1.0])
+    world, obs = make_world(state, gravity=(0.0, 0.0, 0.0), broad_phase="brute-force")
+    world.step(0.01)
+    assert [(c.a, c.other) for c in obs.contacts][:2] == [(0, 1), (1, 2)]
