@@ -115,3 +115,29 @@ def test_the_compiled_reach_is_numpys_quantile_rule_to_the_bit():
             grow_to_reach(x, v, a, radius, dt, margin, lo, hi)
             np.testing.assert_array_equal(lo, want_lo)
             np.testing.assert_array_equal(hi, want_hi)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.sampled_from(["euler", "semi-implicit", "verlet", "exact"]), st.sampled_from([0.0, 0.7]),
+       st.lists(st.floats(-3.0, 3.0), min_size=3, max_size=3), st.lists(st.floats(-20.0, 20.0), min_size=3, max_size=3),
+       st.floats(0.0, 0.01))
+def test_particle_box_holds_the_path_and_its_extremes(integrator, k, velocity, acceleration, anchor):
+    """The box of a path from its anchor to the step's end holds every point of the path
+    (sampled densely) and is no larger than its extremes (the closed-form parabola vertex
+    and the bisection for drag paths agree with sampling)."""
+    from physdbg.engine.motion import INTEGRATOR_NAMES, particle_box
+
+    code = INTEGRATOR_NAMES.index(integrator)
+    x = np.array([[0.1, 0.2, 0.3]])
+    v = np.array([velocity])
+    a = np.array([acceleration])
+    step_end = 0.02
+    lo = np.empty(3)
+    hi = np.empty(3)
+    particle_box(x, v, a, np.array([0.05]), np.array([anchor]), 0, step_end, code, k, 1e-9, lo, hi)
+    taus = np.linspace(0.0, step_end - anchor, 4001)
+    points = np.array([x[0] + v[0] * p1 + a[0] * p2 for p1, p2, _ in (path_coefficients(code, k, t) for t in taus)])
+    pad = 0.05 + 1e-9
+    assert np.all(points.min(axis=0) - pad >= lo - 1e-15) and np.all(points.max(axis=0) + pad <= hi + 1e-15)
+    # tight: within what 4 000 samples can miss of a path this short
+    assert np.all(lo >= points.min(axis=0) - pad - 1e-7) and np.all(hi <= points.max(axis=0) + pad + 1e-7)

@@ -178,7 +178,15 @@ def particle_box(x, v, a, radius, sigma, i, step_end, integrator, k, margin, out
             f_lo = v[i, c]
             q1, _, dq = path_coefficients(integrator, k, hi_t)
             f_hi = v[i, c] * dq + a[i, c] * q1
-            if f_lo * f_hi < 0.0:
+            if f_lo * f_hi < 0.0 and (integrator == VERLET or (integrator == EXACT and k == 0.0)):
+                # a parabola (P1 = tau, P2 = tau²/2): the extremum is at tau = -v/a, in
+                # closed form (the bisection below took 1.6 µs a call, 60 steps on each axis)
+                t_ext = min(max(-v[i, c] / a[i, c], 0.0), tau_end)
+                e1, e2, _ = path_coefficients(integrator, k, t_ext)
+                xe = x0 + v[i, c] * e1 + a[i, c] * e2
+                mn = min(mn, xe)
+                mx = max(mx, xe)
+            elif f_lo * f_hi < 0.0:
                 for _ in range(60):
                     mid = 0.5 * (lo_t + hi_t)
                     m1, _, dm = path_coefficients(integrator, k, mid)
