@@ -32,6 +32,7 @@ import numpy as np
 from numba import njit
 
 from ..events import CONTACT_ROW, KIND_PAIR, KIND_WALL, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_SUPERSEDED
+from .broadphase.boxes import box_misses
 from .jit import borrowing, kernel
 from .kernel_args import LoopBuffers
 from .motion import particle_box, path_acceleration_weight, path_coefficients
@@ -292,7 +293,7 @@ def _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, dete
         if batch_mark[q] == batch:
             if q < p:
                 continue
-        elif _apart(scratch, box_lo, box_hi, q, period):
+        elif box_misses(scratch, box_lo, box_hi, q, period):
             continue
         _predict_pair(min(p, q), max(p, q), x, v, a, radius, sigma, version, step_end, integrator, k, detection,
                       samples, tolerance, period, held, test_int, test_float, test_outcome, heap_toi,
@@ -304,16 +305,6 @@ def _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, dete
                       offsets, half_thickness, two_sided, held, test_int, test_float, test_outcome, heap_toi,
                       heap_data, counters, True)
     return inside
-
-
-@borrowing
-def _apart(path_box, box_lo, box_hi, q, period) -> bool:
-    """Whether the box path_box (2, 3: lo, hi rows) and q's swept box are apart on an axis
-    (periodic axes, where the minimum image decides, never count)."""
-    for c in range(3):
-        if period[c] == 0.0 and (path_box[1, c] < box_lo[q, c] or path_box[0, c] > box_hi[q, c]):
-            return True
-    return False
 
 
 @borrowing

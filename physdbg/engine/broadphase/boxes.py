@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..jit import kernel
+from ..jit import borrowing, kernel
 
 NO_LIMIT = 2**62  # a pair budget that is no budget (broad phases take ``limit``)
 
@@ -21,6 +21,17 @@ def boxes_overlap(lo, hi, i, j):
         if lo[i, c] > hi[j, c] or lo[j, c] > hi[i, c]:
             return False
     return True
+
+
+@borrowing
+def box_misses(box, lo, hi, q, period) -> bool:
+    """Does the box ``box`` (2, 3: its lo and hi rows) miss box q of (lo, hi) (N, 3)
+    (touching meets)? Only non-periodic axes (period (3,) m, 0 = not periodic) can tell:
+    on a periodic one the minimum image decides, so it never counts as a miss."""
+    for c in range(3):
+        if period[c] == 0.0 and (box[1, c] < lo[q, c] or box[0, c] > hi[q, c]):
+            return True
+    return False
 
 
 def overlapping(lo: np.ndarray, hi: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray) -> np.ndarray:
