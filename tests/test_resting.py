@@ -6,8 +6,20 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from physdbg.engine.resting import HeldContacts, _cholesky_solve, _gauss_seidel, _relative, begin_solve, solve_contacts
-from physdbg.events import KIND_PAIR
+from physdbg.engine.resting import (
+    HeldContacts,
+    _cholesky_solve,
+    _contact_matrix,
+    _gauss_seidel,
+    _relative,
+    begin_solve,
+    grow_held,
+    held_add,
+    held_room,
+    new_held,
+    solve_contacts,
+)
+from physdbg.events import KIND_PAIR, KIND_WALL
 
 from .conftest import make_state, make_walls, make_world
 
@@ -127,12 +139,102 @@ def _left_looking_cholesky_solve(big, idx, n, ridge, xs):
     return True
 
 
-@pytest.mark.parametrize("seed", range(6))
+def _random_store(rng, n_spheres=30, n_contacts=70):
+    """Held contacts among random spheres (some immovable) and walls, random unit
+    normals: (store, inverse masses (N,))."""
+    h = new_held(n_spheres)
+    inverse_mass = np.where(rng.random(n_spheres) < 0.15, 0.0, rng.uniform(0.5, 2.0, n_spheres))
+    pairs = set()
+    while len(pairs) < n_contacts:
+        a, b = (int(i) for i in rng.integers(0, n_spheres, 2))
+        if rng.random() < 0.2:
+            pairs.add((KIND_WALL, a, int(rng.integers(0, 3))))
+        elif a != b:
+            pairs.add((KIND_PAIR, min(a, b), max(a, b)))
+    for kind, a, other in sorted(pairs):
+        n = rng.normal(size=3)
+        n /= np.linalg.norm(n)
+        while not held_room(h, a, other if kind == KIND_PAIR else -1):
+            h = grow_held(h)
+        held_add(h, kind, a, other, n[0], n[1], n[2], KIND_PAIR)
+    return h, inverse_mass
+
+
+def _movable_spheres(h, c, inverse_mass) -> set[int]:
+    spheres = {int(h.a[c])} | ({int(h.other[c])} if h.kind[c] == KIND_PAIR else set())
+    return {p for p in spheres if inverse_mass[p] > 0.0}
+
+
+def _scanned_contact_matrix(h, members, inverse_mass):
+    """K = J W Jᵀ by scanning every pair of members (the form the compiled one replaced)."""
+    m = len(members)
+    big = np.zeros((m, m))
+    for r in range(m):
+        c = members[r]
+        for e in range(2):
+            p = h.a[c] if e == 0 else (h.other[c] if h.kind[c] == KIND_PAIR else -1)
+            if p < 0 or inverse_mass[p] == 0.0:
+                continue
+            sr = 1.0 if e == 0 else -1.0
+            for q in range(m):
+                d = members[q]
+                if h.a[d] == p:
+                    sd = 1.0
+                elif h.kind[d] == KIND_PAIR and h.other[d] == p:
+                    sd = -1.0
+                else:
+                    continue
+                big[r, q] += inverse_mass[p] * sr * sd * (h.normal[c, 0] * h.normal[d, 0] + h.normal[c, 1]
+                                                          * h.normal[d, 1] + h.normal[c, 2] * h.normal[d, 2])
+    return big
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_contact_matrix_is_the_scanned_one_to_the_bit(seed):
+    rng = np.random.default_rng(seed)
+    h, inverse_mass = _random_store(rng)
+    members = rng.permutation(int(h.count[0]))[: int(rng.integers(1, h.count[0] + 1))].astype(np.int64)
+    big, row_start, cols = _contact_matrix(h, members, len(members), inverse_mass, KIND_PAIR)
+    expected = _scanned_contact_matrix(h, members, inverse_mass)
+    assert big.tobytes() == expected.tobytes()
+    for r in range(len(members)):  # each row lists its possible nonzeros in column order, and no others
+        listed = cols[row_start[r]:row_start[r + 1]]
+        assert np.all(np.diff(listed) > 0)
+        assert set(np.flatnonzero(expected[r])) <= set(listed.tolist())
+        shared = [q for q in range(len(members))
+                  if _movable_spheres(h, members[q], inverse_mass) & _movable_spheres(h, members[r], inverse_mass)]
+        assert listed.tolist() == shared
+    assert np.all(h.place == -1)  # the spheres' numbering is given back
+
+
+def _sparse_k(rng, m):
+    """A contact matrix K = J W Jᵀ of m contacts among spheres met breadth-first, as a
+    cluster grows: sparse, with exact zeros, in a band."""
+    n_spheres = m // 2 + 2
+    jac = np.zeros((m, 3 * n_spheres))
+    for r in range(m):
+        a = min(r // 2, n_spheres - 2)
+        b = min(a + 1 + int(rng.integers(0, 3)), n_spheres - 1)
+        n = rng.normal(size=3)
+        n /= np.linalg.norm(n)
+        jac[r, 3 * a:3 * a + 3] = n
+        jac[r, 3 * b:3 * b + 3] = -n
+    weight = np.repeat(rng.uniform(0.5, 2.0, n_spheres), 3)
+    big = (jac * weight) @ jac.T
+    big[big == 0.0] = 0.0  # no -0 (the engine's matrix has none)
+    return big
+
+
+@pytest.mark.parametrize("seed", range(10))
 def test_the_cholesky_solve_equals_the_row_by_row_form_to_the_bit(seed):
     rng = np.random.default_rng(seed)
-    m = int(rng.integers(1, 40))
-    jac = rng.normal(size=(m, m + 3))
-    big = jac @ jac.T  # symmetric positive definite, like K = J W Jᵀ
+    m = int(rng.integers(1, 40)) if seed < 6 else int(rng.integers(20, 120))
+    if seed < 6:
+        jac = rng.normal(size=(m, m + 3))
+        big = jac @ jac.T  # symmetric positive definite, like K = J W Jᵀ
+    else:  # sparse, as in a pile: the factorisation visits only the nonzeros
+        big = _sparse_k(rng, m)
+        assert (big == 0.0).mean() > 0.5
     if seed % 2:  # redundant rows (a sphere touching more than three others): only the ridge keeps it solvable
         big[-1] = big[0]
         big[:, -1] = big[:, 0]
@@ -141,11 +243,11 @@ def test_the_cholesky_solve_equals_the_row_by_row_form_to_the_bit(seed):
     rhs = rng.normal(size=m)
     expected = rhs.copy()
     got = rhs.copy()
-    assert _cholesky_solve(big, idx, idx.shape[0], ridge, np.empty((m, m)), got) == \
+    assert _cholesky_solve(big, idx, idx.shape[0], ridge, np.empty((m, m)), got, np.empty(m, np.int64)) == \
         _left_looking_cholesky_solve(big, idx, idx.shape[0], ridge, expected)
     assert got.tobytes() == expected.tobytes()
 
 
 def test_the_cholesky_solve_refuses_a_matrix_that_is_not_positive():
     big = np.array([[1.0, 2.0], [2.0, 1.0]])
-    assert not _cholesky_solve(big, np.arange(2), 2, 0.0, np.empty((2, 2)), np.ones(2))
+    assert not _cholesky_solve(big, np.arange(2), 2, 0.0, np.empty((2, 2)), np.ones(2), np.empty(2, np.int64))

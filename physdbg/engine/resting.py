@@ -719,37 +719,20 @@ def _direct(h, values, is_velocity, members, m, inverse_mass, pair_kind, stick, 
         i = h.a[c]
         j = h.other[c] if h.kind[c] == pair_kind else -1
         wsum[r] = inverse_mass[i] + (inverse_mass[j] if j >= 0 else 0.0)
-    # K by pairs of members sharing a sphere
-    big = np.zeros((m, m))
+    big, row_start, cols = _contact_matrix(h, members, m, inverse_mass, pair_kind)
     for r in range(m):
-        c = members[r]
-        for e in range(2):
-            p = _end(h, c, e, pair_kind)
-            if p < 0 or inverse_mass[p] == 0.0:
-                continue
-            sr = 1.0 if e == 0 else -1.0  # the normal points at the first sphere
-            for q in range(m):
-                d = members[q]
-                if h.a[d] == p:
-                    sd = 1.0
-                elif h.kind[d] == pair_kind and h.other[d] == p:
-                    sd = -1.0
-                else:
-                    continue
-                big[r, q] += inverse_mass[p] * sr * sd * (h.normal[c, 0] * h.normal[d, 0] + h.normal[c, 1] * h.normal[d, 1]
-                                                         + h.normal[c, 2] * h.normal[d, 2])
-    for r in range(m):
-        rhs[r] += _dot_row(big, r, x0, m)
+        rhs[r] += _dot_row(big, r, x0, row_start, cols)
     ridge = 0.0
     for r in range(m):
         ridge = max(ridge, big[r, r])
     ridge *= 1e-13
     active = np.empty(m, np.bool_)
     for r in range(m):
-        active[r] = x0[r] > lower[r] or rhs[r] - _dot_row(big, r, x0, m) > 0.0
+        active[r] = x0[r] > lower[r] or rhs[r] - _dot_row(big, r, x0, row_start, cols) > 0.0
     xs = np.empty(m)
     chol = np.empty((m, m))
     idx = np.empty(m, np.int64)
+    nonzero = np.empty(m, np.int64)
     best = m + 1
     chances = 3
     for _ in range(MAX_PIVOTS):
@@ -765,17 +748,18 @@ def _direct(h, values, is_velocity, members, m, inverse_mass, pair_kind, stick, 
             for u in range(n_act):
                 r = idx[u]
                 b = rhs[r]
-                for q in range(m):
+                for z in range(row_start[r], row_start[r + 1]):
+                    q = cols[z]
                     if not active[q]:
                         b -= big[r, q] * lower[q]
                 xs[r] = b
-            if not _cholesky_solve(big, idx, n_act, ridge, chol, xs):
+            if not _cholesky_solve(big, idx, n_act, ridge, chol, xs, nonzero):
                 return False
         # infeasible: active below its bound, or inactive left violated
         bad = 0
         last_bad = -1
         for r in range(m):
-            if _infeasible(big, rhs, xs, lower, active, wsum, r, m, tolerance):
+            if _infeasible(big, row_start, cols, rhs, xs, lower, active, wsum, r, tolerance):
                 bad += 1
                 last_bad = r
         if bad == 0:
@@ -801,37 +785,133 @@ def _direct(h, values, is_velocity, members, m, inverse_mass, pair_kind, stick, 
             active[last_bad] = not active[last_bad]
             continue
         for r in range(m):
-            if _infeasible(big, rhs, xs, lower, active, wsum, r, m, tolerance):
+            if _infeasible(big, row_start, cols, rhs, xs, lower, active, wsum, r, tolerance):
                 active[r] = not active[r]
     return False
 
 
 @borrowing
-def _infeasible(big, rhs, xs, lower, active, wsum, r, m, tolerance) -> bool:
+def _infeasible(big, row_start, cols, rhs, xs, lower, active, wsum, r, tolerance) -> bool:
     """Whether contact r breaks the solution by more than half the tolerance: an active one
     below its bound, or an inactive one left approaching (rel(x) - target = K x - rhs < 0)."""
     if active[r]:
         return (lower[r] - xs[r]) * wsum[r] > 0.5 * tolerance
-    return _dot_row(big, r, xs, m) - rhs[r] < -0.5 * tolerance
+    return _dot_row(big, r, xs, row_start, cols) - rhs[r] < -0.5 * tolerance
 
 
 @borrowing
-def _dot_row(big, r, xs, m) -> float:
+def _dot_row(big, r, xs, row_start, cols) -> float:
+    """Row r of K times xs, over the row's nonzeros (cols[row_start[r]:row_start[r + 1]],
+    in column order: the same sum, to the bit, as over the whole row, since a +0 entry
+    adds nothing to a sum that starts at +0)."""
     acc = 0.0
-    for q in range(m):
+    for z in range(row_start[r], row_start[r + 1]):
+        q = cols[z]
         acc += big[r, q] * xs[q]
     return acc
 
 
+@kernel
+def _contact_matrix(h, members, m, inverse_mass, pair_kind):
+    """K = J W Jᵀ of contacts ``members[:m]`` (m, m) dense, and where it can be nonzero by
+    row: (row_start (m + 1,), cols) in column order (an entry whose two normals happen to
+    be perpendicular is listed and is 0).
+
+    Two contacts meet in K only through a sphere they share, so each member's row is built
+    from the members of its two spheres (listed once per solve, the spheres numbered in
+    ``h.place`` and given back) instead of a scan of all m: the entries, and the order of
+    the two terms of a diagonal entry (first sphere, then other), are as in a scan.
+    """
+    place = h.place  # -1 everywhere between solves
+    spheres = np.empty(2 * m, np.int64)
+    n_spheres = 0
+    start = np.zeros(2 * m + 1, np.int64)
+    for r in range(m):
+        for e in range(2):
+            p = _end(h, members[r], e, pair_kind)
+            if p < 0 or inverse_mass[p] == 0.0:
+                continue
+            if place[p] < 0:
+                place[p] = n_spheres
+                spheres[n_spheres] = p
+                n_spheres += 1
+            start[place[p] + 1] += 1
+    for sp in range(n_spheres):
+        start[sp + 1] += start[sp]
+    fill = start[:n_spheres].copy()
+    of_sphere = np.empty(start[n_spheres], np.int64)  # members of each sphere, in member order
+    sign = np.empty(start[n_spheres])  # +1 where the sphere is the member's first, -1 its other
+    for r in range(m):
+        for e in range(2):
+            p = _end(h, members[r], e, pair_kind)
+            if p < 0 or inverse_mass[p] == 0.0:
+                continue
+            z = fill[place[p]]
+            of_sphere[z] = r
+            sign[z] = 1.0 if e == 0 else -1.0
+            fill[place[p]] = z + 1
+    big = np.zeros((m, m))
+    for r in range(m):
+        c = members[r]
+        for e in range(2):
+            p = _end(h, c, e, pair_kind)
+            if p < 0 or inverse_mass[p] == 0.0:
+                continue
+            sr = 1.0 if e == 0 else -1.0  # the normal points at the first sphere
+            sp = place[p]
+            for z in range(start[sp], start[sp + 1]):
+                d = members[of_sphere[z]]
+                big[r, of_sphere[z]] += inverse_mass[p] * sr * sign[z] * (
+                    h.normal[c, 0] * h.normal[d, 0] + h.normal[c, 1] * h.normal[d, 1] + h.normal[c, 2] * h.normal[d, 2])
+    # each row's nonzeros: the merge of its spheres' member lists (both in member order;
+    # the member itself is in both)
+    row_start = np.zeros(m + 1, np.int64)
+    cols = np.empty(start[n_spheres], np.int64)
+    z = 0
+    for r in range(m):
+        lo0 = hi0 = lo1 = hi1 = 0
+        p = _end(h, members[r], 0, pair_kind)
+        if p >= 0 and inverse_mass[p] > 0.0:
+            lo0, hi0 = start[place[p]], start[place[p] + 1]
+        p = _end(h, members[r], 1, pair_kind)
+        if p >= 0 and inverse_mass[p] > 0.0:
+            lo1, hi1 = start[place[p]], start[place[p] + 1]
+        while lo0 < hi0 or lo1 < hi1:
+            if lo1 == hi1 or (lo0 < hi0 and of_sphere[lo0] < of_sphere[lo1]):
+                q = of_sphere[lo0]
+                lo0 += 1
+            elif lo0 == hi0 or of_sphere[lo1] < of_sphere[lo0]:
+                q = of_sphere[lo1]
+                lo1 += 1
+            else:  # in both lists: r itself (the diagonal)
+                q = of_sphere[lo0]
+                lo0 += 1
+                lo1 += 1
+            if z == cols.shape[0]:
+                grown = np.empty(2 * z, np.int64)
+                grown[:z] = cols
+                cols = grown
+            cols[z] = q
+            z += 1
+        row_start[r + 1] = z
+    for sp in range(n_spheres):
+        place[spheres[sp]] = -1
+    return big, row_start, cols
+
+
 @borrowing
-def _cholesky_solve(big, idx, n, ridge, work, xs) -> bool:
+def _cholesky_solve(big, idx, n, ridge, work, xs, nonzero) -> bool:
     """Solve (K_AA + ridge·I) y = xs[idx] in place (A = idx[:n]); False if not positive.
 
     work: (>= n, >= n) scratch; the factor L is built in it right-looking — column t of L
     into row t's upper triangle (work[t, u] = L[u, t]), the not yet factored rest of K_AA
-    reduced in the lower triangle — so the update of the rest runs along rows and
-    vectorises. Every entry takes its subtractions in the same order as in the row-by-row
-    (left-looking) form, so the result is the same to the bit.
+    reduced in the lower triangle — so the update of the rest runs along rows. K is sparse
+    (contacts meet only through a shared sphere) and the cluster grows outwards from its
+    seeds, so L stays within a band: each column's update visits only the column's nonzeros
+    (listed in ``nonzero``, (>= n,) scratch), as a sparse factorisation does. Every entry
+    takes its subtractions in the same order as in the dense row-by-row (left-looking)
+    form, and a skipped term is a +0 that would change nothing, so the result is the same
+    to the bit.
     """
     for u in range(n):
         for w in range(u + 1):
@@ -842,22 +922,30 @@ def _cholesky_solve(big, idx, n, ridge, work, xs) -> bool:
             return False
         pivot = math.sqrt(d)
         work[t, t] = pivot
+        count = 0
         for u in range(t + 1, n):
             work[t, u] = work[u, t] / pivot
-        for u in range(t + 1, n):
+            if work[t, u] != 0.0:
+                nonzero[count] = u
+                count += 1
+        for i in range(count):
+            u = nonzero[i]
             f = work[t, u]
-            for w in range(t + 1, u + 1):
+            for j in range(i + 1):
+                w = nonzero[j]
                 work[u, w] -= f * work[t, w]
     # L y = b, then Lᵀ x = y, each sum taken in the same order as the row-by-row form
     for t in range(n):
         y = xs[idx[t]] / work[t, t]
         xs[idx[t]] = y
         for u in range(t + 1, n):
-            xs[idx[u]] -= work[t, u] * y
+            if work[t, u] != 0.0:
+                xs[idx[u]] -= work[t, u] * y
     for u in range(n - 1, -1, -1):
         s = xs[idx[u]]
         for t in range(u + 1, n):
-            s -= work[u, t] * xs[idx[t]]
+            if work[u, t] != 0.0:
+                s -= work[u, t] * xs[idx[t]]
         xs[idx[u]] = s / work[u, u]
     return True
 
