@@ -38,6 +38,21 @@ def test_run_prints_the_summary():
         assert words in result.output
 
 
+def test_the_speed_line_keeps_the_engine_apart_from_what_observes_it(tmp_path):
+    """The engine's own ms/step (its five phases) comes first; the whole loop's, with the
+    audit (run) or the recording and the audit (record), second. A recorder's work once
+    made `record bounce` read as ten times slower an engine than `run bounce`."""
+    import re
+
+    pattern = r"speed       ([0-9.]+) ms/step in the engine \(forces .*\); ([0-9.]+) ms/step with {}; kernels"
+    run = re.search(pattern.format("the audit"), invoke("run", "bounce").output)
+    record = invoke("record", "bounce", "-o", str(tmp_path / "b.mcap"), "--no-rrd").output
+    recorded = re.search(pattern.format("the recording and the audit"), record)
+    assert run and recorded, record
+    for found in (run, recorded):
+        assert 0.0 < float(found.group(1)) <= float(found.group(2))
+
+
 def test_run_json_is_machine_readable_and_repeats_exactly():
     first = json.loads(invoke("run", "cradle", "--json").output)
     second = json.loads(invoke("run", "cradle", "--json").output)

@@ -508,8 +508,9 @@ def _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inv
     return k_applied
 
 
-# The largest cluster solved directly (contacts): its dense factorisation costs m³/6 per
-# pivoting round; beyond it Gauss–Seidel, then the connected solve by conjugate gradients.
+# The largest cluster solved directly (contacts): its factorisation costs about m·b²/2 per
+# pivoting round (b: the band of its factor, which widens with m); beyond it Gauss–Seidel,
+# then the connected solve by conjugate gradients.
 MAX_DIRECT = 192
 # Pivoting rounds of one direct solve before it gives way to Gauss–Seidel.
 MAX_PIVOTS = 24
