@@ -1,0 +1,140 @@
+"""Where a scene's steps spend their time, by compiled function: perf over chosen steps.
+
+    .venv/bin/python benchmarks/profile.py rain --set generate.count=500 --skip 180 --steps 25 [--top 25]
+
+perf sees numba's compiled code as bare addresses, since it is loaded at run time. This
+script names it: it compiles the kernels afresh in a temporary ``NUMBA_CACHE_DIR`` (about
+a minute; cached libraries keep no object code), runs ``--skip`` steps unprofiled, attaches
+``perf record`` to itself for the next ``--steps`` steps only, then writes perf's map file
+``/tmp/perf-<pid>.map`` from each compiled library's object code (symbol offsets from
+``nm``, placed where the library's entry point was loaded) and prints ``perf report``'s
+functions, numba's readable by module and name. It leans on numba internals
+(``Dispatcher.overloads``, a library's compiled object), so a numba upgrade may need it
+changed. Needs ``perf`` and ``nm`` (Debian: linux-perf, binutils) and the rights to
+attach perf to a process (root, or a permissive ``kernel.perf_event_paranoid``).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+
+# before physdbg is imported (it keeps a NUMBA_CACHE_DIR that is already set)
+os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="physdbg-profile-")
+
+import argparse  # noqa: E402
+import gc  # noqa: E402
+import re  # noqa: E402
+import shutil  # noqa: E402
+import signal  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+
+from physdbg.engine.world import warm_up  # noqa: E402
+from physdbg.scene import load_scene  # noqa: E402
+
+
+def write_perf_map() -> int:
+    """Write /tmp/perf-<pid>.map naming every function of the compiled libraries in this
+    process; returns how many."""
+    from numba.core.dispatcher import Dispatcher
+
+    rows = []
+    seen = set()
+    for obj in gc.get_objects():
+        if not isinstance(obj, Dispatcher):
+            continue
+        for cres in list(obj.overloads.values()):
+            library = cres.library
+            if id(library) in seen:
+                continue
+            seen.add(id(library))
+            try:
+                blob = library._get_compiled_object()
+            except RuntimeError:  # loaded from a cache: no object code kept
+                continue
+            with tempfile.NamedTemporaryFile(suffix=".o") as f:
+                f.write(blob)
+                f.flush()
+                listing = subprocess.run(["nm", "-S", "--defined-only", f.name], capture_output=True, text=True,
+                                         check=True).stdout
+            symbols = {}
+            for line in listing.splitlines():
+                parts = line.split()
+                if len(parts) == 4 and parts[2] in "tT":
+                    symbols[parts[3]] = (int(parts[0], 16), int(parts[1], 16))
+            entry = cres.fndesc.llvm_func_name
+            if entry not in symbols:
+                continue
+            base = library.get_pointer_to_function(entry) - symbols[entry][0]
+            rows += [(base + offset, size, name) for name, (offset, size) in symbols.items()]
+    rows.sort()
+    with open(f"/tmp/perf-{os.getpid()}.map", "w") as f:
+        f.writelines(f"{start:x} {size:x} {name}\n" for start, size, name in rows)
+    return len(rows)
+
+
+def readable(symbol: str) -> str:
+    """numba's mangled name -> module.function (other symbols as they are)."""
+    if not symbol.startswith("_ZN"):
+        return symbol
+    parts, i = [], 3
+    while i < len(symbol) and symbol[i].isdigit():
+        j = i
+        while symbol[j].isdigit():
+            j += 1
+        length = int(symbol[i:j])
+        parts.append(symbol[j:j + length])
+        i = j + length
+    return ".".join(parts) or symbol
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("scene")
+    parser.add_argument("--set", dest="overrides", action="append", default=[], help="a scene override, k=v")
+    parser.add_argument("--skip", type=int, default=0, help="steps run before profiling starts")
+    parser.add_argument("--steps", type=int, default=20, help="steps profiled")
+    parser.add_argument("--frequency", type=int, default=999, help="perf samples per second")
+    parser.add_argument("--top", type=int, default=25)
+    args = parser.parse_args()
+    for tool in ("perf", "nm"):
+        if shutil.which(tool) is None:
+            sys.exit(f"{tool} is not installed (Debian: apt-get install linux-perf binutils)")
+    scene = load_scene(args.scene, args.overrides)
+    world = scene.build_world()
+    print(f"compiling the kernels afresh (cache {os.environ['NUMBA_CACHE_DIR']}) ...", flush=True)
+    print(f"compiled in {warm_up(world.broad_phase.name):.1f} s", flush=True)
+    lengths = iter(scene.step_lengths(None))
+    for _ in range(args.skip):
+        world.step(next(lengths))
+    data = os.path.join(os.environ["NUMBA_CACHE_DIR"], "perf.data")
+    perf = subprocess.Popen(["perf", "record", "-q", "-F", str(args.frequency), "-p", str(os.getpid()), "-o", data],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    time.sleep(1.0)  # let perf attach
+    started = time.perf_counter()
+    done = 0
+    for dt in lengths:
+        if done == args.steps:
+            break
+        world.step(dt)
+        done += 1
+    seconds = time.perf_counter() - started
+    perf.send_signal(signal.SIGINT)
+    perf.wait()
+    named = write_perf_map()
+    print(f"steps {args.skip + 1}-{args.skip + done}: {seconds:.2f} s; {named} compiled functions named")
+    report = subprocess.run(["perf", "report", "-i", data, "--no-children", "--sort", "symbol", "--stdio"],
+                            capture_output=True, text=True).stdout
+    shown = 0
+    for line in report.splitlines():
+        found = re.match(r"\s*([0-9.]+)%\s+\[[.k]\]\s+(\S+)", line)
+        if found and shown < args.top:
+            print(f"{found.group(1):>7}%  {readable(found.group(2))}")
+            shown += 1
+    shutil.rmtree(os.environ["NUMBA_CACHE_DIR"], ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
