@@ -8,15 +8,25 @@ import physdbg.engine
 
 from numba.core.registry import CPUDispatcher
 
-from physdbg.engine.jit import _OneVersionPerType, borrowing, kernel
+from physdbg.engine.jit import _OneVersionPerType
 
 
-@kernel
+def _uncached(**options):
+    """jit.py's dispatcher without its disk cache. Cached, the caller would be loaded from
+    disk on any run after the first (numba keys its cache by the source's contents) without
+    compiling its callee, and the callee's versions are what this test counts: it passed
+    once and failed on every later run with the same cache."""
+    def decorate(function):
+        return _OneVersionPerType(py_func=function, locals={}, targetoptions={"nopython": True, **options})
+    return decorate
+
+
+@_uncached()
 def _add_if(value, flag):
     return value + 1 if flag else value
 
 
-@borrowing
+@_uncached(_nrt=False)
 def _calls_with_constants(value):
     # three constant flags and one computed: numba's default compiles _add_if twice here
     # (Literal[bool](True) and Literal[bool](False)) besides the run-time bool version
