@@ -30,8 +30,8 @@ class RunSummary:
     compile_seconds: compiling (first run) or loading (cached) the numba kernels, not
     counted in wall_seconds or ms_per_step. ms_per_step: the whole loop (the engine and
     whatever observes it: a recorder, the audit); engine_ms_per_step: the engine's own five
-    phases (phase_seconds), what a run costs without observers. walls: the walls' names. warning_counts: how
-    many engine warnings of each kind (code); warnings: the first few of each kind, as
+    phases (phase_seconds), what a run costs without observers. walls: the walls' names.
+    warning_counts: how many engine warnings of each kind (code); warnings: the first few of each kind, as
     "step k: message" with k counted from 1 (step k ends at frame k of a recording).
     finding_counts / findings: what the audit found (physdbg.analysis.audit: tunnelling,
     overlaps, out-of-order contacts, energy gained, NaN, budgets, collapse), per kind and
@@ -159,7 +159,8 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         momentum_start=[float(c) for c in mom0], momentum_end=[float(c) for c in mom1],
         momentum_drift=float(np.linalg.norm(mom1 - mom0)), max_overlap=max_overlap,
         wall_seconds=wall, compile_seconds=compile_seconds, ms_per_step=1000.0 * wall / n_steps if n_steps else math.nan,
-        engine_ms_per_step=1000.0 * sum(phase.values()) / n_steps if n_steps else math.nan, phase_seconds=phase, final_hash=digest, warning_counts=dict(warnings.counts),
+        engine_ms_per_step=1000.0 * sum(phase.values()) / n_steps if n_steps else math.nan,
+        phase_seconds=phase, final_hash=digest, warning_counts=dict(warnings.counts),
         warnings=warnings.examples(), finding_counts=dict(auditor.counts) if auditor else {},
         findings=auditor.report(scene.name).lines() if auditor else [], dts=used)
 

@@ -445,9 +445,9 @@ def _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inv
     for r in range(m):
         c = members[r]
         for e in range(2):
-            p = _end(h, c, e, pair_kind)
+            p = _movable_end(h, c, e, inverse_mass, pair_kind)
             local = -1
-            if p >= 0 and inverse_mass[p] > 0.0:
+            if p >= 0:
                 if place[p] < 0:
                     place[p] = n_spheres
                     spheres[n_spheres] = p
@@ -659,6 +659,13 @@ def _add_neighbours(h, values, members, first, m, violated_only, is_velocity, x,
 
 
 @borrowing
+def _movable_end(h, c, e, inverse_mass, pair_kind) -> int:
+    """The sphere at end e of contact c if it can move (a sphere with inverse mass > 0), else -1."""
+    p = _end(h, c, e, pair_kind)
+    return p if p >= 0 and inverse_mass[p] > 0.0 else -1
+
+
+@borrowing
 def _join(h, c, is_velocity, solve) -> None:
     """Contact c joins the cluster (direct or connected): a velocity solve's impulse counts
     from 0 unless this solve already used it (seen == solve) or queued it (seen ==
@@ -829,70 +836,64 @@ def _contact_matrix(h, members, m, inverse_mass, pair_kind):
     start = np.zeros(2 * m + 1, np.int64)
     for r in range(m):
         for e in range(2):
-            p = _end(h, members[r], e, pair_kind)
-            if p < 0 or inverse_mass[p] == 0.0:
+            p = _movable_end(h, members[r], e, inverse_mass, pair_kind)
+            if p < 0:
                 continue
             if place[p] < 0:
                 place[p] = n_spheres
                 spheres[n_spheres] = p
                 n_spheres += 1
             start[place[p] + 1] += 1
+    # a row lists the members of its spheres, so the rows hold at most Σ (members of a sphere)²
+    entries = 0
     for sp in range(n_spheres):
+        entries += start[sp + 1] * start[sp + 1]
         start[sp + 1] += start[sp]
     fill = start[:n_spheres].copy()
     of_sphere = np.empty(start[n_spheres], np.int64)  # members of each sphere, in member order
     sign = np.empty(start[n_spheres])  # +1 where the sphere is the member's first, -1 its other
     for r in range(m):
         for e in range(2):
-            p = _end(h, members[r], e, pair_kind)
-            if p < 0 or inverse_mass[p] == 0.0:
+            p = _movable_end(h, members[r], e, inverse_mass, pair_kind)
+            if p < 0:
                 continue
             z = fill[place[p]]
             of_sphere[z] = r
             sign[z] = 1.0 if e == 0 else -1.0
             fill[place[p]] = z + 1
     big = np.zeros((m, m))
-    for r in range(m):
-        c = members[r]
-        for e in range(2):
-            p = _end(h, c, e, pair_kind)
-            if p < 0 or inverse_mass[p] == 0.0:
-                continue
-            sr = 1.0 if e == 0 else -1.0  # the normal points at the first sphere
-            sp = place[p]
-            for z in range(start[sp], start[sp + 1]):
-                d = members[of_sphere[z]]
-                big[r, of_sphere[z]] += inverse_mass[p] * sr * sign[z] * (
-                    h.normal[c, 0] * h.normal[d, 0] + h.normal[c, 1] * h.normal[d, 1] + h.normal[c, 2] * h.normal[d, 2])
-    # each row's nonzeros: the merge of its spheres' member lists (both in member order;
-    # the member itself is in both)
     row_start = np.zeros(m + 1, np.int64)
-    cols = np.empty(start[n_spheres], np.int64)
+    cols = np.empty(entries, np.int64)
     z = 0
     for r in range(m):
+        c = members[r]
         lo0 = hi0 = lo1 = hi1 = 0
-        p = _end(h, members[r], 0, pair_kind)
-        if p >= 0 and inverse_mass[p] > 0.0:
-            lo0, hi0 = start[place[p]], start[place[p] + 1]
-        p = _end(h, members[r], 1, pair_kind)
-        if p >= 0 and inverse_mass[p] > 0.0:
-            lo1, hi1 = start[place[p]], start[place[p] + 1]
+        for e in range(2):
+            p = _movable_end(h, c, e, inverse_mass, pair_kind)
+            if p < 0:
+                continue
+            if e == 0:
+                lo0, hi0 = start[place[p]], start[place[p] + 1]
+            else:
+                lo1, hi1 = start[place[p]], start[place[p] + 1]
+            sr = 1.0 if e == 0 else -1.0  # the normal points at the first sphere
+            for y in range(start[place[p]], start[place[p] + 1]):
+                d = members[of_sphere[y]]
+                big[r, of_sphere[y]] += inverse_mass[p] * sr * sign[y] * (
+                    h.normal[c, 0] * h.normal[d, 0] + h.normal[c, 1] * h.normal[d, 1] + h.normal[c, 2] * h.normal[d, 2])
+        # the row's nonzeros: the merge of its spheres' member lists (both in member order;
+        # the member itself is in both)
         while lo0 < hi0 or lo1 < hi1:
             if lo1 == hi1 or (lo0 < hi0 and of_sphere[lo0] < of_sphere[lo1]):
-                q = of_sphere[lo0]
+                cols[z] = of_sphere[lo0]
                 lo0 += 1
             elif lo0 == hi0 or of_sphere[lo1] < of_sphere[lo0]:
-                q = of_sphere[lo1]
+                cols[z] = of_sphere[lo1]
                 lo1 += 1
             else:  # in both lists: r itself (the diagonal)
-                q = of_sphere[lo0]
+                cols[z] = of_sphere[lo0]
                 lo0 += 1
                 lo1 += 1
-            if z == cols.shape[0]:
-                grown = np.empty(2 * z, np.int64)
-                grown[:z] = cols
-                cols = grown
-            cols[z] = q
             z += 1
         row_start[r + 1] = z
     for sp in range(n_spheres):
