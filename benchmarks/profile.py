@@ -32,6 +32,7 @@ import sys  # noqa: E402
 import time  # noqa: E402
 
 from physdbg.engine.world import warm_up  # noqa: E402
+from physdbg.errors import PhysdbgError  # noqa: E402
 from physdbg.scene import load_scene  # noqa: E402
 
 
@@ -101,8 +102,11 @@ def main() -> None:
     args = parser.parse_args()
     for tool in ("perf", "nm"):
         if shutil.which(tool) is None:
-            sys.exit(f"{tool} is not installed (Debian: apt-get install linux-perf binutils)")
-    scene = load_scene(args.scene, args.overrides)
+            _stop(f"{tool} is not installed (Debian: apt-get install linux-perf binutils)")
+    try:
+        scene = load_scene(args.scene, args.overrides)
+    except PhysdbgError as err:
+        _stop(str(err))
     world = scene.build_world()
     print(f"compiling the kernels afresh (cache {os.environ['NUMBA_CACHE_DIR']}) ...", flush=True)
     print(f"compiled in {warm_up(world.broad_phase.name):.1f} s", flush=True)
@@ -133,8 +137,16 @@ def main() -> None:
         if found and shown < args.top:
             print(f"{found.group(1):>7}%  {readable(found.group(2))}")
             shown += 1
-    shutil.rmtree(os.environ["NUMBA_CACHE_DIR"], ignore_errors=True)
+
+
+def _stop(message: str) -> None:
+    """Say what is wrong in one line and exit 2."""
+    print(f"profile.py: {message}", file=sys.stderr)
+    sys.exit(2)
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    finally:  # the kernels compiled for the profile, and perf's data
+        shutil.rmtree(os.environ["NUMBA_CACHE_DIR"], ignore_errors=True)
