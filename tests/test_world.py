@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from physdbg.engine import energies
+from physdbg.engine.timeline import ROWS
 from physdbg.events import (
     BroadPhaseInfo,
     KIND_PAIR,
@@ -208,6 +209,34 @@ def test_observer_does_not_change_the_run():
         a = watched.step(scene.dt)
         b = alone.step(scene.dt)
         assert a.state_hash == b.state_hash
+
+
+@pytest.mark.parametrize("ordering", ["time", "index"])
+def test_an_unobserved_step_logs_only_the_tests_that_hit(ordering):
+    # The same run, the same count of swept tests; without an observer the test log
+    # keeps only the hits (a dense step runs millions of tests, 95 % misses), and they
+    # are the observed run's hits, in the same order, with the same outcomes.
+    scene = load_scene("rain", ["steps=40", "generate.count=60", f"ordering={ordering}"])
+    obs = ListObserver()
+    watched = scene.build_world(obs)
+    alone = scene.build_world()
+    kept = total = 0
+    for _ in range(scene.steps):
+        a = watched.step(scene.dt)
+        b = alone.step(scene.dt)
+        assert (a.state_hash, a.swept_tests, a.contacts) == (b.state_hash, b.swept_tests, b.contacts)
+        tests = obs.swept_tests[-1]
+        assert len(tests.kind) == a.swept_tests
+        hit = ~np.isnan(tests.toi)
+        rows = int(alone._buf.counters[ROWS])
+        assert rows == int(hit.sum())
+        np.testing.assert_array_equal(alone._buf.test_int[:rows, 1], tests.a[hit])
+        np.testing.assert_array_equal(alone._buf.test_int[:rows, 2], tests.other[hit])
+        np.testing.assert_array_equal(alone._buf.test_float[:rows, 1], tests.toi[hit])
+        np.testing.assert_array_equal(alone._buf.test_outcome[:rows], tests.outcome[hit])
+        kept += rows
+        total += b.swept_tests
+    assert 0 < kept < total / 2
 
 
 def test_events_carry_copies_not_views():

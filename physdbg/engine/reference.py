@@ -22,7 +22,7 @@ import numpy as np
 from ..events import KIND_PAIR, KIND_WALL, OUTCOME_HIT, OUTCOME_SUPERSEDED
 from .resolve import OUT_OF_WORK, SKIPPED
 from .step_context import StepContext
-from .timeline import CONTACTS, EVENTS, TESTS, Buffers, predict_into
+from .timeline import CONTACTS, EVENTS, ROWS, TESTS, Buffers, predict_into
 from .world import World
 
 
@@ -49,7 +49,7 @@ class ReferenceWorld(World):
                              s.contact_tolerance * 1e-3, self._normals, self._offsets, self._half_thickness,
                              self._two_sided, self._period, self.held, scratch.test_int, scratch.test_float,
                              scratch.test_outcome, scratch.heap_toi, scratch.heap_data, scratch.counters, False)
-                m = int(scratch.counters[TESTS])
+                m = int(scratch.counters[ROWS])
                 for row in range(m):
                     toi = float(scratch.test_float[row, 1])
                     if toi <= ctx.dt:
@@ -75,8 +75,9 @@ class ReferenceWorld(World):
         """Log the contact as a swept test (the reference keeps only those it acted on)."""
         buf = self._buf
         buf.ensure(0, 1, 0)
-        row = int(buf.counters[TESTS])
+        row = int(buf.counters[ROWS])
         buf.test_int[row] = (kind, a, other)
         buf.test_float[row] = (ctx.sigma[a], toi)
         buf.test_outcome[row] = outcome
-        buf.counters[TESTS] = row + 1
+        buf.counters[ROWS] = row + 1
+        buf.counters[TESTS] += 1

@@ -81,6 +81,7 @@ from .timeline import (
     REQUERY,
     RESTING_BUDGET,
     TEST_BUDGET,
+    ROWS,
     TESTS,
     Buffers,
     adjacency_from_pairs,
@@ -245,7 +246,8 @@ class World:
     def _narrow_phase(self, ctx: StepContext) -> None:
         """The swept test of every candidate pair and every sphere–wall pair in reach."""
         ctx.version = np.zeros(self.state.count, dtype=np.int64)
-        self._buf.reset()
+        # an unobserved step logs only the tests that hit (Buffers.reset)
+        self._buf.reset(keep_misses=ctx.observer is not None)
         push = self.settings.ordering == "time"
         self._predict(ctx, KIND_PAIR, ctx.pairs[:, 0].copy(), ctx.pairs[:, 1].copy(), push)
         wall_p, wall_w = reachable_walls(ctx.lo, ctx.hi, self._normals, self._offsets, self._half_thickness,
@@ -436,7 +438,7 @@ class World:
         """Every contact predicted at step start, in detection order, nothing re-predicted;
         returns the budget that stopped it (a Settings field name), or None."""
         buf = self._buf
-        count = int(buf.counters[TESTS])
+        count = int(buf.counters[ROWS])
         toi = buf.test_float[:count, 1]
         hits = np.nonzero(toi <= ctx.dt)[0]
         for rid in hits.tolist():
@@ -507,7 +509,7 @@ class World:
 
     def _swept_tests_event(self, ctx: StepContext) -> SweptTests:
         buf = self._buf
-        count = int(buf.counters[TESTS])
+        count = int(buf.counters[ROWS])  # every test: an observed step logs them all
         toi = buf.test_float[:count, 1].copy()
         return SweptTests(ctx.step, buf.test_int[:count, 0].astype(np.int8),
                           buf.test_int[:count, 1].astype(np.int32), buf.test_int[:count, 2].astype(np.int32),
