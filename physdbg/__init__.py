@@ -5,11 +5,13 @@ __version__ = "0.1.0"
 def _engine_cache_dir() -> None:
     """Keep numba's compiled kernels in a folder named by a hash of the engine's sources.
 
-    numba's cache (``cache=True``) is checked per source file, so a compiled function is
-    reused after a function it calls *in another file* changed: the old callee runs. That
+    numba's cache (``cache=True``) keeps each compiled function with the code of the
+    functions it calls, and reuses it after a callee changed: the old callee runs. That
     happened while building physdbg (tests passed on stale kernels that a fresh clone did
-    not have). A folder per version of the engine's sources makes a stale kernel
-    impossible; a NUMBA_CACHE_DIR set by the user is respected.
+    not have; first with a callee in another file, and on 2026-12-02 with numba 0.68 for
+    a callee in the same file). A folder per version of the engine's sources makes a
+    stale kernel impossible. A NUMBA_CACHE_DIR set by the user is respected, and then
+    nothing protects it: whoever sets one while editing the engine must empty it.
     """
     import hashlib
     import os
