@@ -69,7 +69,7 @@ TOP_FIELDS = {
     "max_pairs_per_step": "budget: broad-phase candidate pairs in one step, integer >= 1 (default 10000000)",
     "max_swept_tests_per_step": "budget: swept tests in one step, integer >= 1 (default 10000000)",
     "max_resting_work_per_step": ("budget: held-contact solve updates in one step, "
-                                  "integer >= 1 (default 100000000)"),
+                                  "integer >= 1 (default 1000000000)"),
     "max_memory": "refuse a scene whose estimated memory is more than this many bytes (default 4e9)",
     "max_particle_steps": "refuse a run of more particle-steps (particles × steps) than this (default 1e10)",
     "particles": "array of [[particles]] tables",
