@@ -51,7 +51,7 @@ def _solve(world, contact, solver, target=0.05):
     h.target[contact] = target
     seeds = np.array([contact], np.int64)
     ok = solver(h, v, True, seeds, 1, x, v, a, sigma, world.state.inverse_mass, 0.0, world._integrator, world._drag,
-                world._k, world.last_step.vtol, 10**9, KIND_PAIR, 0.0)
+                world._k, world.last_step.vtol, 10**9, 0.0)
     assert ok
     return v, h, int(h.count[2])
 
@@ -75,7 +75,7 @@ def test_the_direct_solve_finds_what_gauss_seidel_finds_with_a_fraction_of_the_w
         for c in range(held):
             if h.seen[c] != h.count[1]:
                 continue
-            rel = _relative(v_direct, h, c, KIND_PAIR) - h.target[c]
+            rel = _relative(v_direct, h, c) - h.target[c]
             assert rel >= -2 * tol
             if h.jv[c] > 0.0:
                 assert abs(rel) <= 2 * tol
@@ -94,16 +94,16 @@ def test_the_held_store_grows_only_what_ran_out():
     from physdbg.engine.resting import grow_held, held_add, held_find, held_room, new_held
 
     h = new_held(4, capacity=2, per_particle=2)
-    held_add(h, KIND_PAIR, 0, 1, 1.0, 0.0, 0.0, KIND_PAIR)
-    held_add(h, KIND_PAIR, 2, 3, 0.0, 1.0, 0.0, KIND_PAIR)
+    held_add(h, KIND_PAIR, 0, 1, 1.0, 0.0, 0.0)
+    held_add(h, KIND_PAIR, 2, 3, 0.0, 1.0, 0.0)
     assert not held_room(h, 0, 2)  # the store is full; no sphere is
     h = grow_held(h)
     assert (h.kind.shape[0], h.slots.shape[1]) == (4, 2)
-    held_add(h, KIND_PAIR, 0, 2, 0.0, 0.0, 1.0, KIND_PAIR)
+    held_add(h, KIND_PAIR, 0, 2, 0.0, 0.0, 1.0)
     assert not held_room(h, 0, 3)  # sphere 0's list is full; the store is not
     h = grow_held(h)
     assert (h.kind.shape[0], h.slots.shape[1]) == (4, 4)
-    held_add(h, KIND_PAIR, 0, 3, 1.0, 0.0, 0.0, KIND_PAIR)
+    held_add(h, KIND_PAIR, 0, 3, 1.0, 0.0, 0.0)
     # every contact is still found where it was, with its normal
     for c, (a, b) in enumerate([(0, 1), (2, 3), (0, 2), (0, 3)]):
         assert held_find(h, KIND_PAIR, a, b) == c and held_find(h, KIND_PAIR, b, a) == -1
@@ -156,7 +156,7 @@ def _random_store(rng, n_spheres=30, n_contacts=70):
         n /= np.linalg.norm(n)
         while not held_room(h, a, other if kind == KIND_PAIR else -1):
             h = grow_held(h)
-        held_add(h, kind, a, other, n[0], n[1], n[2], KIND_PAIR)
+        held_add(h, kind, a, other, n[0], n[1], n[2])
     return h, inverse_mass
 
 
@@ -194,7 +194,7 @@ def test_the_contact_matrix_is_the_scanned_one_to_the_bit(seed):
     rng = np.random.default_rng(seed)
     h, inverse_mass = _random_store(rng)
     members = rng.permutation(int(h.count[0]))[: int(rng.integers(1, h.count[0] + 1))].astype(np.int64)
-    big, row_start, cols = _contact_matrix(h, members, len(members), inverse_mass, KIND_PAIR)
+    big, row_start, cols = _contact_matrix(h, members, len(members), inverse_mass)
     expected = _scanned_contact_matrix(h, members, inverse_mass)
     assert big.tobytes() == expected.tobytes()
     for r in range(len(members)):  # each row lists its possible nonzeros in column order, and no others

@@ -70,6 +70,16 @@ class LoopWalls(NamedTuple):
     restitution: np.ndarray
     period: np.ndarray
 
+    @classmethod
+    def of(cls, walls) -> LoopWalls:
+        """The group of a scene's walls (state.Walls), as the kernels' contiguous float64
+        (two_sided: bool) arrays."""
+        def floats(values) -> np.ndarray:
+            return np.ascontiguousarray(values, dtype=np.float64)
+        return cls(floats(walls.normals).reshape(-1, 3), floats(walls.offsets), floats(walls.thickness * 0.5),
+                   np.ascontiguousarray(walls.two_sided, dtype=np.bool_), floats(walls.restitution),
+                   floats(walls.period).reshape(3))
+
 
 class LoopCandidates(NamedTuple):
     """The broad phase's answer: CSR partners (adj_start (N+1,), adj), the swept boxes

@@ -17,9 +17,9 @@ resolver and the held-contact solve (resolve.py, resting.py) and the step's othe
 
 from __future__ import annotations
 
-import numpy as np
 
-from ..events import KIND_PAIR, KIND_WALL, OUTCOME_HIT, OUTCOME_SUPERSEDED
+from ..events import OUTCOME_HIT, OUTCOME_SUPERSEDED
+from .colliders import KINDS, PARTNER_IS_SPHERE, every_candidate
 from .resolve import OUT_OF_WORK, SKIPPED
 from .step_context import StepContext
 from .timeline import CONTACTS, EVENTS, ROWS, TESTS, Buffers, predict_into
@@ -32,29 +32,23 @@ class ReferenceWorld(World):
     def _resolve_in_time_order(self, ctx: StepContext) -> str | None:
         st = self.state
         s = self.settings
-        n = st.count
-        nw = len(self.walls)
-        pair_a, pair_b = np.triu_indices(n, 1)
-        pair_a = pair_a.astype(np.int64)
-        pair_b = pair_b.astype(np.int64)
-        wall_p = np.repeat(np.arange(n, dtype=np.int64), nw)
-        wall_w = np.tile(np.arange(nw, dtype=np.int64), n)
-        scratch = Buffers(n, heap=1, tests=max(len(pair_a) + len(wall_p), 1))
+        every = [(kind, *every_candidate(kind, st.count, self._walls_group)) for kind in range(KINDS)]
+        scratch = Buffers(st.count, heap=1, tests=max(sum(len(ia) for _, ia, _ in every), 1))
         while True:
             candidates = []
-            for kind, ia, ib in ((KIND_WALL, wall_p, wall_w), (KIND_PAIR, pair_a, pair_b)):
+            for kind, ia, ib in every:
                 scratch.reset()
                 predict_into(kind, ia, ib, st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma,
                              ctx.version, ctx.dt, self._integrator, self._k, self._detection, s.samples,
-                             s.contact_tolerance * 1e-3, self._normals, self._offsets, self._half_thickness,
-                             self._two_sided, self._period, self.held, scratch.test_int, scratch.test_float,
-                             scratch.test_outcome, scratch.heap_toi, scratch.heap_data, scratch.counters, False)
+                             s.contact_tolerance * 1e-3, self._walls_group, self.held, scratch.test_int,
+                             scratch.test_float, scratch.test_outcome, scratch.heap_toi, scratch.heap_data,
+                             scratch.counters, False)
                 m = int(scratch.counters[ROWS])
                 for row in range(m):
                     toi = float(scratch.test_float[row, 1])
                     if toi <= ctx.dt:
                         k, a, other = (int(c) for c in scratch.test_int[row])
-                        candidates.append((toi, 0 if k == KIND_WALL else 1, a, other, k))
+                        candidates.append((toi, PARTNER_IS_SPHERE[k], a, other, k))
             if not candidates:
                 return None
             toi, _, a, other, kind = self._first(candidates)
@@ -68,7 +62,8 @@ class ReferenceWorld(World):
 
     @staticmethod
     def _first(candidates: list[tuple]) -> tuple:
-        """The contact to resolve next: the earliest (ties: walls first, then by index)."""
+        """The contact to resolve next: the earliest (ties: immovable partners such as walls
+        first, then by index)."""
         return min(candidates)
 
     def _record_outcome(self, ctx: StepContext, kind: int, a: int, other: int, toi: float, outcome: int) -> None:

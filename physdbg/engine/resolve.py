@@ -29,10 +29,10 @@ import math
 
 import numpy as np
 
-from ..events import HOW_IMPULSE, HOW_RAPID, HOW_RESTING, HOW_WITH_HELD, KIND_PAIR
+from ..events import HOW_IMPULSE, HOW_RAPID, HOW_RESTING, HOW_WITH_HELD
+from .colliders import contact_gap, contact_normal, partner_restitution, partner_sphere
 from .jit import borrowing, kernel
 from .motion import advance_particle
-from .periodic import image
 from .resting import (
     begin_solve,
     contacts_of,
@@ -49,7 +49,6 @@ from .resting import (
     touch,
     velocity_scale,
 )
-from .toi import wall_gap_terms
 
 RESTITUTION_RULES = ("min", "max", "product", "mean")
 
@@ -84,32 +83,6 @@ def seed_impulse(closing, restitution, inverse_mass_sum):
     return (1.0 + restitution) * closing / inverse_mass_sum
 
 
-@borrowing
-def pair_separation(x, ia, ib, period):
-    """Centre of a minus centre of b (3 floats, m) at the anchors, through the minimum
-    image on periodic axes (period (3,), 0 = not periodic), and its length."""
-    d0 = image(x[ia, 0] - x[ib, 0], period[0])
-    d1 = image(x[ia, 1] - x[ib, 1], period[1])
-    d2 = image(x[ia, 2] - x[ib, 2], period[2])
-    return d0, d1, d2, math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-
-
-@borrowing
-def contact_normal(x, ia, ib, other, normals, offsets, two_sided, period):
-    """Unit normal (3 floats) from b (or the wall) to a at the anchors; coincident centres give +x."""
-    if ib >= 0:
-        d0, d1, d2, length = pair_separation(x, ia, ib, period)
-        if length == 0.0:
-            return 1.0, 0.0, 0.0
-        return d0 / length, d1 / length, d2 / length
-    nx = normals[other, 0]
-    ny = normals[other, 1]
-    nz = normals[other, 2]
-    if two_sided[other] and nx * x[ia, 0] + ny * x[ia, 1] + nz * x[ia, 2] - offsets[other] < 0.0:
-        return -nx, -ny, -nz
-    return nx, ny, nz
-
-
 @kernel
 def resolve_contact(kind, ia, other, toi, particles, method, walls, h, contacts, counters, contacts_slot, rapid_slot,
                     changed, work_budget):
@@ -129,21 +102,16 @@ def resolve_contact(kind, ia, other, toi, particles, method, walls, h, contacts,
     x, v, a, acc, radius, inverse_mass, restitution, sigma, _version, last_contact = particles
     (run_time, step_end, integrator, drag, k, _detection, _samples, _tolerance, rest_fraction, rest_step_factor, rule,
      rapid_time, anchor_is_flow, path_follows_acc, vtol, atol) = method
-    normals, offsets, _half_thickness, two_sided, wall_restitution, period = walls
-    ib = other if kind == KIND_PAIR else -1
+    ib = partner_sphere(kind, other)
     changed[0] = 0
     advance_particle(x, v, a, sigma, ia, toi, integrator, drag, k)
     if ib >= 0:
         advance_particle(x, v, a, sigma, ib, toi, integrator, drag, k)
-    nx, ny, nz = contact_normal(x, ia, ib, other, normals, offsets, two_sided, period)
+    nx, ny, nz = contact_normal(kind, x, ia, other, walls)
     closing = -relative_normal(v, ia, ib, nx, ny, nz)
     rel_acc = relative_normal(acc, ia, ib, nx, ny, nz)
-    if ib >= 0:
-        e = combine(rule, restitution[ia], restitution[ib])
-        wsum = inverse_mass[ia] + inverse_mass[ib]
-    else:
-        e = combine(rule, restitution[ia], wall_restitution[other])
-        wsum = inverse_mass[ia]
+    e = combine(rule, restitution[ia], partner_restitution(kind, other, restitution, walls))
+    wsum = inverse_mass[ia] + inverse_mass[ib] if ib >= 0 else inverse_mass[ia]
     # (the velocities' rounding counts only on paths that are the flow: there a contact
     # judged no approach is not predicted again, while on Euler paths it is, at once, by a
     # narrow phase that knows nothing of rounding: see pressed_closing)
@@ -220,7 +188,7 @@ def _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, target, hold, x, v, a
         touch(h, ib, x, v, a, sigma, toi, integrator, drag, k, solve)
     c0 = held_find(h, kind, ia, other)
     if c0 < 0:
-        c0 = held_add(h, kind, ia, other, nx, ny, nz, KIND_PAIR)
+        c0 = held_add(h, kind, ia, other, nx, ny, nz)
     else:
         h.normal[c0, 0] = nx
         h.normal[c0, 1] = ny
@@ -228,14 +196,14 @@ def _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, target, hold, x, v, a
     h.target[c0] = target
     seeds = np.full(1, c0, np.int64)
     ok = solve_contacts(h, v, True, seeds, 1, x, v, a, sigma, inverse_mass, toi, integrator, drag, k, vtol,
-                        work_budget, KIND_PAIR, stick)
+                        work_budget, stick)
     j = h.jv[c0]
     h.target[c0] = 0.0
     if not hold:
         if h.lam[c0] != 0.0:
             push_along(acc, inverse_mass, ia, ib, h.normal[c0, 0], h.normal[c0, 1], h.normal[c0, 2], -h.lam[c0])
-        held_remove(h, c0, KIND_PAIR)
-    release_loose(h, v, acc, inverse_mass, True, x, a, sigma, toi, integrator, drag, k, KIND_PAIR, vtol, atol, stick)
+        held_remove(h, c0)
+    release_loose(h, v, acc, inverse_mass, True, x, a, sigma, toi, integrator, drag, k, vtol, atol, stick)
     if ok:
         ok = _solve_accelerations(h, x, v, a, acc, inverse_mass, sigma, toi, integrator, drag, k, work_budget, vtol,
                                   atol, stick)
@@ -271,9 +239,9 @@ def _solve_accelerations(h, x, v, a, acc, inverse_mass, sigma, when, integrator,
         seeds = np.empty(max(h.count[0], 1), np.int64)
         m = contacts_of(h, touched, touched.shape[0], seeds)
         if not solve_contacts(h, acc, False, seeds, m, x, v, a, sigma, inverse_mass, when, integrator, drag, k, atol,
-                              work_budget, KIND_PAIR, 0.0):
+                              work_budget, 0.0):
             return False
-        if release_loose(h, v, acc, inverse_mass, True, x, a, sigma, when, integrator, drag, k, KIND_PAIR, vtol,
+        if release_loose(h, v, acc, inverse_mass, True, x, a, sigma, when, integrator, drag, k, vtol,
                          atol, stick) == 0:
             return True
 
@@ -293,8 +261,7 @@ def _visit_all(h, v) -> None:
 
 @kernel
 def settle_held(h, x, v, a, acc, free_accel, radius, inverse_mass, sigma, dt, integrator, drag, k,
-                semi_implicit, normals, offsets, half_thickness, two_sided, period, contact_tolerance, work_budget,
-                vtol, atol, stick) -> bool:
+                semi_implicit, walls, contact_tolerance, work_budget, vtol, atol, stick) -> bool:
     """The forces phase of a step, for held contacts (all anchors at the step start).
 
     Releases contacts whose gap exceeds the contact tolerance, refreshes pair normals,
@@ -307,20 +274,13 @@ def settle_held(h, x, v, a, acc, free_accel, radius, inverse_mass, sigma, dt, in
     n = x.shape[0]
     c = 0
     while c < h.count[0]:
-        i = h.a[c]
-        if h.kind[c] == KIND_PAIR:
-            j = h.other[c]
-            d0, d1, d2, length = pair_separation(x, i, j, period)
-            gap = length - radius[i] - radius[j]
-            if length > 0.0:
-                h.normal[c, 0] = d0 / length
-                h.normal[c, 1] = d1 / length
-                h.normal[c, 2] = d2 / length
-        else:
-            w = h.other[c]
-            gap = wall_gap_terms(x, v, a, radius, i, normals[w], offsets[w], half_thickness[w], two_sided[w])[0]
+        gap, n0, n1, n2, renewed = contact_gap(h.kind[c], x, v, a, radius, h.a[c], h.other[c], walls)
+        if renewed:
+            h.normal[c, 0] = n0
+            h.normal[c, 1] = n1
+            h.normal[c, 2] = n2
         if gap > contact_tolerance:
-            held_remove(h, c, KIND_PAIR)
+            held_remove(h, c)
         else:
             c += 1
     for i in range(n):
@@ -328,7 +288,7 @@ def settle_held(h, x, v, a, acc, free_accel, radius, inverse_mass, sigma, dt, in
             acc[i, d] = free_accel[i, d]
     for c in range(h.count[0]):
         if h.lam[c] != 0.0:
-            push_along(acc, inverse_mass, h.a[c], h.other[c] if h.kind[c] == KIND_PAIR else -1, h.normal[c, 0],
+            push_along(acc, inverse_mass, h.a[c], partner_sphere(h.kind[c], h.other[c]), h.normal[c, 0],
                        h.normal[c, 1], h.normal[c, 2], h.lam[c])
     _visit_all(h, v)
     ok = _solve_accelerations(h, x, v, a, acc, inverse_mass, sigma, 0.0, integrator, drag, k, work_budget, math.inf,
@@ -344,8 +304,8 @@ def settle_held(h, x, v, a, acc, free_accel, radius, inverse_mass, sigma, dt, in
         _visit_all(h, v)  # a new solve: the impulses jv start from 0
         seeds = np.arange(h.count[0]).astype(np.int64)
         ok = solve_contacts(h, v, True, seeds, h.count[0], x, v, a, sigma, inverse_mass, 0.0, integrator, drag, k,
-                            vtol, work_budget, KIND_PAIR, stick)
-        if ok and release_loose(h, v, acc, inverse_mass, False, x, a, sigma, 0.0, integrator, drag, k, KIND_PAIR,
+                            vtol, work_budget, stick)
+        if ok and release_loose(h, v, acc, inverse_mass, False, x, a, sigma, 0.0, integrator, drag, k,
                                 vtol, math.inf, stick) > 0:
             ok = _solve_accelerations(h, x, v, a, acc, inverse_mass, sigma, 0.0, integrator, drag, k, work_budget,
                                       vtol, atol, stick)

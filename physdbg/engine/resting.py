@@ -54,6 +54,7 @@ from typing import NamedTuple
 
 from .bound_qp import solve_bound_qp
 from .jit import borrowing, kernel
+from .colliders.kinds import partner_sphere
 from .motion import advance_particle
 
 
@@ -131,8 +132,9 @@ def pressed_closing(closing: float, rel_acc: float, dt: float, scale: float) -> 
 class HeldContacts(NamedTuple):
     """The held contacts of a world, as arrays (capacity C, N spheres, K per sphere).
 
-    kind, a, other: (C,) int64 — KIND_PAIR with a < other, or KIND_WALL with other = wall;
-    normal: (C, 3) unit, from other to a (walls: towards a's side); lam: (C,) acceleration
+    kind, a, other: (C,) int64 — a contact as colliders names it: sphere pairs with a < other,
+    or sphere a against an immovable partner (a wall); normal: (C, 3) unit, from other to a
+    (walls: towards a's side); lam: (C,) acceleration
     multiplier (N: the contact force; kept between steps as the warm start);
     jv: (C,) impulse of the current velocity solve (N·s); target: (C,) separation speed the
     velocity solve must reach (m/s; 0 for held contacts); seen: (C,) int64 id of the last
@@ -222,7 +224,7 @@ def held_find(h, kind, a, other) -> int:
 
 
 @borrowing
-def held_add(h, kind, a, other, nx, ny, nz, pair_kind) -> int:
+def held_add(h, kind, a, other, nx, ny, nz) -> int:
     """Hold contact (kind, a, other) with normal n; returns its id (room checked by held_room)."""
     c = h.count[0]
     h.kind[c] = kind
@@ -238,7 +240,7 @@ def held_add(h, kind, a, other, nx, ny, nz, pair_kind) -> int:
     h.count[0] = c + 1
     h.slots[a, h.deg[a]] = c
     h.deg[a] += 1
-    if kind == pair_kind:
+    if partner_sphere(kind, other) >= 0:
         h.slots[other, h.deg[other]] = c
         h.deg[other] += 1
     return c
@@ -262,15 +264,15 @@ def _relist(h, p, old, new):
 
 
 @borrowing
-def held_remove(h, c, pair_kind) -> None:
+def held_remove(h, c) -> None:
     """Release contact c (the last contact takes its id)."""
     _unlist(h, h.a[c], c)
-    if h.kind[c] == pair_kind:
+    if partner_sphere(h.kind[c], h.other[c]) >= 0:
         _unlist(h, h.other[c], c)
     last = h.count[0] - 1
     if c != last:
         _relist(h, h.a[last], last, c)
-        if h.kind[last] == pair_kind:
+        if partner_sphere(h.kind[last], h.other[last]) >= 0:
             _relist(h, h.other[last], last, c)
         h.kind[c] = h.kind[last]
         h.a[c] = h.a[last]
@@ -325,8 +327,8 @@ def relative_normal(values, i, j, nx, ny, nz) -> float:
 
 
 @borrowing
-def _relative(values, h, c, pair_kind) -> float:
-    return relative_normal(values, h.a[c], h.other[c] if h.kind[c] == pair_kind else -1, h.normal[c, 0],
+def _relative(values, h, c) -> float:
+    return relative_normal(values, h.a[c], partner_sphere(h.kind[c], h.other[c]), h.normal[c, 0],
                            h.normal[c, 1], h.normal[c, 2])
 
 
@@ -347,7 +349,7 @@ def push_along(values, inverse_mass, i, j, nx, ny, nz, amount) -> None:
 
 @kernel
 def solve_contacts(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
-                   k, tolerance, budget, pair_kind, stick) -> bool:
+                   k, tolerance, budget, stick) -> bool:
     """Solve the held contacts reachable from ``seeds[:n_seeds]`` (arguments as in
     :func:`_gauss_seidel`): exactly on the small cluster the change reaches
     (:func:`_solve_cluster`), then a Gauss–Seidel pass over that cluster that confirms it.
@@ -368,29 +370,29 @@ def solve_contacts(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
     (docs/benchmarks.md); 192 is kept.
     """
     m = _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
-                       k, tolerance, budget, pair_kind, stick)
+                       k, tolerance, budget, stick)
     if m > 0:
         return _gauss_seidel(h, values, is_velocity, h.queue[:m].copy(), m, x, v, a, sigma, inverse_mass, when,
-                             integrator, drag, k, tolerance, budget, pair_kind, stick)
+                             integrator, drag, k, tolerance, budget, stick)
     if m < 0:  # nothing violated: one pass confirms it
         return _gauss_seidel(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator,
-                             drag, k, tolerance, budget, pair_kind, stick)
+                             drag, k, tolerance, budget, stick)
     # too large to solve directly: Gauss–Seidel while the change stays local, and where it
     # does not, the whole connected cluster by conjugate gradients (bound_qp.py)
     local = min(budget, h.count[2] + max(LOCAL_SWEEP_WORK, 8 * n_seeds))
     if _gauss_seidel(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
-                     k, tolerance, local, pair_kind, stick):
+                     k, tolerance, local, stick):
         return True
     if h.count[2] >= budget:
         return False
     m = _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator,
-                         drag, k, tolerance, budget, pair_kind, stick)
+                         drag, k, tolerance, budget, stick)
     # confirmed from the contacts it changed and the seeds (a contact is queued once)
     confirm = np.empty(m + n_seeds, np.int64)
     confirm[:m] = h.queue[:m]
     confirm[m:] = seeds[:n_seeds]
     return _gauss_seidel(h, values, is_velocity, confirm, m + n_seeds, x, v, a, sigma, inverse_mass, when,
-                         integrator, drag, k, tolerance, budget, pair_kind, stick)
+                         integrator, drag, k, tolerance, budget, stick)
 
 
 # The Gauss–Seidel updates a solve too large to solve directly may spend before the whole
@@ -401,7 +403,7 @@ LOCAL_SWEEP_WORK = 1024
 
 @kernel
 def _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
-                     k, tolerance, budget, pair_kind, stick) -> int:
+                     k, tolerance, budget, stick) -> int:
     """Solve every held contact connected to ``seeds[:n_seeds]`` (through movable spheres)
     by MPRGP (bound_qp.py), from the multipliers the solve has reached so far; a contact
     takes the answer where it moves its relative value by more than ``tolerance``. Leaves
@@ -422,7 +424,7 @@ def _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inv
         c = members[head]
         head += 1
         for e in range(2):
-            p = _end(h, c, e, pair_kind)
+            p = _end(h, c, e)
             if p < 0:
                 continue
             touch(h, p, x, v, a, sigma, when, integrator, drag, k, solve)
@@ -445,7 +447,7 @@ def _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inv
     for r in range(m):
         c = members[r]
         for e in range(2):
-            p = _movable_end(h, c, e, inverse_mass, pair_kind)
+            p = _movable_end(h, c, e, inverse_mass)
             local = -1
             if p >= 0:
                 if place[p] < 0:
@@ -472,7 +474,7 @@ def _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inv
         current, low, target = _bounds(h, c, is_velocity, stick, solve, True)
         start[q] = current
         lower[q] = low
-        grad[q] = _relative(values, h, c, pair_kind) - target
+        grad[q] = _relative(values, h, c) - target
         for d in range(3):
             normal[q, d] = h.normal[c, d]
     room = max((budget - h.count[2]) // max(n, 1), 0)
@@ -493,7 +495,7 @@ def _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inv
         wsum = (weight[end_a[q]] if end_a[q] >= 0 else 0.0) + (weight[end_b[q]] if end_b[q] >= 0 else 0.0)
         if abs(delta) * wsum <= tolerance:
             continue
-        push_along(values, inverse_mass, h.a[c], h.other[c] if h.kind[c] == pair_kind else -1, h.normal[c, 0],
+        push_along(values, inverse_mass, h.a[c], partner_sphere(h.kind[c], h.other[c]), h.normal[c, 0],
                    h.normal[c, 1], h.normal[c, 2], delta)
         if is_velocity:
             h.jv[c] = answer[q]
@@ -530,7 +532,7 @@ def _bounds(h, c, is_velocity, stick, solve, joined):
 
 @kernel
 def _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
-                   k, tolerance, budget, pair_kind, stick) -> int:
+                   k, tolerance, budget, stick) -> int:
     """The direct solve. The cluster starts from the seeds that are violated (a
     Gauss–Seidel update of one would exceed ``tolerance``) and every held contact of their
     spheres; its linear complementarity problem is solved exactly (:func:`_direct`), and
@@ -551,7 +553,7 @@ def _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
     for s in range(n_seeds):
         c = seeds[s]
         if h.seen[c] != inside and _violated(h, values, c, is_velocity, x, v, a, sigma, inverse_mass, when,
-                                             integrator, drag, k, tolerance, pair_kind, stick, solve):
+                                             integrator, drag, k, tolerance, stick, solve):
             if m == MAX_DIRECT:
                 _leave_cluster(h, members, m, solve)
                 return 0
@@ -570,30 +572,30 @@ def _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
     for _ in range(MAX_GROWTH):
         # with every held contact of the new members' spheres (they share the change)
         grown, fits = _add_neighbours(h, values, members, first, m, False, is_velocity, x, v, a, sigma,
-                                      inverse_mass, when, integrator, drag, k, tolerance, pair_kind, stick, solve)
+                                      inverse_mass, when, integrator, drag, k, tolerance, stick, solve)
         m = grown
         if not fits or h.count[2] + m >= budget:
             return _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, solve)
         for r in range(first, m):
             c = members[r]
             touch(h, h.a[c], x, v, a, sigma, when, integrator, drag, k, solve)
-            if h.kind[c] == pair_kind:
+            if partner_sphere(h.kind[c], h.other[c]) >= 0:
                 touch(h, h.other[c], x, v, a, sigma, when, integrator, drag, k, solve)
         for r in range(saved, m):
             c = members[r]
             undo_x[r] = h.jv[c] if is_velocity else h.lam[c]
             for e in range(2):
-                p = _end(h, c, e, pair_kind)
+                p = _end(h, c, e)
                 undo_p[2 * r + e] = p
                 if p >= 0:
                     for d in range(3):
                         undo_v[2 * r + e, d] = values[p, d]
         saved = m
         h.count[2] += m
-        if not _direct(h, values, is_velocity, members, m, inverse_mass, pair_kind, stick, solve, tolerance):
+        if not _direct(h, values, is_velocity, members, m, inverse_mass, stick, solve, tolerance):
             return _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, solve)
         grown, fits = _add_neighbours(h, values, members, 0, m, True, is_velocity, x, v, a, sigma, inverse_mass,
-                                      when, integrator, drag, k, tolerance, pair_kind, stick, solve)
+                                      when, integrator, drag, k, tolerance, stick, solve)
         if not fits:
             return _give_up(h, values, members, grown, saved, undo_x, undo_p, undo_v, is_velocity, solve)
         if grown == m:
@@ -622,16 +624,16 @@ def _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, 
 
 
 @borrowing
-def _end(h, c, e, pair_kind) -> int:
+def _end(h, c, e) -> int:
     """The sphere at end e of contact c: 0 its first sphere, 1 its other (-1 for a wall)."""
     if e == 0:
         return h.a[c]
-    return h.other[c] if h.kind[c] == pair_kind else -1
+    return partner_sphere(h.kind[c], h.other[c])
 
 
 @borrowing
 def _add_neighbours(h, values, members, first, m, violated_only, is_velocity, x, v, a, sigma, inverse_mass, when,
-                    integrator, drag, k, tolerance, pair_kind, stick, solve):
+                    integrator, drag, k, tolerance, stick, solve):
     """Add to the cluster ``members[:m]`` the held contacts of the spheres of
     ``members[first:m]`` — every one, or (violated_only) those a Gauss–Seidel update would
     move by more than ``tolerance``; returns the new count and whether all fitted in
@@ -641,14 +643,14 @@ def _add_neighbours(h, values, members, first, m, violated_only, is_velocity, x,
     for r in range(first, m):
         c = members[r]
         for e in range(2):
-            p = _end(h, c, e, pair_kind)
+            p = _end(h, c, e)
             if p < 0:
                 continue
             for t in range(h.deg[p]):
                 d = h.slots[p, t]
                 if h.seen[d] == inside or (violated_only and not _violated(
                         h, values, d, is_velocity, x, v, a, sigma, inverse_mass, when, integrator, drag, k,
-                        tolerance, pair_kind, stick, solve)):
+                        tolerance, stick, solve)):
                     continue
                 if count == MAX_DIRECT:
                     return count, False
@@ -659,9 +661,9 @@ def _add_neighbours(h, values, members, first, m, violated_only, is_velocity, x,
 
 
 @borrowing
-def _movable_end(h, c, e, inverse_mass, pair_kind) -> int:
+def _movable_end(h, c, e, inverse_mass) -> int:
     """The sphere at end e of contact c if it can move (a sphere with inverse mass > 0), else -1."""
-    p = _end(h, c, e, pair_kind)
+    p = _end(h, c, e)
     return p if p >= 0 and inverse_mass[p] > 0.0 else -1
 
 
@@ -676,12 +678,11 @@ def _join(h, c, is_velocity, solve) -> None:
 
 
 @borrowing
-def _violated(h, values, c, is_velocity, x, v, a, sigma, inverse_mass, when, integrator, drag, k, tolerance,
-              pair_kind, stick, solve) -> bool:
+def _violated(h, values, c, is_velocity, x, v, a, sigma, inverse_mass, when, integrator, drag, k, tolerance, stick, solve) -> bool:
     """Whether a Gauss–Seidel update of contact c would exceed ``tolerance`` (its spheres
     are brought to ``when`` first)."""
     i = h.a[c]
-    j = h.other[c] if h.kind[c] == pair_kind else -1
+    j = partner_sphere(h.kind[c], h.other[c])
     wsum = inverse_mass[i] + (inverse_mass[j] if j >= 0 else 0.0)
     if wsum == 0.0:
         return False
@@ -689,7 +690,7 @@ def _violated(h, values, c, is_velocity, x, v, a, sigma, inverse_mass, when, int
     if j >= 0:
         touch(h, j, x, v, a, sigma, when, integrator, drag, k, solve)
     current, lower, target = _bounds(h, c, is_velocity, stick, solve, False)
-    new = max(current + (target - _relative(values, h, c, pair_kind)) / wsum, lower)
+    new = max(current + (target - _relative(values, h, c)) / wsum, lower)
     return abs(new - current) * wsum > tolerance
 
 
@@ -701,7 +702,7 @@ def _leave_cluster(h, members, m, solve) -> None:
 
 
 @kernel
-def _direct(h, values, is_velocity, members, m, inverse_mass, pair_kind, stick, solve, tolerance) -> bool:
+def _direct(h, values, is_velocity, members, m, inverse_mass, stick, solve, tolerance) -> bool:
     """Solve the complementarity problem of contacts ``members[:m]`` exactly, the others fixed.
 
     Unknowns x (impulses jv, or multipliers lam) with x >= lower; the relative normal
@@ -723,11 +724,11 @@ def _direct(h, values, is_velocity, members, m, inverse_mass, pair_kind, stick, 
         x0[r] = cur
         lower[r] = lo
         # rel(x) = target  <=>  K x = target - rel0 + K x0
-        rhs[r] = tgt - _relative(values, h, c, pair_kind)
+        rhs[r] = tgt - _relative(values, h, c)
         i = h.a[c]
-        j = h.other[c] if h.kind[c] == pair_kind else -1
+        j = partner_sphere(h.kind[c], h.other[c])
         wsum[r] = inverse_mass[i] + (inverse_mass[j] if j >= 0 else 0.0)
-    big, row_start, cols = _contact_matrix(h, members, m, inverse_mass, pair_kind)
+    big, row_start, cols = _contact_matrix(h, members, m, inverse_mass)
     for r in range(m):
         rhs[r] += _dot_row(big, r, x0, row_start, cols)
     ridge = 0.0
@@ -777,7 +778,7 @@ def _direct(h, values, is_velocity, members, m, inverse_mass, pair_kind, stick, 
                 delta = new - x0[r]
                 if delta != 0.0:
                     i = h.a[c]
-                    j = h.other[c] if h.kind[c] == pair_kind else -1
+                    j = partner_sphere(h.kind[c], h.other[c])
                     push_along(values, inverse_mass, i, j, h.normal[c, 0], h.normal[c, 1], h.normal[c, 2], delta)
                 if is_velocity:
                     h.jv[c] = new
@@ -820,7 +821,7 @@ def _dot_row(big, r, xs, row_start, cols) -> float:
 
 
 @kernel
-def _contact_matrix(h, members, m, inverse_mass, pair_kind):
+def _contact_matrix(h, members, m, inverse_mass):
     """K = J W Jᵀ of contacts ``members[:m]`` (m, m) dense, and where it can be nonzero by
     row: (row_start (m + 1,), cols) in column order (an entry whose two normals happen to
     be perpendicular is listed and is 0).
@@ -836,7 +837,7 @@ def _contact_matrix(h, members, m, inverse_mass, pair_kind):
     start = np.zeros(2 * m + 1, np.int64)
     for r in range(m):
         for e in range(2):
-            p = _movable_end(h, members[r], e, inverse_mass, pair_kind)
+            p = _movable_end(h, members[r], e, inverse_mass)
             if p < 0:
                 continue
             if place[p] < 0:
@@ -854,7 +855,7 @@ def _contact_matrix(h, members, m, inverse_mass, pair_kind):
     sign = np.empty(start[n_spheres])  # +1 where the sphere is the member's first, -1 its other
     for r in range(m):
         for e in range(2):
-            p = _movable_end(h, members[r], e, inverse_mass, pair_kind)
+            p = _movable_end(h, members[r], e, inverse_mass)
             if p < 0:
                 continue
             z = fill[place[p]]
@@ -869,7 +870,7 @@ def _contact_matrix(h, members, m, inverse_mass, pair_kind):
         c = members[r]
         lo0 = hi0 = lo1 = hi1 = 0
         for e in range(2):
-            p = _movable_end(h, c, e, inverse_mass, pair_kind)
+            p = _movable_end(h, c, e, inverse_mass)
             if p < 0:
                 continue
             if e == 0:
@@ -954,7 +955,7 @@ def _cholesky_solve(big, idx, n, ridge, work, xs, nonzero) -> bool:
 
 @borrowing
 def _gauss_seidel(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
-                  k, tolerance, budget, pair_kind, stick) -> bool:
+                  k, tolerance, budget, stick) -> bool:
     """Projected Gauss–Seidel over the held contacts reachable from ``seeds[:n_seeds]``.
 
     values: (N, 3) velocities (is_velocity: impulses jv, each contact ending with
@@ -991,14 +992,14 @@ def _gauss_seidel(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, invers
             return False
         h.count[2] += 1
         i = h.a[c]
-        j = h.other[c] if h.kind[c] == pair_kind else -1
+        j = partner_sphere(h.kind[c], h.other[c])
         wsum = inverse_mass[i] + (inverse_mass[j] if j >= 0 else 0.0)
         if wsum == 0.0:
             continue
         touch(h, i, x, v, a, sigma, when, integrator, drag, k, solve)
         if j >= 0:
             touch(h, j, x, v, a, sigma, when, integrator, drag, k, solve)
-        rel = _relative(values, h, c, pair_kind)
+        rel = _relative(values, h, c)
         if is_velocity:
             new = max(h.jv[c] + (h.target[c] - rel) / wsum, -h.lam[c] * stick)
             delta = new - h.jv[c]
@@ -1033,7 +1034,7 @@ def _gauss_seidel(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, invers
 
 
 @borrowing
-def release_loose(h, v, acc, inverse_mass, touched_only, x, a, sigma, when, integrator, drag, k, pair_kind,
+def release_loose(h, v, acc, inverse_mass, touched_only, x, a, sigma, when, integrator, drag, k,
                   vtol, atol, stick) -> int:
     """Release held contacts that separate or that no force holds while the accelerations
     pull them apart (lam = 0, relative normal acceleration > atol).
@@ -1052,7 +1053,7 @@ def release_loose(h, v, acc, inverse_mass, touched_only, x, a, sigma, when, inte
     if not touched_only:
         c = 0
         while c < h.count[0]:
-            if _release_if_loose(h, c, v, acc, inverse_mass, x, a, sigma, when, integrator, drag, k, pair_kind,
+            if _release_if_loose(h, c, v, acc, inverse_mass, x, a, sigma, when, integrator, drag, k,
                                  vtol, atol, stick):
                 released += 1  # the last contact took id c
             else:
@@ -1064,8 +1065,7 @@ def release_loose(h, v, acc, inverse_mass, touched_only, x, a, sigma, when, inte
         visited += 1
         s = 0
         while s < h.deg[p]:
-            if _release_if_loose(h, h.slots[p, s], v, acc, inverse_mass, x, a, sigma, when, integrator, drag, k,
-                                 pair_kind, vtol, atol, stick):
+            if _release_if_loose(h, h.slots[p, s], v, acc, inverse_mass, x, a, sigma, when, integrator, drag, k, vtol, atol, stick):
                 released += 1  # p's last listed contact took slot s
             else:
                 s += 1
@@ -1073,18 +1073,18 @@ def release_loose(h, v, acc, inverse_mass, touched_only, x, a, sigma, when, inte
 
 
 @borrowing
-def _release_if_loose(h, c, v, acc, inverse_mass, x, a, sigma, when, integrator, drag, k, pair_kind, vtol, atol,
+def _release_if_loose(h, c, v, acc, inverse_mass, x, a, sigma, when, integrator, drag, k, vtol, atol,
                       stick) -> bool:
     """Release held contact c if it is loose (release_loose); whether it was."""
     solve = h.count[1]
     i = h.a[c]
-    j = h.other[c] if h.kind[c] == pair_kind else -1
-    rel_v = _relative(v, h, c, pair_kind)
+    j = partner_sphere(h.kind[c], h.other[c])
+    rel_v = _relative(v, h, c)
     wsum = inverse_mass[i] + (inverse_mass[j] if j >= 0 else 0.0)
     separating = rel_v > SEPARATION_FACTOR * vtol + h.lam[c] * wsum * stick
     # pulled apart, and not approaching by even a rounding error (released, such a
     # contact would be found again at once)
-    pulled = h.lam[c] == 0.0 and rel_v >= 0.0 and _relative(acc, h, c, pair_kind) > atol
+    pulled = h.lam[c] == 0.0 and rel_v >= 0.0 and _relative(acc, h, c) > atol
     if not (separating or pulled):
         return False
     # a released contact was never swept-tested while held: its spheres must be
@@ -1096,7 +1096,7 @@ def _release_if_loose(h, c, v, acc, inverse_mass, x, a, sigma, when, integrator,
         h.renew[j] = solve
     if h.lam[c] != 0.0:
         push_along(acc, inverse_mass, i, j, h.normal[c, 0], h.normal[c, 1], h.normal[c, 2], -h.lam[c])
-    held_remove(h, c, pair_kind)
+    held_remove(h, c)
     return True
 
 

@@ -26,28 +26,17 @@ Python handles it and calls ``run_time_order`` again, which carries on where it 
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 from numba import njit
 
-from ..events import CONTACT_ROW, KIND_PAIR, KIND_WALL, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_SUPERSEDED
-from .broadphase.boxes import box_misses
+from ..events import CONTACT_ROW, OUTCOME_CAPPED, OUTCOME_MISS, OUTCOME_SUPERSEDED, OUTCOME_HIT
+from .colliders import KINDS, partner_sphere, partners_of, time_of_impact
 from .jit import borrowing, kernel
 from .kernel_args import LoopBuffers
-from .motion import particle_box, path_acceleration_weight, path_coefficients
-from .periodic import image
-from .resolve import OUT_OF_WORK, SKIPPED, pair_separation, resolve_contact
+from .motion import particle_box
+from .resolve import OUT_OF_WORK, SKIPPED, resolve_contact
 from .resting import held_find, held_room
-from .toi import (
-    DISCRETE,
-    SWEPT,
-    pair_toi_sampled_scalar,
-    pair_toi_swept_scalar,
-    wall_gap_terms,
-    wall_toi_sampled,
-    wall_toi_swept,
-)
 
 # statuses
 DONE = 0
@@ -205,118 +194,55 @@ def _record(kind, i, j, start, t, step_end, version, test_int, test_float, test_
     test_outcome[rid] = OUTCOME_MISS
     counters[ROWS] = rid + 1
     if push and hit:
-        heap_push(heap_toi, heap_data, counters, start + t, rid, kind, i, j, version[i],
-                  version[j] if kind == KIND_PAIR else 0)
+        b = partner_sphere(kind, j)
+        heap_push(heap_toi, heap_data, counters, start + t, rid, kind, i, j, version[i], version[b] if b >= 0 else 0)
 
 
 @njit(cache=True, inline="always")
-def _predict_pair(i, j, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, tolerance,
-                  period, held, test_int, test_float, test_outcome, heap_toi, heap_data, counters, push):
-    """Swept test of pair (i, j) (i < j) from the later of their anchors; record it, push a
-    hit. A held pair is not tested."""
-    if held.deg[i] > 0 and held.deg[j] > 0 and held_find(held, KIND_PAIR, i, j) >= 0:
+def _predict(kind, ia, other, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
+             tolerance, walls, held, test_int, test_float, test_outcome, heap_toi, heap_data, counters, push):
+    """Swept test of (kind, ia, other) (pairs: ia < other) from the anchors; record it,
+    push a hit. A held contact is not tested."""
+    b = partner_sphere(kind, other)
+    if held.deg[ia] > 0 and (b < 0 or held.deg[b] > 0) and held_find(held, kind, ia, other) >= 0:
         return
-    start = max(sigma[i], sigma[j])
-    pi1, pi2, dpi = path_coefficients(integrator, k, start - sigma[i])
-    pj1, pj2, dpj = path_coefficients(integrator, k, start - sigma[j])
-    wi = path_acceleration_weight(integrator, pi1)
-    wj = path_acceleration_weight(integrator, pj1)
-    # relative position (the minimum image on periodic axes) and path velocity at the
-    # common start (see motion.path_state)
-    dx0 = image((x[i, 0] + v[i, 0] * pi1 + a[i, 0] * pi2) - (x[j, 0] + v[j, 0] * pj1 + a[j, 0] * pj2), period[0])
-    dx1 = image((x[i, 1] + v[i, 1] * pi1 + a[i, 1] * pi2) - (x[j, 1] + v[j, 1] * pj1 + a[j, 1] * pj2), period[1])
-    dx2 = image((x[i, 2] + v[i, 2] * pi1 + a[i, 2] * pi2) - (x[j, 2] + v[j, 2] * pj1 + a[j, 2] * pj2), period[2])
-    dv0 = (v[i, 0] * dpi + a[i, 0] * wi) - (v[j, 0] * dpj + a[j, 0] * wj)
-    dv1 = (v[i, 1] * dpi + a[i, 1] * wi) - (v[j, 1] * dpj + a[j, 1] * wj)
-    dv2 = (v[i, 2] * dpi + a[i, 2] * wi) - (v[j, 2] * dpj + a[j, 2] * wj)
-    horizon = step_end - start
-    if detection == SWEPT:
-        t = pair_toi_swept_scalar(dx0, dx1, dx2, dv0, dv1, dv2, a[i, 0] - a[j, 0], a[i, 1] - a[j, 1],
-                                  a[i, 2] - a[j, 2], radius[i] + radius[j], integrator, k, horizon, tolerance)
-    else:
-        t = pair_toi_sampled_scalar(dx0, dx1, dx2, dv0, dv1, dv2, a[i, 0] - a[j, 0], a[i, 1] - a[j, 1],
-                                    a[i, 2] - a[j, 2], radius[i] + radius[j], integrator, k, horizon,
-                                    1 if detection == DISCRETE else samples)
-    _record(KIND_PAIR, i, j, start, t, step_end, version, test_int, test_float, test_outcome, heap_toi,
-            heap_data, counters, push)
-
-
-@njit(cache=True, inline="always")
-def _predict_wall(i, w, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, normals,
-                  offsets, half_thickness, two_sided, held, test_int, test_float, test_outcome, heap_toi,
-                  heap_data, counters, push):
-    """Swept test of particle i against wall w from i's anchor; record it, push a hit.
-    A held contact is not tested."""
-    if held.deg[i] > 0 and held_find(held, KIND_WALL, i, w) >= 0:
-        return
-    g0, p, q, _ = wall_gap_terms(x, v, a, radius, i, normals[w], offsets[w], half_thickness[w], two_sided[w])
-    start = sigma[i]
-    horizon = step_end - start
-    if detection == SWEPT:
-        t = wall_toi_swept(g0, p, q, integrator, k, horizon)
-    else:
-        depth = 2.0 * (radius[i] + half_thickness[w]) if two_sided[w] else math.inf
-        t = wall_toi_sampled(g0, p, q, integrator, k, horizon, 1 if detection == DISCRETE else samples, depth)
-    _record(KIND_WALL, i, w, start, t, step_end, version, test_int, test_float, test_outcome, heap_toi, heap_data,
+    start, t = time_of_impact(kind, ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
+                              tolerance, walls)
+    _record(kind, ia, other, start, t, step_end, version, test_int, test_float, test_outcome, heap_toi, heap_data,
             counters, push)
 
 
 @borrowing
 def predict_into(kind, ia, ib, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
-                 tolerance, normals, offsets, half_thickness, two_sided, period, held,
-                 test_int, test_float, test_outcome, heap_toi, heap_data, counters, push):
+                 tolerance, walls, held, test_int, test_float, test_outcome, heap_toi, heap_data, counters, push):
     """Swept-test candidates (kind, ia[m], ib[m]); record each test; push hits if ``push``.
 
-    held: the held contacts (resting.HeldContacts), which are not tested; period: (3,)
-    m, the periodic axes (0 = not periodic).
+    walls: kernel_args.LoopWalls (as a tuple); held: the held contacts
+    (resting.HeldContacts), which are not tested.
     """
     for m in range(ia.shape[0]):
-        if kind == KIND_PAIR:
-            _predict_pair(ia[m], ib[m], x, v, a, radius, sigma, version, step_end, integrator, k, detection,
-                          samples, tolerance, period, held, test_int, test_float, test_outcome, heap_toi,
-                          heap_data, counters, push)
-        else:
-            _predict_wall(ia[m], ib[m], x, v, a, radius, sigma, version, step_end, integrator, k, detection,
-                          samples, normals, offsets, half_thickness, two_sided, held, test_int, test_float,
-                          test_outcome, heap_toi, heap_data, counters, push)
+        _predict(kind, ia[m], ib[m], x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
+                 tolerance, walls, held, test_int, test_float, test_outcome, heap_toi, heap_data, counters, push)
 
 
 # ------------------------------------------------------------------------------ resolve
 @borrowing
-def _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, tolerance,
-               normals, offsets, half_thickness, two_sided, period, held, adj_start, adj, batch_mark, batch, test_int,
-               test_float, test_outcome, heap_toi, heap_data, counters, box_lo, box_hi, box_margin, scratch):
-    """Push new predictions of particle p against the partners and walls it can reach;
-    returns whether p's new path stays inside its swept box (if not, the caller queries the
-    broad phase again for it). scratch: (2, 3), left holding the new path's box.
-
-    A pair whose both spheres changed in this batch is predicted once, from the larger index.
-    A partner q that did not change in this batch is predicted only where the new path's box
-    meets q's swept box, which holds q's path (the step's boxes hold every path, and a path
-    that leaves its box has the box grown, World._refresh_box). A wall is predicted where
-    p's swept box reaches it (the step-start rule, reachable_walls), or, where p's new path
-    has left that box, every wall. A path whose box misses another box cannot touch what
-    that box holds, so what is skipped is a miss. (Everything used to be
-    tested: in box-rain 10k's last steps 3–4.6 million tests a step, 95 % of them misses;
-    this leaves 55 % of them, with the same contacts.)
+def _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, tolerance, walls,
+               held, adj_start, adj, batch_mark, batch, test_int, test_float, test_outcome, heap_toi, heap_data,
+               counters, box_lo, box_hi, box_margin, scratch, found):
+    """Push new predictions of particle p against the partners of every kind it can reach
+    (colliders.partners_of: what p's new path can meet, judged by boxes); returns whether
+    p's new path stays inside its swept box (if not, the caller queries the broad phase
+    again for it). scratch: (2, 3), left holding the new path's box; found: (K, 2) room for
+    the candidates of one kind.
     """
     inside = _inside_box(x, v, a, radius, sigma, p, step_end, integrator, k, box_margin, box_lo, box_hi, scratch)
-    for s in range(adj_start[p], adj_start[p + 1]):
-        q = adj[s]
-        if batch_mark[q] == batch:
-            if q < p:
-                continue
-        elif box_misses(scratch, box_lo, box_hi, q, period):
-            continue
-        _predict_pair(min(p, q), max(p, q), x, v, a, radius, sigma, version, step_end, integrator, k, detection,
-                      samples, tolerance, period, held, test_int, test_float, test_outcome, heap_toi,
-                      heap_data, counters, True)
-    for w in range(normals.shape[0]):
-        if inside and not box_reaches_wall(box_lo, box_hi, p, normals, offsets, half_thickness, two_sided, w):
-            continue
-        _predict_wall(p, w, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, normals,
-                      offsets, half_thickness, two_sided, held, test_int, test_float, test_outcome, heap_toi,
-                      heap_data, counters, True)
+    for kind in range(KINDS):
+        m = partners_of(kind, p, inside, scratch, adj_start, adj, box_lo, box_hi, batch_mark, batch, walls, found)
+        for s in range(m):
+            _predict(kind, found[s, 0], found[s, 1], x, v, a, radius, sigma, version, step_end, integrator, k,
+                     detection, samples, tolerance, walls, held, test_int, test_float, test_outcome, heap_toi,
+                     heap_data, counters, True)
     return inside
 
 
@@ -348,14 +274,14 @@ def run_time_order(particles, method, walls, held, candidates, budgets, buffers)
     x, v, a, _acc, radius, _inverse_mass, _restitution, sigma, version, _last_contact = particles
     (_run_time, step_end, integrator, _drag, k, detection, samples, tolerance, _rest_fraction, _rest_step_factor,
      _rule, _rapid_time, _anchor_is_flow, _path_follows_acc, _vtol, _atol) = method
-    normals, offsets, half_thickness, two_sided, _wall_restitution, period = walls
+    nw = walls[0].shape[0]
     adj_start, adj, box_lo, box_hi, box_margin, max_degree = candidates
     cap, max_tests, work_budget = budgets
     (heap_toi, heap_data, test_int, test_float, test_outcome, contacts, counters, pending, changed, batch_mark,
      requery, requery_count) = buffers
-    nw = normals.shape[0]
     room = 2 * max_degree + 2 * nw + 4
     scratch = np.empty((2, 3))  # the lo, hi rows of _inside_box
+    found = np.empty((max(max_degree, nw) + 1, 2), dtype=np.int64)  # one kind's candidates (_repredict)
     while True:
         # re-predict the spheres the last contact changed, pausing if a buffer fills up
         if counters[PENDING_COUNT] > 0:
@@ -365,9 +291,9 @@ def run_time_order(particles, method, walls, held, candidates, budgets, buffers)
                 p = pending[counters[PENDING_AT]]
                 counters[PENDING_AT] += 1
                 if not _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
-                                  tolerance, normals, offsets, half_thickness, two_sided, period, held, adj_start,
-                                  adj, batch_mark, counters[BATCH], test_int, test_float, test_outcome, heap_toi,
-                                  heap_data, counters, box_lo, box_hi, box_margin, scratch):
+                                  tolerance, walls, held, adj_start, adj, batch_mark, counters[BATCH], test_int,
+                                  test_float, test_outcome, heap_toi, heap_data, counters, box_lo, box_hi,
+                                  box_margin, scratch, found):
                     # a path that left its swept box may meet particles it was never paired with
                     requery[requery_count[0]] = p
                     requery_count[0] += 1
@@ -380,7 +306,7 @@ def run_time_order(particles, method, walls, held, candidates, budgets, buffers)
         if (heap_toi.shape[0] - counters[HEAP_SIZE] < room or test_outcome.shape[0] - counters[ROWS] < room
                 or contacts.shape[0] - counters[CONTACTS] < 2):
             return GROW
-        if not held_room(held, heap_data[0, 2], heap_data[0, 3] if heap_data[0, 1] == KIND_PAIR else -1):
+        if not held_room(held, heap_data[0, 2], partner_sphere(heap_data[0, 1], heap_data[0, 3])):
             return GROW_HELD
         if counters[TESTS] >= max_tests:
             mark_capped(heap_data, test_outcome, counters)
@@ -392,7 +318,8 @@ def run_time_order(particles, method, walls, held, candidates, budgets, buffers)
         kind = heap_data[slot, 1]
         ia = heap_data[slot, 2]
         other = heap_data[slot, 3]
-        if version[ia] != heap_data[slot, 4] or (kind == KIND_PAIR and version[other] != heap_data[slot, 5]):
+        ib = partner_sphere(kind, other)
+        if version[ia] != heap_data[slot, 4] or (ib >= 0 and version[ib] != heap_data[slot, 5]):
             test_outcome[rid] = OUTCOME_SUPERSEDED
             continue
         if counters[CONTACTS] >= cap:
@@ -441,67 +368,3 @@ def adjacency_from_pairs(pairs, n):
         partners[fill[j]] = i
         fill[j] += 1
     return start, partners
-
-
-@kernel
-def reachable_walls(lo, hi, normals, offsets, half_thickness, two_sided):
-    """Particle–wall candidates (particles (K,), walls (K,)) whose swept box reaches the wall.
-
-    lo, hi already include the radius, so a box entirely beyond the plane (or slab) cannot
-    touch it on its current path.
-    """
-    n = lo.shape[0]
-    nw = normals.shape[0]
-    ip = np.empty(n * nw, dtype=np.int64)
-    iw = np.empty(n * nw, dtype=np.int64)
-    m = 0
-    for i in range(n):
-        for w in range(nw):
-            if box_reaches_wall(lo, hi, i, normals, offsets, half_thickness, two_sided, w):
-                ip[m] = i
-                iw[m] = w
-                m += 1
-    return ip[:m], iw[:m]
-
-
-@borrowing
-def box_reaches_wall(lo, hi, i, normals, offsets, half_thickness, two_sided, w) -> bool:
-    """Whether particle i's box lo[i], hi[i] (m, radius included) reaches wall w: it is not
-    entirely beyond the plane (or, for a two-sided wall, the slab)."""
-    low = 0.0
-    high = 0.0
-    for c in range(3):
-        a = normals[w, c] * lo[i, c]
-        b = normals[w, c] * hi[i, c]
-        low += min(a, b)
-        high += max(a, b)
-    low -= offsets[w]
-    high -= offsets[w]
-    h = half_thickness[w]
-    return (two_sided[w] and low <= h and high >= -h) or (not two_sided[w] and low <= h)
-
-
-@borrowing
-def max_overlap(x, radius, pairs, normals, offsets, half_thickness, two_sided, period, ignore_tunnelled):
-    """Deepest penetration (m, >= 0) among the candidate pairs and every particle–wall pair
-    (pairs through the minimum image on the periodic axes of period (3,), 0 = not periodic).
-
-    ignore_tunnelled: a sphere past the middle of a thin wall went through it (discrete or
-    sampled detection) and is not counted as overlapping it.
-    """
-    worst = 0.0
-    for m in range(pairs.shape[0]):
-        i = pairs[m, 0]
-        j = pairs[m, 1]
-        d = pair_separation(x, i, j, period)[3]
-        worst = max(worst, radius[i] + radius[j] - d)
-    for i in range(x.shape[0]):
-        for w in range(normals.shape[0]):
-            h = normals[w, 0] * x[i, 0] + normals[w, 1] * x[i, 1] + normals[w, 2] * x[i, 2] - offsets[w]
-            if two_sided[w]:
-                h = abs(h)
-            pen = half_thickness[w] + radius[i] - h
-            if ignore_tunnelled and two_sided[w] and pen > radius[i]:
-                pen = 0.0
-            worst = max(worst, pen)
-    return worst

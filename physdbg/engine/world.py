@@ -36,7 +36,6 @@ import numpy as np
 from ..events import (
     BroadPhaseInfo,
     KIND_PAIR,
-    KIND_WALL,
     OUTCOME_CAPPED,
     OUTCOME_HIT,
     OUTCOME_SUPERSEDED,
@@ -49,6 +48,7 @@ from ..events import (
 from .broadphase import choose_broad_phase, make_broad_phase
 from .broadphase.boxes import boxes_meet
 from .broadphase.periodic import PeriodicBroadPhase
+from .colliders import KINDS, PARTNER_IS_SPHERE, max_overlap, narrow_candidates
 from .kernel_args import LoopBudgets, LoopCandidates, LoopMethod, LoopParticles, LoopWalls
 from .motion import (
     FLOW,
@@ -85,9 +85,7 @@ from .timeline import (
     TESTS,
     Buffers,
     adjacency_from_pairs,
-    max_overlap,
     predict_into,
-    reachable_walls,
     run_time_order,
 )
 
@@ -149,9 +147,6 @@ class World:
         state.velocities[~movable] = 0.0
         self._free_accel = np.ascontiguousarray(
             (state.gravity_scale * movable)[:, None] * gravity[None, :])
-        self._half_thickness = np.ascontiguousarray(walls.thickness * 0.5, dtype=np.float64)
-        self._two_sided = np.ascontiguousarray(walls.two_sided, dtype=np.bool_)
-        self._normals = np.ascontiguousarray(walls.normals, dtype=np.float64).reshape(-1, 3)
         # the integrator's traits (motion.py's table): no branch on which integrator it is
         self._anchor_is_flow = FLOW[self._integrator][self._drag != 1.0]
         self._rest_step_factor = REST_STEP_FACTOR[self._integrator]
@@ -159,18 +154,15 @@ class World:
         self._accel_scale = max(1.0, float(np.abs(self._free_accel).max())) if state.count else 1.0
         self._atol = SOLVE_TOLERANCE * self._accel_scale
         self._acc = np.zeros((state.count, 3))
-        self._offsets = np.ascontiguousarray(walls.offsets, dtype=np.float64)
-        self._wall_restitution = np.ascontiguousarray(walls.restitution, dtype=np.float64)
-        self._period = np.ascontiguousarray(walls.period, dtype=np.float64)
+        # the planes never change in a run: their kernel group is built once
+        self._walls_group = tuple(LoopWalls.of(walls))
+        self._period = self._walls_group[-1]
         self._period_origin = np.ascontiguousarray(walls.period_origin, dtype=np.float64)
         self._periodic = walls.periodic
         if self._periodic:
             wrap_positions(state.positions, self._period_origin, self._period)
             self.broad_phase = PeriodicBroadPhase(self.broad_phase, self._period_origin, self._period)
         self._buf = Buffers(state.count)
-        # the planes never change in a run: their kernel group is built once
-        self._walls_group = tuple(LoopWalls(self._normals, self._offsets, self._half_thickness, self._two_sided,
-                                            self._wall_restitution, self._period))
         self.event_cap = settings.event_cap(state.count)
         self.last_step: StepContext | None = None  # the context of the latest step (for inspection)
 
@@ -218,9 +210,8 @@ class World:
         ctx.sigma = np.zeros(n)
         if not settle_held(self.held, st.positions, st.velocities, ctx.path_accel, self._acc, self._free_accel,
                            st.radius, st.inverse_mass, ctx.sigma, dt, self._integrator, self._drag, self._k,
-                           self._kick_first, self._normals, self._offsets, self._half_thickness, self._two_sided,
-                           self._period, s.contact_tolerance, s.max_resting_work_per_step, ctx.vtol, self._atol,
-                           dt * (self._rest_step_factor + s.rest_fraction)):
+                           self._kick_first, self._walls_group, s.contact_tolerance, s.max_resting_work_per_step,
+                           ctx.vtol, self._atol, dt * (self._rest_step_factor + s.rest_fraction)):
             ctx.warn("max_resting_work_per_step", _budget_message("max_resting_work_per_step",
                                                                   s.max_resting_work_per_step))
 
@@ -244,15 +235,15 @@ class World:
         self._build_adjacency(ctx, pairs)
 
     def _narrow_phase(self, ctx: StepContext) -> None:
-        """The swept test of every candidate pair and every sphere–wall pair in reach."""
+        """The swept test of every candidate of every collider kind: the broad phase's pairs,
+        the walls each swept box reaches (colliders.narrow_candidates)."""
         ctx.version = np.zeros(self.state.count, dtype=np.int64)
         # an unobserved step logs only the tests that hit (Buffers.reset)
         self._buf.reset(keep_misses=ctx.observer is not None)
         push = self.settings.ordering == "time"
-        self._predict(ctx, KIND_PAIR, ctx.pairs[:, 0].copy(), ctx.pairs[:, 1].copy(), push)
-        wall_p, wall_w = reachable_walls(ctx.lo, ctx.hi, self._normals, self._offsets, self._half_thickness,
-                                         self._two_sided)
-        self._predict(ctx, KIND_WALL, wall_p, wall_w, push)
+        for kind in range(KINDS):  # in the kinds' order: ties in the queue break by test
+            ia, other = narrow_candidates(kind, ctx.pairs, ctx.lo, ctx.hi, self._walls_group)
+            self._predict(ctx, kind, ia, other, push)
 
     def _resolve(self, ctx: StepContext) -> None:
         """The contacts, in the order of the policy (``settings.ordering``)."""
@@ -398,8 +389,7 @@ class World:
         buf.ensure(ia.size, ia.size, 0)
         predict_into(kind, ia, ib, st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma, ctx.version,
                      ctx.dt, self._integrator, self._k, self._detection, s.samples, s.contact_tolerance * 1e-3,
-                     self._normals, self._offsets, self._half_thickness, self._two_sided, self._period, self.held,
-                     buf.test_int, buf.test_float, buf.test_outcome, buf.heap_toi, buf.heap_data, buf.counters, push)
+                     self._walls_group, self.held, buf.test_int, buf.test_float, buf.test_outcome, buf.heap_toi, buf.heap_data, buf.counters, push)
 
     # ------------------------------------------------------------------ policies
     def _resolve_in_time_order(self, ctx: StepContext) -> str | None:
@@ -447,7 +437,7 @@ class World:
                 buf.test_outcome[hits[hits >= rid]] = OUTCOME_CAPPED
                 return "max_events_per_step"
             kind, a, other = (int(c) for c in buf.test_int[rid])
-            at = max(float(toi[rid]), ctx.sigma[a], ctx.sigma[other] if kind == KIND_PAIR else 0.0)
+            at = max(float(toi[rid]), ctx.sigma[a], ctx.sigma[other] if PARTNER_IS_SPHERE[kind] else 0.0)
             status = self._resolve_one(ctx, kind, a, other, at)
             buf.test_outcome[rid] = OUTCOME_SUPERSEDED if status == SKIPPED else OUTCOME_HIT
             if status == OUT_OF_WORK:
@@ -461,7 +451,7 @@ class World:
         returns its status (SKIPPED, RESOLVED or OUT_OF_WORK)."""
         buf = self._buf
         buf.ensure(0, 0, 1)
-        while not held_room(self.held, a, other if kind == KIND_PAIR else -1):
+        while not held_room(self.held, a, other if PARTNER_IS_SPHERE[kind] else -1):
             self.held = grow_held(self.held)
         particles, method, walls = self._kernel_groups(ctx)
         return resolve_contact(kind, a, other, when, particles, method, walls, self.held, buf.contacts, buf.counters,
@@ -492,8 +482,7 @@ class World:
 
     def _max_overlap(self, ctx: StepContext) -> float:
         """Deepest penetration (m) among candidate pairs and particle–wall pairs."""
-        return float(max_overlap(self.state.positions, self.state.radius, ctx.pairs, self._normals,
-                                 self._offsets, self._half_thickness, self._two_sided, self._period,
+        return float(max_overlap(self.state.positions, self.state.radius, ctx.pairs, self._walls_group,
                                  self.settings.detection != "swept"))
 
     def _broad_phase_event(self, ctx: StepContext) -> BroadPhaseInfo:

@@ -330,12 +330,13 @@ def import_run(run: ForeignRun, scene, out: Path, notes: list[str] | None = None
 
 def _max_overlap(x: np.ndarray, radius: np.ndarray, walls) -> float:
     """Deepest sphere–sphere or sphere–wall penetration (m, 0 when none), from positions
-    alone: the engine's own measure (timeline.max_overlap) over the grid's candidate pairs;
+    alone: the engine's own measure (colliders.max_overlap) over the grid's candidate pairs;
     a sphere past a thin wall's middle went through it (the audit's tunnelling), not into it."""
     from ..engine import make_broad_phase
     from ..engine.broadphase.periodic import PeriodicBroadPhase
     from ..engine.periodic import wrap_positions
-    from ..engine.timeline import max_overlap
+    from ..engine.colliders import max_overlap
+    from ..engine.kernel_args import LoopWalls
 
     finite = np.all(np.isfinite(x), axis=1)
     x, r = np.ascontiguousarray(x[finite]), np.ascontiguousarray(radius[finite])
@@ -345,9 +346,7 @@ def _max_overlap(x: np.ndarray, radius: np.ndarray, walls) -> float:
         x = x.copy()
         wrap_positions(x, walls.period_origin, walls.period)
     pairs = broad.pairs(x - r[:, None], x + r[:, None]) if len(x) > 1 else np.zeros((0, 2), np.int64)
-    return float(max_overlap(x, r, pairs, np.ascontiguousarray(walls.normals), np.ascontiguousarray(walls.offsets),
-                             np.ascontiguousarray(walls.thickness * 0.5), np.ascontiguousarray(walls.two_sided),
-                             walls.period, True))
+    return float(max_overlap(x, r, pairs, tuple(LoopWalls.of(walls)), True))
 
 
 def write_mcap_run(path: str | Path, times, positions, velocities=None) -> None:

@@ -1,0 +1,123 @@
+"""Plane partners: the seed's walls, one collider kind (events.KIND_WALL).
+
+A wall is the plane n·x = d (normals (W, 3) unit, offsets (W,) m), one-sided (it keeps
+spheres on the side n points to) or two-sided (a thin slab of half-thickness h that
+pushes a sphere back to whichever side its anchor is on). What the engine asks about
+sphere i against wall w, each function reached through the switch in
+``colliders/__init__``: its swept test, its contact normal and gap, which walls a
+sphere's box reaches, and the deepest overlap. Immovable: the partner takes no impulse
+(colliders.kinds.PARTNER_IS_SPHERE).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..jit import borrowing, kernel
+from ..toi import DISCRETE, SWEPT, wall_gap_terms, wall_toi_sampled, wall_toi_swept
+
+
+@njit(cache=True, inline="always")
+def time_of_impact(i, w, x, v, a, radius, sigma, step_end, integrator, k, detection, samples, normals, offsets,
+                   half_thickness, two_sided):
+    """Swept test of sphere i against wall w from i's anchor: (start, t), the test's start
+    in the step (s) and the time of impact after it (s; inf or beyond the step: none)."""
+    g0, p, q, _ = wall_gap_terms(x, v, a, radius, i, normals[w], offsets[w], half_thickness[w], two_sided[w])
+    start = sigma[i]
+    horizon = step_end - start
+    if detection == SWEPT:
+        t = wall_toi_swept(g0, p, q, integrator, k, horizon)
+    else:
+        depth = 2.0 * (radius[i] + half_thickness[w]) if two_sided[w] else math.inf
+        t = wall_toi_sampled(g0, p, q, integrator, k, horizon, 1 if detection == DISCRETE else samples, depth)
+    return start, t
+
+
+@njit(cache=True, inline="always")
+def normal(x, ia, w, normals, offsets, two_sided):
+    """Unit normal (3 floats) from wall w to sphere a: towards a's side of a two-sided wall."""
+    nx = normals[w, 0]
+    ny = normals[w, 1]
+    nz = normals[w, 2]
+    if two_sided[w] and nx * x[ia, 0] + ny * x[ia, 1] + nz * x[ia, 2] - offsets[w] < 0.0:
+        return -nx, -ny, -nz
+    return nx, ny, nz
+
+
+@borrowing
+def gap(x, v, a, radius, i, w, normals, offsets, half_thickness, two_sided):
+    """(gap (m, < 0: overlap), 0, 0, 0, False): a wall's normal never needs renewing."""
+    return wall_gap_terms(x, v, a, radius, i, normals[w], offsets[w], half_thickness[w], two_sided[w])[0], \
+        0.0, 0.0, 0.0, False
+
+
+@njit(cache=True, inline="always")
+def reaches(lo, hi, i, normals, offsets, half_thickness, two_sided, w) -> bool:
+    """Whether sphere i's box lo[i], hi[i] (m, radius included) reaches wall w: it is not
+    entirely beyond the plane (or, for a two-sided wall, the slab)."""
+    low = 0.0
+    high = 0.0
+    for c in range(3):
+        a = normals[w, c] * lo[i, c]
+        b = normals[w, c] * hi[i, c]
+        low += min(a, b)
+        high += max(a, b)
+    low -= offsets[w]
+    high -= offsets[w]
+    h = half_thickness[w]
+    return (two_sided[w] and low <= h and high >= -h) or (not two_sided[w] and low <= h)
+
+
+@njit(cache=True, inline="always")
+def partners_of(p, inside, box_lo, box_hi, normals, offsets, half_thickness, two_sided, out) -> int:
+    """The walls (rows (p, w) of out (K, 2)) sphere p's new path must be tested against;
+    returns how many: those p's swept box reaches (the step-start rule, :func:`reachable`)
+    or, where the new path has left that box (``inside`` False), every wall."""
+    m = 0
+    for w in range(normals.shape[0]):
+        if inside and not reaches(box_lo, box_hi, p, normals, offsets, half_thickness, two_sided, w):
+            continue
+        out[m, 0] = p
+        out[m, 1] = w
+        m += 1
+    return m
+
+
+@kernel
+def reachable(lo, hi, normals, offsets, half_thickness, two_sided):
+    """Sphere–wall candidates (spheres (K,), walls (K,)) whose swept box (lo, hi (N, 3), the
+    radius included) reaches the wall: a box entirely beyond the plane (or slab) cannot
+    touch it on its current path."""
+    n = lo.shape[0]
+    nw = normals.shape[0]
+    ip = np.empty(n * nw, dtype=np.int64)
+    iw = np.empty(n * nw, dtype=np.int64)
+    m = 0
+    for i in range(n):
+        for w in range(nw):
+            if reaches(lo, hi, i, normals, offsets, half_thickness, two_sided, w):
+                ip[m] = i
+                iw[m] = w
+                m += 1
+    return ip[:m], iw[:m]
+
+
+@borrowing
+def deepest(x, radius, normals, offsets, half_thickness, two_sided, ignore_tunnelled):
+    """Deepest overlap (m, >= 0) of any sphere with any wall. ignore_tunnelled: a sphere
+    past the middle of a thin wall went through it (discrete or sampled detection) and is
+    not counted as overlapping it."""
+    worst = 0.0
+    for i in range(x.shape[0]):
+        for w in range(normals.shape[0]):
+            h = normals[w, 0] * x[i, 0] + normals[w, 1] * x[i, 1] + normals[w, 2] * x[i, 2] - offsets[w]
+            if two_sided[w]:
+                h = abs(h)
+            pen = half_thickness[w] + radius[i] - h
+            if ignore_tunnelled and two_sided[w] and pen > radius[i]:
+                pen = 0.0
+            worst = max(worst, pen)
+    return worst

@@ -1,0 +1,113 @@
+"""The collider kinds (engine/colliders): the table, and each kind's geometry judged by
+the others' view of it: the swept test, the gap, the deepest overlap, the candidates."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from hypothesis import assume, event, given, settings
+from hypothesis import strategies as st
+
+from physdbg.engine.colliders import (
+    KIND_NAMES,
+    KINDS,
+    PARTNER_IS_SPHERE,
+    contact_gap,
+    every_candidate,
+    max_overlap,
+    narrow_candidates,
+    partner_restitution,
+    partner_sphere,
+    time_of_impact,
+)
+from physdbg.engine.kernel_args import LoopWalls
+from physdbg.engine.motion import EULER, EXACT, VERLET, advance_particle
+from physdbg.engine.state import Walls
+from physdbg.engine.toi import SWEPT
+from physdbg.events import KIND_PAIR, KIND_WALL
+
+coordinate = st.floats(-1.0, 1.0, allow_nan=False)
+vector = st.tuples(coordinate, coordinate, coordinate).map(np.array)
+
+
+def _walls(normal: np.ndarray, offset: float, two_sided: bool, thickness: float) -> tuple:
+    unit = normal / np.linalg.norm(normal)
+    return tuple(LoopWalls.of(Walls(["w"], unit[None, :], np.array([offset]), np.array([0.7]),
+                                    np.array([two_sided]), np.array([thickness]))))
+
+
+def test_the_table_names_each_kind_and_which_partners_move():
+    assert KINDS == len(KIND_NAMES) == len(PARTNER_IS_SPHERE) == 2
+    assert KIND_NAMES[KIND_PAIR] == "sphere" and KIND_NAMES[KIND_WALL] == "wall"
+    assert partner_sphere(KIND_PAIR, 7) == 7  # a sphere partner is sphere 7 ...
+    assert partner_sphere(KIND_WALL, 7) == -1  # ... wall 7 is immovable
+    walls = _walls(np.array([0.0, 1.0, 0.0]), 0.0, False, 0.0)
+    restitution = np.array([0.2, 0.9])
+    assert partner_restitution(KIND_PAIR, 1, restitution, walls) == 0.9
+    assert partner_restitution(KIND_WALL, 0, restitution, walls) == 0.7
+
+
+@settings(max_examples=300, deadline=None)
+@given(kind=st.sampled_from([KIND_PAIR, KIND_WALL]), integrator=st.sampled_from([EULER, EXACT, VERLET]),
+       xa=vector, xb=vector, va=vector.map(lambda v: 4.0 * v), vb=vector.map(lambda v: 4.0 * v),
+       gravity=vector.map(lambda g: 10.0 * g), normal=vector, offset=coordinate, two_sided=st.booleans(),
+       radius=st.floats(0.02, 0.3), aim=st.floats(0.5, 4.0))
+def test_each_kind_s_gap_closes_at_its_time_of_impact(kind, integrator, xa, xb, va, vb, gravity, normal, offset,
+                                                      two_sided, radius, aim):
+    """Advance to the predicted time of impact on the method's path: the kind's own gap is
+    zero there (sphere 0 is aimed at its partner, plus a random velocity)."""
+    assume(np.linalg.norm(normal) > 0.1)
+    walls = _walls(normal, offset, two_sided, 0.04 if two_sided else 0.0)
+    unit = walls[0][0]
+    height = unit @ xa - offset
+    if kind == KIND_PAIR:
+        va = va + aim * (xb - xa)
+    else:
+        if height < 0.0 and not two_sided:  # a one-sided wall keeps spheres on its normal's side
+            xa = xa - 2.0 * height * unit
+            height = -height
+        va = va - aim * np.sign(height) * unit
+    x = np.array([xa, xb])
+    v = np.array([va, vb])
+    a = np.array([gravity, gravity * 0.5])
+    r = np.array([radius, 0.7 * radius])
+    sigma = np.zeros(2)
+    other = 1 if kind == KIND_PAIR else 0
+    gap0 = contact_gap(kind, x, v, a, r, 0, other, walls)[0]
+    assume(gap0 > 1e-3)
+    start, t = time_of_impact(kind, 0, other, x, v, a, r, sigma, 1.0, integrator, 0.0, SWEPT, 1, 1e-12, walls)
+    assert start == 0.0
+    assume(t <= 1.0)
+    event(f"{KIND_NAMES[kind]} hit")
+    for i in range(2):
+        advance_particle(x, v, a, sigma, i, t, integrator, 1.0, 0.0)
+    gap = contact_gap(kind, x, v, a, r, 0, other, walls)[0]
+    assert abs(gap) <= 1e-7, (KIND_NAMES[kind], t, gap)
+
+
+@settings(max_examples=200, deadline=None)
+@given(points=st.lists(vector, min_size=2, max_size=6), normal=vector, offset=coordinate, two_sided=st.booleans(),
+       radius=st.floats(0.05, 0.6))
+def test_the_deepest_overlap_is_the_largest_negative_gap_and_no_overlap_is_pruned(points, normal, offset, two_sided,
+                                                                                  radius):
+    """max_overlap (the finish phase's audit) against every kind's contact_gap over every
+    candidate; and the narrow phase's candidates for boxes x ± r hold every overlap."""
+    assume(np.linalg.norm(normal) > 0.1)
+    walls = _walls(normal, offset, two_sided, 0.04 if two_sided else 0.0)
+    x = np.array(points)
+    n = len(x)
+    r = np.full(n, radius)
+    zeros = np.zeros((n, 3))
+    pairs = np.column_stack(every_candidate(KIND_PAIR, n, walls))
+    deepest = 0.0
+    for kind in range(KINDS):
+        a, other = every_candidate(kind, n, walls)
+        gaps = [contact_gap(kind, x, zeros, zeros, r, i, j, walls)[0] for i, j in zip(a, other)]
+        deepest = max([deepest] + [-g for g in gaps])
+        near_a, near_other = narrow_candidates(kind, pairs, x - r[:, None], x + r[:, None], walls)
+        kept = set(zip(near_a.tolist(), near_other.tolist()))
+        for i, j, g in zip(a.tolist(), other.tolist(), gaps):
+            if g <= 0.0:
+                assert (i, j) in kept, (KIND_NAMES[kind], i, j, g)
+    assert math.isclose(max_overlap(x, r, pairs, walls, False), deepest, rel_tol=0.0, abs_tol=1e-12)
