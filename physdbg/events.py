@@ -20,9 +20,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-# Kinds of swept-test candidate / contact.
+# Kinds of swept-test candidate / contact (the engine's table of them: engine/colliders).
 KIND_PAIR = 0
 KIND_WALL = 1
+
+
+def partner_words(kind: int, other: int, wall_names) -> str:
+    """How reports name a contact's partner: "sphere 4", or "wall 'floor'" (wall_names:
+    the recording's wall names, by index)."""
+    return f"sphere {other}" if kind == KIND_PAIR else f"wall '{wall_names[other]}'"
+
+
+def contact_words(kind: int, a: int, other: int, wall_names) -> str:
+    """How reports name a contact in few words: "3–4" (a sphere pair), "3–wall 'floor'"."""
+    return f"{a}–{other}" if kind == KIND_PAIR else f"{a}–{partner_words(kind, other, wall_names)}"
 
 # how a contact was resolved (Contacts.how; the recording's contacts ``how`` column)
 HOW_IMPULSE = 0  # the seed's impulse (or reflection), alone

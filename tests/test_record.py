@@ -501,3 +501,17 @@ def test_the_contact_row_is_one_schema_from_the_loop_to_the_file():
         assert recorded.rows.tobytes() == (live[0].rows.tobytes() if live else b"")
         held += int(np.count_nonzero(recorded.how == HOW_RESTING))
     assert held > 0 and np.array_equal(recorded.resting, recorded.how == HOW_RESTING)
+
+
+def test_the_contact_log_names_each_partner_and_how_it_was_met():
+    """The viewer's text log (record/view.describe_contacts): the partner in the words every
+    report uses (events.partner_words), impacts at INFO, held contacts at DEBUG."""
+    from physdbg.events import HOW_IMPULSE, HOW_RESTING, KIND_PAIR, KIND_WALL
+    from physdbg.record.view import describe_contacts
+
+    c = Contacts.empty(3, 2)
+    c.kind[:], c.a[:], c.other[:], c.how[:] = [KIND_PAIR, KIND_WALL], [0, 2], [1, 0], [HOW_IMPULSE, HOW_RESTING]
+    c.time_in_step[:] = [0.005, 0.0]
+    (first, level_1), (second, level_2) = describe_contacts(3, c, 0.01, ["floor"])
+    assert first.startswith("step 3: sphere 0 hit sphere 1 at 0.500·dt") and level_1 == "INFO"
+    assert second.startswith("step 3: sphere 2 rests on wall 'floor' at 0.000·dt") and level_2 == "DEBUG"

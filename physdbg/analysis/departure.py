@@ -37,7 +37,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..errors import PhysdbgError
-from ..events import KIND_PAIR, KIND_WALL
+from ..events import KIND_PAIR, KIND_WALL, contact_words, partner_words
 
 DEFAULT_ATOL = 1e-6  # m and m/s: a body departs when |Δx| or |Δv| exceeds atol + rtol·|reference|
 DEFAULT_RTOL = 1e-6
@@ -737,7 +737,7 @@ class _Comparison:
         return float(np.linalg.norm(x - xb)) - float(self.radius[a] + self.radius[b])
 
     def _what(self, c: dict) -> str:
-        return f"wall '{self.names[c['other']]}'" if c["kind"] == KIND_WALL else f"sphere {c['other']}"
+        return partner_words(c["kind"], c["other"], self.names)
 
     def _subject(self, c: dict) -> str:
         return f"sphere {c['a']}"
@@ -746,7 +746,7 @@ class _Comparison:
         return f"spheres {c['a']} and {c['other']}" if c["kind"] == KIND_PAIR else f"sphere {c['a']}"
 
     def _pair_words(self, c: dict) -> str:
-        return f"{c['a']}–{c['other']}" if c["kind"] == KIND_PAIR else f"{c['a']}–wall '{self.names[c['other']]}'"
+        return contact_words(c["kind"], c["a"], c["other"], self.names)
 
     def _add(self, kind: str, step: int, c: dict, text: str, advice: str, evidence: dict | None = None) -> None:
         other = c["other"] if c["kind"] == KIND_PAIR else None

@@ -17,7 +17,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..events import KIND_PAIR
+from ..events import KIND_PAIR, contact_words
 from . import align
 from .tunnel import StepChecker
 
@@ -627,7 +627,7 @@ class _Differ:
     def _describe(self, r: dict | None, times: bool = True) -> str:
         if r is None:
             return "nothing"
-        who = (f"{r['a']}–{r['other']}" if r["kind"] == KIND_PAIR else f"{r['a']}–wall '{self.names_a[r['other']]}'")
+        who = contact_words(r["kind"], r["a"], r["other"], self.names_a)
         return who + (f" (t = {r['time_in_step'] / r['dt']:.2f}·dt)" if times else "")
 
     def _consequence(self, div: Divergence) -> str:

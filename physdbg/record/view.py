@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..events import KIND_PAIR, Contacts
+from ..events import Contacts, partner_words
 from .header import RecordingHeader
 
 LOG_LINES_PER_STEP = 20  # contacts described in words per step; the rest are counted
@@ -89,8 +89,7 @@ def describe_contacts(frame: int, c: Contacts, dt: float, wall_names) -> list[tu
     lines = []
     resting = c.resting
     for row in range(min(len(c), LOG_LINES_PER_STEP)):
-        other = (f"sphere {int(c.other[row])}" if c.kind[row] == KIND_PAIR
-                 else f"wall {wall_names[int(c.other[row])]}")
+        other = partner_words(int(c.kind[row]), int(c.other[row]), wall_names)
         verb = "rests on" if resting[row] else "hit"
         lines.append((
             f"step {frame}: sphere {int(c.a[row])} {verb} {other} at {c.time_in_step[row] / dt:.3f}·dt "
