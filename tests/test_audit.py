@@ -70,3 +70,38 @@ def test_explain_cli_exit_codes_and_formats(tmp_path):
     bad.write_text("not a recording")
     failed = runner.invoke(app, ["explain", str(bad)])
     assert failed.exit_code == 2 and "not an MCAP file" in failed.output
+
+
+def test_collapse_is_found_where_bounces_pile_up_and_the_advice_names_the_rule_that_is_off(tmp_path):
+    """A ball on a floor with the resting and rapid-contact rules off bounces ever more
+    often (inelastic collapse) until the contact budget stops a step."""
+    out = tmp_path / "z.mcap"
+    api.record("bounce", ["rest_fraction=0", "rapid_contact_time=0"], mcap_path=str(out), rrd=False)
+    report = explain(out)
+    assert report.counts == {"budget": 1, "overlap": 1, "collapse": 1}
+    budget, collapse = (next(f for f in report.findings if f.kind == kind) for kind in ("budget", "collapse"))
+    assert "max_events_per_step budget (10000 contacts resolved)" in budget.message  # the automatic cap
+    assert collapse.message.startswith("10000 bounces among 1 sphere in one step") and collapse.particles == [0]
+    assert "rest_fraction, now 0.0" in collapse.advice and "rapid_contact_time (now 0.0 s)" in collapse.advice
+
+
+def test_contacts_a_rule_holds_are_the_remedy_not_a_collapse():
+    """A settled pile resolves many contacts a step, nearly all held by the resting and
+    rapid rules (restitution 0): only bounces among few spheres are a collapse."""
+    from physdbg.analysis.audit import Auditor
+    from physdbg.events import HOW_IMPULSE, HOW_RAPID, KIND_PAIR, Contacts
+    from physdbg.record import open_recording
+
+    with open_recording(ROOT / "recordings" / "ci" / "rain.mcap") as rec:
+        header = rec.header
+    contacts = Contacts.empty(5, 400)
+    contacts.kind[:] = KIND_PAIR
+    contacts.a[:], contacts.other[:] = [i % 10 for i in range(400)], [10 + i % 10 for i in range(400)]
+    contacts.how[:], contacts.restitution[:] = HOW_RAPID, 0.0  # 20 spheres, 20 contacts each, all held
+    auditor = Auditor(header)
+    auditor._check_collapse(5, contacts)
+    assert auditor.counts == {}
+    contacts.how[:], contacts.restitution[:] = HOW_IMPULSE, 0.8  # the same contacts, all bounces
+    auditor._check_collapse(5, contacts)
+    assert auditor.counts == {"collapse": 1}
+    assert auditor.examples[0].message.startswith("400 bounces among 20 spheres")

@@ -73,9 +73,7 @@ class Settings:
         when it is 0, max(MIN_EVENT_CAP, EVENTS_PER_SPHERE × spheres) — a settling pile
         of N spheres legitimately resolves a few contacts per sphere in a step, so a fixed
         cap that suits 100 spheres stops every step of a pile of 10 000."""
-        if self.max_events_per_step:
-            return int(self.max_events_per_step)
-        return max(MIN_EVENT_CAP, EVENTS_PER_SPHERE * spheres)
+        return event_cap(self.max_events_per_step, spheres)
 
     @property
     def integrator_code(self) -> int:
@@ -198,3 +196,11 @@ def energies(state: State, gravity: np.ndarray) -> tuple[float, float, np.ndarra
     potential = -float(np.sum(m * np.einsum("ij,ij->i", g, state.positions[movable])))
     momentum = (m[:, None] * v).sum(axis=0) if m.size else np.zeros(3)
     return kinetic, potential, momentum
+
+
+def event_cap(max_events_per_step: int, spheres: int) -> int:
+    """The contact budget of one step (Settings.event_cap): the setting, or when it is 0,
+    max(MIN_EVENT_CAP, EVENTS_PER_SPHERE × spheres). Also what the audit reports."""
+    if max_events_per_step:
+        return int(max_events_per_step)
+    return max(MIN_EVENT_CAP, EVENTS_PER_SPHERE * spheres)
