@@ -1,6 +1,6 @@
 """The exact gas: pair collisions per second of the time-ordered loop (issue 10's gas targets).
 
-    .venv/bin/python benchmarks/gas.py [--count 1000] [--steps 200] [--packing 0.3]
+    .venv/bin/python benchmarks/gas.py [--count 1000] [--steps 200] [--packing 0.3] [--dt 0.01]
 
 The built-in ``gas`` scene (e = 1, exact integrator, swept detection) with ``count``
 spheres at the packing fraction; the kernels are loaded (or compiled) first and not
@@ -8,7 +8,9 @@ timed. Prints pair and wall contacts, swept tests, seconds and the rates: pair
 collisions per second is what event-driven codes report (Smallenburg's EDMD: 6.6·10⁵
 per CPU-second), the issue asks 5·10⁵ at N = 1 000 and 3·10⁵ at N = 32 000. Last, the
 milliseconds a step spends in each phase of ``World.step``: an event-driven code has no
-steps, so what the once-a-step phases cost is what physdbg pays for its steps.
+steps, so what the once-a-step phases cost is what physdbg pays for its steps; ``--dt``
+(with ``--steps`` for the same simulated time) shows how that cost trades against the
+longer steps' larger swept boxes (more candidate pairs a contact).
 """
 
 from __future__ import annotations
@@ -26,9 +28,10 @@ def main() -> None:
     parser.add_argument("--count", type=int, default=1000)
     parser.add_argument("--steps", type=int, default=200)
     parser.add_argument("--packing", type=float, default=0.3)
+    parser.add_argument("--dt", type=float, default=None, help="step length, s (default: the scene's, 0.01)")
     args = parser.parse_args()
     scene = load_scene("gas", [f"generate.count={args.count}", f"generate.packing_fraction={args.packing}",
-                               f"steps={args.steps}"])
+                               f"steps={args.steps}"] + ([f"dt={args.dt}"] if args.dt else []))
     world = scene.build_world()
     warm_up(world.broad_phase.name)
     pairs = walls = tests = 0
