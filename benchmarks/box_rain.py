@@ -40,14 +40,14 @@ def peak_memory_mb() -> float:
 
 
 def run_physdbg(scene, trace: bool = False, stop_above_gb: float | None = None) -> dict:
-    """Step the scene; trace: print every step (ms, contacts, held, rapid, events, overlap,
+    """Step the scene; trace: print every step (ms, contacts, held, rapid, released, events, overlap,
     warnings, peak memory); stop_above_gb: stop early once the peak memory passes it."""
     world = scene.build_world()
     capped = 0
     worst = 0.0
     rows = []
     if trace:
-        print("step  ms  contacts  held  rapid  events  overlap(m)  warnings  peak-MB", flush=True)
+        print("step  ms  contacts  held  rapid  released  events  overlap(m)  warnings  peak-MB", flush=True)
     started = time.perf_counter()
     for k in range(scene.steps):
         t0 = time.perf_counter()
@@ -57,7 +57,7 @@ def run_physdbg(scene, trace: bool = False, stop_above_gb: float | None = None) 
         rows.append((stats.contacts, stats.held, stats.rapid, stats.events))
         if trace:
             print(f"{k + 1} {1000 * (time.perf_counter() - t0):.0f} {stats.contacts} {stats.held} {stats.rapid} "
-                  f"{stats.events} {stats.max_overlap:.2g} {[w.code for w in stats.warnings]} {peak_memory_mb():.0f}",
+                  f"{stats.released} {stats.events} {stats.max_overlap:.2g} {[w.code for w in stats.warnings]} {peak_memory_mb():.0f}",
                   flush=True)
         if stop_above_gb is not None and peak_memory_mb() > 1024.0 * stop_above_gb:
             print(f"stopped after step {k + 1}: peak memory {peak_memory_mb():.0f} MB > {stop_above_gb:g} GB")

@@ -63,6 +63,22 @@ def test_bounce_scene_comes_to_rest_on_the_floor():
     assert stats.held == 1 and stats.contacts == 0
 
 
+def test_a_held_contact_that_is_kicked_apart_is_counted_as_released():
+    """StepStats.released (and StepEnd.counts, the recording's column): the held contacts
+    a step let go of — here the resting ball's, once it is thrown upwards."""
+    scene = load_scene("bounce")
+    obs = ListObserver()
+    world = scene.build_world(obs)
+    for _ in range(scene.steps):
+        stats = world.step(scene.dt)
+    assert stats.held == 1 and stats.released == 0
+    world.state.velocities[0] = (0.0, 3.0, 0.0)
+    stats = world.step(scene.dt)
+    assert stats.held == 0 and stats.released == 1
+    assert obs.events[-1].counts["released"] == 1
+    assert world.step(scene.dt).released == 0
+
+
 # ----------------------------------------------------------------------------- cradle
 def _run_cradle(ordering):
     scene = load_scene("cradle", [f"ordering={ordering}"])
@@ -193,7 +209,7 @@ def test_events_arrive_in_pipeline_order_with_everything_a_recording_needs():
     end = obs.step_ends[-1]
     assert end.positions.shape == (5, 3) and end.velocities.shape == (5, 3)
     assert set(end.timings) == {"forces", "broad_phase", "narrow_phase", "resolve", "finish"}
-    assert set(end.counts) == {"contacts", "swept_tests", "events", "resting", "rapid"}
+    assert set(end.counts) == {"contacts", "swept_tests", "events", "resting", "rapid", "released"}
     assert end.kinetic == pytest.approx(0.5)
     contact = obs.contacts[0]
     assert contact.impulse == pytest.approx(1.0)  # j = -(1+1)(1·n)/(1+1), n = -x

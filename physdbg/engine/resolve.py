@@ -281,6 +281,7 @@ def settle_held(h, x, v, a, acc, free_accel, radius, inverse_mass, sigma, dt, in
             h.normal[c, 2] = n2
         if gap > contact_tolerance:
             held_remove(h, c)
+            h.count[4] += 1
         else:
             c += 1
     for i in range(n):

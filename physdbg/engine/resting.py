@@ -138,8 +138,9 @@ class HeldContacts(NamedTuple):
     multiplier (N: the contact force; kept between steps as the warm start);
     jv: (C,) impulse of the current velocity solve (N·s); target: (C,) separation speed the
     velocity solve must reach (m/s; 0 for held contacts); seen: (C,) int64 id of the last
-    solve that used jv; count: (4,) int64 — contacts held, solve id, work done this step
-    (updates), clusters solved whole this step (_solve_connected); slots: (N, K) each
+    solve that used jv; count: (5,) int64 — contacts held, solve id, work done this step
+    (updates), clusters solved whole this step (_solve_connected), contacts released this
+    step; slots: (N, K) each
     sphere's contact ids; deg: (N,) how many; queue: (C,) the
     worklist; mark: (N,) int64 solve id of the last visit; touched: (N + 1,) spheres visited
     by the current solve, count first; before: (N, 3) each visited sphere's velocity when
@@ -174,7 +175,7 @@ def new_held(n: int, capacity: int = 64, per_particle: int = 16) -> HeldContacts
     """An empty store for ``n`` spheres."""
     return HeldContacts(np.zeros(capacity, np.int64), np.zeros(capacity, np.int64), np.zeros(capacity, np.int64),
                         np.zeros((capacity, 3)), np.zeros(capacity), np.zeros(capacity), np.zeros(capacity),
-                        np.full(capacity, -1, np.int64), np.zeros(4, np.int64),
+                        np.full(capacity, -1, np.int64), np.zeros(5, np.int64),
                         np.zeros((n, per_particle), np.int64), np.zeros(n, np.int64), np.zeros(capacity, np.int64),
                         np.full(n, -1, np.int64), np.zeros(n + 1, np.int64), np.zeros((n, 3)),
                         np.full(n, -1, np.int64), np.full(n, -1, np.int64))
@@ -678,7 +679,8 @@ def _join(h, c, is_velocity, solve) -> None:
 
 
 @borrowing
-def _violated(h, values, c, is_velocity, x, v, a, sigma, inverse_mass, when, integrator, drag, k, tolerance, stick, solve) -> bool:
+def _violated(h, values, c, is_velocity, x, v, a, sigma, inverse_mass, when, integrator, drag, k, tolerance, stick,
+              solve) -> bool:
     """Whether a Gauss–Seidel update of contact c would exceed ``tolerance`` (its spheres
     are brought to ``when`` first)."""
     i = h.a[c]
@@ -1065,7 +1067,8 @@ def release_loose(h, v, acc, inverse_mass, touched_only, x, a, sigma, when, inte
         visited += 1
         s = 0
         while s < h.deg[p]:
-            if _release_if_loose(h, h.slots[p, s], v, acc, inverse_mass, x, a, sigma, when, integrator, drag, k, vtol, atol, stick):
+            if _release_if_loose(h, h.slots[p, s], v, acc, inverse_mass, x, a, sigma, when, integrator, drag, k, vtol,
+                                 atol, stick):
                 released += 1  # p's last listed contact took slot s
             else:
                 s += 1
@@ -1097,6 +1100,7 @@ def _release_if_loose(h, c, v, acc, inverse_mass, x, a, sigma, when, integrator,
     if h.lam[c] != 0.0:
         push_along(acc, inverse_mass, i, j, h.normal[c, 0], h.normal[c, 1], h.normal[c, 2], -h.lam[c])
     held_remove(h, c)
+    h.count[4] += 1
     return True
 
 

@@ -110,6 +110,7 @@ class StepStats:
     events: int
     held: int
     rapid: int
+    released: int
     max_overlap: float
     state_hash: str
     timings: dict[str, float]
@@ -205,7 +206,7 @@ class World:
     def _forces(self, ctx: StepContext) -> None:
         """Held contacts -> the accelerations the paths follow (resolve.settle_held)."""
         st, s, n, dt = self.state, self.settings, self.state.count, ctx.dt
-        self.held.count[2:4] = 0  # the resting work of this step, and its whole-cluster solves
+        self.held.count[2:5] = 0  # the resting work of this step, its whole-cluster solves, its releases
         ctx.path_accel = np.empty_like(self._acc)
         ctx.sigma = np.zeros(n)
         if not settle_held(self.held, st.positions, st.velocities, ctx.path_accel, self._acc, self._free_accel,
@@ -283,8 +284,10 @@ class World:
         tests = int(buf.counters[TESTS])
         events = int(buf.counters[EVENTS])
         rapid = int(buf.counters[RAPID])
+        released = int(self.held.count[4])
         stats = StepStats(ctx.step, self.time, ctx.dt, ctx.kinetic, ctx.potential, ctx.momentum, contacts, tests,
-                          events, self.held_count, rapid, ctx.max_overlap, ctx.state_hash, ctx.timings, ctx.warnings)
+                          events, self.held_count, rapid, released, ctx.max_overlap, ctx.state_hash, ctx.timings,
+                          ctx.warnings)
         obs = ctx.observer
         if obs is not None:
             x, v = self.state.positions, self.state.velocities
@@ -293,7 +296,7 @@ class World:
             obs.on_event(StepEnd(ctx.step, self.time, ctx.dt, x.copy(), v.copy(), ctx.kinetic, ctx.potential,
                                  ctx.momentum.copy(),
                                  {"contacts": contacts, "swept_tests": tests, "events": events,
-                                  "resting": self.held_count, "rapid": rapid},
+                                  "resting": self.held_count, "rapid": rapid, "released": released},
                                  ctx.max_overlap, dict(ctx.timings), ctx.state_hash,
                                  tuple(w.message for w in ctx.warnings)))
         if ctx.non_finite is not None:
@@ -389,7 +392,8 @@ class World:
         buf.ensure(ia.size, ia.size, 0)
         predict_into(kind, ia, ib, st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma, ctx.version,
                      ctx.dt, self._integrator, self._k, self._detection, s.samples, s.contact_tolerance * 1e-3,
-                     self._walls_group, self.held, buf.test_int, buf.test_float, buf.test_outcome, buf.heap_toi, buf.heap_data, buf.counters, push)
+                     self._walls_group, self.held, buf.test_int, buf.test_float, buf.test_outcome, buf.heap_toi,
+                     buf.heap_data, buf.counters, push)
 
     # ------------------------------------------------------------------ policies
     def _resolve_in_time_order(self, ctx: StepContext) -> str | None:

@@ -135,7 +135,7 @@ class McapRecorder:
         stats = {"time": end.time, "dt": end.dt, "kinetic": end.kinetic, "potential": end.potential,
                  "energy": end.kinetic + end.potential, "momentum": np.asarray(end.momentum),
                  "max_overlap": end.max_overlap}
-        for name in ("contacts", "swept_tests", "events", "resting", "rapid"):
+        for name in fmt.STEP_COUNTS:
             stats[name] = end.counts.get(name, 0)
         for name, _, _ in fmt.STATS_FIELDS:
             if name.startswith("seconds_"):

@@ -378,7 +378,7 @@ class Recording:
         if not stats_data:
             raise RecordingError(f"{self.path}: step {k} has a state but no stats message")
         s = self._table(fmt.TOPIC_STATS, stats_data[0])[0]
-        counts = {name: int(s[name]) for name in ("contacts", "swept_tests", "events", "resting", "rapid")}
+        counts = {name: int(s[name]) for name in fmt.STEP_COUNTS}
         timings = {name[len("seconds_"):]: float(s[name]) for name in s.dtype.names if name.startswith("seconds_")}
         events.append(StepEnd(step, after.time, after.dt, after.positions, after.velocities, float(s["kinetic"]),
                               float(s["potential"]), s["momentum"].copy(), counts, float(s["max_overlap"]),
