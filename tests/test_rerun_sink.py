@@ -63,8 +63,8 @@ def test_the_rrd_holds_the_engines_positions_at_every_step_and_a_blueprint(billi
     for k in (1, 17, 60, 120):
         got = np.array(rows[("/world/spheres", k)]["Points3D:positions"][-1], dtype=np.float32)
         np.testing.assert_array_equal(got, ends[k - 1].positions.astype(np.float32))
-    contacts_series = rows[("/stats/contacts", 60)]["Scalars:scalars"][0]
-    assert contacts_series == [ends[59].counts["contacts"]]
+    for name in ("contacts", "rapid", "released"):
+        assert rows[(f"/stats/{name}", 60)]["Scalars:scalars"][0] == [ends[59].counts[name]]
     logged = [text for (entity, _), comps in rows.items() if entity == "/log"
               for row in comps.get("TextLog:text", []) for text in row]
     first = live.contacts[0]

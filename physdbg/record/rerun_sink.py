@@ -17,7 +17,8 @@ Entities (timelines ``step`` = frame, steps completed, and ``sim_time`` in secon
     world/contacts/normals   Arrows3D: contact normals (length = the sphere's radius)
     world/contacts/impulses  Arrows3D: velocity change of sphere a, × IMPULSE_ARROW_SECONDS
     world/findings           Points3D: a red marker where the audit found a problem
-    stats/energy/*, stats/momentum/*, stats/contacts   Scalars, sent in columns
+    stats/energy/*, stats/momentum/*, stats/contacts, stats/rapid, stats/released
+                             Scalars, sent in columns
     log                      TextLog: contacts and warnings in words
 
 A default blueprint (3D view, energy and contact plots, the event log) goes in the file.
@@ -283,6 +284,8 @@ class RerunSink:
             "stats/momentum/x": end.momentum[0], "stats/momentum/y": end.momentum[1],
             "stats/momentum/z": end.momentum[2],
             "stats/contacts": end.counts.get("contacts", 0),
+            # a pile's churn: contacts the rapid rule held, held contacts let go again
+            "stats/rapid": end.counts.get("rapid", 0), "stats/released": end.counts.get("released", 0),
         }
         if self._movable > 1 and end.kinetic > 0:  # Z = PV/NkT of this step, from its collisions
             values["stats/pressure/z"] = 1 + self._virial / (2 * end.kinetic * end.dt)
@@ -336,7 +339,8 @@ def blueprint(header: RecordingHeader):
                 for level in range(BVH_LEVELS_SHOWN, 64)}),
             rrb.Vertical(
                 rrb.TimeSeriesView(origin="/stats/energy", name="energy (J)"),
-                rrb.TimeSeriesView(origin="/stats", contents=["/stats/contacts"], name="contacts per step"),
+                rrb.TimeSeriesView(origin="/stats", contents=["/stats/contacts", "/stats/rapid", "/stats/released"],
+                                   name="contacts per step (all, rapid, released)"),
                 rrb.TextLogView(origin="/log", name="events"),
                 row_shares=[2, 1, 2],
             ),
