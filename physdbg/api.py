@@ -24,7 +24,8 @@ from .scene import Scene, load_scene
 class RunSummary:
     """What a run did. Energies in J, momentum in kg·m/s, times in s (ms_per_step in ms).
 
-    rapid: contacts the rapid-contact (TC) rule acted on; resting_at_end: contacts held at the end.
+    rapid: contacts the rapid-contact (TC) rule acted on; released: held contacts let go (all
+    steps; beside rapid, a pile's churn); resting_at_end: contacts held at the end.
     energy_drift: (E_end - E_start) / |E_start| of kinetic + potential (0 when E_start = 0);
     momentum_drift: |p_end - p_start| (kg·m/s); dts: every step's dt, to repeat the run.
     compile_seconds: compiling (first run) or loading (cached) the numba kernels, not
@@ -53,6 +54,7 @@ class RunSummary:
     swept_tests: int
     resting_at_end: int
     rapid: int
+    released: int
     max_contacts_in_a_step: int
     energy_start: float
     energy_end: float
@@ -119,7 +121,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     total = len(dts) if dts is not None else scene.steps
     used: list[float] = []
     phase = {"forces": 0.0, "broad_phase": 0.0, "narrow_phase": 0.0, "resolve": 0.0, "finish": 0.0}
-    contacts = tests = max_in_step = rapid = 0
+    contacts = tests = max_in_step = rapid = released = 0
     max_overlap = 0.0
     warnings = WarningTally()
     started = time.perf_counter()
@@ -135,6 +137,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
             phase[name] += seconds
         contacts += stats.contacts
         rapid += stats.rapid
+        released += stats.released
         tests += stats.swept_tests
         max_in_step = max(max_in_step, stats.contacts)
         max_overlap = max(max_overlap, stats.max_overlap)
@@ -155,6 +158,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         broad_phase_reason=world.broad_phase_reason,
         particles=st.count, walls=list(scene.walls.names), steps=n_steps, sim_time=world.time,
         contacts=contacts, swept_tests=tests, resting_at_end=world.held_count, rapid=rapid,
+        released=released,
         max_contacts_in_a_step=max_in_step, energy_start=e0, energy_end=e1, energy_drift=drift,
         momentum_start=[float(c) for c in mom0], momentum_end=[float(c) for c in mom1],
         momentum_drift=float(np.linalg.norm(mom1 - mom0)), max_overlap=max_overlap,

@@ -814,7 +814,7 @@ def format_summary(s, observers: str = "the audit") -> str:
         f"bodies      {_count(s.particles, 'particle')}, {_count(len(s.walls), 'wall')}",
         f"steps       {s.steps}  ({s.sim_time:.6g} s simulated, {dt_text})",
         f"contacts    {s.contacts}  (at most {s.max_contacts_in_a_step} in a step; {s.swept_tests} swept tests; "
-        f"{s.rapid} rapid; {s.resting_at_end} held at the end)",
+        f"{s.rapid} rapid, {s.released} released; {s.resting_at_end} held at the end)",
         f"energy      {s.energy_start:.6g} J -> {s.energy_end:.6g} J  (drift {s.energy_drift:+.3e})",
         f"momentum    {_vec(s.momentum_start)} -> {_vec(s.momentum_end)} kg·m/s  (drift {s.momentum_drift:.3e})",
         f"overlap     max {s.max_overlap:.3g} m",
