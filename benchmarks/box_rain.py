@@ -6,7 +6,7 @@ The scene of issue 10: the built-in ``rain`` scene with the box grown so the sph
 10 % of it, dt = 1/240 s. Prints, for the run: steps stopped by a budget (the event
 cap or the held-contact solve's), the
 largest overlap after any step, contacts and held contacts per step at the start, middle
-and end, rapid-contact rule counts, and ms/step (the first step, which compiles nothing
+and end, rapid-contact rule counts and held contacts released (a pile's churn), and ms/step (the first step, which compiles nothing
 but builds the broad phase, is counted). With --peers, pybullet and MuJoCo (PGS, 10
 iterations) step the same initial state the same number of steps, when importable, and
 the ratios are printed from this one run (these machines are noisy: compare ratios, not
@@ -54,7 +54,7 @@ def run_physdbg(scene, trace: bool = False, stop_above_gb: float | None = None) 
         stats = world.step(scene.dt)
         capped += any(w.code.startswith("max_") for w in stats.warnings)
         worst = max(worst, stats.max_overlap)
-        rows.append((stats.contacts, stats.held, stats.rapid, stats.events))
+        rows.append((stats.contacts, stats.held, stats.rapid, stats.released, stats.events))
         if trace:
             print(f"{k + 1} {1000 * (time.perf_counter() - t0):.0f} {stats.contacts} {stats.held} {stats.rapid} "
                   f"{stats.released} {stats.events} {stats.max_overlap:.2g} {[w.code for w in stats.warnings]} {peak_memory_mb():.0f}",
@@ -151,9 +151,10 @@ def main() -> None:
           f"{result['worst_overlap']:.3g} m (contact tolerance {result['tolerance']:g} m); peak memory "
           f"{result['peak_mb']:.0f} MB")
     for label, k in (("first", 0), ("middle", steps // 2), ("last", steps - 1)):
-        c, h, r, e = rows[k]
-        print(f"  {label} step: {c} contacts, {h} held, {r} rapid, {e} events")
-    print(f"  last 10 steps: mean {rows[-10:, 0].mean():.0f} contacts/step, {rows[-10:, 1].mean():.0f} held")
+        c, h, r, released, e = rows[k]
+        print(f"  {label} step: {c} contacts, {h} held, {r} rapid, {released} released, {e} events")
+    print(f"  last 10 steps: mean {rows[-10:, 0].mean():.0f} contacts/step, {rows[-10:, 1].mean():.0f} held, "
+          f"{rows[-10:, 3].mean():.0f} released")
     if args.peers:
         for name, runner in (("pybullet", run_pybullet), ("mujoco-PGS10", run_mujoco)):
             seconds = runner(scene)
