@@ -30,8 +30,10 @@ def main() -> None:
     parser.add_argument("--packing", type=float, default=0.3)
     parser.add_argument("--dt", type=float, default=None, help="step length, s (default: the scene's, 0.01)")
     args = parser.parse_args()
+    if args.dt is not None and not 0.0 < args.dt < float("inf"):
+        parser.error(f"--dt must be a positive number of seconds, got {args.dt}")
     scene = load_scene("gas", [f"generate.count={args.count}", f"generate.packing_fraction={args.packing}",
-                               f"steps={args.steps}"] + ([f"dt={args.dt}"] if args.dt else []))
+                               f"steps={args.steps}"] + ([f"dt={args.dt}"] if args.dt is not None else []))
     world = scene.build_world()
     warm_up(world.broad_phase.name)
     pairs = walls = tests = 0

@@ -311,12 +311,14 @@ class Auditor:
         if bounces < COLLAPSE_CONTACTS_PER_SPHERE * len(involved):
             return
         spheres = f"{len(involved)} sphere{'s' if len(involved) != 1 else ''}"
-        rules = [f"let slow pressed contacts rest (rest_fraction, now {self.settings.get('rest_fraction')})"
-                 if not self.settings.get("rest_fraction") else None,
-                 f"hold contacts that follow each other within rapid_contact_time (now "
-                 f"{self.settings.get('rapid_contact_time')} s)" if not self.settings.get("rapid_contact_time")
-                 else None]
-        advice = "; ".join(r for r in rules if r) or "lower the restitution, or use a shorter dt"
+        # name the rule against collapse that is off; with both on, what is left to change
+        rules = []
+        if not self.settings.get("rest_fraction"):
+            rules.append(f"let slow pressed contacts rest (rest_fraction, now {self.settings.get('rest_fraction')})")
+        if not self.settings.get("rapid_contact_time"):
+            rules.append(f"hold contacts that follow each other within rapid_contact_time (now "
+                         f"{self.settings.get('rapid_contact_time')} s)")
+        advice = "; ".join(rules) or "lower the restitution, or use a shorter dt"
         self._add(Finding("collapse", step, involved[:10].tolist(),
                           f"{bounces} bounces among {spheres} in one step: the collision rate has blown up "
                           f"(inelastic collapse: with restitution below 1 the gaps between a few spheres shrink "

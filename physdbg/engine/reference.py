@@ -17,7 +17,6 @@ resolver and the held-contact solve (resolve.py, resting.py) and the step's othe
 
 from __future__ import annotations
 
-
 from ..events import OUTCOME_HIT, OUTCOME_SUPERSEDED
 from .colliders import KINDS, PARTNER_IS_SPHERE, every_candidate
 from .resolve import OUT_OF_WORK, SKIPPED

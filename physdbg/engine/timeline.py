@@ -26,11 +26,10 @@ Python handles it and calls ``run_time_order`` again, which carries on where it 
 
 from __future__ import annotations
 
-
 import numpy as np
 from numba import njit
 
-from ..events import CONTACT_ROW, OUTCOME_CAPPED, OUTCOME_MISS, OUTCOME_SUPERSEDED, OUTCOME_HIT
+from ..events import CONTACT_ROW, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_SUPERSEDED
 from .colliders import KINDS, partner_sphere, partners_of, time_of_impact
 from .jit import borrowing, kernel
 from .kernel_args import LoopBuffers

@@ -66,9 +66,10 @@ def contact_gap(kind, x, v, a, radius, ia, other, walls):
 @njit(cache=True, inline="always")
 def partner_restitution(kind, other, restitution, walls):
     """The partner's restitution coefficient: restitution (N,) for spheres, the walls' own."""
+    wall_restitution = walls[4]  # kernel_args.LoopWalls.restitution
     if kind == KIND_PAIR:
         return restitution[other]
-    return walls[4][other]
+    return wall_restitution[other]
 
 
 @njit(cache=True, inline="always")
