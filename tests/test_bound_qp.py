@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from physdbg.engine.bound_qp import solve_bound_qp
@@ -27,7 +27,17 @@ def _dense(end_a, end_b, normal, inverse_mass):
 
 
 def _reference(big, lower, b, sweeps=200_000):
-    """Projected Gauss–Seidel on the dense matrix until nothing moves (or ``sweeps``)."""
+    """Projected Gauss–Seidel on the dense matrix until nothing moves (or ``sweeps``),
+    then the exact solve on the contacts it left above their bounds.
+
+    Gauss–Seidel alone converges linearly, and on a redundant cluster (4 spheres, 21
+    contacts: hypothesis found one) 200 000 sweeps left its relative values 5e-8 off, more
+    than the tolerance the test asks of MPRGP. Once the sweeps have found which contacts
+    sit at their bounds, the others solve a linear system exactly; with redundant contacts
+    K is singular (K x is unique, x is not), so the smallest correction to the sweeps'
+    answer is taken (least squares), and kept only if it stays within the bounds, as a
+    solution must.
+    """
     x = lower.copy()
     x = np.maximum(x, lower)
     for _ in range(sweeps):
@@ -38,7 +48,13 @@ def _reference(big, lower, b, sweeps=200_000):
             x[r] = new
         if largest < 1e-15:
             break
-    return x
+    # the contacts clearly above their bounds; the rest are at them (Gauss–Seidel leaves
+    # some a rounding error above)
+    free = x > lower + 1e-9
+    exact = np.where(free, x, lower)
+    residual = b[free] - big[free] @ exact
+    exact[free] += np.linalg.lstsq(big[np.ix_(free, free)], residual, rcond=None)[0]  # the smallest correction
+    return exact if (exact >= lower).all() else x
 
 
 def _problem(seed, n_spheres, n_contacts, walls):
@@ -79,6 +95,7 @@ def _problem(seed, n_spheres, n_contacts, walls):
 
 @settings(max_examples=40, deadline=None)
 @given(st.integers(0, 10**6), st.integers(2, 12), st.integers(1, 30), st.floats(0.0, 0.5))
+@example(1166, 4, 21, 0.0625)  # where Gauss–Seidel alone was 5e-8 off (see _reference)
 def test_mprgp_finds_the_complementary_solution_of_the_dense_reference(seed, n_spheres, n_contacts, walls):
     end_a, end_b, normal, inverse_mass, lower, rhs = _problem(seed, n_spheres, n_contacts, walls)
     big = _dense(end_a, end_b, normal, inverse_mass)
