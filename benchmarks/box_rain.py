@@ -1,6 +1,7 @@
 """box-rain: N spheres (r = 0.05 m, 10 % of the box's volume, e = 0.8) rain into a box.
 
     .venv/bin/python benchmarks/box_rain.py [--count 1000] [--steps 240] [--peers] [--trace] [--stop-above-gb G]
+        [--set KEY=VALUE ...]
 
 The scene of issue 10: the built-in ``rain`` scene with the box grown so the spheres fill
 10 % of it, dt = 1/240 s. Prints, for the run: steps stopped by a budget (the event
@@ -22,14 +23,17 @@ import time
 import numpy as np
 
 from physdbg.engine.world import warm_up
+from physdbg.errors import SceneError
 from physdbg.scene import load_scene
 
 
-def box_rain(count: int, steps: int):
-    """The scene: a box of side L with count·(4/3)πr³ = 0.1·L³."""
+def box_rain(count: int, steps: int, overrides: tuple[str, ...] = ()):
+    """The scene: a box of side L with count·(4/3)πr³ = 0.1·L³; overrides: more KEY=VALUE
+    settings, as `physdbg run -s` takes them (e.g. rapid_contact_time=0)."""
     side = (count * 4.0 / 3.0 * math.pi * 0.05**3 / 0.1) ** (1.0 / 3.0)
     return load_scene("rain", [f"generate.count={count}", "generate.radius=0.05", f"box.max=[{side},{side},{side}]",
-                               "dt=1/240", f"steps={steps}", "generate.restitution=0.8", "box.restitution=0.8"])
+                               "dt=1/240", f"steps={steps}", "generate.restitution=0.8", "box.restitution=0.8",
+                               *overrides])
 
 
 def peak_memory_mb() -> float:
@@ -41,13 +45,13 @@ def peak_memory_mb() -> float:
 
 def run_physdbg(scene, trace: bool = False, stop_above_gb: float | None = None) -> dict:
     """Step the scene; trace: print every step (ms, contacts, held, rapid, released, events, overlap,
-    warnings, peak memory); stop_above_gb: stop early once the peak memory passes it."""
+    kinetic energy, warnings, peak memory); stop_above_gb: stop early once the peak memory passes it."""
     world = scene.build_world()
     capped = 0
     worst = 0.0
     rows = []
     if trace:
-        print("step  ms  contacts  held  rapid  released  events  overlap(m)  warnings  peak-MB", flush=True)
+        print("step  ms  contacts  held  rapid  released  events  overlap(m)  kinetic(J)  warnings  peak-MB", flush=True)
     started = time.perf_counter()
     for k in range(scene.steps):
         t0 = time.perf_counter()
@@ -57,7 +61,8 @@ def run_physdbg(scene, trace: bool = False, stop_above_gb: float | None = None) 
         rows.append((stats.contacts, stats.held, stats.rapid, stats.released, stats.events))
         if trace:
             print(f"{k + 1} {1000 * (time.perf_counter() - t0):.0f} {stats.contacts} {stats.held} {stats.rapid} "
-                  f"{stats.released} {stats.events} {stats.max_overlap:.2g} {[w.code for w in stats.warnings]} {peak_memory_mb():.0f}",
+                  f"{stats.released} {stats.events} {stats.max_overlap:.2g} {stats.kinetic:.4g} {[w.code for w in stats.warnings]} "
+                  f"{peak_memory_mb():.0f}",
                   flush=True)
         if stop_above_gb is not None and peak_memory_mb() > 1024.0 * stop_above_gb:
             print(f"stopped after step {k + 1}: peak memory {peak_memory_mb():.0f} MB > {stop_above_gb:g} GB")
@@ -139,9 +144,14 @@ def main() -> None:
     parser.add_argument("--peers", action="store_true")
     parser.add_argument("--trace", action="store_true", help="print every step, with the peak memory")
     parser.add_argument("--stop-above-gb", type=float, default=None, help="stop once peak memory passes this")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="another scene setting, as `physdbg run -s` takes it (repeatable)")
     args = parser.parse_args()
     warm_up("grid")
-    scene = box_rain(args.count, args.steps)
+    try:
+        scene = box_rain(args.count, args.steps, tuple(args.set))
+    except SceneError as error:
+        parser.error(str(error))
     result = run_physdbg(scene, args.trace, args.stop_above_gb)
     rows = np.array(result["rows"])
     steps = result["steps"]
