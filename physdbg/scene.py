@@ -30,6 +30,7 @@ from .engine import (
     DETECTION_NAMES,
     INTEGRATOR_NAMES,
     ORDERING_NAMES,
+    RAPID_RULES,
     RESTITUTION_RULES,
     Settings,
     State,
@@ -63,6 +64,10 @@ TOP_FIELDS = {
     "rapid_contact_time": ("a contact with restitution < 1 within this many seconds of either sphere's previous "
                            "contact is held like a resting one if something presses it, and elastic if not (the TC "
                            "model against inelastic collapse), seconds >= 0, 0 = off (default 1e-4)"),
+    "rapid_contact_rule": ("what the rapid-contact rule does with a pressed contact: hold (hold it at any speed, "
+                           "the default: a pile settles sooner but passes each impact through its held contacts) or "
+                           "tc (hold it only if it closes no faster than its press adds in rapid_contact_time, "
+                           "else elastic: a dense pile is much faster and never churns, but keeps rattling)"),
     "contact_tolerance": "allowed overlap and resting gap, metres > 0",
     "max_events_per_step": ("budget: contacts resolved in one step, integer >= 0 (default 0 = sized to the scene: "
                             "max(10000, 20 per sphere))"),
@@ -479,6 +484,8 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
         rest_fraction=c.number(raw, "rest_fraction", "rest_fraction", default=d.rest_fraction, lo=0, hi=1),
         rapid_contact_time=c.number(raw, "rapid_contact_time", "rapid_contact_time", default=d.rapid_contact_time,
                                     lo=0),
+        rapid_contact_rule=c.choice(raw, "rapid_contact_rule", "rapid_contact_rule", RAPID_RULES,
+                                    d.rapid_contact_rule),
         contact_tolerance=c.number(raw, "contact_tolerance", "contact_tolerance",
                                    default=d.contact_tolerance, scale=True),
         **{budget: c.number(raw, budget, budget, default=getattr(d, budget),

@@ -105,3 +105,25 @@ def test_contacts_a_rule_holds_are_the_remedy_not_a_collapse():
     auditor._check_collapse(5, contacts)
     assert auditor.counts == {"collapse": 1}
     assert auditor.examples[0].message.startswith("400 bounces among 20 spheres")
+
+
+def test_under_the_tc_rule_the_collapse_advice_names_the_hold_rule():
+    """Under rapid_contact_rule = tc a dense bed's fast rapid contacts stay elastic and it
+    rattles (rain-500: ~5 000 bounces a step among its 500 spheres); the advice says which
+    setting holds them."""
+    from physdbg.analysis.audit import Auditor
+    from physdbg.events import HOW_IMPULSE, KIND_PAIR, Contacts
+    from physdbg.record import open_recording
+
+    with open_recording(ROOT / "recordings" / "ci" / "rain.mcap") as rec:
+        header = rec.header
+    contacts = Contacts.empty(5, 400)
+    contacts.kind[:] = KIND_PAIR
+    contacts.a[:], contacts.other[:] = [i % 10 for i in range(400)], [10 + i % 10 for i in range(400)]
+    contacts.how[:], contacts.restitution[:] = HOW_IMPULSE, 1.0  # elastic rapid contacts are bounces too
+    for rule, named in (("hold", False), ("tc", True)):
+        auditor = Auditor(header)
+        auditor.settings = {**auditor.settings, "rapid_contact_rule": rule}
+        auditor._check_collapse(5, contacts)
+        assert auditor.counts == {"collapse": 1}
+        assert ("rapid_contact_rule=hold" in auditor.examples[0].advice) == named

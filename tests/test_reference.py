@@ -68,7 +68,8 @@ def scenes(draw):
     method = Settings(integrator=draw(st.sampled_from(["exact", "verlet", "euler", "semi-implicit"])),
                       gravity=draw(st.sampled_from([(0.0, 0.0, 0.0), (0.0, -9.81, 0.0)])),
                       drag=draw(st.sampled_from([1.0, 0.7])),
-                      restitution_rule=draw(st.sampled_from(["min", "product"])))
+                      restitution_rule=draw(st.sampled_from(["min", "product"])),
+                      rapid_contact_rule=draw(st.sampled_from(["hold", "tc"])))
     return state, _box(side, draw(st.floats(0.5, 1.0)), periodic), method, draw(st.sampled_from([1 / 60, 1 / 240]))
 
 

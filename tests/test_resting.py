@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 from physdbg.engine.resting import (
+    RAPID_HOLD,
+    RAPID_TC,
     HeldContacts,
     _cholesky_solve,
     _contact_matrix,
@@ -17,6 +19,7 @@ from physdbg.engine.resting import (
     held_add,
     held_room,
     new_held,
+    rapid_holds,
     solve_contacts,
 )
 from physdbg.events import KIND_PAIR, KIND_WALL
@@ -251,3 +254,14 @@ def test_the_cholesky_solve_equals_the_row_by_row_form_to_the_bit(seed):
 def test_the_cholesky_solve_refuses_a_matrix_that_is_not_positive():
     big = np.array([[1.0, 2.0], [2.0, 1.0]])
     assert not _cholesky_solve(big, np.arange(2), 2, 0.0, np.empty((2, 2)), np.ones(2), np.empty(2, np.int64))
+
+
+def test_the_tc_rule_holds_a_pressed_rapid_contact_only_if_its_press_brings_it_back_within_the_window():
+    g, window = 9.81, 1e-4  # the press adds g·window = 0.981 mm/s in the window
+    for rule in (RAPID_HOLD, RAPID_TC):
+        assert rapid_holds(0.9e-3, -g, window, rule)  # slow and pressed: held under both
+        assert not rapid_holds(0.9e-3, 0.0, window, rule)  # nothing presses it: elastic
+        assert not rapid_holds(0.9e-3, 2.0, window, rule)  # pulled apart: elastic
+    assert rapid_holds(0.5, -g, window, RAPID_HOLD)  # fast: held at any speed under hold,
+    assert not rapid_holds(0.5, -g, window, RAPID_TC)  # elastic under tc
+    assert rapid_holds(0.5, -5000.0, window, RAPID_TC)  # unless the press is that strong

@@ -313,6 +313,41 @@ def test_box_rain_piles_up_exactly_with_no_step_stopped_by_a_budget():
     assert rapid > 0  # and the rapid-contact rule acted (reported per step)
 
 
+def test_box_rain_under_the_tc_rule_is_exact_and_does_not_churn():
+    """rapid_contact_rule = tc holds a pressed rapid contact only when it is slow, so an
+    impact is not passed through held clusters whose far contacts then come apart: the
+    same box-rain, as exact, lets go of (almost) no held contact, where the hold rule lets
+    go of hundreds."""
+    released = {}
+    for rule in ("hold", "tc"):
+        scene = _box_rain(1000, f"rapid_contact_rule={rule}")
+        world = scene.build_world()
+        released[rule] = rapid = 0
+        for _ in range(scene.steps):
+            stats = world.step(scene.dt)
+            assert not stats.warnings, stats.warnings
+            assert stats.max_overlap <= scene.settings.contact_tolerance
+            released[rule] += stats.released
+            rapid += stats.rapid
+        assert rapid > 1000  # the rule acts under both
+    assert released["hold"] > 500 and released["tc"] * 50 < released["hold"], released
+
+
+def test_under_the_tc_rule_a_lone_ball_still_comes_to_rest():
+    """With the resting rule off, only the rapid rule stops a ball's ever shorter bounces.
+    Under tc its rapid contacts close at most g·T/2 < g·rapid_contact_time, so they are
+    held, as under hold: the same run to the bit."""
+    hashes = {}
+    for rule in ("hold", "tc"):
+        scene = load_scene("bounce", ["rest_fraction=0", f"rapid_contact_rule={rule}"])
+        world = scene.build_world()
+        steps = [world.step(scene.dt) for _ in range(scene.steps)]
+        assert sum(s.rapid for s in steps) > 0 and steps[-1].held == 1
+        assert sum(s.contacts for s in steps[-20:]) == 0  # at rest: no contact is resolved any more
+        hashes[rule] = steps[-1].state_hash
+    assert hashes["hold"] == hashes["tc"]
+
+
 def test_the_rapid_contact_rule_can_be_turned_off_and_then_never_acts():
     scene = _box_rain(300, "rapid_contact_time=0", "steps=120")
     world = scene.build_world()

@@ -318,6 +318,9 @@ class Auditor:
         if not self.settings.get("rapid_contact_time"):
             rules.append(f"hold contacts that follow each other within rapid_contact_time (now "
                          f"{self.settings.get('rapid_contact_time')} s)")
+        if self.settings.get("rapid_contact_time") and self.settings.get("rapid_contact_rule") == "tc":
+            rules.append("hold pressed rapid contacts at any speed (rapid_contact_rule=hold): under tc the fast "
+                         "ones stay elastic, so a dense pile keeps rattling")
         advice = "; ".join(rules) or "lower the restitution, or use a shorter dt"
         self._add(Finding("collapse", step, involved[:10].tolist(),
                           f"{bounces} bounces among {spheres} in one step: the collision rate has blown up "

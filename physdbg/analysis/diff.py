@@ -115,6 +115,11 @@ class DiffReport:
 
 
 # ----------------------------------------------------------------------------- settings
+# engine settings added after recordings were made, and what a recording made before
+# each one existed used
+SETTINGS_ADDED = {"rapid_contact_rule": "hold"}
+
+
 def _flatten(value, prefix: str = "") -> dict:
     if isinstance(value, dict):
         out = {}
@@ -136,8 +141,8 @@ def compare_settings(meta_a: dict, meta_b: dict, warned_a: set[str], warned_b: s
     cannot have mattered)."""
     table_a = _flatten(meta_a["scene"]["table"])
     table_b = _flatten(meta_b["scene"]["table"])
-    used_a = {**table_a, **meta_a.get("settings", {}), "dt": meta_a.get("dt")}
-    used_b = {**table_b, **meta_b.get("settings", {}), "dt": meta_b.get("dt")}
+    used_a = {**table_a, **SETTINGS_ADDED, **meta_a.get("settings", {}), "dt": meta_a.get("dt")}
+    used_b = {**table_b, **SETTINGS_ADDED, **meta_b.get("settings", {}), "dt": meta_b.get("dt")}
     out = []
     for name in sorted(set(used_a) | set(used_b), key=lambda n: (n.count("."), n)):
         a, b = used_a.get(name), used_b.get(name)

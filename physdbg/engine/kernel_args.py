@@ -38,7 +38,8 @@ class LoopMethod(NamedTuple):
     """The step and its methods: run_time (s, at step start), step_end (dt, s), the
     integrator and detection codes, drag and k = -ln(drag), samples, the swept tests'
     tolerance (m), the resting and rapid rules (rest_fraction, rest_step_factor, rule (an
-    index into RESTITUTION_RULES), rapid_time (s)), the integrator's traits
+    index into RESTITUTION_RULES), rapid_time (s), rapid_rule (an index into
+    resting.RAPID_RULES)), the integrator's traits
     (anchor_is_flow, path_follows_acc) and the held solves' tolerances vtol, atol."""
 
     run_time: float
@@ -53,6 +54,7 @@ class LoopMethod(NamedTuple):
     rest_step_factor: float
     rule: int
     rapid_time: float
+    rapid_rule: int
     anchor_is_flow: bool
     path_follows_acc: bool
     vtol: float

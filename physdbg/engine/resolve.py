@@ -42,6 +42,7 @@ from .resting import (
     pressed_closing,
     push_along,
     rapid,
+    rapid_holds,
     relative_normal,
     release_loose,
     rests,
@@ -101,7 +102,7 @@ def resolve_contact(kind, ia, other, toi, particles, method, walls, h, contacts,
     # (unpacked to distinct names: numba types each variable once)
     x, v, a, acc, radius, inverse_mass, restitution, sigma, _version, last_contact = particles
     (run_time, step_end, integrator, drag, k, _detection, _samples, _tolerance, rest_fraction, rest_step_factor, rule,
-     rapid_time, anchor_is_flow, path_follows_acc, vtol, atol) = method
+     rapid_time, rapid_rule, anchor_is_flow, path_follows_acc, vtol, atol) = method
     ib = partner_sphere(kind, other)
     changed[0] = 0
     advance_particle(x, v, a, sigma, ia, toi, integrator, drag, k)
@@ -126,10 +127,12 @@ def resolve_contact(kind, ia, other, toi, particles, method, walls, h, contacts,
     resting = rests(closing, rel_acc, step_end, rest_step_factor, rest_fraction)
     is_rapid = not resting and rapid(now, last_contact[ia], last_contact[ib] if ib >= 0 else -math.inf, e,
                                      rapid_time)
-    # a rapid contact that something presses is held like a resting one; one that nothing
-    # presses is elastic (the original TC model): a free cluster cannot collapse, and
-    # nothing that never rests (a gas, a break shot) loses energy to the rule
-    held = HOW_RESTING if resting else (HOW_RAPID if is_rapid and rel_acc < 0.0 else HOW_IMPULSE)
+    # a rapid contact that something presses is held like a resting one (under the "tc"
+    # rule only a slow one); one that is not held is elastic (the original TC model): a
+    # free cluster cannot collapse, and nothing that never rests (a gas, a break shot)
+    # loses energy to the rule
+    held = HOW_RESTING if resting else (
+        HOW_RAPID if is_rapid and rapid_holds(closing, rel_acc, rapid_time, rapid_rule) else HOW_IMPULSE)
     used = 0.0 if held != HOW_IMPULSE else (1.0 if is_rapid else e)
     slot = counters[contacts_slot]
     row = contacts[slot]

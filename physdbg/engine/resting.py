@@ -19,7 +19,10 @@ c = 0. Two rules turn such contacts into *held* contacts, solved all at once:
    previous contact is, if something presses it (a_n < 0), treated as resting; if
    nothing presses it, it is elastic (c = 1, the original TC model: a free cluster
    cannot collapse, and a break shot or a gas loses no energy to the rule). 0 turns the
-   rule off; with c = 1 it never acts.
+   rule off; with c = 1 it never acts. ``rapid_contact_rule`` = "tc" holds a pressed one
+   only when it closes no faster than |a_n|·``rapid_contact_time`` and keeps a faster one
+   elastic too (`rapid_holds`): fast contacts never join the held clusters, which stay
+   small, so a dense pile does not churn, but neither do its fast contacts lose energy.
 
 A resting contact, or a pressed rapid one, is resolved with restitution 0 and *held*:
 
@@ -78,6 +81,32 @@ def rapid(now: float, last_a: float, last_b: float, restitution: float, window: 
     c; window: Settings.rapid_contact_time (s, 0 = off).
     """
     return window > 0.0 and restitution < 1.0 and (now - last_a < window or now - last_b < window)
+
+
+# What the rapid rule does with a pressed rapid contact (Settings.rapid_contact_rule):
+# "hold" holds it at any speed; "tc" holds it only when it closes no faster than its press
+# adds in the window, and makes a faster one elastic (the TC model's own answer).
+RAPID_RULES = ("hold", "tc")
+RAPID_HOLD = 0
+RAPID_TC = 1
+
+
+@borrowing
+def rapid_holds(closing: float, rel_acc: float, window: float, rule: int) -> bool:
+    """Whether a rapid contact (rule 2 above) is held, the one place it is decided.
+
+    closing: approach speed along the normal (m/s, > 0); rel_acc: relative acceleration
+    along the normal (m/s², < 0 when something presses the contact); window:
+    Settings.rapid_contact_time (s); rule: RAPID_HOLD or RAPID_TC (an index into RAPID_RULES).
+    A contact nothing presses is never held (it is elastic). Under RAPID_TC a pressed one
+    is held only if closing <= |a_n|·window: a pair the press would bring back within the
+    window. Elastic, such a pair would bounce for ever, each bounce shorter than the window
+    (a ball on a floor bouncing every T < window closes at |a_n|·T/2); faster ones, the
+    impacts a pile passes on, stay elastic and are not held, so the held clusters stay small.
+    """
+    if not rel_acc < 0.0:
+        return False
+    return rule == RAPID_HOLD or closing <= -rel_acc * window
 
 
 # Separation speeds below this fraction of |a_n|·dt are rounding, not separation.

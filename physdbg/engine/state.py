@@ -41,7 +41,9 @@ class Settings:
     drag: d in v·d^t, in (0, 1] (1 = none); restitution_rule: see resolve.py;
     rest_fraction: a pressed contact rests when its closing speed is at most this fraction
     of |a_n|·dt (resting.py); rapid_contact_time: a contact with restitution < 1 this soon
-    (s) after either sphere's previous one is held like a resting one (resting.py, 0 = off);
+    (s) after either sphere's previous one is held like a resting one if something presses
+    it, else elastic (resting.py, 0 = off); rapid_contact_rule: "hold" holds such a pressed
+    contact at any speed, "tc" only a slow one (resting.rapid_holds);
     contact_tolerance: allowed overlap / resting gap (m).
 
     Budgets bound the work of one step (see BUDGETS); when one is reached the step still
@@ -59,6 +61,7 @@ class Settings:
     restitution_rule: str = "min"
     rest_fraction: float = 0.01
     rapid_contact_time: float = 1e-4
+    rapid_contact_rule: str = "hold"
     contact_tolerance: float = 1e-9
     max_events_per_step: int = 0
     max_pairs_per_step: int = 10_000_000

@@ -272,7 +272,7 @@ def run_time_order(particles, method, walls, held, candidates, budgets, buffers)
     # distinct names for what the loop does not read itself: numba types each name once
     x, v, a, _acc, radius, _inverse_mass, _restitution, sigma, version, _last_contact = particles
     (_run_time, step_end, integrator, _drag, k, detection, samples, tolerance, _rest_fraction, _rest_step_factor,
-     _rule, _rapid_time, _anchor_is_flow, _path_follows_acc, _vtol, _atol) = method
+     _rule, _rapid_time, _rapid_rule, _anchor_is_flow, _path_follows_acc, _vtol, _atol) = method
     nw = walls[0].shape[0]
     adj_start, adj, box_lo, box_hi, box_margin, max_degree = candidates
     cap, max_tests, work_budget = budgets

@@ -67,7 +67,7 @@ from .resolve import (
     resolve_contact,
     settle_held,
 )
-from .resting import grow_held, held_room, new_held
+from .resting import RAPID_RULES, grow_held, held_room, new_held
 from .state import BUDGETS, NonFiniteState, Settings, State, Walls, energies, first_non_finite, state_hash
 from .step_context import StepContext
 from .timeline import (
@@ -476,7 +476,8 @@ class World:
                                   st.restitution, ctx.sigma, ctx.version, self._last_contact)
         method = LoopMethod(ctx.run_time, ctx.dt, self._integrator, self._drag, self._k, self._detection, s.samples,
                             s.contact_tolerance * 1e-3, s.rest_fraction, self._rest_step_factor,
-                            RESTITUTION_RULES.index(s.restitution_rule), s.rapid_contact_time, self._anchor_is_flow,
+                            RESTITUTION_RULES.index(s.restitution_rule), s.rapid_contact_time,
+                            RAPID_RULES.index(s.rapid_contact_rule), self._anchor_is_flow,
                             not self._kick_first, ctx.vtol, self._atol)
         return tuple(particles), tuple(method), self._walls_group
 
