@@ -44,14 +44,15 @@ def peak_memory_mb() -> float:
 
 
 def run_physdbg(scene, trace: bool = False, stop_above_gb: float | None = None) -> dict:
-    """Step the scene; trace: print every step (ms, contacts, held, rapid, released, events, overlap,
-    kinetic energy, warnings, peak memory); stop_above_gb: stop early once the peak memory passes it."""
+    """Step the scene; trace: print every step (ms, contacts, held, rapid, released, events, swept tests,
+    overlap, kinetic energy, warnings, peak memory); stop_above_gb: stop early once the peak memory passes it."""
     world = scene.build_world()
     capped = 0
     worst = 0.0
     rows = []
     if trace:
-        print("step  ms  contacts  held  rapid  released  events  overlap(m)  kinetic(J)  warnings  peak-MB", flush=True)
+        print("step  ms  contacts  held  rapid  released  events  swept-tests  overlap(m)  kinetic(J)  warnings  peak-MB",
+              flush=True)
     started = time.perf_counter()
     for k in range(scene.steps):
         t0 = time.perf_counter()
@@ -61,7 +62,7 @@ def run_physdbg(scene, trace: bool = False, stop_above_gb: float | None = None) 
         rows.append((stats.contacts, stats.held, stats.rapid, stats.released, stats.events))
         if trace:
             print(f"{k + 1} {1000 * (time.perf_counter() - t0):.0f} {stats.contacts} {stats.held} {stats.rapid} "
-                  f"{stats.released} {stats.events} {stats.max_overlap:.2g} {stats.kinetic:.4g} {[w.code for w in stats.warnings]} "
+                  f"{stats.released} {stats.events} {stats.swept_tests} {stats.max_overlap:.2g} {stats.kinetic:.4g} {[w.code for w in stats.warnings]} "
                   f"{peak_memory_mb():.0f}",
                   flush=True)
         if stop_above_gb is not None and peak_memory_mb() > 1024.0 * stop_above_gb:
