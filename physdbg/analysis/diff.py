@@ -611,7 +611,8 @@ class _Differ:
             rest = "A" if x["resting"] else "B"
             text = (f"Step {step}: {self._describe(x, times=False)} was held in run {rest} (with restitution 0, "
                     f"instead of bounced: the resting rule holds a pressed, slow contact, the rapid-contact rule a "
-                    f"pressed one soon after the spheres' previous contact) and bounced in the other")
+                    f"pressed one soon after the spheres' previous contact, under rapid_contact_rule=tc only a slow "
+                    f"one) and bounced in the other")
             return Cause("missed-contact", text + "." + self._consequence(div), {"a": x, "b": y})
         in_other = [r for r in (cb if label == "A" else ca) if _key(r) == _key(present)]
         text = (f"Step {step}: run {label} resolved {self._describe(present)} (contact {present['index']} of the "
