@@ -4,14 +4,13 @@
         [--set KEY=VALUE ...]
 
 The scene of issue 10: the built-in ``rain`` scene with the box grown so the spheres fill
-10 % of it, dt = 1/240 s. Prints, for the run: steps stopped by a budget (the event
-cap or the held-contact solve's), the
-largest overlap after any step, contacts and held contacts per step at the start, middle
-and end, rapid-contact rule counts and held contacts released (a pile's churn), and ms/step (the first step, which compiles nothing
-but builds the broad phase, is counted). With --peers, pybullet and MuJoCo (PGS, 10
-iterations) step the same initial state the same number of steps, when importable, and
-the ratios are printed from this one run (these machines are noisy: compare ratios, not
-absolute times).
+10 % of it, dt = 1/240 s. Prints, for the run: steps stopped by a budget (the event cap or the
+held-contact solve's), the largest overlap after any step, contacts and held contacts per
+step at the start, middle and end, rapid-contact rule counts and held contacts released (a
+pile's churn), and ms/step (the first step, which compiles nothing but builds the broad
+phase, is counted). With --peers, pybullet and MuJoCo (PGS, 10 iterations) step the same
+initial state the same number of steps, when importable, and the ratios are printed from
+this one run (these machines are noisy: compare ratios, not absolute times).
 """
 
 from __future__ import annotations
@@ -44,15 +43,16 @@ def peak_memory_mb() -> float:
 
 
 def run_physdbg(scene, trace: bool = False, stop_above_gb: float | None = None) -> dict:
-    """Step the scene; trace: print every step (ms, contacts, held, rapid, released, events, swept tests,
-    overlap, kinetic energy, warnings, peak memory); stop_above_gb: stop early once the peak memory passes it."""
+    """Step the scene; trace: print every step (ms, contacts, held, rapid, released, events,
+    swept tests, overlap, kinetic energy, warnings, peak memory); stop_above_gb: stop early
+    once the peak memory passes it."""
     world = scene.build_world()
     capped = 0
     worst = 0.0
     rows = []
     if trace:
-        print("step  ms  contacts  held  rapid  released  events  swept-tests  overlap(m)  kinetic(J)  warnings  peak-MB",
-              flush=True)
+        print("step  ms  contacts  held  rapid  released  events  swept-tests  overlap(m)  kinetic(J)  warnings  "
+              "peak-MB", flush=True)
     started = time.perf_counter()
     for k in range(scene.steps):
         t0 = time.perf_counter()
@@ -62,9 +62,8 @@ def run_physdbg(scene, trace: bool = False, stop_above_gb: float | None = None) 
         rows.append((stats.contacts, stats.held, stats.rapid, stats.released, stats.events))
         if trace:
             print(f"{k + 1} {1000 * (time.perf_counter() - t0):.0f} {stats.contacts} {stats.held} {stats.rapid} "
-                  f"{stats.released} {stats.events} {stats.swept_tests} {stats.max_overlap:.2g} {stats.kinetic:.4g} {[w.code for w in stats.warnings]} "
-                  f"{peak_memory_mb():.0f}",
-                  flush=True)
+                  f"{stats.released} {stats.events} {stats.swept_tests} {stats.max_overlap:.2g} {stats.kinetic:.4g} "
+                  f"{[w.code for w in stats.warnings]} {peak_memory_mb():.0f}", flush=True)
         if stop_above_gb is not None and peak_memory_mb() > 1024.0 * stop_above_gb:
             print(f"stopped after step {k + 1}: peak memory {peak_memory_mb():.0f} MB > {stop_above_gb:g} GB")
             break

@@ -34,6 +34,7 @@ from .colliders import contact_gap, contact_normal, partner_restitution, partner
 from .jit import borrowing, kernel
 from .motion import advance_particle
 from .resting import (
+    STEP_RELEASED,
     begin_solve,
     contacts_of,
     held_add,
@@ -284,7 +285,7 @@ def settle_held(h, x, v, a, acc, free_accel, radius, inverse_mass, sigma, dt, in
             h.normal[c, 2] = n2
         if gap > contact_tolerance:
             held_remove(h, c)
-            h.count[4] += 1
+            h.count[STEP_RELEASED] += 1
         else:
             c += 1
     for i in range(n):

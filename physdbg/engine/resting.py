@@ -158,6 +158,13 @@ def pressed_closing(closing: float, rel_acc: float, dt: float, scale: float) -> 
 
 
 # ----------------------------------------------------------------------------- the store
+# HeldContacts.count's slots that count one step's work (World zeroes them as a step
+# begins): held-solve updates, whole clusters solved, held contacts released
+STEP_WORK = 2
+STEP_WHOLE_SOLVES = 3
+STEP_RELEASED = 4
+
+
 class HeldContacts(NamedTuple):
     """The held contacts of a world, as arrays (capacity C, N spheres, K per sphere).
 
@@ -167,9 +174,9 @@ class HeldContacts(NamedTuple):
     multiplier (N: the contact force; kept between steps as the warm start);
     jv: (C,) impulse of the current velocity solve (N·s); target: (C,) separation speed the
     velocity solve must reach (m/s; 0 for held contacts); seen: (C,) int64 id of the last
-    solve that used jv; count: (5,) int64 — contacts held, solve id, work done this step
-    (updates), clusters solved whole this step (_solve_connected), contacts released this
-    step; slots: (N, K) each
+    solve that used jv; count: (5,) int64 — contacts held, solve id, then this step's
+    counts: work done (updates, STEP_WORK), clusters solved whole (_solve_connected,
+    STEP_WHOLE_SOLVES), contacts released (STEP_RELEASED); slots: (N, K) each
     sphere's contact ids; deg: (N,) how many; queue: (C,) the
     worklist; mark: (N,) int64 solve id of the last visit; touched: (N + 1,) spheres visited
     by the current solve, count first; before: (N, 3) each visited sphere's velocity when
@@ -409,11 +416,11 @@ def solve_contacts(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
                              drag, k, tolerance, budget, stick)
     # too large to solve directly: Gauss–Seidel while the change stays local, and where it
     # does not, the whole connected cluster by conjugate gradients (bound_qp.py)
-    local = min(budget, h.count[2] + max(LOCAL_SWEEP_WORK, 8 * n_seeds))
+    local = min(budget, h.count[STEP_WORK] + max(LOCAL_SWEEP_WORK, 8 * n_seeds))
     if _gauss_seidel(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
                      k, tolerance, local, stick):
         return True
-    if h.count[2] >= budget:
+    if h.count[STEP_WORK] >= budget:
         return False
     m = _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator,
                          drag, k, tolerance, budget, stick)
@@ -507,11 +514,11 @@ def _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inv
         grad[q] = _relative(values, h, c) - target
         for d in range(3):
             normal[q, d] = h.normal[c, d]
-    room = max((budget - h.count[2]) // max(n, 1), 0)
+    room = max((budget - h.count[STEP_WORK]) // max(n, 1), 0)
     answer = start.copy()
     used, _ = solve_bound_qp(end_a, end_b, normal, weight, answer, lower, grad, tolerance, room)
-    h.count[3] += 1
-    h.count[2] += used * n
+    h.count[STEP_WHOLE_SOLVES] += 1
+    h.count[STEP_WORK] += used * n
     # a contact takes its new multiplier only where the change moves its relative value by
     # more than the tolerance (the rule by which Gauss–Seidel wakes a neighbour): the rest
     # of the cluster keeps its velocities to the bit, so its spheres keep their paths and
@@ -604,7 +611,7 @@ def _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
         grown, fits = _add_neighbours(h, values, members, first, m, False, is_velocity, x, v, a, sigma,
                                       inverse_mass, when, integrator, drag, k, tolerance, stick, solve)
         m = grown
-        if not fits or h.count[2] + m >= budget:
+        if not fits or h.count[STEP_WORK] + m >= budget:
             return _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, solve)
         for r in range(first, m):
             c = members[r]
@@ -621,7 +628,7 @@ def _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
                     for d in range(3):
                         undo_v[2 * r + e, d] = values[p, d]
         saved = m
-        h.count[2] += m
+        h.count[STEP_WORK] += m
         if not _direct(h, values, is_velocity, members, m, inverse_mass, stick, solve, tolerance):
             return _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, solve)
         grown, fits = _add_neighbours(h, values, members, 0, m, True, is_velocity, x, v, a, sigma, inverse_mass,
@@ -1019,9 +1026,9 @@ def _gauss_seidel(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, invers
         c = h.queue[head % size]
         head += 1
         h.seen[c] = solve
-        if h.count[2] >= budget:
+        if h.count[STEP_WORK] >= budget:
             return False
-        h.count[2] += 1
+        h.count[STEP_WORK] += 1
         i = h.a[c]
         j = partner_sphere(h.kind[c], h.other[c])
         wsum = inverse_mass[i] + (inverse_mass[j] if j >= 0 else 0.0)
@@ -1129,7 +1136,7 @@ def _release_if_loose(h, c, v, acc, inverse_mass, x, a, sigma, when, integrator,
     if h.lam[c] != 0.0:
         push_along(acc, inverse_mass, i, j, h.normal[c, 0], h.normal[c, 1], h.normal[c, 2], -h.lam[c])
     held_remove(h, c)
-    h.count[4] += 1
+    h.count[STEP_RELEASED] += 1
     return True
 
 

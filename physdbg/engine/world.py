@@ -67,7 +67,7 @@ from .resolve import (
     resolve_contact,
     settle_held,
 )
-from .resting import RAPID_RULES, grow_held, held_room, new_held
+from .resting import RAPID_RULES, STEP_RELEASED, STEP_WORK, grow_held, held_room, new_held
 from .state import BUDGETS, NonFiniteState, Settings, State, Walls, energies, first_non_finite, state_hash
 from .step_context import StepContext
 from .timeline import (
@@ -206,7 +206,7 @@ class World:
     def _forces(self, ctx: StepContext) -> None:
         """Held contacts -> the accelerations the paths follow (resolve.settle_held)."""
         st, s, n, dt = self.state, self.settings, self.state.count, ctx.dt
-        self.held.count[2:5] = 0  # the resting work of this step, its whole-cluster solves, its releases
+        self.held.count[STEP_WORK:STEP_RELEASED + 1] = 0  # this step's resting work, whole solves, releases
         ctx.path_accel = np.empty_like(self._acc)
         ctx.sigma = np.zeros(n)
         if not settle_held(self.held, st.positions, st.velocities, ctx.path_accel, self._acc, self._free_accel,
@@ -284,7 +284,7 @@ class World:
         tests = int(buf.counters[TESTS])
         events = int(buf.counters[EVENTS])
         rapid = int(buf.counters[RAPID])
-        released = int(self.held.count[4])
+        released = int(self.held.count[STEP_RELEASED])
         stats = StepStats(ctx.step, self.time, ctx.dt, ctx.kinetic, ctx.potential, ctx.momentum, contacts, tests,
                           events, self.held_count, rapid, released, ctx.max_overlap, ctx.state_hash, ctx.timings,
                           ctx.warnings)
