@@ -680,7 +680,7 @@ def _add_neighbours(h, values, members, first, m, violated_only, is_velocity, x,
     for r in range(first, m):
         c = members[r]
         for e in range(2):
-            p = _end(h, c, e)
+            p = _movable_end(h, c, e, inverse_mass)  # an immovable sphere passes nothing on
             if p < 0:
                 continue
             for t in range(h.deg[p]):
@@ -1058,7 +1058,7 @@ def _gauss_seidel(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, invers
             continue
         for end in range(2):
             p = i if end == 0 else j
-            if p < 0:
+            if p < 0 or inverse_mass[p] == 0.0:  # an immovable sphere passes nothing on
                 continue
             for s in range(h.deg[p]):
                 d = h.slots[p, s]
