@@ -44,15 +44,16 @@ def peak_memory_mb() -> float:
 
 def run_physdbg(scene, trace: bool = False, stop_above_gb: float | None = None) -> dict:
     """Step the scene; trace: print every step (ms, contacts, held, rapid, released, events,
-    swept tests, overlap, kinetic energy, warnings, peak memory); stop_above_gb: stop early
+    swept tests, overlap, kinetic energy, spheres asleep / fallen asleep / woken, warnings,
+    peak memory); stop_above_gb: stop early
     once the peak memory passes it."""
     world = scene.build_world()
     capped = 0
     worst = 0.0
     rows = []
     if trace:
-        print("step  ms  contacts  held  rapid  released  events  swept-tests  overlap(m)  kinetic(J)  warnings  "
-              "peak-MB", flush=True)
+        print("step  ms  contacts  held  rapid  released  events  swept-tests  overlap(m)  kinetic(J)  asleep  "
+              "slept  woken  warnings  peak-MB", flush=True)
     started = time.perf_counter()
     for k in range(scene.steps):
         t0 = time.perf_counter()
@@ -63,7 +64,7 @@ def run_physdbg(scene, trace: bool = False, stop_above_gb: float | None = None) 
         if trace:
             print(f"{k + 1} {1000 * (time.perf_counter() - t0):.0f} {stats.contacts} {stats.held} {stats.rapid} "
                   f"{stats.released} {stats.events} {stats.swept_tests} {stats.max_overlap:.2g} {stats.kinetic:.4g} "
-                  f"{[w.code for w in stats.warnings]} {peak_memory_mb():.0f}", flush=True)
+                  f"{stats.asleep} {stats.slept} {stats.woken} {[w.code for w in stats.warnings]} {peak_memory_mb():.0f}", flush=True)
         if stop_above_gb is not None and peak_memory_mb() > 1024.0 * stop_above_gb:
             print(f"stopped after step {k + 1}: peak memory {peak_memory_mb():.0f} MB > {stop_above_gb:g} GB")
             break

@@ -26,6 +26,8 @@ class RunSummary:
 
     rapid: contacts the rapid-contact (TC) rule acted on; released: held contacts let go (all
     steps; beside rapid, a pile's churn); resting_at_end: contacts held at the end.
+    asleep_at_end, slept, woken: spheres asleep at the end, fallen asleep and woken over
+    the run (sleeping, engine/sleep.py; 0 with it off).
     energy_drift: (E_end - E_start) / |E_start| of kinetic + potential (0 when E_start = 0);
     momentum_drift: |p_end - p_start| (kg·m/s); dts: every step's dt, to repeat the run.
     compile_seconds: compiling (first run) or loading (cached) the numba kernels, not
@@ -55,6 +57,9 @@ class RunSummary:
     resting_at_end: int
     rapid: int
     released: int
+    asleep_at_end: int
+    slept: int
+    woken: int
     max_contacts_in_a_step: int
     energy_start: float
     energy_end: float
@@ -121,7 +126,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     total = len(dts) if dts is not None else scene.steps
     used: list[float] = []
     phase = {"forces": 0.0, "broad_phase": 0.0, "narrow_phase": 0.0, "resolve": 0.0, "finish": 0.0}
-    contacts = tests = max_in_step = rapid = released = 0
+    contacts = tests = max_in_step = rapid = released = slept = woken = asleep = 0
     max_overlap = 0.0
     warnings = WarningTally()
     started = time.perf_counter()
@@ -138,6 +143,9 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         contacts += stats.contacts
         rapid += stats.rapid
         released += stats.released
+        slept += stats.slept
+        woken += stats.woken
+        asleep = stats.asleep
         tests += stats.swept_tests
         max_in_step = max(max_in_step, stats.contacts)
         max_overlap = max(max_overlap, stats.max_overlap)
@@ -158,7 +166,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         broad_phase_reason=world.broad_phase_reason,
         particles=st.count, walls=list(scene.walls.names), steps=n_steps, sim_time=world.time,
         contacts=contacts, swept_tests=tests, resting_at_end=world.held_count, rapid=rapid,
-        released=released,
+        released=released, asleep_at_end=asleep, slept=slept, woken=woken,
         max_contacts_in_a_step=max_in_step, energy_start=e0, energy_end=e1, energy_drift=drift,
         momentum_start=[float(c) for c in mom0], momentum_end=[float(c) for c in mom1],
         momentum_drift=float(np.linalg.norm(mom1 - mom0)), max_overlap=max_overlap,

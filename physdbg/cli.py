@@ -815,6 +815,8 @@ def format_summary(s, observers: str = "the audit") -> str:
         f"steps       {s.steps}  ({s.sim_time:.6g} s simulated, {dt_text})",
         f"contacts    {s.contacts}  (at most {s.max_contacts_in_a_step} in a step; {s.swept_tests} swept tests; "
         f"{s.rapid} rapid, {s.released} released; {s.resting_at_end} held at the end)",
+        *([f"sleep       {s.asleep_at_end} of {s.particles} spheres asleep at the end  ({s.slept} fell asleep, "
+           f"{s.woken} woke)"] if s.slept else []),
         f"energy      {s.energy_start:.6g} J -> {s.energy_end:.6g} J  (drift {s.energy_drift:+.3e})",
         f"momentum    {_vec(s.momentum_start)} -> {_vec(s.momentum_end)} kg·m/s  (drift {s.momentum_drift:.3e})",
         f"overlap     max {s.max_overlap:.3g} m",

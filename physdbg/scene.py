@@ -69,6 +69,10 @@ TOP_FIELDS = {
                            "tc (hold it only if it closes no faster than its press adds in rapid_contact_time, "
                            "else elastic: a dense pile is much faster and never churns, but keeps rattling)"),
     "contact_tolerance": "allowed overlap and resting gap, metres > 0",
+    "sleep_speed": ("a sphere at most this fast (m/s) at the end of every step for sleep_time falls asleep: "
+                    "immovable until something hits it faster or leaves it (a settled pile then costs nothing), "
+                    "m/s >= 0, 0 = off (the default); not with periodic walls"),
+    "sleep_time": "how long a sphere must stay slow to fall asleep, seconds > 0 (default 0.5)",
     "max_events_per_step": ("budget: contacts resolved in one step, integer >= 0 (default 0 = sized to the scene: "
                             "max(10000, 20 per sphere))"),
     "max_pairs_per_step": "budget: broad-phase candidate pairs in one step, integer >= 1 (default 10000000)",
@@ -488,6 +492,8 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
                                     d.rapid_contact_rule),
         contact_tolerance=c.number(raw, "contact_tolerance", "contact_tolerance",
                                    default=d.contact_tolerance, scale=True),
+        sleep_speed=c.number(raw, "sleep_speed", "sleep_speed", default=d.sleep_speed, lo=0),
+        sleep_time=c.number(raw, "sleep_time", "sleep_time", default=d.sleep_time, scale=True),
         **{budget: c.number(raw, budget, budget, default=getattr(d, budget),
                             lo=0 if budget == "max_events_per_step" else 1, integer=True)
            for budget in BUDGETS},
@@ -598,6 +604,9 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
     walls = Walls(names, np.array(normals, dtype=np.float64).reshape(-1, 3), np.array(offsets, dtype=np.float64),
                   np.array(rest, dtype=np.float64), np.array(two, dtype=np.bool_), np.array(thick, dtype=np.float64),
                   period, box_lo if box_lo is not None else np.zeros(3))
+    if walls.periodic and settings.sleep_speed > 0:
+        c.fail("sleep_speed", f"got {settings.sleep_speed:g}; sleeping needs a box with no periodic axis "
+                              f"(box.periodic): leave sleep_speed at 0 here")
     if walls.periodic:  # a sphere placed outside the box on a periodic axis is the same sphere inside it
         wrap_positions(state.positions, walls.period_origin, walls.period)
     scene = Scene(name, description, source, settings, dt, max_dt, steps, duration, seed, state, walls, raw)

@@ -52,6 +52,13 @@ def test_the_summary_counts_the_held_contacts_let_go_as_the_steps_do():
     assert f"{rapid} rapid, {released} released; {world.held_count} held at the end" in result.output
 
 
+def test_run_says_how_many_spheres_fell_asleep_only_when_sleeping_is_on():
+    result = invoke("run", "bounce", "--set", "sleep_speed=0.05", "--set", "sleep_time=0.1")
+    assert result.exit_code == 0
+    assert "sleep       1 of 1 spheres asleep at the end  (1 fell asleep, 0 woke)" in result.output
+    assert "sleep " not in invoke("run", "bounce").output
+
+
 def test_the_speed_line_keeps_the_engine_apart_from_what_observes_it(tmp_path):
     """The engine's own ms/step (its five phases) comes first; the whole loop's, with the
     audit (run) or the recording and the audit (record), second. A recorder's work once

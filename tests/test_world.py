@@ -209,7 +209,8 @@ def test_events_arrive_in_pipeline_order_with_everything_a_recording_needs():
     end = obs.step_ends[-1]
     assert end.positions.shape == (5, 3) and end.velocities.shape == (5, 3)
     assert set(end.timings) == {"forces", "broad_phase", "narrow_phase", "resolve", "finish"}
-    assert set(end.counts) == {"contacts", "swept_tests", "events", "resting", "rapid", "released"}
+    assert set(end.counts) == {"contacts", "swept_tests", "events", "resting", "rapid", "released", "asleep",
+                               "slept", "woken"}
     assert end.kinetic == pytest.approx(0.5)
     contact = obs.contacts[0]
     assert contact.impulse == pytest.approx(1.0)  # j = -(1+1)(1·n)/(1+1), n = -x

@@ -117,7 +117,7 @@ class DiffReport:
 # ----------------------------------------------------------------------------- settings
 # engine settings added after recordings were made, and what a recording made before
 # each one existed used
-SETTINGS_ADDED = {"rapid_contact_rule": "hold"}
+SETTINGS_ADDED = {"rapid_contact_rule": "hold", "sleep_speed": 0.0, "sleep_time": 0.5}
 
 
 def _flatten(value, prefix: str = "") -> dict:

@@ -44,7 +44,9 @@ class Settings:
     (s) after either sphere's previous one is held like a resting one if something presses
     it, else elastic (resting.py, 0 = off); rapid_contact_rule: "hold" holds such a pressed
     contact at any speed, "tc" only a slow one (resting.rapid_holds);
-    contact_tolerance: allowed overlap / resting gap (m).
+    contact_tolerance: allowed overlap / resting gap (m); sleep_speed: a sphere at most
+    this fast (m/s) for sleep_time (s) falls asleep, immovable until disturbed (sleep.py;
+    0 = off, the default).
 
     Budgets bound the work of one step (see BUDGETS); when one is reached the step still
     finishes, and a warning names the budget. max_events_per_step = 0 (the default) is
@@ -63,6 +65,8 @@ class Settings:
     rapid_contact_time: float = 1e-4
     rapid_contact_rule: str = "hold"
     contact_tolerance: float = 1e-9
+    sleep_speed: float = 0.0
+    sleep_time: float = 0.5
     max_events_per_step: int = 0
     max_pairs_per_step: int = 10_000_000
     max_swept_tests_per_step: int = 10_000_000

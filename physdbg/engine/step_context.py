@@ -32,7 +32,8 @@ class StepContext:
     narrow_phase: version (N,) int64, predictions made of each sphere (stale heap entries).
     resolve: kernel_groups, the step's arrays as the compiled kernels take them (built
     once, World._kernel_groups).
-    finish: max_overlap (m), kinetic, potential (J), momentum (3,), state_hash, non_finite.
+    finish: max_overlap (m); with sleeping on (sleep.py), sleeping_pairs (the broad phase's pairs of two sleeping spheres, left out
+    of ``pairs``) and the spheres that slept and woke (counts); kinetic, potential (J), momentum (3,), state_hash, non_finite.
     warnings and timings (s per phase) collect through the step.
     """
 
@@ -54,6 +55,9 @@ class StepContext:
     version: np.ndarray | None = None
     kernel_groups: tuple | None = None
     max_overlap: float = 0.0
+    sleeping_pairs: np.ndarray = field(default_factory=lambda: np.empty((0, 2), np.int64))
+    slept: int = 0
+    woken: int = 0
     kinetic: float = 0.0
     potential: float = 0.0
     momentum: np.ndarray | None = None

@@ -68,6 +68,7 @@ from .resolve import (
     settle_held,
 )
 from .resting import RAPID_RULES, STEP_RELEASED, STEP_WORK, grow_held, held_room, new_held
+from .sleep import Sleepers, release_static, woken_by_impact
 from .state import BUDGETS, NonFiniteState, Settings, State, Walls, energies, first_non_finite, state_hash
 from .step_context import StepContext
 from .timeline import (
@@ -111,6 +112,9 @@ class StepStats:
     held: int
     rapid: int
     released: int
+    asleep: int
+    slept: int
+    woken: int
     max_overlap: float
     state_hash: str
     timings: dict[str, float]
@@ -164,6 +168,17 @@ class World:
             wrap_positions(state.positions, self._period_origin, self._period)
             self.broad_phase = PeriodicBroadPhase(self.broad_phase, self._period_origin, self._period)
         self._buf = Buffers(state.count)
+        # sleeping (sleep.py): the step reads these, not state.inverse_mass and the free
+        # accelerations, so a sleeping sphere is immovable and feels no gravity
+        self._inverse_mass = state.inverse_mass
+        self._free_accel_awake = self._free_accel
+        self.sleepers: Sleepers | None = None
+        if settings.sleep_speed > 0:
+            if self._periodic:
+                raise ValueError("sleep_speed > 0 needs a scene without periodic walls (sleep.py)")
+            self.sleepers = Sleepers(self._free_accel, self._k, settings.sleep_speed, settings.sleep_time)
+            self._inverse_mass = state.inverse_mass.copy()
+            self._free_accel = self._free_accel.copy()
         self.event_cap = settings.event_cap(state.count)
         self.last_step: StepContext | None = None  # the context of the latest step (for inspection)
 
@@ -210,7 +225,7 @@ class World:
         ctx.path_accel = np.empty_like(self._acc)
         ctx.sigma = np.zeros(n)
         if not settle_held(self.held, st.positions, st.velocities, ctx.path_accel, self._acc, self._free_accel,
-                           st.radius, st.inverse_mass, ctx.sigma, dt, self._integrator, self._drag, self._k,
+                           st.radius, self._inverse_mass, ctx.sigma, dt, self._integrator, self._drag, self._k,
                            self._kick_first, self._walls_group, s.contact_tolerance, s.max_resting_work_per_step,
                            ctx.vtol, self._atol, dt * (self._rest_step_factor + s.rest_fraction)):
             ctx.warn("max_resting_work_per_step", _budget_message("max_resting_work_per_step",
@@ -233,6 +248,11 @@ class World:
         if len(pairs) > s.max_pairs_per_step:
             ctx.warn("max_pairs_per_step", _budget_message("max_pairs_per_step", s.max_pairs_per_step))
             pairs = np.empty((0, 2), dtype=np.int64)
+        if self.sleepers is not None and len(pairs):  # two sleeping spheres cannot meet
+            asleep = self.sleepers.asleep
+            both = asleep[pairs[:, 0]] & asleep[pairs[:, 1]]
+            ctx.sleeping_pairs = pairs[both]
+            pairs = pairs[~both]
         self._build_adjacency(ctx, pairs)
 
     def _narrow_phase(self, ctx: StepContext) -> None:
@@ -269,6 +289,8 @@ class World:
         if s.detection == "swept" and ctx.max_overlap > s.contact_tolerance and not ctx.warnings:
             ctx.warn("overlap", f"spheres overlap by {ctx.max_overlap:.3g} m, more than the contact tolerance "
                                 f"{s.contact_tolerance:g} m")
+        if self.sleepers is not None:
+            self._sleep(ctx)
         ctx.non_finite = first_non_finite(x, v)
         if ctx.non_finite is not None:
             ctx.warn("non-finite", str(NonFiniteState(ctx.step, *ctx.non_finite)))
@@ -276,6 +298,20 @@ class World:
         ctx.state_hash = state_hash(x, v)
         self.time += ctx.dt
         self.step_index += 1
+
+    def _sleep(self, ctx: StepContext) -> None:
+        """The sleep rules at the step's end (sleep.py): wake the disturbed, freeze the slow."""
+        st, sleepers = self.state, self.sleepers
+        rows = self._buf.contacts[:int(self._buf.counters[CONTACTS])]
+        disturbed = woken_by_impact(rows, sleepers.asleep, sleepers.sleep_speed)
+        fell, woke = sleepers.end_of_step(ctx.dt, st.positions, st.velocities, st.radius, np.concatenate((ctx.pairs, ctx.sleeping_pairs)), disturbed)
+        self._inverse_mass[woke] = st.inverse_mass[woke]
+        self._free_accel[woke] = self._free_accel_awake[woke]
+        self._inverse_mass[fell] = 0.0
+        self._free_accel[fell] = 0.0
+        if fell.size:
+            release_static(self.held, self._inverse_mass)
+        ctx.slept, ctx.woken = int(fell.size), int(woke.size)
 
     def _end(self, ctx: StepContext) -> StepStats:
         """The step's stats and its closing events; raises NonFiniteState after reporting."""
@@ -285,8 +321,9 @@ class World:
         events = int(buf.counters[EVENTS])
         rapid = int(buf.counters[RAPID])
         released = int(self.held.count[STEP_RELEASED])
+        asleep = self.sleepers.count if self.sleepers is not None else 0
         stats = StepStats(ctx.step, self.time, ctx.dt, ctx.kinetic, ctx.potential, ctx.momentum, contacts, tests,
-                          events, self.held_count, rapid, released, ctx.max_overlap, ctx.state_hash, ctx.timings,
+                          events, self.held_count, rapid, released, asleep, ctx.slept, ctx.woken, ctx.max_overlap, ctx.state_hash, ctx.timings,
                           ctx.warnings)
         obs = ctx.observer
         if obs is not None:
@@ -296,7 +333,8 @@ class World:
             obs.on_event(StepEnd(ctx.step, self.time, ctx.dt, x.copy(), v.copy(), ctx.kinetic, ctx.potential,
                                  ctx.momentum.copy(),
                                  {"contacts": contacts, "swept_tests": tests, "events": events,
-                                  "resting": self.held_count, "rapid": rapid, "released": released},
+                                  "resting": self.held_count, "rapid": rapid, "released": released,
+                                  "asleep": asleep, "slept": ctx.slept, "woken": ctx.woken},
                                  ctx.max_overlap, dict(ctx.timings), ctx.state_hash,
                                  tuple(w.message for w in ctx.warnings)))
         if ctx.non_finite is not None:
@@ -472,7 +510,7 @@ class World:
 
     def _build_kernel_groups(self, ctx: StepContext) -> tuple[tuple, tuple, tuple]:
         st, s = self.state, self.settings
-        particles = LoopParticles(st.positions, st.velocities, ctx.path_accel, self._acc, st.radius, st.inverse_mass,
+        particles = LoopParticles(st.positions, st.velocities, ctx.path_accel, self._acc, st.radius, self._inverse_mass,
                                   st.restitution, ctx.sigma, ctx.version, self._last_contact)
         method = LoopMethod(ctx.run_time, ctx.dt, self._integrator, self._drag, self._k, self._detection, s.samples,
                             s.contact_tolerance * 1e-3, s.rest_fraction, self._rest_step_factor,

@@ -96,11 +96,11 @@ STATS_FIELDS = [
     ("seconds_forces", "<f8", ()), ("seconds_broad_phase", "<f8", ()), ("seconds_narrow_phase", "<f8", ()),
     ("seconds_resolve", "<f8", ()), ("seconds_finish", "<f8", ()),
     ("temperature", "<f8", ()), ("virial", "<f8", ()), ("wall_impulse", "<f8", ()), ("collisions", "<i8", ()),
-    ("released", "<i8", ()),
+    ("released", "<i8", ()), ("asleep", "<i8", ()), ("slept", "<i8", ()), ("woken", "<i8", ()),
 ]
 # the counts of StepEnd.counts, each a column of STATS_FIELDS (a recording made before
-# ``released`` existed reads 0 there)
-STEP_COUNTS = ("contacts", "swept_tests", "events", "resting", "rapid", "released")
+# ``released`` or the sleep counts existed reads 0 there)
+STEP_COUNTS = ("contacts", "swept_tests", "events", "resting", "rapid", "released", "asleep", "slept", "woken")
 # CONTACT_FIELDS is the engine's own contact row (imported from events: the loop's buffer,
 # the event and this table are one schema). Files written before its ``how`` column was
 # named hold the same column, under the same protobuf field number, as ``resting``;

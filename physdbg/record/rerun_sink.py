@@ -17,7 +17,7 @@ Entities (timelines ``step`` = frame, steps completed, and ``sim_time`` in secon
     world/contacts/normals   Arrows3D: contact normals (length = the sphere's radius)
     world/contacts/impulses  Arrows3D: velocity change of sphere a, × IMPULSE_ARROW_SECONDS
     world/findings           Points3D: a red marker where the audit found a problem
-    stats/energy/*, stats/momentum/*, stats/contacts, stats/rapid, stats/released
+    stats/energy/*, stats/momentum/*, stats/contacts, stats/rapid, stats/released, stats/asleep
                              Scalars, sent in columns
     log                      TextLog: contacts and warnings in words
 
@@ -286,6 +286,8 @@ class RerunSink:
             "stats/contacts": end.counts.get("contacts", 0),
             # a pile's churn: contacts the rapid rule held, held contacts let go again
             "stats/rapid": end.counts.get("rapid", 0), "stats/released": end.counts.get("released", 0),
+            # sleeping spheres (sleep.py; 0 with sleeping off)
+            "stats/asleep": end.counts.get("asleep", 0),
         }
         if self._movable > 1 and end.kinetic > 0:  # Z = PV/NkT of this step, from its collisions
             values["stats/pressure/z"] = 1 + self._virial / (2 * end.kinetic * end.dt)
@@ -339,8 +341,9 @@ def blueprint(header: RecordingHeader):
                 for level in range(BVH_LEVELS_SHOWN, 64)}),
             rrb.Vertical(
                 rrb.TimeSeriesView(origin="/stats/energy", name="energy (J)"),
-                rrb.TimeSeriesView(origin="/stats", contents=["/stats/contacts", "/stats/rapid", "/stats/released"],
-                                   name="contacts per step (all, rapid, released)"),
+                rrb.TimeSeriesView(origin="/stats", contents=["/stats/contacts", "/stats/rapid", "/stats/released",
+                                                              "/stats/asleep"],
+                                   name="contacts per step (all, rapid, released); spheres asleep"),
                 rrb.TextLogView(origin="/log", name="events"),
                 row_shares=[2, 1, 2],
             ),

@@ -1,0 +1,195 @@
+"""Sleeping spheres (engine/sleep.py): who may sleep, when they sleep and wake, what it costs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from physdbg.engine import Settings, World
+from physdbg.engine.resting import held_add, new_held
+from physdbg.engine.sleep import can_sleep, release_static
+from physdbg.errors import SceneError
+from physdbg.scene import load_scene
+
+from .conftest import make_state, make_walls
+
+G = 9.81
+SLEEP = {"sleep_speed": 0.05, "sleep_time": 0.1}
+
+
+def _world(positions, velocities=None, *, restitution=0.5, radius=0.1, gravity=(0.0, -G, 0.0), **settings):
+    state = make_state(positions, velocities, radius=radius, restitution=restitution)
+    floor = make_walls(([0, 1, 0], 0.0, restitution))
+    return World(state, floor, Settings(gravity=gravity, **{**SLEEP, **settings}))
+
+
+def test_only_a_sphere_gravity_would_carry_through_the_sleep_speed_quickly_may_sleep():
+    """A sphere in free flight is at most v_s fast for v_s/g + v_s/(g - k·v_s) seconds."""
+    g = np.array([[0.0, -G, 0.0], [0.0, -G, 0.0], [0.0, 0.0, 0.0], [0.0, -0.01, 0.0]])
+    allowed = can_sleep(g, 0.0, 0.05, 0.5)
+    assert allowed.tolist() == [True, True, False, False]  # no gravity, or too little, never sleeps
+    flight = 2 * 0.05 / G  # 0.0102 s at the top of a flight
+    assert can_sleep(g[:1], 0.0, 0.05, 1.01 * flight).tolist() == [True]
+    assert can_sleep(g[:1], 0.0, 0.05, 0.99 * flight).tolist() == [False]
+    # drag slows the fall: with g <= k·v_s a sphere could drift slower than v_s for ever
+    assert can_sleep(g[:1], G / 0.05, 0.05, 100.0).tolist() == [False]
+
+
+def test_a_dropped_ball_comes_to_rest_then_sleeps_exactly_where_it_lies():
+    world = _world([[0.0, 0.6, 0.0]])
+    fell_at = None
+    for step in range(600):
+        stats = world.step(1 / 60)
+        assert stats.max_overlap <= world.settings.contact_tolerance
+        if stats.slept:
+            fell_at = step
+            break
+    assert fell_at is not None and stats.asleep == 1
+    lying = world.state.positions.copy()
+    assert world.state.velocities.tolist() == [[0.0, 0.0, 0.0]]
+    assert lying[0, 1] == pytest.approx(0.1, abs=1e-9)  # on the floor
+    for _ in range(60):
+        stats = world.step(1 / 60)
+        assert (stats.contacts, stats.asleep, stats.slept, stats.woken) == (0, 1, 0, 0)
+        assert stats.kinetic == 0.0
+    assert np.array_equal(world.state.positions, lying)  # to the bit: no gravity, no motion
+
+
+def test_sleeping_is_off_by_default_and_then_nothing_sleeps():
+    state = make_state([[0.0, 0.6, 0.0]], restitution=0.5)
+    world = World(state, make_walls(([0, 1, 0], 0.0, 0.5)), Settings())
+    for _ in range(300):
+        stats = world.step(1 / 60)
+    assert world.sleepers is None and (stats.asleep, stats.slept, stats.woken) == (0, 0, 0)
+
+
+def _sleeping_stack(*extra):
+    """Two balls resting one on the other on the floor, asleep."""
+    world = _world([[0.0, 0.1, 0.0], [0.0, 0.3, 0.0], *extra[0]], extra[1] if extra else None)
+    for _ in range(30):
+        stats = world.step(1 / 60)
+    return world, stats
+
+
+def test_a_stack_sleeps_from_the_floor_up_and_a_hit_on_its_foot_wakes_it_all():
+    world, stats = _sleeping_stack([[3.0, 0.1, 0.0]], [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    assert world.sleepers.asleep.tolist() == [True, True, True]
+    # a ball rolled fast along the floor into the bottom ball of the stack
+    world.sleepers.asleep[2] = False
+    world._inverse_mass[2] = 1.0
+    world._free_accel[2] = world._free_accel_awake[2]
+    world.state.velocities[2] = [-6.0, 0.0, 0.0]
+    woke_at = None
+    for step in range(30):
+        stats = world.step(1 / 60)
+        assert stats.max_overlap <= world.settings.contact_tolerance
+        if stats.woken:
+            woke_at = step
+            break
+    assert woke_at is not None
+    # the bottom ball was hit (rule 2) and the one resting on it woke with it (rule 3)
+    assert stats.woken == 2 and not world.sleepers.asleep[0] and not world.sleepers.asleep[1]
+    # within the step of the impact the sleeper did not move: the ball bounced off it
+    assert world.state.velocities[0].tolist() == [0.0, 0.0, 0.0]
+    assert world.state.velocities[2, 0] > 0.0
+
+
+def test_a_ball_on_an_awake_one_does_not_fall_asleep_before_it():
+    """Rule 4: the upper ball is slow from the start, but sleeps only once the lower one does."""
+    world = _world([[0.0, 0.1, 0.0], [0.0, 0.3, 0.0]])
+    world.sleepers.allowed[0] = False  # the lower ball may never sleep
+    for _ in range(60):
+        stats = world.step(1 / 60)
+    assert stats.asleep == 0
+    world.sleepers.allowed[0] = True
+    for _ in range(30):
+        stats = world.step(1 / 60)
+    assert stats.asleep == 2
+
+
+def test_a_slow_ball_in_a_box_without_gravity_never_sleeps():
+    world = _world([[0.0, 0.5, 0.0]], [[0.01, 0.0, 0.0]], gravity=(0.0, 0.0, 0.0), restitution=1.0)
+    for _ in range(120):
+        stats = world.step(1 / 60)
+    assert stats.asleep == 0 and world.state.velocities[0, 0] == 0.01
+
+
+def test_a_held_contact_between_two_immovable_ends_is_released():
+    h = new_held(3)
+    held_add(h, 0, 0, 1, 0.0, 1.0, 0.0)  # spheres 0 and 1
+    held_add(h, 0, 1, 2, 0.0, 1.0, 0.0)  # spheres 1 and 2
+    held_add(h, 1, 2, 0, 0.0, 1.0, 0.0)  # sphere 2 and wall 0
+    released = release_static(h, np.array([0.0, 1.0, 0.0]))  # sphere 1 can move
+    assert released == 1 and int(h.count[0]) == 2
+    assert sorted((int(h.kind[c]), int(h.a[c]), int(h.other[c])) for c in range(2)) == [(0, 0, 1), (0, 1, 2)]
+
+
+NARROW_PILE = ["generate.count=100", "box.max=[0.3,1,0.3]", "generate.speed=0", "generate.restitution=0.5",
+               "box.restitution=0.5", "rapid_contact_rule=tc"]
+
+
+def test_without_sleeping_the_narrow_pile_collapses():
+    """The pile below, awake: its bed rattles ever faster until the event cap stops a step."""
+    scene = load_scene("rain", [*NARROW_PILE, "steps=60"])
+    world = scene.build_world()
+    codes = set()
+    for _ in range(scene.steps):
+        codes.update(w.code for w in world.step(scene.dt).warnings)
+    assert "max_events_per_step" in codes
+
+
+def test_a_pile_falls_asleep_exactly_and_sleeping_never_adds_energy():
+    """100 spheres dropped into a narrow box pile up and every one falls asleep: no contact,
+    no event, no motion is left, and no step left an overlap or gained energy beyond the
+    simultaneous solves' rounding (5e-9 of it in the worst step here)."""
+    scene = load_scene("rain", [*NARROW_PILE, "sleep_speed=0.05", "sleep_time=0.1", "steps=240"])
+    world = scene.build_world()
+    energy = None
+    slept = 0
+    for _ in range(scene.steps):
+        before = energy
+        stats = world.step(scene.dt)
+        energy = stats.kinetic + stats.potential
+        slept += stats.slept
+        assert stats.max_overlap <= scene.settings.contact_tolerance and not stats.warnings
+        if before is not None:
+            assert energy <= before + 1e-7 * abs(before)
+    assert slept >= 100 and stats.asleep == 100 and (stats.contacts, stats.events, stats.kinetic) == (0, 0, 0.0)
+
+
+def test_only_slow_spheres_fall_asleep_and_only_their_kinetic_energy_goes():
+    """end_of_step zeroes the velocities of the spheres that fall asleep, each at most v_s
+    fast, and touches no other."""
+    from physdbg.engine.sleep import Sleepers
+
+    free = np.tile([0.0, -G, 0.0], (4, 1))
+    sleepers = Sleepers(free, 0.0, 0.05, 0.1)
+    x = np.array([[0.0, 0.1, 0.0], [1.0, 0.1, 0.0], [2.0, 0.1, 0.0], [3.0, 0.1, 0.0]])
+    v = np.array([[0.03, 0.0, 0.0], [0.0, 0.049, 0.0], [0.2, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    radius = np.full(4, 0.1)
+    no_pairs = np.empty((0, 2), np.int64)
+    nobody = np.empty(0, np.int64)
+    for _ in range(5):  # 5 steps of 0.02 s: slow for 0.1 s
+        before = v.copy()
+        fell, woke = sleepers.end_of_step(0.02, x, v, radius, no_pairs, nobody)
+    assert fell.tolist() == [0, 1, 3] and woke.size == 0
+    assert np.array_equal(v[2], before[2]) and not v[[0, 1, 3]].any()
+    removed = 0.5 * np.einsum("ij,ij->i", before, before)[fell]
+    assert (removed <= 0.5 * 0.05**2).all()
+    # a sphere hit while asleep wakes; its slow time starts again
+    fell, woke = sleepers.end_of_step(0.02, x, v, radius, no_pairs, np.array([1]))
+    assert woke.tolist() == [1] and fell.size == 0 and sleepers.still[1] == 0.0
+
+
+def test_a_scene_cannot_sleep_in_a_periodic_box():
+    with pytest.raises(SceneError, match="sleep_speed"):
+        load_scene("gas", ["sleep_speed=0.1", "box.periodic=true"])
+
+
+def test_same_scene_with_sleeping_gives_the_same_hashes():
+    hashes = []
+    for _ in range(2):
+        scene = load_scene("rain", ["generate.count=40", "sleep_speed=0.05", "sleep_time=0.1", "steps=200"])
+        world = scene.build_world()
+        hashes.append([world.step(scene.dt).state_hash for _ in range(scene.steps)])
+    assert hashes[0] == hashes[1]
