@@ -35,16 +35,20 @@ def test_only_a_sphere_gravity_would_carry_through_the_sleep_speed_quickly_may_s
     assert can_sleep(g[:1], G / 0.05, 0.05, 100.0).tolist() == [False]
 
 
-def test_a_dropped_ball_comes_to_rest_then_sleeps_exactly_where_it_lies():
-    world = _world([[0.0, 0.6, 0.0]])
-    fell_at = None
-    for step in range(600):
+def _step_until(world, counted: str, limit: int):
+    """Step (1/60 s) until a step's stats count ``counted`` (slept, woken); returns its stats."""
+    for _ in range(limit):
         stats = world.step(1 / 60)
         assert stats.max_overlap <= world.settings.contact_tolerance
-        if stats.slept:
-            fell_at = step
-            break
-    assert fell_at is not None and stats.asleep == 1
+        if getattr(stats, counted):
+            return stats
+    raise AssertionError(f"no step counted {counted} in {limit} steps")
+
+
+def test_a_dropped_ball_comes_to_rest_then_sleeps_exactly_where_it_lies():
+    world = _world([[0.0, 0.6, 0.0]])
+    stats = _step_until(world, "slept", 600)
+    assert stats.asleep == 1
     lying = world.state.positions.copy()
     assert world.state.velocities.tolist() == [[0.0, 0.0, 0.0]]
     assert lying[0, 1] == pytest.approx(0.1, abs=1e-9)  # on the floor
@@ -63,32 +67,15 @@ def test_sleeping_is_off_by_default_and_then_nothing_sleeps():
     assert world.sleepers is None and (stats.asleep, stats.slept, stats.woken) == (0, 0, 0)
 
 
-def _sleeping_stack(*extra):
-    """Two balls resting one on the other on the floor, asleep."""
-    world = _world([[0.0, 0.1, 0.0], [0.0, 0.3, 0.0], *extra[0]], extra[1] if extra else None)
-    for _ in range(30):
-        stats = world.step(1 / 60)
-    return world, stats
-
-
 def test_a_stack_sleeps_from_the_floor_up_and_a_hit_on_its_foot_wakes_it_all():
-    world, stats = _sleeping_stack([[3.0, 0.1, 0.0]], [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
-    assert world.sleepers.asleep.tolist() == [True, True, True]
-    # a ball rolled fast along the floor into the bottom ball of the stack
-    world.sleepers.asleep[2] = False
-    world._inverse_mass[2] = 1.0
-    world._free_accel[2] = world._free_accel_awake[2]
-    world.state.velocities[2] = [-6.0, 0.0, 0.0]
-    woke_at = None
-    for step in range(30):
-        stats = world.step(1 / 60)
-        assert stats.max_overlap <= world.settings.contact_tolerance
-        if stats.woken:
-            woke_at = step
-            break
-    assert woke_at is not None
+    """Two balls stacked on the floor fall asleep; a third slides along the (frictionless)
+    floor at 6 m/s, too fast to sleep, and hits the bottom one."""
+    world = _world([[0.0, 0.1, 0.0], [0.0, 0.3, 0.0], [12.0, 0.1, 0.0]], [[0, 0, 0], [0, 0, 0], [-6.0, 0, 0]])
+    stats = _step_until(world, "slept", 60)
+    assert world.sleepers.asleep.tolist() == [True, True, False]  # together: the lower one lets the upper sleep
+    stats = _step_until(world, "woken", 180)
     # the bottom ball was hit (rule 2) and the one resting on it woke with it (rule 3)
-    assert stats.woken == 2 and not world.sleepers.asleep[0] and not world.sleepers.asleep[1]
+    assert stats.woken == 2 and not world.sleepers.asleep.any()
     # within the step of the impact the sleeper did not move: the ball bounced off it
     assert world.state.velocities[0].tolist() == [0.0, 0.0, 0.0]
     assert world.state.velocities[2, 0] > 0.0
