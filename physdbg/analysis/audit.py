@@ -322,7 +322,7 @@ class Auditor:
             rules.append("hold pressed rapid contacts at any speed (rapid_contact_rule=hold): under tc the fast "
                          "ones stay elastic, so a dense pile keeps rattling")
             if not self.settings.get("sleep_speed"):
-                rules.append("or let the slow spheres of the pile sleep (sleep_speed, e.g. 0.05 m/s, with "
+                rules.append("or let the slow spheres of the pile sleep (sleep_speed, e.g. 0.1 m/s, with "
                              "sleep_time=0.1): it freezes the bed as it cools")
         advice = "; ".join(rules) or "lower the restitution, or use a shorter dt"
         self._add(Finding("collapse", step, involved[:10].tolist(),
