@@ -121,11 +121,14 @@ def test_under_the_tc_rule_the_collapse_advice_names_the_hold_rule():
     contacts.kind[:] = KIND_PAIR
     contacts.a[:], contacts.other[:] = [i % 10 for i in range(400)], [10 + i % 10 for i in range(400)]
     contacts.how[:], contacts.restitution[:] = HOW_IMPULSE, 1.0  # elastic rapid contacts are bounces too
-    for rule, sleep_speed, named, sleep_named in (("hold", 0.0, False, False), ("tc", 0.0, True, True),
-                                                  ("tc", 0.05, True, False)):
+    for rule, sleep_speed, named, asleep_said in (("hold", 0.0, False, False), ("tc", 0.0, True, False),
+                                                  ("tc", 0.05, True, True)):
         auditor = Auditor(header)
-        auditor.settings = {**auditor.settings, "rapid_contact_rule": rule, "sleep_speed": sleep_speed}
+        auditor.settings = {**auditor.settings, "rapid_contact_rule": rule, "sleep_speed": sleep_speed,
+                            "sleep_time": 0.1}
         auditor._check_collapse(5, contacts)
         assert auditor.counts == {"collapse": 1}
-        assert ("rapid_contact_rule=hold" in auditor.examples[0].advice) == named
-        assert ("sleep_speed" in auditor.examples[0].advice) == sleep_named
+        advice = auditor.examples[0].advice
+        assert ("rapid_contact_rule=hold" in advice) == named
+        assert ("sleep_speed" in advice) == named  # under tc: sleeping is named, on or off
+        assert ("rattles until its spheres fall asleep" in advice) == asleep_said

@@ -319,11 +319,16 @@ class Auditor:
             rules.append(f"hold contacts that follow each other within rapid_contact_time (now "
                          f"{self.settings.get('rapid_contact_time')} s)")
         if self.settings.get("rapid_contact_time") and self.settings.get("rapid_contact_rule") == "tc":
-            rules.append("hold pressed rapid contacts at any speed (rapid_contact_rule=hold): under tc the fast "
-                         "ones stay elastic, so a dense pile keeps rattling")
-            if not self.settings.get("sleep_speed"):
-                rules.append("or let the slow spheres of the pile sleep (sleep_speed, e.g. 0.1 m/s, with "
-                             "sleep_time=0.1): it freezes the bed as it cools")
+            if self.settings.get("sleep_speed"):
+                rules.append(f"under tc a dense bed rattles until its spheres fall asleep: a higher sleep_speed "
+                             f"(now {self.settings.get('sleep_speed')} m/s) or a shorter sleep_time (now "
+                             f"{self.settings.get('sleep_time')} s) ends it sooner (rapid_contact_rule=hold holds "
+                             f"such contacts instead, but passes each impact through the pile)")
+            else:
+                rules.append("hold pressed rapid contacts at any speed (rapid_contact_rule=hold): under tc the fast "
+                             "ones stay elastic, so a dense pile keeps rattling; or let the slow spheres of the "
+                             "pile sleep (sleep_speed, e.g. 0.1 m/s, with sleep_time=0.1): it freezes the bed as "
+                             "it cools")
         advice = "; ".join(rules) or "lower the restitution, or use a shorter dt"
         self._add(Finding("collapse", step, involved[:10].tolist(),
                           f"{bounces} bounces among {spheres} in one step: the collision rate has blown up "
