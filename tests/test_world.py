@@ -334,6 +334,22 @@ def test_box_rain_under_the_tc_rule_is_exact_and_does_not_churn():
     assert released["hold"] > 500 and released["tc"] * 50 < released["hold"], released
 
 
+def test_box_rain_comes_entirely_to_rest_under_tc_with_sleeping():
+    """Issue 10's "the pile settles, contacts per step bounded": box-rain 1k with
+    rapid_contact_rule=tc, sleep_speed=0.1, sleep_time=0.1 is exact at every step and every
+    sphere is asleep by step 700 (671 when measured), with no contact left to resolve."""
+    scene = _box_rain(1000, "rapid_contact_rule=tc", "sleep_speed=0.1", "sleep_time=0.1", "steps=700")
+    world = scene.build_world()
+    most = 0
+    for _ in range(scene.steps):
+        stats = world.step(scene.dt)
+        assert not stats.warnings, stats.warnings
+        assert stats.max_overlap <= scene.settings.contact_tolerance
+        most = max(most, stats.contacts)
+    assert stats.asleep == 1000 and (stats.contacts, stats.events, stats.held, stats.kinetic) == (0, 0, 0, 0.0)
+    assert most < 20_000  # bounded on the way: the event cap of 1 000 spheres is 20 000
+
+
 def test_under_the_tc_rule_a_lone_ball_still_comes_to_rest():
     """With the resting rule off, only the rapid rule stops a ball's ever shorter bounces.
     Under tc its rapid contacts close at most g·T/2 < g·rapid_contact_time, so they are
