@@ -153,3 +153,36 @@ def test_a_step_with_more_contacts_than_are_drawn_says_so(tmp_path, monkeypatch)
     assert len(ghosts) == 2 and len(open_recording(rec.mcap).contacts(44)) == 4
     texts = [t for row in rows[("/log", 44)]["TextLog:text"] for t in row]
     assert "step 44: ... and 3 more contacts; ghosts and arrows for the first 2" in texts
+
+
+def test_a_pile_falling_asleep_turns_grey_blue_live_and_replayed(tmp_path):
+    """Spheres exactly at rest (here: asleep) are drawn STILL_COLOR from the step their
+    velocity became zero; the replay from MCAP, which has only the velocities, agrees."""
+    from physdbg.record.view import STILL_COLOR
+
+    scene = load_scene("rain", ["generate.count=100", "box.max=[0.3,1,0.3]", "generate.speed=0",
+                                "generate.restitution=0.5", "box.restitution=0.5", "rapid_contact_rule=tc",
+                                "sleep_speed=0.05", "sleep_time=0.1", "steps=240"])
+    header = RecordingHeader.from_scene(scene)
+    mcap, rrd = tmp_path / "p.mcap", tmp_path / "p.rrd"
+    sinks = [McapRecorder(mcap, header), RerunSink(header, rrd)]
+    summary = api.run(scene, observer=FanOut(*sinks))
+    for sink in sinks:
+        sink.close()
+    assert summary.asleep_at_end == 100
+    rows = read_rrd(rrd)
+    coloured = sorted(step for (entity, step), comps in rows.items()
+                      if entity == "/world/spheres" and "Points3D:colors" in comps)
+    assert coloured  # the colours change only when the still spheres do
+    last = rows[("/world/spheres", coloured[-1])]["Points3D:colors"][-1]
+    assert len(last) == 100
+    packed = (STILL_COLOR[0] << 24) | (STILL_COLOR[1] << 16) | (STILL_COLOR[2] << 8) | 255
+    assert set(last) == {packed}
+    again = tmp_path / "replayed.rrd"
+    api.replay(mcap, str(again))
+    spheres = {key: comps for key, comps in read_rrd(again).items() if key[0] == "/world/spheres"}
+    assert spheres == {key: comps for key, comps in rows.items() if key[0] == "/world/spheres"}
+    # every series keeps one value a step once nothing moves (the pressure is a gap there)
+    pressure = [comps["Scalars:scalars"][0][0] for (entity, _), comps in rows.items() if entity == "/stats/pressure/z"]
+    assert len(pressure) == 240 and np.isnan(pressure[-1])
+

@@ -26,6 +26,8 @@ A default blueprint (3D view, energy and contact plots, the event log) goes in t
 
 from __future__ import annotations
 
+import math
+
 import uuid
 from pathlib import Path
 
@@ -37,7 +39,7 @@ from ..analysis.pressure import collision_sums
 from ..engine.periodic import unwrap_near
 from .header import RecordingHeader
 from . import view
-from .view import (contact_centres, describe_contacts, periodic_faces, scene_bounds, sphere_colors, up_axis,
+from .view import (contact_centres, describe_contacts, periodic_faces, scene_bounds, sphere_colors, still_spheres, up_axis,
                    wall_outlines)
 
 APPLICATION_ID = "physdbg"
@@ -114,6 +116,7 @@ class RerunSink:
         self._last_time = (0, 0.0)
         self._virial = 0.0
         self._movable = int(np.count_nonzero(header.inverse_mass > 0))
+        self._still = np.zeros(header.count, dtype=bool)  # the spheres last drawn as exactly at rest
         self._log_static(header)
 
     # ------------------------------------------------------------------ static
@@ -156,8 +159,17 @@ class RerunSink:
         frame = end.step + 1
         self._last_time = (frame, end.time)
         self._set_time(frame, end.time)
-        # Copies in float32: rerun may hold the array until it flushes.
-        rec.log(self.root + "world/spheres", rr.Points3D.from_fields(positions=np.asarray(end.positions, dtype=np.float32)))
+        # Copies in float32: rerun may hold the array until it flushes. Colours only when the
+        # spheres exactly at rest (asleep, or held still) change: a pile falling asleep greys
+        still = still_spheres(self.header.inverse_mass, end.velocities)
+        if np.array_equal(still, self._still):
+            rec.log(self.root + "world/spheres",
+                    rr.Points3D.from_fields(positions=np.asarray(end.positions, dtype=np.float32)))
+        else:
+            rec.log(self.root + "world/spheres", rr.Points3D.from_fields(
+                positions=np.asarray(end.positions, dtype=np.float32),
+                colors=sphere_colors(self.header.inverse_mass, still)))
+            self._still = still
         contacts = self._contacts if self.detail != "state" else None
         if self._broad_phase is not None:
             self._bvh(self._broad_phase)
@@ -289,8 +301,12 @@ class RerunSink:
             # sleeping spheres (sleep.py; 0 with sleeping off)
             "stats/asleep": end.counts.get("asleep", 0),
         }
-        if self._movable > 1 and end.kinetic > 0:  # Z = PV/NkT of this step, from its collisions
-            values["stats/pressure/z"] = 1 + self._virial / (2 * end.kinetic * end.dt)
+        # Z = PV/NkT of this step, from its collisions; NaN (a gap) where no sphere moves, so
+        # that every series keeps one value a step (rerun refuses columns of unequal length,
+        # and did drop a batch once a pile fell asleep)
+        if self._movable > 1:
+            values["stats/pressure/z"] = (1 + self._virial / (2 * end.kinetic * end.dt) if end.kinetic > 0
+                                          else math.nan)
         self._virial = 0.0
         for path, value in values.items():
             self._series.setdefault(path, []).append(float(value))

@@ -76,11 +76,25 @@ def periodic_faces(walls, lo: np.ndarray, hi: np.ndarray):
             yield f"{'xyz'[axis]}{side}", corners.astype(np.float32)
 
 
-def sphere_colors(inverse_mass: np.ndarray) -> np.ndarray:
-    """Immovable spheres grey, the rest a warm orange."""
+# a movable sphere exactly at rest at the end of a step (asleep, or held perfectly still)
+STILL_COLOR = (110, 135, 170)
+
+
+def sphere_colors(inverse_mass: np.ndarray, still: np.ndarray | None = None) -> np.ndarray:
+    """(N, 3) uint8: immovable spheres grey, the rest a warm orange, and those ``still``
+    ((N,) bool: exactly at rest, e.g. asleep) a cool grey-blue."""
     colors = np.tile(np.array([[240, 140, 50]], dtype=np.uint8), (len(inverse_mass), 1))
+    if still is not None:
+        colors[still] = STILL_COLOR
     colors[inverse_mass == 0] = (140, 140, 140)
     return colors
+
+
+def still_spheres(inverse_mass: np.ndarray, velocities: np.ndarray) -> np.ndarray:
+    """(N,) bool: the movable spheres whose velocity (N, 3) is exactly zero. A sleeping
+    sphere always is (engine/sleep.py), a moving one never; so the picture shows a pile
+    falling asleep from a recording's velocities alone, live or replayed."""
+    return (inverse_mass > 0) & ~velocities.any(axis=1)
 
 
 def describe_contacts(frame: int, c: Contacts, dt: float, wall_names) -> list[tuple[str, str]]:
