@@ -70,8 +70,8 @@ TOP_FIELDS = {
                            "else elastic: a dense pile is much faster and never churns, but keeps rattling)"),
     "contact_tolerance": "allowed overlap and resting gap, metres > 0",
     "sleep_speed": ("a sphere at most this fast (m/s) at the end of every step for sleep_time falls asleep: "
-                    "immovable until something hits it faster or leaves it (a settled pile then costs nothing), "
-                    "m/s >= 0, 0 = off (the default); not with periodic walls"),
+                    "immovable until something hits it faster or what it rests on wakes (a settled pile then "
+                    "costs nothing), m/s >= 0, 0 = off (the default); not with periodic walls"),
     "sleep_time": "how long a sphere must stay slow to fall asleep, seconds > 0 (default 0.5)",
     "max_events_per_step": ("budget: contacts resolved in one step, integer >= 0 (default 0 = sized to the scene: "
                             "max(10000, 20 per sphere))"),

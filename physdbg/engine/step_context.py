@@ -32,8 +32,9 @@ class StepContext:
     narrow_phase: version (N,) int64, predictions made of each sphere (stale heap entries).
     resolve: kernel_groups, the step's arrays as the compiled kernels take them (built
     once, World._kernel_groups).
-    finish: max_overlap (m); with sleeping on (sleep.py), sleeping_pairs (the broad phase's pairs of two sleeping spheres, left out
-    of ``pairs``) and the spheres that slept and woke (counts); kinetic, potential (J), momentum (3,), state_hash, non_finite.
+    finish: max_overlap (m); with sleeping on (sleep.py), sleeping_pairs (the broad
+    phase's pairs of two sleeping spheres, left out of ``pairs``) and how many spheres
+    slept and woke; kinetic, potential (J), momentum (3,), state_hash, non_finite.
     warnings and timings (s per phase) collect through the step.
     """
 

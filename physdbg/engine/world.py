@@ -304,7 +304,8 @@ class World:
         st, sleepers = self.state, self.sleepers
         rows = self._buf.contacts[:int(self._buf.counters[CONTACTS])]
         disturbed = woken_by_impact(rows, sleepers.asleep, sleepers.sleep_speed)
-        fell, woke = sleepers.end_of_step(ctx.dt, st.positions, st.velocities, st.radius, np.concatenate((ctx.pairs, ctx.sleeping_pairs)), disturbed)
+        pairs = np.concatenate((ctx.pairs, ctx.sleeping_pairs))
+        fell, woke = sleepers.end_of_step(ctx.dt, st.positions, st.velocities, st.radius, pairs, disturbed)
         self._inverse_mass[woke] = st.inverse_mass[woke]
         self._free_accel[woke] = self._free_accel_awake[woke]
         self._inverse_mass[fell] = 0.0
@@ -323,8 +324,8 @@ class World:
         released = int(self.held.count[STEP_RELEASED])
         asleep = self.sleepers.count if self.sleepers is not None else 0
         stats = StepStats(ctx.step, self.time, ctx.dt, ctx.kinetic, ctx.potential, ctx.momentum, contacts, tests,
-                          events, self.held_count, rapid, released, asleep, ctx.slept, ctx.woken, ctx.max_overlap, ctx.state_hash, ctx.timings,
-                          ctx.warnings)
+                          events, self.held_count, rapid, released, asleep, ctx.slept, ctx.woken, ctx.max_overlap,
+                          ctx.state_hash, ctx.timings, ctx.warnings)
         obs = ctx.observer
         if obs is not None:
             x, v = self.state.positions, self.state.velocities

@@ -27,7 +27,6 @@ A default blueprint (3D view, energy and contact plots, the event log) goes in t
 from __future__ import annotations
 
 import math
-
 import uuid
 from pathlib import Path
 
@@ -39,8 +38,8 @@ from ..analysis.pressure import collision_sums
 from ..engine.periodic import unwrap_near
 from .header import RecordingHeader
 from . import view
-from .view import (contact_centres, describe_contacts, periodic_faces, scene_bounds, sphere_colors, still_spheres, up_axis,
-                   wall_outlines)
+from .view import (contact_centres, describe_contacts, periodic_faces, scene_bounds, sphere_colors, still_spheres,
+                   up_axis, wall_outlines)
 
 APPLICATION_ID = "physdbg"
 IMPULSE_ARROW_SECONDS = 0.05  # an impulse arrow shows how far its velocity change moves a in 50 ms
@@ -162,14 +161,10 @@ class RerunSink:
         # Copies in float32: rerun may hold the array until it flushes. Colours only when the
         # spheres exactly at rest (asleep, or held still) change: a pile falling asleep greys
         still = still_spheres(self.header.inverse_mass, end.velocities)
-        if np.array_equal(still, self._still):
-            rec.log(self.root + "world/spheres",
-                    rr.Points3D.from_fields(positions=np.asarray(end.positions, dtype=np.float32)))
-        else:
-            rec.log(self.root + "world/spheres", rr.Points3D.from_fields(
-                positions=np.asarray(end.positions, dtype=np.float32),
-                colors=sphere_colors(self.header.inverse_mass, still)))
-            self._still = still
+        colors = None if np.array_equal(still, self._still) else sphere_colors(self.header.inverse_mass, still)
+        self._still = still
+        rec.log(self.root + "world/spheres",
+                rr.Points3D.from_fields(positions=np.asarray(end.positions, dtype=np.float32), colors=colors))
         contacts = self._contacts if self.detail != "state" else None
         if self._broad_phase is not None:
             self._bvh(self._broad_phase)
