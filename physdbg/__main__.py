@@ -1,6 +1,6 @@
 """``python -m physdbg``: the same command line as ``physdbg``."""
 
-from .cli import app
+from .cli import console_main
 
 if __name__ == "__main__":
-    app(prog_name="physdbg")
+    console_main()

@@ -161,6 +161,11 @@ def test_console_script_runs(tmp_path):
     # ``python -m physdbg`` is the same command line
     package = subprocess.run([sys.executable, "-m", "physdbg", "--help"], capture_output=True, text=True)
     assert package.returncode == 0 and "Usage: physdbg" in package.stdout and "record" in package.stdout
+    # the installed ``physdbg`` is the same entry point (which also settles the garbage collector)
+    from importlib.metadata import entry_points
+
+    (script,) = [e for e in entry_points(group="console_scripts") if e.name == "physdbg"]
+    assert script.value == "physdbg.cli:console_main"
 
 
 def test_long_runs_show_progress_on_stderr_and_keep_stdout_clean(monkeypatch):

@@ -153,6 +153,8 @@ def test_a_step_with_more_contacts_than_are_drawn_says_so(tmp_path, monkeypatch)
     assert len(ghosts) == 2 and len(open_recording(rec.mcap).contacts(44)) == 4
     texts = [t for row in rows[("/log", 44)]["TextLog:text"] for t in row]
     assert "step 44: ... and 3 more contacts; ghosts and arrows for the first 2" in texts
+    # sleeping is off in cradle: no flat-zero "asleep" series beside the contacts
+    assert not any(entity == "/stats/asleep" for entity, _ in rows)
 
 
 def test_a_pile_falling_asleep_turns_grey_blue_live_and_replayed(tmp_path):
@@ -185,4 +187,6 @@ def test_a_pile_falling_asleep_turns_grey_blue_live_and_replayed(tmp_path):
     # every series keeps one value a step once nothing moves (the pressure is a gap there)
     pressure = [comps["Scalars:scalars"][0][0] for (entity, _), comps in rows.items() if entity == "/stats/pressure/z"]
     assert len(pressure) == 240 and np.isnan(pressure[-1])
+    asleep = [comps["Scalars:scalars"][0][0] for (entity, _), comps in rows.items() if entity == "/stats/asleep"]
+    assert len(asleep) == 240 and asleep[-1] == 100
 

@@ -52,6 +52,12 @@ class RecordingHeader:
     def detail(self) -> str:
         return self.meta["detail"]
 
+    @property
+    def sleeping(self) -> bool:
+        """Whether the run let spheres fall asleep (sleep_speed > 0; recordings older
+        than sleeping have no such setting and did not)."""
+        return float(self.meta.get("settings", {}).get("sleep_speed", 0.0) or 0.0) > 0.0
+
     @classmethod
     def from_scene(cls, scene, detail: str = "full",
                    bvh_max_nodes: int | None = DEFAULT_BVH_MAX_NODES) -> RecordingHeader:

@@ -17,7 +17,7 @@ Entities (timelines ``step`` = frame, steps completed, and ``sim_time`` in secon
     world/contacts/normals   Arrows3D: contact normals (length = the sphere's radius)
     world/contacts/impulses  Arrows3D: velocity change of sphere a, × IMPULSE_ARROW_SECONDS
     world/findings           Points3D: a red marker where the audit found a problem
-    stats/energy/*, stats/momentum/*, stats/contacts, stats/rapid, stats/released, stats/asleep
+    stats/energy/*, stats/momentum/*, stats/contacts, stats/rapid, stats/released, stats/asleep (with sleeping on)
                              Scalars, sent in columns
     log                      TextLog: contacts and warnings in words
 
@@ -293,9 +293,9 @@ class RerunSink:
             "stats/contacts": end.counts.get("contacts", 0),
             # a pile's churn: contacts the rapid rule held, held contacts let go again
             "stats/rapid": end.counts.get("rapid", 0), "stats/released": end.counts.get("released", 0),
-            # sleeping spheres (sleep.py; 0 with sleeping off)
-            "stats/asleep": end.counts.get("asleep", 0),
         }
+        if self.header.sleeping:  # spheres asleep (sleep.py); with sleeping off it is 0: not drawn
+            values["stats/asleep"] = end.counts.get("asleep", 0)
         # Z = PV/NkT of this step, from its collisions; NaN (a gap) where no sphere moves, so
         # that every series keeps one value a step (rerun refuses columns of unequal length,
         # and did drop a batch once a pile fell asleep)
@@ -353,8 +353,9 @@ def blueprint(header: RecordingHeader):
             rrb.Vertical(
                 rrb.TimeSeriesView(origin="/stats/energy", name="energy (J)"),
                 rrb.TimeSeriesView(origin="/stats", contents=["/stats/contacts", "/stats/rapid", "/stats/released",
-                                                              "/stats/asleep"],
-                                   name="contacts per step (all, rapid, released); spheres asleep"),
+                                                              *(["/stats/asleep"] if header.sleeping else [])],
+                                   name="contacts per step (all, rapid, released)"
+                                        + ("; spheres asleep" if header.sleeping else "")),
                 rrb.TextLogView(origin="/log", name="events"),
                 row_shares=[2, 1, 2],
             ),
