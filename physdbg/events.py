@@ -242,7 +242,8 @@ class StepEnd:
     particles. counts: contacts, swept_tests, events (heap pops), resting (contacts held).
     max_overlap: deepest sphere–sphere or sphere–wall penetration after the step (m,
     0 when none). timings: seconds per phase. state_hash: hex digest over the exact bytes
-    of positions and velocities.
+    of positions and velocities. asleep: (N,) bool, the spheres asleep at ``time``
+    (engine/sleep.py), or None when the run does not let spheres sleep.
     """
 
     step: int
@@ -258,6 +259,7 @@ class StepEnd:
     timings: dict[str, float]
     state_hash: str
     warnings: tuple[str, ...] = field(default=())
+    asleep: np.ndarray | None = None
 
 
 Event = StepBegin | BroadPhaseInfo | Contacts | SweptTests | EngineWarning | StepEnd

@@ -91,6 +91,30 @@ def test_a_nudge_of_one_picometre_is_an_outside_change_at_the_next_step(tmp_path
     assert r.growth.model == "exponential" and r.growth.rate > 0
 
 
+def test_a_sphere_asleep_in_one_run_only_is_named_when_it_falls_asleep_and_when_it_is_hit(tmp_path):
+    """Sleeping (engine/sleep.py) parts runs in two ways diff names from the recorded
+    asleep masks: a sphere falls asleep in one run only (its velocity set to zero), or a
+    sleeper that is exactly where the other run's awake sphere is gets hit."""
+    pile = ["generate.count=100", "box.max=[0.3,1,0.3]", "generate.speed=0", "generate.restitution=0.5",
+            "box.restitution=0.5", "rapid_contact_rule=tc", "steps=20", "sleep_speed=0.05"]
+    r = diff(_rec(tmp_path, "a", "rain", pile + ["sleep_time=0.1"]), _rec(tmp_path, "b", "rain", pile + ["sleep_time=0.2"]))
+    assert r.divergence.step == 15 and _kinds(r) == ["settings", "sleep"]
+    assert ("sphere 10 fell asleep at the end of the step in run A and did not in run B (sleep_time: 0.1 in A, "
+            "0.2 in B). Falling asleep sets its velocity to zero") in r.causes[1].text
+    assert r.headline.startswith("the runs part in step 15: sphere 10 fell asleep")
+    # the rest scene's row lies exactly still in both runs, asleep only in A, until a ball lands on it
+    text = (ROOT / "physdbg" / "scenes" / "rest.toml").read_text()
+    drop = tmp_path / "drop.toml"
+    drop.write_text(text.replace("position = [4.0, 1.6, 0.0]", "position = [4.25, 2.5, 0.0]"))
+    r = diff(_rec(tmp_path, "c", str(drop), ["sleep_speed=0.05", "sleep_time=0.1", "duration=1"]),
+             _rec(tmp_path, "d", str(drop), ["duration=1"]))
+    sleep = next(c for c in r.causes if c.kind == "sleep")
+    assert r.divergence.step == 28 and _kinds(r)[:2] == ["settings", "sleep"]
+    assert sleep.text.startswith("Step 28: sphere 3 was asleep in run A and awake in run B when the step began")
+    # sphere 3 sleeps on: only the sphere hit (4) is woken by the impact
+    assert sleep.evidence == {"particle": 3, "asleep_at_start": [True, False], "asleep_at_end": [True, False]}
+
+
 def test_the_event_cap_hit_in_one_run_only(tmp_path):
     r = diff(_rec(tmp_path, "a", "rain"), _rec(tmp_path, "b", "rain", ["max_events_per_step=20"]))
     limits = next(c for c in r.causes if c.kind == "engine-limits")

@@ -132,6 +132,26 @@ def test_the_point_cloud_holds_the_positions_and_the_log_the_words(tmp_path):
     assert any(line.startswith("step 44: sphere ") for line in logs)
 
 
+def test_sleeping_spheres_are_grey_blue_in_the_3d_scene_and_named_in_the_log(tmp_path):
+    """Foxglove shows what the Rerun view shows: a sphere is grey-blue exactly while the
+    state's asleep mask says so, and the log names who fell asleep."""
+    from physdbg.record.view import ASLEEP_COLOR
+
+    result = api.record("bounce", ["sleep_speed=0.05", "sleep_time=0.1"], mcap_path=str(tmp_path / "b.mcap"),
+                        rrd=False)
+    rec = open_recording(result.mcap)
+    per_frame = [u for _, u in messages(result.mcap, fmt.TOPIC_VIEW_SCENE)
+                 if not any(e.id == "walls" for e in u.entities)]
+    grey_blue = [c / 255.0 for c in ASLEEP_COLOR]
+    for k in (0, rec.frames // 2, rec.frames - 1):
+        colour = per_frame[k].entities[0].spheres[0].color
+        asleep = rec.state(k).asleep
+        assert np.allclose([colour.r, colour.g, colour.b], grey_blue) == bool(asleep is not None and asleep[0])
+    assert rec.state(-1).asleep[0]  # the ball has come to rest and sleeps by the end
+    logs = [m.message for _, m in messages(result.mcap, fmt.TOPIC_VIEW_LOG)]
+    assert sum(line.endswith("1 sphere fell asleep: 0") for line in logs) == result.summary.slept >= 1
+
+
 def test_view_channels_follow_detail_and_no_view_leaves_them_out(tmp_path):
     runner = CliRunner()
     out = tmp_path / "none.mcap"

@@ -153,14 +153,19 @@ def test_a_step_with_more_contacts_than_are_drawn_says_so(tmp_path, monkeypatch)
     assert len(ghosts) == 2 and len(open_recording(rec.mcap).contacts(44)) == 4
     texts = [t for row in rows[("/log", 44)]["TextLog:text"] for t in row]
     assert "step 44: ... and 3 more contacts; ghosts and arrows for the first 2" in texts
-    # sleeping is off in cradle: no flat-zero "asleep" series beside the contacts
+    # sleeping is off in cradle: no flat-zero "asleep" series beside the contacts, and the
+    # spheres keep the colours logged once, though the resting balls are exactly still
     assert not any(entity == "/stats/asleep" for entity, _ in rows)
+    assert not any(entity == "/world/spheres" and step > 0 and "Points3D:colors" in comps
+                   for (entity, step), comps in rows.items())
 
 
 def test_a_pile_falling_asleep_turns_grey_blue_live_and_replayed(tmp_path):
-    """Spheres exactly at rest (here: asleep) are drawn STILL_COLOR from the step their
-    velocity became zero; the replay from MCAP, which has only the velocities, agrees."""
-    from physdbg.record.view import STILL_COLOR
+    """Sleeping spheres are drawn ASLEEP_COLOR from the step they fell asleep, and the log
+    names who fell asleep and who woke; the MCAP state carries the mask, so the replay
+    draws the same picture."""
+    from physdbg.record.reader import open_recording
+    from physdbg.record.view import ASLEEP_COLOR
 
     scene = load_scene("rain", ["generate.count=100", "box.max=[0.3,1,0.3]", "generate.speed=0",
                                 "generate.restitution=0.5", "box.restitution=0.5", "rapid_contact_rule=tc",
@@ -178,7 +183,7 @@ def test_a_pile_falling_asleep_turns_grey_blue_live_and_replayed(tmp_path):
     assert coloured  # the colours change only when the still spheres do
     last = rows[("/world/spheres", coloured[-1])]["Points3D:colors"][-1]
     assert len(last) == 100
-    packed = (STILL_COLOR[0] << 24) | (STILL_COLOR[1] << 16) | (STILL_COLOR[2] << 8) | 255
+    packed = (ASLEEP_COLOR[0] << 24) | (ASLEEP_COLOR[1] << 16) | (ASLEEP_COLOR[2] << 8) | 255
     assert set(last) == {packed}
     again = tmp_path / "replayed.rrd"
     api.replay(mcap, str(again))
@@ -189,4 +194,16 @@ def test_a_pile_falling_asleep_turns_grey_blue_live_and_replayed(tmp_path):
     assert len(pressure) == 240 and np.isnan(pressure[-1])
     asleep = [comps["Scalars:scalars"][0][0] for (entity, _), comps in rows.items() if entity == "/stats/asleep"]
     assert len(asleep) == 240 and asleep[-1] == 100
+    # the log counts every sphere that fell asleep and every one that woke, as the summary does
+    texts = [t for (entity, _), comps in rows.items() if entity == "/log" for row in comps["TextLog:text"] for t in row]
+    told = {"fell asleep": 0, "woke": 0}
+    for text in texts:
+        for verb in told:
+            if f" {verb}: " in text:
+                told[verb] += int(text.split(": ")[1].split()[0])
+    assert told == {"fell asleep": summary.slept, "woke": summary.woken} and summary.slept >= 100
+    # the recording's own mask: none at frame 0, all 100 at the end
+    recording = open_recording(mcap)
+    assert recording.state(0).asleep is None
+    assert recording.state(-1).asleep.dtype == bool and recording.state(-1).asleep.all()
 

@@ -542,6 +542,9 @@ class _Differ:
         if identical_start and not any(c.kind in ("engine-limits", "non-finite") for c in causes):
             causes.append(self._outside_change(step, div, event))
             return causes
+        sleep = self._sleep_cause(div)
+        if sleep is not None:
+            causes.append(sleep)
         if event is not None:
             x, y = event["a"], event["b"]
             keys_a = sorted(_key(r) for r in ca)
@@ -579,7 +582,7 @@ class _Differ:
                             f"another outcome: impulse {x['impulse']:.6g} N·s with e = {x['restitution']:.3g} in A, "
                             f"{y['impulse']:.6g} N·s with e = {y['restitution']:.3g} in B")
                 causes.append(Cause("contact-outcome", text + "." + self._consequence(div), {"a": x, "b": y}))
-        elif not any(c.kind in ("tunnelling", "engine-limits", "non-finite") for c in causes):
+        elif not any(c.kind in ("tunnelling", "engine-limits", "non-finite", "sleep") for c in causes):
             method = [s.name for s in self.settings if s.matters and s.name in METHOD_SETTINGS]
             if method or not self.by_step:
                 causes.append(Cause("method-drift", f"no event differs up to step {step}: the states drift apart "
@@ -590,6 +593,43 @@ class _Differ:
                 causes.append(Cause("method-drift", f"no event differs up to step {step}; the states drift apart "
                                                     f"because of the settings above", {}))
         return causes
+
+    def _sleep_cause(self, div: Divergence) -> Cause | None:
+        """A differing sphere asleep in one run and awake in the other, when the step began
+        or when it ended (engine/sleep.py): a sleeper does not move, and falling asleep
+        sets a sphere's velocity to zero. None when no differing sphere's sleep differs."""
+        if not self.by_step:
+            return None
+        frames = {"start": (self.ra.state(div.step - 1).asleep, self.rb.state(div.step_b - 1).asleep),
+                  "end": (self.ra.state(div.step).asleep, self.rb.state(div.step_b).asleep)}
+        if all(mask is None for pair in frames.values() for mask in pair):
+            return None
+
+        def asleep(when: str, run: int, p: int) -> bool:
+            mask = frames[when][run]
+            return bool(mask is not None and mask[p])
+
+        sleep_settings = [f"{d.name}: {_show(d.a)} in A, {_show(d.b)} in B" for d in self.settings
+                          if d.name in ("sleep_speed", "sleep_time")]
+        why = f" ({'; '.join(sleep_settings)})" if sleep_settings else ""
+        for p in (entry["particle"] for entry in div.state.particles):
+            start, end = (asleep("start", 0, p), asleep("start", 1, p)), (asleep("end", 0, p), asleep("end", 1, p))
+            if start[0] != start[1]:
+                sleeper, other = ("A", "B") if start[0] else ("B", "A")
+                text = (f"Step {div.step}: sphere {p} was asleep in run {sleeper} and awake in run {other} when "
+                        f"the step began{why}. A sleeping sphere does not move: what hits or pushes it bounces "
+                        f"off it as off a wall")
+            elif end[0] != end[1]:
+                changed, other = ("A", "B") if end[0] != start[0] else ("B", "A")
+                verb = "fell asleep" if not start[0] else "woke"
+                text = (f"Step {div.step}: sphere {p} {verb} at the end of the step in run {changed} and did not in "
+                        f"run {other}{why}" + (". Falling asleep sets its velocity to zero" if verb == "fell asleep"
+                                               else ""))
+            else:
+                continue
+            return Cause("sleep", text + "." + self._consequence(div),
+                         {"particle": p, "asleep_at_start": list(start), "asleep_at_end": list(end)})
+        return None
 
     def _outside_change(self, step: int, div: Divergence, event: dict | None) -> Cause:
         who = div.state.particles[0] if div.state.particles else {}

@@ -337,7 +337,8 @@ class World:
                                   "resting": self.held_count, "rapid": rapid, "released": released,
                                   "asleep": asleep, "slept": ctx.slept, "woken": ctx.woken},
                                  ctx.max_overlap, dict(ctx.timings), ctx.state_hash,
-                                 tuple(w.message for w in ctx.warnings)))
+                                 tuple(w.message for w in ctx.warnings),
+                                 self.sleepers.asleep.copy() if self.sleepers is not None else None))
         if ctx.non_finite is not None:
             raise NonFiniteState(ctx.step, *ctx.non_finite)
         return stats

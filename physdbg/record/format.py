@@ -134,9 +134,11 @@ PROTOBUF_MESSAGES = {
     "physdbg.FrameIndex": (FRAME_INDEX_FIELDS, True),
 }
 STATE_MESSAGE = "physdbg.State"
-# after ``step``: (name, numpy kind or "bytes"); ``words`` is the packed state below
+# after ``step``: (name, numpy kind or "bytes"); ``words`` is the packed state below;
+# ``asleep``: the spheres asleep after this frame's step, np.packbits of the (N,) mask
+# (sphere i is bit 7 - i % 8 of byte i // 8), empty when the run does not let spheres sleep
 STATE_MESSAGE_FIELDS = [("time", "<f8"), ("dt", "<f8"), ("state_hash", "bytes"), ("codec", "<u4"),
-                        ("count", "<u4"), ("words", "bytes")]
+                        ("count", "<u4"), ("words", "bytes"), ("asleep", "bytes")]
 
 # JSON channels. /physdbg/scene and /physdbg/walls are written once and their schema is
 # made from the message itself (json_schema_of), so it names every field of that file's
@@ -274,9 +276,10 @@ def codec_for(frame: int, have_previous: int) -> int:
 
 def encode_state(frame: int, time: float, dt: float, state_hash: str, positions: np.ndarray,
                  velocities: np.ndarray, codec: int, previous: np.ndarray | None = None,
-                 before_previous: np.ndarray | None = None) -> bytes:
+                 before_previous: np.ndarray | None = None, asleep: np.ndarray | None = None) -> bytes:
     """One /physdbg/state message. positions, velocities: (N, 3) float64; previous,
-    before_previous: (N, 6) float64 states of frames k-1 and k-2 (as codec needs)."""
+    before_previous: (N, 6) float64 states of frames k-1 and k-2 (as codec needs);
+    asleep: (N,) bool, the sleeping spheres, or None when the run does not sleep."""
     from .proto import message_class
 
     n = positions.shape[0]
@@ -292,7 +295,8 @@ def encode_state(frame: int, time: float, dt: float, state_hash: str, positions:
         words[:, 3:] -= v_pred.view(np.int64)
         words = _zigzag(words)
     message = message_class(STATE_MESSAGE)(step=frame, time=time, dt=dt, state_hash=bytes.fromhex(state_hash),
-                                           codec=codec, count=n, words=_shuffle(words.reshape(-1)))
+                                           codec=codec, count=n, words=_shuffle(words.reshape(-1)),
+                                           asleep=np.packbits(asleep).tobytes() if asleep is not None else b"")
     return message.SerializeToString()
 
 
@@ -311,21 +315,26 @@ def decode_state_header(data: bytes):
         raise ValueError("not a physdbg state message (bad codec or hash)")
     if len(message.words) != 48 * message.count:
         raise ValueError(f"state words of {len(message.words)} bytes, expected {48 * message.count}")
+    if message.asleep and len(message.asleep) != (message.count + 7) // 8:
+        raise ValueError(f"asleep mask of {len(message.asleep)} bytes, expected {(message.count + 7) // 8}")
     return message
 
 
-def decode_state(data: bytes, previous: np.ndarray | None = None,
-                 before_previous: np.ndarray | None = None) -> tuple[np.ndarray, int, float, float, str]:
-    """(state (N, 6) float64, frame, time, dt, state_hash) of a state message.
+def decode_state(data: bytes, previous: np.ndarray | None = None, before_previous: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, int, float, float, str, np.ndarray | None]:
+    """(state (N, 6) float64, frame, time, dt, state_hash, asleep) of a state message;
+    asleep: (N,) bool, or None when the run did not let spheres sleep.
 
     previous / before_previous: decoded (N, 6) states of the frames before, as the
     message's codec needs (ValueError if missing).
     """
     m = decode_state_header(data)
     codec, count, frame, time, dt, digest = m.codec, m.count, m.step, m.time, m.dt, m.state_hash.hex()
+    asleep = (np.unpackbits(np.frombuffer(m.asleep, np.uint8), count=count).astype(bool) if m.asleep
+              else None)
     words = _unshuffle(m.words, 6 * count).reshape(count, 6)
     if codec == CODEC_RAW:
-        return words.view(np.float64).copy(), frame, time, dt, digest
+        return words.view(np.float64).copy(), frame, time, dt, digest, asleep
     if previous is None or (codec == CODEC_TWO_PREVIOUS and before_previous is None):
         raise ValueError(f"frame {frame} needs the frames before it to decode")
     residual = _unzigzag(words)
@@ -335,4 +344,4 @@ def decode_state(data: bytes, previous: np.ndarray | None = None,
     with np.errstate(over="ignore", invalid="ignore"):
         x_pred = previous[:, :3] + (dt * 0.5) * (previous[:, 3:] + state[:, 3:])
     state[:, :3] = (x_pred.view(np.int64) + residual[:, :3]).view(np.float64)
-    return state, frame, time, dt, digest
+    return state, frame, time, dt, digest, asleep

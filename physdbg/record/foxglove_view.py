@@ -56,19 +56,28 @@ class FoxgloveView:
         self.classes = view_schemas()
         self.names = [f"sphere {i}" for i in range(header.count)]
         self.diameters = (2.0 * header.radius).tolist()
-        colors = view.sphere_colors(header.inverse_mass) / 255.0
-        self._templates = []  # one SceneEntity per distinct colour; a sphere's entity is a copy
-        self._template_of = np.zeros(header.count, dtype=np.int64)
-        for k, color in enumerate(np.unique(colors, axis=0)):
-            entity = SceneEntity(frame_id=fmt.VIEW_SCENE_FRAME)
-            sphere = entity.spheres.add()
-            sphere.pose.orientation.w = 1.0
-            sphere.color.r, sphere.color.g, sphere.color.b, sphere.color.a = (*color.tolist(), 1.0)
-            self._templates.append(entity)
-            self._template_of[np.all(colors == color, axis=1)] = k
+        self._scene_entity = SceneEntity
+        self._template_by_color: dict[tuple, SceneEntity] = {}  # a sphere's entity is a copy of its colour's
+        self._asleep: np.ndarray | None = None
+        self._color_spheres(None)
         self._points = np.zeros(header.count, dtype=POINT_DTYPE)
         self._points["radius"] = header.radius
         self._points["id"] = np.arange(header.count)
+
+    def _color_spheres(self, asleep: np.ndarray | None) -> None:
+        """Pick each sphere's template: its colour, grey-blue while asleep ((N,) bool or None)."""
+        colors, which = np.unique(view.sphere_colors(self.header.inverse_mass, asleep), axis=0, return_inverse=True)
+        self._templates = []
+        for color in colors.tolist():
+            entity = self._template_by_color.get(tuple(color))
+            if entity is None:
+                entity = self._scene_entity(frame_id=fmt.VIEW_SCENE_FRAME)
+                sphere = entity.spheres.add()
+                sphere.pose.orientation.w = 1.0
+                sphere.color.r, sphere.color.g, sphere.color.b, sphere.color.a = (*(c / 255.0 for c in color), 1.0)
+                self._template_by_color[tuple(color)] = entity
+            self._templates.append(entity)
+        self._template_of = which.reshape(-1)
 
     # ------------------------------------------------------------------ frames
     def first(self, ns: int) -> list[tuple[str, bytes]]:
@@ -84,11 +93,17 @@ class FoxgloveView:
 
     def step(self, frame: int, ns: int, end: StepEnd, contacts: Contacts | None,
              warnings: list[EngineWarning]) -> list[tuple[str, bytes]]:
+        sleep_lines = []
+        if view.sleep_changed(self._asleep, end.asleep):
+            self._color_spheres(end.asleep)
+            sleep_lines = view.describe_sleep(frame, self._asleep, end.asleep)
+        self._asleep = end.asleep
         out = [(fmt.TOPIC_VIEW_SCENE, self._spheres(ns, end.positions, contacts))]
         out.append((fmt.TOPIC_VIEW_POINTS, self._point_cloud(ns, end.positions)))
         lines = [(f"step {frame}: {w.message}", "WARN") for w in warnings]
         if contacts is not None:
             lines += view.describe_contacts(frame, contacts, end.dt, self.header.walls.names)
+        lines += sleep_lines
         out += self._log(ns, lines)
         return out
 

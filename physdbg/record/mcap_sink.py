@@ -150,7 +150,7 @@ class McapRecorder:
                 self._write(topic, frame, ns, data)
         self._contacts, self._warnings = None, []
         # The state goes last: a frame whose state is in the file is a complete step.
-        self._write_state(frame, end.time, end.dt, end.state_hash, end.positions, end.velocities, ns)
+        self._write_state(frame, end.time, end.dt, end.state_hash, end.positions, end.velocities, ns, end.asleep)
         self._send()
 
     def _frame_time(self, seconds: float) -> int:
@@ -224,11 +224,11 @@ class McapRecorder:
                 return
 
     def _write_state(self, frame: int, time: float, dt: float, digest: str, x: np.ndarray, v: np.ndarray,
-                     ns: int) -> None:
+                     ns: int, asleep: np.ndarray | None = None) -> None:
         codec = fmt.codec_for(frame, len(self._history))
         previous = self._history[-1] if self._history else None
         before = self._history[-2] if len(self._history) > 1 else None
-        data = fmt.encode_state(frame, time, dt, digest, x, v, codec, previous, before)
+        data = fmt.encode_state(frame, time, dt, digest, x, v, codec, previous, before, asleep)
         self._write(fmt.TOPIC_STATE, frame, ns, data)
         self._index_rows.append((time, ns, dt, bytes.fromhex(digest)))
         state = np.empty((x.shape[0], 6))

@@ -37,7 +37,9 @@ class RecordingError(PhysdbgError):
 @dataclass(frozen=True)
 class FrameState:
     """The state at one frame. positions, velocities: (N, 3) float64, m and m/s; time: s;
-    dt: s of the step that led here (0 at frame 0); state_hash: as the engine computed it."""
+    dt: s of the step that led here (0 at frame 0); state_hash: as the engine computed it;
+    asleep: (N,) bool, the spheres asleep, or None when the run did not let spheres sleep
+    (and at frame 0)."""
 
     frame: int
     time: float
@@ -45,6 +47,7 @@ class FrameState:
     positions: np.ndarray
     velocities: np.ndarray
     state_hash: str
+    asleep: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -263,13 +266,13 @@ class Recording:
         history: list[np.ndarray] = []
         for _, frame, data in self._messages([fmt.TOPIC_STATE], start, last):
             try:
-                state, frame_no, time, dt, digest = fmt.decode_state(
+                state, frame_no, time, dt, digest, asleep = fmt.decode_state(
                     data, history[-1] if history else None, history[-2] if len(history) > 1 else None)
             except ValueError as err:
                 raise RecordingError(f"{self.path}: frame {frame}: damaged state message ({err})") from None
             history = [*history[-1:], state]
             if frame_no >= first:
-                out.append(FrameState(frame_no, time, dt, state[:, :3].copy(), state[:, 3:].copy(), digest))
+                out.append(FrameState(frame_no, time, dt, state[:, :3].copy(), state[:, 3:].copy(), digest, asleep))
         if len(out) != last - first + 1:
             raise RecordingError(f"{self.path}: frames {first}..{last} are not all in the file")
         return out
@@ -382,7 +385,7 @@ class Recording:
         timings = {name[len("seconds_"):]: float(s[name]) for name in s.dtype.names if name.startswith("seconds_")}
         events.append(StepEnd(step, after.time, after.dt, after.positions, after.velocities, float(s["kinetic"]),
                               float(s["potential"]), s["momentum"].copy(), counts, float(s["max_overlap"]),
-                              timings, after.state_hash, tuple(w["message"] for w in warnings)))
+                              timings, after.state_hash, tuple(w["message"] for w in warnings), after.asleep))
         return events
 
     def _contacts(self, step: int, data: bytes) -> Contacts:

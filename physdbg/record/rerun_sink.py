@@ -38,7 +38,8 @@ from ..analysis.pressure import collision_sums
 from ..engine.periodic import unwrap_near
 from .header import RecordingHeader
 from . import view
-from .view import (contact_centres, describe_contacts, periodic_faces, scene_bounds, sphere_colors, still_spheres,
+from .view import (contact_centres, describe_contacts, describe_sleep, periodic_faces, scene_bounds, sleep_changed,
+                   sphere_colors,
                    up_axis, wall_outlines)
 
 APPLICATION_ID = "physdbg"
@@ -115,7 +116,7 @@ class RerunSink:
         self._last_time = (0, 0.0)
         self._virial = 0.0
         self._movable = int(np.count_nonzero(header.inverse_mass > 0))
-        self._still = np.zeros(header.count, dtype=bool)  # the spheres last drawn as exactly at rest
+        self._asleep: np.ndarray | None = None  # the spheres last drawn asleep (None: none)
         self._log_static(header)
 
     # ------------------------------------------------------------------ static
@@ -159,10 +160,11 @@ class RerunSink:
         self._last_time = (frame, end.time)
         self._set_time(frame, end.time)
         # Copies in float32: rerun may hold the array until it flushes. Colours only when the
-        # spheres exactly at rest (asleep, or held still) change: a pile falling asleep greys
-        still = still_spheres(self.header.inverse_mass, end.velocities)
-        colors = None if np.array_equal(still, self._still) else sphere_colors(self.header.inverse_mass, still)
-        self._still = still
+        # set of sleeping spheres changes: a pile falling asleep turns grey-blue
+        changed = sleep_changed(self._asleep, end.asleep)
+        colors = sphere_colors(self.header.inverse_mass, end.asleep) if changed else None
+        sleep_lines = describe_sleep(frame, self._asleep, end.asleep) if changed else []
+        self._asleep = end.asleep
         rec.log(self.root + "world/spheres",
                 rr.Points3D.from_fields(positions=np.asarray(end.positions, dtype=np.float32), colors=colors))
         contacts = self._contacts if self.detail != "state" else None
@@ -174,7 +176,7 @@ class RerunSink:
         if contacts is not None:
             self._draw_contacts(contacts.first(view.DRAWN_CONTACTS_PER_STEP))
             lines += self._describe(frame, contacts, end.dt)
-        self._log_lines(frame, end.time, lines)
+        self._log_lines(frame, end.time, lines + sleep_lines)
         self._warnings = []
         self._contacts = None
         self.previous = end.positions

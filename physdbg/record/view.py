@@ -76,25 +76,43 @@ def periodic_faces(walls, lo: np.ndarray, hi: np.ndarray):
             yield f"{'xyz'[axis]}{side}", corners.astype(np.float32)
 
 
-# a movable sphere exactly at rest at the end of a step (asleep, or held perfectly still)
-STILL_COLOR = (110, 135, 170)
+# a sleeping sphere (engine/sleep.py): a cool grey-blue beside the moving spheres' orange
+ASLEEP_COLOR = (110, 135, 170)
+SLEEP_IDS_PER_LINE = 12  # spheres named in a "fell asleep" / "woke" log line; the rest are counted
 
 
-def sphere_colors(inverse_mass: np.ndarray, still: np.ndarray | None = None) -> np.ndarray:
-    """(N, 3) uint8: immovable spheres grey, the rest a warm orange, and those ``still``
-    ((N,) bool: exactly at rest, e.g. asleep) a cool grey-blue."""
+def sphere_colors(inverse_mass: np.ndarray, asleep: np.ndarray | None = None) -> np.ndarray:
+    """(N, 3) uint8: immovable spheres grey, the rest a warm orange, and those ``asleep``
+    ((N,) bool, as StepEnd and the recording's state carry it) a cool grey-blue."""
     colors = np.tile(np.array([[240, 140, 50]], dtype=np.uint8), (len(inverse_mass), 1))
-    if still is not None:
-        colors[still] = STILL_COLOR
+    if asleep is not None:
+        colors[asleep] = ASLEEP_COLOR
     colors[inverse_mass == 0] = (140, 140, 140)
     return colors
 
 
-def still_spheres(inverse_mass: np.ndarray, velocities: np.ndarray) -> np.ndarray:
-    """(N,) bool: the movable spheres whose velocity (N, 3) is exactly zero. A sleeping
-    sphere always is (engine/sleep.py), a moving one never; so the picture shows a pile
-    falling asleep from a recording's velocities alone, live or replayed."""
-    return (inverse_mass > 0) & ~velocities.any(axis=1)
+def sleep_changed(before: np.ndarray | None, after: np.ndarray | None) -> bool:
+    """Whether the set of sleeping spheres differs ((N,) bool masks; None = none asleep)."""
+    if before is None or after is None:
+        return before is not after and bool((before if after is None else after).any())
+    return not np.array_equal(before, after)
+
+
+def describe_sleep(frame: int, before: np.ndarray | None, after: np.ndarray | None) -> list[tuple[str, str]]:
+    """(text, level) lines naming the spheres that fell asleep and those that woke in the
+    step that ends at ``frame``; before, after: (N,) bool masks (None: none asleep)."""
+    if after is None:
+        return []
+    was = before if before is not None else np.zeros_like(after)
+    lines = []
+    for verb, who in (("fell asleep", after & ~was), ("woke", was & ~after)):
+        ids = np.flatnonzero(who)
+        if len(ids):
+            named = ", ".join(str(int(i)) for i in ids[:SLEEP_IDS_PER_LINE])
+            more = f" and {len(ids) - SLEEP_IDS_PER_LINE} more" if len(ids) > SLEEP_IDS_PER_LINE else ""
+            noun = "sphere" if len(ids) == 1 else "spheres"
+            lines.append((f"step {frame}: {len(ids)} {noun} {verb}: {named}{more}", "INFO"))
+    return lines
 
 
 def describe_contacts(frame: int, c: Contacts, dt: float, wall_names) -> list[tuple[str, str]]:
