@@ -509,7 +509,10 @@ def _equation_of_state(rec) -> dict | None:
 
     if rec.steps < 2 * BLOCKS or int(np.count_nonzero(rec.header.inverse_mass > 0)) < 2:
         return None
-    eos = equation_of_state(rec)
+    try:
+        eos = equation_of_state(rec)
+    except ValueError:  # nothing moved in part of the window (a pile asleep): no kT
+        return None
     return dict(asdict(eos), periodic=rec.header.walls.periodic) if eos.z_virial != 1.0 else None
 
 

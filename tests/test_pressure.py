@@ -53,3 +53,20 @@ def test_a_hard_sphere_gas_reads_close_to_carnahan_starling(tmp_path):
     done = CliRunner().invoke(app, ["info", result.mcap])
     assert done.exit_code == 0 and "pressure    Z = PV/NkT = " in done.output
     assert "Carnahan–Starling at packing fraction 0.1: Z = 1.5213" in done.output
+
+
+def test_a_pile_that_fell_asleep_has_no_equation_of_state_and_info_says_nothing_of_one(tmp_path):
+    """Nothing moves once a pile sleeps (engine/sleep.py): no temperature to divide by, so
+    no Z (the ValueError says why) and no NaN or RuntimeWarning in `physdbg info`."""
+    import warnings
+
+    pile = ["generate.count=100", "box.max=[0.3,1,0.3]", "generate.speed=0", "generate.restitution=0.5",
+            "box.restitution=0.5", "rapid_contact_rule=tc", "sleep_speed=0.05", "sleep_time=0.1", "steps=240"]
+    result = api.record("rain", pile, mcap_path=str(tmp_path / "pile.mcap"), rrd=False, detail="state", view=False)
+    assert result.summary.asleep_at_end == 100
+    with pytest.raises(ValueError, match=r"nothing moves in steps \d+\.\.\d+: no temperature"):
+        equation_of_state(open_recording(result.mcap))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a RuntimeWarning from a division by zero fails the test
+        done = CliRunner().invoke(app, ["info", result.mcap])
+    assert done.exit_code == 0 and "pressure" not in done.output and "nan" not in done.output

@@ -127,6 +127,11 @@ def equation_of_state(rec, skip: float = 0.5) -> EquationOfState:
     dt, kinetic = stats["dt"], stats["kinetic"]
     blocks = np.array_split(np.arange(len(stats)), BLOCKS)
 
+    still = next((b for b in blocks if not (kinetic[b] * dt[b]).sum() > 0), None)
+    if still is not None:  # e.g. a pile that fell asleep: no temperature to divide by
+        raise ValueError(f"nothing moves in steps {first + int(still[0])}..{first + int(still[-1])}: "
+                         f"no temperature, so no equation of state")
+
     def mean_and_error(values: np.ndarray) -> tuple[float, float]:
         return float(values.mean()), float(values.std(ddof=1) / math.sqrt(len(values)))
 
