@@ -114,3 +114,52 @@ def test_check_exits_1_when_the_scene_s_own_settings_are_predicted_to_fail():
     data = json.loads(done.output)
     assert data["ok"] and data["recommended"]["detection"] == "swept"
     assert {p["outcome"] for p in data["predictions"] if p["setting"] == "ordering"} == {"safe", "overlap left"}
+
+
+NARROW_PILE = ["generate.count=100", "box.max=[0.3,1,0.3]", "generate.speed=0", "generate.restitution=0.5",
+               "box.restitution=0.5", "steps=240"]
+
+
+def test_a_pile_is_foreseen_and_each_rule_does_on_it_what_check_says():
+    """100 spheres in a 0.3 m × 0.3 m box settle ~3 layers deep. hold churns (held contacts
+    let go and held again, the swept tests of a step up a hundredfold), tc collapses (the
+    event cap, then overlaps), tc with sleeping falls asleep exactly."""
+    from physdbg.analysis.advisor import pile_choice
+
+    scene = load_scene("rain", NARROW_PILE)
+    advice = advise(scene)
+    assert advice.facts["pile"]["layers"] == pytest.approx(
+        100 * 4 / 3 * np.pi * 0.03**3 / 0.64 / 0.09 / 0.06, rel=1e-12)
+    outcomes = {p.value: p.outcome for p in advice.predictions if p.setting == "pile"}
+    assert outcomes == {"hold": "churns", "hold+sleep": "churns", "tc": "collapses", "tc+sleep": "settles"}
+    assert pile_choice(scene.settings) == "hold"
+
+    world = scene.build_world()
+    stats = [world.step(scene.dt) for _ in range(70)]
+    assert max(s.released for s in stats) > 100 and max(s.swept_tests for s in stats) > 100 * stats[9].swept_tests
+
+    world = load_scene("rain", NARROW_PILE + ["rapid_contact_rule=tc"]).build_world()
+    stats = [world.step(1 / 120) for _ in range(60)]
+    assert any("max_events_per_step" in [w.code for w in s.warnings] for s in stats)
+
+    settled = api.run("rain", NARROW_PILE + ["rapid_contact_rule=tc", "sleep_speed=0.05", "sleep_time=0.1"])
+    assert settled.asleep_at_end == 100 and settled.max_overlap <= 1e-9 and not settled.warning_counts
+
+
+@pytest.mark.parametrize("overrides", [[], ["generate.count=500", "generate.restitution=1", "box.restitution=1"],
+                                       ["generate.count=500", "gravity=[0,0,0]"]])
+def test_no_pile_without_a_full_layer_without_losses_or_without_gravity(overrides):
+    assert advise(load_scene("rain", overrides)).facts["pile"] is None  # rain's 100 spheres: 0.3 layers
+
+
+def test_check_shows_the_pile_rules_marks_the_scene_s_own_and_keeps_its_exit_code():
+    runner = CliRunner()
+    done = runner.invoke(app, ["check", "rain", "-s", "generate.count=500"])
+    assert done.exit_code == 0
+    assert "pile        500 spheres settle about 1.5 layers deep on a 1 m² floor (restitution 0.8 < 1)" in done.output
+    assert " *hold           churns" in done.output and "  tc+sleep       settles" in done.output
+    assert "to settle -s rapid_contact_rule=tc -s sleep_speed=0.1 -s sleep_time=0.1" in done.output
+    done = runner.invoke(app, ["check", "rain", "-s", "generate.count=500", "-s", "rapid_contact_rule=tc",
+                               "-s", "sleep_speed=0.1", "-s", "sleep_time=0.1"])
+    assert done.exit_code == 0 and " *tc+sleep       settles" in done.output and "to settle" not in done.output
+    assert "pile" not in runner.invoke(app, ["check", "rain"]).output

@@ -24,6 +24,16 @@ speed: the stability maps), **discrete** when none can (no swept tests to pay fo
 **time** ordering when a step can hold more than one contact (index ordering resolves a
 later contact first: overlaps in the cradle and the gas); the broad phase ``auto`` picks
 by size and radius spread (docs/broadphase.md).
+
+A **pile**: under gravity, in a box closed by one-sided walls with a floor against
+gravity, spheres with restitution below 1 end in a pile PILE_LAYERS or more layers deep
+(their volume at random close packing over the floor). An exact pile never rests by
+itself (docs/benchmarks.md): with ``rapid_contact_rule = "hold"`` each impact on it is
+solved through its held contacts and the steps slow as it grows (rain of 500: minutes);
+with ``"tc"`` its bed rattles ever faster until a budget stops steps; with ``"tc"`` and
+sleeping (``sleep_speed``) it falls asleep, exactly, at the price of freezing motion below
+``sleep_speed`` (docs/engine.md, "Sleeping"). This is advice on speed and on resting,
+read from those measurements; it does not change ``check``'s exit code.
 """
 
 from __future__ import annotations
@@ -40,6 +50,9 @@ from ..engine.toi import DETECTION_NAMES
 
 AUTO = "auto"
 CHOSEN = ("integrator", "detection", "ordering")  # what ``auto`` may decide in a scene
+PILE_LAYERS = 1.0  # layers of spheres at rest on the floor from which the rain makes a pile
+RANDOM_CLOSE_PACKING = 0.64  # the volume fraction of a settled pile of equal spheres
+PILE_REMEDY = {"rapid_contact_rule": "tc", "sleep_speed": 0.1, "sleep_time": 0.1}  # measured on box-rain and rain
 
 
 @dataclass
@@ -118,6 +131,10 @@ def advise(scene) -> Advice:
 
     if periodic is not None and not periodic["fits"]:
         predictions.append(Prediction("dt", f"{dt:.6g}", "pairs untested", periodic["why"]))
+    pile = _pile(state, walls, np.asarray(s.gravity, dtype=float))
+    facts["pile"] = pile
+    if pile is not None:
+        predictions += _pile_predictions()
 
     recommended = {"integrator": "exact"}
     reasons = {"integrator": f"only {forces} {act} on physdbg's spheres: exact at any dt, and no dearer per step "
@@ -155,6 +172,53 @@ def _detection(name, contacts_possible, bound, dt, samples, r_min, two_sided, n)
         return Prediction("detection", name, "tunnels", f"can tunnel through {', '.join(tunnels)}: up to {step}")
     return Prediction("detection", name, "overlap left",
                       "finds each contact only after the spheres overlap (docs/stability.md); up to " + step)
+
+
+def _pile(state, walls, gravity: np.ndarray) -> dict | None:
+    """Whether the spheres end in a pile (see module doc): {"layers", "why"}, or None."""
+    from .pressure import box_of
+
+    movable = state.inverse_mass > 0
+    g = float(np.linalg.norm(gravity))
+    box = box_of(walls)
+    if g == 0.0 or box is None or walls.periodic or not np.any(movable):
+        return None
+    down = gravity / g
+    axis = int(np.argmax(np.abs(down)))
+    if abs(abs(down[axis]) - 1.0) > 1e-12:  # gravity along no axis of the box: no floor area to speak of
+        return None
+    side = box[1] - box[0]
+    floor = float(np.prod(np.delete(side, axis)))
+    r = state.radius[movable]
+    height = float(np.sum(4.0 / 3.0 * np.pi * r**3)) / RANDOM_CLOSE_PACKING / floor
+    layers = height / (2.0 * float(r.mean()))
+    if layers < PILE_LAYERS:
+        return None
+    e_spheres = float(state.restitution[movable].min())
+    e_walls = float(walls.restitution.min()) if len(walls) else 1.0
+    if min(e_spheres, e_walls) >= 1.0:  # nothing loses energy: the spheres stay a hot gas, no pile
+        return None
+    return {"layers": layers, "why": (
+        f"{int(np.count_nonzero(movable))} spheres settle about {layers:.2g} layers deep on a {floor:.3g} m² floor "
+        f"(restitution {min(e_spheres, e_walls):.2g} < 1)")}
+
+
+def _pile_predictions() -> list[Prediction]:
+    """How each rapid-contact rule, with sleeping or not, does on a pile (module doc)."""
+    return [
+        Prediction("pile", "hold", "churns", "each impact on the pile is solved through the contacts it holds, so "
+                                             "the steps slow as it grows (rain of 500: minutes; docs/benchmarks.md)"),
+        Prediction("pile", "hold+sleep", "churns", "the pile churns before its spheres are slow long enough to sleep"),
+        Prediction("pile", "tc", "collapses", "fast while the rain falls; once the pile has formed, its bed rattles "
+                                              "ever faster until a budget stops steps"),
+        Prediction("pile", "tc+sleep", "settles", "falls asleep from the floor up, exactly (rain of 500: seconds); "
+                                                  "motion slower than sleep_speed is frozen"),
+    ]
+
+
+def pile_choice(settings) -> str:
+    """The ``pile`` prediction a scene's settings pick: its rapid-contact rule, +sleep when on."""
+    return settings.rapid_contact_rule + ("+sleep" if settings.sleep_speed > 0 else "")
 
 
 def _speed_bound(state, walls, gravity: np.ndarray, duration: float) -> tuple[float, str]:
