@@ -90,6 +90,16 @@ def scenes() -> None:
         typer.echo(f"{name:<{width}}  {description}")
 
 
+def _pile_note(scene) -> None:
+    """Before a run: say on stderr when the scene makes a pile its settings will not let
+    rest (analysis.advisor.pile_note), so nobody waits minutes without knowing why."""
+    from .analysis.advisor import pile_note
+
+    note = pile_note(scene)
+    if note:
+        typer.echo(f"note: {note}", err=True)
+
+
 SetOption = Annotated[
     Optional[list[str]],
     typer.Option("--set", "-s", metavar="KEY=VALUE",
@@ -120,6 +130,7 @@ def run(
         from .scene import load_scene
 
         loaded = load_scene(scene, set_ or [])
+        _pile_note(loaded)
         step_lengths = _read_dts(dts) if dts is not None else None
         total = len(step_lengths) if step_lengths is not None else loaded.steps
         bar = _progress_bar(total, show=progress and not as_json)
@@ -180,6 +191,7 @@ def record(
         if check_against is not None and not check_against.is_file():
             raise PhysdbgError(f"{check_against}: no such recording to check against")
         loaded = load_scene(scene, set_ or [])
+        _pile_note(loaded)
         step_lengths = _read_dts(dts) if dts is not None else None
         total = len(step_lengths) if step_lengths is not None else loaded.steps
         bar = _progress_bar(total, show=progress)

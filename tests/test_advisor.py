@@ -163,3 +163,20 @@ def test_check_shows_the_pile_rules_marks_the_scene_s_own_and_keeps_its_exit_cod
                                "-s", "sleep_speed=0.1", "-s", "sleep_time=0.1"])
     assert done.exit_code == 0 and " *tc+sleep       settles" in done.output and "to settle" not in done.output
     assert "pile" not in runner.invoke(app, ["check", "rain"]).output
+
+
+def test_run_and_record_say_before_they_start_that_the_pile_will_not_rest(tmp_path):
+    """The user of issue 10 who types `physdbg run rain -s generate.count=500` is told at
+    once (stderr) why the run will be slow and what lets the pile rest; --json stays JSON."""
+    runner = CliRunner()
+    done = runner.invoke(app, ["run", "rain", "-s", "generate.count=500", "-s", "steps=1", "--json"])
+    assert done.exit_code == 0
+    assert done.stderr.startswith("note: 500 spheres settle about 1.5 layers deep")
+    assert "Under hold it churns" in done.stderr and "-s rapid_contact_rule=tc -s sleep_speed=0.1" in done.stderr
+    assert json.loads(done.stdout)["steps"] == 1
+    done = runner.invoke(app, ["record", "rain", "-s", "generate.count=500", "-s", "steps=1", "-s",
+                               "rapid_contact_rule=tc", "-o", str(tmp_path / "r.mcap"), "--no-rrd"])
+    assert done.exit_code == 0 and "Under tc it collapses" in done.stderr
+    quiet = runner.invoke(app, ["run", "rain", "-s", "generate.count=500", "-s", "steps=1", "-s", "rapid_contact_rule=tc",
+                                "-s", "sleep_speed=0.1"])
+    assert quiet.exit_code == 0 and "note:" not in quiet.stderr

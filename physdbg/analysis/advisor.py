@@ -216,6 +216,20 @@ def _pile_predictions() -> list[Prediction]:
     ]
 
 
+def pile_note(scene) -> str | None:
+    """One sentence for a run about to start (physdbg run / record): the scene makes a pile
+    that its settings will not let rest, and what would; None otherwise. O(N): safe to
+    call on any scene, unlike advise (whose contact test is O(N²))."""
+    pile = _pile(scene.state, scene.walls, np.asarray(scene.settings.gravity, dtype=float))
+    choice = pile_choice(scene.settings)
+    if pile is None or choice == "tc+sleep":
+        return None
+    outcome = next(p for p in _pile_predictions() if p.value == choice)
+    return (f"{pile['why']}, and an exact pile does not rest by itself. Under {choice} it {outcome.outcome}: "
+            f"{outcome.why}. To let it rest: " + " ".join(f"-s {k}={v}" for k, v in PILE_REMEDY.items())
+            + " (physdbg check on this scene says more).")
+
+
 def pile_choice(settings) -> str:
     """The ``pile`` prediction a scene's settings pick: its rapid-contact rule, +sleep when on."""
     return settings.rapid_contact_rule + ("+sleep" if settings.sleep_speed > 0 else "")
