@@ -43,7 +43,7 @@ def main() -> None:
     started = time.perf_counter()
     audit = explain(paths[0])
     explain_seconds = time.perf_counter() - started
-    print(f"\n| what | seconds | target |\n|---|---|---|")
+    print("\n| what | seconds | target |\n|---|---|---|")
     print(f"| diff: first divergence (step {report.divergence.step if report.divergence else '-'}) found and "
           f"reported | {diff_seconds:.2f} | < 1 |")
     print(f"| explain: {audit.checked} steps audited, {sum(audit.counts.values())} findings | {explain_seconds:.2f} "

@@ -4,7 +4,6 @@ inside the held-contact solve on a pile too large to solve directly."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 

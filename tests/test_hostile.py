@@ -18,7 +18,7 @@ from physdbg.engine import NonFiniteState
 from physdbg.errors import NonFiniteRunError, PhysdbgError, SceneError
 from physdbg.scene import FIELDS, load_scene, parse_scene
 
-from .conftest import make_state, make_walls, make_world
+from .conftest import make_state, make_world
 
 # ----------------------------------------------------------------------------- generated input
 # Values a hostile user types: extremes of every kind, wrong types, deep and huge structures.
