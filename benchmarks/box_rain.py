@@ -157,7 +157,8 @@ def main() -> None:
     rows = np.array(result["rows"])
     steps = result["steps"]
     ms = 1000.0 * result["seconds"] / steps
-    print(f"box-rain N={args.count}, {steps} of {args.steps} steps of 1/240 s")
+    overrides = f" ({', '.join(args.set)})" if args.set else ""
+    print(f"box-rain N={args.count}, {steps} of {args.steps} steps of {scene.dt:.6g} s{overrides}")
     print(f"physdbg: {ms:.1f} ms/step; steps stopped by a budget: {result['capped']}; largest overlap after any step: "
           f"{result['worst_overlap']:.3g} m (contact tolerance {result['tolerance']:g} m); peak memory "
           f"{result['peak_mb']:.0f} MB")
