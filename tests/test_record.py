@@ -78,6 +78,18 @@ def test_key_frames_come_every_interval_and_need_nothing_before_them():
         fmt.decode_state(data)
 
 
+def test_an_asleep_mask_of_the_wrong_length_is_a_damaged_state():
+    x = np.ones((9, 3))  # 9 spheres: a mask of 2 bytes
+    good = fmt.encode_state(1, 0.1, 0.1, state_hash(x, x), x, x, fmt.CODEC_RAW, asleep=np.arange(9) % 2 == 0)
+    assert fmt.decode_state(good)[5].tolist() == [True, False] * 4 + [True]
+    from physdbg.record.proto import message_class
+
+    bad = message_class(fmt.STATE_MESSAGE).FromString(good)
+    bad.asleep = b"\x01"
+    with pytest.raises(ValueError, match="asleep mask of 1 bytes, expected 2"):
+        fmt.decode_state(bad.SerializeToString())
+
+
 def test_ballistic_states_compress_to_a_fraction_of_their_raw_size():
     """Free flight is what the predictor predicts: residuals are mostly zero bytes."""
     import zstandard
