@@ -497,6 +497,8 @@ def info(path: str | Path) -> dict:
                           "messages": c.messages} for c in rec.channels()],
             "equation_of_state": _equation_of_state(rec),
             "foreign": meta.get("foreign"),
+            # spheres asleep after the last step (None: the run did not let spheres sleep)
+            "asleep_at_end": int(last.asleep.sum()) if last.asleep is not None else None,
         }
 
 

@@ -675,6 +675,8 @@ def info(
             f"settings    {settings}",
             f"steps       {data['steps']}  ({data['sim_time']:.6g} s simulated), detail {data['detail']}",
             f"bodies      {_count(data['particles'], 'particle')}, {_count(len(data['walls']), 'wall')}",
+            *([f"sleep       {data['asleep_at_end']} of {data['particles']} spheres asleep at the end "
+               f"(sleep_speed {data['settings'].get('sleep_speed')} m/s)"] if data["asleep_at_end"] is not None else []),
             f"size        {data['bytes_per_particle_step']:.1f} bytes per particle-step (everything)"
             if data["bytes_per_particle_step"] else "size        -",
             f"final hash  {data['final_hash']}",

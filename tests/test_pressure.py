@@ -70,3 +70,4 @@ def test_a_pile_that_fell_asleep_has_no_equation_of_state_and_info_says_nothing_
         warnings.simplefilter("error")  # a RuntimeWarning from a division by zero fails the test
         done = CliRunner().invoke(app, ["info", result.mcap])
     assert done.exit_code == 0 and "pressure" not in done.output and "nan" not in done.output
+    assert "sleep       100 of 100 spheres asleep at the end (sleep_speed 0.05 m/s)" in done.output
