@@ -132,3 +132,28 @@ def test_under_the_tc_rule_the_collapse_advice_names_the_hold_rule():
         assert ("rapid_contact_rule=hold" in advice) == named
         assert ("sleep_speed" in advice) == named  # under tc: sleeping is named, on or off
         assert ("rattles until its spheres fall asleep" in advice) == asleep_said
+
+
+def test_a_budget_hit_in_a_pile_names_the_settings_that_let_it_rest(tmp_path):
+    """A pile (analysis.advisor) under tc alone collapses: the event cap stops step 54.
+    The budget finding says, besides raising the budget, what lets the pile fall asleep;
+    the bouncing ball above (a budget hit but no pile) says nothing of piles."""
+    pile = ["generate.count=100", "box.max=[0.3,1,0.3]", "generate.speed=0", "generate.restitution=0.5",
+            "box.restitution=0.5", "rapid_contact_rule=tc", "steps=55"]
+    out = tmp_path / "pile.mcap"
+    api.record("rain", pile, mcap_path=str(out), rrd=False, detail="contacts", view=False)
+    report = explain(out)
+    hint = "this scene makes a pile about 3.3 layers deep, which tc does not let rest"
+    budget = next(f for f in report.findings if f.kind == "budget")
+    assert budget.step == 54 and hint in budget.advice and "--set max_events_per_step=N" in budget.advice
+    assert all(hint in f.advice for f in report.findings if f.kind == "tunnelling")
+    from physdbg.analysis.audit import Auditor
+    from physdbg.record.header import RecordingHeader
+    from physdbg.scene import load_scene
+
+    auditor = Auditor(RecordingHeader.from_scene(load_scene("rain", pile)))
+    assert auditor._pile() == ("this scene makes a pile about 3.3 layers deep, which tc does not let rest: "
+                               "-s rapid_contact_rule=tc -s sleep_speed=0.1 -s sleep_time=0.1 lets it fall asleep "
+                               "(physdbg check)")
+    assert Auditor(RecordingHeader.from_scene(load_scene("bounce")))._pile() is None
+    assert Auditor(RecordingHeader.from_scene(load_scene("rain", pile + ["sleep_speed=0.1"])))._pile() is None

@@ -175,10 +175,12 @@ def _detection(name, contacts_possible, bound, dt, samples, r_min, two_sided, n)
 
 
 def _pile(state, walls, gravity: np.ndarray) -> dict | None:
-    """Whether the spheres end in a pile (see module doc): {"layers", "why"}, or None."""
+    """Whether the spheres end in a pile (see module doc): {"layers", "why"}, or None.
+    state: anything with (N,) radius, inverse_mass, restitution and gravity_scale (a
+    State, a RecordingHeader)."""
     from .pressure import box_of
 
-    movable = state.inverse_mass > 0
+    movable = (state.inverse_mass > 0) & (state.gravity_scale > 0)
     g = float(np.linalg.norm(gravity))
     box = box_of(walls)
     if g == 0.0 or box is None or walls.periodic or not np.any(movable):
@@ -230,9 +232,25 @@ def pile_note(scene) -> str | None:
             + " (physdbg check on this scene says more).")
 
 
+def pile_hint(header) -> str | None:
+    """For advice on a recorded run (the audit): the scene makes a pile its settings do not
+    let rest, and what does; None otherwise. header: a RecordingHeader."""
+    settings = header.meta.get("settings", {})
+    pile = _pile(header, header.walls, np.asarray(settings.get("gravity", (0.0, 0.0, 0.0)), dtype=float))
+    choice = _choice(settings.get("rapid_contact_rule", "hold"), float(settings.get("sleep_speed", 0.0) or 0.0))
+    if pile is None or choice == "tc+sleep":
+        return None
+    return (f"this scene makes a pile about {pile['layers']:.2g} layers deep, which {choice} does not let rest: "
+            + " ".join(f"-s {k}={v}" for k, v in PILE_REMEDY.items()) + " lets it fall asleep (physdbg check)")
+
+
 def pile_choice(settings) -> str:
     """The ``pile`` prediction a scene's settings pick: its rapid-contact rule, +sleep when on."""
-    return settings.rapid_contact_rule + ("+sleep" if settings.sleep_speed > 0 else "")
+    return _choice(settings.rapid_contact_rule, settings.sleep_speed)
+
+
+def _choice(rapid_contact_rule: str, sleep_speed: float) -> str:
+    return rapid_contact_rule + ("+sleep" if sleep_speed > 0 else "")
 
 
 def _speed_bound(state, walls, gravity: np.ndarray, duration: float) -> tuple[float, str]:

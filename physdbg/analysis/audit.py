@@ -112,6 +112,7 @@ class Auditor:
         self.checker = StepChecker(header.radius, header.inverse_mass, header.gravity_scale, header.walls,
                                    self.settings)
         self.tolerance = float(self.settings.get("contact_tolerance", 1e-9))
+        self._pile_hint: str | None | bool = False  # advisor.pile_hint, worked out when first needed
         self.listeners = [on_finding] if on_finding else []
         self.counts: dict[str, int] = {}
         self.examples: list[Finding] = []
@@ -174,10 +175,19 @@ class Auditor:
                 value = self.settings.get(w.code)
                 if w.code == "max_events_per_step":  # 0: the cap that suits the sphere count
                     value = event_cap(value or 0, self.header.count)
+                advice = (f"raise it with --set {w.code}=N, or see whether the scene is in inelastic collapse "
+                          f"(many bounces among few spheres)")
+                pile = self._pile()
                 self._add(Finding("budget", step, [], f"the {w.code} budget ({value} {what}) was hit: {consequence}.",
-                                  f"raise it with --set {w.code}=N, or see whether the scene is in inelastic "
-                                  f"collapse (many bounces among few spheres)", evidence={"budget": w.code,
-                                                                                          "value": value}))
+                                  advice + (f"; {pile}" if pile else ""), evidence={"budget": w.code, "value": value}))
+
+    def _pile(self) -> str | None:
+        """advisor.pile_hint for this run (a foreign run's settings say nothing of physdbg's rules)."""
+        if self._pile_hint is False:
+            from .advisor import pile_hint
+
+            self._pile_hint = None if self.header.meta.get("foreign") else pile_hint(self.header)
+        return self._pile_hint
 
     def _check_crossings(self, step: int, end: StepEnd, contacts: Contacts | None) -> None:
         for c in self.checker.check(self._x, self._v, end.positions, end.dt, contacts):
@@ -186,8 +196,9 @@ class Auditor:
                    "sampled": f"detection = sampled tests only {self.settings.get('samples', 4)} instants a step"}
             budgets = [w.code for w in self._warnings if w.code != "non-finite" and w.code != "overlap"]
             if budgets:
+                pile = self._pile()
                 advice = (f"this step hit the {budgets[0]} budget, so contacts after it were not resolved: "
-                          f"raise it, or let slow contacts rest (rest_fraction)")
+                          f"raise it, or let slow contacts rest (rest_fraction)" + (f"; {pile}" if pile else ""))
             elif detection == "foreign":
                 advice = ("the other engine let it cross within one step with no contact: test for contacts along "
                           "the path through the step (a swept test, as physdbg does), not where the step ends, or "
