@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from physdbg.engine.resting import (
+    HELD,
     RAPID_HOLD,
     RAPID_TC,
     HeldContacts,
@@ -60,7 +61,7 @@ def _solve(world, contact, solver, target=0.05):
 
 
 def test_the_direct_solve_finds_what_gauss_seidel_finds_with_a_fraction_of_the_work(pile):
-    held = int(pile.held.count[0])
+    held = int(pile.held.count[HELD])
     rng = np.random.default_rng(7)
     direct_work = sweep_work = 0
     for contact in rng.choice(held, size=12, replace=False):
@@ -110,7 +111,7 @@ def test_the_held_store_grows_only_what_ran_out():
     # every contact is still found where it was, with its normal
     for c, (a, b) in enumerate([(0, 1), (2, 3), (0, 2), (0, 3)]):
         assert held_find(h, KIND_PAIR, a, b) == c and held_find(h, KIND_PAIR, b, a) == -1
-    assert h.normal[2].tolist() == [0.0, 0.0, 1.0] and h.count[0] == 4 and h.deg.tolist() == [3, 1, 2, 2]
+    assert h.normal[2].tolist() == [0.0, 0.0, 1.0] and h.count[HELD] == 4 and h.deg.tolist() == [3, 1, 2, 2]
 
 
 def _left_looking_cholesky_solve(big, idx, n, ridge, xs):
@@ -196,7 +197,7 @@ def _scanned_contact_matrix(h, members, inverse_mass):
 def test_the_contact_matrix_is_the_scanned_one_to_the_bit(seed):
     rng = np.random.default_rng(seed)
     h, inverse_mass = _random_store(rng)
-    members = rng.permutation(int(h.count[0]))[: int(rng.integers(1, h.count[0] + 1))].astype(np.int64)
+    members = rng.permutation(int(h.count[HELD]))[: int(rng.integers(1, h.count[HELD] + 1))].astype(np.int64)
     big, row_start, cols = _contact_matrix(h, members, len(members), inverse_mass)
     expected = _scanned_contact_matrix(h, members, inverse_mass)
     assert big.tobytes() == expected.tobytes()

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from physdbg.engine import Settings, World
-from physdbg.engine.resting import held_add, new_held
+from physdbg.engine.resting import HELD, held_add, new_held
 from physdbg.engine.sleep import can_sleep, release_static
 from physdbg.errors import SceneError
 from physdbg.scene import load_scene
@@ -107,7 +107,7 @@ def test_a_held_contact_between_two_immovable_ends_is_released():
     held_add(h, 0, 1, 2, 0.0, 1.0, 0.0)  # spheres 1 and 2
     held_add(h, 1, 2, 0, 0.0, 1.0, 0.0)  # sphere 2 and wall 0
     released = release_static(h, np.array([0.0, 1.0, 0.0]))  # sphere 1 can move
-    assert released == 1 and int(h.count[0]) == 2
+    assert released == 1 and int(h.count[HELD]) == 2
     assert sorted((int(h.kind[c]), int(h.a[c]), int(h.other[c])) for c in range(2)) == [(0, 0, 1), (0, 1, 2)]
 
 

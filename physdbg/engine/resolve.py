@@ -34,6 +34,7 @@ from .colliders import contact_gap, contact_normal, partner_restitution, partner
 from .jit import borrowing, kernel
 from .motion import advance_particle
 from .resting import (
+    HELD,
     STEP_RELEASED,
     begin_solve,
     contacts_of,
@@ -240,7 +241,7 @@ def _solve_accelerations(h, x, v, a, acc, inverse_mass, sigma, when, integrator,
     released contact's force leaves its spheres). Returns False when the budget ran out."""
     while True:
         touched = h.touched[1:h.touched[0] + 1].copy()
-        seeds = np.empty(max(h.count[0], 1), np.int64)
+        seeds = np.empty(max(h.count[HELD], 1), np.int64)
         m = contacts_of(h, touched, touched.shape[0], seeds)
         if not solve_contacts(h, acc, False, seeds, m, x, v, a, sigma, inverse_mass, when, integrator, drag, k, atol,
                               work_budget, 0.0):
@@ -277,7 +278,7 @@ def settle_held(h, x, v, a, acc, free_accel, radius, inverse_mass, sigma, dt, in
     """
     n = x.shape[0]
     c = 0
-    while c < h.count[0]:
+    while c < h.count[HELD]:
         gap, n0, n1, n2, renewed = contact_gap(h.kind[c], x, v, a, radius, h.a[c], h.other[c], walls)
         if renewed:
             h.normal[c, 0] = n0
@@ -291,7 +292,7 @@ def settle_held(h, x, v, a, acc, free_accel, radius, inverse_mass, sigma, dt, in
     for i in range(n):
         for d in range(3):
             acc[i, d] = free_accel[i, d]
-    for c in range(h.count[0]):
+    for c in range(h.count[HELD]):
         if h.lam[c] != 0.0:
             push_along(acc, inverse_mass, h.a[c], partner_sphere(h.kind[c], h.other[c]), h.normal[c, 0],
                        h.normal[c, 1], h.normal[c, 2], h.lam[c])
@@ -303,12 +304,12 @@ def settle_held(h, x, v, a, acc, free_accel, radius, inverse_mass, sigma, dt, in
         for i in range(n):
             for d in range(3):
                 v[i, d] = v[i, d] * damp + acc[i, d] * dt
-    if ok and h.count[0] > 0:
-        for c in range(h.count[0]):
+    if ok and h.count[HELD] > 0:
+        for c in range(h.count[HELD]):
             h.target[c] = 0.0
         _visit_all(h, v)  # a new solve: the impulses jv start from 0
-        seeds = np.arange(h.count[0]).astype(np.int64)
-        ok = solve_contacts(h, v, True, seeds, h.count[0], x, v, a, sigma, inverse_mass, 0.0, integrator, drag, k,
+        seeds = np.arange(h.count[HELD]).astype(np.int64)
+        ok = solve_contacts(h, v, True, seeds, h.count[HELD], x, v, a, sigma, inverse_mass, 0.0, integrator, drag, k,
                             vtol, work_budget, stick)
         if ok and release_loose(h, v, acc, inverse_mass, False, x, a, sigma, 0.0, integrator, drag, k,
                                 vtol, math.inf, stick) > 0:

@@ -158,8 +158,11 @@ def pressed_closing(closing: float, rel_acc: float, dt: float, scale: float) -> 
 
 
 # ----------------------------------------------------------------------------- the store
-# HeldContacts.count's slots that count one step's work (World zeroes them as a step
-# begins): held-solve updates, whole clusters solved, held contacts released
+# HeldContacts.count's slots: the contacts held now, the last solve's id, then those that
+# count one step's work (World zeroes them as a step begins): held-solve updates, whole
+# clusters solved, held contacts released
+HELD = 0
+SOLVE_ID = 1
 STEP_WORK = 2
 STEP_WHOLE_SOLVES = 3
 STEP_RELEASED = 4
@@ -228,7 +231,7 @@ def grow_held(h: HeldContacts) -> HeldContacts:
     """
     c = h.kind.shape[0]
     k = h.slots.shape[1]
-    capacity = 2 * c if h.count[0] >= c else c
+    capacity = 2 * c if h.count[HELD] >= c else c
     per_sphere = 2 * k if h.deg.shape[0] and int(h.deg.max()) >= k else k
     if capacity == c and per_sphere == k:  # asked to grow with room left: grow the store anyway
         capacity = 2 * c
@@ -246,7 +249,7 @@ def grow_held(h: HeldContacts) -> HeldContacts:
 @borrowing
 def held_room(h, a, b) -> bool:
     """Whether one more contact of spheres a and b (b = -1: a wall) fits without growing."""
-    return (h.count[0] < h.kind.shape[0] and h.deg[a] < h.slots.shape[1]
+    return (h.count[HELD] < h.kind.shape[0] and h.deg[a] < h.slots.shape[1]
             and (b < 0 or h.deg[b] < h.slots.shape[1]))
 
 
@@ -263,7 +266,7 @@ def held_find(h, kind, a, other) -> int:
 @borrowing
 def held_add(h, kind, a, other, nx, ny, nz) -> int:
     """Hold contact (kind, a, other) with normal n; returns its id (room checked by held_room)."""
-    c = h.count[0]
+    c = h.count[HELD]
     h.kind[c] = kind
     h.a[c] = a
     h.other[c] = other
@@ -274,7 +277,7 @@ def held_add(h, kind, a, other, nx, ny, nz) -> int:
     h.jv[c] = 0.0
     h.target[c] = 0.0
     h.seen[c] = -1
-    h.count[0] = c + 1
+    h.count[HELD] = c + 1
     h.slots[a, h.deg[a]] = c
     h.deg[a] += 1
     if partner_sphere(kind, other) >= 0:
@@ -306,7 +309,7 @@ def held_remove(h, c) -> None:
     _unlist(h, h.a[c], c)
     if partner_sphere(h.kind[c], h.other[c]) >= 0:
         _unlist(h, h.other[c], c)
-    last = h.count[0] - 1
+    last = h.count[HELD] - 1
     if c != last:
         _relist(h, h.a[last], last, c)
         if partner_sphere(h.kind[last], h.other[last]) >= 0:
@@ -320,7 +323,7 @@ def held_remove(h, c) -> None:
         h.jv[c] = h.jv[last]
         h.target[c] = h.target[last]
         h.seen[c] = h.seen[last]
-    h.count[0] = last
+    h.count[HELD] = last
 
 
 # ----------------------------------------------------------------------------- solves
@@ -334,9 +337,9 @@ def begin_solve(h) -> int:
     # ids go up in fours: a contact's ``seen`` holds solve (impulse jv is this solve's),
     # -(solve + 2) (on the worklist) or -(solve + 3) (listed by contacts_of), and no
     # marker of one solve may equal a marker of the next
-    h.count[1] += 4
+    h.count[SOLVE_ID] += 4
     h.touched[0] = 0
-    return h.count[1]
+    return h.count[SOLVE_ID]
 
 
 @borrowing
@@ -446,7 +449,7 @@ def _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inv
     takes the answer where it moves its relative value by more than ``tolerance``. Leaves
     the ids of the contacts it changed in ``h.queue[:m]`` (for the confirming Gauss–Seidel
     pass) and returns m. Each product K·d counts a cluster's contacts of work."""
-    solve = h.count[1]
+    solve = h.count[SOLVE_ID]
     inside = -(solve + 1)
     members = h.queue
     m = 0
@@ -583,7 +586,7 @@ def _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
     violated boundary held fixed can push hard against it, which Gauss–Seidel then
     spends far longer spreading than it would have spent from the start.)
     """
-    solve = h.count[1]
+    solve = h.count[SOLVE_ID]
     inside = -(solve + 1)  # seen code: in the cluster
     members = h.queue
     m = 0
@@ -1009,7 +1012,7 @@ def _gauss_seidel(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, invers
     within microseconds, the next contact does the same to another, and the pile
     collapses into endless tiny events after all.
     """
-    solve = h.count[1]
+    solve = h.count[SOLVE_ID]
     size = h.queue.shape[0]
     head = 0
     tail = 0
@@ -1090,7 +1093,7 @@ def release_loose(h, v, acc, inverse_mass, touched_only, x, a, sigma, when, inte
     released = 0
     if not touched_only:
         c = 0
-        while c < h.count[0]:
+        while c < h.count[HELD]:
             if _release_if_loose(h, c, v, acc, inverse_mass, x, a, sigma, when, integrator, drag, k,
                                  vtol, atol, stick):
                 released += 1  # the last contact took id c
@@ -1115,7 +1118,7 @@ def release_loose(h, v, acc, inverse_mass, touched_only, x, a, sigma, when, inte
 def _release_if_loose(h, c, v, acc, inverse_mass, x, a, sigma, when, integrator, drag, k, vtol, atol,
                       stick) -> bool:
     """Release held contact c if it is loose (release_loose); whether it was."""
-    solve = h.count[1]
+    solve = h.count[SOLVE_ID]
     i = h.a[c]
     j = partner_sphere(h.kind[c], h.other[c])
     rel_v = _relative(v, h, c)
@@ -1143,9 +1146,9 @@ def _release_if_loose(h, c, v, acc, inverse_mass, x, a, sigma, when, integrator,
 @borrowing
 def contacts_of(h, spheres, n_spheres, out) -> int:
     """The ids of every held contact of ``spheres[:n_spheres]`` into ``out`` (each once,
-    in sphere order); returns how many. out must hold h.count[0] entries."""
+    in sphere order); returns how many. out must hold h.count[HELD] entries."""
     m = 0
-    solve = h.count[1]
+    solve = h.count[SOLVE_ID]
     for s in range(n_spheres):
         p = spheres[s]
         for t in range(h.deg[p]):

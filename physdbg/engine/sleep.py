@@ -54,7 +54,7 @@ import numpy as np
 from ..events import KIND_PAIR
 from .colliders.kinds import partner_sphere
 from .jit import kernel
-from .resting import held_remove
+from .resting import HELD, held_remove
 
 
 def can_sleep(free_accel: np.ndarray, drag_k: float, sleep_speed: float, sleep_time: float) -> np.ndarray:
@@ -96,7 +96,7 @@ def release_static(h, inverse_mass) -> int:
     """Release every held contact whose two ends are immovable (inverse_mass 0; a wall
     always is); returns how many. h: the held store (resting.HeldContacts)."""
     released = 0
-    c = h.count[0] - 1
+    c = h.count[HELD] - 1
     while c >= 0:
         b = partner_sphere(h.kind[c], h.other[c])
         if inverse_mass[h.a[c]] == 0.0 and (b < 0 or inverse_mass[b] == 0.0):

@@ -67,7 +67,7 @@ from .resolve import (
     resolve_contact,
     settle_held,
 )
-from .resting import RAPID_RULES, STEP_RELEASED, STEP_WORK, grow_held, held_room, new_held
+from .resting import HELD, RAPID_RULES, STEP_RELEASED, STEP_WORK, grow_held, held_room, new_held
 from .sleep import Sleepers, release_static, woken_by_impact
 from .state import BUDGETS, NonFiniteState, Settings, State, Walls, energies, first_non_finite, state_hash
 from .step_context import StepContext
@@ -185,7 +185,7 @@ class World:
     @property
     def held_count(self) -> int:
         """How many contacts are held (resting or rapid, resting.py)."""
-        return int(self.held.count[0])
+        return int(self.held.count[HELD])
 
     # ------------------------------------------------------------------ the step
     def step(self, dt: float) -> StepStats:
