@@ -243,6 +243,15 @@ class _Differ:
         self.period = ra.header.walls.period if ra.header.walls.periodic else None
         movable = ra.header.inverse_mass > 0
         self.radius = float(ra.header.radius[movable].min()) if movable.any() else float(ra.header.radius.min())
+        self._states: dict[tuple[bool, int], object] = {}  # frames the causes read, decoded once (_state)
+
+    def _state(self, rec, k: int):
+        """Frame k of run A or B (rec), decoded once: the causes read the frames around the
+        divergence several times, and each read decodes from the key frame before it."""
+        key = (rec is self.rb, k)
+        if key not in self._states:
+            self._states[key] = rec.state(k)
+        return self._states[key]
 
     # ------------------------------------------------------------------ driver
     def run(self) -> DiffReport:
@@ -491,6 +500,8 @@ class _Differ:
     def _causes(self, div: Divergence, prev_a, prev_b, ca, cb, growth) -> list[Cause]:
         causes = self._setting_causes()
         step, step_b = div.step, div.step_b
+        if prev_a is not None:  # decoded already by the search for the divergence
+            self._states[(False, step - 1)], self._states[(True, step_b - 1)] = prev_a, prev_b
         settings_a, settings_b = self.ra.meta["settings"], self.rb.meta["settings"]
         # engine limits and NaN, in either run, in the diverging step
         for label, warns, k in (("A", self.warn_a, step), ("B", self.warn_b, step_b)):
@@ -509,7 +520,7 @@ class _Differ:
         if self.by_step and prev_a is not None:
             for label, rec, prev, contacts_rec in (("A", self.ra, prev_a, self.ra), ("B", self.rb, prev_b, self.rb)):
                 contacts = contacts_rec.contacts(step) if rec.detail != "state" else None
-                after = rec.state(step)
+                after = self._state(rec, step)
                 checker = StepChecker(rec.header.radius, rec.header.inverse_mass, rec.header.gravity_scale,
                                       rec.header.walls, rec.meta["settings"])
                 crossed[label] = checker.check(prev.positions, prev.velocities, after.positions, after.dt, contacts)
@@ -600,8 +611,8 @@ class _Differ:
         sets a sphere's velocity to zero. None when no differing sphere's sleep differs."""
         if not self.by_step:
             return None
-        frames = {"start": (self.ra.state(div.step - 1).asleep, self.rb.state(div.step_b - 1).asleep),
-                  "end": (self.ra.state(div.step).asleep, self.rb.state(div.step_b).asleep)}
+        frames = {"start": (self._state(self.ra, div.step - 1).asleep, self._state(self.rb, div.step_b - 1).asleep),
+                  "end": (self._state(self.ra, div.step).asleep, self._state(self.rb, div.step_b).asleep)}
         if all(mask is None for pair in frames.values() for mask in pair):
             return None
 
@@ -680,8 +691,8 @@ class _Differ:
         if not div.state.particles:
             return ""
         p = div.state.particles[0]["particle"]
-        va = np.linalg.norm(self.ra.state(div.step).velocities[p])
-        vb = np.linalg.norm(self.rb.state(div.step_b).velocities[p])
+        va = np.linalg.norm(self._state(self.ra, div.step).velocities[p])
+        vb = np.linalg.norm(self._state(self.rb, div.step_b).velocities[p])
         return f" From there sphere {p} leaves at {va:.2f} m/s in A and {vb:.2f} m/s in B."
 
 
