@@ -525,7 +525,7 @@ def check(
                     mark = "*" if result.current[setting] == p.value else " "
                     lines.append(f"{setting if k == 0 else '':<11} {mark}{p.value:<14} {p.outcome:<13} {p.why}")
             if f["pile"] is not None:  # speed and resting, not correctness: the exit code ignores it
-                from .analysis.advisor import PILE_REMEDY, pile_choice
+                from .analysis.advisor import PILE_REMEDY_FLAGS, pile_choice
 
                 chosen = pile_choice(result.scene.settings)
                 lines.append(f"pile        {f['pile']['why']}; an exact pile does not rest by itself:")
@@ -533,8 +533,7 @@ def check(
                     mark = "*" if p.value == chosen else " "
                     lines.append(f"{'':<11} {mark}{p.value:<14} {p.outcome:<13} {p.why}")
                 if chosen != "tc+sleep":
-                    lines.append("  to settle " + " ".join(f"-s {k}={v}" for k, v in PILE_REMEDY.items())
-                                 + '  (docs/engine.md, "Sleeping")')
+                    lines.append(f'  to settle {PILE_REMEDY_FLAGS}  (docs/engine.md, "Sleeping")')
             lines.append("recommended " + " ".join(f"{k}={v}" for k, v in advice.recommended.items()))
             lines += [f"  {k:<12}{advice.reasons[k]}" for k in advice.recommended]
             settings = " ".join(f"{k}={v}" for k, v in result.current.items())

@@ -53,6 +53,7 @@ CHOSEN = ("integrator", "detection", "ordering")  # what ``auto`` may decide in 
 PILE_LAYERS = 1.0  # layers of spheres at rest on the floor from which the rain makes a pile
 RANDOM_CLOSE_PACKING = 0.64  # the volume fraction of a settled pile of equal spheres
 PILE_REMEDY = {"rapid_contact_rule": "tc", "sleep_speed": 0.1, "sleep_time": 0.1}  # measured on box-rain and rain
+PILE_REMEDY_FLAGS = " ".join(f"-s {k}={v}" for k, v in PILE_REMEDY.items())  # as a user types them
 
 
 @dataclass
@@ -218,30 +219,39 @@ def _pile_predictions() -> list[Prediction]:
     ]
 
 
+def _unrested_pile(bodies, walls, gravity, rapid_contact_rule: str, sleep_speed: float) -> tuple[dict, str] | None:
+    """(the pile, the settings' choice) when the spheres make a pile that rule and
+    sleeping do not let rest; None otherwise. O(N): safe on any scene, unlike advise
+    (whose contact test is O(N²))."""
+    pile = _pile(bodies, walls, np.asarray(gravity, dtype=float))
+    choice = _choice(rapid_contact_rule, sleep_speed)
+    return None if pile is None or choice == "tc+sleep" else (pile, choice)
+
+
 def pile_note(scene) -> str | None:
     """One sentence for a run about to start (physdbg run / record): the scene makes a pile
-    that its settings will not let rest, and what would; None otherwise. O(N): safe to
-    call on any scene, unlike advise (whose contact test is O(N²))."""
-    pile = _pile(scene.state, scene.walls, np.asarray(scene.settings.gravity, dtype=float))
-    choice = pile_choice(scene.settings)
-    if pile is None or choice == "tc+sleep":
+    that its settings will not let rest, and what would; None otherwise."""
+    s = scene.settings
+    found = _unrested_pile(scene.state, scene.walls, s.gravity, s.rapid_contact_rule, s.sleep_speed)
+    if found is None:
         return None
+    pile, choice = found
     outcome = next(p for p in _pile_predictions() if p.value == choice)
     return (f"{pile['why']}, and an exact pile does not rest by itself. Under {choice} it {outcome.outcome}: "
-            f"{outcome.why}. To let it rest: " + " ".join(f"-s {k}={v}" for k, v in PILE_REMEDY.items())
-            + " (physdbg check on this scene says more).")
+            f"{outcome.why}. To let it rest: {PILE_REMEDY_FLAGS} (physdbg check on this scene says more).")
 
 
 def pile_hint(header) -> str | None:
     """For advice on a recorded run (the audit): the scene makes a pile its settings do not
     let rest, and what does; None otherwise. header: a RecordingHeader."""
-    settings = header.meta.get("settings", {})
-    pile = _pile(header, header.walls, np.asarray(settings.get("gravity", (0.0, 0.0, 0.0)), dtype=float))
-    choice = _choice(settings.get("rapid_contact_rule", "hold"), float(settings.get("sleep_speed", 0.0) or 0.0))
-    if pile is None or choice == "tc+sleep":
+    s = header.meta.get("settings", {})
+    found = _unrested_pile(header, header.walls, s.get("gravity", (0.0, 0.0, 0.0)), s.get("rapid_contact_rule", "hold"),
+                           float(s.get("sleep_speed", 0.0) or 0.0))
+    if found is None:
         return None
+    pile, choice = found
     return (f"this scene makes a pile about {pile['layers']:.2g} layers deep, which {choice} does not let rest: "
-            + " ".join(f"-s {k}={v}" for k, v in PILE_REMEDY.items()) + " lets it fall asleep (physdbg check)")
+            f"{PILE_REMEDY_FLAGS} lets it fall asleep (physdbg check)")
 
 
 def pile_choice(settings) -> str:

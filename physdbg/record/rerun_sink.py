@@ -39,8 +39,7 @@ from ..engine.periodic import unwrap_near
 from .header import RecordingHeader
 from . import view
 from .view import (contact_centres, describe_contacts, describe_sleep, periodic_faces, scene_bounds, sleep_changed,
-                   sphere_colors,
-                   up_axis, wall_outlines)
+                   sphere_colors, up_axis, wall_outlines)
 
 APPLICATION_ID = "physdbg"
 IMPULSE_ARROW_SECONDS = 0.05  # an impulse arrow shows how far its velocity change moves a in 50 ms
