@@ -4,10 +4,13 @@
         [--set KEY=VALUE ...]
 
 The scene of issue 10: the built-in ``rain`` scene with the box grown so the spheres fill
-10 % of it, dt = 1/240 s. Prints, for the run: steps stopped by a budget (the event cap or the
-held-contact solve's), the largest overlap after any step, contacts and held contacts per
-step at the start, middle and end, rapid-contact rule counts and held contacts released (a
-pile's churn), and ms/step (the first step, which compiles nothing but builds the broad
+10 % of it, dt = 1/240 s, under the rain scene's rules for a pile (``rapid_contact_rule =
+"tc"``, sleeping at 0.1 m/s after 0.1 s: docs/engine.md, "Sleeping"); ``--set
+rapid_contact_rule=hold --set sleep_speed=0`` runs the engine's exact defaults instead.
+Prints, for the run: steps stopped by a budget (the event cap or the held-contact
+solve's), the largest overlap after any step, contacts, held contacts and sleeping spheres
+per step at the start, middle and end, rapid-contact rule counts and held contacts
+released (a pile's churn), and ms/step (the first step, which compiles nothing but builds the broad
 phase, is counted). With --peers, pybullet and MuJoCo (PGS, 10 iterations) step the same
 initial state the same number of steps, when importable, and the ratios are printed from
 this one run (these machines are noisy: compare ratios, not absolute times).
@@ -60,7 +63,7 @@ def run_physdbg(scene, trace: bool = False, stop_above_gb: float | None = None) 
         stats = world.step(scene.dt)
         capped += any(w.code.startswith("max_") for w in stats.warnings)
         worst = max(worst, stats.max_overlap)
-        rows.append((stats.contacts, stats.held, stats.rapid, stats.released, stats.events))
+        rows.append((stats.contacts, stats.held, stats.rapid, stats.released, stats.events, stats.asleep))
         if trace:
             print(f"{k + 1} {1000 * (time.perf_counter() - t0):.0f} {stats.contacts} {stats.held} {stats.rapid} "
                   f"{stats.released} {stats.events} {stats.swept_tests} {stats.max_overlap:.2g} {stats.kinetic:.4g} "
@@ -159,12 +162,16 @@ def main() -> None:
     ms = 1000.0 * result["seconds"] / steps
     overrides = f" ({', '.join(args.set)})" if args.set else ""
     print(f"box-rain N={args.count}, {steps} of {args.steps} steps of {scene.dt:.6g} s{overrides}")
+    s = scene.settings
+    print(f"rules: rapid_contact_rule={s.rapid_contact_rule}, sleep_speed={s.sleep_speed:g} m/s, sleep_time="
+          f"{s.sleep_time:g} s (the rain scene sets tc and 0.1/0.1, which let the pile rest; --set "
+          f"rapid_contact_rule=hold --set sleep_speed=0 runs the engine's defaults)")
     print(f"physdbg: {ms:.1f} ms/step; steps stopped by a budget: {result['capped']}; largest overlap after any step: "
           f"{result['worst_overlap']:.3g} m (contact tolerance {result['tolerance']:g} m); peak memory "
           f"{result['peak_mb']:.0f} MB")
     for label, k in (("first", 0), ("middle", steps // 2), ("last", steps - 1)):
-        c, h, r, released, e = rows[k]
-        print(f"  {label} step: {c} contacts, {h} held, {r} rapid, {released} released, {e} events")
+        c, h, r, released, e, asleep = rows[k]
+        print(f"  {label} step: {c} contacts, {h} held, {r} rapid, {released} released, {e} events, {asleep} asleep")
     print(f"  last 10 steps: mean {rows[-10:, 0].mean():.0f} contacts/step, {rows[-10:, 1].mean():.0f} held, "
           f"{rows[-10:, 3].mean():.0f} released")
     if args.peers:

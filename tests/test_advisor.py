@@ -116,8 +116,17 @@ def test_check_exits_1_when_the_scene_s_own_settings_are_predicted_to_fail():
     assert {p["outcome"] for p in data["predictions"] if p["setting"] == "ordering"} == {"safe", "overlap left"}
 
 
+# the rain scene's pile rules put back to the engine's defaults (hold, no sleeping)
+ENGINE_RULES = ["rapid_contact_rule=hold", "sleep_speed=0"]
+
+
+def _flags(overrides: list[str]) -> list[str]:
+    """KEY=VALUE overrides as the CLI takes them (-s KEY=VALUE ...)."""
+    return [part for item in overrides for part in ("-s", item)]
+
+
 NARROW_PILE = ["generate.count=100", "box.max=[0.3,1,0.3]", "generate.speed=0", "generate.restitution=0.5",
-               "box.restitution=0.5", "steps=240"]
+               "box.restitution=0.5", "steps=240", *ENGINE_RULES]
 
 
 def test_a_pile_is_foreseen_and_each_rule_does_on_it_what_check_says():
@@ -146,6 +155,14 @@ def test_a_pile_is_foreseen_and_each_rule_does_on_it_what_check_says():
     assert settled.asleep_at_end == 100 and settled.max_overlap <= 1e-9 and not settled.warning_counts
 
 
+def test_the_rain_scene_uses_the_rules_check_recommends_for_a_pile():
+    from physdbg.analysis.advisor import PILE_REMEDY, pile_choice
+
+    settings = load_scene("rain").settings
+    assert {name: getattr(settings, name) for name in PILE_REMEDY} == PILE_REMEDY
+    assert pile_choice(settings) == "tc+sleep"
+
+
 @pytest.mark.parametrize("overrides", [[], ["generate.count=500", "generate.restitution=1", "box.restitution=1"],
                                        ["generate.count=500", "gravity=[0,0,0]"]])
 def test_no_pile_without_a_full_layer_without_losses_or_without_gravity(overrides):
@@ -154,13 +171,12 @@ def test_no_pile_without_a_full_layer_without_losses_or_without_gravity(override
 
 def test_check_shows_the_pile_rules_marks_the_scene_s_own_and_keeps_its_exit_code():
     runner = CliRunner()
-    done = runner.invoke(app, ["check", "rain", "-s", "generate.count=500"])
+    done = runner.invoke(app, ["check", "rain", "-s", "generate.count=500", *_flags(ENGINE_RULES)])
     assert done.exit_code == 0
     assert "pile        500 spheres settle about 1.5 layers deep on a 1 m² floor (restitution 0.8 < 1)" in done.output
     assert " *hold           churns" in done.output and "  tc+sleep       settles" in done.output
     assert "to settle -s rapid_contact_rule=tc -s sleep_speed=0.1 -s sleep_time=0.1" in done.output
-    done = runner.invoke(app, ["check", "rain", "-s", "generate.count=500", "-s", "rapid_contact_rule=tc",
-                               "-s", "sleep_speed=0.1", "-s", "sleep_time=0.1"])
+    done = runner.invoke(app, ["check", "rain", "-s", "generate.count=500"])  # the scene's own rules
     assert done.exit_code == 0 and " *tc+sleep       settles" in done.output and "to settle" not in done.output
     assert "pile" not in runner.invoke(app, ["check", "rain"]).output
 
@@ -169,14 +185,15 @@ def test_run_and_record_say_before_they_start_that_the_pile_will_not_rest(tmp_pa
     """The user of issue 10 who types `physdbg run rain -s generate.count=500` is told at
     once (stderr) why the run will be slow and what lets the pile rest; --json stays JSON."""
     runner = CliRunner()
-    done = runner.invoke(app, ["run", "rain", "-s", "generate.count=500", "-s", "steps=1", "--json"])
+    done = runner.invoke(app, ["run", "rain", "-s", "generate.count=500", "-s", "steps=1", *_flags(ENGINE_RULES),
+                               "--json"])
     assert done.exit_code == 0
     assert done.stderr.startswith("note: 500 spheres settle about 1.5 layers deep")
     assert "Under hold it churns" in done.stderr and "-s rapid_contact_rule=tc -s sleep_speed=0.1" in done.stderr
     assert json.loads(done.stdout)["steps"] == 1
     done = runner.invoke(app, ["record", "rain", "-s", "generate.count=500", "-s", "steps=1", "-s",
-                               "rapid_contact_rule=tc", "-o", str(tmp_path / "r.mcap"), "--no-rrd"])
+                               "rapid_contact_rule=tc", "-s", "sleep_speed=0", "-o", str(tmp_path / "r.mcap"),
+                               "--no-rrd"])
     assert done.exit_code == 0 and "Under tc it collapses" in done.stderr
-    quiet = runner.invoke(app, ["run", "rain", "-s", "generate.count=500", "-s", "steps=1", "-s", "rapid_contact_rule=tc",
-                                "-s", "sleep_speed=0.1"])
+    quiet = runner.invoke(app, ["run", "rain", "-s", "generate.count=500", "-s", "steps=1"])  # rain's own rules
     assert quiet.exit_code == 0 and "note:" not in quiet.stderr

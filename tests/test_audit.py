@@ -139,7 +139,7 @@ def test_a_budget_hit_in_a_pile_names_the_settings_that_let_it_rest(tmp_path):
     The budget finding says, besides raising the budget, what lets the pile fall asleep;
     the bouncing ball above (a budget hit but no pile) says nothing of piles."""
     pile = ["generate.count=100", "box.max=[0.3,1,0.3]", "generate.speed=0", "generate.restitution=0.5",
-            "box.restitution=0.5", "rapid_contact_rule=tc", "steps=55"]
+            "box.restitution=0.5", "rapid_contact_rule=tc", "sleep_speed=0", "steps=55"]
     out = tmp_path / "pile.mcap"
     api.record("rain", pile, mcap_path=str(out), rrd=False, detail="contacts", view=False)
     report = explain(out)

@@ -301,7 +301,8 @@ def _box_rain(count: int, *extra: str):
 
 
 def test_box_rain_piles_up_exactly_with_no_step_stopped_by_a_budget():
-    scene = _box_rain(1000)
+    """Under the engine's own rules (the rain scene's are tc and sleeping)."""
+    scene = _box_rain(1000, "rapid_contact_rule=hold", "sleep_speed=0")
     world = scene.build_world()
     rapid = held = 0
     for _ in range(scene.steps):
@@ -321,7 +322,7 @@ def test_box_rain_under_the_tc_rule_is_exact_and_does_not_churn():
     go of hundreds."""
     released = {}
     for rule in ("hold", "tc"):
-        scene = _box_rain(1000, f"rapid_contact_rule={rule}")
+        scene = _box_rain(1000, f"rapid_contact_rule={rule}", "sleep_speed=0")
         world = scene.build_world()
         released[rule] = rapid = 0
         for _ in range(scene.steps):
