@@ -151,11 +151,11 @@ def main() -> None:
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="another scene setting, as `physdbg run -s` takes it (repeatable)")
     args = parser.parse_args()
-    warm_up("grid")
     try:
         scene = box_rain(args.count, args.steps, tuple(args.set))
     except SceneError as error:
         parser.error(str(error))
+    warm_up("grid", sleeping=scene.settings.sleep_speed > 0)
     result = run_physdbg(scene, args.trace, args.stop_above_gb)
     rows = np.array(result["rows"])
     steps = result["steps"]

@@ -27,7 +27,7 @@ def main() -> None:
     args = parser.parse_args()
     scene = load_scene("rain", [f"generate.count={args.count}"])
     world = scene.build_world()
-    warm_up(world.broad_phase.name)
+    warm_up(world.broad_phase.name, sleeping=world.sleepers is not None)
     started = time.perf_counter()
     print("step  ms/step  contacts  swept-tests  held  solve-work  overlap(m)  warnings")
     for index, dt in enumerate(scene.step_lengths(None)):

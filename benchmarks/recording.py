@@ -67,7 +67,7 @@ def worker(n: int, steps: int, detail: str | None, rerun: bool, folder: str, vie
 
             sinks.append(RerunSink(header, rrd))
     world = scene.build_world(FanOut(*sinks) if sinks else None)
-    warm_up(world.broad_phase.name)
+    warm_up(world.broad_phase.name, sleeping=world.sleepers is not None)
     started = time.perf_counter()
     for _ in range(scene.steps):
         world.step(scene.dt)

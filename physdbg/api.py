@@ -117,7 +117,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     world = scene.build_world(observer)
     if on_status is not None:
         on_status("compiling")
-    compile_seconds = warm_up(world.broad_phase.name)
+    compile_seconds = warm_up(world.broad_phase.name, sleeping=world.sleepers is not None)
     if on_status is not None:
         on_status("running")
     st = world.state
@@ -419,7 +419,7 @@ def verify(path: str | Path, on_step: Callable[[int, int | None], None] | None =
                                "physdbg run to repeat. `physdbg explain` audits it; `physdbg diff` compares it "
                                "with a physdbg recording of the same scene")
         world = rec.scene.build_world()
-        warm_up(world.broad_phase.name)
+        warm_up(world.broad_phase.name, sleeping=world.sleepers is not None)
         first = rec.state(0)
         if state_hash(first.positions, first.velocities) != first.state_hash:
             return VerifyResult(False, 0, 0, "the stored initial state does not match its stored hash (file altered)")

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from physdbg.engine import Settings, World
+from physdbg.events import CONTACT_ROW, KIND_PAIR
 from physdbg.engine.resting import HELD, held_add, new_held
 from physdbg.engine.sleep import can_sleep, release_static
 from physdbg.errors import SceneError
@@ -154,17 +155,18 @@ def test_only_slow_spheres_fall_asleep_and_only_their_kinetic_energy_goes():
     x = np.array([[0.0, 0.1, 0.0], [1.0, 0.1, 0.0], [2.0, 0.1, 0.0], [3.0, 0.1, 0.0]])
     v = np.array([[0.03, 0.0, 0.0], [0.0, 0.049, 0.0], [0.2, 0.0, 0.0], [0.0, 0.0, 0.0]])
     radius = np.full(4, 0.1)
-    no_pairs = np.empty((0, 2), np.int64)
-    nobody = np.empty(0, np.int64)
+    no_pairs = (np.empty((0, 2), np.int64), np.empty((0, 2), np.int64))
     for _ in range(5):  # 5 steps of 0.02 s: slow for 0.1 s
         before = v.copy()
-        fell, woke = sleepers.end_of_step(0.02, x, v, radius, no_pairs, nobody)
+        fell, woke = sleepers.end_of_step(0.02, x, v, radius, no_pairs, np.zeros(0, CONTACT_ROW))
     assert fell.tolist() == [0, 1, 3] and woke.size == 0
     assert np.array_equal(v[2], before[2]) and not v[[0, 1, 3]].any()
     removed = 0.5 * np.einsum("ij,ij->i", before, before)[fell]
     assert (removed <= 0.5 * 0.05**2).all()
     # a sphere hit while asleep wakes; its slow time starts again
-    fell, woke = sleepers.end_of_step(0.02, x, v, radius, no_pairs, np.array([1]))
+    hit = np.zeros(1, CONTACT_ROW)
+    hit["kind"], hit["a"], hit["other"], hit["closing_speed"] = KIND_PAIR, 1, 2, 0.5
+    fell, woke = sleepers.end_of_step(0.02, x, v, radius, no_pairs, hit)
     assert woke.tolist() == [1] and fell.size == 0 and sleepers.still[1] == 0.0
 
 
@@ -180,3 +182,83 @@ def test_same_scene_with_sleeping_gives_the_same_hashes():
         world = scene.build_world()
         hashes.append([world.step(scene.dt).state_hash for _ in range(scene.steps)])
     assert hashes[0] == hashes[1]
+
+
+# ----------------------------------------------------------------------------- the rules, slowly
+def _reference_rules(sleepers, dt, x, velocities, radius, pair_lists, rows):
+    """The sleep rules in plain numpy (sleep.py's module doc, each fixed point reached by
+    repeating its rule over every pair until nothing changes): the reference the compiled
+    sleep_rules must match. In place on sleepers and velocities; returns (fell, woke)."""
+    from physdbg.engine.sleep import SUPPORT_GAP
+
+    asleep = sleepers.asleep
+    pairs = np.concatenate(pair_lists)
+    fast = (rows["kind"] == KIND_PAIR) & (rows["closing_speed"] > sleepers.sleep_speed)
+    a, b = rows["a"][fast].astype(np.int64), rows["other"][fast].astype(np.int64)
+    disturbed = np.unique(np.concatenate((a[asleep[a] & ~asleep[b]], b[asleep[b] & ~asleep[a]])))
+    i, j = pairs[:, 0], pairs[:, 1]
+    d = x[i] - x[j]
+    reach = (1.0 + SUPPORT_GAP) * (radius[i] + radius[j])
+    near = np.einsum("ij,ij->i", d, d) <= reach * reach
+    i, j, d = i[near], j[near], -d[near]
+    j_below = np.einsum("ij,ij->i", d, sleepers.down[i]) > 0.0
+    i_below = np.einsum("ij,ij->i", -d, sleepers.down[j]) > 0.0
+    upper = np.concatenate((i[j_below], j[i_below]))
+    lower = np.concatenate((j[j_below], i[i_below]))
+    waking = np.zeros_like(asleep)
+    waking[disturbed] = True
+    while True:
+        more = upper[(~asleep[lower] | waking[lower]) & asleep[upper] & ~waking[upper]]
+        if more.size == 0:
+            break
+        waking[more] = True
+    woke = np.nonzero(waking)[0]
+    asleep[woke] = False
+    speed2 = np.einsum("ij,ij->i", velocities, velocities)
+    slow = sleepers.allowed & ~asleep & ~waking & (speed2 <= sleepers.sleep_speed ** 2)
+    sleepers.still[:] = np.where(slow, sleepers.still + dt, 0.0)
+    ready = slow & (sleepers.still >= sleepers.sleep_time)
+    while True:
+        blocked = upper[ready[upper] & ~(asleep[lower] | ready[lower])]
+        if blocked.size == 0:
+            break
+        ready[blocked] = False
+    fell = np.nonzero(ready)[0]
+    asleep[fell] = True
+    sleepers.still[fell] = 0.0
+    velocities[fell] = 0.0
+    return fell, woke
+
+
+def test_the_compiled_rules_match_the_plain_ones_on_a_pile_falling_asleep_and_waking():
+    """Every step of a pile falling asleep (and parts of it woken again as it settles):
+    the compiled rules (worklists) and the plain ones (repeat until nothing changes) agree
+    on who sleeps, who wakes, each sphere's slow time and the zeroed velocities."""
+    import copy
+
+    from physdbg.engine.sleep import Sleepers
+
+    scene = load_scene("rain", [*NARROW_PILE, "sleep_speed=0.1", "sleep_time=0.1", "steps=240"])
+    world = scene.build_world()
+    compiled = Sleepers.end_of_step
+    seen = {"fell": 0, "woke": 0, "steps": 0}
+
+    def checked(self, dt, x, velocities, radius, pair_lists, rows):
+        twin, v = copy.deepcopy(self), velocities.copy()
+        fell, woke = compiled(self, dt, x, velocities, radius, pair_lists, rows)
+        want = _reference_rules(twin, dt, x, v, radius, pair_lists, rows)
+        assert fell.tolist() == want[0].tolist() and woke.tolist() == want[1].tolist()
+        assert np.array_equal(self.asleep, twin.asleep) and np.array_equal(self.still, twin.still)
+        assert np.array_equal(velocities, v)
+        seen["fell"] += fell.size
+        seen["woke"] += woke.size
+        seen["steps"] += 1
+        return fell, woke
+
+    Sleepers.end_of_step = checked
+    try:
+        for _ in range(scene.steps):
+            world.step(scene.dt)
+    finally:
+        Sleepers.end_of_step = compiled
+    assert seen["steps"] == scene.steps and seen["fell"] > 100 and seen["woke"] > 0, seen

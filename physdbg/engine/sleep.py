@@ -78,19 +78,6 @@ def can_sleep(free_accel: np.ndarray, drag_k: float, sleep_speed: float, sleep_t
     return (g > 0.0) & (slow_flight < sleep_time)
 
 
-def woken_by_impact(rows: np.ndarray, asleep: np.ndarray, sleep_speed: float) -> np.ndarray:
-    """Rule 2: the sleeping spheres this step's contact rows (events.CONTACT_ROW) hit
-    closing faster than sleep_speed (m/s); int64 indices, sorted, unique."""
-    if rows.shape[0] == 0:
-        return np.zeros(0, np.int64)
-    pair = rows["kind"] == KIND_PAIR
-    fast = pair & (rows["closing_speed"] > sleep_speed)
-    a = rows["a"][fast].astype(np.int64)
-    b = rows["other"][fast].astype(np.int64)
-    hit = np.concatenate((a[asleep[a] & ~asleep[b]], b[asleep[b] & ~asleep[a]]))
-    return np.unique(hit)
-
-
 @kernel
 def release_static(h, inverse_mass) -> int:
     """Release every held contact whose two ends are immovable (inverse_mass 0; a wall
@@ -112,26 +99,154 @@ def release_static(h, inverse_mass) -> int:
 SUPPORT_GAP = 0.01
 
 
-def touching(pairs: np.ndarray, x: np.ndarray, radius: np.ndarray) -> np.ndarray:
-    """The pairs (P, 2) whose spheres touch (gap <= SUPPORT_GAP·(r_i + r_j)) at positions x."""
-    if pairs.shape[0] == 0:
-        return pairs
-    i, j = pairs[:, 0], pairs[:, 1]
-    reach = (1.0 + SUPPORT_GAP) * (radius[i] + radius[j])
-    d = x[i] - x[j]
-    return pairs[np.einsum("ij,ij->i", d, d) <= reach * reach]
+@kernel
+def split_sleeping(pairs, asleep):
+    """(pairs (P, 2) with an awake sphere, pairs whose two spheres sleep), each in the order
+    of ``pairs``: two sleeping spheres cannot meet, so the step does not test them."""
+    m = pairs.shape[0]
+    both = 0
+    for t in range(m):
+        if asleep[pairs[t, 0]] and asleep[pairs[t, 1]]:
+            both += 1
+    awake = np.empty((m - both, 2), dtype=np.int64)
+    sleeping = np.empty((both, 2), dtype=np.int64)
+    na = ns = 0
+    for t in range(m):
+        if asleep[pairs[t, 0]] and asleep[pairs[t, 1]]:
+            sleeping[ns, 0] = pairs[t, 0]
+            sleeping[ns, 1] = pairs[t, 1]
+            ns += 1
+        else:
+            awake[na, 0] = pairs[t, 0]
+            awake[na, 1] = pairs[t, 1]
+            na += 1
+    return awake, sleeping
 
 
-def supports(pairs: np.ndarray, x: np.ndarray, down: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The touching pairs as (upper, lower) edges: lower is below upper along upper's
-    ``down`` (N, 3) unit (its free acceleration's direction; 0 when it has none)."""
-    i, j = pairs[:, 0], pairs[:, 1]
-    d = x[j] - x[i]
-    j_below = np.einsum("ij,ij->i", d, down[i]) > 0.0
-    i_below = np.einsum("ij,ij->i", -d, down[j]) > 0.0
-    upper = np.concatenate((i[j_below], j[i_below]))
-    lower = np.concatenate((j[j_below], i[i_below]))
-    return upper, lower
+@kernel
+def _support_edges(pair_lists, x, radius, down):
+    """Every (upper, lower) of the touching pairs of each (P, 2) list in pair_lists: lower is
+    below upper along upper's ``down``. As CSR by the lower sphere: (start (N+1,), uppers),
+    and the edges in order (upper (E,), lower (E,))."""
+    n = x.shape[0]
+    total = 0
+    for pairs in pair_lists:
+        total += 2 * pairs.shape[0]
+    upper = np.empty(total, dtype=np.int64)
+    lower = np.empty(total, dtype=np.int64)
+    e = 0
+    for pairs in pair_lists:
+        for t in range(pairs.shape[0]):
+            i = pairs[t, 0]
+            j = pairs[t, 1]
+            reach = (1.0 + SUPPORT_GAP) * (radius[i] + radius[j])
+            d0 = x[i, 0] - x[j, 0]
+            d1 = x[i, 1] - x[j, 1]
+            d2 = x[i, 2] - x[j, 2]
+            if d0 * d0 + d1 * d1 + d2 * d2 > reach * reach:
+                continue
+            if -d0 * down[i, 0] + -d1 * down[i, 1] + -d2 * down[i, 2] > 0.0:  # j below i
+                upper[e] = i
+                lower[e] = j
+                e += 1
+            if d0 * down[j, 0] + d1 * down[j, 1] + d2 * down[j, 2] > 0.0:  # i below j
+                upper[e] = j
+                lower[e] = i
+                e += 1
+    start = np.zeros(n + 1, dtype=np.int64)
+    for k in range(e):
+        start[lower[k] + 1] += 1
+    for k in range(n):
+        start[k + 1] += start[k]
+    fill = start[:-1].copy()
+    uppers = np.empty(e, dtype=np.int64)
+    for k in range(e):
+        uppers[fill[lower[k]]] = upper[k]
+        fill[lower[k]] += 1
+    return start, uppers, upper[:e], lower[:e]
+
+
+@kernel
+def sleep_rules(asleep, still, allowed, down, dt, x, velocities, radius, pair_lists, hit_kind, hit_a, hit_b,
+                hit_closing, sleep_speed, sleep_time):
+    """The rules at the end of a step of dt seconds (module doc), in place on asleep (N,)
+    bool, still (N,) s and velocities (N, 3) m/s (the new sleepers' are zeroed); returns
+    (fell asleep, woke), int64 indices, sorted.
+
+    allowed (N,) bool: can_sleep; down (N, 3) unit: each sphere's way down; x (N, 3) m at
+    the step's end; radius (N,) m; pair_lists: the step's candidate pairs (P, 2), awake
+    and sleeping; hit_kind, hit_a, hit_b, hit_closing: the step's contact rows' kind,
+    sphere, partner and closing speed (m/s). A sphere is woken, or kept awake, as soon as
+    one reason holds, and each support edge is followed once from each end (a worklist):
+    the fixed points the rules define, in O(N + pairs).
+    """
+    n = asleep.shape[0]
+    start, uppers, upper, lower = _support_edges(pair_lists, x, radius, down)
+    # rule 2: a sleeper hit by an awake sphere closing faster than sleep_speed
+    waking = np.zeros(n, dtype=np.bool_)
+    for t in range(hit_kind.shape[0]):
+        if hit_kind[t] != KIND_PAIR or not hit_closing[t] > sleep_speed:
+            continue
+        a = hit_a[t]
+        b = hit_b[t]
+        if asleep[a] and not asleep[b]:
+            waking[a] = True
+        if asleep[b] and not asleep[a]:
+            waking[b] = True
+    # rule 3: a sleeper resting on an awake (or waking) sphere wakes, and so on up the pile
+    stack = np.empty(n, dtype=np.int64)
+    top = 0
+    for s in range(n):
+        if not asleep[s] or waking[s]:
+            stack[top] = s
+            top += 1
+    while top > 0:
+        top -= 1
+        s = stack[top]
+        for k in range(start[s], start[s + 1]):
+            u = uppers[k]
+            if asleep[u] and not waking[u]:
+                waking[u] = True
+                stack[top] = u
+                top += 1
+    woke = np.nonzero(waking)[0]
+    for s in woke:
+        asleep[s] = False
+    # rule 1: slow for sleep_time (a sphere woken now starts again)
+    ready = np.zeros(n, dtype=np.bool_)
+    limit = sleep_speed * sleep_speed
+    for s in range(n):
+        v0 = velocities[s, 0]
+        v1 = velocities[s, 1]
+        v2 = velocities[s, 2]
+        if allowed[s] and not asleep[s] and not waking[s] and v0 * v0 + v1 * v1 + v2 * v2 <= limit:
+            still[s] += dt
+            ready[s] = still[s] >= sleep_time
+        else:
+            still[s] = 0.0
+    # rule 4: only on sleepers (or walls): one not ready below keeps its uppers awake, on up
+    for k in range(upper.shape[0]):
+        if ready[upper[k]] and not (asleep[lower[k]] or ready[lower[k]]):
+            ready[upper[k]] = False
+            stack[top] = upper[k]
+            top += 1
+    while top > 0:
+        top -= 1
+        s = stack[top]
+        for k in range(start[s], start[s + 1]):
+            u = uppers[k]
+            if ready[u]:
+                ready[u] = False
+                stack[top] = u
+                top += 1
+    fell = np.nonzero(ready)[0]
+    for s in fell:
+        asleep[s] = True
+        still[s] = 0.0
+        velocities[s, 0] = 0.0
+        velocities[s, 1] = 0.0
+        velocities[s, 2] = 0.0
+    return fell, woke
 
 
 class Sleepers:
@@ -157,39 +272,12 @@ class Sleepers:
         return int(np.count_nonzero(self.asleep))
 
     def end_of_step(self, dt: float, x: np.ndarray, velocities: np.ndarray, radius: np.ndarray,
-                    pairs: np.ndarray, disturbed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The rules at the end of a step of dt seconds: wake the ``disturbed`` (rule 2,
-        int64 indices) and what rests on the awake (rule 3), then rule 1 for the slow whose
-        supports all sleep (rule 4). x, velocities: (N, 3) m, m/s at the step's end (the
-        new sleepers' velocities are zeroed in place); radius (N,) m; pairs: (P, 2) every
-        candidate pair of the step, sleeping ones included. Returns (fell asleep, woke),
-        int64 indices."""
-        asleep = self.asleep
-        near = touching(pairs, x, radius)
-        upper, lower = supports(near, x, self.down)
-        # rule 3: a sleeper resting on an awake sphere wakes, and so on up the pile
-        waking = np.zeros_like(asleep)
-        waking[disturbed[asleep[disturbed]]] = True
-        while True:
-            awake_below = ~asleep[lower] | waking[lower]
-            more = upper[awake_below & asleep[upper] & ~waking[upper]]
-            if more.size == 0:
-                break
-            waking[more] = True
-        woke = np.nonzero(waking)[0]
-        asleep[woke] = False
-        # rule 1, with rule 4: asleep only on sleepers (or walls), so the pile sleeps upwards
-        speed2 = np.einsum("ij,ij->i", velocities, velocities)
-        slow = self.allowed & ~asleep & ~waking & (speed2 <= self.sleep_speed * self.sleep_speed)
-        self.still = np.where(slow, self.still + dt, 0.0)
-        ready = slow & (self.still >= self.sleep_time)
-        while True:
-            blocked = upper[ready[upper] & ~(asleep[lower] | ready[lower])]
-            if blocked.size == 0:
-                break
-            ready[blocked] = False
-        fell = np.nonzero(ready)[0]
-        asleep[fell] = True
-        self.still[fell] = 0.0
-        velocities[fell] = 0.0
-        return fell, woke
+                    pair_lists: tuple[np.ndarray, ...], rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The rules at the end of a step of dt seconds (sleep_rules): x, velocities (N, 3)
+        m, m/s at the step's end (the new sleepers' velocities are zeroed in place);
+        radius (N,) m; pair_lists: the step's candidate pairs, (P, 2) arrays (awake and
+        sleeping); rows: the step's contact rows (events.CONTACT_ROW). Returns (fell
+        asleep, woke), int64 indices, sorted."""
+        return sleep_rules(self.asleep, self.still, self.allowed, self.down, dt, x, velocities, radius, pair_lists,
+                           rows["kind"], rows["a"], rows["other"], rows["closing_speed"], self.sleep_speed,
+                           self.sleep_time)

@@ -68,7 +68,7 @@ from .resolve import (
     settle_held,
 )
 from .resting import HELD, RAPID_RULES, STEP_RELEASED, STEP_WORK, grow_held, held_room, new_held
-from .sleep import Sleepers, release_static, woken_by_impact
+from .sleep import Sleepers, release_static, split_sleeping
 from .state import BUDGETS, NonFiniteState, Settings, State, Walls, energies, first_non_finite, state_hash
 from .step_context import StepContext
 from .timeline import (
@@ -249,10 +249,8 @@ class World:
             ctx.warn("max_pairs_per_step", _budget_message("max_pairs_per_step", s.max_pairs_per_step))
             pairs = np.empty((0, 2), dtype=np.int64)
         if self.sleepers is not None and len(pairs):  # two sleeping spheres cannot meet
-            asleep = self.sleepers.asleep
-            both = asleep[pairs[:, 0]] & asleep[pairs[:, 1]]
-            ctx.sleeping_pairs = pairs[both]
-            pairs = pairs[~both]
+            pairs, ctx.sleeping_pairs = split_sleeping(np.ascontiguousarray(pairs, dtype=np.int64),
+                                                       self.sleepers.asleep)
         self._build_adjacency(ctx, pairs)
 
     def _narrow_phase(self, ctx: StepContext) -> None:
@@ -303,9 +301,9 @@ class World:
         """The sleep rules at the step's end (sleep.py): wake the disturbed, freeze the slow."""
         st, sleepers = self.state, self.sleepers
         rows = self._buf.contacts[:int(self._buf.counters[CONTACTS])]
-        disturbed = woken_by_impact(rows, sleepers.asleep, sleepers.sleep_speed)
-        pairs = np.concatenate((ctx.pairs, ctx.sleeping_pairs))
-        fell, woke = sleepers.end_of_step(ctx.dt, st.positions, st.velocities, st.radius, pairs, disturbed)
+        pair_lists = (np.ascontiguousarray(ctx.pairs, dtype=np.int64),
+                      np.ascontiguousarray(ctx.sleeping_pairs, dtype=np.int64))
+        fell, woke = sleepers.end_of_step(ctx.dt, st.positions, st.velocities, st.radius, pair_lists, rows)
         self._inverse_mass[woke] = st.inverse_mass[woke]
         self._free_accel[woke] = self._free_accel_awake[woke]
         self._inverse_mass[fell] = 0.0
@@ -565,12 +563,13 @@ def _budget_message(budget: str, value: int) -> str:
             f"if the scene really needs more")
 
 
-def warm_up(broad_phase: str | None = None) -> float:
+def warm_up(broad_phase: str | None = None, sleeping: bool = False) -> float:
     """Compile (or load from numba's cache) every kernel a step uses; returns seconds taken.
 
     Runs a two-sphere, one-wall world for one step with contacts, so the first real step
     is not charged with compilation. The kernels take the integrator and detection as
-    arguments, so one run compiles every method. broad_phase: also compile this one.
+    arguments, so one run compiles every method. broad_phase: also compile this one;
+    sleeping: also the sleep rules' (sleep.py; only a run that sleeps loads them).
     """
     started = perf_counter()
     if broad_phase is not None and broad_phase != "brute-force":
@@ -582,4 +581,7 @@ def warm_up(broad_phase: str | None = None) -> float:
                   np.zeros(1))
     for detection in ("swept", "sampled"):
         World(state.copy(), walls, Settings(detection=detection)).step(0.5)
+    if sleeping:
+        World(state.copy(), walls, Settings(sleep_speed=0.1, sleep_time=0.1)).step(0.5)
+        release_static(new_held(state.count), np.zeros(state.count))
     return perf_counter() - started

@@ -30,14 +30,17 @@ def _cell_of(value, origin, cell, dim):
 
 @kernel
 def grid_pairs(lo, hi, cell, limit):
-    """(M, 2) int64 pairs i < j of overlapping boxes, sorted; and the number of cells used.
+    """(M, 2) int64 pairs i < j of overlapping boxes, sorted; the number of cells used; and
+    the cell side (m).
 
-    lo, hi: (N, 3) box corners (m); cell: cell side (m) >= the largest box extent;
-    limit: stop after limit + 1 pairs (over the budget).
+    lo, hi: (N, 3) box corners (m); cell: cell side (m) >= the largest box extent, or 0 for
+    the one auto_cell gives; limit: stop after limit + 1 pairs (over the budget).
     """
     n = lo.shape[0]
+    if cell <= 0.0:
+        cell = auto_cell(lo, hi)
     if n < 2:
-        return np.empty((0, 2), dtype=np.int64), 0
+        return np.empty((0, 2), dtype=np.int64), 0, cell
     origin = np.empty(3)
     dims = np.empty(3, dtype=np.int64)
     for c in range(3):
@@ -97,7 +100,28 @@ def grid_pairs(lo, hi, cell, limit):
         bigger_j[:found] = out_j[:found]
         out_i = bigger_i
         out_j = bigger_j
-    return sort_pairs(out_i[:found], out_j[:found], n), used
+    return sort_pairs(out_i[:found], out_j[:found], n), used, cell
+
+
+@borrowing
+def auto_cell(lo, hi):
+    """The cell side (m) for boxes lo, hi (N, 3): the largest box extent, but at least
+    1/2^20 of the span of all boxes (the key space stays bounded even if one box flies far
+    away) and 1e-12 m; 1 m for no boxes."""
+    n = lo.shape[0]
+    if n == 0:
+        return 1.0
+    extent = 0.0
+    span = 0.0
+    for c in range(3):
+        low = np.inf
+        high = -np.inf
+        for i in range(n):
+            extent = max(extent, hi[i, c] - lo[i, c])
+            low = min(low, lo[i, c])
+            high = max(high, hi[i, c])
+        span = max(span, high - low)
+    return max(extent, span / 2.0**20, 1e-12)
 
 
 @borrowing
@@ -205,17 +229,9 @@ class UniformGrid:
         self.cell = cell
         self.stats: dict[str, float] = {}
 
-    def _cell_size(self, lo: np.ndarray, hi: np.ndarray) -> float:
-        if self.cell is not None:
-            return self.cell
-        extent = float(np.max(hi - lo)) if lo.size else 1.0
-        # keep the key space bounded even if one box flies far away
-        span = float(np.max(np.max(hi, axis=0) - np.min(lo, axis=0))) if lo.size else 1.0
-        return max(extent, span / 2.0**20, 1e-12)
-
     def pairs(self, lo: np.ndarray, hi: np.ndarray, limit: int = NO_LIMIT) -> np.ndarray:
-        cell = self._cell_size(lo, hi)
-        pairs, cells = grid_pairs(np.ascontiguousarray(lo), np.ascontiguousarray(hi), cell, limit)
+        pairs, cells, cell = grid_pairs(np.ascontiguousarray(lo), np.ascontiguousarray(hi),
+                                        0.0 if self.cell is None else float(self.cell), limit)
         self.stats = {"cell": cell, "cells_used": cells, "pairs": len(pairs)}
         return pairs
 
