@@ -32,6 +32,7 @@ from .engine import (
     ORDERING_NAMES,
     RAPID_RULES,
     RESTITUTION_RULES,
+    SIZED_BUDGETS,
     Settings,
     State,
     Walls,
@@ -76,7 +77,8 @@ TOP_FIELDS = {
     "max_events_per_step": ("budget: contacts resolved in one step, integer >= 0 (default 0 = sized to the scene: "
                             "max(10000, 20 per sphere))"),
     "max_pairs_per_step": "budget: broad-phase candidate pairs in one step, integer >= 1 (default 10000000)",
-    "max_swept_tests_per_step": "budget: swept tests in one step, integer >= 1 (default 10000000)",
+    "max_swept_tests_per_step": ("budget: swept tests in one step, integer >= 0 (default 0 = sized to the scene: "
+                                 "max(10000000, 400 per sphere))"),
     "max_resting_work_per_step": ("budget: held-contact solve updates in one step, "
                                   "integer >= 1 (default 1000000000)"),
     "max_memory": "refuse a scene whose estimated memory is more than this many bytes (default 4e9)",
@@ -495,7 +497,7 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
         sleep_speed=c.number(raw, "sleep_speed", "sleep_speed", default=d.sleep_speed, lo=0),
         sleep_time=c.number(raw, "sleep_time", "sleep_time", default=d.sleep_time, scale=True),
         **{budget: c.number(raw, budget, budget, default=getattr(d, budget),
-                            lo=0 if budget == "max_events_per_step" else 1, integer=True)
+                            lo=0 if budget in SIZED_BUDGETS else 1, integer=True)
            for budget in BUDGETS},
     )
 

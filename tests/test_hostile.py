@@ -181,7 +181,7 @@ def test_strong_gravity_piles_stay_bounded_and_out_of_the_floor():
     world = scene.build_world()
     for _ in range(3):
         stats = world.step(scene.dt)
-        assert stats.swept_tests < scene.settings.max_swept_tests_per_step
+        assert stats.swept_tests < scene.settings.swept_test_budget(world.state.count)
         assert stats.max_overlap <= scene.settings.contact_tolerance
 
 

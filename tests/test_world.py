@@ -186,6 +186,25 @@ def test_event_cap_stops_the_step_and_warns():
     assert max(e.counts["contacts"] for e in obs.step_ends) == 2
 
 
+def test_the_contact_and_swept_test_budgets_are_sized_to_the_scene_unless_set(monkeypatch):
+    from physdbg.engine import Settings, state
+
+    sized = Settings()
+    assert (sized.event_cap(100), sized.swept_test_budget(100)) == (10_000, 10_000_000)
+    assert (sized.event_cap(100_000), sized.swept_test_budget(100_000)) == (2_000_000, 40_000_000)
+    chosen = Settings(max_events_per_step=7, max_swept_tests_per_step=9)
+    assert (chosen.event_cap(100_000), chosen.swept_test_budget(100_000)) == (7, 9)
+    assert load_scene("rain", ["max_swept_tests_per_step=0"]).settings.max_swept_tests_per_step == 0
+    # the world spends the sized budget (made small here: 1 000 tests a sphere, at least 5 000)
+    monkeypatch.setattr(state, "MIN_SWEPT_TESTS", 5_000)
+    monkeypatch.setattr(state, "SWEPT_TESTS_PER_SPHERE", 1_000)
+    for count, budget in ((3, 5_000), (20, 20_000)):
+        world = load_scene("gas", ["dt=100", "steps=1", f"generate.count={count}"]).build_world()
+        stats = world.step(100.0)  # a long step in a small box: every sphere bounces thousands of times
+        assert budget <= stats.swept_tests <= budget + 2 * (count + 6)
+        assert stats.warnings[0].message.startswith(f"max_swept_tests_per_step reached ({budget} swept tests)")
+
+
 # ----------------------------------------------------------------------------- events
 def test_events_arrive_in_pipeline_order_with_everything_a_recording_needs():
     scene = load_scene("cradle")

@@ -163,7 +163,7 @@ class Auditor:
 
     # ------------------------------------------------------------------ checks
     def _check_warnings(self, step: int) -> None:
-        from ..engine.state import BUDGETS, event_cap
+        from ..engine.state import BUDGETS, budget_value
 
         for w in self._warnings:
             if w.code == "non-finite":
@@ -172,9 +172,7 @@ class Auditor:
                                   "proportion usually starts it", evidence={"warning": w.message}))
             elif w.code in BUDGETS:
                 what, consequence = BUDGETS[w.code]
-                value = self.settings.get(w.code)
-                if w.code == "max_events_per_step":  # 0: the cap that suits the sphere count
-                    value = event_cap(value or 0, self.header.count)
+                value = budget_value(w.code, self.settings.get(w.code), self.header.count)  # 0: sized
                 advice = (f"raise it with --set {w.code}=N, or see whether the scene is in inelastic collapse "
                           f"(many bounces among few spheres)")
                 pile = self._pile()

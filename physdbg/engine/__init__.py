@@ -9,12 +9,12 @@ from .broadphase import BROAD_PHASE_NAMES, BruteForce, choose_broad_phase, make_
 from .motion import INTEGRATOR_NAMES
 from .resolve import RESTITUTION_RULES, combine_restitution
 from .resting import RAPID_RULES
-from .state import BUDGETS, ORDERING_NAMES, NonFiniteState, Settings, State, Walls, energies, state_hash
+from .state import BUDGETS, ORDERING_NAMES, SIZED_BUDGETS, NonFiniteState, Settings, State, Walls, energies, state_hash
 from .toi import DETECTION_NAMES
 from .world import StepStats, World, warm_up
 
 __all__ = [
     "BROAD_PHASE_NAMES", "BUDGETS", "BruteForce", "choose_broad_phase", "DETECTION_NAMES", "INTEGRATOR_NAMES", "ORDERING_NAMES",
-    "NonFiniteState", "RAPID_RULES", "RESTITUTION_RULES", "Settings", "State", "StepStats", "Walls", "World",
+    "NonFiniteState", "RAPID_RULES", "RESTITUTION_RULES", "SIZED_BUDGETS", "Settings", "State", "StepStats", "Walls", "World",
     "combine_restitution", "energies", "make_broad_phase", "state_hash", "warm_up",
 ]

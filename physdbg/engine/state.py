@@ -18,6 +18,13 @@ ORDERING_NAMES = ("time", "index")
 # the default contact budget of a step (Settings.event_cap)
 MIN_EVENT_CAP = 10_000
 EVENTS_PER_SPHERE = 20
+# ... and of swept tests (Settings.swept_test_budget): box-rain 100k's densest steps of its
+# first second need up to 4·10⁷, 400 a sphere (docs/benchmarks.md, "seventh session")
+MIN_SWEPT_TESTS = 10_000_000
+SWEPT_TESTS_PER_SPHERE = 400
+
+# The budgets whose 0 (their default) means "sized to the scene's sphere count" (budget_value).
+SIZED_BUDGETS = ("max_events_per_step", "max_swept_tests_per_step")
 
 # The work budgets of one step (Settings fields), each with what it counts and what
 # happens to the rest of the step when it is reached.
@@ -49,8 +56,9 @@ class Settings:
     0 = off, the default).
 
     Budgets bound the work of one step (see BUDGETS); when one is reached the step still
-    finishes, and a warning names the budget. max_events_per_step = 0 (the default) is
-    sized to the scene: see ``event_cap``.
+    finishes, and a warning names the budget. max_events_per_step = 0 and
+    max_swept_tests_per_step = 0 (the defaults) are sized to the scene: see ``event_cap``
+    and ``swept_test_budget``.
     """
 
     integrator: str = "exact"
@@ -69,7 +77,7 @@ class Settings:
     sleep_time: float = 0.5
     max_events_per_step: int = 0
     max_pairs_per_step: int = 10_000_000
-    max_swept_tests_per_step: int = 10_000_000
+    max_swept_tests_per_step: int = 0
     # 10⁹ held-contact updates (tens of seconds of one step at worst): the jammed steps of
     # `physdbg run rain -s generate.count=500` need up to 2.5·10⁸, and 10⁸ left 24 of
     # them unfinished (docs/benchmarks.md, "second session")
@@ -81,6 +89,16 @@ class Settings:
         of N spheres legitimately resolves a few contacts per sphere in a step, so a fixed
         cap that suits 100 spheres stops every step of a pile of 10 000."""
         return event_cap(self.max_events_per_step, spheres)
+
+    def swept_test_budget(self, spheres: int) -> int:
+        """The swept-test budget of one step for this many spheres: max_swept_tests_per_step,
+        or when it is 0, max(MIN_SWEPT_TESTS, SWEPT_TESTS_PER_SPHERE × spheres) (the same
+        reason as event_cap)."""
+        return swept_test_budget(self.max_swept_tests_per_step, spheres)
+
+    def budget(self, name: str, spheres: int) -> int:
+        """The value budget ``name`` (a BUDGETS key) takes in a world of this many spheres."""
+        return budget_value(name, getattr(self, name), spheres)
 
     @property
     def integrator_code(self) -> int:
@@ -204,10 +222,28 @@ def energies(state: State, gravity: np.ndarray) -> tuple[float, float, np.ndarra
     else:
         m, v = 1.0 / inverse_mass[movable], state.velocities[movable]
         x, scale = state.positions[movable], state.gravity_scale[movable]
-    kinetic = 0.5 * float(m @ np.einsum("ij,ij->i", v, v))
-    potential = -float((m * scale) @ (x @ np.asarray(gravity, dtype=np.float64)))
-    momentum = m @ v
+    with np.errstate(invalid="ignore", over="ignore"):  # a non-finite state is reported, not warned of
+        kinetic = 0.5 * float(m @ np.einsum("ij,ij->i", v, v))
+        potential = -float((m * scale) @ (x @ np.asarray(gravity, dtype=np.float64)))
+        momentum = m @ v
     return kinetic, potential, momentum
+
+
+def budget_value(name: str, value: int | None, spheres: int) -> int:
+    """What budget ``name`` set to ``value`` (0 or None: sized) is for this many spheres;
+    what a world uses and what the audit reports."""
+    if name == "max_events_per_step":
+        return event_cap(value or 0, spheres)
+    if name == "max_swept_tests_per_step":
+        return swept_test_budget(value or 0, spheres)
+    return int(value)
+
+
+def swept_test_budget(max_swept_tests_per_step: int, spheres: int) -> int:
+    """The swept-test budget of one step (Settings.swept_test_budget)."""
+    if max_swept_tests_per_step:
+        return int(max_swept_tests_per_step)
+    return max(MIN_SWEPT_TESTS, SWEPT_TESTS_PER_SPHERE * spheres)
 
 
 def event_cap(max_events_per_step: int, spheres: int) -> int:

@@ -271,8 +271,7 @@ class World:
         if ctx.too_wide_mid_step and not ctx.warned("periodic"):
             ctx.warn("periodic", ctx.too_wide_mid_step)
         if budget is not None and not ctx.warned(budget):
-            ctx.warn(budget, _budget_message(budget, self.event_cap if budget == "max_events_per_step"
-                                             else getattr(s, budget)))
+            ctx.warn(budget, _budget_message(budget, s.budget(budget, self.state.count)))
 
     def _finish(self, ctx: StepContext) -> None:
         """Every sphere to the end of the step; the overlap audit, energies and state hash."""
@@ -441,7 +440,8 @@ class World:
         buf = self._buf
         nw = len(self.walls)
         particles, method, walls = self._kernel_groups(ctx)
-        budgets = tuple(LoopBudgets(self.event_cap, s.max_swept_tests_per_step, s.max_resting_work_per_step))
+        budgets = tuple(LoopBudgets(self.event_cap, s.swept_test_budget(self.state.count),
+                                    s.max_resting_work_per_step))
         while True:
             # the held store, the adjacency and the buffers are replaced when they grow
             candidates = tuple(LoopCandidates(ctx.adj_start, ctx.adj, ctx.lo, ctx.hi, s.contact_tolerance,
