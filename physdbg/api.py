@@ -154,6 +154,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         if on_step is not None:
             on_step(len(used), total)
     wall = time.perf_counter() - started
+    report = auditor.report(scene.name) if auditor else None  # before its counts: it ends what waits
     k1, p1, mom1 = energies(st, world.gravity)
     e0, e1 = k0 + p0, k1 + p1
     drift = (e1 - e0) / abs(e0) if e0 != 0 else (e1 - e0)
@@ -173,8 +174,8 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         wall_seconds=wall, compile_seconds=compile_seconds, ms_per_step=1000.0 * wall / n_steps if n_steps else math.nan,
         engine_ms_per_step=1000.0 * sum(phase.values()) / n_steps if n_steps else math.nan,
         phase_seconds=phase, final_hash=digest, warning_counts=dict(warnings.counts),
-        warnings=warnings.examples(), finding_counts=dict(auditor.counts) if auditor else {},
-        findings=auditor.report(scene.name).lines() if auditor else [], dts=used)
+        warnings=warnings.examples(), findings=report.lines() if report else [],
+        finding_counts=dict(auditor.counts) if auditor else {}, dts=used)
 
 
 class WarningTally:
@@ -465,6 +466,7 @@ def replay(path: str | Path, rrd_path: str | None = None, force: bool = False, s
                 for event in events:
                     sink.on_event(event)
                     auditor.on_event(event)
+            auditor.finish()  # a rattling bed that never fell asleep is marked too
         except BaseException:
             sink.close()
             if out is not None:

@@ -192,7 +192,7 @@ def test_a_slow_first_compile_says_what_it_is_doing(monkeypatch):
 
     monkeypatch.setattr(cli._progress_bar, "AFTER_SECONDS", 0.05)
     real = engine.warm_up
-    monkeypatch.setattr(engine, "warm_up", lambda *a: (time.sleep(0.3), real(*a))[1])
+    monkeypatch.setattr(engine, "warm_up", lambda *a, **k: (time.sleep(0.3), real(*a, **k))[1])
     result = invoke("run", "bounce", "--no-progress", "--set", "steps=5")
     assert "compiling the engine's kernels" in result.stderr
     monkeypatch.setattr(engine, "warm_up", real)

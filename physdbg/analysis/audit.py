@@ -15,7 +15,9 @@ Checks (kind: what it means):
   alone: one solved with held contacts also moves the spheres they hold);
 * ``non-finite``: a position or velocity became NaN or infinite;
 * ``budget``: a step hit the event cap or another work budget and left work undone;
-* ``collapse``: a collision rate that blows up (inelastic collapse).
+* ``collapse``: a collision rate that blows up (inelastic collapse). With sleeping on, a
+  bed that rattles like that is judged when its spheres are asleep: if every sphere of
+  the step is asleep by the end of the run, sleeping ended it, and a note says so instead.
 """
 
 from __future__ import annotations
@@ -124,6 +126,11 @@ class Auditor:
         self._in_overlap = False  # the step before ended overlapping: the same overlap goes on
         self._saw_contacts = False
         self._energy: float | None = None  # kinetic + potential after the last step (J)
+        # with sleeping on, a rattling bed (a collapse finding and its spheres) waits until
+        # they are all asleep (then a note: sleeping ended it) or the run ends (a finding)
+        self._rattling: list[tuple[Finding, np.ndarray]] = []
+        self._rattled: list[tuple[int, int]] = []  # (step of the rattle, step all were asleep)
+        self._asleep: np.ndarray | None = None  # the last step's asleep mask
 
     # ------------------------------------------------------------------ observer
     def on_event(self, event) -> None:
@@ -148,6 +155,15 @@ class Auditor:
                 self._check_collapse(step, contacts)
             elif self.header.meta.get("foreign"):
                 self._check_energy_of_states(step, end)
+        self._asleep = end.asleep
+        if self._rattling and end.asleep is not None:
+            still = []
+            for finding, involved in self._rattling:
+                if end.asleep[involved].all():
+                    self._rattled.append((finding.step, step))
+                else:
+                    still.append((finding, involved))
+            self._rattling = still
         self._x, self._v = end.positions, end.velocities
         self._energy = end.kinetic + end.potential
         self._contacts = None
@@ -339,15 +355,39 @@ class Auditor:
                              "pile sleep (sleep_speed, e.g. 0.1 m/s, with sleep_time=0.1): it freezes the bed as "
                              "it cools")
         advice = "; ".join(rules) or "lower the restitution, or use a shorter dt"
-        self._add(Finding("collapse", step, involved[:10].tolist(),
+        finding = Finding("collapse", step, involved[:10].tolist(),
                           f"{bounces} bounces among {spheres} in one step: the collision rate has blown up "
                           f"(inelastic collapse: with restitution below 1 the gaps between a few spheres shrink "
                           f"geometrically and they collide ever more often)", advice,
-                          evidence={"contacts": len(c), "bounces": bounces, "spheres": len(involved)}))
+                          evidence={"contacts": len(c), "bounces": bounces, "spheres": len(involved)})
+        if self.settings.get("sleep_speed"):
+            self._rattling.append((finding, involved))
+        else:
+            self._add(finding)
+
+    def finish(self) -> None:
+        """The run has ended: a rattling bed not yet all asleep is a collapse finding after
+        all (its listeners hear of it now). report() calls it; call it yourself before
+        closing what the listeners write to."""
+        for finding, involved in self._rattling:
+            if self._asleep is not None:
+                awake = int(np.count_nonzero(~self._asleep[involved]))
+                finding.message += (f"; {awake} of the {len(involved)} spheres were still awake when the run "
+                                    f"ended (step {self.steps})")
+                finding.evidence["awake_at_end"] = awake
+            self._add(finding)
+        self._rattling = []
 
     # ------------------------------------------------------------------ result
     def report(self, source: str, total_steps: int | None = None) -> AuditReport:
+        self.finish()
         notes = list(self.notes)
+        if self._rattled:
+            (first, _), last = self._rattled[0], max(asleep for _, asleep in self._rattled)
+            notes.append(f"the bed rattled (at least {COLLAPSE_CONTACTS_PER_SPHERE} bounces a sphere) in "
+                         f"{len(self._rattled)} step{'s' if len(self._rattled) != 1 else ''} from step {first}, and "
+                         f"every sphere of those steps was asleep by step {last}: sleeping ended it, so it is not "
+                         f"reported as a collapse")
         foreign = self.header.meta.get("foreign")
         if foreign and self.steps:
             notes.append(f"a run of another engine (from {foreign['source']}, velocities {foreign['velocities']}): "
