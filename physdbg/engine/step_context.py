@@ -25,8 +25,9 @@ class StepContext:
     Set by the phases, in order:
     forces: path_accel (N, 3) m/s², the acceleration each path follows (contact-solved);
     sigma (N,) s, each sphere's anchor time in the step (motion.py).
-    broad_phase: lo, hi (N, 3) m, the swept boxes (grown mid-step when a contact sends a
-    sphere out of its box); pairs (P, 2) int64, sorted candidate pairs; adj_start (N+1,),
+    broad_phase: path_lo, path_hi (N, 3) m, the box of each path over the step; lo, hi
+    (N, 3) m, those boxes grown to what the sphere could reach after a contact (and again
+    mid-step when a contact sends a sphere out of its box); pairs (P, 2) int64, sorted candidate pairs; adj_start (N+1,),
     adj (2P,) their CSR adjacency and max_degree; grown, the spheres whose boxes grew;
     too_wide_mid_step, why a grown box broke the periodic minimum image (or None).
     narrow_phase: version (N,) int64, predictions made of each sphere (stale heap entries).
@@ -45,6 +46,8 @@ class StepContext:
     observer: object | None = None
     path_accel: np.ndarray | None = None
     sigma: np.ndarray | None = None
+    path_lo: np.ndarray | None = None
+    path_hi: np.ndarray | None = None
     lo: np.ndarray | None = None
     hi: np.ndarray | None = None
     pairs: np.ndarray | None = None

@@ -4,7 +4,7 @@
 
     forces        held contacts -> accelerations; semi-implicit velocity update
     broad_phase   swept box of each path over the step -> candidate pairs
-    narrow_phase  swept test of every candidate pair and particle–wall pair
+    narrow_phase  swept test of every candidate pair and particle–wall pair whose path boxes meet
     resolve       contacts taken in the order of the policy:
                     time  - earliest first; advance the particles to it, change their
                             velocities, re-predict only them, repeat (no lost time);
@@ -238,6 +238,7 @@ class World:
         ctx.hi = np.empty((n, 3))
         swept_boxes(st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma, ctx.dt, self._integrator,
                     self._k, s.contact_tolerance, ctx.lo, ctx.hi)
+        ctx.path_lo, ctx.path_hi = ctx.lo.copy(), ctx.hi.copy()
         self._add_reach(ctx)
         too_wide = self._too_wide_for_the_period(ctx.lo, ctx.hi)
         if too_wide:
@@ -254,14 +255,17 @@ class World:
         self._build_adjacency(ctx, pairs)
 
     def _narrow_phase(self, ctx: StepContext) -> None:
-        """The swept test of every candidate of every collider kind: the broad phase's pairs,
-        the walls each swept box reaches (colliders.narrow_candidates)."""
+        """The swept test of every candidate of every collider kind whose path boxes meet:
+        the broad phase's pairs, the walls each path reaches (colliders.narrow_candidates).
+        The broad phase paired the boxes grown to what a sphere could reach after a contact;
+        until a contact changes a path, only the path's own box can meet anything, and a
+        changed path is tested again against every partner of the grown box (timeline)."""
         ctx.version = np.zeros(self.state.count, dtype=np.int64)
         # an unobserved step logs only the tests that hit (Buffers.reset)
         self._buf.reset(keep_misses=ctx.observer is not None)
         push = self.settings.ordering == "time"
         for kind in range(KINDS):  # in the kinds' order: ties in the queue break by test
-            ia, other = narrow_candidates(kind, ctx.pairs, ctx.lo, ctx.hi, self._walls_group)
+            ia, other = narrow_candidates(kind, ctx.pairs, ctx.path_lo, ctx.path_hi, self._walls_group)
             self._predict(ctx, kind, ia, other, push)
 
     def _resolve(self, ctx: StepContext) -> None:

@@ -97,10 +97,11 @@ def max_overlap(x, radius, pairs, walls, ignore_tunnelled):
 def narrow_candidates(kind: int, pairs: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                       walls: tuple) -> tuple[np.ndarray, np.ndarray]:
     """The narrow phase's candidates of ``kind`` at step start, (a (M,), other (M,)) int64:
-    the broad phase's sphere pairs (M, 2), or the walls each swept box lo, hi (N, 3) reaches."""
+    the broad phase's sphere pairs (M, 2) whose path boxes lo, hi (N, 3) meet, or the walls
+    each path box reaches."""
+    normals, offsets, half_thickness, two_sided, _restitution, period = walls
     if kind == KIND_PAIR:
-        return sphere.candidates(pairs)
-    normals, offsets, half_thickness, two_sided, _restitution, _period = walls
+        return sphere.candidates(pairs, lo, hi, period)
     return plane.reachable(lo, hi, normals, offsets, half_thickness, two_sided)
 
 

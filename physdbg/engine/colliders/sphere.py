@@ -14,7 +14,7 @@ import numpy as np
 from numba import njit
 
 from ..broadphase.boxes import box_misses
-from ..jit import borrowing
+from ..jit import borrowing, kernel
 from ..motion import path_acceleration_weight, path_coefficients
 from ..periodic import image
 from ..toi import DISCRETE, SWEPT, pair_toi_sampled_scalar, pair_toi_swept_scalar
@@ -118,6 +118,24 @@ def deepest(x, radius, pairs, period):
     return worst
 
 
-def candidates(pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The narrow phase's pairs (a (M,), other (M,)): the broad phase's (M, 2), i < j."""
-    return pairs[:, 0].copy(), pairs[:, 1].copy()
+@kernel
+def candidates(pairs, lo, hi, period):
+    """The narrow phase's pairs (a (K,), other (K,)): those of the broad phase's (M, 2),
+    i < j, whose boxes lo, hi (N, 3) meet (box_misses: on a periodic axis, period (3,) m,
+    the minimum image decides, so the axis never tells them apart); in their order."""
+    m = pairs.shape[0]
+    a = np.empty(m, dtype=np.int64)
+    other = np.empty(m, dtype=np.int64)
+    box = np.empty((2, 3))
+    k = 0
+    for t in range(m):
+        i = pairs[t, 0]
+        for c in range(3):
+            box[0, c] = lo[i, c]
+            box[1, c] = hi[i, c]
+        if box_misses(box, lo, hi, pairs[t, 1], period):
+            continue
+        a[k] = i
+        other[k] = pairs[t, 1]
+        k += 1
+    return a[:k], other[:k]
