@@ -53,7 +53,7 @@ import numpy as np
 
 from ..events import KIND_PAIR
 from .colliders.kinds import partner_sphere
-from .jit import kernel
+from .jit import borrowing, kernel
 from .resting import HELD, held_remove
 
 
@@ -166,6 +166,23 @@ def _support_edges(pair_lists, x, radius, down):
     return start, uppers, upper[:e], lower[:e]
 
 
+@borrowing
+def _spread_up(stack, top, start, uppers, mark, before, gate):
+    """Follow the support edges up (start, uppers: CSR by the lower sphere) from the spheres
+    on stack[:top]: every upper sphere u with mark[u] == before and gate[u] flips its mark
+    and is followed in turn, so each sphere is pushed at most once (stack (N,)). The stack
+    is left empty."""
+    while top > 0:
+        top -= 1
+        s = stack[top]
+        for k in range(start[s], start[s + 1]):
+            u = uppers[k]
+            if mark[u] == before and gate[u]:
+                mark[u] = not before
+                stack[top] = u
+                top += 1
+
+
 @kernel
 def sleep_rules(asleep, still, allowed, down, dt, x, velocities, radius, pair_lists, hit_kind, hit_a, hit_b,
                 hit_closing, sleep_speed, sleep_time):
@@ -200,15 +217,8 @@ def sleep_rules(asleep, still, allowed, down, dt, x, velocities, radius, pair_li
         if not asleep[s] or waking[s]:
             stack[top] = s
             top += 1
-    while top > 0:
-        top -= 1
-        s = stack[top]
-        for k in range(start[s], start[s + 1]):
-            u = uppers[k]
-            if asleep[u] and not waking[u]:
-                waking[u] = True
-                stack[top] = u
-                top += 1
+    _spread_up(stack, top, start, uppers, waking, False, asleep)
+    top = 0  # _spread_up empties the stack
     woke = np.nonzero(waking)[0]
     for s in woke:
         asleep[s] = False
@@ -230,15 +240,7 @@ def sleep_rules(asleep, still, allowed, down, dt, x, velocities, radius, pair_li
             ready[upper[k]] = False
             stack[top] = upper[k]
             top += 1
-    while top > 0:
-        top -= 1
-        s = stack[top]
-        for k in range(start[s], start[s + 1]):
-            u = uppers[k]
-            if ready[u]:
-                ready[u] = False
-                stack[top] = u
-                top += 1
+    _spread_up(stack, top, start, uppers, ready, True, ready)
     fell = np.nonzero(ready)[0]
     for s in fell:
         asleep[s] = True
