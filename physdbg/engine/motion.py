@@ -209,18 +209,25 @@ def particle_box(x, v, a, radius, sigma, i, step_end, integrator, k, margin, out
 @kernel
 def _quantile_99(values):
     """np.quantile(values, 0.99) (its default, linear interpolation) to the bit, NaN if
-    any value is NaN; values (N,), N >= 1."""
-    ordered = np.sort(values)
-    n = ordered.shape[0]
-    if ordered[n - 1] != ordered[n - 1]:
-        return math.nan
+    any value is NaN; values (N,), N >= 1. The two order statistics it needs are selected
+    (O(N)), not sorted for."""
+    n = values.shape[0]
+    largest = -math.inf
+    for i in range(n):
+        if values[i] != values[i]:
+            return math.nan
+        largest = max(largest, values[i])
     virtual = (n - 1) * 0.99
     below = math.floor(virtual)
     if virtual >= n - 1:
-        return ordered[n - 1]
+        return largest
     gamma = virtual - below
-    x = ordered[int(below)]
-    y = ordered[int(below) + 1]
+    k = int(below)
+    parted = np.partition(values, k)  # the k-th smallest at k, larger ones after it
+    x = parted[k]
+    y = parted[k + 1]
+    for i in range(k + 2, n):
+        y = min(y, parted[i])
     step = y - x
     return y - step * (1.0 - gamma) if gamma >= 0.5 else x + step * gamma
 
