@@ -156,7 +156,8 @@ class Auditor:
             elif self.header.meta.get("foreign"):
                 self._check_energy_of_states(step, end)
         self._asleep = end.asleep
-        if self._rattling and end.asleep is not None:
+        # a rattling step's spheres can all be asleep only once one of them fell asleep
+        if self._rattling and end.asleep is not None and end.counts.get("slept", 1):
             still = []
             for finding, involved in self._rattling:
                 if end.asleep[involved].all():

@@ -236,7 +236,7 @@ def budget_value(name: str, value: int | None, spheres: int) -> int:
         return event_cap(value or 0, spheres)
     if name == "max_swept_tests_per_step":
         return swept_test_budget(value or 0, spheres)
-    return int(value)
+    return int(value or 0)
 
 
 def swept_test_budget(max_swept_tests_per_step: int, spheres: int) -> int:
