@@ -88,13 +88,13 @@ class Settings:
         when it is 0, max(MIN_EVENT_CAP, EVENTS_PER_SPHERE × spheres) — a settling pile
         of N spheres legitimately resolves a few contacts per sphere in a step, so a fixed
         cap that suits 100 spheres stops every step of a pile of 10 000."""
-        return event_cap(self.max_events_per_step, spheres)
+        return self.budget("max_events_per_step", spheres)
 
     def swept_test_budget(self, spheres: int) -> int:
         """The swept-test budget of one step for this many spheres: max_swept_tests_per_step,
         or when it is 0, max(MIN_SWEPT_TESTS, SWEPT_TESTS_PER_SPHERE × spheres) (the same
         reason as event_cap)."""
-        return swept_test_budget(self.max_swept_tests_per_step, spheres)
+        return self.budget("max_swept_tests_per_step", spheres)
 
     def budget(self, name: str, spheres: int) -> int:
         """The value budget ``name`` (a BUDGETS key) takes in a world of this many spheres."""
@@ -230,25 +230,11 @@ def energies(state: State, gravity: np.ndarray) -> tuple[float, float, np.ndarra
 
 
 def budget_value(name: str, value: int | None, spheres: int) -> int:
-    """What budget ``name`` set to ``value`` (0 or None: sized) is for this many spheres;
-    what a world uses and what the audit reports."""
-    if name == "max_events_per_step":
-        return event_cap(value or 0, spheres)
-    if name == "max_swept_tests_per_step":
-        return swept_test_budget(value or 0, spheres)
-    return int(value or 0)
-
-
-def swept_test_budget(max_swept_tests_per_step: int, spheres: int) -> int:
-    """The swept-test budget of one step (Settings.swept_test_budget)."""
-    if max_swept_tests_per_step:
-        return int(max_swept_tests_per_step)
-    return max(MIN_SWEPT_TESTS, SWEPT_TESTS_PER_SPHERE * spheres)
-
-
-def event_cap(max_events_per_step: int, spheres: int) -> int:
-    """The contact budget of one step (Settings.event_cap): the setting, or when it is 0,
-    max(MIN_EVENT_CAP, EVENTS_PER_SPHERE × spheres). Also what the audit reports."""
-    if max_events_per_step:
-        return int(max_events_per_step)
-    return max(MIN_EVENT_CAP, EVENTS_PER_SPHERE * spheres)
+    """What budget ``name`` (a BUDGETS key) set to ``value`` is for this many spheres: the
+    value, or for a budget of SIZED_BUDGETS set to 0 (or None), max(at least, per sphere ×
+    spheres). What a world spends and what the audit reports."""
+    if value or name not in SIZED_BUDGETS:
+        return int(value or 0)
+    least, per_sphere = ((MIN_EVENT_CAP, EVENTS_PER_SPHERE) if name == "max_events_per_step"
+                         else (MIN_SWEPT_TESTS, SWEPT_TESTS_PER_SPHERE))
+    return max(least, per_sphere * spheres)
