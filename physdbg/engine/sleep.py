@@ -52,6 +52,7 @@ import math
 import numpy as np
 
 from ..events import KIND_PAIR
+from .broadphase.grid import bucket_starts
 from .colliders.kinds import partner_sphere
 from .jit import borrowing, kernel
 from .resting import HELD, held_remove
@@ -153,11 +154,7 @@ def _support_edges(pair_lists, x, radius, down):
                 upper[e] = j
                 lower[e] = i
                 e += 1
-    start = np.zeros(n + 1, dtype=np.int64)
-    for k in range(e):
-        start[lower[k] + 1] += 1
-    for k in range(n):
-        start[k + 1] += start[k]
+    start = bucket_starts(lower[:e], n)  # the counting sort the grid files its boxes with
     fill = start[:-1].copy()
     uppers = np.empty(e, dtype=np.int64)
     for k in range(e):
