@@ -4,9 +4,11 @@ Cells are cubes of side ``cell`` no smaller than the largest box (for swept boxe
 the largest radius plus the longest motion of the step). Each box is filed under the
 cell of its centre (a counting sort), so two overlapping boxes have centres at most one
 cell apart on every axis: each box needs testing only against the boxes filed in its own
-and the 26 neighbouring cells, and only those of higher index, so each pair comes out
-once. Going through the boxes in index order and sorting each one's few partners gives
-the pairs already in sorted order.
+and the 26 neighbouring cells. Boxes are walked in cell order, each against the *half
+shell* of cells after its own (so each pair comes out once); in cell order the three
+cells z-1, z, z+1 of one (x, y) row are contiguous, so the half shell is five runs of
+boxes: the rest of its own row, (x, y+1), and (x+1, y-1 .. y+1). The pairs are then
+sorted (a counting sort on the first index).
 """
 
 from __future__ import annotations
@@ -77,25 +79,22 @@ def grid_pairs(lo, hi, cell, limit):
     for k in range(n):
         if k == 0 or sorted_keys[k] != sorted_keys[k - 1]:
             used += 1
-    # walk the boxes in cell order over cell-ordered copies of their bounds (memory locality),
-    # visiting each neighbouring cell pair once: own cell (later boxes) + the 13 higher cells
-    slo = np.empty((n, 3))
-    shi = np.empty((n, 3))
+    # cell-ordered copies of the bounds, one row of six per box (memory locality)
+    boxes = np.empty((n, 6))
     for k in range(n):
         for c in range(3):
-            slo[k, c] = lo[filed[k], c]
-            shi[k, c] = hi[filed[k], c]
-    out_i = np.empty(max(16, 4 * n), dtype=np.int64)
-    out_j = np.empty(max(16, 4 * n), dtype=np.int64)
+            boxes[k, c] = lo[filed[k], c]
+            boxes[k, 3 + c] = hi[filed[k], c]
+    out_i = np.empty(max(16, 8 * n), dtype=np.int64)
+    out_j = np.empty(max(16, 8 * n), dtype=np.int64)
     found = 0
     k = 0
     while True:
-        k, found = _collect_pairs(k, found, filed, sorted_keys, cell_start, dense, dims, slo, shi, limit, out_i,
-                                  out_j)
+        k, found = _collect_pairs(k, found, filed, sorted_keys, cell_start, dense, dims, boxes, limit, out_i, out_j)
         if k >= n:
             break
-        bigger_i = np.empty(2 * out_i.shape[0], dtype=np.int64)
-        bigger_j = np.empty(2 * out_j.shape[0], dtype=np.int64)
+        bigger_i = np.empty(2 * out_i.shape[0] + 64, dtype=np.int64)
+        bigger_j = np.empty(2 * out_j.shape[0] + 64, dtype=np.int64)
         bigger_i[:found] = out_i[:found]
         bigger_j[:found] = out_j[:found]
         out_i = bigger_i
@@ -124,14 +123,24 @@ def auto_cell(lo, hi):
     return max(extent, span / 2.0**20, 1e-12)
 
 
+# the half shell's (x, y) rows after a box's own, as offsets (the own row comes first)
+_ROW_DX = (0, 0, 1, 1, 1)
+_ROW_DY = (0, 1, -1, 0, 1)
+
+
 @borrowing
-def _collect_pairs(first_box, found, filed, sorted_keys, cell_start, dense, dims, slo, shi, limit, out_i, out_j):
+def _collect_pairs(first_box, found, filed, sorted_keys, cell_start, dense, dims, boxes, limit, out_i, out_j):
     """The pairs of boxes ``first_box`` onwards (in cell order) into out_i, out_j from
     ``found`` on; returns (the box to go on from, pairs found): n when done (or past
     ``limit``), else the box whose pairs did not fit, whose pairs are dropped, to be
     collected again into larger arrays. (Growing the arrays inside this loop made the
     whole loop about twice as slow: an array variable reassigned in a loop is reloaded,
-    and reference-counted, on every pass.)"""
+    and reference-counted, on every pass.)
+
+    boxes: (N, 6) lo then hi of each box, in cell order. Each run of candidates is
+    tested without branches: every candidate is written and the count moves on by
+    whether the boxes meet (a mispredicted branch per candidate cost more than the test).
+    """
     n = filed.shape[0]
     plane = dims[1] * dims[2]
     for k in range(first_box, n):
@@ -143,41 +152,34 @@ def _collect_pairs(first_box, found, filed, sorted_keys, cell_start, dense, dims
         own_x = own // plane
         own_y = (own // dims[2]) % dims[1]
         own_z = own % dims[2]
-        for ox in range(-1, 2):
-            x = own_x + ox
-            if x < 0 or x >= dims[0]:
+        z_first = max(own_z - 1, 0)
+        z_end = min(own_z + 2, dims[2])
+        lo0, lo1, lo2 = boxes[k, 0], boxes[k, 1], boxes[k, 2]
+        hi0, hi1, hi2 = boxes[k, 3], boxes[k, 4], boxes[k, 5]
+        for r in range(5):
+            x = own_x + _ROW_DX[r]
+            y = own_y + _ROW_DY[r]
+            if x >= dims[0] or y < 0 or y >= dims[1]:
                 continue
-            for oy in range(-1, 2):
-                y = own_y + oy
-                if y < 0 or y >= dims[1]:
-                    continue
-                for oz in range(-1, 2):
-                    z = own_z + oz
-                    if z < 0 or z >= dims[2]:
-                        continue
-                    kk = (x * dims[1] + y) * dims[2] + z
-                    if kk < own:
-                        continue
-                    if dense:
-                        first = cell_start[kk]
-                        last = cell_start[kk + 1]
-                    else:
-                        first = np.searchsorted(sorted_keys, kk)
-                        last = np.searchsorted(sorted_keys, kk, side="right")
-                    if kk == own:
-                        first = k + 1
-                    for t in range(first, last):
-                        if (slo[k, 0] > shi[t, 0] or slo[t, 0] > shi[k, 0] or slo[k, 1] > shi[t, 1]
-                                or slo[t, 1] > shi[k, 1] or slo[k, 2] > shi[t, 2] or slo[t, 2] > shi[k, 2]):
-                            continue
-                        if found == out_i.shape[0]:
-                            return k, box_start
-                        j = filed[t]
-                        out_i[found] = min(i, j)
-                        out_j[found] = max(i, j)
-                        found += 1
-                        if found > limit:
-                            return n, found
+            row = (x * dims[1] + y) * dims[2]
+            if dense:
+                first = cell_start[row + z_first]
+                last = cell_start[row + z_end]
+            else:
+                first = np.searchsorted(sorted_keys, row + z_first)
+                last = np.searchsorted(sorted_keys, row + z_end)
+            if r == 0:
+                first = k + 1  # own row: only the boxes after this one
+            if found + (last - first) > out_i.shape[0]:
+                return k, box_start
+            for t in range(first, last):
+                # "not apart" rather than "overlap", so that a NaN bound pairs as before
+                apart = ((lo0 > boxes[t, 3]) | (boxes[t, 0] > hi0) | (lo1 > boxes[t, 4]) | (boxes[t, 1] > hi1)
+                         | (lo2 > boxes[t, 5]) | (boxes[t, 2] > hi2))
+                j = filed[t]
+                out_i[found] = min(i, j)
+                out_j[found] = max(i, j)
+                found += 1 - apart
     return n, found
 
 
