@@ -22,7 +22,7 @@ FAST = ["grid", "bvh-sah", "bvh-median", "bvh-mean", "bvh-lbvh"]
 def boxes(draw):
     """Sphere boxes with the awkward cases the issue names."""
     n = draw(st.integers(0, 60))
-    layout = draw(st.sampled_from(["random", "one point", "cell boundaries", "mixed 100x"]))
+    layout = draw(st.sampled_from(["random", "one point", "cell boundaries", "mixed 100x", "one far away"]))
     rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
     if layout == "one point":
         centres = np.full((n, 3), 0.5)
@@ -34,6 +34,12 @@ def boxes(draw):
     elif layout == "mixed 100x":
         centres = rng.uniform(0.0, 3.0, size=(n, 3))
         radius = 0.01 * 100.0 ** rng.uniform(0.0, 1.0, size=n)
+    elif layout == "one far away":
+        # a sparse grid (far more cells than boxes: the grid looks cells up by search)
+        centres = rng.uniform(0.0, 2.0, size=(n, 3))
+        radius = rng.uniform(0.05, 0.2, size=n)
+        if n:
+            centres[rng.integers(n)] = rng.uniform(1e3, 1e4, size=3)
     else:
         centres = rng.uniform(0.0, 2.0, size=(n, 3))
         radius = rng.uniform(0.05, 0.2, size=n)
