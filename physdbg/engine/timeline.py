@@ -345,6 +345,30 @@ def run_time_order(particles, method, walls, held, candidates, budgets, buffers)
 
 # ------------------------------------------------------------------------------ step helpers
 @kernel
+def merge_sorted_pairs(pairs, extra):
+    """The pairs (M, 2) and extra (E, 2), each sorted (lexicographically) and no pair in
+    both, as one sorted (M + E, 2) array: a merge, O(M + E) (a mid-step re-query adds a
+    few pairs to the step's whole list; sorting it again cost ~6 ms at 10 000 spheres)."""
+    m = pairs.shape[0]
+    e = extra.shape[0]
+    out = np.empty((m + e, 2), dtype=np.int64)
+    s = 0
+    t = 0
+    for row in range(m + e):
+        take_extra = t < e and (s == m or extra[t, 0] < pairs[s, 0]
+                                or (extra[t, 0] == pairs[s, 0] and extra[t, 1] < pairs[s, 1]))
+        if take_extra:
+            out[row, 0] = extra[t, 0]
+            out[row, 1] = extra[t, 1]
+            t += 1
+        else:
+            out[row, 0] = pairs[s, 0]
+            out[row, 1] = pairs[s, 1]
+            s += 1
+    return out
+
+
+@kernel
 def adjacency_from_pairs(pairs, n):
     """CSR partner lists (start (N+1,), partners (2M,)) from sorted pairs i < j.
 

@@ -46,7 +46,7 @@ from ..events import (
     SweptTests,
 )
 from .broadphase import choose_broad_phase, make_broad_phase
-from .broadphase.boxes import boxes_meet
+from .broadphase.boxes import boxes_meet, overlapping
 from .broadphase.periodic import PeriodicBroadPhase
 from .colliders import KINDS, PARTNER_IS_SPHERE, max_overlap, narrow_candidates
 from .kernel_args import LoopBudgets, LoopCandidates, LoopMethod, LoopParticles, LoopWalls
@@ -86,6 +86,7 @@ from .timeline import (
     TESTS,
     Buffers,
     adjacency_from_pairs,
+    merge_sorted_pairs,
     predict_into,
     run_time_order,
 )
@@ -417,9 +418,8 @@ class World:
         if not new_pairs:
             return
         extra = np.array(sorted(set(new_pairs)), dtype=np.int64).reshape(-1, 2)
-        merged = np.concatenate((ctx.pairs, extra))
-        merged = merged[np.lexsort((merged[:, 1], merged[:, 0]))]
-        self._build_adjacency(ctx, merged)
+        # new_pairs holds no known partner (_refresh_box), so the two lists are disjoint
+        self._build_adjacency(ctx, merge_sorted_pairs(np.ascontiguousarray(ctx.pairs, dtype=np.int64), extra))
         self._predict(ctx, KIND_PAIR, extra[:, 0].copy(), extra[:, 1].copy(), True)
 
     # ------------------------------------------------------------------ narrow phase
@@ -585,6 +585,10 @@ def warm_up(broad_phase: str | None = None, sleeping: bool = False) -> float:
                   np.zeros(1))
     for detection in ("swept", "sampled"):
         World(state.copy(), walls, Settings(detection=detection)).step(0.5)
+    # a mid-step re-query's (World._refresh_box, _add_partners), rare in this small world
+    no_pairs = np.empty((0, 2), dtype=np.int64)
+    merge_sorted_pairs(no_pairs, no_pairs)
+    overlapping(state.positions, state.positions, state.positions[0], state.positions[0])
     if sleeping:
         World(state.copy(), walls, Settings(sleep_speed=0.1, sleep_time=0.1)).step(0.5)
         release_static(new_held(state.count), np.zeros(state.count))

@@ -34,10 +34,24 @@ def box_misses(box, lo, hi, q, period) -> bool:
     return False
 
 
-def overlapping(lo: np.ndarray, hi: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray) -> np.ndarray:
-    """Indices (sorted) of the boxes lo, hi (N, 3) that overlap one box: a linear scan."""
-    overlap = np.all((box_lo <= hi) & (lo <= box_hi), axis=1)
-    return np.nonzero(overlap)[0].astype(np.int64)
+@kernel
+def overlapping(lo, hi, box_lo, box_hi):
+    """Indices (sorted, int64) of the boxes lo, hi (N, 3) that overlap one box box_lo,
+    box_hi (3,) (touching counts; a NaN bound overlaps nothing): a linear scan, compiled
+    (a mid-step re-query; numpy's four passes took ~0.3 ms at 10 000 boxes)."""
+    n = lo.shape[0]
+    out = np.empty(n, dtype=np.int64)
+    found = 0
+    for i in range(n):
+        meets = True
+        for c in range(3):
+            if not (box_lo[c] <= hi[i, c] and lo[i, c] <= box_hi[c]):
+                meets = False
+                break
+        if meets:
+            out[found] = i
+            found += 1
+    return out[:found]
 
 
 def boxes_meet(lo: np.ndarray, hi: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray,
