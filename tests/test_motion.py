@@ -95,9 +95,30 @@ def test_verlet_path_is_the_parabola_and_velocity_has_the_seeds_drag():
     assert damp == 0.25 and gain == 2.0
 
 
-def test_the_compiled_reach_is_numpys_quantile_rule_to_the_bit():
-    """World._add_reach's boxes (motion.grow_to_reach) equal the numpy expression they
-    replaced, bit for bit, for many sizes and with a NaN velocity (NaN boxes either way)."""
+def _nearby_fastest_reference(x, speed, radius, typical, dt):
+    """motion.nearby_fastest in plain numpy: the fastest speed in each sphere's 3 x 3 x 3
+    block of cells (side 2 max r + 2 typical dt), or typical where there is no grid."""
+    n = len(x)
+    cell = 2.0 * radius.max() + 2.0 * typical * dt
+    span = x.max(axis=0) - x.min(axis=0)
+    if not (np.isfinite(typical) and cell > 0 and np.all(span < 1e6 * cell)):
+        return np.full(n, typical)
+    dims = (span / cell).astype(np.int64) + 1
+    if np.prod(dims) > 8 * n + 4096:
+        return np.full(n, typical)
+    index = np.minimum(((x - x.min(axis=0)) / cell).astype(np.int64), dims - 1)
+    in_cell = np.zeros(tuple(dims))
+    np.maximum.at(in_cell, tuple(index.T), np.where(np.isnan(speed), np.inf, speed))
+    padded = np.pad(in_cell, 1)
+    block = np.max([padded[tuple(index[:, c] + 1 + d[c] for c in range(3))]
+                    for d in np.ndindex(3, 3, 3) for d in [np.array(d) - 1]], axis=0)
+    return block
+
+
+def test_the_compiled_reach_is_the_numpy_rule_to_the_bit():
+    """World._add_reach's boxes (motion.grow_to_reach) equal the rule written in numpy
+    (the 99th-percentile speed by np.quantile, the nearby fastest by the reference above),
+    bit for bit, for many sizes and with a NaN velocity (NaN boxes either way)."""
     from physdbg.engine.motion import grow_to_reach
 
     rng = np.random.default_rng(7)
@@ -111,12 +132,40 @@ def test_the_compiled_reach_is_numpys_quantile_rule_to_the_bit():
             radius, dt, margin = rng.uniform(0.01, 0.1, n), 1 / 60, 1e-9
             lo0, hi0 = x - rng.uniform(0, 0.5, (n, 3)), x + rng.uniform(0, 0.5, (n, 3))
             speed = np.linalg.norm(v, axis=1) + np.linalg.norm(a, axis=1) * dt
-            reach = (np.maximum(speed, float(np.quantile(speed, 0.99))) * dt + radius + margin)[:, None]
+            typical = float(np.quantile(speed, 0.99))
+            others = np.minimum(_nearby_fastest_reference(x, speed, radius, typical, dt), typical)
+            reach = (np.maximum(speed, others) * dt + radius + margin)[:, None]
             want_lo, want_hi = np.minimum(lo0, x - reach), np.maximum(hi0, x + reach)
             lo, hi = lo0.copy(), hi0.copy()
             grow_to_reach(x, v, a, radius, dt, margin, lo, hi)
             np.testing.assert_array_equal(lo, want_lo)
             np.testing.assert_array_equal(hi, want_hi)
+
+
+def test_a_sphere_far_from_fast_ones_keeps_a_small_box_and_one_near_them_a_large_one():
+    """The reach counts only the speeds that could meet a sphere in the step: a still pile
+    far below a falling layer is grown by its own speed, the pile's top next to it by the
+    layer's (motion.nearby_fastest)."""
+    from physdbg.engine.motion import grow_to_reach, nearby_fastest
+
+    lattice = np.stack(np.meshgrid(*[np.arange(10) * 0.1] * 3, indexing="ij"), -1).reshape(-1, 3)
+    pile = lattice  # z up to 0.9
+    rain = lattice[lattice[:, 2] == 0.0] + [0.0, 0.0, 1.0]  # one layer at z = 1
+    x = np.concatenate((pile, rain))
+    v = np.zeros_like(x)
+    v[len(pile):, 2] = -10.0  # the rain falls at 10 m/s; the pile is still
+    radius, dt = np.full(len(x), 0.05), 1 / 240
+    speed = np.linalg.norm(v, axis=1)
+    nearby = nearby_fastest(x, speed, radius, 10.0, dt)
+    assert np.all(nearby[len(pile):] == 10.0)
+    bottom, top = pile[:, 2] < 0.35, pile[:, 2] > 0.85
+    assert np.all(nearby[:len(pile)][bottom] == 0.0) and np.all(nearby[:len(pile)][top] == 10.0)
+    lo, hi = x.copy(), x.copy()
+    grow_to_reach(x, v, np.zeros_like(x), radius, dt, 0.0, lo, hi)
+    width = (hi - lo)[:, 0]
+    np.testing.assert_allclose(width[:len(pile)][bottom], 2 * 0.05)
+    np.testing.assert_allclose(width[:len(pile)][top], 2 * (0.05 + 10.0 * dt))
+    np.testing.assert_array_equal(nearby_fastest(x, speed, radius, np.nan, dt), np.full(len(x), np.nan))
 
 
 @settings(max_examples=200, deadline=None)

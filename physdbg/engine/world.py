@@ -359,8 +359,9 @@ class World:
 
         A contact turns a path, so a box around the old path alone would send nearly every
         particle back to the broad phase after its first contact. The cube x ± (reach + r)
-        with reach = max(own speed, the scene's 99th-percentile speed) · dt (speed counting
-        one step of acceleration) holds any path that does not outrun it; the rare one that
+        with reach = max(own speed, min(the scene's 99th-percentile speed, the fastest
+        sphere nearby)) · dt (speed counting one step of acceleration; "nearby":
+        motion.nearby_fastest) holds any path that does not outrun it; the rare one that
         does is queried again (timeline.REQUERY). In place on ctx.lo, ctx.hi (N, 3).
         """
         st = self.state
