@@ -8,7 +8,7 @@ import pytest
 from physdbg.engine import Settings, World
 from physdbg.events import CONTACT_ROW, KIND_PAIR
 from physdbg.engine.resting import HELD, held_add, new_held
-from physdbg.engine.sleep import can_sleep, release_static
+from physdbg.engine.sleep import SUPPORT_GAP, can_sleep, release_static
 from physdbg.errors import SceneError
 from physdbg.scene import load_scene
 
@@ -34,6 +34,20 @@ def test_only_a_sphere_gravity_would_carry_through_the_sleep_speed_quickly_may_s
     assert can_sleep(g[:1], 0.0, 0.05, 0.99 * flight).tolist() == [False]
     # drag slows the fall: with g <= k·v_s a sphere could drift slower than v_s for ever
     assert can_sleep(g[:1], G / 0.05, 0.05, 100.0).tolist() == [False]
+
+
+def test_every_pair_the_rules_count_as_touching_is_a_candidate_whatever_the_reach():
+    """The rules read the step's candidate pairs; a still sphere's box grows by little more
+    than its radius, so two still spheres a hair apart (within SUPPORT_GAP, "touching")
+    must still be paired: with sleeping, every box is padded by the touching distance.
+    (Before, the broad phase's generous reach usually paired them, and a tighter one
+    changed which spheres fell asleep.)"""
+    r = 0.1
+    gap = 0.8 * SUPPORT_GAP * 2 * r  # touching for the rules, yet far beyond a still sphere's reach
+    for sleep_speed, paired in ((0.05, True), (0.0, False)):
+        world = _world([[0.0, r, 0.0], [2 * r + gap, r, 0.0]], radius=r, sleep_speed=sleep_speed)
+        world.step(1 / 240)
+        assert ([0, 1] in world.last_step.pairs.tolist()) is paired
 
 
 def _step_until(world, counted: str, limit: int):

@@ -68,7 +68,7 @@ from .resolve import (
     settle_held,
 )
 from .resting import HELD, RAPID_RULES, STEP_RELEASED, STEP_WORK, grow_held, held_room, new_held
-from .sleep import Sleepers, release_static, split_sleeping
+from .sleep import SUPPORT_GAP, Sleepers, release_static, split_sleeping
 from .state import BUDGETS, NonFiniteState, Settings, State, Walls, energies, first_non_finite, state_hash
 from .step_context import StepContext
 from .timeline import (
@@ -180,6 +180,12 @@ class World:
             self.sleepers = Sleepers(self._free_accel, self._k, settings.sleep_speed, settings.sleep_time)
             self._inverse_mass = state.inverse_mass.copy()
             self._free_accel = self._free_accel.copy()
+        # every swept box is padded by this (m) beyond the sphere: the contact tolerance, and
+        # with sleeping the sleep rules' touching distance, so every pair they count as
+        # touching at a step's end is one of the step's candidate pairs whatever the reach
+        self._box_margin = settings.contact_tolerance
+        if self.sleepers is not None and state.count:
+            self._box_margin += SUPPORT_GAP * float(state.radius.max())
         self.event_cap = settings.event_cap(state.count)
         self.last_step: StepContext | None = None  # the context of the latest step (for inspection)
 
@@ -238,7 +244,7 @@ class World:
         ctx.lo = np.empty((n, 3))
         ctx.hi = np.empty((n, 3))
         swept_boxes(st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma, ctx.dt, self._integrator,
-                    self._k, s.contact_tolerance, ctx.lo, ctx.hi)
+                    self._k, self._box_margin, ctx.lo, ctx.hi)
         ctx.path_lo, ctx.path_hi = ctx.lo.copy(), ctx.hi.copy()
         self._add_reach(ctx)
         too_wide = self._too_wide_for_the_period(ctx.lo, ctx.hi)
@@ -366,7 +372,7 @@ class World:
         """
         st = self.state
         # compiled (motion.grow_to_reach): np.quantile alone was a third of a small step
-        grow_to_reach(st.positions, st.velocities, ctx.path_accel, st.radius, ctx.dt, self.settings.contact_tolerance,
+        grow_to_reach(st.positions, st.velocities, ctx.path_accel, st.radius, ctx.dt, self._box_margin,
                       ctx.lo, ctx.hi)
 
     def _too_wide_for_the_period(self, lo: np.ndarray, hi: np.ndarray,
@@ -395,7 +401,7 @@ class World:
         lo = np.empty(3)
         hi = np.empty(3)
         particle_box(st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma, i, ctx.dt, self._integrator,
-                     self._k, self.settings.contact_tolerance, lo, hi)
+                     self._k, self._box_margin, lo, hi)
         if np.all(lo >= ctx.lo[i]) and np.all(hi <= ctx.hi[i]):
             return []
         ctx.lo[i] = np.minimum(ctx.lo[i], lo)
@@ -449,7 +455,7 @@ class World:
                                     s.max_resting_work_per_step))
         while True:
             # the held store, the adjacency and the buffers are replaced when they grow
-            candidates = tuple(LoopCandidates(ctx.adj_start, ctx.adj, ctx.lo, ctx.hi, s.contact_tolerance,
+            candidates = tuple(LoopCandidates(ctx.adj_start, ctx.adj, ctx.lo, ctx.hi, self._box_margin,
                                               ctx.max_degree))
             status = run_time_order(particles, method, walls, self.held, candidates, budgets, buf.loop())
             if status == DONE:
