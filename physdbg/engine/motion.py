@@ -38,6 +38,7 @@ import math
 import numpy as np
 from numba import njit
 
+from .broadphase.grid import cell_key, grid_frame
 from .jit import borrowing, kernel
 
 EULER = 0
@@ -269,9 +270,9 @@ def grow_to_reach(x, v, a, radius, dt, margin, lo, hi):
 def nearby_fastest(x, speed, radius, typical, dt):
     """(N,) for each sphere the largest speed (m/s) among the spheres in its own and the 26
     neighbouring cells of a grid of side 2·max(r) + 2·typical·dt (m) over the centres x
-    (N, 3); typical for every sphere where no such grid is worth building (a NaN or
-    far-flung centre, more cells than 8 N + 4096, a zero cell). speed: (N,) m/s, a NaN
-    counted as infinite.
+    (N, 3) (broadphase.grid's grid_frame and cell_key); typical for every sphere where no
+    such grid is worth building (no finite centre, one far away, more cells than 8 N +
+    4096, a zero cell). speed: (N,) m/s, a NaN counted as infinite.
 
     Why: a contact can only pass on the speed of a sphere that reaches this one in the
     step, and one that moves at most ``typical`` starts within a cell. A pile's depths,
@@ -292,28 +293,18 @@ def nearby_fastest(x, speed, radius, typical, dt):
         return out
     origin = np.empty(3)
     dims = np.empty(3, dtype=np.int64)
-    for c in range(3):
-        low = np.inf
-        high = -np.inf
-        for i in range(n):
-            low = min(low, x[i, c])
-            high = max(high, x[i, c])
-        if not high - low < 1e6 * cell:  # NaN, or one sphere far away
-            return out
-        origin[c] = low
-        dims[c] = int((high - low) / cell) + 1
+    extent = grid_frame(x, cell, origin, dims)
+    if not 0.0 <= extent < 1e6 * cell:  # no number, or one sphere far away
+        return out
     cells = dims[0] * dims[1] * dims[2]
     if cells > 8 * n + 4096:
         return out
     in_cell = np.zeros(cells)  # the fastest speed in each cell
     key = np.empty(n, dtype=np.int64)
     for i in range(n):
-        k = 0
-        for c in range(3):
-            k = k * dims[c] + min(int((x[i, c] - origin[c]) / cell), dims[c] - 1)
-        key[i] = k
+        key[i] = cell_key(x, i, origin, cell, dims)
         s = speed[i] if speed[i] == speed[i] else np.inf
-        in_cell[k] = max(in_cell[k], s)
+        in_cell[key[i]] = max(in_cell[key[i]], s)
     plane = dims[1] * dims[2]
     for i in range(n):
         cx = key[i] // plane

@@ -30,6 +30,36 @@ def _cell_of(value, origin, cell, dim):
     return k
 
 
+@borrowing
+def grid_frame(points, cell, origin, dims):
+    """The uniform grid of side ``cell`` (m) over points (N, 3), N >= 1: origin (3,) <- the
+    points' lowest corner (m), dims (3,) <- the cells on each axis; returns the points'
+    largest extent on any axis (m). NaN coordinates are passed over (and cell_key clamps
+    them into the grid); an axis with no number gives a negative extent. dims mean
+    something only where 0 <= extent and extent / cell is moderate: a caller that cannot
+    promise it checks."""
+    extent = 0.0
+    for c in range(3):
+        low = np.inf
+        high = -np.inf
+        for i in range(points.shape[0]):
+            low = min(low, points[i, c])
+            high = max(high, points[i, c])
+        origin[c] = low
+        dims[c] = int(math.floor((high - low) / cell)) + 1
+        extent = extent if high - low <= extent else high - low
+    return extent
+
+
+@borrowing
+def cell_key(points, i, origin, cell, dims):
+    """The cell of point i of points (N, 3) in grid_frame's grid, as (x·dy + y)·dz + z."""
+    cx = _cell_of(points[i, 0], origin[0], cell, dims[0])
+    cy = _cell_of(points[i, 1], origin[1], cell, dims[1])
+    cz = _cell_of(points[i, 2], origin[2], cell, dims[2])
+    return (cx * dims[1] + cy) * dims[2] + cz
+
+
 @kernel
 def grid_pairs(lo, hi, cell, limit):
     """(M, 2) int64 pairs i < j of overlapping boxes, sorted; the number of cells used; and
@@ -43,24 +73,17 @@ def grid_pairs(lo, hi, cell, limit):
         cell = auto_cell(lo, hi)
     if n < 2:
         return np.empty((0, 2), dtype=np.int64), 0, cell
+    centres = np.empty((n, 3))
+    for i in range(n):
+        for c in range(3):
+            centres[i, c] = 0.5 * (lo[i, c] + hi[i, c])
     origin = np.empty(3)
     dims = np.empty(3, dtype=np.int64)
-    for c in range(3):
-        mn = np.inf
-        mx = -np.inf
-        for i in range(n):
-            centre = 0.5 * (lo[i, c] + hi[i, c])
-            mn = min(mn, centre)
-            mx = max(mx, centre)
-        origin[c] = mn
-        dims[c] = int(math.floor((mx - mn) / cell)) + 1
+    grid_frame(centres, cell, origin, dims)
     cells = dims[0] * dims[1] * dims[2]
     key = np.empty(n, dtype=np.int64)
     for i in range(n):
-        cx = _cell_of(0.5 * (lo[i, 0] + hi[i, 0]), origin[0], cell, dims[0])
-        cy = _cell_of(0.5 * (lo[i, 1] + hi[i, 1]), origin[1], cell, dims[1])
-        cz = _cell_of(0.5 * (lo[i, 2] + hi[i, 2]), origin[2], cell, dims[2])
-        key[i] = (cx * dims[1] + cy) * dims[2] + cz
+        key[i] = cell_key(centres, i, origin, cell, dims)
     dense = cells <= 8 * n + 4096
     if dense:
         # counting sort: cell_start[k] .. cell_start[k+1] are the boxes filed in cell k
