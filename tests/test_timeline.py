@@ -1,4 +1,5 @@
-"""timeline.py's step helpers: the pair list a mid-step re-query grows, and its adjacency."""
+"""timeline.py's event queue, and its step helpers: the pair list a mid-step re-query
+grows, and its adjacency."""
 
 from __future__ import annotations
 
@@ -6,7 +7,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from physdbg.engine.timeline import adjacency_from_pairs, merge_sorted_pairs
+from physdbg.engine.timeline import (COUNTERS, HEAP_SIZE, adjacency_from_pairs, heap_pop, heap_push,
+                                     merge_sorted_pairs)
 
 
 def _sorted_pairs(pairs: set[tuple[int, int]]) -> np.ndarray:
@@ -29,3 +31,35 @@ def test_merging_new_pairs_gives_what_sorting_the_whole_list_gives(n, data):
     for i in range(n):
         expected = sorted([j for a, j in chosen | new if a == i] + [a for a, j in chosen | new if j == i])
         assert partners[start[i]:start[i + 1]].tolist() == expected
+
+
+@settings(max_examples=200, deadline=None)
+@given(times=st.lists(st.sampled_from([0.0, 1e-300, 0.25, 0.5, 0.5000000000000001, 1.0]), max_size=60),
+       pops=st.lists(st.integers(0, 3), max_size=60))
+def test_the_queue_pops_by_time_then_row_whatever_the_interleaving(times, pops):
+    """Pushes and pops interleaved (pops[m] pops after push m, ties in time included): each
+    pop is the earliest entry still queued, by time and then by test-log row, the order
+    the loop's contacts (and so every golden hash) depend on."""
+    toi = np.empty(len(times) + 1)
+    data = np.empty((len(times) + 1, 6), dtype=np.int64)
+    counters = np.zeros(COUNTERS, dtype=np.int64)
+    queued: list[tuple[float, int]] = []
+    popped, expected = [], []
+
+    def pop():
+        slot = heap_pop(toi, data, counters)
+        popped.append((float(toi[slot]), int(data[slot, 0])))
+        assert data[slot, 2:4].tolist() == [data[slot, 0], data[slot, 0] + 1]  # the entry moved whole
+        queued.sort()
+        expected.append(queued.pop(0))
+
+    for row, t in enumerate(times):
+        heap_push(toi, data, counters, t, row, 0, row, row + 1, 0, 0)
+        queued.append((t, row))
+        for _ in range(pops[row] if row < len(pops) else 0):
+            if queued:
+                pop()
+    while queued:
+        pop()
+    assert popped == expected
+    assert counters[HEAP_SIZE] == 0
