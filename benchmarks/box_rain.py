@@ -1,7 +1,7 @@
 """box-rain: N spheres (r = 0.05 m, 10 % of the box's volume, e = 0.8) rain into a box.
 
     .venv/bin/python benchmarks/box_rain.py [--count 1000] [--steps 240] [--peers] [--trace] [--stop-above-gb G]
-        [--set KEY=VALUE ...]
+        [--set KEY=VALUE ...] [--checkpoint FILE [--checkpoint-every K]] [--resume FILE]
 
 The scene of issue 10: the built-in ``rain`` scene with the box grown so the spheres fill
 10 % of it, dt = 1/240 s, under the rain scene's rules for a pile (``rapid_contact_rule =
@@ -14,16 +14,27 @@ released (a pile's churn), and ms/step (the first step, which compiles nothing b
 phase, is counted). With --peers, pybullet and MuJoCo (PGS, 10 iterations) step the same
 initial state the same number of steps, when importable, and the ratios are printed from
 this one run (these machines are noisy: compare ratios, not absolute times).
+
+A run longer than one sitting (box-rain 100k to rest: hours) can be carried on: with
+``--checkpoint FILE`` the world and the run's tallies are pickled to FILE every K steps
+(default 20; written to a temporary file, then renamed, so a killed run leaves the last
+whole one), and ``--resume FILE`` (with the same --count and --set) carries on from it.
+A resumed run is the same run, bit for bit (the world holds all its state;
+``tests/test_benchmarks.py`` checks it): the trace's last column, the state hash, shows it.
+Its time is summed over the sittings; its peak memory is the larger of theirs.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
+import pickle
 import time
 
 import numpy as np
 
+from physdbg.engine.timeline import Buffers
 from physdbg.engine.world import warm_up
 from physdbg.errors import SceneError
 from physdbg.scene import load_scene
@@ -45,35 +56,74 @@ def peak_memory_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def run_physdbg(scene, trace: bool = False, stop_above_gb: float | None = None) -> dict:
+def run_physdbg(scene, trace: bool = False, stop_above_gb: float | None = None, checkpoint: str | None = None,
+                every: int = 20, resumed: dict | None = None, key: tuple = ()) -> dict:
     """Step the scene; trace: print every step (ms, contacts, held, rapid, released, events,
     swept tests, overlap, kinetic energy, spheres asleep / fallen asleep / woken, warnings,
-    peak memory); stop_above_gb: stop early
-    once the peak memory passes it."""
-    world = scene.build_world()
-    capped = 0
-    worst = 0.0
-    rows = []
+    peak memory, the state hash's first 16 hex digits); stop_above_gb: stop early once the
+    peak memory passes it; checkpoint: pickle the run to this file every ``every`` steps
+    and at its end; resumed: a run loaded by load_checkpoint, carried on; key: what a
+    checkpoint must match to be resumed (the count and settings)."""
+    run = resumed or {"world": scene.build_world(), "capped": 0, "worst_overlap": 0.0, "rows": [],
+                      "seconds": 0.0, "peak_mb": 0.0, "key": key}
+    world = run["world"]
     if trace:
         print("step  ms  contacts  held  rapid  released  events  swept-tests  overlap(m)  kinetic(J)  asleep  "
-              "slept  woken  warnings  peak-MB", flush=True)
-    started = time.perf_counter()
-    for k in range(scene.steps):
+              "slept  woken  warnings  peak-MB  hash", flush=True)
+    started = time.perf_counter() - run["seconds"]
+    for k in range(world.step_index, scene.steps):
         t0 = time.perf_counter()
         stats = world.step(scene.dt)
-        capped += any(w.code.startswith("max_") for w in stats.warnings)
-        worst = max(worst, stats.max_overlap)
-        rows.append((stats.contacts, stats.held, stats.rapid, stats.released, stats.events, stats.asleep))
+        run["capped"] += any(w.code.startswith("max_") for w in stats.warnings)
+        run["worst_overlap"] = max(run["worst_overlap"], stats.max_overlap)
+        run["rows"].append((stats.contacts, stats.held, stats.rapid, stats.released, stats.events, stats.asleep))
         if trace:
             print(f"{k + 1} {1000 * (time.perf_counter() - t0):.0f} {stats.contacts} {stats.held} {stats.rapid} "
                   f"{stats.released} {stats.events} {stats.swept_tests} {stats.max_overlap:.2g} {stats.kinetic:.4g} "
-                  f"{stats.asleep} {stats.slept} {stats.woken} {[w.code for w in stats.warnings]} {peak_memory_mb():.0f}", flush=True)
-        if stop_above_gb is not None and peak_memory_mb() > 1024.0 * stop_above_gb:
+                  f"{stats.asleep} {stats.slept} {stats.woken} {[w.code for w in stats.warnings]} "
+                  f"{peak_memory_mb():.0f} {stats.state_hash[:16]}", flush=True)
+        stopping = stop_above_gb is not None and peak_memory_mb() > 1024.0 * stop_above_gb
+        if checkpoint and ((k + 1) % every == 0 or k + 1 == scene.steps or stopping):
+            run["seconds"] = time.perf_counter() - started
+            run["peak_mb"] = max(run["peak_mb"], peak_memory_mb())
+            save_checkpoint(checkpoint, run)
+        if stopping:
             print(f"stopped after step {k + 1}: peak memory {peak_memory_mb():.0f} MB > {stop_above_gb:g} GB")
             break
-    seconds = time.perf_counter() - started
-    return {"seconds": seconds, "capped": capped, "worst_overlap": worst, "rows": rows, "steps": len(rows),
-            "tolerance": scene.settings.contact_tolerance, "peak_mb": peak_memory_mb()}
+    run["seconds"] = time.perf_counter() - started
+    run["peak_mb"] = max(run["peak_mb"], peak_memory_mb())
+    return {**{name: run[name] for name in ("seconds", "capped", "worst_overlap", "rows", "peak_mb")},
+            "steps": len(run["rows"]), "tolerance": scene.settings.contact_tolerance}
+
+
+def save_checkpoint(path: str, run: dict) -> None:
+    """Pickle the run (its world and tallies) to path, whole or not at all.
+
+    The world's step scratch is left out: its loop buffers (grown to hundreds of MB in a
+    dense bed) are pickled fresh, as a new world has them, and its last step's context
+    not at all. The one thing the buffers carry from step to step, the id of the last
+    batch of re-predictions, only has to differ from the ids the fresh buffers' marks
+    hold, and does (the test beside this checks the resumed run bit for bit)."""
+    world = run["world"]
+    buffers, last_step = world._buf, world.last_step
+    world._buf, world.last_step = Buffers(world.state.count), None
+    try:
+        partial = f"{path}.partial"
+        with open(partial, "wb") as out:
+            pickle.dump(run, out, protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(partial, path)
+    finally:
+        world._buf, world.last_step = buffers, last_step
+
+
+def load_checkpoint(path: str, key: tuple) -> dict:
+    """A run saved by save_checkpoint, checked to be of the same scene (key); ValueError if
+    not. Only load a checkpoint you wrote: it is a pickle."""
+    with open(path, "rb") as file:
+        run = pickle.load(file)
+    if run.get("key") != key:
+        raise ValueError(f"{path} is a checkpoint of another run ({run.get('key')}), not of {key}")
+    return run
 
 
 def run_pybullet(scene) -> float | None:
@@ -150,13 +200,26 @@ def main() -> None:
     parser.add_argument("--stop-above-gb", type=float, default=None, help="stop once peak memory passes this")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="another scene setting, as `physdbg run -s` takes it (repeatable)")
+    parser.add_argument("--checkpoint", metavar="FILE", help="pickle the run here every --checkpoint-every steps")
+    parser.add_argument("--checkpoint-every", type=int, default=20, metavar="K")
+    parser.add_argument("--resume", metavar="FILE", help="carry on a run from its checkpoint")
     args = parser.parse_args()
+    if args.checkpoint_every < 1:
+        parser.error("--checkpoint-every must be at least 1")
     try:
         scene = box_rain(args.count, args.steps, tuple(args.set))
     except SceneError as error:
         parser.error(str(error))
+    key = (args.count, tuple(args.set))
+    resumed = None
+    if args.resume:
+        try:
+            resumed = load_checkpoint(args.resume, key)
+        except (OSError, ValueError, pickle.UnpicklingError, EOFError) as error:
+            parser.error(f"cannot resume from {args.resume}: {error}")
+        print(f"resuming after step {resumed['world'].step_index} ({resumed['seconds']:.0f} s so far)")
     warm_up("grid", sleeping=scene.settings.sleep_speed > 0)
-    result = run_physdbg(scene, args.trace, args.stop_above_gb)
+    result = run_physdbg(scene, args.trace, args.stop_above_gb, args.checkpoint, args.checkpoint_every, resumed, key)
     rows = np.array(result["rows"])
     steps = result["steps"]
     ms = 1000.0 * result["seconds"] / steps

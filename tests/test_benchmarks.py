@@ -1,0 +1,35 @@
+"""benchmarks/box_rain.py's checkpoints: a run carried on from one is the same run."""
+
+from __future__ import annotations
+
+import pytest
+
+from benchmarks.box_rain import box_rain, load_checkpoint, run_physdbg
+
+
+def test_a_run_resumed_from_its_checkpoint_is_the_uninterrupted_run(tmp_path, capsys):
+    key = (200, ())
+    whole = run_physdbg(box_rain(200, 40), trace=True, key=key)
+    straight = capsys.readouterr().out.splitlines()[1:]
+    path = str(tmp_path / "run.pickle")
+    run_physdbg(box_rain(200, 25), trace=True, checkpoint=path, every=10, key=key)  # written at 10, 20 and 25
+    first = capsys.readouterr().out.splitlines()[1:]
+    resumed = load_checkpoint(path, key)
+    assert resumed["world"].step_index == 25
+    rest = run_physdbg(box_rain(200, 40), trace=True, resumed=resumed, key=key)
+    second = capsys.readouterr().out.splitlines()[1:]
+
+    def without_timing(lines):  # the ms and peak-MB columns differ from run to run
+        return [line.split()[2:-2] + line.split()[-1:] for line in lines]
+
+    assert len(first) == 25 and len(second) == 15
+    assert without_timing(first + second) == without_timing(straight)  # every count and the state hash
+    assert rest["rows"] == whole["rows"] and rest["steps"] == 40
+    assert rest["capped"] == whole["capped"] and rest["worst_overlap"] == whole["worst_overlap"]
+
+
+def test_a_checkpoint_of_another_run_is_refused(tmp_path):
+    path = str(tmp_path / "run.pickle")
+    run_physdbg(box_rain(50, 3), checkpoint=path, every=1, key=(50, ()))
+    with pytest.raises(ValueError, match="another run"):
+        load_checkpoint(path, (50, ("generate.restitution=0.5",)))
