@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from physdbg.engine.motion import EXACT, VERLET, path_coefficients, velocity_coefficients
+from physdbg.engine.motion import EXACT, VERLET, _quantile_99, path_coefficients, velocity_coefficients
 
 from .conftest import make_state, make_world
 
@@ -192,3 +192,19 @@ def test_particle_box_holds_the_path_and_its_extremes(integrator, k, velocity, a
     assert np.all(points.min(axis=0) - pad >= lo - 1e-15) and np.all(points.max(axis=0) + pad <= hi + 1e-15)
     # tight: within what 4 000 samples can miss of a path this short
     assert np.all(lo >= points.min(axis=0) - pad - 1e-7) and np.all(hi <= points.max(axis=0) + pad + 1e-7)
+
+
+@settings(max_examples=300, deadline=None)
+@given(n=st.integers(1, 3000), seed=st.integers(0, 2**32 - 1), levels=st.sampled_from([2, 5, 0]),
+       order=st.sampled_from(["as drawn", "ascending", "descending"]))
+def test_the_99th_percentile_speed_is_numpys_to_the_bit(n, seed, levels, order):
+    """The grown boxes' typical speed (motion._quantile_99) is np.quantile(·, 0.99) exactly,
+    with ties (speeds drawn from a few levels) and sorted input (the selection's worst
+    case) included; a NaN gives NaN."""
+    rng = np.random.default_rng(seed)
+    speeds = rng.integers(0, levels, n) * 1.5 if levels else rng.exponential(3.0, n)
+    if order != "as drawn":
+        speeds = np.sort(speeds)[:: 1 if order == "ascending" else -1].copy()
+    assert _quantile_99(speeds) == np.quantile(speeds, 0.99)
+    speeds[n // 2] = np.nan
+    assert math.isnan(_quantile_99(speeds))

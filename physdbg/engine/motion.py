@@ -207,11 +207,21 @@ def particle_box(x, v, a, radius, sigma, i, step_end, integrator, k, margin, out
         out_hi[c] = mx + r
 
 
+@borrowing
+def _gcd(a, b):
+    while b:
+        a, b = b, a % b
+    return a
+
+
 @kernel
 def _quantile_99(values):
     """np.quantile(values, 0.99) (its default, linear interpolation) to the bit, NaN if
-    any value is NaN; values (N,), N >= 1. The two order statistics it needs are selected
-    (O(N)), not sorted for."""
+    any value is NaN; values (N,), N >= 1. The two order statistics it needs are the
+    smallest two of the m = N - k largest values (k = floor(0.99 (N - 1))), kept in a
+    min-heap of m in one pass: O(N log m) at worst, about O(N) for speeds in no order.
+    (np.partition did the same in O(N), but compiling it and the sorts its argument
+    checks use took about 4 s of the cold compile.)"""
     n = values.shape[0]
     largest = -math.inf
     for i in range(n):
@@ -223,12 +233,41 @@ def _quantile_99(values):
     if virtual >= n - 1:
         return largest
     gamma = virtual - below
-    k = int(below)
-    parted = np.partition(values, k)  # the k-th smallest at k, larger ones after it
-    x = parted[k]
-    y = parted[k + 1]
-    for i in range(k + 2, n):
-        y = min(y, parted[i])
+    m = n - int(below)  # >= 2: the k-th smallest value onwards
+    top = np.empty(m)  # a min-heap of the m largest values so far
+    size = 0
+    # visit the values with a stride near n / golden ratio, coprime to n (so each once): a
+    # run of rising values (spheres numbered by height) comes in well mixed, not each one
+    # displacing the heap's least (n log m: 5.2 ms for 100 000 rising speeds, 0.5 ms mixed)
+    stride = max(1, int(0.6180339887 * n))
+    while _gcd(stride, n) != 1:
+        stride += 1
+    i = 0
+    for _ in range(n):
+        i += stride
+        if i >= n:
+            i -= n
+        value = values[i]
+        if size < m:
+            c = size
+            size += 1
+            while c > 0 and top[(c - 1) // 2] > value:
+                top[c] = top[(c - 1) // 2]
+                c = (c - 1) // 2
+            top[c] = value
+        elif value > top[0]:
+            c = 0
+            while 2 * c + 1 < m:
+                child = 2 * c + 1
+                if child + 1 < m and top[child + 1] < top[child]:
+                    child += 1
+                if top[child] >= value:
+                    break
+                top[c] = top[child]
+                c = child
+            top[c] = value
+    x = top[0]  # the k-th smallest of all
+    y = top[1] if m == 2 else min(top[1], top[2])  # the (k+1)-th: the heap's second smallest
     step = y - x
     return y - step * (1.0 - gamma) if gamma >= 0.5 else x + step * gamma
 

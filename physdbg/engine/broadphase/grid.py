@@ -118,8 +118,9 @@ def grid_pairs(lo, hi, cell, limit):
             break
         bigger_i = np.empty(2 * out_i.shape[0] + 64, dtype=np.int64)
         bigger_j = np.empty(2 * out_j.shape[0] + 64, dtype=np.int64)
-        bigger_i[:found] = out_i[:found]
-        bigger_j[:found] = out_j[:found]
+        for t in range(found):  # a loop, not a slice copy: that compiles numba's shape-error
+            bigger_i[t] = out_i[t]  # formatting, 2 s of the cold compile
+            bigger_j[t] = out_j[t]
         out_i = bigger_i
         out_j = bigger_j
     return sort_pairs(out_i[:found], out_j[:found], n), used, cell
