@@ -75,10 +75,10 @@ TOP_FIELDS = {
                     "costs nothing), m/s >= 0, 0 = off (the default); not with periodic walls"),
     "sleep_time": "how long a sphere must stay slow to fall asleep, seconds > 0 (default 0.5)",
     "max_events_per_step": ("budget: contacts resolved in one step, integer >= 0 (default 0 = sized to the scene: "
-                            "max(10000, 20 per sphere))"),
+                            "max(10000, 100 per sphere))"),
     "max_pairs_per_step": "budget: broad-phase candidate pairs in one step, integer >= 1 (default 10000000)",
     "max_swept_tests_per_step": ("budget: swept tests in one step, integer >= 0 (default 0 = sized to the scene: "
-                                 "max(10000000, 400 per sphere))"),
+                                 "max(10000000, 2000 per sphere))"),
     "max_resting_work_per_step": ("budget: held-contact solve updates in one step, "
                                   "integer >= 1 (default 1000000000)"),
     "max_memory": "refuse a scene whose estimated memory is more than this many bytes (default 4e9)",
