@@ -191,7 +191,7 @@ def test_the_contact_and_swept_test_budgets_are_sized_to_the_scene_unless_set(mo
 
     sized = Settings()
     assert (sized.event_cap(100), sized.swept_test_budget(100)) == (10_000, 10_000_000)
-    assert (sized.event_cap(100_000), sized.swept_test_budget(100_000)) == (2_000_000, 40_000_000)
+    assert (sized.event_cap(100_000), sized.swept_test_budget(100_000)) == (10_000_000, 200_000_000)
     chosen = Settings(max_events_per_step=7, max_swept_tests_per_step=9)
     assert (chosen.event_cap(100_000), chosen.swept_test_budget(100_000)) == (7, 9)
     assert load_scene("rain", ["max_swept_tests_per_step=0"]).settings.max_swept_tests_per_step == 0
