@@ -207,13 +207,6 @@ def particle_box(x, v, a, radius, sigma, i, step_end, integrator, k, margin, out
         out_hi[c] = mx + r
 
 
-@borrowing
-def _gcd(a, b):
-    while b:
-        a, b = b, a % b
-    return a
-
-
 @kernel
 def _quantile_99(values):
     """np.quantile(values, 0.99) (its default, linear interpolation) to the bit, NaN if
@@ -240,7 +233,7 @@ def _quantile_99(values):
     # run of rising values (spheres numbered by height) comes in well mixed, not each one
     # displacing the heap's least (n log m: 5.2 ms for 100 000 rising speeds, 0.5 ms mixed)
     stride = max(1, int(0.6180339887 * n))
-    while _gcd(stride, n) != 1:
+    while math.gcd(stride, n) != 1:
         stride += 1
     i = 0
     for _ in range(n):
