@@ -122,8 +122,17 @@ def load_checkpoint(path: str, key: tuple) -> dict:
     with open(path, "rb") as file:
         run = pickle.load(file)
     if run.get("key") != key:
-        raise ValueError(f"{path} is a checkpoint of another run ({run.get('key')}), not of {key}")
+        raise ValueError(f"{path} is a checkpoint of another run ({_options(run.get('key'))}), not of "
+                         f"{_options(key)}")
     return run
+
+
+def _options(key) -> str:
+    """A run's key (count, settings) as the options that give it."""
+    if not (isinstance(key, tuple) and len(key) == 2):
+        return repr(key)
+    count, settings = key
+    return " ".join([f"--count {count}", *(f"--set {setting}" for setting in settings)])
 
 
 def run_pybullet(scene) -> float | None:
@@ -201,8 +210,10 @@ def main() -> None:
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="another scene setting, as `physdbg run -s` takes it (repeatable)")
     parser.add_argument("--checkpoint", metavar="FILE", help="pickle the run here every --checkpoint-every steps")
-    parser.add_argument("--checkpoint-every", type=int, default=20, metavar="K")
-    parser.add_argument("--resume", metavar="FILE", help="carry on a run from its checkpoint")
+    parser.add_argument("--checkpoint-every", type=int, default=20, metavar="K",
+                        help="steps between checkpoints (default 20; one is also written at the end)")
+    parser.add_argument("--resume", metavar="FILE",
+                        help="carry on the run checkpointed in FILE (same --count and --set)")
     args = parser.parse_args()
     if args.checkpoint_every < 1:
         parser.error("--checkpoint-every must be at least 1")

@@ -33,3 +33,23 @@ def test_a_checkpoint_of_another_run_is_refused(tmp_path):
     run_physdbg(box_rain(50, 3), checkpoint=path, every=1, key=(50, ()))
     with pytest.raises(ValueError, match="another run"):
         load_checkpoint(path, (50, ("generate.restitution=0.5",)))
+
+
+def test_the_command_refuses_bad_checkpoint_options_with_a_clear_error(tmp_path, monkeypatch, capsys):
+    """Before anything is compiled or run: a zero interval, a missing file, another run's
+    checkpoint, a file that is not one each end with argparse's exit 2 and say why."""
+    from benchmarks import box_rain
+
+    path = str(tmp_path / "run.pickle")
+    run_physdbg(box_rain.box_rain(50, 2), checkpoint=path, every=1, key=(50, ()))
+    (tmp_path / "junk").write_bytes(b"not a pickle")
+    cases = [(["--checkpoint-every", "0"], "--checkpoint-every must be at least 1"),
+             (["--resume", str(tmp_path / "none")], "No such file"),
+             (["--count", "60", "--resume", path], "is a checkpoint of another run (--count 50), not of --count 60"),
+             (["--resume", str(tmp_path / "junk")], "cannot resume from")]
+    for argv, said in cases:
+        monkeypatch.setattr("sys.argv", ["box_rain.py", *argv])
+        with pytest.raises(SystemExit) as stopped:
+            box_rain.main()
+        assert stopped.value.code == 2
+        assert said in capsys.readouterr().err
