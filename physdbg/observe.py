@@ -3,6 +3,11 @@
 The engine holds at most one observer and calls ``observer.on_event(event)`` for each
 typed event of :mod:`physdbg.events`. Recorders, summaries and tests are observers;
 :class:`FanOut` hands every event to several of them.
+
+An observer that does not read ``SweptTests`` (every swept test of a step, misses
+included: tens of millions in a dense step) says so with ``wants_swept_tests = False``;
+the world then neither logs the misses nor sends the event (engine.world.wants_swept_tests).
+One that does not say gets every event.
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ from .events import ContactResolved, Contacts, EngineWarning, Event, StepBegin, 
 
 class Observer(Protocol):
     def on_event(self, event: Event) -> None: ...
+    # optional: wants_swept_tests: bool (True when absent)
 
 
 class FanOut:
@@ -21,6 +27,11 @@ class FanOut:
 
     def __init__(self, *observers: Observer):
         self.observers = [o for o in observers if o is not None]
+
+    @property
+    def wants_swept_tests(self) -> bool:
+        """Whether any of the observers reads SweptTests (True for one that does not say)."""
+        return any(getattr(o, "wants_swept_tests", True) for o in self.observers)
 
     def on_event(self, event: Event) -> None:
         for observer in self.observers:

@@ -39,6 +39,7 @@ from .engine import (
     World,
 )
 from .engine.periodic import wrap_positions
+from .engine.state import BYTES_PER_PARTICLE, DEFAULT_MAX_MEMORY
 from .errors import SceneError, UnknownSceneError
 from .scenes import builtin_descriptions, builtin_names, builtin_text  # noqa: F401
 
@@ -81,7 +82,9 @@ TOP_FIELDS = {
                                  "max(10000000, 2000 per sphere))"),
     "max_resting_work_per_step": ("budget: held-contact solve updates in one step, "
                                   "integer >= 1 (default 1000000000)"),
-    "max_memory": "refuse a scene whose estimated memory is more than this many bytes (default 4e9)",
+    "max_memory": ("the most memory a run may use, bytes (default 4e9): a scene whose particles need more (about "
+                   "4 KiB each) is refused, and a step whose buffers (event queue, swept-test log, contacts) would "
+                   "grow past it is stopped like a budget"),
     "max_particle_steps": "refuse a run of more particle-steps (particles × steps) than this (default 1e10)",
     "particles": "array of [[particles]] tables",
     "planes": "array of [[planes]] tables",
@@ -137,12 +140,7 @@ _SETTINGS_DEFAULTS = Settings()
 MAX_MAGNITUDE = 1e12
 MIN_SCALE = 1e-12
 MAX_INTEGER = 10**12
-DEFAULT_MAX_MEMORY = 4e9
 DEFAULT_MAX_PARTICLE_STEPS = 1e10
-# Estimated bytes of memory per particle while stepping (state, swept boxes, candidate
-# pairs, swept-test and heap buffers): box-rain peaks at ~1.7 KiB at 10k and ~1 KiB at
-# 100k (peak RSS over the start); twice that leaves room for dense steps.
-BYTES_PER_PARTICLE = 4096
 MAX_SCENE_BYTES = 64 * 2**20  # a scene file is text: larger ones are made with [generate]
 MAX_NESTING = 6
 MAX_SAMPLES = 1000  # samples along a path per swept test (detection = "sampled")  # table > array of tables > table > vector is 4 deep
@@ -499,6 +497,7 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
         **{budget: c.number(raw, budget, budget, default=getattr(d, budget),
                             lo=0 if budget in SIZED_BUDGETS else 1, integer=True)
            for budget in BUDGETS},
+        max_memory=max_memory,
     )
 
     # walls

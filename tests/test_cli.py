@@ -330,6 +330,19 @@ def test_record_caps_a_big_bvh_and_says_so(tmp_path):
     assert "note" not in full.output
 
 
+def test_a_recording_held_to_max_memory_says_which_detail_needs_less(tmp_path):
+    # At --detail full every swept test is kept: under this limit the log may not grow and
+    # the steps say so; at --detail contacts only the hits are logged and the run is exact.
+    args = ["rain", "-s", "generate.count=200", "-s", "steps=5", "-s", "max_memory=1.2e6", "--no-rrd"]
+    full = invoke("record", *args, "-o", str(tmp_path / "full.mcap"))
+    assert full.exit_code == 0, full.output
+    assert "warnings    5 (5 max_memory)" in full.output
+    assert "max_memory reached" in full.output and "or record below --detail full" in full.output
+    lean = invoke("record", *args, "-o", str(tmp_path / "lean.mcap"), "--detail", "contacts")
+    assert lean.exit_code == 0, lean.output
+    assert "warnings    none" in lean.output and "audit       clean" in lean.output
+
+
 def test_record_repeats_a_real_time_run_from_its_step_lengths(tmp_path):
     first = tmp_path / "rt.mcap"
     invoke("record", "bounce", "-s", "dt=real", "-s", "duration=0.1", "-o", str(first), "--no-rrd")

@@ -21,7 +21,7 @@ from physdbg import api, open_recording
 from physdbg.engine import state_hash
 from physdbg.events import BroadPhaseInfo, Contacts, StepEnd, SweptTests
 from physdbg.observe import FanOut, ListObserver
-from physdbg.record import RecordingError, RecordingHeader
+from physdbg.record import DETAIL_LEVELS, RecordingError, RecordingHeader
 from physdbg.record import format as fmt
 from physdbg.record.mcap_sink import McapRecorder
 from physdbg.scene import load_scene
@@ -174,6 +174,26 @@ def test_detail_levels_record_only_what_they_say(tmp_path):
     assert len(rec.contacts(impact)) == 4
     with pytest.raises(RecordingError, match="--detail full"):
         rec.swept_tests(impact)
+
+
+def test_only_detail_full_asks_the_engine_for_the_swept_tests(tmp_path):
+    # Below "full" the recording stores no swept test, so the engine logs only the hits
+    # (engine.world.wants_swept_tests); the audit reads none either. The states are the same.
+    from physdbg.analysis.audit import Auditor
+
+    scene = load_scene("rain", ["steps=20", "generate.count=40"])
+    hashes = {}
+    for detail in DETAIL_LEVELS:
+        header = RecordingHeader.from_scene(scene, detail)
+        recorder = McapRecorder(tmp_path / f"{detail}.mcap", header)
+        assert recorder.wants_swept_tests == (detail == "full")
+        assert FanOut(recorder, Auditor(header)).wants_swept_tests == (detail == "full")
+        api.run(scene, observer=recorder)
+        recorder.close()
+        rec = open_recording(tmp_path / f"{detail}.mcap")
+        hashes[detail] = [rec.state(k).state_hash for k in range(scene.steps + 1)]
+    assert hashes["state"] == hashes["contacts"] == hashes["full"]
+    assert Auditor.wants_swept_tests is False
 
 
 def test_bvh_nodes_are_recorded_and_a_big_tree_is_capped_by_whole_levels(tmp_path):

@@ -11,6 +11,7 @@ import pytest
 
 from physdbg.engine import energies
 from physdbg.engine.timeline import ROWS
+from physdbg.engine.world import wants_swept_tests
 from physdbg.events import (
     BroadPhaseInfo,
     KIND_PAIR,
@@ -22,7 +23,7 @@ from physdbg.events import (
     StepEnd,
     SweptTests,
 )
-from physdbg.observe import ListObserver
+from physdbg.observe import FanOut, ListObserver
 from physdbg.scene import load_scene
 
 from .conftest import make_state, make_walls, make_world
@@ -273,6 +274,77 @@ def test_an_unobserved_step_logs_only_the_tests_that_hit(ordering):
         kept += rows
         total += b.swept_tests
     assert 0 < kept < total / 2
+
+
+class _NoTests(ListObserver):
+    wants_swept_tests = False
+
+
+def test_an_observer_that_reads_no_swept_tests_gets_none_and_the_step_logs_only_hits():
+    # The audit, the Rerun view and a recording below detail "full" read no SweptTests: the
+    # step logs only the hits (as unobserved) and sends every other event; same results.
+    scene = load_scene("rain", ["steps=30", "generate.count=60"])
+    lean, full = _NoTests(), ListObserver()
+    a, b = scene.build_world(lean), scene.build_world(full)
+    for _ in range(scene.steps):
+        sa, sb = a.step(scene.dt), b.step(scene.dt)
+        assert (sa.state_hash, sa.swept_tests, sa.contacts) == (sb.state_hash, sb.swept_tests, sb.contacts)
+        rows = int(a._buf.counters[ROWS])
+        assert rows == int(np.count_nonzero(~np.isnan(full.swept_tests[-1].toi))) < sb.swept_tests
+    assert lean.swept_tests == [] and len(full.swept_tests) == scene.steps
+    assert [type(e) for e in lean.events] == [type(e) for e in full.events if not isinstance(e, SweptTests)]
+    assert len(lean.contacts) == len(full.contacts) > 0
+
+
+def test_a_fan_out_wants_swept_tests_when_any_of_its_observers_does():
+    assert not FanOut(_NoTests(), _NoTests()).wants_swept_tests
+    assert FanOut(_NoTests(), ListObserver()).wants_swept_tests  # one that does not say gets everything
+    assert FanOut(FanOut(_NoTests()), FanOut(_NoTests(), ListObserver())).wants_swept_tests
+    assert not FanOut(FanOut(_NoTests()), _NoTests()).wants_swept_tests
+    assert not wants_swept_tests(None) and wants_swept_tests(ListObserver())
+
+
+@pytest.mark.parametrize("ordering", ["time", "index"])
+def test_a_step_whose_buffers_would_pass_max_memory_is_stopped_like_a_budget(ordering):
+    # 200 spheres count 0.82 MB and the buffers start at ~0.32 MB; an observer of the swept
+    # tests makes the log grow in the first step. Under 1.2e6 bytes it may not: the step
+    # stops with a warning that says what it would have needed and what to set, and the
+    # buffers never pass the limit. The suggested limit gives the exact run back.
+    def world(*extra):
+        scene = load_scene("rain", ["steps=20", "generate.count=200", f"ordering={ordering}", *extra])
+        return scene, scene.build_world(ListObserver())
+
+    tight_scene, tight = world("max_memory=1.2e6")
+    assert tight_scene.settings.max_memory == 1.2e6
+    stopped = []
+    for _ in range(tight_scene.steps):
+        stats = tight.step(tight_scene.dt)
+        stopped += [w.message for w in stats.warnings if w.code == "max_memory"]
+        buffers, _ = tight._buf.bytes_after(0, 0, 0)
+        assert 200 * 4096 + buffers + sum(a.nbytes for a in tight.held) <= 1.2e6
+    assert len(stopped) == tight_scene.steps
+    message = stopped[0]
+    assert "max_memory reached" in message and "more than max_memory = 1.2e+06 bytes" in message
+    assert "the remaining contacts of the step were not resolved" in message
+    suggested = message.split("--set max_memory=")[1].split()[0]
+    scene, again = world(f"max_memory={suggested}")
+    _, default = world()
+    for _ in range(scene.steps):
+        a, b = again.step(scene.dt), default.step(scene.dt)
+        assert a.warnings == b.warnings and a.state_hash == b.state_hash  # index order may overlap: as ever
+        assert "max_memory" not in {w.code for w in a.warnings}
+
+
+def test_an_observer_of_the_swept_tests_counts_their_log_against_max_memory():
+    # The same limit holds the hits-only log of a step no observer reads the tests of, and
+    # not the full one; the warning then names the lighter recording detail.
+    scene = load_scene("rain", ["steps=20", "generate.count=200", "max_memory=1.2e6"])
+    lean, full = scene.build_world(_NoTests()), scene.build_world(ListObserver())
+    lean_stats = [lean.step(scene.dt) for _ in range(scene.steps)]
+    full_stats = [full.step(scene.dt) for _ in range(scene.steps)]
+    assert all(s.warnings == [] for s in lean_stats)
+    message = full_stats[0].warnings[0].message
+    assert message.startswith("max_memory reached") and "or record below --detail full" in message
 
 
 def test_events_carry_copies_not_views():

@@ -104,6 +104,8 @@ class Auditor:
     on_finding: called with each Finding as it is made (e.g. to mark it in the viewer).
     """
 
+    wants_swept_tests = False  # it judges contacts and states, not the test log (observe.py)
+
     def __init__(self, header, on_finding: Callable[[Finding], None] | None = None):
         self.header = header
         self.settings = header.meta.get("settings", {})

@@ -26,6 +26,14 @@ EVENTS_PER_SPHERE = 100
 MIN_SWEPT_TESTS = 10_000_000
 SWEPT_TESTS_PER_SPHERE = 2_000
 
+# Estimated bytes of memory per particle while stepping, before the step's growable buffers
+# (state, swept boxes, candidate pairs, the per-sphere arrays of the loop): what a scene is
+# refused by before it starts (scene.py) and what World.step counts besides its buffers
+# when it holds them to max_memory. Box-rain peaks at ~1.7 KiB at 10k and ~1 KiB at 100k
+# (peak RSS over the start); twice that leaves room.
+BYTES_PER_PARTICLE = 4096
+DEFAULT_MAX_MEMORY = 4e9
+
 # The budgets whose 0 (their default) means "sized to the scene's sphere count" (budget_value).
 SIZED_BUDGETS = ("max_events_per_step", "max_swept_tests_per_step")
 
@@ -58,6 +66,9 @@ class Settings:
     this fast (m/s) for sleep_time (s) falls asleep, immovable until disturbed (sleep.py;
     0 = off, the default).
 
+    max_memory (bytes): the particles' own memory (BYTES_PER_PARTICLE each) and the step's
+    growable buffers (event queue, swept-test log, contact rows, held contacts) may not
+    pass it; a step whose buffers would is stopped like a budget (warning "max_memory").
     Budgets bound the work of one step (see BUDGETS); when one is reached the step still
     finishes, and a warning names the budget. max_events_per_step = 0 and
     max_swept_tests_per_step = 0 (the defaults) are sized to the scene: see ``event_cap``
@@ -85,6 +96,7 @@ class Settings:
     # `physdbg run rain -s generate.count=500` need up to 2.5·10⁸, and 10⁸ left 24 of
     # them unfinished (docs/benchmarks.md, "second session")
     max_resting_work_per_step: int = 1_000_000_000
+    max_memory: float = DEFAULT_MAX_MEMORY
 
     def event_cap(self, spheres: int) -> int:
         """The contact budget of one step for this many spheres: max_events_per_step, or

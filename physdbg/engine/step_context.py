@@ -58,6 +58,7 @@ class StepContext:
     too_wide_mid_step: str | None = None
     version: np.ndarray | None = None
     kernel_groups: tuple | None = None
+    out_of_memory: int = 0  # bytes the buffers would have needed, when max_memory stopped growing them
     max_overlap: float = 0.0
     sleeping_pairs: np.ndarray = field(default_factory=lambda: np.empty((0, 2), np.int64))
     slept: int = 0

@@ -22,7 +22,9 @@ Each particle carries an *anchor*: its position and velocity at a time sigma ins
 step, from which :mod:`motion` gives its path. Resolving a contact at time t advances the
 anchors of the particles involved to t, so the rest of their step runs over exactly the
 remaining time. Events go to ``observer.on_event``; with no observer, building them
-costs one branch per step.
+costs one branch per step. The step's swept tests (``SweptTests``: every test, misses
+included) are logged and sent only to an observer that reads them (see
+``wants_swept_tests``): the tests of a dense step run to tens of millions.
 """
 
 from __future__ import annotations
@@ -69,7 +71,7 @@ from .resolve import (
 )
 from .resting import HELD, RAPID_RULES, STEP_RELEASED, STEP_WORK, grow_held, held_room, new_held
 from .sleep import SUPPORT_GAP, Sleepers, release_static, split_sleeping
-from .state import BUDGETS, NonFiniteState, Settings, State, Walls, energies, first_non_finite, state_hash
+from .state import BUDGETS, BYTES_PER_PARTICLE, NonFiniteState, Settings, State, Walls, energies, first_non_finite, state_hash
 from .step_context import StepContext
 from .timeline import (
     CAPPED,
@@ -86,6 +88,7 @@ from .timeline import (
     TESTS,
     Buffers,
     adjacency_from_pairs,
+    mark_capped,
     merge_sorted_pairs,
     predict_into,
     run_time_order,
@@ -126,7 +129,8 @@ class World:
     """Particles, walls and settings, stepped in place.
 
     state: the particles (its arrays are updated by ``step``); walls: the planes;
-    settings: methods and tolerances; observer: anything with ``on_event(event)``.
+    settings: methods and tolerances; observer: anything with ``on_event(event)``, and
+    optionally ``wants_swept_tests`` (see the function of that name).
     """
 
     def __init__(self, state: State, walls: Walls, settings: Settings, observer=None):
@@ -138,6 +142,7 @@ class World:
         self.settings = settings
         self.observer = observer
         self.step_index = 0
+        self._particle_bytes = state.count * BYTES_PER_PARTICLE  # what max_memory counts besides the buffers
         self.time = 0.0
         chosen, self.broad_phase_reason = choose_broad_phase(settings.broad_phase, state.radius)
         self.broad_phase = make_broad_phase(chosen)
@@ -269,7 +274,7 @@ class World:
         changed path is tested again against every partner of the grown box (timeline)."""
         ctx.version = np.zeros(self.state.count, dtype=np.int64)
         # an unobserved step logs only the tests that hit (Buffers.reset)
-        self._buf.reset(keep_misses=ctx.observer is not None)
+        self._buf.reset(keep_misses=wants_swept_tests(ctx.observer))
         push = self.settings.ordering == "time"
         for kind in range(KINDS):  # in the kinds' order: ties in the queue break by test
             ia, other = narrow_candidates(kind, ctx.pairs, ctx.path_lo, ctx.path_hi, self._walls_group)
@@ -281,7 +286,9 @@ class World:
         budget = self._resolve_in_time_order(ctx) if s.ordering == "time" else self._resolve_in_index_order(ctx)
         if ctx.too_wide_mid_step and not ctx.warned("periodic"):
             ctx.warn("periodic", ctx.too_wide_mid_step)
-        if budget is not None and not ctx.warned(budget):
+        if budget == "max_memory" and not ctx.warned(budget):
+            ctx.warn(budget, self._memory_message(ctx))
+        elif budget is not None and not ctx.warned(budget):
             ctx.warn(budget, _budget_message(budget, s.budget(budget, self.state.count)))
 
     def _finish(self, ctx: StepContext) -> None:
@@ -338,7 +345,8 @@ class World:
         if obs is not None:
             x, v = self.state.positions, self.state.velocities
             obs.on_event(self._contacts_event(ctx))
-            obs.on_event(self._swept_tests_event(ctx))
+            if wants_swept_tests(obs):
+                obs.on_event(self._swept_tests_event(ctx))
             obs.on_event(StepEnd(ctx.step, self.time, ctx.dt, x.copy(), v.copy(), ctx.kinetic, ctx.potential,
                                  ctx.momentum.copy(),
                                  {"contacts": contacts, "swept_tests": tests, "events": events,
@@ -431,13 +439,15 @@ class World:
 
     # ------------------------------------------------------------------ narrow phase
     def _predict(self, ctx: StepContext, kind: int, ia: np.ndarray, ib: np.ndarray, push: bool) -> None:
-        """Swept-test candidates (kind, ia[m], ib[m]) into the buffers (held ones skipped)."""
+        """Swept-test candidates (kind, ia[m], ib[m]) into the buffers (held ones skipped);
+        none if the buffers cannot grow for them within max_memory (ctx.out_of_memory)."""
         if ia.size == 0:
             return
         st = self.state
         s = self.settings
         buf = self._buf
-        buf.ensure(ia.size, ia.size, 0)
+        if ctx.out_of_memory or not self._ensure(ctx, ia.size, ia.size, 0):
+            return  # the step stops before resolving anything more (_resolve)
         predict_into(kind, ia, ib, st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma, ctx.version,
                      ctx.dt, self._integrator, self._k, self._detection, s.samples, s.contact_tolerance * 1e-3,
                      self._walls_group, self.held, buf.test_int, buf.test_float, buf.test_outcome, buf.heap_toi,
@@ -454,6 +464,9 @@ class World:
         budgets = tuple(LoopBudgets(self.event_cap, s.swept_test_budget(self.state.count),
                                     s.max_resting_work_per_step))
         while True:
+            if ctx.out_of_memory:  # the narrow phase, or a re-query's predictions, did not fit
+                mark_capped(buf.heap_data, buf.test_outcome, buf.counters)
+                return "max_memory"
             # the held store, the adjacency and the buffers are replaced when they grow
             candidates = tuple(LoopCandidates(ctx.adj_start, ctx.adj, ctx.lo, ctx.hi, self._box_margin,
                                               ctx.max_degree))
@@ -468,9 +481,9 @@ class World:
                 return "max_resting_work_per_step"
             if status == GROW:
                 room = 2 * ctx.max_degree + 2 * nw + 4
-                buf.ensure(room, room, 2)
+                self._ensure(ctx, room, room, 2)
             elif status == GROW_HELD:
-                self.held = grow_held(self.held)
+                self._grow_held(ctx)
             elif status == REQUERY:
                 new_pairs = []
                 for i in buf.requery[: buf.requery_count[0]].tolist():
@@ -484,12 +497,18 @@ class World:
         count = int(buf.counters[ROWS])
         toi = buf.test_float[:count, 1]
         hits = np.nonzero(toi <= ctx.dt)[0]
+        if ctx.out_of_memory:  # the narrow phase did not fit: nothing is resolved
+            buf.test_outcome[hits] = OUTCOME_CAPPED
+            return "max_memory"
         for rid in hits.tolist():
             buf.counters[EVENTS] += 1
             if buf.counters[CONTACTS] >= self.event_cap:
                 buf.test_outcome[hits[hits >= rid]] = OUTCOME_CAPPED
                 return "max_events_per_step"
             kind, a, other = (int(c) for c in buf.test_int[rid])
+            if not self._ensure(ctx, 0, 0, 1) or not self._held_room(ctx, a, other if PARTNER_IS_SPHERE[kind] else -1):
+                buf.test_outcome[hits[hits >= rid]] = OUTCOME_CAPPED
+                return "max_memory"
             at = max(float(toi[rid]), ctx.sigma[a], ctx.sigma[other] if PARTNER_IS_SPHERE[kind] else 0.0)
             status = self._resolve_one(ctx, kind, a, other, at)
             buf.test_outcome[rid] = OUTCOME_SUPERSEDED if status == SKIPPED else OUTCOME_HIT
@@ -497,6 +516,53 @@ class World:
                 buf.test_outcome[hits[hits > rid]] = OUTCOME_CAPPED
                 return "max_resting_work_per_step"
         return None
+
+    # ------------------------------------------------------------------ memory
+    def _memory_message(self, ctx: StepContext) -> str:
+        """What the warning says when max_memory stopped a step."""
+        limit = self.settings.max_memory
+        logging = (" or record below --detail full (an observer of the swept tests keeps every test, misses "
+                   "included)" if wants_swept_tests(ctx.observer) else "")
+        return (f"max_memory reached: this step's buffers (event queue, swept-test log, contacts, held contacts) "
+                f"would have taken the run to about {_bytes(ctx.out_of_memory)}, more than max_memory = {limit:.3g} "
+                f"bytes (the {self.state.count} particles count ~{BYTES_PER_PARTICLE // 1024} KiB each); the "
+                f"remaining contacts of the step were not resolved; raise it with --set "
+                f"max_memory={max(ctx.out_of_memory * 1.5, limit * 2):.2g}{logging}")
+
+    def _ensure(self, ctx: StepContext, heap_room: int, test_room: int, contact_room: int) -> bool:
+        """Grow the loop's buffers for this much more (Buffers.ensure), unless that would
+        take the particles' own memory (BYTES_PER_PARTICLE each), the buffers, the held
+        contacts and, for an observer that reads them, the copies the step's events make
+        of the test log and the contacts, past Settings.max_memory: then nothing is
+        allocated, ctx.out_of_memory holds what it would have needed (bytes), and False."""
+        total, log = self._buf.bytes_after(heap_room, test_room, contact_room)
+        need = (self._particle_bytes + total + _nbytes(self.held)
+                + (log if wants_swept_tests(ctx.observer) else 0))
+        if need > self.settings.max_memory:
+            ctx.out_of_memory = max(ctx.out_of_memory, need)
+            return False
+        self._buf.ensure(heap_room, test_room, contact_room)
+        return True
+
+    def _grow_held(self, ctx: StepContext) -> bool:
+        """Grow the held-contact store (resting.grow_held: at most twice its size) within
+        max_memory, as _ensure; False (ctx.out_of_memory set) if it would not fit."""
+        total, log = self._buf.bytes_after(0, 0, 0)
+        need = (self._particle_bytes + total + 2 * _nbytes(self.held)
+                + (log if wants_swept_tests(ctx.observer) else 0))
+        if need > self.settings.max_memory:
+            ctx.out_of_memory = max(ctx.out_of_memory, need)
+            return False
+        self.held = grow_held(self.held)
+        return True
+
+    def _held_room(self, ctx: StepContext, a: int, b: int) -> bool:
+        """Room in the held store for a contact of a (and sphere b, or -1), grown if need
+        be within max_memory."""
+        while not held_room(self.held, a, b):
+            if not self._grow_held(ctx):
+                return False
+        return True
 
     # ------------------------------------------------------------------ one contact
     def _resolve_one(self, ctx: StepContext, kind: int, a: int, other: int, when: float) -> int:
@@ -558,6 +624,29 @@ class World:
                           buf.test_int[:count, 1].astype(np.int32), buf.test_int[:count, 2].astype(np.int32),
                           buf.test_float[:count, 0].copy(), np.where(toi <= ctx.dt, toi, np.nan),
                           buf.test_outcome[:count].copy())
+
+
+def _bytes(count: float) -> str:
+    """A size for a message: 950 kB, 1.26 MB, 4.1 GB (powers of 1000, as max_memory is given)."""
+    for unit, size in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if count >= size:
+            return f"{count / size:.3g} {unit}"
+    return f"{count:.0f} bytes"
+
+
+def _nbytes(arrays) -> int:
+    return sum(a.nbytes for a in arrays)
+
+
+def wants_swept_tests(observer) -> bool:
+    """Whether the step logs every swept test, misses included, and sends the
+    ``SweptTests`` event: only for an observer that reads it. An observer says so with a
+    ``wants_swept_tests`` attribute (physdbg.observe.FanOut asks each of its observers);
+    one without it gets every event. A dense step runs tens of millions of tests, about
+    95 % misses, at 41 bytes a row: the audit, the Rerun view and a recording below
+    detail "full" read none of them. Logging or not changes no result (the hits keep
+    their order: Buffers.reset)."""
+    return observer is not None and bool(getattr(observer, "wants_swept_tests", True))
 
 
 def _checked_step_length(dt) -> float:

@@ -106,6 +106,11 @@ class McapRecorder:
         self._send()
 
     # ------------------------------------------------------------------ observer
+    @property
+    def wants_swept_tests(self) -> bool:
+        """Only detail "full" records the swept tests (observe.py)."""
+        return fmt.TOPIC_SWEPT in self._channels
+
     def on_event(self, event) -> None:
         frame = event.step + 1
         if isinstance(event, StepEnd):

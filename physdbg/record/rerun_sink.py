@@ -72,6 +72,8 @@ class RerunSink:
     Call close() at the end (it flushes the series and the file).
     """
 
+    wants_swept_tests = False  # the view draws states, contacts and the BVH (observe.py)
+
     def __init__(self, header: RecordingHeader, rrd: str | Path | None = None, spawn: bool = False,
                  detail: str | None = None, recording_id: str | None = None, stream=None, root: str = ""):
         import rerun as rr
