@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from physdbg.analysis.tunnel import StepChecker
+from physdbg.analysis.tunnel import StepChecker, _anchor_order, _widen_to_anchors
 from physdbg.cli import app
 from physdbg.engine.state import Walls
 from physdbg.events import CONTACT_ROW, KIND_PAIR, KIND_WALL, Contacts
@@ -109,3 +111,27 @@ def test_a_dense_pile_is_not_accused_of_tunnelling():
     result = CliRunner().invoke(app, ["run", "rain", "-s", "generate.count=500", "-s", "duration=1.4"])
     assert result.exit_code == 0, result.output
     assert "audit       clean" in result.output, result.output
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 12), st.data())
+def test_the_anchors_are_ordered_and_boxed_as_numpy_would(n, data):
+    # The audit's compiled anchor order and boxes against np.lexsort and np.minimum.at,
+    # with ties in time (a cradle's blow) and contacts resolved out of time order.
+    m = data.draw(st.integers(0, 40))
+    who = np.concatenate([np.arange(n), np.array(data.draw(st.lists(st.integers(0, n - 1), min_size=m, max_size=m)),
+                                                 dtype=np.int64)])
+    times = st.sampled_from([0.0, 0.25, 0.5, 1e-300, 0.5 + 1e-16, 1.0])
+    when = np.concatenate([np.zeros(n), np.array(data.draw(st.lists(times, min_size=m, max_size=m)))])
+    order_key = np.concatenate([np.full(n, -1), np.array(data.draw(st.permutations(range(m))), dtype=np.int64)])
+    order, start = _anchor_order(who, when, order_key, n)
+    np.testing.assert_array_equal(order, np.lexsort((order_key, when, who)))
+    np.testing.assert_array_equal(start, np.concatenate([[0], np.cumsum(np.bincount(who, minlength=n))]))
+    where = np.random.default_rng(m).normal(size=(len(who), 3))
+    lo, hi = np.full((n, 3), 0.1), np.full((n, 3), 0.2)
+    lo_np, hi_np = lo.copy(), hi.copy()
+    np.minimum.at(lo_np, who, where)
+    np.maximum.at(hi_np, who, where)
+    _widen_to_anchors(who, where, lo, hi)
+    np.testing.assert_array_equal(lo, lo_np)
+    np.testing.assert_array_equal(hi, hi_np)
