@@ -85,7 +85,9 @@ class LoopWalls(NamedTuple):
 
 class LoopCandidates(NamedTuple):
     """The broad phase's answer: CSR partners (adj_start (N+1,), adj), the swept boxes
-    box_lo, box_hi (N, 3) m with their margin (m), and the largest partner count."""
+    box_lo, box_hi (N, 3) m (grown to each sphere's reach) with their margin (m), the
+    largest partner count, and path_lo, path_hi (N, 3) m, the box of each sphere's current
+    path over the rest of the step (the loop updates a sphere's when it re-predicts it)."""
 
     adj_start: np.ndarray
     adj: np.ndarray
@@ -93,6 +95,8 @@ class LoopCandidates(NamedTuple):
     box_hi: np.ndarray
     box_margin: float
     max_degree: int
+    path_lo: np.ndarray
+    path_hi: np.ndarray
 
 
 class LoopBudgets(NamedTuple):

@@ -249,16 +249,24 @@ def predict_into(kind, ia, ib, x, v, a, radius, sigma, version, step_end, integr
 @borrowing
 def _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, tolerance, walls,
                held, adj_start, adj, batch_mark, batch, test_int, test_float, test_outcome, heap_toi, heap_data,
-               counters, box_lo, box_hi, box_margin, scratch, found):
+               counters, box_lo, box_hi, box_margin, path_lo, path_hi, scratch, found):
     """Push new predictions of particle p against the partners of every kind it can reach
     (colliders.partners_of: what p's new path can meet, judged by boxes); returns whether
     p's new path stays inside its swept box (if not, the caller queries the broad phase
-    again for it). scratch: (2, 3), left holding the new path's box; found: (K, 2) room for
-    the candidates of one kind.
+    again for it). scratch: (2, 3), left holding the new path's box, which also becomes
+    p's row of path_lo, path_hi (N, 3); found: (K, 2) room for the candidates of one kind.
+
+    A partner is judged by the box of its *current* path (path_lo, path_hi), not by its
+    swept box grown to its reach: if its path changes later it is re-predicted then,
+    against p's path as it is. (The grown boxes are for finding partners at all; judged by
+    them, box-rain 10k tested ~1.6 times as many pairs that could not meet.)
     """
     inside = _inside_box(x, v, a, radius, sigma, p, step_end, integrator, k, box_margin, box_lo, box_hi, scratch)
+    for c in range(3):
+        path_lo[p, c] = scratch[0, c]
+        path_hi[p, c] = scratch[1, c]
     for kind in range(KINDS):
-        m = partners_of(kind, p, inside, scratch, adj_start, adj, box_lo, box_hi, batch_mark, batch, walls, found)
+        m = partners_of(kind, p, scratch, adj_start, adj, path_lo, path_hi, batch_mark, batch, walls, found)
         for s in range(m):
             _predict(kind, found[s, 0], found[s, 1], x, v, a, radius, sigma, version, step_end, integrator, k,
                      detection, samples, tolerance, walls, held, test_int, test_float, test_outcome, heap_toi,
@@ -295,7 +303,7 @@ def run_time_order(particles, method, walls, held, candidates, budgets, buffers)
     (_run_time, step_end, integrator, _drag, k, detection, samples, tolerance, _rest_fraction, _rest_step_factor,
      _rule, _rapid_time, _rapid_rule, _anchor_is_flow, _path_follows_acc, _vtol, _atol) = method
     nw = walls[0].shape[0]
-    adj_start, adj, box_lo, box_hi, box_margin, max_degree = candidates
+    adj_start, adj, box_lo, box_hi, box_margin, max_degree, path_lo, path_hi = candidates
     cap, max_tests, work_budget = budgets
     (heap_toi, heap_data, test_int, test_float, test_outcome, contacts, counters, pending, changed, batch_mark,
      requery, requery_count) = buffers
@@ -313,7 +321,7 @@ def run_time_order(particles, method, walls, held, candidates, budgets, buffers)
                 if not _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
                                   tolerance, walls, held, adj_start, adj, batch_mark, counters[BATCH], test_int,
                                   test_float, test_outcome, heap_toi, heap_data, counters, box_lo, box_hi,
-                                  box_margin, scratch, found):
+                                  box_margin, path_lo, path_hi, scratch, found):
                     # a path that left its swept box may meet particles it was never paired with
                     requery[requery_count[0]] = p
                     requery_count[0] += 1

@@ -469,7 +469,7 @@ class World:
                 return "max_memory"
             # the held store, the adjacency and the buffers are replaced when they grow
             candidates = tuple(LoopCandidates(ctx.adj_start, ctx.adj, ctx.lo, ctx.hi, self._box_margin,
-                                              ctx.max_degree))
+                                              ctx.max_degree, ctx.path_lo, ctx.path_hi))
             status = run_time_order(particles, method, walls, self.held, candidates, budgets, buf.loop())
             if status == DONE:
                 return None

@@ -73,16 +73,16 @@ def partner_restitution(kind, other, restitution, walls):
 
 
 @njit(cache=True, inline="always")
-def partners_of(kind, p, inside, box, adj_start, adj, box_lo, box_hi, batch_mark, batch, walls, out) -> int:
+def partners_of(kind, p, box, adj_start, adj, path_lo, path_hi, batch_mark, batch, walls, out) -> int:
     """The candidates of ``kind`` that sphere p's new path must be swept-tested against, as
-    rows (a, other) of out (K, 2); returns how many. box (2, 3): the new path's box;
-    inside: it stays inside p's swept box box_lo[p], box_hi[p]; adj_start, adj: the
-    broad phase's partners (CSR); batch_mark (N,): the batch that last changed each
-    sphere (batch: this one)."""
+    rows (a, other) of out (K, 2); returns how many. box (2, 3): the new path's box, also
+    p's row of path_lo, path_hi (N, 3), the boxes of every sphere's current path;
+    adj_start, adj: the broad phase's partners (CSR); batch_mark (N,): the batch that last
+    changed each sphere (batch: this one)."""
     normals, offsets, half_thickness, two_sided, _restitution, period = walls
     if kind == KIND_PAIR:
-        return sphere.partners_of(p, box, box_lo, box_hi, adj_start, adj, batch_mark, batch, period, out)
-    return plane.partners_of(p, inside, box_lo, box_hi, normals, offsets, half_thickness, two_sided, out)
+        return sphere.partners_of(p, box, path_lo, path_hi, adj_start, adj, batch_mark, batch, period, out)
+    return plane.partners_of(p, path_lo, path_hi, normals, offsets, half_thickness, two_sided, out)
 
 
 @borrowing

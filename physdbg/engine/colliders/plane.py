@@ -72,13 +72,13 @@ def reaches(lo, hi, i, normals, offsets, half_thickness, two_sided, w) -> bool:
 
 
 @njit(cache=True, inline="always")
-def partners_of(p, inside, box_lo, box_hi, normals, offsets, half_thickness, two_sided, out) -> int:
+def partners_of(p, path_lo, path_hi, normals, offsets, half_thickness, two_sided, out) -> int:
     """The walls (rows (p, w) of out (K, 2)) sphere p's new path must be tested against;
-    returns how many: those p's swept box reaches (the step-start rule, :func:`reachable`)
-    or, where the new path has left that box (``inside`` False), every wall."""
+    returns how many: those the box of that path (row p of path_lo, path_hi) reaches (the
+    step-start rule, :func:`reachable`)."""
     m = 0
     for w in range(normals.shape[0]):
-        if inside and not reaches(box_lo, box_hi, p, normals, offsets, half_thickness, two_sided, w):
+        if not reaches(path_lo, path_hi, p, normals, offsets, half_thickness, two_sided, w):
             continue
         out[m, 0] = p
         out[m, 1] = w

@@ -79,18 +79,18 @@ def gap(x, radius, ia, ib, period):
 
 
 @njit(cache=True, inline="always")
-def partners_of(p, box, box_lo, box_hi, adj_start, adj, batch_mark, batch, period, out) -> int:
+def partners_of(p, box, path_lo, path_hi, adj_start, adj, batch_mark, batch, period, out) -> int:
     """The pairs (a < other, rows of out (K, 2)) sphere p's new path must be tested against;
     returns how many.
 
     A pair whose both spheres changed in this batch is listed once, from the larger index.
     A partner q that did not change in this batch is listed only where the new path's box
-    ``box`` (2, 3) meets q's swept box (box_lo, box_hi (N, 3)), which holds q's path (the
-    step's boxes hold every path, and a path that leaves its box has the box grown,
-    World._refresh_box). A path whose box misses another box cannot touch what that box
-    holds, so what is skipped is a miss. (Everything used to be tested: in box-rain 10k's
-    last steps 3–4.6 million tests a step, 95 % of them misses; this leaves 55 % of them,
-    with the same contacts.)
+    ``box`` (2, 3) meets the box of q's current path (path_lo, path_hi (N, 3): each
+    sphere's path over the rest of the step, renewed whenever it is re-predicted). A path
+    whose box misses another path's box cannot touch that path, so what is skipped is a
+    miss; if q's path changes later, q is re-predicted against p's then. (Everything used
+    to be tested: in box-rain 10k's last steps 3–4.6 million tests a step, 95 % of them
+    misses; judging by the swept boxes grown to each sphere's reach left 55 % of them.)
     """
     m = 0
     for s in range(adj_start[p], adj_start[p + 1]):
@@ -98,7 +98,7 @@ def partners_of(p, box, box_lo, box_hi, adj_start, adj, batch_mark, batch, perio
         if batch_mark[q] == batch:
             if q < p:
                 continue
-        elif box_misses(box, box_lo, box_hi, q, period):
+        elif box_misses(box, path_lo, path_hi, q, period):
             continue
         out[m, 0] = min(p, q)
         out[m, 1] = max(p, q)
