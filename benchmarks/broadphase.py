@@ -168,11 +168,9 @@ def run_worker(kind: str, *args, env=None, timeout=3600) -> dict:
 
 
 def pybullet_available() -> bool:
-    try:
-        import pybullet  # noqa: F401
-    except ImportError:
-        return False
-    return True
+    import importlib.util
+
+    return importlib.util.find_spec("pybullet") is not None
 
 
 # ----------------------------------------------------------------------------- main

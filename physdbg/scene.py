@@ -41,7 +41,7 @@ from .engine import (
 from .engine.periodic import wrap_positions
 from .engine.state import BYTES_PER_PARTICLE, DEFAULT_MAX_MEMORY
 from .errors import SceneError, UnknownSceneError
-from .scenes import builtin_descriptions, builtin_names, builtin_text  # noqa: F401
+from .scenes import builtin_names, builtin_text
 
 # ----------------------------------------------------------------------------- schema
 TOP_FIELDS = {
