@@ -338,6 +338,9 @@ def test_a_recording_held_to_max_memory_says_which_detail_needs_less(tmp_path):
     assert full.exit_code == 0, full.output
     assert "warnings    5 (5 max_memory)" in full.output
     assert "max_memory reached" in full.output and "or record below --detail full" in full.output
+    explained = invoke("explain", str(tmp_path / "full.mcap"))
+    assert "this step reached max_memory, so contacts after it were not resolved" in explained.output
+    assert "record at --detail contacts" in explained.output
     lean = invoke("record", *args, "-o", str(tmp_path / "lean.mcap"), "--detail", "contacts")
     assert lean.exit_code == 0, lean.output
     assert "warnings    none" in lean.output and "audit       clean" in lean.output

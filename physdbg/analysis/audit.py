@@ -212,7 +212,11 @@ class Auditor:
             how = {"discrete": "detection = discrete tests only where each step ends",
                    "sampled": f"detection = sampled tests only {self.settings.get('samples', 4)} instants a step"}
             budgets = [w.code for w in self._warnings if w.code != "non-finite" and w.code != "overlap"]
-            if budgets:
+            if budgets and budgets[0] == "max_memory":
+                advice = ("this step reached max_memory, so contacts after it were not resolved: raise it (the "
+                          "step's warning names a value), or record at --detail contacts, which logs only the "
+                          "swept tests that hit")
+            elif budgets:
                 pile = self._pile()
                 advice = (f"this step hit the {budgets[0]} budget, so contacts after it were not resolved: "
                           f"raise it, or let slow contacts rest (rest_fraction)" + (f"; {pile}" if pile else ""))
