@@ -107,10 +107,10 @@ class Buffers:
         while self.contacts.shape[0] - c[CONTACTS] < contact_room:
             self.contacts = _grown(self.contacts)
 
-    def bytes_after(self, heap_room: int, test_room: int, contact_room: int) -> tuple[int, int]:
-        """(all the buffers, the test log and contact rows alone) in bytes once ``ensure``
-        with these rooms has run: what growing would cost, before anything is allocated
-        (the world holds it to Settings.max_memory)."""
+    def bytes_after(self, heap_room: int, test_room: int, contact_room: int) -> tuple[int, int, int]:
+        """(all the buffers, the test log alone, the contact rows alone) in bytes once
+        ``ensure`` with these rooms has run: what growing would cost, before anything is
+        allocated (the world holds it to Settings.max_memory)."""
         c = self.counters
 
         def doubled(rows: int, used: int, room: int) -> int:
@@ -119,10 +119,10 @@ class Buffers:
             return rows
 
         heap = doubled(self.heap_toi.shape[0], int(c[HEAP_SIZE]), heap_room) * HEAP_ROW_BYTES
-        log = (doubled(self.test_outcome.shape[0], int(c[ROWS]), test_room) * TEST_ROW_BYTES
-               + doubled(self.contacts.shape[0], int(c[CONTACTS]), contact_room) * self.contacts.dtype.itemsize)
+        log = doubled(self.test_outcome.shape[0], int(c[ROWS]), test_room) * TEST_ROW_BYTES
+        rows = doubled(self.contacts.shape[0], int(c[CONTACTS]), contact_room) * self.contacts.dtype.itemsize
         fixed = sum(a.nbytes for a in (self.counters, self.pending, self.changed, self.batch_mark, self.requery))
-        return heap + log + fixed, log
+        return heap + log + rows + fixed, log, rows
 
 
 HEAP_ROW_BYTES = 8 + 6 * 8  # heap_toi, heap_data

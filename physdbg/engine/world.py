@@ -531,25 +531,29 @@ class World:
 
     def _ensure(self, ctx: StepContext, heap_room: int, test_room: int, contact_room: int) -> bool:
         """Grow the loop's buffers for this much more (Buffers.ensure), unless that would
-        take the particles' own memory (BYTES_PER_PARTICLE each), the buffers, the held
-        contacts and, for an observer that reads them, the copies the step's events make
-        of the test log and the contacts, past Settings.max_memory: then nothing is
-        allocated, ctx.out_of_memory holds what it would have needed (bytes), and False."""
-        total, log = self._buf.bytes_after(heap_room, test_room, contact_room)
-        need = (self._particle_bytes + total + _nbytes(self.held)
-                + (log if wants_swept_tests(ctx.observer) else 0))
+        take the particles' own memory (BYTES_PER_PARTICLE each), the held contacts, the
+        buffers and the copies the step's events take of them (_buffer_bytes) past
+        Settings.max_memory: then nothing is allocated, ctx.out_of_memory holds what it
+        would have needed (bytes), and False."""
+        need = self._particle_bytes + _nbytes(self.held) + self._buffer_bytes(ctx, heap_room, test_room, contact_room)
         if need > self.settings.max_memory:
             ctx.out_of_memory = max(ctx.out_of_memory, need)
             return False
         self._buf.ensure(heap_room, test_room, contact_room)
         return True
 
+    def _buffer_bytes(self, ctx: StepContext, heap_room: int, test_room: int, contact_room: int) -> int:
+        """The loop's buffers after growing by these rooms, and the copies the step's events
+        will take of them: the contact rows for any observer, the test log for one that
+        reads the swept tests (bytes)."""
+        total, log, rows = self._buf.bytes_after(heap_room, test_room, contact_room)
+        return (total + (rows if ctx.observer is not None else 0)
+                + (log if wants_swept_tests(ctx.observer) else 0))
+
     def _grow_held(self, ctx: StepContext) -> bool:
         """Grow the held-contact store (resting.grow_held: at most twice its size) within
         max_memory, as _ensure; False (ctx.out_of_memory set) if it would not fit."""
-        total, log = self._buf.bytes_after(0, 0, 0)
-        need = (self._particle_bytes + total + 2 * _nbytes(self.held)
-                + (log if wants_swept_tests(ctx.observer) else 0))
+        need = self._particle_bytes + 2 * _nbytes(self.held) + self._buffer_bytes(ctx, 0, 0, 0)
         if need > self.settings.max_memory:
             ctx.out_of_memory = max(ctx.out_of_memory, need)
             return False
