@@ -70,10 +70,35 @@ def write_perf_map() -> int:
                 continue
             base = library.get_pointer_to_function(entry) - symbols[entry][0]
             rows += [(base + offset, size, name) for name, (offset, size) in symbols.items()]
+    rows += _runtime_rows()
     rows.sort()
     with open(f"/tmp/perf-{os.getpid()}.map", "w") as f:
         f.writelines(f"{start:x} {size:x} {name}\n" for start, size, name in rows)
     return len(rows)
+
+
+def _runtime_rows() -> list[tuple[int, int, str]]:
+    """numba's runtime functions (NRT_incref, NRT_decref, ...), compiled at start-up into a
+    library of their own that no dispatcher owns: (address, size, name) rows, each sized up
+    to the next one (the library's functions are laid out in order)."""
+    from numba.core.runtime.nrt import rtsys
+
+    library = getattr(rtsys, "_library", None)
+    if library is None:
+        return []
+    names = ("nrt_atomic_add", "nrt_atomic_sub", "nrt_atomic_cas", "NRT_MemInfo_data_fast", "NRT_incref",
+             "NRT_decref", "nrt_unresolved_abort")
+    found = []
+    for name in names:
+        try:
+            address = library.get_pointer_to_function(name)
+        except Exception:  # a numba that builds its runtime differently: leave them unnamed
+            continue
+        if address:
+            found.append((address, "numba." + name))
+    found.sort()
+    return [(address, (found[i + 1][0] - address) if i + 1 < len(found) else 16, name)
+            for i, (address, name) in enumerate(found)]
 
 
 def readable(symbol: str) -> str:

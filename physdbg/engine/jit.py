@@ -15,6 +15,14 @@ NamedTuple of 17 arrays) with one ``if`` pays 34 such calls: 200 ns a call, agai
 0.5 ns for the same helper compiled without NRT (``benchmarks/call_overhead.py``). In
 rain-500's jammed steps they were 45 % of the time (perf, docs/benchmarks.md).
 
+The same goes for the *caller*: a ``kernel`` increfs every array it hands to a call it
+does not inline, and decrefs it after. The time-ordered loop was a kernel calling the
+re-prediction (~45 arrays) for every changed sphere: 13 % of box-rain 10k's time was
+these atomic updates (perf: numba's ``NRT_incref`` and ``NRT_decref``, unnamed in
+profiles before ``benchmarks/profile.py`` named them). So a hot loop is itself
+``borrowing``, and the kernel above it calls it once and takes over only for what must
+allocate (timeline.run_time_order and _run_events).
+
 The rule: every function in the hot paths that does not allocate is ``borrowing``; what
 allocates (a solve's scratch arrays) sits above them. A borrowing function can call
 only functions that do not allocate: numba compiles its callees with its flags and

@@ -59,6 +59,7 @@ RESTITUTION_RULES = ("min", "max", "product", "mean")
 SKIPPED = 0
 RESOLVED = 1
 OUT_OF_WORK = 2
+NEEDS_HELD = 3  # judge_contact: to be finished by finish_with_held
 
 @borrowing
 def combine(rule, e_a, e_b):
@@ -100,7 +101,28 @@ def resolve_contact(kind, ia, other, toi, particles, method, walls, h, contacts,
     h: the held store. Returns SKIPPED (not approaching: nothing resolved), RESOLVED, or
     OUT_OF_WORK (the held-contact solve ran out of its budget). On periodic axes the
     contact point is on a's surface next to a's centre, whichever image of b it met.
+
+    In two stages: :func:`judge_contact`, which resolves by itself every contact that
+    involves no held contact (it allocates nothing, so the time-ordered loop runs it
+    without reference counting, jit.py), and :func:`finish_with_held` for the rest.
     """
+    status, closing, used, how, is_rapid = judge_contact(kind, ia, other, toi, particles, method, walls, h, contacts,
+                                                         counters, contacts_slot, rapid_slot, changed)
+    if status != NEEDS_HELD:
+        return status
+    return finish_with_held(kind, ia, other, toi, particles, method, h, contacts, counters, contacts_slot, rapid_slot,
+                            changed, work_budget, closing, used, how, is_rapid)
+
+
+@borrowing
+def judge_contact(kind, ia, other, toi, particles, method, walls, h, contacts, counters, contacts_slot, rapid_slot,
+                  changed):
+    """The first stage of :func:`resolve_contact` (its arguments but the budget): advance,
+    judge, begin the contact's row and, for a contact that involves no held contact,
+    apply the seed's impulse and finish the row. Returns (status, closing speed (m/s),
+    restitution used, how (HOW_*), rapid): status SKIPPED, RESOLVED, or NEEDS_HELD — the
+    row is begun (time, normal, point, velocities before) and :func:`finish_with_held`
+    must solve it with the held contacts it reaches."""
     # (unpacked to distinct names: numba types each variable once)
     x, v, a, acc, radius, inverse_mass, restitution, sigma, _version, last_contact = particles
     (run_time, step_end, integrator, drag, k, _detection, _samples, _tolerance, rest_fraction, rest_step_factor, rule,
@@ -124,7 +146,7 @@ def resolve_contact(kind, ia, other, toi, particles, method, walls, h, contacts,
             changed[0] = 2 if ib >= 0 else 1
             changed[1] = ia
             changed[2] = ib
-        return SKIPPED
+        return SKIPPED, closing, 0.0, HOW_IMPULSE, False
     now = run_time + toi
     resting = rests(closing, rel_acc, step_end, rest_step_factor, rest_fraction)
     is_rapid = not resting and rapid(now, last_contact[ia], last_contact[ib] if ib >= 0 else -math.inf, e,
@@ -136,8 +158,7 @@ def resolve_contact(kind, ia, other, toi, particles, method, walls, h, contacts,
     held = HOW_RESTING if resting else (
         HOW_RAPID if is_rapid and rapid_holds(closing, rel_acc, rapid_time, rapid_rule) else HOW_IMPULSE)
     used = 0.0 if held != HOW_IMPULSE else (1.0 if is_rapid else e)
-    slot = counters[contacts_slot]
-    row = contacts[slot]
+    row = contacts[counters[contacts_slot]]
     row.time_in_step = toi
     row.normal[0] = nx
     row.normal[1] = ny
@@ -149,22 +170,47 @@ def resolve_contact(kind, ia, other, toi, particles, method, walls, h, contacts,
     last_contact[ia] = now
     if ib >= 0:
         last_contact[ib] = now
-    status = RESOLVED
-    with_held = not (held == HOW_IMPULSE and h.deg[ia] == 0 and (ib < 0 or h.deg[ib] == 0))
-    if not with_held:
-        # the seed's impulse, alone
-        j = seed_impulse(closing, used, wsum)
-        push_along(v, inverse_mass, ia, ib, nx, ny, nz, j)
-        changed[0] = 2 if ib >= 0 else 1
-        changed[1] = ia
-        changed[2] = ib
-    else:
-        stick = step_end * (rest_step_factor + rest_fraction)
-        j, ok = _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, used * closing, held != HOW_IMPULSE, x, v, a,
-                                 acc, inverse_mass, sigma, integrator, drag, k, anchor_is_flow, path_follows_acc, h,
-                                 changed, work_budget, vtol, atol, stick)
-        if not ok:
-            status = OUT_OF_WORK
+    if held != HOW_IMPULSE or h.deg[ia] != 0 or (ib >= 0 and h.deg[ib] != 0):
+        return NEEDS_HELD, closing, used, held, is_rapid
+    # the seed's impulse, alone
+    j = seed_impulse(closing, used, wsum)
+    push_along(v, inverse_mass, ia, ib, nx, ny, nz, j)
+    changed[0] = 2 if ib >= 0 else 1
+    changed[1] = ia
+    changed[2] = ib
+    _finish_row(kind, ia, other, ib, v, j, used, closing, held, is_rapid, contacts, counters, contacts_slot,
+                rapid_slot)
+    return RESOLVED, closing, used, held, is_rapid
+
+
+@kernel
+def finish_with_held(kind, ia, other, toi, particles, method, h, contacts, counters, contacts_slot, rapid_slot,
+                     changed, work_budget, closing, used, how, is_rapid):
+    """The second stage of :func:`resolve_contact`, for a contact judge_contact found
+    involves held contacts (its status NEEDS_HELD, and closing, used, how, is_rapid as it
+    returned them): solve it with the held contacts it reaches and finish its row.
+    Returns RESOLVED or OUT_OF_WORK."""
+    x, v, a, acc, _radius, inverse_mass, _restitution, sigma, _version, _last_contact = particles
+    (_run_time, step_end, integrator, drag, k, _detection, _samples, _tolerance, rest_fraction, rest_step_factor,
+     _rule, _rapid_time, _rapid_rule, anchor_is_flow, path_follows_acc, vtol, atol) = method
+    ib = partner_sphere(kind, other)
+    row = contacts[counters[contacts_slot]]
+    stick = step_end * (rest_step_factor + rest_fraction)
+    j, ok = _solve_with_held(kind, ia, ib, other, toi, row.normal[0], row.normal[1], row.normal[2], used * closing,
+                             how != HOW_IMPULSE, x, v, a, acc, inverse_mass, sigma, integrator, drag, k, anchor_is_flow,
+                             path_follows_acc, h, changed, work_budget, vtol, atol, stick)
+    _finish_row(kind, ia, other, ib, v, j, used, closing, how if how != HOW_IMPULSE else HOW_WITH_HELD, is_rapid,
+                contacts, counters, contacts_slot, rapid_slot)
+    return RESOLVED if ok else OUT_OF_WORK
+
+
+@borrowing
+def _finish_row(kind, ia, other, ib, v, j, used, closing, how, is_rapid, contacts, counters, contacts_slot,
+                rapid_slot):
+    """Finish the contact's row (velocities after, impulse, restitution used, closing
+    speed, who, how) and count it (and a rapid one)."""
+    slot = counters[contacts_slot]
+    row = contacts[slot]
     for c in range(3):
         row.velocity_a_after[c] = v[ia, c]
         row.velocity_b_after[c] = v[ib, c] if ib >= 0 else math.nan
@@ -174,11 +220,10 @@ def resolve_contact(kind, ia, other, toi, particles, method, walls, h, contacts,
     row.kind = kind
     row.a = ia
     row.other = other
-    row.how = held if (held != HOW_IMPULSE or not with_held) else HOW_WITH_HELD
+    row.how = how
     counters[contacts_slot] = slot + 1
     if is_rapid:
         counters[rapid_slot] += 1
-    return status
 
 
 @kernel
