@@ -71,7 +71,8 @@ from .resolve import (
 )
 from .resting import HELD, RAPID_RULES, STEP_RELEASED, STEP_WORK, grow_held, held_room, new_held
 from .sleep import SUPPORT_GAP, Sleepers, release_static, split_sleeping
-from .state import BUDGETS, BYTES_PER_PARTICLE, NonFiniteState, Settings, State, Walls, energies, first_non_finite, state_hash
+from .state import (BUDGETS, BYTES_PER_PARTICLE, NonFiniteState, Settings, State, Walls, energies, first_non_finite,
+                    state_hash)
 from .step_context import StepContext
 from .timeline import (
     CAPPED,
