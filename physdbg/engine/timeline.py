@@ -294,6 +294,9 @@ def _inside_box(x, v, a, radius, sigma, p, step_end, integrator, k, margin, box_
     return True
 
 
+_HELD_SOLVE = -1  # _run_events: the contact in ``judged`` is to be solved with held contacts
+
+
 @kernel
 def run_time_order(particles, method, walls, held, candidates, budgets, buffers):
     """Resolve contacts in time order until done or a pause (see module doc); the groups
@@ -328,9 +331,6 @@ def run_time_order(particles, method, walls, held, candidates, budgets, buffers)
         if solved == OUT_OF_WORK:
             mark_capped(heap_data, test_outcome, counters)
             return RESTING_BUDGET
-
-
-_HELD_SOLVE = -1  # _run_events: the contact in ``judged`` is to be solved with held contacts
 
 
 @borrowing
