@@ -11,8 +11,9 @@ events afterwards, only if someone observes.
 
 Resolving is resolve.resolve_contact, the one resolver (it also solves resting, rapid
 and held contacts, resting.py), called in its two stages (judge_contact in the loop,
-finish_with_held outside it: run_time_order says why). The spheres it changed are re-predicted one by one from
-a pending list, so the loop can pause between any two of them. It *pauses* and returns
+finish_with_held outside it: run_time_order says why). The spheres it changed are
+re-predicted one by one from a pending list, so the loop can pause between any two of
+them. It *pauses* and returns
 to Python for:
 
 * REQUERY: a new path left the swept box its broad-phase pairs were found for;
@@ -98,30 +99,23 @@ class Buffers:
     def ensure(self, heap_room: int, test_room: int, contact_room: int) -> None:
         """Make sure at least this much more fits in each buffer (doubling as needed)."""
         c = self.counters
-        while self.heap_toi.shape[0] - c[HEAP_SIZE] < heap_room:
-            self.heap_toi = _grown(self.heap_toi)
-            self.heap_data = _grown(self.heap_data)
-        while self.test_outcome.shape[0] - c[ROWS] < test_room:
-            self.test_int = _grown(self.test_int)
-            self.test_float = _grown(self.test_float)
-            self.test_outcome = _grown(self.test_outcome)
-        while self.contacts.shape[0] - c[CONTACTS] < contact_room:
-            self.contacts = _grown(self.contacts)
+        rows = _rows_after(self.heap_toi.shape[0], int(c[HEAP_SIZE]), heap_room)
+        self.heap_toi = _grown(self.heap_toi, rows)
+        self.heap_data = _grown(self.heap_data, rows)
+        rows = _rows_after(self.test_outcome.shape[0], int(c[ROWS]), test_room)
+        self.test_int = _grown(self.test_int, rows)
+        self.test_float = _grown(self.test_float, rows)
+        self.test_outcome = _grown(self.test_outcome, rows)
+        self.contacts = _grown(self.contacts, _rows_after(self.contacts.shape[0], int(c[CONTACTS]), contact_room))
 
     def bytes_after(self, heap_room: int, test_room: int, contact_room: int) -> tuple[int, int, int]:
         """(all the buffers, the test log alone, the contact rows alone) in bytes once
         ``ensure`` with these rooms has run: what growing would cost, before anything is
         allocated (the world holds it to Settings.max_memory)."""
         c = self.counters
-
-        def doubled(rows: int, used: int, room: int) -> int:
-            while rows - used < room:
-                rows *= 2
-            return rows
-
-        heap = doubled(self.heap_toi.shape[0], int(c[HEAP_SIZE]), heap_room) * HEAP_ROW_BYTES
-        log = doubled(self.test_outcome.shape[0], int(c[ROWS]), test_room) * TEST_ROW_BYTES
-        rows = doubled(self.contacts.shape[0], int(c[CONTACTS]), contact_room) * self.contacts.dtype.itemsize
+        heap = _rows_after(self.heap_toi.shape[0], int(c[HEAP_SIZE]), heap_room) * HEAP_ROW_BYTES
+        log = _rows_after(self.test_outcome.shape[0], int(c[ROWS]), test_room) * TEST_ROW_BYTES
+        rows = _rows_after(self.contacts.shape[0], int(c[CONTACTS]), contact_room) * self.contacts.dtype.itemsize
         fixed = sum(a.nbytes for a in (self.counters, self.pending, self.changed, self.batch_mark, self.requery))
         return heap + log + rows + fixed, log, rows
 
@@ -130,8 +124,19 @@ HEAP_ROW_BYTES = 8 + 6 * 8  # heap_toi, heap_data
 TEST_ROW_BYTES = 3 * 8 + 2 * 8 + 1  # test_int, test_float, test_outcome
 
 
-def _grown(array: np.ndarray) -> np.ndarray:
-    bigger = np.empty((2 * array.shape[0],) + array.shape[1:], dtype=array.dtype)
+def _rows_after(rows: int, used: int, room: int) -> int:
+    """A buffer's rows once it holds ``room`` more than the ``used`` of its ``rows``: doubled
+    as often as needed (Buffers.ensure grows to it, Buffers.bytes_after prices it)."""
+    while rows - used < room:
+        rows *= 2
+    return rows
+
+
+def _grown(array: np.ndarray, rows: int) -> np.ndarray:
+    """array itself if it has ``rows`` rows, else a copy with that many (the new ones empty)."""
+    if rows == array.shape[0]:
+        return array
+    bigger = np.empty((rows,) + array.shape[1:], dtype=array.dtype)
     bigger[: array.shape[0]] = array
     return bigger
 
@@ -309,11 +314,11 @@ def run_time_order(particles, method, walls, held, candidates, budgets, buffers)
     It stops for what must allocate: a contact to be solved with held contacts
     (resolve.finish_with_held), solved here before it carries on.
     """
-    _x, _v, _a, _acc, _radius, _inverse_mass, _restitution, _sigma, version, _last_contact = particles
-    adj_start, adj, box_lo, box_hi, box_margin, max_degree, path_lo, path_hi = candidates
-    _cap, _max_tests, work_budget = budgets
+    version = particles[8]
+    max_degree = candidates[5]
+    work_budget = budgets[2]
     (_heap_toi, heap_data, _test_int, _test_float, test_outcome, contacts, counters, pending, changed, batch_mark,
-     requery, requery_count) = buffers
+     _requery, requery_count) = buffers
     nw = walls[0].shape[0]
     scratch = np.empty((2, 3))  # the lo, hi rows of _inside_box
     found = np.empty((max(max_degree, nw) + 1, 2), dtype=np.int64)  # one kind's candidates (_repredict)

@@ -536,11 +536,18 @@ class World:
         buffers and the copies the step's events take of them (_buffer_bytes) past
         Settings.max_memory: then nothing is allocated, ctx.out_of_memory holds what it
         would have needed (bytes), and False."""
-        need = self._particle_bytes + _nbytes(self.held) + self._buffer_bytes(ctx, heap_room, test_room, contact_room)
+        if not self._fits(ctx, _nbytes(self.held) + self._buffer_bytes(ctx, heap_room, test_room, contact_room)):
+            return False
+        self._buf.ensure(heap_room, test_room, contact_room)
+        return True
+
+    def _fits(self, ctx: StepContext, need: int) -> bool:
+        """Whether the particles' own memory and ``need`` more bytes stay within max_memory;
+        if not, ctx.out_of_memory keeps the largest total asked for."""
+        need += self._particle_bytes
         if need > self.settings.max_memory:
             ctx.out_of_memory = max(ctx.out_of_memory, need)
             return False
-        self._buf.ensure(heap_room, test_room, contact_room)
         return True
 
     def _buffer_bytes(self, ctx: StepContext, heap_room: int, test_room: int, contact_room: int) -> int:
@@ -554,9 +561,7 @@ class World:
     def _grow_held(self, ctx: StepContext) -> bool:
         """Grow the held-contact store (resting.grow_held: at most twice its size) within
         max_memory, as _ensure; False (ctx.out_of_memory set) if it would not fit."""
-        need = self._particle_bytes + 2 * _nbytes(self.held) + self._buffer_bytes(ctx, 0, 0, 0)
-        if need > self.settings.max_memory:
-            ctx.out_of_memory = max(ctx.out_of_memory, need)
+        if not self._fits(ctx, 2 * _nbytes(self.held) + self._buffer_bytes(ctx, 0, 0, 0)):
             return False
         self.held = grow_held(self.held)
         return True
