@@ -104,8 +104,9 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         scene = load_scene(scene, overrides)
     elif overrides:
         raise PhysdbgError("give overrides when loading the scene, not with a Scene object")
-    from .engine import NonFiniteState, energies, state_hash, warm_up
+    from .engine import NonFiniteState, energies, state_hash
     from .observe import FanOut
+    from .precompile import compile_kernels
 
     auditor = None
     if audit:
@@ -117,7 +118,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     world = scene.build_world(observer)
     if on_status is not None:
         on_status("compiling")
-    compile_seconds = warm_up(world.broad_phase.name, sleeping=world.sleepers is not None)
+    compile_seconds = compile_kernels(world.broad_phase.name, sleeping=world.sleepers is not None)
     if on_status is not None:
         on_status("running")
     st = world.state
@@ -410,7 +411,8 @@ class VerifyResult:
 def verify(path: str | Path, on_step: Callable[[int, int | None], None] | None = None) -> VerifyResult:
     """Re-simulate a recording from its embedded scene and step lengths; compare every
     step's state hash (and check each stored state against its stored hash)."""
-    from .engine import state_hash, warm_up
+    from .engine import state_hash
+    from .precompile import compile_kernels
     from .record import open_recording
 
     with open_recording(path) as rec:
@@ -420,7 +422,7 @@ def verify(path: str | Path, on_step: Callable[[int, int | None], None] | None =
                                "physdbg run to repeat. `physdbg explain` audits it; `physdbg diff` compares it "
                                "with a physdbg recording of the same scene")
         world = rec.scene.build_world()
-        warm_up(world.broad_phase.name, sleeping=world.sleepers is not None)
+        compile_kernels(world.broad_phase.name, sleeping=world.sleepers is not None)
         first = rec.state(0)
         if state_hash(first.positions, first.velocities) != first.state_hash:
             return VerifyResult(False, 0, 0, "the stored initial state does not match its stored hash (file altered)")

@@ -794,7 +794,7 @@ class _progress_bar:
             self._started = self._time()
 
     def _say_compiling(self) -> None:
-        sys.stderr.write("compiling the engine's kernels (the first run only: one to two minutes on 2 cores; cached afterwards)...\n")
+        sys.stderr.write("compiling the engine's kernels (the first run only: 40 s to a minute and more; cached afterwards)...\n")
         sys.stderr.flush()
 
     def _cancel(self) -> None:

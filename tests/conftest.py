@@ -9,6 +9,15 @@ from physdbg.engine import Settings, State, Walls, World
 from physdbg.observe import ListObserver
 
 
+def pytest_sessionstart(session):
+    """Compile the kernels once, before the first test, on two cores when the cache is
+    cold and two are free (physdbg.precompile): a fresh clone's suite starts ~30 s sooner
+    than when its first tests compile them one by one in this process."""
+    from physdbg.precompile import compile_kernels
+
+    compile_kernels("grid", sleeping=True)
+
+
 def make_state(positions, velocities=None, *, radius=0.1, inverse_mass=1.0, restitution=1.0, gravity_scale=1.0):
     positions = np.asarray(positions, dtype=float).reshape(-1, 3)
     n = len(positions)

@@ -188,14 +188,14 @@ def test_short_runs_show_no_bar():
 def test_a_slow_first_compile_says_what_it_is_doing(monkeypatch):
     import time
 
-    from physdbg import cli, engine
+    from physdbg import cli, precompile
 
     monkeypatch.setattr(cli._progress_bar, "AFTER_SECONDS", 0.05)
-    real = engine.warm_up
-    monkeypatch.setattr(engine, "warm_up", lambda *a, **k: (time.sleep(0.3), real(*a, **k))[1])
+    real = precompile.compile_kernels
+    monkeypatch.setattr(precompile, "compile_kernels", lambda *a, **k: (time.sleep(0.3), real(*a, **k))[1])
     result = invoke("run", "bounce", "--no-progress", "--set", "steps=5")
     assert "compiling the engine's kernels" in result.stderr
-    monkeypatch.setattr(engine, "warm_up", real)
+    monkeypatch.setattr(precompile, "compile_kernels", real)
     assert "compiling" not in invoke("run", "bounce", "--set", "steps=5").stderr
 
 

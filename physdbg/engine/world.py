@@ -680,15 +680,11 @@ def warm_up(broad_phase: str | None = None, sleeping: bool = False) -> float:
     is not charged with compilation. The kernels take the integrator and detection as
     arguments, so one run compiles every method. broad_phase: also compile this one;
     sleeping: also the sleep rules' (sleep.py; only a run that sleeps loads them).
+    (physdbg.precompile runs this on two cores when the cache is cold.)
     """
     started = perf_counter()
-    if broad_phase is not None and broad_phase != "brute-force":
-        boxes = np.random.default_rng(0).uniform(0.0, 1.0, (8, 3))
-        make_broad_phase(broad_phase).pairs(boxes, boxes + 0.3)
-    state = State(np.array([[0.0, 0.3, 0.0], [0.5, 0.3, 0.0]]), np.array([[1.0, -1.0, 0.0], [-1.0, 0.0, 0.0]]),
-                  np.ones(2), np.full(2, 0.1), np.ones(2), np.ones(2))
-    walls = Walls(["floor"], np.array([[0.0, 1.0, 0.0]]), np.zeros(1), np.ones(1), np.zeros(1, dtype=np.bool_),
-                  np.zeros(1))
+    _warm_up_broad_phase(broad_phase)
+    state, walls = _warm_up_world()
     for detection in ("swept", "sampled"):
         World(state.copy(), walls, Settings(detection=detection)).step(0.5)
     # a mid-step re-query's (World._refresh_box, _add_partners), rare in this small world
@@ -699,3 +695,42 @@ def warm_up(broad_phase: str | None = None, sleeping: bool = False) -> float:
         World(state.copy(), walls, Settings(sleep_speed=0.1, sleep_time=0.1)).step(0.5)
         release_static(new_held(state.count), np.zeros(state.count))
     return perf_counter() - started
+
+
+def warm_up_held_solve() -> None:
+    """The first of warm_up's two call trees: the forces phase of its world (settle_held
+    and the resting solve beneath it, about 40 % of a cold compile)."""
+    state, walls = _warm_up_world()
+    world = World(state, walls, Settings())
+    world._forces(world._begin(0.5))
+
+
+def warm_up_after_forces(broad_phase: str | None = None) -> None:
+    """The second: the broad phase named, and every phase of warm_up's step after the
+    forces phase, with the forces phase's outputs set as it leaves them when nothing is
+    held (the free accelerations, every anchor at the step's start); it reaches the
+    resting solve only through the loop's held solve, late in its compile. The world is
+    thrown away: only the compiling counts."""
+    _warm_up_broad_phase(broad_phase)
+    state, walls = _warm_up_world()
+    world = World(state, walls, Settings())
+    ctx = world._begin(0.5)
+    ctx.path_accel = world._free_accel.copy()
+    ctx.sigma = np.zeros(state.count)
+    for phase in (world._broad_phase, world._narrow_phase, world._resolve, world._finish):
+        phase(ctx)
+
+
+def _warm_up_broad_phase(broad_phase: str | None) -> None:
+    if broad_phase is not None and broad_phase != "brute-force":
+        boxes = np.random.default_rng(0).uniform(0.0, 1.0, (8, 3))
+        make_broad_phase(broad_phase).pairs(boxes, boxes + 0.3)
+
+
+def _warm_up_world() -> tuple[State, Walls]:
+    """Two spheres that meet each other and a floor within 0.5 s."""
+    state = State(np.array([[0.0, 0.3, 0.0], [0.5, 0.3, 0.0]]), np.array([[1.0, -1.0, 0.0], [-1.0, 0.0, 0.0]]),
+                  np.ones(2), np.full(2, 0.1), np.ones(2), np.ones(2))
+    walls = Walls(["floor"], np.array([[0.0, 1.0, 0.0]]), np.zeros(1), np.ones(1), np.zeros(1, dtype=np.bool_),
+                  np.zeros(1))
+    return state, walls

@@ -1,0 +1,81 @@
+"""Compiling the engine's kernels before a run: ``compile_kernels``, on two cores when it can.
+
+A fresh cache compiles about 190 functions (numba: typing, lowering, LLVM): 65–80 s on
+this project's 2-core machines, in one thread, nearly all of it in two call trees of
+``engine.warm_up``'s world: the forces phase's held-contact solve (``settle_held`` and
+the resting solve beneath it, about 40 %) and the rest of the step (the grid, the narrow
+phase, the time-ordered loop). On a cold cache with a second CPU free, a helper process
+compiles the first tree (``engine.world.warm_up_held_solve``) while this one compiles
+the second (``warm_up_after_forces``). Both write numba's on-disk cache (the folder
+``physdbg`` names per version of the engine's sources), and numba looks there before it
+compiles a callee, so each loads what the other has written: the loop's own held solve
+reaches the resting solve some 30 s into this process's tree, after the helper saved it
+(had it not, this process would compile it too: slower, the same code). Then
+``engine.warm_up`` runs as ever and loads everything.
+
+No helper when only one CPU is this process's to use (``taskset``, a CI runner's quota),
+when the cache already holds the held solve, or when ``parallel`` is False. It is waited
+for, never left running past the call, and killed if this process is interrupted; if it
+fails, this process compiles what it did not. Whichever process compiles a kernel, the
+machine code is the same (the golden hashes do not move). Outside the engine, which
+starts no processes.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from time import perf_counter
+
+# the helper's whole program
+_HELPER = "from physdbg.engine.world import warm_up_held_solve; warm_up_held_solve()"
+
+
+def compile_kernels(broad_phase: str | None = None, sleeping: bool = False, parallel: bool = True) -> float:
+    """``engine.warm_up(broad_phase, sleeping)``, on two processes when the cache is cold
+    and two CPUs are free (module docstring); returns the seconds taken."""
+    from .engine.world import warm_up, warm_up_after_forces
+
+    started = perf_counter()
+    helper = start_helper() if parallel and cache_is_cold() and usable_cpus() >= 2 else None
+    try:
+        if helper is not None:
+            warm_up_after_forces(broad_phase)
+            helper.wait()
+        warm_up(broad_phase, sleeping)
+    finally:
+        if helper is not None and helper.poll() is None:  # interrupted: leave nothing running
+            helper.kill()
+            helper.wait()
+    return perf_counter() - started
+
+
+def cache_is_cold() -> bool:
+    """Whether numba's cache holds no compiled held solve for these engine sources (then it
+    holds next to nothing). Reads numba's cache object, an internal: should that change,
+    the cache counts as warm, and kernels compile in one process as before."""
+    from .engine.resolve import settle_held
+
+    try:
+        return not settle_held._cache._cache_file._load_index()
+    except Exception:  # noqa: BLE001 - numba internals: fall back to the one-process compile
+        return False
+
+
+def usable_cpus() -> int:
+    """The CPUs this process may run on (its affinity, where the system tells it)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+def start_helper() -> subprocess.Popen | None:
+    """The helper process: this interpreter, this environment (so the same numba cache),
+    compiling the held solve; None if it cannot be started."""
+    try:
+        return subprocess.Popen([sys.executable, "-c", _HELPER], stdin=subprocess.DEVNULL,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    except OSError:
+        return None

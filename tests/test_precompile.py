@@ -1,0 +1,95 @@
+"""physdbg.precompile: the kernels compiled on two processes when the cache is cold."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+
+from physdbg import precompile
+from physdbg.engine.world import warm_up_after_forces
+
+
+def test_a_warm_cache_starts_no_helper(monkeypatch):
+    """The suite's session start compiled everything: no second process is worth starting."""
+    started = []
+    monkeypatch.setattr(precompile, "start_helper", lambda: started.append(1))
+    assert not precompile.cache_is_cold()
+    assert precompile.compile_kernels("grid", sleeping=True) < 30.0
+    assert started == []
+
+
+def test_a_cold_cache_with_two_cpus_compiles_the_held_solve_in_a_helper(monkeypatch):
+    """The order of the work: the helper starts, this process compiles the step after the
+    forces phase, waits for the helper, then runs the whole warm-up (which loads)."""
+    calls = []
+
+    class Helper:
+        def wait(self):
+            calls.append("helper waited for")
+
+        def poll(self):
+            return 0
+
+    monkeypatch.setattr(precompile, "cache_is_cold", lambda: True)
+    monkeypatch.setattr(precompile, "usable_cpus", lambda: 2)
+    monkeypatch.setattr(precompile, "start_helper", lambda: calls.append("helper started") or Helper())
+    import physdbg.engine.world as world
+
+    monkeypatch.setattr(world, "warm_up_after_forces", lambda bp: calls.append(f"after forces {bp}"))
+    monkeypatch.setattr(world, "warm_up", lambda bp, sleeping: calls.append(f"warm up {bp} {sleeping}"))
+    precompile.compile_kernels("grid", sleeping=True)
+    assert calls == ["helper started", "after forces grid", "helper waited for", "warm up grid True"]
+
+
+def test_one_cpu_or_parallel_off_means_one_process(monkeypatch):
+    monkeypatch.setattr(precompile, "cache_is_cold", lambda: True)
+    monkeypatch.setattr(precompile, "start_helper", lambda: (_ for _ in ()).throw(AssertionError("no helper")))
+    monkeypatch.setattr(precompile, "usable_cpus", lambda: 1)
+    precompile.compile_kernels()
+    monkeypatch.setattr(precompile, "usable_cpus", lambda: 2)
+    precompile.compile_kernels(parallel=False)
+
+
+def test_an_interrupted_compile_kills_the_helper(monkeypatch):
+    """Ctrl-C while this process compiles: the helper does not outlive the call."""
+    helper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    monkeypatch.setattr(precompile, "cache_is_cold", lambda: True)
+    monkeypatch.setattr(precompile, "usable_cpus", lambda: 2)
+    monkeypatch.setattr(precompile, "start_helper", lambda: helper)
+    import physdbg.engine.world as world
+
+    def interrupted(bp):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(world, "warm_up_after_forces", interrupted)
+    try:
+        precompile.compile_kernels()
+    except KeyboardInterrupt:
+        pass
+    assert helper.poll() is not None
+
+
+def test_the_helper_program_runs_and_the_two_parts_leave_the_world_untouched():
+    """The helper's program itself, on the warm cache (it loads, so it is quick), exits 0;
+    the part this process runs throws its world away."""
+    done = subprocess.run([sys.executable, "-c", precompile._HELPER], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    warm_up_after_forces("grid")
+    assert np.isfinite(precompile.compile_kernels("grid"))
+
+
+def test_the_helper_fills_an_empty_cache_with_the_held_solve(tmp_path):
+    """The real thing, once: the helper's program compiles into an empty cache folder, and
+    a process started afterwards finds the held solve there (so the main process's
+    warm-up loads it instead of compiling it). About half a minute."""
+    import os
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    check = "from physdbg.precompile import cache_is_cold; print(cache_is_cold())"
+    assert subprocess.run([sys.executable, "-c", check], env=env, capture_output=True, text=True,
+                          check=True).stdout.strip() == "True"
+    subprocess.run([sys.executable, "-c", precompile._HELPER], env=env, check=True, timeout=600)
+    assert subprocess.run([sys.executable, "-c", check], env=env, capture_output=True, text=True,
+                          check=True).stdout.strip() == "False"
