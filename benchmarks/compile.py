@@ -1,0 +1,78 @@
+"""The cold compile: every kernel compiled into an empty cache, timed (issue 10's ≤ 10 s target).
+
+    .venv/bin/python benchmarks/compile.py [--one-process] [--by-function [--top 40]]
+
+Points ``NUMBA_CACHE_DIR`` at a new temporary folder (removed afterwards), then times
+``physdbg.precompile.compile_kernels("grid", sleeping=True)``: what ``physdbg record`` and
+``run`` do before their first step. By default on two processes when two CPUs are free;
+``--one-process`` forces one. Prints the wall time and this process's CPU time (the
+helper's is its own). ``--by-function`` (implies one process) lists each compiled
+function's own time and with its callees, from numba's ``numba:compile`` events, the
+largest first: where a cold compile goes.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+
+# before physdbg is imported (it keeps a NUMBA_CACHE_DIR that is already set)
+CACHE = tempfile.mkdtemp(prefix="physdbg-compile-")
+os.environ["NUMBA_CACHE_DIR"] = CACHE
+
+import argparse  # noqa: E402
+import time  # noqa: E402
+
+
+class _CompileTimes:
+    """numba:compile events -> (own seconds, seconds with callees, function, depth)."""
+
+    def __init__(self):
+        from numba.core import event
+
+        self.rows: list[tuple[float, float, str, int]] = []
+        self._open: list[tuple[str, float, list[float]]] = []
+        listener = self
+
+        class Listener(event.Listener):
+            def on_start(self, ev):
+                function = ev.data["dispatcher"].py_func
+                listener._open.append((f"{function.__module__}.{function.__qualname__}", time.perf_counter(), []))
+
+            def on_end(self, ev):
+                name, started, callees = listener._open.pop()
+                total = time.perf_counter() - started
+                listener.rows.append((total - sum(callees), total, name, len(listener._open)))
+                if listener._open:
+                    listener._open[-1][2].append(total)
+
+        event.register("numba:compile", Listener())
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--one-process", action="store_true")
+    parser.add_argument("--by-function", action="store_true", help="each function's compile time (one process)")
+    parser.add_argument("--top", type=int, default=40)
+    args = parser.parse_args()
+    try:
+        times = _CompileTimes() if args.by_function else None
+        from physdbg.precompile import compile_kernels, usable_cpus
+
+        parallel = not (args.one_process or args.by_function)
+        cpu = time.process_time()
+        wall = compile_kernels("grid", sleeping=True, parallel=parallel)
+        cpu = time.process_time() - cpu
+        processes = "two processes" if parallel and usable_cpus() >= 2 else "one process"
+        print(f"cold compile on {processes}: {wall:.1f} s wall, {cpu:.1f} s CPU in this process")
+        if times is not None:
+            print(f"{len(times.rows)} compiled functions; own s, with callees s, depth, function:")
+            for own, total, name, depth in sorted(times.rows, reverse=True)[:args.top]:
+                print(f"  {own:6.2f} {total:6.2f} {depth} {name}")
+    finally:
+        shutil.rmtree(CACHE, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
