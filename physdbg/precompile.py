@@ -5,20 +5,22 @@ this project's 2-core machines, in one thread, nearly all of it in two call tree
 ``engine.warm_up``'s world: the forces phase's held-contact solve (``settle_held`` and
 the resting solve beneath it, about 40 %) and the rest of the step (the grid, the narrow
 phase, the time-ordered loop). On a cold cache with a second CPU free, a helper process
-compiles the first tree (``engine.world.warm_up_held_solve``) while this one compiles
-the second (``warm_up_after_forces``). Both write numba's on-disk cache (the folder
+compiles the first tree (``engine.world.warm_up_held_solve``) while this one compiles the
+second (``warm_up_without_forces``). Both write numba's on-disk cache (the folder
 ``physdbg`` names per version of the engine's sources), and numba looks there before it
-compiles a callee, so each loads what the other has written: the loop's own held solve
-reaches the resting solve some 30 s into this process's tree, after the helper saved it
-(had it not, this process would compile it too: slower, the same code). Then
-``engine.warm_up`` runs as ever and loads everything.
+compiles any function, callees included. The trees meet in one place, the resting solve,
+which the loop's held solve calls: this process compiles all that needs no resting solve
+first (~15 s) and the loop last, and reaches the resting solve some 23 s in, by when the
+helper has cached it (its callees first). Then ``engine.warm_up`` runs as ever and loads
+everything. (Waiting for the helper's resting solve before starting the loop was
+measured, and lost: the loop's own part is the longer.)
 
 No helper when only one CPU is this process's to use (``taskset``, a CI runner's quota),
 when the cache already holds the held solve, or when ``parallel`` is False. It is waited
 for, never left running past the call, and killed if this process is interrupted; if it
-fails, this process compiles what it did not. Whichever process compiles a kernel, the
-machine code is the same (the golden hashes do not move). Outside the engine, which
-starts no processes.
+fails (or is slow), this process compiles what it did not, which costs time and changes
+nothing. Whichever process compiles a kernel, the machine code is the same (the golden
+hashes do not move). Outside the engine, which starts no processes.
 """
 
 from __future__ import annotations
@@ -35,13 +37,13 @@ _HELPER = "from physdbg.engine.world import warm_up_held_solve; warm_up_held_sol
 def compile_kernels(broad_phase: str | None = None, sleeping: bool = False, parallel: bool = True) -> float:
     """``engine.warm_up(broad_phase, sleeping)``, on two processes when the cache is cold
     and two CPUs are free (module docstring); returns the seconds taken."""
-    from .engine.world import warm_up, warm_up_after_forces
+    from .engine.world import warm_up, warm_up_without_forces
 
     started = perf_counter()
     helper = start_helper() if parallel and cache_is_cold() and usable_cpus() >= 2 else None
     try:
         if helper is not None:
-            warm_up_after_forces(broad_phase)
+            warm_up_without_forces(broad_phase)
             helper.wait()
         warm_up(broad_phase, sleeping)
     finally:
@@ -53,12 +55,15 @@ def compile_kernels(broad_phase: str | None = None, sleeping: bool = False, para
 
 def cache_is_cold() -> bool:
     """Whether numba's cache holds no compiled held solve for these engine sources (then it
-    holds next to nothing). Reads numba's cache object, an internal: should that change,
-    the cache counts as warm, and kernels compile in one process as before."""
+    holds next to nothing): its index lists no version, or the code it names is not there
+    yet (numba writes the index first). Reads numba's cache object, an internal: should
+    that change, the cache counts as warm, and kernels compile in one process as before."""
     from .engine.resolve import settle_held
 
     try:
-        return not settle_held._cache._cache_file._load_index()
+        cache_file = settle_held._cache._cache_file
+        versions = cache_file._load_index()
+        return not (versions and all(os.path.exists(cache_file._data_path(name)) for name in versions.values()))
     except Exception:  # noqa: BLE001 - numba internals: fall back to the one-process compile
         return False
 

@@ -8,7 +8,7 @@ import sys
 import numpy as np
 
 from physdbg import precompile
-from physdbg.engine.world import warm_up_after_forces
+from physdbg.engine.world import warm_up_without_forces
 
 
 def test_a_warm_cache_starts_no_helper(monkeypatch):
@@ -21,26 +21,29 @@ def test_a_warm_cache_starts_no_helper(monkeypatch):
 
 
 def test_a_cold_cache_with_two_cpus_compiles_the_held_solve_in_a_helper(monkeypatch):
-    """The order of the work: the helper starts, this process compiles the step after the
-    forces phase, waits for the helper, then runs the whole warm-up (which loads)."""
+    """The order of the work: the helper starts, this process compiles the rest of the
+    step, waits for the helper, then runs the whole warm-up (which loads everything)."""
     calls = []
 
     class Helper:
+        returncode = None  # running until waited for
+
         def wait(self):
             calls.append("helper waited for")
+            self.returncode = 0
 
         def poll(self):
-            return 0
+            return self.returncode
 
     monkeypatch.setattr(precompile, "cache_is_cold", lambda: True)
     monkeypatch.setattr(precompile, "usable_cpus", lambda: 2)
     monkeypatch.setattr(precompile, "start_helper", lambda: calls.append("helper started") or Helper())
     import physdbg.engine.world as world
 
-    monkeypatch.setattr(world, "warm_up_after_forces", lambda bp: calls.append(f"after forces {bp}"))
+    monkeypatch.setattr(world, "warm_up_without_forces", lambda bp: calls.append(f"without forces {bp}"))
     monkeypatch.setattr(world, "warm_up", lambda bp, sleeping: calls.append(f"warm up {bp} {sleeping}"))
     precompile.compile_kernels("grid", sleeping=True)
-    assert calls == ["helper started", "after forces grid", "helper waited for", "warm up grid True"]
+    assert calls == ["helper started", "without forces grid", "helper waited for", "warm up grid True"]
 
 
 def test_one_cpu_or_parallel_off_means_one_process(monkeypatch):
@@ -63,7 +66,7 @@ def test_an_interrupted_compile_kills_the_helper(monkeypatch):
     def interrupted(bp):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(world, "warm_up_after_forces", interrupted)
+    monkeypatch.setattr(world, "warm_up_without_forces", interrupted)
     try:
         precompile.compile_kernels()
     except KeyboardInterrupt:
@@ -76,20 +79,21 @@ def test_the_helper_program_runs_and_the_two_parts_leave_the_world_untouched():
     the part this process runs throws its world away."""
     done = subprocess.run([sys.executable, "-c", precompile._HELPER], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
-    warm_up_after_forces("grid")
+    warm_up_without_forces("grid")
     assert np.isfinite(precompile.compile_kernels("grid"))
 
 
 def test_the_helper_fills_an_empty_cache_with_the_held_solve(tmp_path):
     """The real thing, once: the helper's program compiles into an empty cache folder, and
-    a process started afterwards finds the held solve there (so the main process's
-    warm-up loads it instead of compiling it). About half a minute."""
+    a process started afterwards finds the held solve and the resting solve there (so the
+    main process's warm-up loads them instead of compiling them). About half a minute."""
     import os
 
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
-    check = "from physdbg.precompile import cache_is_cold; print(cache_is_cold())"
+    check = ("from physdbg.precompile import cache_is_cold; from physdbg.engine.resting import solve_contacts; "
+             "print(cache_is_cold(), bool(solve_contacts._cache._cache_file._load_index()))")
     assert subprocess.run([sys.executable, "-c", check], env=env, capture_output=True, text=True,
-                          check=True).stdout.strip() == "True"
+                          check=True).stdout.strip() == "True False"
     subprocess.run([sys.executable, "-c", precompile._HELPER], env=env, check=True, timeout=600)
     assert subprocess.run([sys.executable, "-c", check], env=env, capture_output=True, text=True,
-                          check=True).stdout.strip() == "False"
+                          check=True).stdout.strip() == "False True"

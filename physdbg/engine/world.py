@@ -698,27 +698,36 @@ def warm_up(broad_phase: str | None = None, sleeping: bool = False) -> float:
 
 
 def warm_up_held_solve() -> None:
-    """The first of warm_up's two call trees: the forces phase of its world (settle_held
-    and the resting solve beneath it, about 40 % of a cold compile)."""
+    """The first of warm_up's call trees: the forces phase of its world (settle_held and
+    the resting solve beneath it, about 40 % of a cold compile)."""
     state, walls = _warm_up_world()
     world = World(state, walls, Settings())
     world._forces(world._begin(0.5))
 
 
-def warm_up_after_forces(broad_phase: str | None = None) -> None:
-    """The second: the broad phase named, and every phase of warm_up's step after the
-    forces phase, with the forces phase's outputs set as it leaves them when nothing is
-    held (the free accelerations, every anchor at the step's start); it reaches the
-    resting solve only through the loop's held solve, late in its compile. The world is
-    thrown away: only the compiling counts."""
+def warm_up_without_forces(broad_phase: str | None = None) -> None:
+    """The second: the rest of the step, with no forces phase (its outputs set as it
+    leaves them when nothing is held: the free accelerations, every anchor at the step's
+    start). First all that needs no resting solve (the grid and the broad phase named;
+    the broad, narrow and finish phases of a sleeping world, the sleep rules included),
+    the time-ordered loop last: its held solve calls the resting solve, which a process
+    compiling warm_up_held_solve beside this one has by then cached, nearly or wholly
+    (physdbg.precompile). The worlds are thrown away: only the compiling counts."""
+    _warm_up_broad_phase("grid")
     _warm_up_broad_phase(broad_phase)
+    _phases_without_forces("finish", sleep_speed=0.1, sleep_time=0.1)
+    _phases_without_forces("resolve")
+
+
+def _phases_without_forces(last: str, **settings) -> None:
     state, walls = _warm_up_world()
-    world = World(state, walls, Settings())
+    world = World(state, walls, Settings(**settings))
     ctx = world._begin(0.5)
     ctx.path_accel = world._free_accel.copy()
     ctx.sigma = np.zeros(state.count)
-    for phase in (world._broad_phase, world._narrow_phase, world._resolve, world._finish):
-        phase(ctx)
+    world._broad_phase(ctx)
+    world._narrow_phase(ctx)
+    (world._finish if last == "finish" else world._resolve)(ctx)
 
 
 def _warm_up_broad_phase(broad_phase: str | None) -> None:
