@@ -4,8 +4,10 @@
 the results in the order of ``jobs``:
 
 * ``workers=1``: in this process, one after another;
-* otherwise on local cores (``workers=None``: all of them) in a process pool, each worker
-  loading the compiled kernels once before its first job (so no job's cost includes it);
+* otherwise on local cores (``workers=None``: all of them) in a process pool: the
+  kernels are compiled here first (on a cold cache, on two processes:
+  physdbg.precompile), then each worker loads them once before its first job (so no
+  job's cost includes it, and no two workers compile the same kernels);
 * ``dask="tcp://host:port"``: on an existing Dask cluster (the optional extra
   ``physdbg[dask]``), each worker warmed up the same way. No job system of physdbg's own.
 
@@ -25,9 +27,10 @@ class DaskMissing(PhysdbgError):
 
 
 def _warm() -> None:
-    from ..engine import warm_up
+    """Compile (or load) the kernels: on a cold cache on two processes (physdbg.precompile)."""
+    from ..precompile import compile_kernels
 
-    warm_up()
+    compile_kernels()
 
 
 def _call(call, args):
@@ -52,6 +55,7 @@ def run_jobs(call: Callable, jobs: Sequence[tuple], workers: int | None = None, 
         return out
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
+    _warm()  # here first, so the workers load the kernels instead of each compiling them all
     results: list = [None] * total
     with ProcessPoolExecutor(max_workers=min(workers, total), initializer=_warm) as pool:
         futures = {pool.submit(_call, call, args): k for k, args in enumerate(jobs)}
