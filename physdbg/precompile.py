@@ -28,10 +28,8 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from pathlib import Path
 from time import perf_counter
-
-# the helper's whole program
-_HELPER = "from physdbg.engine.world import warm_up_held_solve; warm_up_held_solve()"
 
 
 def compile_kernels(broad_phase: str | None = None, sleeping: bool = False, parallel: bool = True) -> float:
@@ -76,11 +74,21 @@ def usable_cpus() -> int:
         return os.cpu_count() or 1
 
 
+def helper_command() -> list[str]:
+    """The helper's command line: this interpreter, with the folder this physdbg was
+    imported from first on its path (so neither the working folder nor PYTHONPATH can put
+    another physdbg before it: it compiles these very sources); the environment is
+    inherited, so numba's cache folder is this process's."""
+    root = str(Path(__file__).resolve().parent.parent)
+    program = (f"import sys; sys.path.insert(0, {root!r}); "
+               "from physdbg.engine.world import warm_up_held_solve; warm_up_held_solve()")
+    return [sys.executable, "-c", program]
+
+
 def start_helper() -> subprocess.Popen | None:
-    """The helper process: this interpreter, this environment (so the same numba cache),
-    compiling the held solve; None if it cannot be started."""
+    """The helper process, compiling the held solve; None if it cannot be started."""
     try:
-        return subprocess.Popen([sys.executable, "-c", _HELPER], stdin=subprocess.DEVNULL,
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        return subprocess.Popen(helper_command(), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
     except OSError:
         return None

@@ -77,10 +77,22 @@ def test_an_interrupted_compile_kills_the_helper(monkeypatch):
 def test_the_helper_program_runs_and_the_two_parts_leave_the_world_untouched():
     """The helper's program itself, on the warm cache (it loads, so it is quick), exits 0;
     the part this process runs throws its world away."""
-    done = subprocess.run([sys.executable, "-c", precompile._HELPER], capture_output=True, text=True, timeout=120)
+    done = subprocess.run(precompile.helper_command(), capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     warm_up_without_forces("grid")
     assert np.isfinite(precompile.compile_kernels("grid"))
+
+
+def test_the_helper_compiles_this_physdbg_whatever_the_working_folder_holds(tmp_path):
+    """A folder named physdbg where the helper starts (a checkout of another version, say)
+    or on PYTHONPATH is not what it imports: it is told where this physdbg lives."""
+    (tmp_path / "physdbg").mkdir()
+    (tmp_path / "physdbg" / "__init__.py").write_text("raise SystemExit('the wrong physdbg')\n")
+    program = precompile.helper_command()[-1].replace("warm_up_held_solve()", "print(__import__('physdbg').__file__)")
+    done = subprocess.run(precompile.helper_command()[:-1] + [program], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=120, env={**__import__("os").environ, "PYTHONPATH": str(tmp_path)})
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == precompile.__file__.replace("precompile.py", "__init__.py")
 
 
 def test_the_helper_fills_an_empty_cache_with_the_held_solve(tmp_path):
@@ -94,6 +106,6 @@ def test_the_helper_fills_an_empty_cache_with_the_held_solve(tmp_path):
              "print(cache_is_cold(), bool(solve_contacts._cache._cache_file._load_index()))")
     assert subprocess.run([sys.executable, "-c", check], env=env, capture_output=True, text=True,
                           check=True).stdout.strip() == "True False"
-    subprocess.run([sys.executable, "-c", precompile._HELPER], env=env, check=True, timeout=600)
+    subprocess.run(precompile.helper_command(), env=env, check=True, timeout=600)
     assert subprocess.run([sys.executable, "-c", check], env=env, capture_output=True, text=True,
                           check=True).stdout.strip() == "False True"
