@@ -17,9 +17,9 @@ measured, and lost: the loop's own part is the longer.)
 
 No helper when only one CPU is this process's to use (``taskset``, a CI runner's quota),
 when the cache already holds the held solve, or when ``parallel`` is False. It is waited
-for, never left running past the call, and killed if this process is interrupted; if it
-fails (or is slow), this process compiles what it did not, which costs time and changes
-nothing. Whichever process compiles a kernel, the machine code is the same (the golden
+for (at most HELPER_TIMEOUT), never left running past the call, and killed if this
+process is interrupted; if it fails (or is slow), this process compiles what it did not,
+which costs time and changes nothing. Whichever process compiles a kernel, the machine code is the same (the golden
 hashes do not move). Outside the engine, which starts no processes.
 """
 
@@ -30,6 +30,11 @@ import subprocess
 import sys
 from pathlib import Path
 from time import perf_counter
+
+# The helper compiles for about half a minute here; a slow machine may take a few minutes.
+# One still running after this long is stuck (a numba deadlock, a machine swapping): it is
+# killed, and this process compiles what it did not.
+HELPER_TIMEOUT = 900.0  # s
 
 
 def compile_kernels(broad_phase: str | None = None, sleeping: bool = False, parallel: bool = True) -> float:
@@ -42,10 +47,13 @@ def compile_kernels(broad_phase: str | None = None, sleeping: bool = False, para
     try:
         if helper is not None:
             warm_up_without_forces(broad_phase)
-            helper.wait()
+            try:
+                helper.wait(timeout=HELPER_TIMEOUT)
+            except subprocess.TimeoutExpired:
+                pass  # killed below; warm_up compiles the rest
         warm_up(broad_phase, sleeping)
     finally:
-        if helper is not None and helper.poll() is None:  # interrupted: leave nothing running
+        if helper is not None and helper.poll() is None:  # interrupted or stuck: leave nothing running
             helper.kill()
             helper.wait()
     return perf_counter() - started

@@ -28,8 +28,8 @@ def test_a_cold_cache_with_two_cpus_compiles_the_held_solve_in_a_helper(monkeypa
     class Helper:
         returncode = None  # running until waited for
 
-        def wait(self):
-            calls.append("helper waited for")
+        def wait(self, timeout=None):
+            calls.append(f"helper waited for (at most {timeout} s)")
             self.returncode = 0
 
         def poll(self):
@@ -43,7 +43,8 @@ def test_a_cold_cache_with_two_cpus_compiles_the_held_solve_in_a_helper(monkeypa
     monkeypatch.setattr(world, "warm_up_without_forces", lambda bp: calls.append(f"without forces {bp}"))
     monkeypatch.setattr(world, "warm_up", lambda bp, sleeping: calls.append(f"warm up {bp} {sleeping}"))
     precompile.compile_kernels("grid", sleeping=True)
-    assert calls == ["helper started", "without forces grid", "helper waited for", "warm up grid True"]
+    assert calls == ["helper started", "without forces grid",
+                     f"helper waited for (at most {precompile.HELPER_TIMEOUT} s)", "warm up grid True"]
 
 
 def test_one_cpu_or_parallel_off_means_one_process(monkeypatch):
@@ -71,6 +72,18 @@ def test_an_interrupted_compile_kills_the_helper(monkeypatch):
         precompile.compile_kernels()
     except KeyboardInterrupt:
         pass
+    assert helper.poll() is not None
+
+
+def test_a_stuck_helper_is_killed_and_the_compile_goes_on(monkeypatch):
+    """A helper that never ends does not hang the run: after HELPER_TIMEOUT it is killed and
+    this process finishes the warm-up itself."""
+    helper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    monkeypatch.setattr(precompile, "HELPER_TIMEOUT", 0.5)
+    monkeypatch.setattr(precompile, "cache_is_cold", lambda: True)
+    monkeypatch.setattr(precompile, "usable_cpus", lambda: 2)
+    monkeypatch.setattr(precompile, "start_helper", lambda: helper)
+    assert precompile.compile_kernels() < 30.0
     assert helper.poll() is not None
 
 
