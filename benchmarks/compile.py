@@ -1,6 +1,6 @@
 """The cold compile: every kernel compiled into an empty cache, timed (issue 10's ≤ 10 s target).
 
-    .venv/bin/python benchmarks/compile.py [--one-process] [--by-function [--top 40]]
+    .venv/bin/python benchmarks/compile.py [--one-process] [--by-function [--top 40]] [--arguments]
 
 Points ``NUMBA_CACHE_DIR`` at a new temporary folder (removed afterwards), then times
 ``physdbg.precompile.compile_kernels("grid", sleeping=True)``: what ``physdbg record`` and
@@ -8,7 +8,9 @@ Points ``NUMBA_CACHE_DIR`` at a new temporary folder (removed afterwards), then 
 ``--one-process`` forces one. Prints the wall time and this process's CPU time (the
 helper's is its own). ``--by-function`` (implies one process) lists each compiled
 function's own time and with its callees, from numba's ``numba:compile`` events, the
-largest first: where a cold compile goes.
+largest first: where a cold compile goes. ``--arguments`` (instead) times numba compiling
+a trivial function and one caller of it, taking 4, 16 or 40 arrays (the engine's kernels
+take 10–45): what each array argument costs a compile, whatever the function does.
 """
 
 from __future__ import annotations
@@ -50,13 +52,45 @@ class _CompileTimes:
         event.register("numba:compile", Listener())
 
 
+def argument_cost() -> None:
+    """Compile time of a trivial callee and its caller by the number of arrays they take."""
+    import numpy as np
+    from numba import njit
+
+    def pair(tag: str, arrays: int, sites: int):
+        names = ", ".join(f"a{i}" for i in range(arrays))
+        body = " + ".join(f"a{i}[i, 0]" for i in range(arrays))
+        calls = "".join(f"        out += callee_{tag}(i % 4, {names})\n" for _ in range(sites))
+        source = (f"def callee_{tag}(i, {names}):\n    return {body}\n"
+                  f"def caller_{tag}({names}):\n    out = 0.0\n    for i in range(8):\n{calls}    return out\n")
+        space: dict = {}
+        exec(source, space)  # fresh functions: nothing cached, nothing shared
+        space[f"callee_{tag}"] = njit(space[f"callee_{tag}"])
+        space[f"caller_{tag}"].__globals__[f"callee_{tag}"] = space[f"callee_{tag}"]
+        return njit(space[f"caller_{tag}"])
+
+    array = np.ones((4, 3))
+    pair("warm", 2, 1)(array, array)  # numba's own first-use setup, not counted
+    for arrays in (4, 16, 40):
+        for sites in (1, 5):
+            caller = pair(f"{arrays}_{sites}", arrays, sites)
+            started = time.perf_counter()
+            caller(*([array] * arrays))
+            print(f"  {arrays:2d} arrays, {sites} call site{'s' if sites > 1 else ' '}: "
+                  f"{time.perf_counter() - started:.2f} s to compile")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--one-process", action="store_true")
     parser.add_argument("--by-function", action="store_true", help="each function's compile time (one process)")
     parser.add_argument("--top", type=int, default=40)
+    parser.add_argument("--arguments", action="store_true", help="compile time by array arguments, alone")
     args = parser.parse_args()
     try:
+        if args.arguments:
+            argument_cost()
+            return
         times = _CompileTimes() if args.by_function else None
         from physdbg.precompile import compile_kernels, usable_cpus
 
