@@ -10,7 +10,8 @@ helper's is its own). ``--by-function`` (implies one process) lists each compile
 function's own time and with its callees, from numba's ``numba:compile`` events, the
 largest first: where a cold compile goes. ``--arguments`` (instead) times numba compiling
 a trivial function and one caller of it, taking 4, 16 or 40 arrays (the engine's kernels
-take 10–45): what each array argument costs a compile, whatever the function does.
+take 10–45): what each array argument costs a compile, whatever the function does; and
+the same pair taking the 16 arrays' data as one structured array (rows of 16 fields).
 """
 
 from __future__ import annotations
@@ -69,6 +70,17 @@ def argument_cost() -> None:
         space[f"caller_{tag}"].__globals__[f"callee_{tag}"] = space[f"callee_{tag}"]
         return njit(space[f"caller_{tag}"])
 
+    def record_pair(tag: str, fields: int, sites: int):
+        """The same pair taking one structured array of ``fields`` float fields instead."""
+        body = " + ".join(f"r[i].f{k}" for k in range(fields))
+        calls = "".join(f"        out += callee_{tag}(i % 4, r)\n" for _ in range(sites))
+        source = (f"def callee_{tag}(i, r):\n    return {body}\n"
+                  f"def caller_{tag}(r):\n    out = 0.0\n    for i in range(8):\n{calls}    return out\n")
+        space: dict = {}
+        exec(source, space)
+        space[f"callee_{tag}"] = njit(space[f"callee_{tag}"])
+        return njit(space[f"caller_{tag}"])
+
     array = np.ones((4, 3))
     pair("warm", 2, 1)(array, array)  # numba's own first-use setup, not counted
     for arrays in (4, 16, 40):
@@ -78,6 +90,14 @@ def argument_cost() -> None:
             caller(*([array] * arrays))
             print(f"  {arrays:2d} arrays, {sites} call site{'s' if sites > 1 else ' '}: "
                   f"{time.perf_counter() - started:.2f} s to compile")
+    rows = np.zeros(8, dtype=[(f"f{k}", np.float64) for k in range(16)])
+    record_pair("warm", 16, 1)(rows)
+    for sites in (1, 5):
+        caller = record_pair(f"record_{sites}", 16, sites)
+        started = time.perf_counter()
+        caller(rows)
+        print(f"  one structured array of 16 fields, {sites} call site{'s' if sites > 1 else ' '}: "
+              f"{time.perf_counter() - started:.2f} s to compile")
 
 
 def main() -> None:
