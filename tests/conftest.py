@@ -11,8 +11,8 @@ from physdbg.observe import ListObserver
 
 def pytest_sessionstart(session):
     """Compile the kernels once, before the first test, on two cores when the cache is
-    cold and two are free (physdbg.precompile): a fresh clone's suite starts ~30 s sooner
-    than when its first tests compile them one by one in this process."""
+    cold and two are free (physdbg.precompile: ~37 s instead of ~70 s here), rather than
+    in the first tests that use them, one by one in this process."""
     from physdbg.precompile import compile_kernels
 
     compile_kernels("grid", sleeping=True)
