@@ -58,34 +58,30 @@ def argument_cost() -> None:
     import numpy as np
     from numba import njit
 
-    def pair(tag: str, arrays: int, sites: int):
-        names = ", ".join(f"a{i}" for i in range(arrays))
-        body = " + ".join(f"a{i}[i, 0]" for i in range(arrays))
-        calls = "".join(f"        out += callee_{tag}(i % 4, {names})\n" for _ in range(sites))
-        source = (f"def callee_{tag}(i, {names}):\n    return {body}\n"
-                  f"def caller_{tag}({names}):\n    out = 0.0\n    for i in range(8):\n{calls}    return out\n")
+    def pair(tag: str, params: str, body: str, sites: int):
+        """A fresh callee ``(i, params) -> body`` and a caller calling it ``sites`` times in a
+        loop (fresh functions: nothing cached, nothing shared), compiled on first call."""
+        calls = "".join(f"        out += callee_{tag}(i % 4, {params})\n" for _ in range(sites))
+        source = (f"def callee_{tag}(i, {params}):\n    return {body}\n"
+                  f"def caller_{tag}({params}):\n    out = 0.0\n    for i in range(8):\n{calls}    return out\n")
         space: dict = {}
-        exec(source, space)  # fresh functions: nothing cached, nothing shared
-        space[f"callee_{tag}"] = njit(space[f"callee_{tag}"])
-        space[f"caller_{tag}"].__globals__[f"callee_{tag}"] = space[f"callee_{tag}"]
+        exec(source, space)
+        space[f"callee_{tag}"] = njit(space[f"callee_{tag}"])  # the caller finds it in the same namespace
         return njit(space[f"caller_{tag}"])
+
+    def arrays_pair(tag: str, arrays: int, sites: int):
+        return pair(tag, ", ".join(f"a{i}" for i in range(arrays)), " + ".join(f"a{i}[i, 0]" for i in range(arrays)),
+                    sites)
 
     def record_pair(tag: str, fields: int, sites: int):
         """The same pair taking one structured array of ``fields`` float fields instead."""
-        body = " + ".join(f"r[i].f{k}" for k in range(fields))
-        calls = "".join(f"        out += callee_{tag}(i % 4, r)\n" for _ in range(sites))
-        source = (f"def callee_{tag}(i, r):\n    return {body}\n"
-                  f"def caller_{tag}(r):\n    out = 0.0\n    for i in range(8):\n{calls}    return out\n")
-        space: dict = {}
-        exec(source, space)
-        space[f"callee_{tag}"] = njit(space[f"callee_{tag}"])
-        return njit(space[f"caller_{tag}"])
+        return pair(tag, "r", " + ".join(f"r[i].f{k}" for k in range(fields)), sites)
 
     array = np.ones((4, 3))
-    pair("warm", 2, 1)(array, array)  # numba's own first-use setup, not counted
+    arrays_pair("warm", 2, 1)(array, array)  # numba's own first-use setup, not counted
     for arrays in (4, 16, 40):
         for sites in (1, 5):
-            caller = pair(f"{arrays}_{sites}", arrays, sites)
+            caller = arrays_pair(f"{arrays}_{sites}", arrays, sites)
             started = time.perf_counter()
             caller(*([array] * arrays))
             print(f"  {arrays:2d} arrays, {sites} call site{'s' if sites > 1 else ' '}: "
@@ -102,11 +98,13 @@ def argument_cost() -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("--one-process", action="store_true")
+    parser.add_argument("--one-process", action="store_true", help="no helper process, even with two CPUs free")
     parser.add_argument("--by-function", action="store_true", help="each function's compile time (one process)")
-    parser.add_argument("--top", type=int, default=40)
+    parser.add_argument("--top", type=int, default=40, help="functions --by-function lists (default 40)")
     parser.add_argument("--arguments", action="store_true", help="compile time by array arguments, alone")
     args = parser.parse_args()
+    if args.top < 1:
+        parser.error(f"--top must be at least 1, got {args.top}")
     try:
         if args.arguments:
             argument_cost()

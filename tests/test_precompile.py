@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -87,9 +88,9 @@ def test_a_stuck_helper_is_killed_and_the_compile_goes_on(monkeypatch):
     assert helper.poll() is not None
 
 
-def test_the_helper_program_runs_and_the_two_parts_leave_the_world_untouched():
+def test_the_helper_program_and_this_process_s_part_run_on_a_warm_cache():
     """The helper's program itself, on the warm cache (it loads, so it is quick), exits 0;
-    the part this process runs throws its world away."""
+    this process's part runs too, and a warm-up after them takes a finite time."""
     done = subprocess.run(precompile.helper_command(), capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     warm_up_without_forces("grid")
@@ -103,7 +104,7 @@ def test_the_helper_compiles_this_physdbg_whatever_the_working_folder_holds(tmp_
     (tmp_path / "physdbg" / "__init__.py").write_text("raise SystemExit('the wrong physdbg')\n")
     program = precompile.helper_command()[-1].replace("warm_up_held_solve()", "print(__import__('physdbg').__file__)")
     done = subprocess.run(precompile.helper_command()[:-1] + [program], cwd=tmp_path, capture_output=True, text=True,
-                          timeout=120, env={**__import__("os").environ, "PYTHONPATH": str(tmp_path)})
+                          timeout=120, env={**os.environ, "PYTHONPATH": str(tmp_path)})
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == precompile.__file__.replace("precompile.py", "__init__.py")
 
@@ -112,8 +113,6 @@ def test_the_helper_fills_an_empty_cache_with_the_held_solve(tmp_path):
     """The real thing, once: the helper's program compiles into an empty cache folder, and
     a process started afterwards finds the held solve and the resting solve there (so the
     main process's warm-up loads them instead of compiling them). About half a minute."""
-    import os
-
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
     check = ("from physdbg.precompile import cache_is_cold; from physdbg.engine.resting import solve_contacts; "
              "print(cache_is_cold(), bool(solve_contacts._cache._cache_file._load_index()))")
