@@ -20,7 +20,7 @@ import numpy as np
 class LoopParticles(NamedTuple):
     """Per-sphere arrays (N rows): positions, velocities (N, 3), path and contact-solved
     accelerations a, acc (N, 3) m/s², radius, inverse_mass, restitution, anchor time sigma
-    (s), prediction version (int64), last contact time (s since the run began)."""
+    (s), last contact time (s since the run began)."""
 
     x: np.ndarray
     v: np.ndarray
@@ -30,7 +30,6 @@ class LoopParticles(NamedTuple):
     inverse_mass: np.ndarray
     restitution: np.ndarray
     sigma: np.ndarray
-    version: np.ndarray
     last_contact: np.ndarray
 
 

@@ -38,7 +38,7 @@ class ReferenceWorld(World):
             for kind, ia, ib in every:
                 scratch.reset()
                 predict_into(kind, ia, ib, st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma,
-                             ctx.version, ctx.dt, self._integrator, self._k, self._detection, s.samples,
+                             ctx.dt, self._integrator, self._k, self._detection, s.samples,
                              s.contact_tolerance * 1e-3, self._walls_group, self.held, scratch.test_int,
                              scratch.test_float, scratch.test_outcome, scratch.heap_toi, scratch.heap_data,
                              scratch.counters, False)

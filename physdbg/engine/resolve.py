@@ -124,7 +124,7 @@ def judge_contact(kind, ia, other, toi, particles, method, walls, h, contacts, c
     row is begun (time, normal, point, velocities before) and :func:`finish_with_held`
     must solve it with the held contacts it reaches."""
     # (unpacked to distinct names: numba types each variable once)
-    x, v, a, acc, radius, inverse_mass, restitution, sigma, _version, last_contact = particles
+    x, v, a, acc, radius, inverse_mass, restitution, sigma, last_contact = particles
     (run_time, step_end, integrator, drag, k, _detection, _samples, _tolerance, rest_fraction, rest_step_factor, rule,
      rapid_time, rapid_rule, anchor_is_flow, path_follows_acc, vtol, atol) = method
     ib = partner_sphere(kind, other)
@@ -190,7 +190,7 @@ def finish_with_held(kind, ia, other, toi, particles, method, h, contacts, count
     involves held contacts (its status NEEDS_HELD, and closing, used, how, is_rapid as it
     returned them): solve it with the held contacts it reaches and finish its row.
     Returns RESOLVED or OUT_OF_WORK."""
-    x, v, a, acc, _radius, inverse_mass, _restitution, sigma, _version, _last_contact = particles
+    x, v, a, acc, _radius, inverse_mass, _restitution, sigma, _last_contact = particles
     (_run_time, step_end, integrator, drag, k, _detection, _samples, _tolerance, rest_fraction, rest_step_factor,
      _rule, _rapid_time, _rapid_rule, anchor_is_flow, path_follows_acc, vtol, atol) = method
     ib = partner_sphere(kind, other)

@@ -30,7 +30,6 @@ class StepContext:
     mid-step when a contact sends a sphere out of its box); pairs (P, 2) int64, sorted candidate pairs; adj_start (N+1,),
     adj (2P,) their CSR adjacency and max_degree; grown, the spheres whose boxes grew;
     too_wide_mid_step, why a grown box broke the periodic minimum image (or None).
-    narrow_phase: version (N,) int64, predictions made of each sphere (stale heap entries).
     resolve: kernel_groups, the step's arrays as the compiled kernels take them (built
     once, World._kernel_groups).
     finish: max_overlap (m); with sleeping on (sleep.py), sleeping_pairs (the broad
@@ -56,7 +55,6 @@ class StepContext:
     max_degree: int = 0
     grown: set[int] = field(default_factory=set)
     too_wide_mid_step: str | None = None
-    version: np.ndarray | None = None
     kernel_groups: tuple | None = None
     out_of_memory: int = 0  # bytes the buffers would have needed, when max_memory stopped growing them
     max_overlap: float = 0.0

@@ -67,7 +67,9 @@ class Buffers:
 
     def __init__(self, n: int, heap: int = 1024, tests: int = 4096, contacts: int = 256):
         self.heap_toi = np.empty(heap)
-        self.heap_data = np.empty((heap, 6), dtype=np.int64)  # rid, kind, a, other, version a, version b
+        # the queue: each prediction's time, and its test-log row (kind, a, other are the
+        # row's) and the batch it was made in (stale once a later batch changed a or other)
+        self.heap_data = np.empty((heap, 2), dtype=np.int64)  # rid, batch
         self.test_int = np.empty((tests, 3), dtype=np.int64)  # kind, a, other
         self.test_float = np.empty((tests, 2))  # start, toi
         self.test_outcome = np.empty(tests, dtype=np.int8)
@@ -120,7 +122,7 @@ class Buffers:
         return heap + log + rows + fixed, log, rows
 
 
-HEAP_ROW_BYTES = 8 + 6 * 8  # heap_toi, heap_data
+HEAP_ROW_BYTES = 8 + 2 * 8  # heap_toi, heap_data
 TEST_ROW_BYTES = 3 * 8 + 2 * 8 + 1  # test_int, test_float, test_outcome
 
 
@@ -148,61 +150,63 @@ def _less(toi, data, i, j):
 
 
 @njit(cache=True, inline="always")
-def _swap(toi, data, i, j):
-    t = toi[i]
-    toi[i] = toi[j]
-    toi[j] = t
-    for c in range(6):
-        d = data[i, c]
-        data[i, c] = data[j, c]
-        data[j, c] = d
-
-
-@njit(cache=True, inline="always")
-def heap_push(toi, data, counters, t, rid, kind, a, other, va, vb):
+def heap_push(toi, data, counters, t, rid, batch):
+    """Queue the prediction of test-log row ``rid`` at time t (s), made in ``batch``: the
+    new entry rises through a hole (each parent on its way moves down once) to where it
+    belongs by time, then row."""
     n = counters[HEAP_SIZE]
-    toi[n] = t
-    data[n, 0] = rid
-    data[n, 1] = kind
-    data[n, 2] = a
-    data[n, 3] = other
-    data[n, 4] = va
-    data[n, 5] = vb
     counters[HEAP_SIZE] = n + 1
     while n > 0:
         up = (n - 1) // 2
-        if _less(toi, data, n, up):
-            _swap(toi, data, n, up)
+        if t < toi[up] or (t == toi[up] and rid < data[up, 0]):
+            toi[n] = toi[up]
+            data[n, 0] = data[up, 0]
+            data[n, 1] = data[up, 1]
             n = up
         else:
             break
+    toi[n] = t
+    data[n, 0] = rid
+    data[n, 1] = batch
 
 
 @borrowing
 def heap_pop(toi, data, counters):
-    """Move the smallest entry to the slot just past the heap and return that slot."""
+    """Move the smallest entry to the slot just past the heap and return that slot. The
+    last entry sinks from the root through a hole (each smaller child moves up once),
+    which leaves the same heap as swapping it down, with half the moves."""
     n = counters[HEAP_SIZE] - 1
-    _swap(toi, data, 0, n)
     counters[HEAP_SIZE] = n
+    last_t = toi[n]
+    last_rid = data[n, 0]
+    last_batch = data[n, 1]
+    toi[n] = toi[0]
+    data[n, 0] = data[0, 0]
+    data[n, 1] = data[0, 1]
     i = 0
     while True:
-        left = 2 * i + 1
-        if left >= n:
+        child = 2 * i + 1
+        if child >= n:
             break
-        child = left
-        if left + 1 < n and _less(toi, data, left + 1, left):
-            child = left + 1
-        if _less(toi, data, child, i):
-            _swap(toi, data, child, i)
+        if child + 1 < n and _less(toi, data, child + 1, child):
+            child += 1
+        if toi[child] < last_t or (toi[child] == last_t and data[child, 0] < last_rid):
+            toi[i] = toi[child]
+            data[i, 0] = data[child, 0]
+            data[i, 1] = data[child, 1]
             i = child
         else:
             break
+    if n > 0:
+        toi[i] = last_t
+        data[i, 0] = last_rid
+        data[i, 1] = last_batch
     return n
 
 
 # ------------------------------------------------------------------------------ predict
 @njit(cache=True, inline="always")
-def _record(kind, i, j, start, t, step_end, version, test_int, test_float, test_outcome, heap_toi, heap_data,
+def _record(kind, i, j, start, t, step_end, test_int, test_float, test_outcome, heap_toi, heap_data,
             counters, push):
     """Count a swept test, log it (every test, or only a hit: counters[KEEP_MISSES]) and
     push a hit onto the heap if ``push``. Rows keep the order of the tests, so the heap's
@@ -220,12 +224,11 @@ def _record(kind, i, j, start, t, step_end, version, test_int, test_float, test_
     test_outcome[rid] = OUTCOME_MISS
     counters[ROWS] = rid + 1
     if push and hit:
-        b = partner_sphere(kind, j)
-        heap_push(heap_toi, heap_data, counters, start + t, rid, kind, i, j, version[i], version[b] if b >= 0 else 0)
+        heap_push(heap_toi, heap_data, counters, start + t, rid, counters[BATCH])
 
 
 @njit(cache=True, inline="always")
-def _predict(kind, ia, other, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
+def _predict(kind, ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
              tolerance, walls, held, test_int, test_float, test_outcome, heap_toi, heap_data, counters, push):
     """Swept test of (kind, ia, other) (pairs: ia < other) from the anchors; record it,
     push a hit. A held contact is not tested."""
@@ -234,12 +237,12 @@ def _predict(kind, ia, other, x, v, a, radius, sigma, version, step_end, integra
         return
     start, t = time_of_impact(kind, ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
                               tolerance, walls)
-    _record(kind, ia, other, start, t, step_end, version, test_int, test_float, test_outcome, heap_toi, heap_data,
+    _record(kind, ia, other, start, t, step_end, test_int, test_float, test_outcome, heap_toi, heap_data,
             counters, push)
 
 
 @borrowing
-def predict_into(kind, ia, ib, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
+def predict_into(kind, ia, ib, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
                  tolerance, walls, held, test_int, test_float, test_outcome, heap_toi, heap_data, counters, push):
     """Swept-test candidates (kind, ia[m], ib[m]); record each test; push hits if ``push``.
 
@@ -247,13 +250,13 @@ def predict_into(kind, ia, ib, x, v, a, radius, sigma, version, step_end, integr
     (resting.HeldContacts), which are not tested.
     """
     for m in range(ia.shape[0]):
-        _predict(kind, ia[m], ib[m], x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
+        _predict(kind, ia[m], ib[m], x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
                  tolerance, walls, held, test_int, test_float, test_outcome, heap_toi, heap_data, counters, push)
 
 
 # ------------------------------------------------------------------------------ resolve
 @borrowing
-def _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples, tolerance, walls,
+def _repredict(p, x, v, a, radius, sigma, step_end, integrator, k, detection, samples, tolerance, walls,
                held, adj_start, adj, batch_mark, batch, test_int, test_float, test_outcome, heap_toi, heap_data,
                counters, box_lo, box_hi, box_margin, path_lo, path_hi, scratch, found):
     """Push new predictions of particle p against the partners of every kind it can reach
@@ -274,7 +277,7 @@ def _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, dete
     for kind in range(KINDS):
         m = partners_of(kind, p, scratch, adj_start, adj, path_lo, path_hi, batch_mark, batch, walls, found)
         for s in range(m):
-            _predict(kind, found[s, 0], found[s, 1], x, v, a, radius, sigma, version, step_end, integrator, k,
+            _predict(kind, found[s, 0], found[s, 1], x, v, a, radius, sigma, step_end, integrator, k,
                      detection, samples, tolerance, walls, held, test_int, test_float, test_outcome, heap_toi,
                      heap_data, counters, True)
     return inside
@@ -314,7 +317,6 @@ def run_time_order(particles, method, walls, held, candidates, budgets, buffers)
     It stops for what must allocate: a contact to be solved with held contacts
     (resolve.finish_with_held), solved here before it carries on.
     """
-    version = particles[8]
     max_degree = candidates[5]
     work_budget = budgets[2]
     (_heap_toi, heap_data, _test_int, _test_float, test_outcome, contacts, counters, pending, changed, batch_mark,
@@ -332,21 +334,20 @@ def run_time_order(particles, method, walls, held, candidates, budgets, buffers)
         rid, kind, ia, other, how = judged[0], judged[1], judged[2], judged[3], judged[4]
         solved = finish_with_held(kind, ia, other, judged_f[0], particles, method, held, contacts, counters, CONTACTS,
                                   RAPID, changed, work_budget, judged_f[1], judged_f[2], how, judged_f[3] != 0.0)
-        _after_contact(solved, rid, version, batch_mark, pending, changed, test_outcome, counters, requery_count)
+        _after_contact(solved, rid, batch_mark, pending, changed, test_outcome, counters, requery_count)
         if solved == OUT_OF_WORK:
             mark_capped(heap_data, test_outcome, counters)
             return RESTING_BUDGET
 
 
 @borrowing
-def _after_contact(status, rid, version, batch_mark, pending, changed, test_outcome, counters, requery_count):
+def _after_contact(status, rid, batch_mark, pending, changed, test_outcome, counters, requery_count):
     """A resolved (or skipped) contact's bookkeeping: its test's outcome, and the spheres
     whose paths changed (``changed``) queued for re-prediction in a new batch."""
     test_outcome[rid] = OUTCOME_SUPERSEDED if status == SKIPPED else OUTCOME_HIT
     counters[BATCH] += 1
     for s in range(changed[0]):
         p = changed[1 + s]
-        version[p] += 1
         batch_mark[p] = counters[BATCH]
         pending[s] = p
     counters[PENDING_COUNT] = changed[0]
@@ -361,7 +362,7 @@ def _run_events(particles, method, walls, held, candidates, budgets, buffers, sc
     the contact in judged, judged_f: see run_time_order)."""
     # positional, in kernel_args' field order (the groups come as plain tuples, see there);
     # distinct names for what the loop does not read itself: numba types each name once
-    x, v, a, _acc, radius, _inverse_mass, _restitution, sigma, version, _last_contact = particles
+    x, v, a, _acc, radius, _inverse_mass, _restitution, sigma, _last_contact = particles
     (_run_time, step_end, integrator, _drag, k, detection, samples, tolerance, _rest_fraction, _rest_step_factor,
      _rule, _rapid_time, _rapid_rule, _anchor_is_flow, _path_follows_acc, _vtol, _atol) = method
     nw = walls[0].shape[0]
@@ -378,7 +379,7 @@ def _run_events(particles, method, walls, held, candidates, budgets, buffers, sc
                     return GROW
                 p = pending[counters[PENDING_AT]]
                 counters[PENDING_AT] += 1
-                if not _repredict(p, x, v, a, radius, sigma, version, step_end, integrator, k, detection, samples,
+                if not _repredict(p, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
                                   tolerance, walls, held, adj_start, adj, batch_mark, counters[BATCH], test_int,
                                   test_float, test_outcome, heap_toi, heap_data, counters, box_lo, box_hi,
                                   box_margin, path_lo, path_hi, scratch, found):
@@ -394,7 +395,8 @@ def _run_events(particles, method, walls, held, candidates, budgets, buffers, sc
         if (heap_toi.shape[0] - counters[HEAP_SIZE] < room or test_outcome.shape[0] - counters[ROWS] < room
                 or contacts.shape[0] - counters[CONTACTS] < 2):
             return GROW
-        if not held_room(held, heap_data[0, 2], partner_sphere(heap_data[0, 1], heap_data[0, 3])):
+        top = heap_data[0, 0]
+        if not held_room(held, test_int[top, 1], partner_sphere(test_int[top, 0], test_int[top, 2])):
             return GROW_HELD
         if counters[TESTS] >= max_tests:
             mark_capped(heap_data, test_outcome, counters)
@@ -403,11 +405,13 @@ def _run_events(particles, method, walls, held, candidates, budgets, buffers, sc
         counters[EVENTS] += 1
         toi = heap_toi[slot]
         rid = heap_data[slot, 0]
-        kind = heap_data[slot, 1]
-        ia = heap_data[slot, 2]
-        other = heap_data[slot, 3]
+        batch = heap_data[slot, 1]
+        kind = test_int[rid, 0]
+        ia = test_int[rid, 1]
+        other = test_int[rid, 2]
         ib = partner_sphere(kind, other)
-        if version[ia] != heap_data[slot, 4] or (ib >= 0 and version[ib] != heap_data[slot, 5]):
+        # stale: a batch after the one that made the prediction changed a sphere of it
+        if batch_mark[ia] > batch or (ib >= 0 and batch_mark[ib] > batch):
             test_outcome[rid] = OUTCOME_SUPERSEDED
             continue
         if counters[CONTACTS] >= cap:
@@ -429,7 +433,7 @@ def _run_events(particles, method, walls, held, candidates, budgets, buffers, sc
             judged_f[3] = 1.0 if is_rapid else 0.0
             return _HELD_SOLVE
         # re-predict only the particles whose paths changed (next time round the loop)
-        _after_contact(status, rid, version, batch_mark, pending, changed, test_outcome, counters, requery_count)
+        _after_contact(status, rid, batch_mark, pending, changed, test_outcome, counters, requery_count)
 
 
 # ------------------------------------------------------------------------------ step helpers

@@ -273,7 +273,6 @@ class World:
         The broad phase paired the boxes grown to what a sphere could reach after a contact;
         until a contact changes a path, only the path's own box can meet anything, and a
         changed path is tested again against every partner of the grown box (timeline)."""
-        ctx.version = np.zeros(self.state.count, dtype=np.int64)
         # an unobserved step logs only the tests that hit (Buffers.reset)
         self._buf.reset(keep_misses=wants_swept_tests(ctx.observer))
         push = self.settings.ordering == "time"
@@ -449,8 +448,8 @@ class World:
         buf = self._buf
         if ctx.out_of_memory or not self._ensure(ctx, ia.size, ia.size, 0):
             return  # the step stops before resolving anything more (_resolve)
-        predict_into(kind, ia, ib, st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma, ctx.version,
-                     ctx.dt, self._integrator, self._k, self._detection, s.samples, s.contact_tolerance * 1e-3,
+        predict_into(kind, ia, ib, st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma, ctx.dt,
+                     self._integrator, self._k, self._detection, s.samples, s.contact_tolerance * 1e-3,
                      self._walls_group, self.held, buf.test_int, buf.test_float, buf.test_outcome, buf.heap_toi,
                      buf.heap_data, buf.counters, push)
 
@@ -598,7 +597,7 @@ class World:
     def _build_kernel_groups(self, ctx: StepContext) -> tuple[tuple, tuple, tuple]:
         st, s = self.state, self.settings
         particles = LoopParticles(st.positions, st.velocities, ctx.path_accel, self._acc, st.radius, self._inverse_mass,
-                                  st.restitution, ctx.sigma, ctx.version, self._last_contact)
+                                  st.restitution, ctx.sigma, self._last_contact)
         method = LoopMethod(ctx.run_time, ctx.dt, self._integrator, self._drag, self._k, self._detection, s.samples,
                             s.contact_tolerance * 1e-3, s.rest_fraction, self._rest_step_factor,
                             RESTITUTION_RULES.index(s.restitution_rule), s.rapid_contact_time,
