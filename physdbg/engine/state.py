@@ -6,10 +6,12 @@ Nothing here knows about files: :mod:`physdbg.scene` builds these from TOML.
 from __future__ import annotations
 
 import hashlib
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from .jit import kernel
 from .motion import INTEGRATOR_NAMES
 from .toi import DETECTION_NAMES
 
@@ -202,9 +204,10 @@ class NonFiniteState(FloatingPointError):
 def first_non_finite(positions: np.ndarray, velocities: np.ndarray) -> tuple[int, str, int] | None:
     """(first particle, "position" or "velocity", how many) whose state is not finite, or None."""
     # fast path, every step: a sum is finite when no entry is NaN or infinite (or, with
-    # finite entries that overflow the sum, the exact check below finds nothing): 0.2 ms
-    # instead of 5 ms at 100k particles
-    if np.isfinite(positions.sum() + velocities.sum()):
+    # finite entries that overflow the sum, the exact check below finds nothing); compiled,
+    # one pass: 2 µs at 1 000 particles (numpy's two sums: 15 µs within a step)
+    if _sum_is_finite(np.ascontiguousarray(positions, dtype=np.float64),
+                      np.ascontiguousarray(velocities, dtype=np.float64)):
         return None
     bad_x = ~np.isfinite(positions).all(axis=1)
     bad_v = ~np.isfinite(velocities).all(axis=1)
@@ -213,6 +216,15 @@ def first_non_finite(positions: np.ndarray, velocities: np.ndarray) -> tuple[int
         return None
     first = int(np.argmax(bad))
     return first, "position" if bad_x[first] else "velocity", int(bad.sum())
+
+
+@kernel
+def _sum_is_finite(x, v):
+    """Is the sum of every entry of x and v (N, 3) finite?"""
+    total = 0.0
+    for i in range(x.shape[0]):
+        total += x[i, 0] + x[i, 1] + x[i, 2] + v[i, 0] + v[i, 1] + v[i, 2]
+    return math.isfinite(total)
 
 
 def state_hash(positions: np.ndarray, velocities: np.ndarray) -> str:
@@ -228,20 +240,33 @@ def energies(state: State, gravity: np.ndarray) -> tuple[float, float, np.ndarra
 
     Potential energy is -m (s_i g)·x_i: zero at the origin, so only its changes mean much.
     """
-    inverse_mass = state.inverse_mass
-    movable = inverse_mass > 0
-    # every step computes these: dot products, and no copies where every particle moves
-    # (19 µs instead of 94 at 1 000 particles)
-    if movable.all():
-        m, v, x, scale = 1.0 / inverse_mass, state.velocities, state.positions, state.gravity_scale
-    else:
-        m, v = 1.0 / inverse_mass[movable], state.velocities[movable]
-        x, scale = state.positions[movable], state.gravity_scale[movable]
-    with np.errstate(invalid="ignore", over="ignore"):  # a non-finite state is reported, not warned of
-        kinetic = 0.5 * float(m @ np.einsum("ij,ij->i", v, v))
-        potential = -float((m * scale) @ (x @ np.asarray(gravity, dtype=np.float64)))
-        momentum = m @ v
-    return kinetic, potential, momentum
+    g = np.asarray(gravity, dtype=np.float64)
+    kinetic, potential, p0, p1, p2 = _energy_sums(state.positions, state.velocities, state.inverse_mass,
+                                                  state.gravity_scale, g[0], g[1], g[2])
+    return kinetic, potential, np.array([p0, p1, p2])
+
+
+@kernel
+def _energy_sums(x, v, inverse_mass, gravity_scale, g0, g1, g2):
+    """energies' sums in one compiled pass over the particles (every step computes them:
+    numpy's dot products took 55 µs of a step at 1 000 particles). Summed in index order
+    (numba does not reorder float additions without fastmath), so a run's energies are
+    deterministic like its states."""
+    kinetic = 0.0
+    potential = 0.0
+    p0 = 0.0
+    p1 = 0.0
+    p2 = 0.0
+    for i in range(x.shape[0]):
+        w = inverse_mass[i]
+        if w > 0.0:
+            m = 1.0 / w
+            kinetic += m * (v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2])
+            potential += m * gravity_scale[i] * (x[i, 0] * g0 + x[i, 1] * g1 + x[i, 2] * g2)
+            p0 += m * v[i, 0]
+            p1 += m * v[i, 1]
+            p2 += m * v[i, 2]
+    return 0.5 * kinetic, -potential, p0, p1, p2
 
 
 def budget_value(name: str, value: int | None, spheres: int) -> int:
