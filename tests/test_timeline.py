@@ -1,5 +1,5 @@
 """timeline.py's event queue, and its step helpers: the pair list a mid-step re-query
-grows, and its adjacency."""
+grows, and its adjacency; the loop's own re-query."""
 
 from __future__ import annotations
 
@@ -7,8 +7,9 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from physdbg.engine.timeline import (COUNTERS, HEAP_SIZE, adjacency_from_pairs, heap_pop, heap_push,
-                                     merge_sorted_pairs)
+from physdbg.engine.broadphase.boxes import overlapping
+from physdbg.engine.timeline import (COUNTERS, HEAP_SIZE, adjacency_from_pairs, grow_unpartnered, heap_pop,
+                                     heap_push, merge_sorted_pairs)
 
 
 def _sorted_pairs(pairs: set[tuple[int, int]]) -> np.ndarray:
@@ -63,3 +64,33 @@ def test_the_queue_pops_by_time_then_row_whatever_the_interleaving(times, pops):
         pop()
     assert popped == expected
     assert counters[HEAP_SIZE] == 0
+
+
+# box bounds from a few values, so that boxes touch, coincide and hold signed zeros and NaN
+_BOUND = st.sampled_from([-1.0, -0.5, -0.0, 0.0, 0.25, 0.5, 1.0, float("nan")])
+
+
+@settings(max_examples=300, deadline=None)
+@given(n=st.integers(2, 12), data=st.data())
+def test_the_loops_requery_finds_nothing_exactly_when_the_worlds_would(n, data):
+    """grow_unpartnered answers the world's re-query (World._refresh_box on a broad phase
+    whose query scans every box) where that would find no new partner: it grows the box
+    bit for bit as np.minimum and np.maximum do, and leaves everything alone otherwise."""
+    lo = np.array(data.draw(st.lists(st.lists(_BOUND, min_size=3, max_size=3), min_size=n, max_size=n)))
+    hi = lo + np.array(data.draw(st.lists(st.lists(st.sampled_from([0.0, 0.25, 1.0]), min_size=3, max_size=3),
+                                          min_size=n, max_size=n)))
+    every = [(i, j) for i in range(n) for j in range(i + 1, n)]
+    start, partners = adjacency_from_pairs(_sorted_pairs(data.draw(st.sets(st.sampled_from(every)))), n)
+    p = data.draw(st.integers(0, n - 1))
+    path_box = np.array(data.draw(st.lists(st.lists(_BOUND, min_size=3, max_size=3), min_size=2, max_size=2)))
+    # the world's way: grow, scan every box, drop p and its known partners
+    grown_lo, grown_hi = lo.copy(), hi.copy()
+    grown_lo[p] = np.minimum(lo[p], path_box[0])
+    grown_hi[p] = np.maximum(hi[p], path_box[1])
+    found = set(overlapping(grown_lo, grown_hi, grown_lo[p], grown_hi[p]).tolist())
+    new = found - {p} - set(partners[start[p]:start[p + 1]].tolist())
+    box_lo, box_hi = lo.copy(), hi.copy()
+    alone = grow_unpartnered(p, path_box, box_lo, box_hi, start, partners)
+    assert alone == (not new)
+    want_lo, want_hi = (grown_lo, grown_hi) if alone else (lo, hi)
+    assert box_lo.tobytes() == want_lo.tobytes() and box_hi.tobytes() == want_hi.tobytes()

@@ -85,8 +85,10 @@ class LoopWalls(NamedTuple):
 class LoopCandidates(NamedTuple):
     """The broad phase's answer: CSR partners (adj_start (N+1,), adj), the swept boxes
     box_lo, box_hi (N, 3) m (grown to each sphere's reach) with their margin (m), the
-    largest partner count, and path_lo, path_hi (N, 3) m, the box of each sphere's current
-    path over the rest of the step (the loop updates a sphere's when it re-predicts it)."""
+    largest partner count, path_lo, path_hi (N, 3) m, the box of each sphere's current
+    path over the rest of the step (the loop updates a sphere's when it re-predicts it),
+    and scan_boxes: a re-query may be a scan of every swept box, run in the loop
+    (timeline.grow_unpartnered; the broad phase's query is that scan, no axis periodic)."""
 
     adj_start: np.ndarray
     adj: np.ndarray
@@ -96,6 +98,7 @@ class LoopCandidates(NamedTuple):
     max_degree: int
     path_lo: np.ndarray
     path_hi: np.ndarray
+    scan_boxes: bool
 
 
 class LoopBudgets(NamedTuple):

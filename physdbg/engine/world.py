@@ -175,6 +175,8 @@ class World:
             wrap_positions(state.positions, self._period_origin, self._period)
             self.broad_phase = PeriodicBroadPhase(self.broad_phase, self._period_origin, self._period)
         self._buf = Buffers(state.count)
+        # a re-query the loop can answer itself (timeline.grow_unpartnered) without a pause
+        self._scan_boxes = bool(self.broad_phase.query_scans_boxes) and not self._periodic
         # sleeping (sleep.py): the step reads these, not state.inverse_mass and the free
         # accelerations, so a sleeping sphere is immovable and feels no gravity
         self._inverse_mass = state.inverse_mass
@@ -469,7 +471,7 @@ class World:
                 return "max_memory"
             # the held store, the adjacency and the buffers are replaced when they grow
             candidates = tuple(LoopCandidates(ctx.adj_start, ctx.adj, ctx.lo, ctx.hi, self._box_margin,
-                                              ctx.max_degree, ctx.path_lo, ctx.path_hi))
+                                              ctx.max_degree, ctx.path_lo, ctx.path_hi, self._scan_boxes))
             status = run_time_order(particles, method, walls, self.held, candidates, budgets, buf.loop())
             if status == DONE:
                 return None

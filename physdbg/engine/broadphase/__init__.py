@@ -23,11 +23,14 @@ from .boxes import NO_LIMIT, overlapping
 class BroadPhase(Protocol):
     """What World uses of a broad phase. stats: what the last ``pairs`` call measured
     (numbers by name, shown in BroadPhaseInfo); nodes: the tree it built (BVHs:
-    bvh.BVHNodes) or None."""
+    bvh.BVHNodes) or None; query_scans_boxes: whether ``query`` tests every box it is
+    given as it is now (a linear scan), so that the contact loop may run the same scan
+    itself (timeline: a re-query that finds nothing new need not pause the loop)."""
 
     name: str
     stats: dict
     nodes: object | None
+    query_scans_boxes: bool
 
     def pairs(self, lo: np.ndarray, hi: np.ndarray, limit: int = ...) -> np.ndarray: ...
 
@@ -43,6 +46,7 @@ class BruteForce:
 
     name = "brute-force"
     nodes = None
+    query_scans_boxes = True
 
     def __init__(self, block: int = 512):
         self.block = block

@@ -571,6 +571,7 @@ class BVH:
     max_cost_growth: float = 1.3
     name: str = field(init=False)
     nodes: BVHNodes | None = field(default=None, init=False, repr=False)
+    query_scans_boxes: bool = field(default=False, init=False, repr=False)  # the tree is of the old boxes
     stats: dict = field(default_factory=dict, init=False, repr=False)
     _cost_at_build: float = field(default=0.0, init=False, repr=False)
     _since_build: int = field(default=0, init=False, repr=False)

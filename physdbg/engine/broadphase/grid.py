@@ -250,6 +250,7 @@ class UniformGrid:
 
     name = "grid"
     nodes = None  # no tree
+    query_scans_boxes = True
 
     def __init__(self, cell: float | None = None):
         self.cell = cell

@@ -52,6 +52,7 @@ class PeriodicBroadPhase:
     def __init__(self, inner, origin: np.ndarray, period: np.ndarray):
         self.inner = inner
         self.name = inner.name
+        self.query_scans_boxes = False  # through images: the loop's scan has none
         self.origin = np.asarray(origin, dtype=np.float64)
         self.period = np.asarray(period, dtype=np.float64)
 
