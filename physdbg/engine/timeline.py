@@ -16,7 +16,9 @@ re-predicted one by one from a pending list, so the loop can pause between any t
 them. It *pauses* and returns
 to Python for:
 
-* REQUERY: a new path left the swept box its broad-phase pairs were found for;
+* REQUERY: a new path left the swept box its broad-phase pairs were found for, and may
+  meet a sphere it was never paired with (the loop answers a re-query that finds
+  nothing new itself, where the broad phase's query is a scan: grow_unpartnered);
 * GROW: a buffer, or the held-contact store, is nearly full.
 
 It stops for good with CAPPED (the contact budget, max_events_per_step), TEST_BUDGET
