@@ -46,10 +46,30 @@ def test_the_command_refuses_bad_checkpoint_options_with_a_clear_error(tmp_path,
     cases = [(["--checkpoint-every", "0"], "--checkpoint-every must be at least 1"),
              (["--resume", str(tmp_path / "none")], "No such file"),
              (["--count", "60", "--resume", path], "is a checkpoint of another run (--count 50), not of --count 60"),
-             (["--resume", str(tmp_path / "junk")], "cannot resume from")]
+             (["--resume", str(tmp_path / "junk")], "cannot resume from"),
+             (["--rounds", "2"], "more than 1 only with --peers"),
+             (["--peers", "--rounds", "0"], "--rounds must be at least 1")]
     for argv, said in cases:
         monkeypatch.setattr("sys.argv", ["box_rain.py", *argv])
         with pytest.raises(SystemExit) as stopped:
             box_rain.main()
         assert stopped.value.code == 2
         assert said in capsys.readouterr().err
+
+
+def test_rounds_time_every_engine_in_turn_and_summarise_each_ratio(monkeypatch, capsys):
+    """--rounds: physdbg and each peer run once a round, in turn; every round's ratio is
+    the peer's time over that round's physdbg time, and the summary is their median and
+    range (the peers here are stand-ins that take a known time)."""
+    from benchmarks import box_rain
+
+    peer_seconds = iter([2.0, 1.0, 4.0, 3.0, 6.0, 5.0])  # pybullet, mujoco in each of three rounds
+    monkeypatch.setattr(box_rain, "run_pybullet", lambda scene: next(peer_seconds))
+    monkeypatch.setattr(box_rain, "run_mujoco", lambda scene: next(peer_seconds))
+    physdbg_seconds = iter([0.5, 1.0])  # rounds two and three (round one's time is given)
+    monkeypatch.setattr(box_rain, "run_physdbg", lambda scene: {"seconds": next(physdbg_seconds)})
+    ratios = box_rain.compare_with_peers(box_rain.box_rain(20, 2), 1.0, rounds=3)
+    assert ratios == {"pybullet": [2.0, 8.0, 6.0], "mujoco-PGS10": [1.0, 6.0, 5.0]}
+    out = capsys.readouterr().out
+    assert "physdbg against pybullet over 3 rounds: median 6.00x, range 2.00-8.00x" in out
+    assert "physdbg against mujoco-PGS10 over 3 rounds: median 5.00x, range 1.00-6.00x" in out
