@@ -96,7 +96,7 @@ PARTICLE_FIELDS = {
     "velocity": "[x, y, z] in m/s (default [0, 0, 0]; must be zero when immovable)",
     "radius": "metres > 0",
     "mass": "kg > 0 (or give inverse_mass)",
-    "inverse_mass": "1/kg >= 0; 0 = immovable",
+    "inverse_mass": "1/kg: 0 = immovable, else 1e-12 to 1e12 (a mass within mass's bounds)",
     "restitution": "0 <= e <= 1 (default 1)",
     "gravity_scale": "multiplies gravity for this particle (default 1)",
 }
@@ -554,6 +554,9 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
             c.fail(p + "mass", "give mass or inverse_mass, not both")
         if "inverse_mass" in part:
             inv.append(c.number(part, "inverse_mass", p + "inverse_mass", lo=0))
+            if 0.0 < inv[-1] < 1.0 / MAX_MAGNITUDE:  # a mass past mass's own bound: its momentum overflows
+                c.fail(p + "inverse_mass", f"got {inv[-1]:g}; expected 0 (immovable) or a number >= "
+                                           f"{1.0 / MAX_MAGNITUDE:g} and <= {MAX_MAGNITUDE:g}")
         else:
             inv.append(1.0 / c.number(part, "mass", p + "mass", default=1.0, scale=True))
         if inv[-1] == 0.0 and np.any(vel[-1] != 0.0):

@@ -123,6 +123,21 @@ def test_the_classes_found_are_refused_with_the_field(override, field, words):
     assert f"'{field}" in str(info.value) and words in str(info.value)
 
 
+@pytest.mark.parametrize("inverse_mass", ["1e-300", "5e-324", "9.9e-13"])
+def test_an_inverse_mass_past_the_mass_bound_is_refused_with_the_field(inverse_mass):
+    """A mass of 1e300 kg given as its inverse was taken: the run's momentum then overflowed
+    numpy's norm (a RuntimeWarning on the user's terminal; 5e-324, the division). The
+    inverse is held to the bounds mass has; 0 (immovable) and the bounds themselves pass."""
+    text = "dt = 0.01\nsteps = 2\n[[particles]]\nposition = [0, 1, 0]\nradius = 0.1\ninverse_mass = {}\n"
+    with pytest.raises(SceneError) as info:
+        parse_scene(text.format(inverse_mass), "heavy.toml", BOUNDS)
+    assert ("heavy.toml" in str(info.value) and "'particles.0.inverse_mass'" in str(info.value)
+            and "expected 0 (immovable) or a number >= 1e-12 and <= 1e+12" in str(info.value))
+    for fine in ("0", "1e-12", "1e12"):
+        scene = parse_scene(text.format(fine), "heavy.toml", BOUNDS)
+        assert scene.state.inverse_mass.tolist() == [float(fine)]
+
+
 def test_a_deeply_nested_scene_file_is_refused(tmp_path):
     path = tmp_path / "deep.toml"
     path.write_text("dt = 0.01\nsteps = 1\nx = " + "[" * 1000 + "]" * 1000 + "\n")
