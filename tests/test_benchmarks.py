@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from benchmarks.box_rain import box_rain, load_checkpoint, run_physdbg
@@ -73,3 +74,30 @@ def test_rounds_time_every_engine_in_turn_and_summarise_each_ratio(monkeypatch, 
     out = capsys.readouterr().out
     assert "physdbg against pybullet over 3 rounds: median 6.00x, range 2.00-8.00x" in out
     assert "physdbg against mujoco-PGS10 over 3 rounds: median 5.00x, range 1.00-6.00x" in out
+
+
+def test_renumbering_the_spheres_changes_no_contact_and_the_calls_fit_in_the_step():
+    """benchmarks/step_parts.py: the spheres in any order give the same contacts (only
+    time may differ); Morton order brings partners closer in index; the calls it times
+    add up to no more than the step."""
+    from benchmarks import step_parts
+
+    runs = {}
+    for order in step_parts.ORDERS:
+        scene = step_parts.scene_for("rain", 200, 40)
+        step_parts.renumber(scene, order)
+        runs[order] = step_parts.measure(scene)
+    assert runs["as-generated"]["contacts"] > 0
+    assert len({run["contacts"] for run in runs.values()}) == 1
+    assert runs["morton"]["index_distance"] < runs["random"]["index_distance"]
+    for run in runs.values():
+        assert {"run_time_order", "predict_into", "state_hash", "broad phase pairs"} <= set(run["calls"])
+        assert 0.0 < sum(run["calls"].values()) <= run["wall"]
+
+
+def test_morton_keys_follow_the_z_curve():
+    from benchmarks.step_parts import morton_keys
+
+    corners = np.array([[x, y, z] for z in (0.0, 1.0) for y in (0.0, 1.0) for x in (0.0, 1.0)])
+    keys = morton_keys(corners, bits=1)
+    assert keys.tolist() == list(range(8))  # x the lowest bit, then y, then z

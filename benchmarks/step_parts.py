@@ -1,0 +1,157 @@
+"""Where a step's time goes, call by call, measured inside the step; and what renumbering does.
+
+    .venv/bin/python benchmarks/step_parts.py [--scene rain|gas] [--count 1000] [--steps S]
+        [--order as-generated|random|morton]
+
+Runs box-rain (``rain``: benchmarks/box_rain.py's scene, 240 steps) or the exact gas
+(``gas``: packing 0.3, 200 steps at 1 000, 10 at 32 000 and more) and prints ms/step, each
+phase of ``World.step``, and each compiled call the phases make, timed where it runs (a
+call costs more there than alone in a loop: the step's other passes leave cold caches
+and untrained branches), with the Python between them as the remainder. Also the pauses
+of the contact loop for a broad-phase re-query (``REQUERY``) a step, and the Python time
+they cost (``World._refresh_box``).
+
+``--order`` renumbers the spheres before the run: as generated, in a random order, or in
+Morton (Z-curve) order of their starting places, which puts spheres close in space close
+in index (memory locality, the issue's suggestion). The physics does not depend on the
+numbering, so the contacts come out the same; only the time may differ. The mean index
+distance of the last step's candidate pairs shows how local the order is.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+from physdbg.engine import world as world_module
+from physdbg.engine.timeline import REQUERY
+from physdbg.engine.world import warm_up
+from physdbg.scene import load_scene
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # run as a script or imported as benchmarks.step_parts
+from box_rain import box_rain  # noqa: E402
+
+# the compiled calls the step's phases make, by the name world.py imports them under
+CALLS = ("settle_held", "swept_boxes", "grow_to_reach", "split_sleeping", "adjacency_from_pairs",
+         "narrow_candidates", "predict_into", "run_time_order", "advance_particles", "max_overlap",
+         "first_non_finite", "energies", "state_hash")
+ORDERS = ("as-generated", "random", "morton")
+
+
+def scene_for(name: str, count: int, steps: int | None):
+    """The benchmark scene: box-rain or the exact gas at packing 0.3."""
+    if name == "rain":
+        return box_rain(count, steps or 240)
+    steps = steps or (200 if count < 5000 else 10)
+    return load_scene("gas", [f"generate.count={count}", "generate.packing_fraction=0.3", f"steps={steps}"])
+
+
+def morton_keys(points: np.ndarray, bits: int = 10) -> np.ndarray:
+    """(N,) Z-curve keys of points (N, 3): each axis quantised to ``bits`` bits over the
+    points' bounding cube, the bits interleaved x, y, z."""
+    low = points.min(axis=0)
+    span = float((points.max(axis=0) - low).max()) or 1.0
+    q = np.clip(((points - low) / span * (2**bits - 1)).astype(np.int64), 0, 2**bits - 1)
+    keys = np.zeros(len(points), dtype=np.int64)
+    for bit in range(bits):
+        for axis in range(3):
+            keys |= ((q[:, axis] >> bit) & 1) << (3 * bit + axis)
+    return keys
+
+
+def renumber(scene, order: str) -> None:
+    """Permute the scene's particles in place into ``order`` (one of ORDERS)."""
+    state = scene.state
+    if order == "as-generated":
+        return
+    if order == "random":
+        permutation = np.random.default_rng(0).permutation(state.count)
+    else:
+        permutation = np.argsort(morton_keys(state.positions), kind="stable")
+    for name in ("positions", "velocities", "inverse_mass", "radius", "restitution", "gravity_scale"):
+        setattr(state, name, np.ascontiguousarray(getattr(state, name)[permutation]))
+
+
+@contextlib.contextmanager
+def timed_calls(world, seconds: Counter, counts: Counter):
+    """While inside, every compiled call of CALLS that world.py makes, the broad phase's
+    ``pairs``, the sleep rules and the re-query's Python are timed into ``seconds`` (by
+    name); the loop's returns are counted into ``counts``."""
+    def wrap(name, function, count_returns=False):
+        def timed(*args, **kwargs):
+            started = time.perf_counter()
+            result = function(*args, **kwargs)
+            seconds[name] += time.perf_counter() - started
+            if count_returns:
+                counts[result] += 1
+            return result
+        return timed
+
+    saved = {name: getattr(world_module, name) for name in CALLS}
+    try:
+        for name, function in saved.items():
+            setattr(world_module, name, wrap(name, function, name == "run_time_order"))
+        world.broad_phase.pairs = wrap("broad phase pairs", world.broad_phase.pairs)
+        if world.sleepers is not None:
+            world.sleepers.end_of_step = wrap("sleep rules", world.sleepers.end_of_step)
+        world._refresh_box = wrap("re-query (Python)", world._refresh_box)  # (its new pairs' tests: predict_into)
+        yield
+    finally:
+        for name, function in saved.items():
+            setattr(world_module, name, function)
+
+
+def measure(scene) -> dict:
+    """Step the scene with every call timed: ms/step, phases, calls (s), pauses, contacts."""
+    world = scene.build_world()
+    warm_up(world.broad_phase.name, sleeping=world.sleepers is not None)
+    seconds: Counter = Counter()
+    returns: Counter = Counter()
+    phases: Counter = Counter()
+    contacts = 0
+    with timed_calls(world, seconds, returns):
+        started = time.perf_counter()
+        for _ in range(scene.steps):
+            stats = world.step(scene.dt)
+            phases.update(stats.timings)
+            contacts += stats.contacts
+        wall = time.perf_counter() - started
+    pairs = world.last_step.pairs
+    return {"steps": scene.steps, "wall": wall, "phases": phases, "calls": seconds, "contacts": contacts,
+            "requery_pauses": returns[REQUERY],
+            "index_distance": float(np.abs(pairs[:, 0] - pairs[:, 1]).mean()) if len(pairs) else 0.0}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--scene", choices=("rain", "gas"), default="rain")
+    parser.add_argument("--count", type=int, default=1000)
+    parser.add_argument("--steps", type=int, default=None, help="default: 240 (rain), 200 or 10 (gas)")
+    parser.add_argument("--order", choices=ORDERS, default="as-generated")
+    args = parser.parse_args()
+    if args.count < 2 or (args.steps is not None and args.steps < 1):
+        parser.error("--count must be at least 2 and --steps at least 1")
+    scene = scene_for(args.scene, args.count, args.steps)
+    renumber(scene, args.order)
+    result = measure(scene)
+    steps = result["steps"]
+    per_step = 1e6 / steps  # seconds over the run -> µs a step
+    print(f"{args.scene} N={args.count}, {steps} steps, spheres {args.order}: "
+          f"{1000 * result['wall'] / steps:.3f} ms/step, {result['contacts']} contacts")
+    print("  phases (ms/step): " + ", ".join(f"{name} {1000 * t / steps:.3f}" for name, t in result["phases"].items()))
+    calls = result["calls"]
+    for name, t in calls.most_common():
+        print(f"  {name:24s} {t * per_step:9.1f} µs/step")
+    print(f"  {'Python between them':24s} {(result['wall'] - sum(calls.values())) * per_step:9.1f} µs/step")
+    print(f"  loop pauses for a re-query: {result['requery_pauses'] / steps:.3f} a step; mean index distance of the "
+          f"last step's candidate pairs: {result['index_distance']:.0f}")
+
+
+if __name__ == "__main__":
+    main()
