@@ -13,9 +13,11 @@ they cost (``World._refresh_box``).
 
 ``--order`` renumbers the spheres before the run: as generated, in a random order, or in
 Morton (Z-curve) order of their starting places, which puts spheres close in space close
-in index (memory locality, the issue's suggestion). The physics does not depend on the
-numbering, so the contacts come out the same; only the time may differ. The mean index
-distance of the last step's candidate pairs shows how local the order is.
+in index (memory locality, the issue's suggestion). The contacts have come out the same
+in every order measured (box-rain 1k and 10k, the gas at 32k), though the held-contact
+solves sweep in index order, so a pile could differ in its last bits: the time is the
+point. The mean index distance of the last step's candidate pairs shows how local the
+order is.
 """
 
 from __future__ import annotations
