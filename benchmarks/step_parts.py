@@ -132,10 +132,12 @@ def measure(scene) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("--scene", choices=("rain", "gas"), default="rain")
-    parser.add_argument("--count", type=int, default=1000)
+    parser.add_argument("--scene", choices=("rain", "gas"), default="rain",
+                        help="box-rain (benchmarks/box_rain.py's scene) or the exact gas at packing 0.3")
+    parser.add_argument("--count", type=int, default=1000, help="spheres (at least 2)")
     parser.add_argument("--steps", type=int, default=None, help="default: 240 (rain), 200 or 10 (gas)")
-    parser.add_argument("--order", choices=ORDERS, default="as-generated")
+    parser.add_argument("--order", choices=ORDERS, default="as-generated",
+                        help="number the spheres as generated, at random, or in Morton order of their places")
     args = parser.parse_args()
     if args.count < 2 or (args.steps is not None and args.steps < 1):
         parser.error("--count must be at least 2 and --steps at least 1")

@@ -19,8 +19,9 @@ No helper when only one CPU is this process's to use (``taskset``, a CI runner's
 when the cache already holds the held solve, or when ``parallel`` is False. It is waited
 for (at most HELPER_TIMEOUT), never left running past the call, and killed if this
 process is interrupted; if it fails (or is slow), this process compiles what it did not,
-which costs time and changes nothing. Whichever process compiles a kernel, the machine code is the same (the golden
-hashes do not move). Outside the engine, which starts no processes.
+which costs time and changes nothing. Whichever process compiles a kernel, the machine
+code is the same (the golden hashes do not move). Outside the engine, which starts no
+processes.
 """
 
 from __future__ import annotations

@@ -101,3 +101,20 @@ def test_morton_keys_follow_the_z_curve():
     corners = np.array([[x, y, z] for z in (0.0, 1.0) for y in (0.0, 1.0) for x in (0.0, 1.0)])
     keys = morton_keys(corners, bits=1)
     assert keys.tolist() == list(range(8))  # x the lowest bit, then y, then z
+
+
+def test_step_parts_prints_each_call_and_refuses_a_bad_count(monkeypatch, capsys):
+    """benchmarks/step_parts.py as a user runs it: the header, a row per timed call, the
+    Python between them; --count 1 ends with argparse's exit 2 and says what is allowed."""
+    from benchmarks import step_parts
+
+    monkeypatch.setattr("sys.argv", ["step_parts.py", "--count", "60", "--steps", "5", "--order", "morton"])
+    step_parts.main()
+    out = capsys.readouterr().out
+    assert out.startswith("rain N=60, 5 steps, spheres morton: ")
+    assert "run_time_order" in out and "Python between them" in out and "loop pauses for a re-query" in out
+    monkeypatch.setattr("sys.argv", ["step_parts.py", "--count", "1"])
+    with pytest.raises(SystemExit) as stopped:
+        step_parts.main()
+    assert stopped.value.code == 2
+    assert "--count must be at least 2 and --steps at least 1" in capsys.readouterr().err

@@ -34,6 +34,7 @@ import numpy as np
 from numba import njit
 
 from ..events import CONTACT_ROW, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_SUPERSEDED
+from .broadphase.boxes import box_meets
 from .colliders import KINDS, partner_sphere, partners_of, time_of_impact
 from .jit import borrowing, kernel
 from .kernel_args import LoopBuffers
@@ -147,8 +148,10 @@ def _grown(array: np.ndarray, rows: int) -> np.ndarray:
 
 # ------------------------------------------------------------------------------ heap
 @njit(cache=True, inline="always")
-def _less(toi, data, i, j):
-    return toi[i] < toi[j] or (toi[i] == toi[j] and data[i, 0] < data[j, 0])
+def _precedes(t, rid, other_t, other_rid):
+    """Does the prediction at time t (s) from test-log row rid come before the one at
+    other_t from other_rid? The queue's one order: by time, ties by row (the tests' order)."""
+    return t < other_t or (t == other_t and rid < other_rid)
 
 
 @njit(cache=True, inline="always")
@@ -160,7 +163,7 @@ def heap_push(toi, data, counters, t, rid, batch):
     counters[HEAP_SIZE] = n + 1
     while n > 0:
         up = (n - 1) // 2
-        if t < toi[up] or (t == toi[up] and rid < data[up, 0]):
+        if _precedes(t, rid, toi[up], data[up, 0]):
             toi[n] = toi[up]
             data[n, 0] = data[up, 0]
             data[n, 1] = data[up, 1]
@@ -190,9 +193,9 @@ def heap_pop(toi, data, counters):
         child = 2 * i + 1
         if child >= n:
             break
-        if child + 1 < n and _less(toi, data, child + 1, child):
+        if child + 1 < n and _precedes(toi[child + 1], data[child + 1, 0], toi[child], data[child, 0]):
             child += 1
-        if toi[child] < last_t or (toi[child] == last_t and data[child, 0] < last_rid):
+        if _precedes(toi[child], data[child, 0], last_t, last_rid):
             toi[i] = toi[child]
             data[i, 0] = data[child, 0]
             data[i, 1] = data[child, 1]
@@ -304,8 +307,8 @@ def grow_unpartnered(p, path_box, box_lo, box_hi, adj_start, adj):
     p's partners (adj_start, adj: CSR, rows sorted) has a swept box (box_lo, box_hi
     (N, 3)) meeting p's grown to hold the path (touching counts, a NaN bound meets
     nothing), grow p's box so, bit for bit as the world would, and return True; else
-    change nothing and return False (the world re-queries). A scan of every box, as the
-    grid's and brute force's ``query`` are."""
+    change nothing and return False (the world re-queries). A scan of every box with
+    their query's test (boxes.box_meets, as boxes.overlapping)."""
     lo0 = _least(box_lo[p, 0], path_box[0, 0])
     lo1 = _least(box_lo[p, 1], path_box[0, 1])
     lo2 = _least(box_lo[p, 2], path_box[0, 2])
@@ -315,8 +318,7 @@ def grow_unpartnered(p, path_box, box_lo, box_hi, adj_start, adj):
     known = adj_start[p]
     last = adj_start[p + 1]
     for j in range(box_lo.shape[0]):
-        if (lo0 <= box_hi[j, 0] and box_lo[j, 0] <= hi0 and lo1 <= box_hi[j, 1] and box_lo[j, 1] <= hi1
-                and lo2 <= box_hi[j, 2] and box_lo[j, 2] <= hi2) and j != p:
+        if box_meets(lo0, lo1, lo2, hi0, hi1, hi2, box_lo, box_hi, j) and j != p:
             while known < last and adj[known] < j:  # j rises, and so does p's sorted row
                 known += 1
             if known == last or adj[known] != j:

@@ -8,6 +8,7 @@ Nothing here imports the rest of the package, so the grid, the BVHs and the inte
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from ..jit import borrowing, kernel
 
@@ -34,6 +35,15 @@ def box_misses(box, lo, hi, q, period) -> bool:
     return False
 
 
+@njit(cache=True, inline="always")
+def box_meets(lo0, lo1, lo2, hi0, hi1, hi2, lo, hi, j) -> bool:
+    """Does the box (lo0, lo1, lo2)-(hi0, hi1, hi2) meet box j of (lo, hi) (N, 3)?
+    Touching counts; a NaN bound meets nothing (a query's rule: overlapping, and the
+    contact loop's own re-query)."""
+    return (lo0 <= hi[j, 0] and lo[j, 0] <= hi0 and lo1 <= hi[j, 1] and lo[j, 1] <= hi1
+            and lo2 <= hi[j, 2] and lo[j, 2] <= hi2)
+
+
 @kernel
 def overlapping(lo, hi, box_lo, box_hi):
     """Indices (sorted, int64) of the boxes lo, hi (N, 3) that overlap one box box_lo,
@@ -43,12 +53,7 @@ def overlapping(lo, hi, box_lo, box_hi):
     out = np.empty(n, dtype=np.int64)
     found = 0
     for i in range(n):
-        meets = True
-        for c in range(3):
-            if not (box_lo[c] <= hi[i, c] and lo[i, c] <= box_hi[c]):
-                meets = False
-                break
-        if meets:
+        if box_meets(box_lo[0], box_lo[1], box_lo[2], box_hi[0], box_hi[1], box_hi[2], lo, hi, i):
             out[found] = i
             found += 1
     return out[:found]
