@@ -118,7 +118,8 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     world = scene.build_world(observer)
     if on_status is not None:
         on_status("compiling")
-    compile_seconds = compile_kernels(world.broad_phase.name, sleeping=world.sleepers is not None)
+    compile_seconds = compile_kernels(world.broad_phase.name, sleeping=world.sleepers is not None,
+                                      audit=auditor is not None)
     if on_status is not None:
         on_status("running")
     st = world.state

@@ -13,7 +13,10 @@ which the loop's held solve calls: this process compiles all that needs no resti
 first (~15 s) and the loop last, and reaches the resting solve some 23 s in, by when the
 helper has cached it (its callees first). Then ``engine.warm_up`` runs as ever and loads
 everything. (Waiting for the helper's resting solve before starting the loop was
-measured, and lost: the loop's own part is the longer.)
+measured, and lost: the loop's own part is the longer.) For an audited run (``physdbg
+run``, ``record``) the helper then compiles the audit's step checker
+(``analysis.tunnel.warm_up``, ~11 s alone), which its shorter share leaves room for; before,
+the first audited step compiled it, and the run reported it as the audit's time a step.
 
 No helper when only one CPU is this process's to use (``taskset``, a CI runner's quota),
 when the cache already holds the held solve, or when ``parallel`` is False. It is waited
@@ -38,13 +41,16 @@ from time import perf_counter
 HELPER_TIMEOUT = 900.0  # s
 
 
-def compile_kernels(broad_phase: str | None = None, sleeping: bool = False, parallel: bool = True) -> float:
+def compile_kernels(broad_phase: str | None = None, sleeping: bool = False, parallel: bool = True,
+                    audit: bool = False) -> float:
     """``engine.warm_up(broad_phase, sleeping)``, on two processes when the cache is cold
-    and two CPUs are free (module docstring); returns the seconds taken."""
+    and two CPUs are free (module docstring); audit: also the audit's step checker
+    (``analysis.tunnel.warm_up``, ~11 s cold; on the helper, after the held solve, where it
+    fits in the time this process spends on the rest); returns the seconds taken."""
     from .engine.world import warm_up, warm_up_without_forces
 
     started = perf_counter()
-    helper = start_helper() if parallel and cache_is_cold() and usable_cpus() >= 2 else None
+    helper = start_helper(audit) if parallel and cache_is_cold() and usable_cpus() >= 2 else None
     try:
         if helper is not None:
             warm_up_without_forces(broad_phase)
@@ -53,6 +59,10 @@ def compile_kernels(broad_phase: str | None = None, sleeping: bool = False, para
             except subprocess.TimeoutExpired:
                 pass  # killed below; warm_up compiles the rest
         warm_up(broad_phase, sleeping)
+        if audit:
+            from .analysis.tunnel import warm_up as warm_up_checker
+
+            warm_up_checker()
     finally:
         if helper is not None and helper.poll() is None:  # interrupted or stuck: leave nothing running
             helper.kill()
@@ -83,21 +93,25 @@ def usable_cpus() -> int:
         return os.cpu_count() or 1
 
 
-def helper_command() -> list[str]:
+def helper_command(audit: bool = False) -> list[str]:
     """The helper's command line: this interpreter, with the folder this physdbg was
     imported from first on its path (so neither the working folder nor PYTHONPATH can put
     another physdbg before it: it compiles these very sources); the environment is
-    inherited, so numba's cache folder is this process's."""
+    inherited, so numba's cache folder is this process's. audit: the audit's step checker
+    after the held solve."""
     root = str(Path(__file__).resolve().parent.parent)
     program = (f"import sys; sys.path.insert(0, {root!r}); "
                "from physdbg.engine.world import warm_up_held_solve; warm_up_held_solve()")
+    if audit:
+        program += "; from physdbg.analysis.tunnel import warm_up; warm_up()"
     return [sys.executable, "-c", program]
 
 
-def start_helper() -> subprocess.Popen | None:
-    """The helper process, compiling the held solve; None if it cannot be started."""
+def start_helper(audit: bool = False) -> subprocess.Popen | None:
+    """The helper process, compiling the held solve (and the audit's checker); None if it
+    cannot be started."""
     try:
-        return subprocess.Popen(helper_command(), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+        return subprocess.Popen(helper_command(audit), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL)
     except OSError:
         return None

@@ -15,7 +15,7 @@ from physdbg.engine.world import warm_up_without_forces
 def test_a_warm_cache_starts_no_helper(monkeypatch):
     """The suite's session start compiled everything: no second process is worth starting."""
     started = []
-    monkeypatch.setattr(precompile, "start_helper", lambda: started.append(1))
+    monkeypatch.setattr(precompile, "start_helper", lambda audit=False: started.append(1))
     assert not precompile.cache_is_cold()
     assert precompile.compile_kernels("grid", sleeping=True) < 30.0
     assert started == []
@@ -38,19 +38,30 @@ def test_a_cold_cache_with_two_cpus_compiles_the_held_solve_in_a_helper(monkeypa
 
     monkeypatch.setattr(precompile, "cache_is_cold", lambda: True)
     monkeypatch.setattr(precompile, "usable_cpus", lambda: 2)
-    monkeypatch.setattr(precompile, "start_helper", lambda: calls.append("helper started") or Helper())
+    monkeypatch.setattr(precompile, "start_helper",
+                        lambda audit=False: calls.append(f"helper started, audit {audit}") or Helper())
+    import physdbg.analysis.tunnel as tunnel
     import physdbg.engine.world as world
 
     monkeypatch.setattr(world, "warm_up_without_forces", lambda bp: calls.append(f"without forces {bp}"))
     monkeypatch.setattr(world, "warm_up", lambda bp, sleeping: calls.append(f"warm up {bp} {sleeping}"))
+    monkeypatch.setattr(tunnel, "warm_up", lambda: calls.append("checker"))
     precompile.compile_kernels("grid", sleeping=True)
-    assert calls == ["helper started", "without forces grid",
+    assert calls == ["helper started, audit False", "without forces grid",
                      f"helper waited for (at most {precompile.HELPER_TIMEOUT} s)", "warm up grid True"]
+    calls.clear()
+    # an audited run: the helper compiles the checker after the held solve; this process
+    # then loads it (or compiles what the helper did not)
+    precompile.compile_kernels("grid", sleeping=True, audit=True)
+    assert calls == ["helper started, audit True", "without forces grid",
+                     f"helper waited for (at most {precompile.HELPER_TIMEOUT} s)", "warm up grid True", "checker"]
+    assert precompile.helper_command(audit=True)[-1].endswith(
+        "warm_up_held_solve(); from physdbg.analysis.tunnel import warm_up; warm_up()")
 
 
 def test_one_cpu_or_parallel_off_means_one_process(monkeypatch):
     monkeypatch.setattr(precompile, "cache_is_cold", lambda: True)
-    monkeypatch.setattr(precompile, "start_helper", lambda: (_ for _ in ()).throw(AssertionError("no helper")))
+    monkeypatch.setattr(precompile, "start_helper", lambda audit=False: (_ for _ in ()).throw(AssertionError("no helper")))
     monkeypatch.setattr(precompile, "usable_cpus", lambda: 1)
     precompile.compile_kernels()
     monkeypatch.setattr(precompile, "usable_cpus", lambda: 2)
@@ -62,7 +73,7 @@ def test_an_interrupted_compile_kills_the_helper(monkeypatch):
     helper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
     monkeypatch.setattr(precompile, "cache_is_cold", lambda: True)
     monkeypatch.setattr(precompile, "usable_cpus", lambda: 2)
-    monkeypatch.setattr(precompile, "start_helper", lambda: helper)
+    monkeypatch.setattr(precompile, "start_helper", lambda audit=False: helper)
     import physdbg.engine.world as world
 
     def interrupted(bp):
@@ -83,7 +94,7 @@ def test_a_stuck_helper_is_killed_and_the_compile_goes_on(monkeypatch):
     monkeypatch.setattr(precompile, "HELPER_TIMEOUT", 0.5)
     monkeypatch.setattr(precompile, "cache_is_cold", lambda: True)
     monkeypatch.setattr(precompile, "usable_cpus", lambda: 2)
-    monkeypatch.setattr(precompile, "start_helper", lambda: helper)
+    monkeypatch.setattr(precompile, "start_helper", lambda audit=False: helper)
     assert precompile.compile_kernels() < 30.0
     assert helper.poll() is not None
 
@@ -121,3 +132,21 @@ def test_the_helper_fills_an_empty_cache_with_the_held_solve(tmp_path):
     subprocess.run(precompile.helper_command(), env=env, check=True, timeout=600)
     assert subprocess.run([sys.executable, "-c", check], env=env, capture_output=True, text=True,
                           check=True).stdout.strip() == "False True"
+
+
+def test_an_audited_run_loads_no_kernel_after_compile_kernels(monkeypatch):
+    """compile_kernels(audit=True) loads the audit's step checker too: with compiling and
+    loading turned off afterwards, an audited run with contacts still finds a version of
+    every kernel (else ~11 s of a cold cache went to its first step, counted as the
+    audit's time a step)."""
+    import gc
+
+    from numba.core.registry import CPUDispatcher
+
+    from physdbg import api
+
+    precompile.compile_kernels("grid", sleeping=True, audit=True)
+    for kernel in [k for k in gc.get_objects() if isinstance(k, CPUDispatcher)]:
+        monkeypatch.setattr(kernel, "_can_compile", False)
+    summary = api.run("rain", ["steps=20", "generate.count=40", "broad_phase=grid"], audit=True)
+    assert summary.contacts > 0

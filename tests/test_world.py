@@ -565,3 +565,28 @@ def test_a_sphere_sent_towards_a_partner_still_meets_it():
     world, obs = make_world(state, gravity=(0.0, 0.0, 0.0), broad_phase="brute-force")
     world.step(0.01)
     assert [(c.a, c.other) for c in obs.contacts][:2] == [(0, 1), (1, 2)]
+
+
+def test_after_warm_up_a_run_loads_no_kernel(monkeypatch):
+    # warm_up loads every version of every kernel a step calls from Python, so that a run
+    # is not charged a cache load (~5 ms each) mid-way: with compiling and loading turned
+    # off afterwards, a sleeping rain whose steps have zero, one and many contacts, and a
+    # Python re-query (World._refresh_box, rare in a run), still find a version of each.
+    # (Not caught here: a contiguous array where the version takes any layout, which numba
+    # then converts; Sleepers.end_of_step passes contiguous columns for that reason.)
+    import gc
+
+    from physdbg.engine.jit import _OneVersionPerType
+    from physdbg.engine.world import warm_up
+
+    warm_up("grid", sleeping=True)
+    kernels = [k for k in gc.get_objects() if isinstance(k, _OneVersionPerType)]
+    for k in kernels:
+        monkeypatch.setattr(k, "_can_compile", False)
+    scene = load_scene("rain", ["steps=40", "generate.count=60", "broad_phase=grid"])
+    world = scene.build_world()
+    seen = set()
+    for _ in range(scene.steps):
+        seen.add(min(world.step(scene.dt).contacts, 2))
+        world._refresh_box(world.last_step, 0)
+    assert seen == {0, 1, 2} and world.sleepers is not None

@@ -277,6 +277,8 @@ class Sleepers:
         radius (N,) m; pair_lists: the step's candidate pairs, (P, 2) arrays (awake and
         sleeping); rows: the step's contact rows (events.CONTACT_ROW). Returns (fell
         asleep, woke), int64 indices, sorted."""
+        # contiguous columns: a field of two or more rows is a strided view, of none or one
+        # a contiguous one, and each layout would be a version of its own to compile and load
+        kind, a, other, closing = (np.ascontiguousarray(rows[name]) for name in ("kind", "a", "other", "closing_speed"))
         return sleep_rules(self.asleep, self.still, self.allowed, self.down, dt, x, velocities, radius, pair_lists,
-                           rows["kind"], rows["a"], rows["other"], rows["closing_speed"], self.sleep_speed,
-                           self.sleep_time)
+                           kind, a, other, closing, self.sleep_speed, self.sleep_time)

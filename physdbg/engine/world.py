@@ -685,10 +685,13 @@ def warm_up(broad_phase: str | None = None, sleeping: bool = False) -> float:
     """
     started = perf_counter()
     _warm_up_broad_phase(broad_phase)
-    state, walls = _warm_up_world()
+    state, walls = warm_up_world()
     for detection in ("swept", "sampled"):
-        World(state.copy(), walls, Settings(detection=detection)).step(0.5)
-    # a mid-step re-query's (World._refresh_box, _add_partners), rare in this small world
+        world = World(state.copy(), walls, Settings(detection=detection))
+        world.step(0.5)
+    # a mid-step re-query's (World._refresh_box, _add_partners), rare in this small world:
+    # otherwise the first one in a run pays ~5 ms loading particle_box's Python entry
+    world._refresh_box(world.last_step, 0)
     no_pairs = np.empty((0, 2), dtype=np.int64)
     merge_sorted_pairs(no_pairs, no_pairs)
     overlapping(state.positions, state.positions, state.positions[0], state.positions[0])
@@ -701,7 +704,7 @@ def warm_up(broad_phase: str | None = None, sleeping: bool = False) -> float:
 def warm_up_held_solve() -> None:
     """The first of warm_up's call trees: the forces phase of its world (settle_held and
     the resting solve beneath it, about 40 % of a cold compile)."""
-    state, walls = _warm_up_world()
+    state, walls = warm_up_world()
     world = World(state, walls, Settings())
     world._forces(world._begin(0.5))
 
@@ -721,7 +724,7 @@ def warm_up_without_forces(broad_phase: str | None = None) -> None:
 
 
 def _phases_without_forces(last: str, **settings) -> None:
-    state, walls = _warm_up_world()
+    state, walls = warm_up_world()
     world = World(state, walls, Settings(**settings))
     ctx = world._begin(0.5)
     ctx.path_accel = world._free_accel.copy()
@@ -737,8 +740,9 @@ def _warm_up_broad_phase(broad_phase: str | None) -> None:
         make_broad_phase(broad_phase).pairs(boxes, boxes + 0.3)
 
 
-def _warm_up_world() -> tuple[State, Walls]:
-    """Two spheres that meet each other and a floor within 0.5 s."""
+def warm_up_world() -> tuple[State, Walls]:
+    """Two spheres that meet each other and a floor within 0.5 s (warm_up's, and the
+    audit's: analysis.tunnel.warm_up)."""
     state = State(np.array([[0.0, 0.3, 0.0], [0.5, 0.3, 0.0]]), np.array([[1.0, -1.0, 0.0], [-1.0, 0.0, 0.0]]),
                   np.ones(2), np.full(2, 0.1), np.ones(2), np.ones(2))
     walls = Walls(["floor"], np.array([[0.0, 1.0, 0.0]]), np.zeros(1), np.ones(1), np.zeros(1, dtype=np.bool_),
