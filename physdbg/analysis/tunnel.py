@@ -33,6 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from ..engine.broadphase.boxes import NO_LIMIT
+from ..engine.broadphase.grid import grid_pairs
 from ..engine.motion import KICK_AT_STEP_START, STRAIGHT_PATH, path_coefficients, velocity_coefficients
 from ..engine.periodic import unwrap_near
 from ..engine.toi import INF, pair_toi_swept_scalar
@@ -66,48 +68,18 @@ def _at(anchor_t, anchor_x, anchor_v, row, acc, i, t, integrator, drag, k, out):
 
 
 @njit(cache=True)
-def _sort_and_sweep(lo, hi, checked):
-    """Candidate pairs (i < j) whose boxes overlap, among checked particles: (M, 2)."""
-    n = lo.shape[0]
-    order = np.argsort(lo[:, 0])
-    out = np.empty((max(16, 4 * n), 2), dtype=np.int64)
-    m = 0
-    for p in range(n):
-        i = order[p]
-        if not checked[i]:
-            continue
-        for q in range(p + 1, n):
-            j = order[q]
-            if lo[j, 0] > hi[i, 0]:
-                break
-            if not checked[j]:
-                continue
-            if lo[j, 1] > hi[i, 1] or lo[i, 1] > hi[j, 1] or lo[j, 2] > hi[i, 2] or lo[i, 2] > hi[j, 2]:
-                continue
-            if m == out.shape[0]:
-                grown = np.empty((2 * m, 2), dtype=np.int64)
-                grown[:m] = out
-                out = grown
-            out[m, 0] = min(i, j)
-            out[m, 1] = max(i, j)
-            m += 1
-    return out[:m]
-
-
-@njit(cache=True)
-def pair_crossings(anchor_start, anchor_t, anchor_x, anchor_v, pinned, acc, radius, checked, lo, hi, contacted,
+def pair_crossings(anchor_start, anchor_t, anchor_x, anchor_v, pinned, acc, radius, pairs, contacted,
                    dt, integrator, drag, k, tolerance):
     """Pairs that touch along their rebuilt paths with no contact resolved between them.
 
     anchor_start: (N+1,) CSR offsets of each particle's anchors (time-sorted rows of
     anchor_t (s), anchor_x, anchor_v (M, 3)); pinned: (M,) bool, whether the piece of path
     from each anchor to the next is pinned by the recording (module doc; other pieces are
-    not tested); acc: (N, 3) path accelerations; checked: (N,) bool, particles with a
-    pinned piece; lo, hi: (N, 3) boxes of the paths; contacted: sorted keys i*N+j (i<j) of
-    pairs with a contact this step. Returns (i, j, time, depth) rows as (K, 4) float64.
+    not tested); acc: (N, 3) path accelerations; pairs: (P, 2) the candidate pairs i < j
+    (those whose path boxes meet); contacted: sorted keys i*N+j (i<j) of pairs with a
+    contact this step. Returns (i, j, time, depth) rows as (K, 4) float64.
     """
     n = radius.shape[0]
-    pairs = _sort_and_sweep(lo, hi, checked)
     found = np.empty((0, 4))
     rows = []
     si = np.empty(6)
@@ -304,9 +276,13 @@ class StepChecker:
             _widen_to_anchors(who, np.ascontiguousarray(where), lo, hi)
         bow = 0.125 * (np.linalg.norm(self.path_acc, axis=1) + self.k * np.abs(speed).max(initial=0.0)) * dt * dt
         pad = (radius + bow + self.tolerance)[:, None]
+        # the boxes that meet, by the engine's uniform grid (a sort and sweep along x took
+        # 21 ms a step at 10 000 spheres, twice the engine's step: each box met ~400 in x)
+        pairs = grid_pairs(np.ascontiguousarray(lo - pad), np.ascontiguousarray(hi + pad), 0.0, NO_LIMIT)[0]
+        pairs = np.ascontiguousarray(pairs[checked[pairs[:, 0]] & checked[pairs[:, 1]]])
         found = pair_crossings(start, when, np.ascontiguousarray(where), np.ascontiguousarray(speed), pinned,
-                               np.ascontiguousarray(self.path_acc), radius, checked, lo - pad, hi + pad, contacted,
-                               dt, self.integrator, self.drag, self.k, max(self.tolerance, 1e-12))
+                               np.ascontiguousarray(self.path_acc), radius, pairs, contacted, dt, self.integrator,
+                               self.drag, self.k, max(self.tolerance, 1e-12))
         depth_floor = 1e-6 * radius
         return [Crossing(KIND_PAIR, int(i), int(j), float(t), float(d)) for i, j, t, d in found
                 if d > max(depth_floor[int(i)], depth_floor[int(j)], self.tolerance)]
