@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from physdbg.analysis.tunnel import StepChecker, _anchor_order, _widen_to_anchors
+from physdbg.analysis.tunnel import StepChecker, _anchor_order, _at, _pinned_kernel, _widen_to_anchors
 from physdbg.cli import app
 from physdbg.engine.state import Walls
 from physdbg.events import CONTACT_ROW, KIND_PAIR, KIND_WALL, Contacts
@@ -135,3 +135,66 @@ def test_the_anchors_are_ordered_and_boxed_as_numpy_would(n, data):
     _widen_to_anchors(who, where, lo, hi)
     np.testing.assert_array_equal(lo, lo_np)
     np.testing.assert_array_equal(hi, hi_np)
+
+
+def _pinned_by_numpy(who, when, where, speed, before, start, x1, dt, acc, radius, tolerance, integrator, drag, k):
+    """StepChecker._pinned as numpy wrote it before it was compiled: the reference."""
+    m = len(who)
+    is_last = np.zeros(m, dtype=bool)
+    is_last[start[1:] - 1] = True
+    target_t = np.where(is_last, dt, np.roll(when, -1))
+    target_x = np.where(is_last[:, None], x1[who], np.roll(where, -1, axis=0))
+    target_v = np.where(is_last[:, None], np.nan, np.roll(before, -1, axis=0))
+    got = np.empty((m, 6))
+    for r in range(m):
+        _at(when, where, speed, r, acc, who[r], target_t[r], integrator, drag, k, got[r])
+    slack = 1e-6 * radius[who] + 10.0 * tolerance + 1e-12 * np.abs(target_x).max(axis=1)
+    x_ok = np.linalg.norm(got[:, :3] - target_x, axis=1) <= slack
+    v_slack = slack / dt + 1e-12 * np.abs(got[:, 3:]).max(axis=1)
+    v_err = np.linalg.norm(got[:, 3:] - target_v, axis=1)
+    return x_ok & (np.isnan(v_err) | (v_err <= v_slack))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.sampled_from([(0, 1.0), (0, 0.9), (1, 1.0), (2, 1.0)]))
+def test_the_compiled_pinning_rule_answers_as_numpy_did(seed, method):
+    """The compiled _pinned_kernel against the numpy it replaced, piece by piece: random
+    anchors (1-3 a sphere), some pieces made to arrive exactly where the next anchor (or
+    the step's end) is, some nudged within or past the slack, some NaN."""
+    integrator, drag = method
+    k = -np.log(drag)
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 6))
+    counts = rng.integers(1, 4, n)
+    start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    m = int(start[-1])
+    who = np.repeat(np.arange(n), counts).astype(np.int64)
+    dt = 0.01
+    when = np.concatenate([np.sort(rng.uniform(0, dt, c)) * (np.arange(c) > 0) for c in counts])
+    where = rng.normal(size=(m, 3))
+    speed = rng.normal(size=(m, 3))
+    before = rng.normal(size=(m, 3))
+    acc = rng.normal(size=(n, 3)) * 9.81
+    radius = rng.uniform(0.01, 0.1, n)
+    x1 = rng.normal(size=(n, 3))
+    got = np.empty(6)
+    for r in range(m):  # make pieces arrive: exactly, within the slack, past it
+        last = r + 1 == m or who[r + 1] != who[r]
+        if rng.random() < 0.6:
+            _at(when, where, speed, r, acc, who[r], dt if last else when[r + 1], integrator, drag, k, got)
+            nudge = rng.choice([0.0, 1e-9, 1e-3])
+            if last:
+                x1[who[r]] = got[:3] + nudge
+            else:
+                where[r + 1] = got[:3] + nudge
+                before[r + 1] = got[3:] + rng.choice([0.0, 1e-9, 1e-1])
+    for a in (where, speed, before, x1):
+        if rng.random() < 0.2:
+            a[rng.integers(len(a)), rng.integers(3)] = np.nan
+    tolerance = float(rng.choice([0.0, 1e-9]))
+    compiled = np.empty(m, dtype=bool)
+    _pinned_kernel(who, when, where, speed, before, start, x1, dt, acc, radius, tolerance, integrator, drag, k,
+                   compiled)
+    expected = _pinned_by_numpy(who, when, where, speed, before, start, x1, dt, acc, radius, tolerance, integrator,
+                                drag, k)
+    assert compiled.tolist() == expected.tolist()

@@ -295,21 +295,58 @@ class StepChecker:
         The slack is far below the depth a crossing must reach to be reported: a path
         whose unrecorded change stays within it moves by no more than the slack.
         """
-        m = len(who)
-        is_last = np.zeros(m, dtype=bool)
-        is_last[start[1:] - 1] = True
-        target_t = np.where(is_last, dt, np.roll(when, -1))
-        target_x = np.where(is_last[:, None], x1[who], np.roll(where, -1, axis=0))
-        target_v = np.where(is_last[:, None], np.nan, np.roll(before, -1, axis=0))
-        got_x, got_v = _rebuilt(when, target_t, where, speed, self.path_acc, who, self.integrator, self.drag,
-                                self.k)
-        radius = self.radius[who]
-        slack = 1e-6 * radius + 10.0 * self.tolerance + 1e-12 * np.abs(target_x).max(axis=1)
-        x_ok = np.linalg.norm(got_x - target_x, axis=1) <= slack
-        v_slack = slack / dt + 1e-12 * np.abs(got_v).max(axis=1)
-        v_err = np.linalg.norm(got_v - target_v, axis=1)
-        v_ok = np.isnan(v_err) | (v_err <= v_slack)
-        return x_ok & v_ok
+        pinned = np.empty(len(who), dtype=bool)
+        _pinned_kernel(who, when, np.ascontiguousarray(where), np.ascontiguousarray(speed),
+                       np.ascontiguousarray(before), start, np.ascontiguousarray(x1), dt,
+                       np.ascontiguousarray(self.path_acc), self.radius, self.tolerance, self.integrator, self.drag,
+                       self.k, pinned)
+        return pinned
+
+
+@njit(cache=True)
+def _pinned_kernel(who, when, where, speed, before, start, x1, dt, acc, radius, tolerance, integrator, drag, k,
+                   pinned):
+    """StepChecker._pinned in one compiled pass (its numpy took ~4 ms a step at 10 000
+    spheres), written as numpy wrote it: the piece from anchor r runs to the next anchor
+    (its time, centre, and velocity before it) or, for a sphere's last, to the step's end
+    (dt, x1 (N, 3), no velocity); rebuilt along the path, it must arrive within a slack of
+    1e-6 radius + 10 tolerance + 1e-12 |target| (a NaN anywhere fails it), and its
+    velocity within slack / dt + 1e-12 |velocity| (none to match passes). pinned: (M,) out."""
+    m = who.shape[0]
+    is_last = np.zeros(m, dtype=np.bool_)
+    for i in range(start.shape[0] - 1):
+        is_last[start[i + 1] - 1] = True
+    got = np.empty(6)
+    for r in range(m):
+        last = is_last[r]
+        i = who[r]
+        _at(when, where, speed, r, acc, i, dt if last else when[r + 1], integrator, drag, k, got)
+        x_err = 0.0
+        v_err = 0.0
+        target_size = 0.0
+        speed_size = 0.0
+        for c in range(3):
+            target = x1[i, c] if last else where[r + 1, c]
+            arrived = before[r + 1, c] if not last else np.nan
+            x_err += (got[c] - target) * (got[c] - target)
+            v_err += (got[3 + c] - arrived) * (got[3 + c] - arrived)
+            target_size = _max_with_nan(target_size, abs(target), c)
+            speed_size = _max_with_nan(speed_size, abs(got[3 + c]), c)
+        slack = 1e-6 * radius[i] + 10.0 * tolerance + 1e-12 * target_size
+        v_slack = slack / dt + 1e-12 * speed_size
+        v_err = math.sqrt(v_err)
+        pinned[r] = math.sqrt(x_err) <= slack and (v_err != v_err or v_err <= v_slack)
+
+
+@njit(cache=True, inline="always")
+def _max_with_nan(so_far, value, c):
+    """numpy's max over a row, one element c at a time: the first is taken as it is, and a
+    NaN anywhere is the answer."""
+    if c == 0 or value != value:
+        return value
+    if so_far != so_far or so_far >= value:
+        return so_far
+    return value
 
 
 def warm_up() -> None:
@@ -332,16 +369,6 @@ def warm_up() -> None:
                           {"integrator": "exact", "drag": 1.0, "gravity": (0.0, 0.0, 0.0), "contact_tolerance": 1e-9})
     checker.check(x0, v0, x1, 0.5, Contacts(0, rows))
     assert checker.pinned_pieces == 4  # the sweep ran (it runs only over pinned pieces)
-
-
-def _rebuilt(t, t_to, x, v, acc, who, integrator, drag, k) -> tuple[np.ndarray, np.ndarray]:
-    """Positions and velocities (M, 3) at times t_to (M,) along the integrator's paths from
-    anchors at t (M,) with positions x and velocities v (M, 3); acc: (N, 3) the path
-    accelerations, who: (M,) whose anchor each row is."""
-    out = np.empty((len(t), 6))
-    _rebuilt_kernel(t, t_to, np.ascontiguousarray(x), np.ascontiguousarray(v), np.ascontiguousarray(acc), who,
-                    integrator, drag, k, out)
-    return out[:, :3], out[:, 3:]
 
 
 @njit(cache=True)
@@ -385,8 +412,3 @@ def _widen_to_anchors(who, where, lo, hi):
             if where[r, c] > hi[i, c]:
                 hi[i, c] = where[r, c]
 
-
-@njit(cache=True)
-def _rebuilt_kernel(t, t_to, x, v, acc, who, integrator, drag, k, out):
-    for row in range(x.shape[0]):
-        _at(t, x, v, row, acc, who[row], t_to[row], integrator, drag, k, out[row])
