@@ -9,7 +9,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from physdbg.analysis.tunnel import StepChecker, _anchor_order, _at, _pinned_kernel, _widen_to_anchors
+from physdbg.analysis.tunnel import (
+    StepChecker,
+    _anchor_order,
+    _at,
+    _pinned_kernel,
+    _wall_crossings,
+    _widen_to_anchors,
+)
 from physdbg.cli import app
 from physdbg.engine.state import Walls
 from physdbg.events import CONTACT_ROW, KIND_PAIR, KIND_WALL, Contacts
@@ -198,3 +205,32 @@ def test_the_compiled_pinning_rule_answers_as_numpy_did(seed, method):
     expected = _pinned_by_numpy(who, when, where, speed, before, start, x1, dt, acc, radius, tolerance, integrator,
                                 drag, k)
     assert compiled.tolist() == expected.tolist()
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_the_compiled_wall_check_answers_as_numpy_did(seed):
+    """_wall_crossings against the (N, W) numpy it replaced: one- and two-sided walls,
+    centres that cross, stop on the plane, stay; some NaN."""
+    rng = np.random.default_rng(seed)
+    n, w = int(rng.integers(1, 30)), int(rng.integers(1, 5))
+    normals = rng.normal(size=(w, 3))
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    normals[rng.random(w) < 0.5] = np.eye(3)[rng.integers(3)]  # axis walls: ends exactly on them
+    offsets = rng.choice([0.0, 0.5, -0.25], w)
+    two_sided = rng.random(w) < 0.5
+    radius = rng.uniform(0.01, 0.3, n)
+    x0 = rng.choice([-1.0, -0.25, 0.0, 0.5, 1.0], (n, 3)) + rng.normal(size=(n, 3)) * (rng.random((n, 1)) < 0.5)
+    x1 = rng.choice([-1.0, -0.25, 0.0, 0.5, 1.0], (n, 3)) + rng.normal(size=(n, 3)) * (rng.random((n, 1)) < 0.5)
+    for a in (x0, x1):
+        if rng.random() < 0.3:
+            a[rng.integers(n), rng.integers(3)] = np.nan
+    def signed_distance(x):  # n·x - d summed in axis order, as the kernel sums it
+        return (x[:, 0:1] * normals[:, 0] + x[:, 1:2] * normals[:, 1]) + x[:, 2:3] * normals[:, 2] - offsets[None, :]
+
+    h0, h1 = signed_distance(x0), signed_distance(x1)
+    through = np.where(two_sided[None, :], (np.sign(h0) != np.sign(h1)) & (h0 != 0) & (h1 != 0),
+                       (h0 >= 0) & (h1 < -radius[:, None]))
+    expected = [(float(i), float(j), float(abs(h1[i, j]))) for i, j in zip(*np.nonzero(through), strict=True)]
+    got = [tuple(row) for row in _wall_crossings(x0, x1, normals, offsets, two_sided, radius).tolist()]
+    assert np.array_equal(np.array(got).reshape(-1, 3), np.array(expected).reshape(-1, 3), equal_nan=True)

@@ -68,6 +68,42 @@ def _at(anchor_t, anchor_x, anchor_v, row, acc, i, t, integrator, drag, k, out):
 
 
 @njit(cache=True)
+def _wall_crossings(x0, x1, normals, offsets, two_sided, radius):
+    """Spheres whose centre went through a wall in the step, from x0 to x1 (N, 3), as rows
+    (sphere, wall, |h1|) of a (K, 3) float64 array in (sphere, wall) order; h = n·x - d is
+    the centre's signed distance from wall n·x = d (normals (W, 3), offsets (W,)). A
+    two-sided wall: h changed sign, neither end on the plane (a NaN end counts as through,
+    as numpy's sign comparison had it); a one-sided wall: from h >= 0 to beyond a radius
+    behind it. (Was (N, W) numpy, ~1.7 ms a step at 10 000 spheres; n·x is summed in axis
+    order here, where the matrix product's order was the BLAS library's.)"""
+    rows = []
+    for i in range(x0.shape[0]):
+        for w in range(normals.shape[0]):
+            h0 = normals[w, 0] * x0[i, 0] + normals[w, 1] * x0[i, 1] + normals[w, 2] * x0[i, 2] - offsets[w]
+            h1 = normals[w, 0] * x1[i, 0] + normals[w, 1] * x1[i, 1] + normals[w, 2] * x1[i, 2] - offsets[w]
+            if two_sided[w]:
+                through = _sign(h0) != _sign(h1) and h0 != 0.0 and h1 != 0.0
+            else:
+                through = h0 >= 0.0 and h1 < -radius[i]
+            if through:
+                rows.append((float(i), float(w), abs(h1)))
+    out = np.empty((len(rows), 3))
+    for r in range(len(rows)):
+        out[r, 0] = rows[r][0]
+        out[r, 1] = rows[r][1]
+        out[r, 2] = rows[r][2]
+    return out
+
+
+@njit(cache=True, inline="always")
+def _sign(h):
+    """np.sign of a float: -1, 0 or 1, NaN for NaN."""
+    if h != h:
+        return h
+    return (h > 0.0) - (h < 0.0)
+
+
+@njit(cache=True)
 def pair_crossings(anchor_start, anchor_t, anchor_x, anchor_v, pinned, acc, radius, pairs, contacted,
                    dt, integrator, drag, k, tolerance):
     """Pairs that touch along their rebuilt paths with no contact resolved between them.
@@ -194,20 +230,19 @@ class StepChecker:
         walls = self.walls
         if not len(walls):
             return []
-        h0 = x0 @ walls.normals.T - walls.offsets[None, :]  # (N, W) signed distance of centres
-        h1 = x1 @ walls.normals.T - walls.offsets[None, :]
-        through = np.where(self.two_sided[None, :], (np.sign(h0) != np.sign(h1)) & (h0 != 0) & (h1 != 0),
-                           (h0 >= 0) & (h1 < -self.radius[:, None]))
-        if not through.any():
+        found = _wall_crossings(np.ascontiguousarray(x0, dtype=np.float64), np.ascontiguousarray(x1, dtype=np.float64),
+                                np.ascontiguousarray(walls.normals, dtype=np.float64),
+                                np.ascontiguousarray(walls.offsets, dtype=np.float64), self.two_sided, self.radius)
+        if not len(found):
             return []
         touched = set()
         if contacts is not None:
             wall = contacts.kind == KIND_WALL
             touched = set(zip(contacts.a[wall].tolist(), contacts.other[wall].tolist(), strict=True))
         out = []
-        for i, w in zip(*np.nonzero(through), strict=True):
+        for i, w, depth in found.tolist():
             if (int(i), int(w)) not in touched:
-                out.append(Crossing(KIND_WALL, int(i), int(w), math.nan, float(abs(h1[i, w]))))
+                out.append(Crossing(KIND_WALL, int(i), int(w), math.nan, depth))
         return out
 
     def _pairs(self, x0, v0, x1, dt, contacts) -> list[Crossing]:
