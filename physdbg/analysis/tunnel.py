@@ -202,6 +202,7 @@ class StepChecker:
         self.gravity_acc = np.where(movable[:, None], np.asarray(gravity_scale)[:, None] * gravity[None, :], 0.0)
         self.path_acc = np.zeros_like(self.gravity_acc) if STRAIGHT_PATH[self.integrator] \
             else self.gravity_acc
+        self.path_acc_size = np.linalg.norm(self.path_acc, axis=1)  # (N,) m/s², the same every step
         self.tolerance = max(float(settings.get("contact_tolerance", 1e-9)), 0.0)
         self.two_sided = np.asarray(walls.two_sided, dtype=bool)
         self.half_thickness = 0.5 * np.asarray(walls.thickness, dtype=np.float64)
@@ -253,47 +254,47 @@ class StepChecker:
             v_start = v0 * (self.drag ** dt if self.drag != 1.0 else 1.0) + self.gravity_acc * dt
         # anchors: who (sphere), when (s into the step), where (centre), speed (velocity
         # after), before (velocity just before: how the piece leading here must arrive)
+        # the step's start, then one per contact (sphere a), then one per pair contact
+        # (sphere b); contacts at one instant (a cradle's blow) are anchors in the order they
+        # were resolved (order_key)
         who = [np.arange(n)]
         when = [np.zeros(n)]
-        where = [x0]
-        speed = [v_start]
-        before = [np.full((n, 3), np.nan)]  # the step's start ends no piece
-        # contacts at one instant (a cradle's blow) are anchors in the order they were resolved
         order_key = [np.full(n, -1, dtype=np.int64)]
+        no_rows = np.empty((0, 3))
+        centre_a = after_a = before_a = centre_b = after_b = before_b = no_rows
         contacted = np.zeros(0, dtype=np.int64)
         if contacts is not None and len(contacts):
-            centre_a = contacts.point + contacts.normal * radius[contacts.a][:, None]
-            who.append(contacts.a.astype(np.int64))
+            a = contacts.a.astype(np.int64)
+            centre_a = contacts.point + contacts.normal * radius[a][:, None]
+            after_a, before_a = contacts.velocity_a_after, contacts.velocity_a_before
+            who.append(a)
             when.append(contacts.time_in_step)
-            where.append(centre_a)
-            speed.append(contacts.velocity_a_after)
-            before.append(contacts.velocity_a_before)
             order_key.append(np.arange(len(contacts), dtype=np.int64))
             pair = contacts.kind == KIND_PAIR
             b = contacts.other[pair].astype(np.int64)
+            centre_b = contacts.point[pair] - contacts.normal[pair] * radius[b][:, None]
+            after_b, before_b = contacts.velocity_b_after[pair], contacts.velocity_b_before[pair]
             who.append(b)
             when.append(contacts.time_in_step[pair])
-            where.append(contacts.point[pair] - contacts.normal[pair] * radius[b][:, None])
-            speed.append(contacts.velocity_b_after[pair])
-            before.append(contacts.velocity_b_before[pair])
             order_key.append(np.flatnonzero(pair).astype(np.int64))
-            a = contacts.a[pair].astype(np.int64)
-            contacted = np.unique(np.minimum(a, b) * n + np.maximum(a, b))
+            contacted = np.unique(np.minimum(a[pair], b) * n + np.maximum(a[pair], b))
         who = np.concatenate(who)
         when = np.concatenate(when)
-        where = np.concatenate(where)
-        speed = np.concatenate(speed)
-        before = np.concatenate(before)
         order_key = np.concatenate(order_key)
-        if self.walls.periodic:
-            where = unwrap_near(where, x0[who], self.walls.period)
         if np.isnan(when).any():  # not from physdbg's engine: numpy's order puts NaN last
             order = np.lexsort((order_key, when, who))
             start = np.zeros(n + 1, dtype=np.int64)
             np.cumsum(np.bincount(who, minlength=n), out=start[1:])
         else:
             order, start = _anchor_order(who, when, order_key, n)
-        who, when, where, speed, before = who[order], when[order], where[order], speed[order], before[order]
+        who, when = who[order], when[order]
+        # (M, 3) rows straight into their order: concatenating them and then gathering
+        # made two fresh copies of each, ~10 ms a step at 100 000 spheres
+        where, speed, before = _ordered_anchors(order, *(np.ascontiguousarray(rows, dtype=np.float64) for rows in
+                                                         (x0, v_start, centre_a, after_a, before_a, centre_b,
+                                                          after_b, before_b)))
+        if self.walls.periodic:
+            where = unwrap_near(where, x0[who], self.walls.period)
         pinned = self._pinned(who, when, where, speed, before, start, x1, dt)
         self.pieces += len(pinned)
         self.pinned_pieces += int(pinned.sum())
@@ -309,7 +310,7 @@ class StepChecker:
             np.maximum.at(hi, who, where)
         else:
             _widen_to_anchors(who, np.ascontiguousarray(where), lo, hi)
-        bow = 0.125 * (np.linalg.norm(self.path_acc, axis=1) + self.k * np.abs(speed).max(initial=0.0)) * dt * dt
+        bow = 0.125 * (self.path_acc_size + self.k * np.abs(speed).max(initial=0.0)) * dt * dt
         pad = (radius + bow + self.tolerance)[:, None]
         # the boxes that meet, by the engine's uniform grid (a sort and sweep along x took
         # 21 ms a step at 10 000 spheres, twice the engine's step: each box met ~400 in x)
@@ -434,6 +435,36 @@ def _anchor_order(who, when, order_key, n):
                 q -= 1
             order[q + 1] = r
     return order, start
+
+
+@njit(cache=True)
+def _ordered_anchors(order, x0, v_start, centre_a, after_a, before_a, centre_b, after_b, before_b):
+    """The anchors' centres, velocities after and velocities before (each (M, 3)) in
+    ``order`` (M,), which numbers them as StepChecker._pairs lists them: the N spheres at
+    the step's start (x0, v_start; no velocity before: NaN), then sphere a of each contact
+    (centre_a, after_a, before_a), then sphere b of each pair contact (centre_b, ...)."""
+    n = x0.shape[0]
+    with_a = n + centre_a.shape[0]
+    m = order.shape[0]
+    where = np.empty((m, 3))
+    speed = np.empty((m, 3))
+    before = np.empty((m, 3))
+    for r in range(m):
+        s = order[r]
+        for c in range(3):
+            if s < n:
+                where[r, c] = x0[s, c]
+                speed[r, c] = v_start[s, c]
+                before[r, c] = np.nan
+            elif s < with_a:
+                where[r, c] = centre_a[s - n, c]
+                speed[r, c] = after_a[s - n, c]
+                before[r, c] = before_a[s - n, c]
+            else:
+                where[r, c] = centre_b[s - with_a, c]
+                speed[r, c] = after_b[s - with_a, c]
+                before[r, c] = before_b[s - with_a, c]
+    return where, speed, before
 
 
 @njit(cache=True)
