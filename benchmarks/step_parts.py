@@ -1,7 +1,8 @@
 """Where a step's time goes, call by call, measured inside the step; and what renumbering does.
 
     .venv/bin/python benchmarks/step_parts.py [--scene rain|gas] [--count 1000] [--steps S]
-        [--order as-generated|random|morton]
+        [--order as-generated|random|morton|columns|landed [--landed-step K]]
+    .venv/bin/python benchmarks/step_parts.py --count 100000 --in-turn as-generated,morton,landed
 
 Runs box-rain (``rain``: benchmarks/box_rain.py's scene, 240 steps) or the exact gas
 (``gas``: packing 0.3, 200 steps at 1 000, 10 at 32 000 and more) and prints ms/step, each
@@ -13,11 +14,18 @@ they cost (``World._refresh_box``).
 
 ``--order`` renumbers the spheres before the run: as generated, in a random order, or in
 Morton (Z-curve) order of their starting places, which puts spheres close in space close
-in index (memory locality, the issue's suggestion). The contacts have come out the same
-in every order measured (box-rain 1k and 10k, the gas at 32k), though the held-contact
-solves sweep in index order, so a pile could differ in its last bits: the time is the
-point. The mean index distance of the last step's candidate pairs shows how local the
-order is.
+in index (memory locality, the issue's suggestion); ``columns``: Morton order of (x, y),
+then height (rain falls nearly straight down, so a column stays a column); ``landed``:
+Morton order of where each sphere is after ``--landed-step`` steps (default: nine tenths
+of the run), found by a first, untimed run: what an order kept up as the spheres move
+would give near that step (box-rain 100k's landing: docs/benchmarks.md, fourteenth
+session). The contacts have come out the same in every order measured (box-rain 1k, 10k
+and 100k, the gas at 32k), though the held-contact solves sweep in index order, so a pile
+could differ in its last bits: the time is the point. The mean index distance of the last
+step's candidate pairs shows how local the order is. Whole runs one after another are no
+way to compare orders on this machine (the same run has taken 544 and 916 ms/step within
+the hour); ``--in-turn`` steps the orders' worlds in turn in one process and prints each
+one's ms/step.
 """
 
 from __future__ import annotations
@@ -43,7 +51,7 @@ from box_rain import box_rain  # noqa: E402
 CALLS = ("settle_held", "swept_boxes", "grow_to_reach", "split_sleeping", "adjacency_from_pairs",
          "narrow_candidates", "predict_into", "run_time_order", "advance_particles", "max_overlap",
          "first_non_finite", "energies", "state_hash")
-ORDERS = ("as-generated", "random", "morton")
+ORDERS = ("as-generated", "random", "morton", "columns", "landed")
 
 
 def scene_for(name: str, count: int, steps: int | None):
@@ -67,13 +75,48 @@ def morton_keys(points: np.ndarray, bits: int = 10) -> np.ndarray:
     return keys
 
 
-def renumber(scene, order: str) -> None:
-    """Permute the scene's particles in place into ``order`` (one of ORDERS)."""
+def column_keys(points: np.ndarray, bits: int = 10) -> np.ndarray:
+    """(N,) keys of points (N, 3) by column: the Z-curve of (x, y) quantised as in
+    morton_keys, then the height z as the lowest ``bits`` bits."""
+    low = points.min(axis=0)
+    span = float((points.max(axis=0) - low).max()) or 1.0
+    q = np.clip(((points - low) / span * (2**bits - 1)).astype(np.int64), 0, 2**bits - 1)
+    keys = np.zeros(len(points), dtype=np.int64)
+    for bit in range(bits):
+        for axis in range(2):
+            keys |= ((q[:, axis] >> bit) & 1) << (2 * bit + axis)
+    return (keys << bits) | q[:, 2]
+
+
+def landing_step(run_steps: int, landed_step: int | None) -> int:
+    """The step whose places order the spheres for ``--order landed``: landed_step, or nine
+    tenths of the run."""
+    return (9 * run_steps) // 10 if landed_step is None else landed_step
+
+
+def landed_places(scene, steps: int) -> np.ndarray:
+    """(N, 3) where each sphere is after ``steps`` steps of the scene (a run of its own,
+    untimed; the scene is left as it was)."""
+    world = scene.build_world()
+    warm_up(world.broad_phase.name, sleeping=world.sleepers is not None)
+    for _ in range(steps):
+        world.step(scene.dt)
+    return world.state.positions.copy()
+
+
+def renumber(scene, order: str, landed_step: int | None = None) -> None:
+    """Permute the scene's particles in place into ``order`` (one of ORDERS); landed_step:
+    for "landed", the step whose places give the order (default: nine tenths of the run)."""
     state = scene.state
     if order == "as-generated":
         return
     if order == "random":
         permutation = np.random.default_rng(0).permutation(state.count)
+    elif order == "columns":
+        permutation = np.argsort(column_keys(state.positions), kind="stable")
+    elif order == "landed":
+        places = landed_places(scene, landing_step(scene.steps, landed_step))
+        permutation = np.argsort(morton_keys(places), kind="stable")
     else:
         permutation = np.argsort(morton_keys(state.positions), kind="stable")
     for name in ("positions", "velocities", "inverse_mass", "radius", "restitution", "gravity_scale"):
@@ -109,6 +152,30 @@ def timed_calls(world, seconds: Counter, counts: Counter):
             setattr(world_module, name, function)
 
 
+def in_turn(name: str, count: int, steps: int | None, orders: list[str], landed_step: int | None = None) -> dict:
+    """The scene in each of ``orders``, stepped in turn in one process: step k of every
+    order back to back (the orders' sequence reversed every other step), so that this
+    machine's drift (whole runs of the same engine have differed by 30 % within minutes)
+    falls on every order alike. Returns {order: (seconds stepping, contacts)}."""
+    worlds = {}
+    for order in orders:
+        scene = scene_for(name, count, steps)
+        renumber(scene, order, landed_step)
+        worlds[order] = (scene, scene.build_world())
+    scene = next(iter(worlds.values()))[0]
+    warm_up(worlds[orders[0]][1].broad_phase.name, sleeping=worlds[orders[0]][1].sleepers is not None)
+    spent = dict.fromkeys(orders, 0.0)
+    contacts = dict.fromkeys(orders, 0)
+    for k in range(scene.steps):
+        for order in orders if k % 2 == 0 else orders[::-1]:
+            scene, world = worlds[order]
+            started = time.perf_counter()
+            stats = world.step(scene.dt)
+            spent[order] += time.perf_counter() - started
+            contacts[order] += stats.contacts
+    return {order: (spent[order], contacts[order]) for order in orders}
+
+
 def measure(scene) -> dict:
     """Step the scene with every call timed: ms/step, phases, calls (s), pauses, contacts."""
     world = scene.build_world()
@@ -137,16 +204,37 @@ def main() -> None:
     parser.add_argument("--count", type=int, default=1000, help="spheres (at least 2)")
     parser.add_argument("--steps", type=int, default=None, help="default: 240 (rain), 200 or 10 (gas)")
     parser.add_argument("--order", choices=ORDERS, default="as-generated",
-                        help="number the spheres as generated, at random, or in Morton order of their places")
+                        help="number the spheres as generated, at random, in Morton order of their places, "
+                             "by columns, or in Morton order of their places after --landed-step steps")
+    parser.add_argument("--landed-step", type=int, default=None, metavar="K",
+                        help="with --order landed: the step whose places order the spheres (default: 9/10 of the run)")
+    parser.add_argument("--in-turn", metavar="ORDER,ORDER,...", default=None,
+                        help="step the scene in each of these orders in turn in one process and print only "
+                             "each order's ms/step (instead of one order's calls)")
     args = parser.parse_args()
     if args.count < 2 or (args.steps is not None and args.steps < 1):
         parser.error("--count must be at least 2 and --steps at least 1")
+    turns = args.in_turn.split(",") if args.in_turn else []
+    if any(order not in ORDERS for order in turns) or len(set(turns)) != len(turns):
+        parser.error(f"--in-turn takes distinct orders among {', '.join(ORDERS)}, separated by commas")
+    if args.landed_step is not None and ("landed" not in turns + [args.order] or args.landed_step < 0):
+        parser.error("--landed-step goes with --order landed (or landed in --in-turn), and is a step number >= 0")
+    if turns:
+        results = in_turn(args.scene, args.count, args.steps, turns, args.landed_step)
+        steps = scene_for(args.scene, args.count, args.steps).steps
+        print(f"{args.scene} N={args.count}, {steps} steps, the orders stepped in turn in one process:")
+        for order, (seconds, contacts) in results.items():
+            print(f"  {order:13s} {1000 * seconds / steps:9.3f} ms/step, {contacts} contacts")
+        return
     scene = scene_for(args.scene, args.count, args.steps)
-    renumber(scene, args.order)
+    renumber(scene, args.order, args.landed_step)
     result = measure(scene)
     steps = result["steps"]
     per_step = 1e6 / steps  # seconds over the run -> µs a step
-    print(f"{args.scene} N={args.count}, {steps} steps, spheres {args.order}: "
+    label = args.order
+    if args.order == "landed":
+        label += f" (Morton order of step {landing_step(steps, args.landed_step)}'s places)"
+    print(f"{args.scene} N={args.count}, {steps} steps, spheres {label}: "
           f"{1000 * result['wall'] / steps:.3f} ms/step, {result['contacts']} contacts")
     print("  phases (ms/step): " + ", ".join(f"{name} {1000 * t / steps:.3f}" for name, t in result["phases"].items()))
     calls = result["calls"]

@@ -90,6 +90,10 @@ def test_renumbering_the_spheres_changes_no_contact_and_the_calls_fit_in_the_ste
     assert runs["as-generated"]["contacts"] > 0
     assert len({run["contacts"] for run in runs.values()}) == 1
     assert runs["morton"]["index_distance"] < runs["random"]["index_distance"]
+    assert runs["columns"]["index_distance"] < runs["random"]["index_distance"]
+    # numbered by where the spheres are near the run's end, the last step's partners are
+    # closer in index than in any order fixed at the start
+    assert runs["landed"]["index_distance"] < min(runs[o]["index_distance"] for o in ("morton", "columns", "random"))
     for run in runs.values():
         assert {"run_time_order", "predict_into", "state_hash", "broad phase pairs"} <= set(run["calls"])
         assert 0.0 < sum(run["calls"].values()) <= run["wall"]
@@ -101,6 +105,14 @@ def test_morton_keys_follow_the_z_curve():
     corners = np.array([[x, y, z] for z in (0.0, 1.0) for y in (0.0, 1.0) for x in (0.0, 1.0)])
     keys = morton_keys(corners, bits=1)
     assert keys.tolist() == list(range(8))  # x the lowest bit, then y, then z
+
+
+def test_column_keys_order_by_column_then_height():
+    from benchmarks.step_parts import column_keys
+
+    points = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    # (x, y) = (0, 0) first, lowest first; then x = 1; then y = 1; then both
+    assert np.argsort(column_keys(points, bits=1), kind="stable").tolist() == [3, 1, 0, 2, 4]
 
 
 def test_step_parts_prints_each_call_and_refuses_a_bad_count(monkeypatch, capsys):
@@ -118,3 +130,34 @@ def test_step_parts_prints_each_call_and_refuses_a_bad_count(monkeypatch, capsys
         step_parts.main()
     assert stopped.value.code == 2
     assert "--count must be at least 2 and --steps at least 1" in capsys.readouterr().err
+    monkeypatch.setattr("sys.argv", ["step_parts.py", "--count", "60", "--landed-step", "3"])
+    with pytest.raises(SystemExit) as stopped:
+        step_parts.main()
+    assert stopped.value.code == 2
+    assert "--landed-step goes with --order landed" in capsys.readouterr().err
+    monkeypatch.setattr("sys.argv", ["step_parts.py", "--count", "60", "--steps", "5", "--order", "landed",
+                                     "--landed-step", "3"])
+    step_parts.main()
+    assert capsys.readouterr().out.startswith("rain N=60, 5 steps, spheres landed (Morton order of step 3's places): ")
+
+
+def test_step_parts_in_turn_steps_each_order_to_the_same_contacts(monkeypatch, capsys):
+    """--in-turn: every order named, each with its ms/step and the same contacts; a name
+    that is not an order, or one named twice, is refused with what is allowed."""
+    from benchmarks import step_parts
+
+    monkeypatch.setattr("sys.argv", ["step_parts.py", "--count", "200", "--steps", "30", "--in-turn",
+                                     "as-generated,morton,landed"])
+    step_parts.main()
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "rain N=200, 30 steps, the orders stepped in turn in one process:"
+    rows = [line.split() for line in out[1:]]
+    assert [row[0] for row in rows] == ["as-generated", "morton", "landed"]
+    assert float(rows[0][1]) > 0 and rows[0][2] == "ms/step,"
+    assert len({row[3] for row in rows}) == 1 and int(rows[0][3]) > 0  # the same contacts in every order
+    for bad in ("morton,zigzag", "morton,morton"):
+        monkeypatch.setattr("sys.argv", ["step_parts.py", "--in-turn", bad])
+        with pytest.raises(SystemExit) as stopped:
+            step_parts.main()
+        assert stopped.value.code == 2
+        assert "--in-turn takes distinct orders among as-generated, random, morton" in capsys.readouterr().err
