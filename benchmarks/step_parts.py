@@ -62,30 +62,34 @@ def scene_for(name: str, count: int, steps: int | None):
     return load_scene("gas", [f"generate.count={count}", "generate.packing_fraction=0.3", f"steps={steps}"])
 
 
+def _quantised(points: np.ndarray, bits: int) -> np.ndarray:
+    """(N, 3) int64: each axis of points (N, 3) quantised to ``bits`` bits over the points'
+    bounding cube."""
+    low = points.min(axis=0)
+    span = float((points.max(axis=0) - low).max()) or 1.0
+    return np.clip(((points - low) / span * (2**bits - 1)).astype(np.int64), 0, 2**bits - 1)
+
+
+def _interleaved(q: np.ndarray, axes: int, bits: int) -> np.ndarray:
+    """(N,) the bits of the first ``axes`` columns of q interleaved, column 0 the lowest."""
+    keys = np.zeros(len(q), dtype=np.int64)
+    for bit in range(bits):
+        for axis in range(axes):
+            keys |= ((q[:, axis] >> bit) & 1) << (axes * bit + axis)
+    return keys
+
+
 def morton_keys(points: np.ndarray, bits: int = 10) -> np.ndarray:
     """(N,) Z-curve keys of points (N, 3): each axis quantised to ``bits`` bits over the
     points' bounding cube, the bits interleaved x, y, z."""
-    low = points.min(axis=0)
-    span = float((points.max(axis=0) - low).max()) or 1.0
-    q = np.clip(((points - low) / span * (2**bits - 1)).astype(np.int64), 0, 2**bits - 1)
-    keys = np.zeros(len(points), dtype=np.int64)
-    for bit in range(bits):
-        for axis in range(3):
-            keys |= ((q[:, axis] >> bit) & 1) << (3 * bit + axis)
-    return keys
+    return _interleaved(_quantised(points, bits), 3, bits)
 
 
 def column_keys(points: np.ndarray, bits: int = 10) -> np.ndarray:
     """(N,) keys of points (N, 3) by column: the Z-curve of (x, y) quantised as in
     morton_keys, then the height z as the lowest ``bits`` bits."""
-    low = points.min(axis=0)
-    span = float((points.max(axis=0) - low).max()) or 1.0
-    q = np.clip(((points - low) / span * (2**bits - 1)).astype(np.int64), 0, 2**bits - 1)
-    keys = np.zeros(len(points), dtype=np.int64)
-    for bit in range(bits):
-        for axis in range(2):
-            keys |= ((q[:, axis] >> bit) & 1) << (2 * bit + axis)
-    return (keys << bits) | q[:, 2]
+    q = _quantised(points, bits)
+    return (_interleaved(q, 2, bits) << bits) | q[:, 2]
 
 
 def landing_step(run_steps: int, landed_step: int | None) -> int:
