@@ -156,18 +156,20 @@ def timed_calls(world, seconds: Counter, counts: Counter):
             setattr(world_module, name, function)
 
 
-def in_turn(name: str, count: int, steps: int | None, orders: list[str], landed_step: int | None = None) -> dict:
+def in_turn(name: str, count: int, steps: int | None, orders: list[str], landed_step: int | None = None
+            ) -> tuple[int, dict]:
     """The scene in each of ``orders``, stepped in turn in one process: step k of every
     order back to back (the orders' sequence reversed every other step), so that this
     machine's drift (whole runs of the same engine have differed by 30 % within minutes)
-    falls on every order alike. Returns {order: (seconds stepping, contacts)}."""
+    falls on every order alike. Returns the steps run and {order: (seconds stepping,
+    contacts)}."""
     worlds = {}
     for order in orders:
         scene = scene_for(name, count, steps)
         renumber(scene, order, landed_step)
         worlds[order] = (scene, scene.build_world())
-    scene = next(iter(worlds.values()))[0]
-    warm_up(worlds[orders[0]][1].broad_phase.name, sleeping=worlds[orders[0]][1].sleepers is not None)
+    scene, world = worlds[orders[0]]
+    warm_up(world.broad_phase.name, sleeping=world.sleepers is not None)
     spent = dict.fromkeys(orders, 0.0)
     contacts = dict.fromkeys(orders, 0)
     for k in range(scene.steps):
@@ -177,7 +179,7 @@ def in_turn(name: str, count: int, steps: int | None, orders: list[str], landed_
             stats = world.step(scene.dt)
             spent[order] += time.perf_counter() - started
             contacts[order] += stats.contacts
-    return {order: (spent[order], contacts[order]) for order in orders}
+    return scene.steps, {order: (spent[order], contacts[order]) for order in orders}
 
 
 def measure(scene) -> dict:
@@ -224,8 +226,7 @@ def main() -> None:
     if args.landed_step is not None and ("landed" not in turns + [args.order] or args.landed_step < 0):
         parser.error("--landed-step goes with --order landed (or landed in --in-turn), and is a step number >= 0")
     if turns:
-        results = in_turn(args.scene, args.count, args.steps, turns, args.landed_step)
-        steps = scene_for(args.scene, args.count, args.steps).steps
+        steps, results = in_turn(args.scene, args.count, args.steps, turns, args.landed_step)
         print(f"{args.scene} N={args.count}, {steps} steps, the orders stepped in turn in one process:")
         for order, (seconds, contacts) in results.items():
             print(f"  {order:13s} {1000 * seconds / steps:9.3f} ms/step, {contacts} contacts")
