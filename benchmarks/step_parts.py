@@ -1,7 +1,7 @@
 """Where a step's time goes, call by call, measured inside the step; and what renumbering does.
 
     .venv/bin/python benchmarks/step_parts.py [--scene rain|gas] [--count 1000] [--steps S]
-        [--order as-generated|random|morton|columns|landed [--landed-step K]]
+        [--order as-generated|random|morton|columns|landed|inside [--landed-step K]]
     .venv/bin/python benchmarks/step_parts.py --count 100000 --in-turn as-generated,morton,landed
 
 Runs box-rain (``rain``: benchmarks/box_rain.py's scene, 240 steps) or the exact gas
@@ -19,7 +19,9 @@ then height (rain falls nearly straight down, so a column stays a column); ``lan
 Morton order of where each sphere is after ``--landed-step`` steps (default: nine tenths
 of the run), found by a first, untimed run: what an order kept up as the spheres move
 would give near that step (box-rain 100k's landing: docs/benchmarks.md, fourteenth
-session). The contacts have come out the same in every order measured (box-rain 1k, 10k
+session); ``inside``: as generated, numbered by the world itself (``space_order = "morton"``,
+which ``auto`` picks from 4 096 spheres up; every other order here runs with
+``space_order = "given"``, so the world keeps the order it is given). The contacts have come out the same in every order measured (box-rain 1k, 10k
 and 100k, the gas at 32k), though the held-contact solves sweep in index order, so a pile
 could differ in its last bits: the time is the point. The mean index distance of the last
 step's candidate pairs shows how local the order is. Whole runs one after another are no
@@ -32,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import sys
 import time
 from collections import Counter
@@ -40,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from physdbg.engine import world as world_module
+from physdbg.engine.space_order import interleaved, morton_keys, quantised
 from physdbg.engine.timeline import REQUERY
 from physdbg.engine.world import warm_up
 from physdbg.scene import load_scene
@@ -51,7 +55,7 @@ from box_rain import box_rain  # noqa: E402
 CALLS = ("settle_held", "swept_boxes", "grow_to_reach", "split_sleeping", "adjacency_from_pairs",
          "narrow_candidates", "predict_into", "run_time_order", "advance_particles", "max_overlap",
          "first_non_finite", "energies", "state_hash")
-ORDERS = ("as-generated", "random", "morton", "columns", "landed")
+ORDERS = ("as-generated", "random", "morton", "columns", "landed", "inside")
 
 
 def scene_for(name: str, count: int, steps: int | None):
@@ -62,34 +66,11 @@ def scene_for(name: str, count: int, steps: int | None):
     return load_scene("gas", [f"generate.count={count}", "generate.packing_fraction=0.3", f"steps={steps}"])
 
 
-def _quantised(points: np.ndarray, bits: int) -> np.ndarray:
-    """(N, 3) int64: each axis of points (N, 3) quantised to ``bits`` bits over the points'
-    bounding cube."""
-    low = points.min(axis=0)
-    span = float((points.max(axis=0) - low).max()) or 1.0
-    return np.clip(((points - low) / span * (2**bits - 1)).astype(np.int64), 0, 2**bits - 1)
-
-
-def _interleaved(q: np.ndarray, axes: int, bits: int) -> np.ndarray:
-    """(N,) the bits of the first ``axes`` columns of q interleaved, column 0 the lowest."""
-    keys = np.zeros(len(q), dtype=np.int64)
-    for bit in range(bits):
-        for axis in range(axes):
-            keys |= ((q[:, axis] >> bit) & 1) << (axes * bit + axis)
-    return keys
-
-
-def morton_keys(points: np.ndarray, bits: int = 10) -> np.ndarray:
-    """(N,) Z-curve keys of points (N, 3): each axis quantised to ``bits`` bits over the
-    points' bounding cube, the bits interleaved x, y, z."""
-    return _interleaved(_quantised(points, bits), 3, bits)
-
-
 def column_keys(points: np.ndarray, bits: int = 10) -> np.ndarray:
     """(N,) keys of points (N, 3) by column: the Z-curve of (x, y) quantised as in
     morton_keys, then the height z as the lowest ``bits`` bits."""
-    q = _quantised(points, bits)
-    return (_interleaved(q, 2, bits) << bits) | q[:, 2]
+    q = quantised(points, bits)
+    return (interleaved(q, 2, bits) << bits) | q[:, 2]
 
 
 def landing_step(run_steps: int, landed_step: int | None) -> int:
@@ -109,10 +90,14 @@ def landed_places(scene, steps: int) -> np.ndarray:
 
 
 def renumber(scene, order: str, landed_step: int | None = None) -> None:
-    """Permute the scene's particles in place into ``order`` (one of ORDERS); landed_step:
-    for "landed", the step whose places give the order (default: nine tenths of the run)."""
+    """Permute the scene's particles in place into ``order`` (one of ORDERS), the world
+    keeping that numbering (``space_order = "given"``); "inside": as generated, the world
+    numbering them itself (``space_order = "morton"``, physdbg/engine/space_order.py);
+    landed_step: for "landed", the step whose places give the order (default: nine tenths
+    of the run)."""
+    scene.settings = dataclasses.replace(scene.settings, space_order="morton" if order == "inside" else "given")
     state = scene.state
-    if order == "as-generated":
+    if order in ("as-generated", "inside"):
         return
     if order == "random":
         permutation = np.random.default_rng(0).permutation(state.count)
@@ -162,7 +147,7 @@ def in_turn(name: str, count: int, steps: int | None, orders: list[str], landed_
     order back to back (the orders' sequence reversed every other step), so that this
     machine's drift (whole runs of the same engine have differed by 30 % within minutes)
     falls on every order alike. Returns the steps run and {order: (seconds stepping,
-    contacts)}."""
+    contacts, the last step's state hash)}."""
     worlds = {}
     for order in orders:
         scene = scene_for(name, count, steps)
@@ -172,6 +157,7 @@ def in_turn(name: str, count: int, steps: int | None, orders: list[str], landed_
     warm_up(world.broad_phase.name, sleeping=world.sleepers is not None)
     spent = dict.fromkeys(orders, 0.0)
     contacts = dict.fromkeys(orders, 0)
+    hashes = dict.fromkeys(orders, "")
     for k in range(scene.steps):
         for order in orders if k % 2 == 0 else orders[::-1]:
             scene, world = worlds[order]
@@ -179,7 +165,8 @@ def in_turn(name: str, count: int, steps: int | None, orders: list[str], landed_
             stats = world.step(scene.dt)
             spent[order] += time.perf_counter() - started
             contacts[order] += stats.contacts
-    return scene.steps, {order: (spent[order], contacts[order]) for order in orders}
+            hashes[order] = stats.state_hash
+    return scene.steps, {order: (spent[order], contacts[order], hashes[order]) for order in orders}
 
 
 def measure(scene) -> dict:
@@ -228,8 +215,9 @@ def main() -> None:
     if turns:
         steps, results = in_turn(args.scene, args.count, args.steps, turns, args.landed_step)
         print(f"{args.scene} N={args.count}, {steps} steps, the orders stepped in turn in one process:")
-        for order, (seconds, contacts) in results.items():
-            print(f"  {order:13s} {1000 * seconds / steps:9.3f} ms/step, {contacts} contacts")
+        for order, (seconds, contacts, last_hash) in results.items():
+            print(f"  {order:13s} {1000 * seconds / steps:9.3f} ms/step, {contacts} contacts, "
+                  f"state hash {last_hash[:8]}")
         return
     scene = scene_for(args.scene, args.count, args.steps)
     renumber(scene, args.order, args.landed_step)

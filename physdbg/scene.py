@@ -39,6 +39,7 @@ from .engine import (
     World,
 )
 from .engine.periodic import wrap_positions
+from .engine.space_order import SPACE_ORDER_MIN, SPACE_ORDER_NAMES
 from .engine.state import BYTES_PER_PARTICLE, DEFAULT_MAX_MEMORY
 from .errors import SceneError, UnknownSceneError
 from .scenes import builtin_names, builtin_text
@@ -85,6 +86,10 @@ TOP_FIELDS = {
     "max_memory": ("the most memory a run may use, bytes (default 4e9): a scene whose particles need more (about "
                    "4 KiB each) is refused, and a step whose buffers (event queue, swept-test log, contacts) would "
                    "grow past it is stopped like a budget"),
+    "space_order": ("the engine's own numbering of the spheres, for speed: auto (the default: Morton order from "
+                    f"{SPACE_ORDER_MIN} spheres up under ordering = time), given (the scene's) or morton (along a "
+                    "Z-curve of their starting places); every event, state and recording stays in the scene's "
+                    "numbering"),
     "max_particle_steps": "refuse a run of more particle-steps (particles × steps) than this (default 1e10)",
     "particles": "array of [[particles]] tables",
     "planes": "array of [[planes]] tables",
@@ -498,6 +503,7 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
                             lo=0 if budget in SIZED_BUDGETS else 1, integer=True)
            for budget in BUDGETS},
         max_memory=max_memory,
+        space_order=c.choice(raw, "space_order", "space_order", SPACE_ORDER_NAMES, d.space_order),
     )
 
     # walls

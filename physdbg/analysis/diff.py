@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ..engine.space_order import chosen_order
 from ..events import KIND_PAIR, contact_words
 from . import align
 from .tunnel import StepChecker
@@ -117,7 +118,7 @@ class DiffReport:
 # ----------------------------------------------------------------------------- settings
 # engine settings added after recordings were made, and what a recording made before
 # each one existed used
-SETTINGS_ADDED = {"rapid_contact_rule": "hold", "sleep_speed": 0.0, "sleep_time": 0.5}
+SETTINGS_ADDED = {"rapid_contact_rule": "hold", "sleep_speed": 0.0, "sleep_time": 0.5, "space_order": "given"}
 
 
 def _flatten(value, prefix: str = "") -> dict:
@@ -146,7 +147,7 @@ def compare_settings(meta_a: dict, meta_b: dict, warned_a: set[str], warned_b: s
     out = []
     for name in sorted(set(used_a) | set(used_b), key=lambda n: (n.count("."), n)):
         a, b = used_a.get(name), used_b.get(name)
-        if _same(a, b):
+        if _same(a, b) or (name == "space_order" and _numbering(meta_a, a) == _numbering(meta_b, b)):
             continue
         if name in table_a or name in table_b:
             # a field given in one file and defaulted in the other: compare what was used
@@ -159,6 +160,9 @@ def compare_settings(meta_a: dict, meta_b: dict, warned_a: set[str], warned_b: s
             matters, note = False, CANNOT_MATTER[name]
         elif name in BUDGET_SETTINGS and name not in warned_a | warned_b:
             matters, note = False, "a work limit that neither run reached"
+        elif name == "space_order":
+            note = ("the engine's own numbering of the spheres (space_order.py): only the order of exactly "
+                    "simultaneous contacts of one sphere depends on it")
         elif name == "samples" and "sampled" not in (used_a.get("detection"), used_b.get("detection")):
             matters, note = False, "used only by detection = sampled"
         out.append(SettingDifference(name, a, b, matters, note))
@@ -167,6 +171,15 @@ def compare_settings(meta_a: dict, meta_b: dict, warned_a: set[str], warned_b: s
             out.append(SettingDifference(name, meta_a.get(name), meta_b.get(name), True,
                                          "recorded by different builds: results may differ in the last bits"))
     return out
+
+
+def _numbering(meta: dict, space_order) -> str | None:
+    """The numbering a recorded run's world kept ("given" or "morton"; space_order.py)."""
+    settings = meta.get("settings", {})
+    try:
+        return chosen_order(str(space_order), int(meta.get("particles", 0)), settings.get("ordering", "time"))
+    except ValueError:
+        return None
 
 
 def _same(a, b) -> bool:

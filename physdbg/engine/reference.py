@@ -29,7 +29,7 @@ class ReferenceWorld(World):
     """A World whose time-ordered resolve phase is the O(N²) reference loop (module doc)."""
 
     def _resolve_in_time_order(self, ctx: StepContext) -> str | None:
-        st = self.state
+        st = self._st
         s = self.settings
         every = [(kind, *every_candidate(kind, st.count, self._walls_group)) for kind in range(KINDS)]
         scratch = Buffers(st.count, heap=1, tests=max(sum(len(ia) for _, ia, _ in every), 1))

@@ -57,7 +57,7 @@ from typing import NamedTuple
 
 from .bound_qp import solve_bound_qp
 from .jit import borrowing, kernel
-from .colliders.kinds import partner_sphere
+from .colliders.kinds import PARTNER_IS_SPHERE, partner_sphere
 from .motion import advance_particle
 
 
@@ -218,6 +218,28 @@ def new_held(n: int, capacity: int = 64, per_particle: int = 16) -> HeldContacts
                         np.zeros((n, per_particle), np.int64), np.zeros(n, np.int64), np.zeros(capacity, np.int64),
                         np.full(n, -1, np.int64), np.zeros(n + 1, np.int64), np.zeros((n, 3)),
                         np.full(n, -1, np.int64), np.full(n, -1, np.int64))
+
+
+def renumber_held(h: HeldContacts, old_of_new: np.ndarray, new_of_old: np.ndarray) -> None:
+    """Renumber the spheres of the held contacts in place (space_order.py): sphere i is now
+    the one that was old_of_new[i] (new_of_old its inverse). A pair whose two ends come
+    out the other way round is turned over (a < other, the normal reversed: the same
+    contact, its force multiplier unchanged). Contact ids and each sphere's list of them
+    keep their order."""
+    held = int(h.count[HELD])
+    kind, a, other = h.kind[:held], h.a[:held], h.other[:held]
+    pair = np.asarray(PARTNER_IS_SPHERE)[kind]
+    new_a = new_of_old[a]
+    new_other = np.where(pair, new_of_old[np.where(pair, other, 0)], other)
+    turn = pair & (new_a > new_other)
+    h.a[:held] = np.where(turn, new_other, new_a)
+    h.other[:held] = np.where(turn, new_a, new_other)
+    h.normal[:held][turn] *= -1.0
+    for name in ("slots", "deg", "mark", "renew", "place", "before"):
+        rows = getattr(h, name)
+        rows[:] = rows[old_of_new]
+    visited = int(h.touched[0])
+    h.touched[1:visited + 1] = new_of_old[h.touched[1:visited + 1]]
 
 
 def grow_held(h: HeldContacts) -> HeldContacts:

@@ -270,6 +270,11 @@ class Sleepers:
     def count(self) -> int:
         return int(np.count_nonzero(self.asleep))
 
+    def renumber(self, old_of_new: np.ndarray) -> None:
+        """The spheres renumbered (space_order.py): sphere i is now the one that was old_of_new[i]."""
+        for name in ("asleep", "still", "allowed", "down"):
+            setattr(self, name, np.ascontiguousarray(getattr(self, name)[old_of_new]))
+
     def end_of_step(self, dt: float, x: np.ndarray, velocities: np.ndarray, radius: np.ndarray,
                     pair_lists: tuple[np.ndarray, ...], rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The rules at the end of a step of dt seconds (sleep_rules): x, velocities (N, 3)

@@ -66,7 +66,10 @@ class Settings:
     contact at any speed, "tc" only a slow one (resting.rapid_holds);
     contact_tolerance: allowed overlap / resting gap (m); sleep_speed: a sphere at most
     this fast (m/s) for sleep_time (s) falls asleep, immovable until disturbed (sleep.py;
-    0 = off, the default).
+    0 = off, the default); space_order: the world's own numbering of the spheres,
+    "auto", "given" or "morton" (space_order.py: only speed and the order of exactly
+    simultaneous events depend on it; everything the world reports is in the scene's
+    numbering).
 
     max_memory (bytes): the particles' own memory (BYTES_PER_PARTICLE each) and the step's
     growable buffers (event queue, swept-test log, contact rows, held contacts) may not
@@ -99,6 +102,7 @@ class Settings:
     # them unfinished (docs/benchmarks.md, "second session")
     max_resting_work_per_step: int = 1_000_000_000
     max_memory: float = DEFAULT_MAX_MEMORY
+    space_order: str = "auto"
 
     def event_cap(self, spheres: int) -> int:
         """The contact budget of one step for this many spheres: max_events_per_step, or
@@ -159,6 +163,10 @@ class Walls:
     def periodic(self) -> bool:
         """Is any axis periodic?"""
         return bool(np.any(self.period > 0))
+
+
+# State's per-sphere arrays, in its order
+STATE_FIELDS = ("positions", "velocities", "inverse_mass", "radius", "restitution", "gravity_scale")
 
 
 @dataclass

@@ -91,6 +91,13 @@ class Buffers:
                                  self.contacts, self.counters, self.pending, self.changed, self.batch_mark,
                                  self.requery, self.requery_count))
 
+    def renumber(self, old_of_new: np.ndarray) -> None:
+        """The spheres renumbered between steps (space_order.py): sphere i is now the one
+        that was old_of_new[i]. Only batch_mark outlives a step (the other per-sphere
+        arrays are a step's scratch)."""
+        n = old_of_new.shape[0]
+        self.batch_mark[:n] = self.batch_mark[old_of_new]
+
     def reset(self, keep_misses: bool = True) -> None:
         """Start a step. keep_misses: log every swept test; False logs only the tests that
         hit within the step (what the loop acts on): an unobserved step of a dense scene

@@ -69,10 +69,11 @@ from .resolve import (
     resolve_contact,
     settle_held,
 )
-from .resting import HELD, RAPID_RULES, STEP_RELEASED, STEP_WORK, grow_held, held_room, new_held
+from .resting import HELD, RAPID_RULES, STEP_RELEASED, STEP_WORK, grow_held, held_room, new_held, renumber_held
 from .sleep import SUPPORT_GAP, Sleepers, release_static, split_sleeping
-from .state import (BUDGETS, BYTES_PER_PARTICLE, NonFiniteState, Settings, State, Walls, energies, first_non_finite,
-                    state_hash)
+from .space_order import RENUMBER_EVERY, Numbering, chosen_order, morton_order
+from .state import (BUDGETS, BYTES_PER_PARTICLE, STATE_FIELDS, NonFiniteState, Settings, State, Walls, energies,
+                    first_non_finite, state_hash)
 from .step_context import StepContext
 from .timeline import (
     CAPPED,
@@ -129,9 +130,16 @@ class StepStats:
 class World:
     """Particles, walls and settings, stepped in place.
 
-    state: the particles (its arrays are updated by ``step``); walls: the planes;
-    settings: methods and tolerances; observer: anything with ``on_event(event)``, and
-    optionally ``wants_swept_tests`` (see the function of that name).
+    state: the particles (its positions and velocities are updated in place by ``step``,
+    and what is written to them between steps counts); walls: the planes; settings:
+    methods and tolerances; observer: anything with ``on_event(event)``, and optionally
+    ``wants_swept_tests`` (see the function of that name).
+
+    A large world numbers the spheres its own way (``settings.space_order``,
+    space_order.py): ``numbering`` translates (None: the scene's numbering). ``state``,
+    the events and the stats are always in the scene's numbering; what is inside
+    (``held``, ``sleepers``, ``last_step``) is in the world's, which it renews every
+    RENUMBER_EVERY steps.
     """
 
     def __init__(self, state: State, walls: Walls, settings: Settings, observer=None):
@@ -145,27 +153,8 @@ class World:
         self.step_index = 0
         self._particle_bytes = state.count * BYTES_PER_PARTICLE  # what max_memory counts besides the buffers
         self.time = 0.0
-        chosen, self.broad_phase_reason = choose_broad_phase(settings.broad_phase, state.radius)
-        self.broad_phase = make_broad_phase(chosen)
-        self.held = new_held(state.count)
-        self._last_contact = np.full(state.count, -math.inf)
-        self._integrator = settings.integrator_code
-        self._detection = settings.detection_code
-        self._drag = float(settings.drag)
-        self._k = -math.log(self._drag)
-        gravity = np.asarray(settings.gravity, dtype=np.float64)
-        self.gravity = gravity
         movable = state.inverse_mass > 0
         state.velocities[~movable] = 0.0
-        self._free_accel = np.ascontiguousarray(
-            (state.gravity_scale * movable)[:, None] * gravity[None, :])
-        # the integrator's traits (motion.py's table): no branch on which integrator it is
-        self._anchor_is_flow = FLOW[self._integrator][self._drag != 1.0]
-        self._rest_step_factor = REST_STEP_FACTOR[self._integrator]
-        self._kick_first = KICK_AT_STEP_START[self._integrator]
-        self._accel_scale = max(1.0, float(np.abs(self._free_accel).max())) if state.count else 1.0
-        self._atol = SOLVE_TOLERANCE * self._accel_scale
-        self._acc = np.zeros((state.count, 3))
         # the planes never change in a run: their kernel group is built once
         self._walls_group = tuple(LoopWalls.of(walls))
         self._period = self._walls_group[-1]
@@ -173,29 +162,71 @@ class World:
         self._periodic = walls.periodic
         if self._periodic:
             wrap_positions(state.positions, self._period_origin, self._period)
+        # the world's own numbering (space_order.py): self._st is the particles in it, and
+        # is self.state itself when it is the scene's
+        self.numbering: Numbering | None = None
+        self._st = state
+        if chosen_order(settings.space_order, state.count, settings.ordering) == "morton":
+            self.numbering = Numbering(morton_order(state.positions))
+            self._st = State(*(self.numbering.inward(getattr(state, name)) for name in STATE_FIELDS))
+            movable = self._st.inverse_mass > 0
+        st = self._st
+        chosen, self.broad_phase_reason = choose_broad_phase(settings.broad_phase, st.radius)
+        self.broad_phase = make_broad_phase(chosen)
+        self.held = new_held(st.count)
+        self._last_contact = np.full(st.count, -math.inf)
+        self._integrator = settings.integrator_code
+        self._detection = settings.detection_code
+        self._drag = float(settings.drag)
+        self._k = -math.log(self._drag)
+        gravity = np.asarray(settings.gravity, dtype=np.float64)
+        self.gravity = gravity
+        self._free_accel = np.ascontiguousarray(
+            (st.gravity_scale * movable)[:, None] * gravity[None, :])
+        # the integrator's traits (motion.py's table): no branch on which integrator it is
+        self._anchor_is_flow = FLOW[self._integrator][self._drag != 1.0]
+        self._rest_step_factor = REST_STEP_FACTOR[self._integrator]
+        self._kick_first = KICK_AT_STEP_START[self._integrator]
+        self._accel_scale = max(1.0, float(np.abs(self._free_accel).max())) if st.count else 1.0
+        self._atol = SOLVE_TOLERANCE * self._accel_scale
+        self._acc = np.zeros((st.count, 3))
+        if self._periodic:
             self.broad_phase = PeriodicBroadPhase(self.broad_phase, self._period_origin, self._period)
         self._buf = Buffers(state.count)
         # a re-query the loop can answer itself (timeline.grow_unpartnered) without a pause
         self._scan_boxes = bool(self.broad_phase.query_scans_boxes) and not self._periodic
         # sleeping (sleep.py): the step reads these, not state.inverse_mass and the free
         # accelerations, so a sleeping sphere is immovable and feels no gravity
-        self._inverse_mass = state.inverse_mass
+        self._inverse_mass = st.inverse_mass
         self._free_accel_awake = self._free_accel
         self.sleepers: Sleepers | None = None
         if settings.sleep_speed > 0:
             if self._periodic:
                 raise ValueError("sleep_speed > 0 needs a scene without periodic walls (sleep.py)")
             self.sleepers = Sleepers(self._free_accel, self._k, settings.sleep_speed, settings.sleep_time)
-            self._inverse_mass = state.inverse_mass.copy()
+            self._inverse_mass = st.inverse_mass.copy()
             self._free_accel = self._free_accel.copy()
         # every swept box is padded by this (m) beyond the sphere: the contact tolerance, and
         # with sleeping the sleep rules' touching distance, so every pair they count as
         # touching at a step's end is one of the step's candidate pairs whatever the reach
         self._box_margin = settings.contact_tolerance
-        if self.sleepers is not None and state.count:
-            self._box_margin += SUPPORT_GAP * float(state.radius.max())
+        if self.sleepers is not None and st.count:
+            self._box_margin += SUPPORT_GAP * float(st.radius.max())
         self.event_cap = settings.event_cap(state.count)
         self.last_step: StepContext | None = None  # the context of the latest step (for inspection)
+
+    def asleep(self) -> np.ndarray | None:
+        """(N,) bool in the scene's numbering: the spheres asleep now (sleep.py), or None
+        when the world does not sleep. (``self.sleepers`` is in the world's own numbering.)"""
+        if self.sleepers is None:
+            return None
+        if self.numbering is None:
+            return self.sleepers.asleep.copy()
+        return self.numbering.outward(self.sleepers.asleep)
+
+    def scene_sphere(self, index: int) -> int:
+        """The scene's number of the world's sphere ``index`` (space_order.py)."""
+        return index if self.numbering is None else self.numbering.sphere(index)
 
     @property
     def held_count(self) -> int:
@@ -223,6 +254,11 @@ class World:
         # a velocity residue of vtol moves a sphere vtol·dt in a step: SOLVE_TOLERANCE·a·dt²
         ctx = StepContext(self.step_index, dt, self.time, SOLVE_TOLERANCE * self._accel_scale * dt, self.observer)
         self.last_step = ctx
+        if self.numbering is not None:  # World.state is the world: what was written to it counts
+            self.numbering.gather(self.state.positions, self._st.positions)
+            self.numbering.gather(self.state.velocities, self._st.velocities)
+            if ctx.step and ctx.step % RENUMBER_EVERY == 0:
+                self._renumber()
         if ctx.observer is not None:
             ctx.observer.on_event(StepBegin(ctx.step, ctx.run_time, dt))
         return ctx
@@ -235,7 +271,7 @@ class World:
 
     def _forces(self, ctx: StepContext) -> None:
         """Held contacts -> the accelerations the paths follow (resolve.settle_held)."""
-        st, s, n, dt = self.state, self.settings, self.state.count, ctx.dt
+        st, s, n, dt = self._st, self.settings, self._st.count, ctx.dt
         self.held.count[STEP_WORK:STEP_RELEASED + 1] = 0  # this step's resting work, whole solves, releases
         ctx.path_accel = np.empty_like(self._acc)
         ctx.sigma = np.zeros(n)
@@ -248,7 +284,7 @@ class World:
 
     def _broad_phase(self, ctx: StepContext) -> None:
         """Each path's swept box over the step, grown to its reach -> candidate pairs."""
-        st, s, n = self.state, self.settings, self.state.count
+        st, s, n = self._st, self.settings, self._st.count
         ctx.lo = np.empty((n, 3))
         ctx.hi = np.empty((n, 3))
         swept_boxes(st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma, ctx.dt, self._integrator,
@@ -291,11 +327,11 @@ class World:
         if budget == "max_memory" and not ctx.warned(budget):
             ctx.warn(budget, self._memory_message(ctx))
         elif budget is not None and not ctx.warned(budget):
-            ctx.warn(budget, _budget_message(budget, s.budget(budget, self.state.count)))
+            ctx.warn(budget, _budget_message(budget, s.budget(budget, self._st.count)))
 
     def _finish(self, ctx: StepContext) -> None:
         """Every sphere to the end of the step; the overlap audit, energies and state hash."""
-        st, s, n = self.state, self.settings, self.state.count
+        st, s, n = self._st, self.settings, self._st.count
         x, v = st.positions, st.velocities
         advance_particles(x, v, ctx.path_accel, ctx.sigma, np.arange(n, dtype=np.int64), ctx.dt, self._integrator,
                           self._drag, self._k)
@@ -308,17 +344,21 @@ class World:
                                 f"{s.contact_tolerance:g} m")
         if self.sleepers is not None:
             self._sleep(ctx)
+        if self.numbering is not None:  # what leaves the world is in the scene's numbering
+            self.numbering.scatter(x, self.state.positions)
+            self.numbering.scatter(v, self.state.velocities)
+            x, v = self.state.positions, self.state.velocities
         ctx.non_finite = first_non_finite(x, v)
         if ctx.non_finite is not None:
             ctx.warn("non-finite", str(NonFiniteState(ctx.step, *ctx.non_finite)))
-        ctx.kinetic, ctx.potential, ctx.momentum = energies(st, self.gravity)
+        ctx.kinetic, ctx.potential, ctx.momentum = energies(self.state, self.gravity)
         ctx.state_hash = state_hash(x, v)
         self.time += ctx.dt
         self.step_index += 1
 
     def _sleep(self, ctx: StepContext) -> None:
         """The sleep rules at the step's end (sleep.py): wake the disturbed, freeze the slow."""
-        st, sleepers = self.state, self.sleepers
+        st, sleepers = self._st, self.sleepers
         rows = self._buf.contacts[:int(self._buf.counters[CONTACTS])]
         pair_lists = (np.ascontiguousarray(ctx.pairs, dtype=np.int64),
                       np.ascontiguousarray(ctx.sleeping_pairs, dtype=np.int64))
@@ -355,11 +395,36 @@ class World:
                                   "resting": self.held_count, "rapid": rapid, "released": released,
                                   "asleep": asleep, "slept": ctx.slept, "woken": ctx.woken},
                                  ctx.max_overlap, dict(ctx.timings), ctx.state_hash,
-                                 tuple(w.message for w in ctx.warnings),
-                                 self.sleepers.asleep.copy() if self.sleepers is not None else None))
+                                 tuple(w.message for w in ctx.warnings), self.asleep()))
         if ctx.non_finite is not None:
             raise NonFiniteState(ctx.step, *ctx.non_finite)
         return stats
+
+    def _renumber(self) -> None:
+        """Number the spheres in Morton order of where they are now (space_order.py): every
+        array that outlives a step is permuted, the held contacts and the sleepers too."""
+        old_of_new = morton_order(self._st.positions)
+        new_of_old = np.empty_like(old_of_new)
+        new_of_old[old_of_new] = np.arange(old_of_new.shape[0], dtype=np.int64)
+        moved: dict[int, np.ndarray] = {}  # by id: an array held under two names stays one array
+
+        def move(rows: np.ndarray) -> np.ndarray:
+            if id(rows) not in moved:
+                moved[id(rows)] = np.ascontiguousarray(rows[old_of_new])
+            return moved[id(rows)]
+
+        st = self._st
+        for name in STATE_FIELDS:
+            setattr(st, name, move(getattr(st, name)))
+        self._inverse_mass, self._free_accel, self._free_accel_awake, self._acc, self._last_contact = (
+            move(rows) for rows in (self._inverse_mass, self._free_accel, self._free_accel_awake, self._acc,
+                                    self._last_contact))
+        if self.sleepers is not None:
+            self.sleepers.renumber(old_of_new)
+        renumber_held(self.held, old_of_new, new_of_old)
+        self._buf.renumber(old_of_new)
+        self.broad_phase.renumbered()
+        self.numbering = Numbering(self.numbering.inner_to_scene[old_of_new])
 
     # ------------------------------------------------------------------ candidates
     @staticmethod
@@ -380,7 +445,7 @@ class World:
         motion.nearby_fastest) holds any path that does not outrun it; the rare one that
         does is queried again (timeline.REQUERY). In place on ctx.lo, ctx.hi (N, 3).
         """
-        st = self.state
+        st = self._st
         # compiled (motion.grow_to_reach): np.quantile alone was a third of a small step
         grow_to_reach(st.positions, st.velocities, ctx.path_accel, st.radius, ctx.dt, self._box_margin,
                       ctx.lo, ctx.hi)
@@ -407,7 +472,7 @@ class World:
 
     def _refresh_box(self, ctx: StepContext, i: int) -> list[int]:
         """Grow i's swept box to hold its new path; return partners it did not have."""
-        st = self.state
+        st = self._st
         lo = np.empty(3)
         hi = np.empty(3)
         particle_box(st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma, i, ctx.dt, self._integrator,
@@ -418,7 +483,7 @@ class World:
         ctx.hi[i] = np.maximum(ctx.hi[i], hi)
         if self._periodic and ctx.too_wide_mid_step is None:
             ctx.too_wide_mid_step = self._too_wide_for_the_period(
-                ctx.lo[i:i + 1], ctx.hi[i:i + 1], f"sphere {i}'s later contacts in this step (after a contact "
+                ctx.lo[i:i + 1], ctx.hi[i:i + 1], f"sphere {self.scene_sphere(i)}'s later contacts in this step (after a contact "
                                                   f"sent it out of its box) may have met the wrong image")
         found = set(self.broad_phase.query(ctx.lo, ctx.hi, ctx.lo[i], ctx.hi[i]).tolist())
         # a structure built at step start knows the old boxes: check grown ones directly
@@ -445,7 +510,7 @@ class World:
         none if the buffers cannot grow for them within max_memory (ctx.out_of_memory)."""
         if ia.size == 0:
             return
-        st = self.state
+        st = self._st
         s = self.settings
         buf = self._buf
         if ctx.out_of_memory or not self._ensure(ctx, ia.size, ia.size, 0):
@@ -463,7 +528,7 @@ class World:
         buf = self._buf
         nw = len(self.walls)
         particles, method, walls = self._kernel_groups(ctx)
-        budgets = tuple(LoopBudgets(self.event_cap, s.swept_test_budget(self.state.count),
+        budgets = tuple(LoopBudgets(self.event_cap, s.swept_test_budget(self._st.count),
                                     s.max_resting_work_per_step))
         while True:
             if ctx.out_of_memory:  # the narrow phase, or a re-query's predictions, did not fit
@@ -527,7 +592,7 @@ class World:
                    "included)" if wants_swept_tests(ctx.observer) else "")
         return (f"max_memory reached: this step's buffers (event queue, swept-test log, contacts, held contacts) "
                 f"would have taken the run to about {_bytes(ctx.out_of_memory)}, more than max_memory = {limit:.3g} "
-                f"bytes (the {self.state.count} particles count ~{BYTES_PER_PARTICLE // 1024} KiB each); the "
+                f"bytes (the {self._st.count} particles count ~{BYTES_PER_PARTICLE // 1024} KiB each); the "
                 f"remaining contacts of the step were not resolved; raise it with --set "
                 f"max_memory={max(ctx.out_of_memory * 1.5, limit * 2):.2g}{logging}")
 
@@ -597,7 +662,7 @@ class World:
         return ctx.kernel_groups
 
     def _build_kernel_groups(self, ctx: StepContext) -> tuple[tuple, tuple, tuple]:
-        st, s = self.state, self.settings
+        st, s = self._st, self.settings
         particles = LoopParticles(st.positions, st.velocities, ctx.path_accel, self._acc, st.radius, self._inverse_mass,
                                   st.restitution, ctx.sigma, self._last_contact)
         method = LoopMethod(ctx.run_time, ctx.dt, self._integrator, self._drag, self._k, self._detection, s.samples,
@@ -609,11 +674,15 @@ class World:
 
     # ------------------------------------------------------------------ events
     def _contacts_event(self, ctx: StepContext) -> Contacts:
-        return Contacts(ctx.step, self._buf.contacts[:int(self._buf.counters[CONTACTS])].copy())
+        rows = self._buf.contacts[:int(self._buf.counters[CONTACTS])].copy()
+        if self.numbering is not None:  # a pair's a may then be the larger number
+            rows["other"] = self.numbering.partners(rows["kind"], rows["other"])
+            rows["a"] = self.numbering.spheres(rows["a"])
+        return Contacts(ctx.step, rows)
 
     def _max_overlap(self, ctx: StepContext) -> float:
         """Deepest penetration (m) among candidate pairs and particle–wall pairs."""
-        return float(max_overlap(self.state.positions, self.state.radius, ctx.pairs, self._walls_group,
+        return float(max_overlap(self._st.positions, self._st.radius, ctx.pairs, self._walls_group,
                                  self.settings.detection != "swept"))
 
     def _broad_phase_event(self, ctx: StepContext) -> BroadPhaseInfo:
@@ -625,14 +694,18 @@ class World:
         if tree is not None:
             nodes = {name: getattr(tree, name).copy() for name in
                      ("lo", "hi", "left", "right", "parent", "depth", "start", "count", "order")}
+            if self.numbering is not None:
+                nodes["order"] = self.numbering.spheres(nodes["order"])
         return BroadPhaseInfo(ctx.step, bp.name, self.broad_phase_reason, stats, nodes)
 
     def _swept_tests_event(self, ctx: StepContext) -> SweptTests:
         buf = self._buf
         count = int(buf.counters[ROWS])  # every test: an observed step logs them all
         toi = buf.test_float[:count, 1].copy()
-        return SweptTests(ctx.step, buf.test_int[:count, 0].astype(np.int8),
-                          buf.test_int[:count, 1].astype(np.int32), buf.test_int[:count, 2].astype(np.int32),
+        kind, a, other = buf.test_int[:count, 0], buf.test_int[:count, 1], buf.test_int[:count, 2]
+        if self.numbering is not None:
+            a, other = self.numbering.spheres(a), self.numbering.partners(kind, other)
+        return SweptTests(ctx.step, kind.astype(np.int8), a.astype(np.int32), other.astype(np.int32),
                           buf.test_float[:count, 0].copy(), np.where(toi <= ctx.dt, toi, np.nan),
                           buf.test_outcome[:count].copy())
 

@@ -37,6 +37,10 @@ class BroadPhase(Protocol):
     def query(self, lo: np.ndarray, hi: np.ndarray, box_lo: np.ndarray,
               box_hi: np.ndarray) -> np.ndarray: ...
 
+    def renumbered(self) -> None:
+        """The boxes will come in another order from now on (space_order.py): forget
+        anything kept by index from one call to the next."""
+
 
 class BruteForce:
     """All N(N-1)/2 box tests, vectorised a block of rows at a time (O(N²) time).
@@ -51,6 +55,9 @@ class BruteForce:
     def __init__(self, block: int = 512):
         self.block = block
         self.stats: dict = {}
+
+    def renumbered(self) -> None:
+        """Nothing is kept between calls."""
 
     def pairs(self, lo: np.ndarray, hi: np.ndarray, limit: int = NO_LIMIT) -> np.ndarray:
         n = lo.shape[0]

@@ -581,6 +581,11 @@ class BVH:
     def __post_init__(self) -> None:
         self.name = f"bvh-{self.method}"
 
+    def renumbered(self) -> None:
+        """The tree's leaves name boxes by index: the next call builds a new one."""
+        self.nodes = None
+        self._lo = self._hi = None
+
     def _update_tree(self, lo: np.ndarray, hi: np.ndarray) -> bool:
         t0 = perf_counter()
         rebuilt = True

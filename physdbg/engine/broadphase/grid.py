@@ -256,6 +256,9 @@ class UniformGrid:
         self.cell = cell
         self.stats: dict[str, float] = {}
 
+    def renumbered(self) -> None:
+        """Nothing is kept between calls."""
+
     def pairs(self, lo: np.ndarray, hi: np.ndarray, limit: int = NO_LIMIT) -> np.ndarray:
         pairs, cells, cell = grid_pairs(np.ascontiguousarray(lo), np.ascontiguousarray(hi),
                                         0.0 if self.cell is None else float(self.cell), limit)

@@ -56,6 +56,9 @@ class PeriodicBroadPhase:
         self.origin = np.asarray(origin, dtype=np.float64)
         self.period = np.asarray(period, dtype=np.float64)
 
+    def renumbered(self) -> None:
+        self.inner.renumbered()
+
     @property
     def stats(self) -> dict:
         return self.inner.stats
