@@ -237,7 +237,7 @@ def renumber_held(h: HeldContacts, old_of_new: np.ndarray, new_of_old: np.ndarra
     h.normal[:held][turn] *= -1.0
     for name in ("slots", "deg", "mark", "renew", "place", "before"):
         rows = getattr(h, name)
-        rows[:] = rows[old_of_new]
+        rows[:] = np.take(rows, old_of_new, axis=0)
     visited = int(h.touched[0])
     h.touched[1:visited + 1] = new_of_old[h.touched[1:visited + 1]]
 

@@ -273,7 +273,7 @@ class Sleepers:
     def renumber(self, old_of_new: np.ndarray) -> None:
         """The spheres renumbered (space_order.py): sphere i is now the one that was old_of_new[i]."""
         for name in ("asleep", "still", "allowed", "down"):
-            setattr(self, name, np.ascontiguousarray(getattr(self, name)[old_of_new]))
+            setattr(self, name, np.take(getattr(self, name), old_of_new, axis=0))
 
     def end_of_step(self, dt: float, x: np.ndarray, velocities: np.ndarray, radius: np.ndarray,
                     pair_lists: tuple[np.ndarray, ...], rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

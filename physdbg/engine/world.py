@@ -410,7 +410,7 @@ class World:
 
         def move(rows: np.ndarray) -> np.ndarray:
             if id(rows) not in moved:
-                moved[id(rows)] = np.ascontiguousarray(rows[old_of_new])
+                moved[id(rows)] = np.take(rows, old_of_new, axis=0)
             return moved[id(rows)]
 
         st = self._st
