@@ -8,12 +8,14 @@ them (a generated scene: at random), a partner's row is anywhere among N; past t
 box-rain 100k, stepped in turn in one process with the same run numbered otherwise
 (docs/benchmarks.md, fourteenth session): 17 % off the whole second in Morton order of the
 starting places, 32 % in Morton order of the landed pile; 16–21 % off the exact gas at
-32 000; nothing at 1 000, where everything fits the cache.
+32 000; nothing at 1 000, where everything fits the cache. Kept up inside the world, 30 %
+off box-rain 100k (fifteenth session).
 
 So a world of many spheres keeps an internal numbering (``Settings.space_order``):
 
 - ``given``: the scene's numbering (no permutation).
-- ``morton``: Morton order of the places when the world is built.
+- ``morton``: Morton order of the places when the world is built, renewed every
+  :data:`RENUMBER_EVERY` steps from where the spheres then are (World._renumber).
 - ``auto`` (the default): ``morton`` from :data:`SPACE_ORDER_MIN` spheres up under the
   time-ordered policy, else ``given`` (small worlds fit the cache; the index-ordered
   policy resolves contacts in the order the spheres are numbered, which a user reads as
@@ -22,8 +24,9 @@ So a world of many spheres keeps an internal numbering (``Settings.space_order``
 Whatever the numbering inside, everything that leaves the world is in the scene's:
 ``World.state``, every event, the stats and the state hash (computed over the arrays in
 the scene's numbering). What it changes is the order in which the engine meets exactly
-simultaneous contacts and sweeps a held cluster, so a large pile's last bits (and its
-state hashes) differ between ``given`` and ``morton``; a run is as deterministic in
+simultaneous contacts and sweeps a held cluster, so a pile's last bits (and its state
+hashes) can differ between ``given`` and ``morton`` (box-rain 1k and 10k do not; rain with
+300 spheres does from step 221: tests/test_space_order.py); a run is as deterministic in
 either. :class:`Numbering` is the one place indices cross between the two.
 """
 
@@ -35,8 +38,9 @@ from .colliders.kinds import PARTNER_IS_SPHERE
 
 SPACE_ORDER_NAMES = ("auto", "given", "morton")
 
-# auto numbers a world in Morton order from this many spheres up: measured no gain at
-# 1 000 (box-rain, the gas), 5–12 % at 10 000 and 17–32 % at 100 000 (module doc)
+# auto numbers a world in Morton order from this many spheres up: box-rain in turn gained
+# nothing at 1 000 and 2 000 spheres, 4 % at 5 000, 7 % at 10 000 and 30 % at 100 000
+# (docs/benchmarks.md, fifteenth session)
 SPACE_ORDER_MIN = 4096
 
 MORTON_BITS = 10  # per axis: 1024 cells a side, 30-bit keys
