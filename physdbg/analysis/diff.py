@@ -161,8 +161,9 @@ def compare_settings(meta_a: dict, meta_b: dict, warned_a: set[str], warned_b: s
         elif name in BUDGET_SETTINGS and name not in warned_a | warned_b:
             matters, note = False, "a work limit that neither run reached"
         elif name == "space_order":
-            note = ("the engine's own numbering of the spheres (space_order.py): only the order of exactly "
-                    "simultaneous contacts of one sphere depends on it")
+            note = ("the engine's own numbering of the spheres (space_order.py): only work that is otherwise a "
+                    "tie depends on it (exactly simultaneous contacts, the order a held cluster is solved in), so "
+                    "the runs can differ in the last bits")
         elif name == "samples" and "sampled" not in (used_a.get("detection"), used_b.get("detection")):
             matters, note = False, "used only by detection = sampled"
         out.append(SettingDifference(name, a, b, matters, note))
