@@ -21,8 +21,8 @@ of the run), found by a first, untimed run: what an order kept up as the spheres
 would give near that step (box-rain 100k's landing: docs/benchmarks.md, fourteenth
 session); ``inside``: as generated, numbered by the world itself (``space_order = "morton"``,
 which ``auto`` picks from 4 096 spheres up; every other order here runs with
-``space_order = "given"``, so the world keeps the order it is given). The contacts have come out the same in every order measured (box-rain 1k, 10k
-and 100k, the gas at 32k), though the held-contact solves sweep in index order, so a pile
+``space_order = "given"``, so the world keeps the order it is given). The contacts have
+come out the same in every order measured (box-rain 1k, 10k and 100k, the gas at 32k), though the held-contact solves sweep in index order, so a pile
 could differ in its last bits: the time is the point. The mean index distance of the last
 step's candidate pairs shows how local the order is. Whole runs one after another are no
 way to compare orders on this machine (the same run has taken 544 and 916 ms/step within
@@ -44,6 +44,7 @@ import numpy as np
 
 from physdbg.engine import world as world_module
 from physdbg.engine.space_order import interleaved, morton_keys, quantised
+from physdbg.engine.state import STATE_FIELDS
 from physdbg.engine.timeline import REQUERY
 from physdbg.engine.world import warm_up
 from physdbg.scene import load_scene
@@ -108,7 +109,7 @@ def renumber(scene, order: str, landed_step: int | None = None) -> None:
         permutation = np.argsort(morton_keys(places), kind="stable")
     else:
         permutation = np.argsort(morton_keys(state.positions), kind="stable")
-    for name in ("positions", "velocities", "inverse_mass", "radius", "restitution", "gravity_scale"):
+    for name in STATE_FIELDS:
         setattr(state, name, np.ascontiguousarray(getattr(state, name)[permutation]))
 
 

@@ -39,7 +39,7 @@ from .engine import (
     World,
 )
 from .engine.periodic import wrap_positions
-from .engine.space_order import SPACE_ORDER_MIN, SPACE_ORDER_NAMES
+from .engine.space_order import RENUMBER_EVERY, SPACE_ORDER_MIN, SPACE_ORDER_NAMES
 from .engine.state import BYTES_PER_PARTICLE, DEFAULT_MAX_MEMORY
 from .errors import SceneError, UnknownSceneError
 from .scenes import builtin_names, builtin_text
@@ -88,8 +88,8 @@ TOP_FIELDS = {
                    "grow past it is stopped like a budget"),
     "space_order": ("the engine's own numbering of the spheres, for speed: auto (the default: Morton order from "
                     f"{SPACE_ORDER_MIN} spheres up under ordering = time), given (the scene's) or morton (along a "
-                    "Z-curve of their starting places); every event, state and recording stays in the scene's "
-                    "numbering"),
+                    f"Z-curve of their places, renewed every {RENUMBER_EVERY} steps); every event, state and "
+                    "recording stays in the scene's numbering"),
     "max_particle_steps": "refuse a run of more particle-steps (particles × steps) than this (default 1e10)",
     "particles": "array of [[particles]] tables",
     "planes": "array of [[planes]] tables",

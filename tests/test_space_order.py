@@ -65,9 +65,9 @@ def test_a_numbering_moves_rows_both_ways_and_keeps_wall_indices():
     assert inner[:, 0].tolist() == [20.0, 0.0, 30.0, 10.0]
     assert numbering.outward(inner).tolist() == scene_rows.tolist()
     back = np.empty_like(scene_rows)
-    numbering.scatter(inner, back)
+    numbering.outward(inner, out=back)
     again = np.empty_like(inner)
-    numbering.gather(back, again)
+    numbering.inward(back, out=again)
     assert back.tolist() == scene_rows.tolist() and again.tolist() == inner.tolist()
     kinds = np.array([KIND_PAIR, 1, KIND_PAIR])
     assert numbering.partners(kinds, np.array([0, 0, 3])).tolist() == [2, 0, 1]  # the wall stays wall 0

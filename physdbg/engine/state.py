@@ -67,8 +67,8 @@ class Settings:
     contact_tolerance: allowed overlap / resting gap (m); sleep_speed: a sphere at most
     this fast (m/s) for sleep_time (s) falls asleep, immovable until disturbed (sleep.py;
     0 = off, the default); space_order: the world's own numbering of the spheres,
-    "auto", "given" or "morton" (space_order.py: only speed and the order of exactly
-    simultaneous events depend on it; everything the world reports is in the scene's
+    "auto", "given" or "morton" (space_order.py: only speed and the order of work that
+    is otherwise a tie depend on it; everything the world reports is in the scene's
     numbering).
 
     max_memory (bytes): the particles' own memory (BYTES_PER_PARTICLE each) and the step's

@@ -71,7 +71,7 @@ from .resolve import (
 )
 from .resting import HELD, RAPID_RULES, STEP_RELEASED, STEP_WORK, grow_held, held_room, new_held, renumber_held
 from .sleep import SUPPORT_GAP, Sleepers, release_static, split_sleeping
-from .space_order import RENUMBER_EVERY, Numbering, chosen_order, morton_order
+from .space_order import RENUMBER_EVERY, Numbering, chosen_order, inverse_permutation, morton_order
 from .state import (BUDGETS, BYTES_PER_PARTICLE, STATE_FIELDS, NonFiniteState, Settings, State, Walls, energies,
                     first_non_finite, state_hash)
 from .step_context import StepContext
@@ -255,8 +255,8 @@ class World:
         ctx = StepContext(self.step_index, dt, self.time, SOLVE_TOLERANCE * self._accel_scale * dt, self.observer)
         self.last_step = ctx
         if self.numbering is not None:  # World.state is the world: what was written to it counts
-            self.numbering.gather(self.state.positions, self._st.positions)
-            self.numbering.gather(self.state.velocities, self._st.velocities)
+            self.numbering.inward(self.state.positions, out=self._st.positions)
+            self.numbering.inward(self.state.velocities, out=self._st.velocities)
             if ctx.step and ctx.step % RENUMBER_EVERY == 0:
                 self._renumber()
         if ctx.observer is not None:
@@ -345,8 +345,8 @@ class World:
         if self.sleepers is not None:
             self._sleep(ctx)
         if self.numbering is not None:  # what leaves the world is in the scene's numbering
-            self.numbering.scatter(x, self.state.positions)
-            self.numbering.scatter(v, self.state.velocities)
+            self.numbering.outward(x, out=self.state.positions)
+            self.numbering.outward(v, out=self.state.velocities)
             x, v = self.state.positions, self.state.velocities
         ctx.non_finite = first_non_finite(x, v)
         if ctx.non_finite is not None:
@@ -404,8 +404,7 @@ class World:
         """Number the spheres in Morton order of where they are now (space_order.py): every
         array that outlives a step is permuted, the held contacts and the sleepers too."""
         old_of_new = morton_order(self._st.positions)
-        new_of_old = np.empty_like(old_of_new)
-        new_of_old[old_of_new] = np.arange(old_of_new.shape[0], dtype=np.int64)
+        new_of_old = inverse_permutation(old_of_new)
         moved: dict[int, np.ndarray] = {}  # by id: an array held under two names stays one array
 
         def move(rows: np.ndarray) -> np.ndarray:
@@ -483,8 +482,9 @@ class World:
         ctx.hi[i] = np.maximum(ctx.hi[i], hi)
         if self._periodic and ctx.too_wide_mid_step is None:
             ctx.too_wide_mid_step = self._too_wide_for_the_period(
-                ctx.lo[i:i + 1], ctx.hi[i:i + 1], f"sphere {self.scene_sphere(i)}'s later contacts in this step (after a contact "
-                                                  f"sent it out of its box) may have met the wrong image")
+                ctx.lo[i:i + 1], ctx.hi[i:i + 1],
+                f"sphere {self.scene_sphere(i)}'s later contacts in this step (after a contact sent it out of its "
+                f"box) may have met the wrong image")
         found = set(self.broad_phase.query(ctx.lo, ctx.hi, ctx.lo[i], ctx.hi[i]).tolist())
         # a structure built at step start knows the old boxes: check grown ones directly
         if ctx.grown:
