@@ -157,3 +157,42 @@ def test_step_parts_in_turn_steps_each_order_to_the_same_contacts(monkeypatch, c
             step_parts.main()
         assert stopped.value.code == 2
         assert "--in-turn takes distinct orders among as-generated, random, morton" in capsys.readouterr().err
+
+
+def test_profile_annotation_puts_each_sample_beside_its_instruction_and_leads_up_to_the_hottest():
+    from benchmarks.profile import annotated, hottest
+
+    listing = """
+/tmp/x.o:     file format elf64-x86-64
+
+Disassembly of section .text:
+
+0000000000000010 <_ZN7physdbg6engine8timeline10_repredictB4v2E5ArrayIdLi2E>:
+  10:	mov    (%rsi,%rcx,8),%rsi
+  14:	mov    %rsi,%rdi
+  17:	cmp    %r12,(%r9,%r8,8)
+  1b:	jne    40 <_ZN7physdbg6engine8timeline10_repredictB4v2E5ArrayIdLi2E+0x30>
+  1d:	jmp    10 <_ZN7physdbg6engine8timeline10_repredictB4v2E5ArrayIdLi2E>
+"""
+    rows = annotated(listing, {0x14: 30, 0x1b: 10, 0x99: 5})
+    assert [(offset, count) for offset, count, _ in rows] == [(0x10, 0), (0x14, 30), (0x17, 0), (0x1b, 10), (0x1d, 0)]
+    assert rows[3][2] == "jne    40 <+0x30>" and rows[4][2] == "jmp    10 <>"  # names dropped, offsets kept
+    lines = hottest(rows, top=5, before=1)
+    # hottest first, each after the instruction before it; instructions with no sample are not listed
+    assert lines[0] == "-- 75.0 % of the function's samples at +0x14"
+    assert lines[1].split()[:2] == ["0", "+0x10"] and lines[2].split()[:2] == ["30", "+0x14"]
+    assert lines[3] == "-- 25.0 % of the function's samples at +0x1b"
+    assert len(lines) == 6
+
+
+def test_queue_benchmark_times_both_heaps_and_they_pop_the_same_order(monkeypatch, capsys):
+    from benchmarks import queue
+
+    monkeypatch.setattr("sys.argv", ["queue.py", "--sizes", "3", "200", "--ops", "3000"])
+    queue.main()
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 2 and all("binary (engine)" in line and "4-ary" in line and "same order" in line
+                                   for line in lines)
+    monkeypatch.setattr("sys.argv", ["queue.py", "--ops", "0"])
+    with pytest.raises(SystemExit):
+        queue.main()
