@@ -21,14 +21,17 @@ import time
 import numpy as np
 from numba import njit
 
-from physdbg.engine.timeline import COUNTERS, HEAP_SIZE, heap_pop, heap_push
+from physdbg.engine.timeline import COUNTERS, HEAP_SIZE, _precedes, heap_pop, heap_push
 
 ARITY = 4
 
 
 @njit(cache=True)
-def _precedes(t, rid, other_t, other_rid):
-    return t < other_t or (t == other_t and rid < other_rid)
+def _move(toi, data, to, source):
+    """Entry ``source`` (time, row, batch) copied to slot ``to``."""
+    toi[to] = toi[source]
+    data[to, 0] = data[source, 0]
+    data[to, 1] = data[source, 1]
 
 
 @njit(cache=True)
@@ -39,9 +42,7 @@ def quaternary_push(toi, data, counters, t, rid, batch):
     while n > 0:
         up = (n - 1) // ARITY
         if _precedes(t, rid, toi[up], data[up, 0]):
-            toi[n] = toi[up]
-            data[n, 0] = data[up, 0]
-            data[n, 1] = data[up, 1]
+            _move(toi, data, n, up)
             n = up
         else:
             break
@@ -58,9 +59,7 @@ def quaternary_pop(toi, data, counters):
     last_t = toi[n]
     last_rid = data[n, 0]
     last_batch = data[n, 1]
-    toi[n] = toi[0]
-    data[n, 0] = data[0, 0]
-    data[n, 1] = data[0, 1]
+    _move(toi, data, n, 0)
     i = 0
     while True:
         first = ARITY * i + 1
@@ -71,9 +70,7 @@ def quaternary_pop(toi, data, counters):
             if _precedes(toi[child], data[child, 0], toi[best], data[best, 0]):
                 best = child
         if _precedes(toi[best], data[best, 0], last_t, last_rid):
-            toi[i] = toi[best]
-            data[i, 0] = data[best, 0]
-            data[i, 1] = data[best, 1]
+            _move(toi, data, i, best)
             i = best
         else:
             break
