@@ -27,8 +27,10 @@ from __future__ import annotations
 import os
 import tempfile
 
-# before physdbg is imported (it keeps a NUMBA_CACHE_DIR that is already set)
-os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="physdbg-profile-")
+# before physdbg is imported (it keeps a NUMBA_CACHE_DIR that is already set); only when run:
+# imported (the tests read its listing helpers), it must not move the importer's cache
+if __name__ == "__main__":
+    os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="physdbg-profile-")
 
 import argparse  # noqa: E402
 import gc  # noqa: E402

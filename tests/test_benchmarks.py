@@ -186,13 +186,29 @@ Disassembly of section .text:
 
 
 def test_queue_benchmark_times_both_heaps_and_they_pop_the_same_order(monkeypatch, capsys):
-    from benchmarks import queue
+    from benchmarks import event_queue
 
-    monkeypatch.setattr("sys.argv", ["queue.py", "--sizes", "3", "200", "--ops", "3000"])
-    queue.main()
+    monkeypatch.setattr("sys.argv", ["event_queue.py", "--sizes", "3", "200", "--ops", "3000"])
+    event_queue.main()
     lines = capsys.readouterr().out.splitlines()
     assert len(lines) == 2 and all("binary (engine)" in line and "4-ary" in line and "same order" in line
                                    for line in lines)
-    monkeypatch.setattr("sys.argv", ["queue.py", "--ops", "0"])
+    monkeypatch.setattr("sys.argv", ["event_queue.py", "--ops", "0"])
     with pytest.raises(SystemExit):
-        queue.main()
+        event_queue.main()
+
+
+def test_partner_scan_replays_the_same_hits_in_every_form(monkeypatch, capsys):
+    from benchmarks import partner_scan
+
+    monkeypatch.setattr("sys.argv", ["partner_scan.py", "--count", "300", "--step", "100", "--spheres", "2000"])
+    partner_scan.main()  # raises SystemExit if two forms disagree on the hits
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("box-rain N=300, step 100: 2000 re-predicted spheres")
+    forms = [line.split("  ")[1].strip() for line in out[1:]]
+    assert forms[:3] == ["numba", "numba, unsigned", "numba, packed"] and forms[3].startswith("C")
+    hits = {line.split("(")[1] for line in out[1:4]}
+    assert len(hits) == 1 and hits != {"0 hits)"}
+    monkeypatch.setattr("sys.argv", ["partner_scan.py", "--spheres", "0"])
+    with pytest.raises(SystemExit):
+        partner_scan.main()

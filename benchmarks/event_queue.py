@@ -1,6 +1,6 @@
 """The event queue's cost per operation: the engine's binary heap against a 4-ary one.
 
-    .venv/bin/python benchmarks/queue.py [--sizes 1000 5000 50000 500000] [--ops 1000000]
+    .venv/bin/python benchmarks/event_queue.py [--sizes 1000 5000 50000 500000] [--ops 1000000]
 
 The time-ordered loop (engine/timeline.py) keeps every prediction that hits within the
 step in a binary heap ordered by (time, test-log row) and drops stale ones as they come
@@ -81,20 +81,18 @@ def quaternary_pop(toi, data, counters):
     return n
 
 
-def churn_with(push, pop):
-    @njit(cache=False)
-    def churn(toi, data, counters, gaps, size, ops, popped):
-        """Fill to ``size``, then ``ops`` times pop the earliest and push it again a gap
-        later; popped (ops,) <- the rows popped, in order."""
-        for m in range(size):
-            push(toi, data, counters, gaps[m % gaps.shape[0]], m, 0)
-        row = size
-        for m in range(ops):
-            slot = pop(toi, data, counters)
-            popped[m] = data[slot, 0]
-            push(toi, data, counters, toi[slot] + gaps[row % gaps.shape[0]], row, 0)
-            row += 1
-    return churn
+@njit(cache=False)
+def churn(push, pop, toi, data, counters, gaps, size, ops, popped):
+    """With the queue functions push and pop: fill to ``size``, then ``ops`` times pop the
+    earliest and push it again a gap later; popped (ops,) <- the rows popped, in order."""
+    for m in range(size):
+        push(toi, data, counters, gaps[m % gaps.shape[0]], m, 0)
+    row = size
+    for m in range(ops):
+        slot = pop(toi, data, counters)
+        popped[m] = data[slot, 0]
+        push(toi, data, counters, toi[slot] + gaps[row % gaps.shape[0]], row, 0)
+        row += 1
 
 
 def main() -> None:
@@ -104,27 +102,27 @@ def main() -> None:
     args = parser.parse_args()
     if min(args.sizes) < 1 or args.ops < 1:
         parser.error("--sizes and --ops must be positive")
-    engines = {"binary (engine)": churn_with(heap_push, heap_pop), "4-ary": churn_with(quaternary_push, quaternary_pop)}
+    engines = {"binary (engine)": (heap_push, heap_pop), "4-ary": (quaternary_push, quaternary_pop)}
     gaps = np.random.default_rng(1).random(1 << 20)
     for size in args.sizes:
         line = [f"size {size:>7}:"]
         orders = []
-        for name, churn in engines.items():
+        for name, (push, pop) in engines.items():
             toi = np.empty(size + 1)
             data = np.empty((size + 1, 2), dtype=np.int64)
             counters = np.zeros(COUNTERS, dtype=np.int64)
             popped = np.empty(args.ops, dtype=np.int64)
-            churn(toi, data, counters, gaps, 1, 1, popped)  # compile before timing
+            churn(push, pop, toi, data, counters, gaps, 1, 1, popped)  # compile before timing
             best = float("inf")
             for _ in range(5):
                 counters[:] = 0
                 started = time.perf_counter()
-                churn(toi, data, counters, gaps, size, args.ops, popped)
+                churn(push, pop, toi, data, counters, gaps, size, args.ops, popped)
                 best = min(best, time.perf_counter() - started)
             orders.append(popped.copy())
             line.append(f"{name} {1e9 * best / args.ops:6.1f} ns")
         if not np.array_equal(orders[0], orders[1]):
-            raise SystemExit(f"queue.py: the two heaps popped different orders at size {size}")
+            raise SystemExit(f"event_queue.py: the two heaps popped different orders at size {size}")
         print("  ".join(line) + "  per pop + push (same order popped)")
 
 
