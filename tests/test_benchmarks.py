@@ -160,7 +160,7 @@ def test_step_parts_in_turn_steps_each_order_to_the_same_contacts(monkeypatch, c
 
 
 def test_profile_annotation_puts_each_sample_beside_its_instruction_and_leads_up_to_the_hottest():
-    from benchmarks.profile import annotated, hottest
+    from benchmarks.perf_profile import annotated, hottest
 
     listing = """
 /tmp/x.o:     file format elf64-x86-64

@@ -19,7 +19,7 @@ The same goes for the *caller*: a ``kernel`` increfs every array it hands to a c
 does not inline, and decrefs it after. The time-ordered loop was a kernel calling the
 re-prediction (~45 arrays) for every changed sphere: 13 % of box-rain 10k's time was
 these atomic updates (perf: numba's ``NRT_incref`` and ``NRT_decref``, unnamed in
-profiles before ``benchmarks/profile.py`` named them). So a hot loop is itself
+profiles before ``benchmarks/perf_profile.py`` named them). So a hot loop is itself
 ``borrowing``, and the kernel above it calls it once and takes over only for what must
 allocate (timeline.run_time_order and _run_events).
 

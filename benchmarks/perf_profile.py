@@ -1,6 +1,9 @@
 """Where a scene's steps spend their time, by compiled function: perf over chosen steps.
 
-    .venv/bin/python benchmarks/profile.py rain --set generate.count=500 --skip 180 --steps 25 [--top 25]
+(Named perf_profile, not profile: a script's folder comes first on the import path, and a
+``profile.py`` there would stand in for the standard library's, which cProfile imports.)
+
+    .venv/bin/python benchmarks/perf_profile.py rain --set generate.count=500 --skip 180 --steps 25 [--top 25]
         [--annotate physdbg.engine.timeline._repredict,... [--listings FOLDER]]
 
 perf sees numba's compiled code as bare addresses, since it is loaded at run time. This
@@ -250,7 +253,7 @@ def main() -> None:
 
 def _stop(message: str) -> None:
     """Say what is wrong in one line and exit 2."""
-    print(f"profile.py: {message}", file=sys.stderr)
+    print(f"perf_profile.py: {message}", file=sys.stderr)
     sys.exit(2)
 
 
