@@ -66,7 +66,11 @@ def scenes(draw):
                   rng.uniform(0.5, 2.0, len(keep)), radius[keep], rng.uniform(0.5, 1.0, len(keep)),
                   np.ones(len(keep)))
     method = Settings(integrator=draw(st.sampled_from(["exact", "verlet", "euler", "semi-implicit"])),
-                      gravity=draw(st.sampled_from([(0.0, 0.0, 0.0), (0.0, -9.81, 0.0)])),
+                      # no gravity along a periodic axis: such a fall never stops, and within 60
+                      # steps its swept boxes can pass half the period, where both loops warn
+                      # and test no pairs (test_periodic.py covers that warning)
+                      gravity=draw(st.sampled_from([(0.0, 0.0, 0.0)] if periodic[1] else
+                                                   [(0.0, 0.0, 0.0), (0.0, -9.81, 0.0)])),
                       drag=draw(st.sampled_from([1.0, 0.7])),
                       restitution_rule=draw(st.sampled_from(["min", "product"])),
                       rapid_contact_rule=draw(st.sampled_from(["hold", "tc"])))
