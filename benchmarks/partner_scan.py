@@ -4,15 +4,20 @@
 
 Steps box-rain (benchmarks/box_rain.py's scene) to ``--step``, then replays the work the
 loop does for each re-predicted sphere (timeline._repredict): scan its broad-phase
-partners, keep those whose path box meets its own, and run the closed-form pair test on
-them (the straight-path case, as in colliders.sphere), over the real partner lists, for
-``--spheres`` spheres drawn at random among those with at least four partners. Four forms
-of the same arithmetic on the same data:
+partners, keep those whose path box meets its own, and read what the pair test reads of
+both (positions, velocities, path accelerations, radii), over the real partner lists, for
+``--spheres`` spheres drawn at random among those with at least four partners. The test
+itself is a stand-in of a few flops (approaching, and within a small gap), not the
+engine's swept test: the point is the reads. Four forms of the same arithmetic on the
+same data:
 
 * ``numba``: one array per field, as the engine keeps them;
 * ``numba, unsigned``: the same with unsigned indices (numba then drops the fix-up for
   negative indices it adds to every access with a signed one);
-* ``numba, packed``: a sphere's test data in one 128-byte row, its path box in another;
+* ``numba, packed``: the same reads from one 128-byte row a sphere (positions,
+  velocities, accelerations, radius) and one 64-byte row of its path box (a loop of its
+  own: the first form's code on strided views of these rows measured ~30 % slower, numba's
+  code for strided arrays, not the layout);
 * ``C``: the first form in C (gcc -O2 -march=native, loaded with ctypes), if gcc is found.
 
 Each must find the same hits (checked); prints nanoseconds per re-predicted sphere, best
@@ -66,6 +71,7 @@ int64_t scan(const int64_t *seq, int64_t m, const int64_t *adj_start, const int6
 def _scan_with(unsigned: bool):
     @njit(cache=False)
     def scan(seq, adj_start, adj, x, v, a, r, lo, hi, h):
+        """Pairs (seq[t], partner) whose boxes meet, approaching and within h of touching."""
         hits = 0
         for t in range(seq.shape[0]):
             p = uint64(seq[t]) if unsigned else seq[t]
@@ -120,14 +126,19 @@ def _scan_packed(seq, adj_start, adj, rows, boxes, h):
 
 
 def _c_scan(folder: str):
-    """The C form as a Python callable, or None where gcc is not found."""
+    """(the C form as a Python callable, None) or (None, why it was not built)."""
     if shutil.which("gcc") is None:
-        return None
+        return None, "gcc not found"
     source = os.path.join(folder, "scan.c")
     library = os.path.join(folder, "scan.so")
     with open(source, "w") as f:
         f.write(C_SOURCE)
-    subprocess.run(["gcc", "-O2", "-march=native", "-shared", "-fPIC", "-o", library, source], check=True)
+    built = subprocess.run(["gcc", "-O2", "-march=native", "-shared", "-fPIC", "-o", library, source],
+                           capture_output=True, text=True)
+    if built.returncode != 0:
+        errors = [line for line in built.stderr.splitlines() if "error" in line]
+        why = errors[0].strip() if errors else f"exit status {built.returncode}"
+        return None, f"gcc failed: {why}"
     scan = ctypes.CDLL(library).scan
     scan.restype = ctypes.c_int64
     scan.argtypes = [ctypes.c_void_p, ctypes.c_int64] + [ctypes.c_void_p] * 8 + [ctypes.c_double]
@@ -135,7 +146,7 @@ def _c_scan(folder: str):
     def call(seq, adj_start, adj, x, v, a, r, lo, hi, h):
         return scan(seq.ctypes.data, seq.shape[0], *(array.ctypes.data for array in (adj_start, adj, x, v, a, r, lo,
                                                                                      hi)), h)
-    return call
+    return call, None
 
 
 def main() -> None:
@@ -158,15 +169,15 @@ def main() -> None:
     if busy.size == 0:
         parser.error(f"no sphere has four partners at step {args.step}: take a later step or more spheres")
     seq = np.random.default_rng(0).choice(busy, args.spheres).astype(np.int64)
-    rows = np.zeros((len(r), 16))
+    rows = np.zeros((len(r), 16))  # 128 bytes a sphere
     rows[:, 0:3], rows[:, 3:6], rows[:, 6:9], rows[:, 9] = x, v, a, r
-    boxes = np.zeros((len(r), 8))
+    boxes = np.zeros((len(r), 8))  # 64 bytes a sphere
     boxes[:, 0:3], boxes[:, 3:6] = lo, hi
     h = 1e-3
     with tempfile.TemporaryDirectory() as folder:
         forms = {"numba": lambda s: _scan_signed(s, *data, h), "numba, unsigned": lambda s: _scan_unsigned(s, *data, h),
                  "numba, packed": lambda s: _scan_packed(s, adj_start, adj, rows, boxes, h)}
-        c_scan = _c_scan(folder)
+        c_scan, not_built = _c_scan(folder)
         if c_scan is not None:
             forms["C"] = lambda s: c_scan(s, *data, h)
         hits = {}
@@ -181,7 +192,7 @@ def main() -> None:
                 best = min(best, time.perf_counter() - started)
             print(f"  {name:16s} {1e9 * best / args.spheres:7.1f} ns a sphere ({hits[name]} hits)")
         if c_scan is None:
-            print("  C                (gcc not found: not run)")
+            print(f"  C                (not run: {not_built})")
         if len(set(hits.values())) != 1:
             raise SystemExit(f"partner_scan.py: the forms found different hits: {hits}")
 

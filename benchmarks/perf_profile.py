@@ -207,6 +207,8 @@ def main() -> None:
                         help="where --annotate writes each function's whole annotated listing (default: here)")
     args = parser.parse_args()
     wanted = tuple(name for name in args.annotate.split(",") if name)
+    if wanted and not os.path.isdir(args.listings):
+        _stop(f"--listings {args.listings}: no such folder (where --annotate writes each function's listing)")
     for tool in ("perf", "nm") + (("objdump",) if wanted else ()):
         if shutil.which(tool) is None:
             _stop(f"{tool} is not installed (Debian: apt-get install linux-perf binutils)")

@@ -22,8 +22,9 @@ would give near that step (box-rain 100k's landing: docs/benchmarks.md, fourteen
 session); ``inside``: as generated, numbered by the world itself (``space_order = "morton"``,
 which ``auto`` picks from 4 096 spheres up; every other order here runs with
 ``space_order = "given"``, so the world keeps the order it is given). The contacts have
-come out the same in every order measured (box-rain 1k, 10k and 100k, the gas at 32k), though the held-contact solves sweep in index order, so a pile
-could differ in its last bits: the time is the point. The mean index distance of the last
+come out the same in every order measured (box-rain 1k, 10k and 100k, the gas at 32k),
+though the held-contact solves sweep in index order, so a pile could differ in its last
+bits: the time is the point. The mean index distance of the last
 step's candidate pairs shows how local the order is. Whole runs one after another are no
 way to compare orders on this machine (the same run has taken 544 and 916 ms/step within
 the hour); ``--in-turn`` steps the orders' worlds in turn in one process and prints each

@@ -212,3 +212,15 @@ def test_partner_scan_replays_the_same_hits_in_every_form(monkeypatch, capsys):
     monkeypatch.setattr("sys.argv", ["partner_scan.py", "--spheres", "0"])
     with pytest.raises(SystemExit):
         partner_scan.main()
+
+
+def test_profile_refuses_a_listings_folder_that_is_not_there_before_it_runs(monkeypatch, capsys, tmp_path):
+    from benchmarks import perf_profile
+
+    missing = tmp_path / "nowhere"
+    monkeypatch.setattr("sys.argv", ["perf_profile.py", "rain", "--annotate", "physdbg.engine.timeline._repredict",
+                                     "--listings", str(missing)])
+    with pytest.raises(SystemExit) as stopped:
+        perf_profile.main()
+    assert stopped.value.code == 2
+    assert f"--listings {missing}: no such folder" in capsys.readouterr().err
