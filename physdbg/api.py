@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import math
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
@@ -260,6 +261,11 @@ def check_writable(paths: Sequence[Path | None], force: bool) -> None:
             path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as err:
             raise PhysdbgError(f"{path.parent}: cannot create the folder ({err.strerror})") from None
+        try:  # found now, before a run is spent, not when the file is first written
+            with tempfile.NamedTemporaryFile(dir=path.parent, prefix=".physdbg-probe-"):
+                pass
+        except OSError as err:
+            raise PhysdbgError(f"{path}: cannot write in {path.parent} ({err.strerror})") from None
 
 
 def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | None = None,
@@ -409,14 +415,15 @@ class VerifyResult:
     reason: str = ""
 
 
-def verify(path: str | Path, on_step: Callable[[int, int | None], None] | None = None) -> VerifyResult:
+def verify(path: str | Path, on_step: Callable[[int, int | None], None] | None = None,
+           check_file: bool = True) -> VerifyResult:
     """Re-simulate a recording from its embedded scene and step lengths; compare every
-    step's state hash (and check each stored state against its stored hash)."""
-    from .engine import state_hash
+    step's state hash. With check_file, each stored state is checked against its stored
+    hash and the frame index as it is read (RecordingIntegrityError: an altered file)."""
     from .precompile import compile_kernels
     from .record import open_recording
 
-    with open_recording(path) as rec:
+    with open_recording(path, verify=check_file) as rec:
         foreign = rec.meta.get("foreign")
         if foreign:
             raise PhysdbgError(f"{path} is a run of another engine (imported from {foreign['source']}): there is no "
@@ -424,35 +431,37 @@ def verify(path: str | Path, on_step: Callable[[int, int | None], None] | None =
                                "with a physdbg recording of the same scene")
         world = rec.scene.build_world()
         compile_kernels(world.broad_phase.name, sleeping=world.sleepers is not None)
-        first = rec.state(0)
-        if state_hash(first.positions, first.velocities) != first.state_hash:
-            return VerifyResult(False, 0, 0, "the stored initial state does not match its stored hash (file altered)")
+        first = rec.state(0)  # the reader checks each state against its stored hash (check_file)
         if world.state.positions.tobytes() != first.positions.tobytes() or \
                 world.state.velocities.tobytes() != first.velocities.tobytes():
             return VerifyResult(False, 0, 0, "the scene in the file does not give the recorded initial state")
         checked = 0
         for frame in rec.states(1):
             k = frame.frame
-            if state_hash(frame.positions, frame.velocities) != frame.state_hash:
-                return VerifyResult(False, checked, k, f"step {k}: the stored state does not match its stored hash "
-                                                      f"(the file was altered)")
             stats = world.step(frame.dt)
-            if stats.state_hash != frame.state_hash:
+            # the states themselves, not only the hashes: without check_file a stored state
+            # need not give its stored hash
+            if stats.state_hash != frame.state_hash or \
+                    world.state.positions.tobytes() != frame.positions.tobytes() or \
+                    world.state.velocities.tobytes() != frame.velocities.tobytes():
                 from .analysis.align import state_difference
 
                 d = state_difference(world.state.positions, world.state.velocities, frame.positions,
                                      frame.velocities)
                 worst = ", ".join(f"sphere {p['particle']} |Δx| = {p['position']:.3g} m" for p in d.particles[:3])
-                return VerifyResult(False, checked, k, f"step {k}: re-simulated hash {stats.state_hash} != recorded "
-                                                      f"{frame.state_hash}; {d.count} spheres differ ({worst})")
+                return VerifyResult(False, checked, k, f"step {k}: re-simulated state (hash {stats.state_hash}) is "
+                                                      f"not the recorded one (hash {frame.state_hash}); {d.count} "
+                                                      f"spheres differ ({worst})")
             checked += 1
             if on_step is not None:
                 on_step(checked, rec.steps)
         return VerifyResult(True, checked)
 
 
-def replay(path: str | Path, rrd_path: str | None = None, force: bool = False, spawn: bool = False) -> dict:
-    """Rebuild the Rerun view of a recording from the MCAP file alone; returns what was written."""
+def replay(path: str | Path, rrd_path: str | None = None, force: bool = False, spawn: bool = False,
+           verify: bool = True) -> dict:
+    """Rebuild the Rerun view of a recording from the MCAP file alone; returns what was written.
+    verify: check every state against its stored hash and the frame index as it is read."""
     from .record import open_recording
     from .record.rerun_sink import RerunSink
 
@@ -461,7 +470,7 @@ def replay(path: str | Path, rrd_path: str | None = None, force: bool = False, s
         check_writable([out], force)
     from .analysis.audit import Auditor
 
-    with open_recording(path) as rec:
+    with open_recording(path, verify=verify) as rec:
         sink = RerunSink(rec.header, out, spawn=spawn)
         auditor = Auditor(rec.header, sink.mark_finding)  # the findings marked, as in the live picture
         try:
@@ -524,28 +533,32 @@ def _equation_of_state(rec) -> dict | None:
 
 
 # ----------------------------------------------------------------------------- analysis
-def diff(a: str | Path, b: str | Path, atol: float | None = None, rtol: float | None = None):
-    """Where two recordings part and why (physdbg.analysis.diff.DiffReport)."""
+def diff(a: str | Path, b: str | Path, atol: float | None = None, rtol: float | None = None,
+         verify: bool = True):
+    """Where two recordings part and why (physdbg.analysis.diff.DiffReport). verify: check
+    every state read against its stored hash and the frame index (docs/recording.md,
+    "Integrity"); False is ``--no-verify``."""
     from .analysis.diff import diff as _diff
 
-    return _diff(a, b, atol=atol, rtol=rtol)
+    return _diff(a, b, atol=atol, rtol=rtol, verify=verify)
 
 
-def explain(path: str | Path):
-    """Audit one recording (physdbg.analysis.audit.AuditReport)."""
+def explain(path: str | Path, verify: bool = True):
+    """Audit one recording (physdbg.analysis.audit.AuditReport); verify as for diff."""
     from .analysis.audit import explain as _explain
 
-    return _explain(path)
+    return _explain(path, verify=verify)
 
 
 def overlay(a: str | Path, b: str | Path, report=None, rrd_path: str | None = None, force: bool = False,
-            spawn: bool = False) -> str | None:
+            spawn: bool = False, verify: bool = True) -> str | None:
     """Both runs in one Rerun recording, side by side, opened at the divergence."""
     from .analysis.overlay import write_overlay
 
     if rrd_path is not None:
         check_writable([Path(rrd_path)], force)
-    return write_overlay(a, b, report if report is not None else diff(a, b), rrd_path, spawn=spawn)
+    return write_overlay(a, b, report if report is not None else diff(a, b, verify=verify), rrd_path, spawn=spawn,
+                         verify=verify)
 
 
 # ----------------------------------------------------------------------------- other engines
@@ -593,13 +606,11 @@ class CheckRunResult:
 
 def check_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str] = (), atol: float | None = None,
               rtol: float | None = None, keep: str | Path | None = None, force: bool = False,
-              on_status: Callable[[str], None] | None = None) -> CheckRunResult:
+              on_status: Callable[[str], None] | None = None, verify: bool = True) -> CheckRunResult:
     """Record physdbg's exact run of ``scene`` with the foreign run's own time steps and
     say where the foreign run (a .csv, .jsonl or .mcap trajectory) departs from it and why
     (analysis.departure). keep: a folder to keep both recordings in (run.mcap and
     reference.mcap, for replay, diff and overlay); otherwise they are temporary."""
-    import tempfile
-
     import numpy as np
 
     from .analysis.departure import compare
@@ -634,7 +645,7 @@ def check_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str]
                view=False, on_status=on_status)
         if on_status is not None:
             on_status("comparing")
-        report = compare(run_out, reference_out, atol, rtol)
+        report = compare(run_out, reference_out, atol, rtol, verify=verify)
         report.run = str(run_path)
         kept = keep is not None
         return CheckRunResult(report, str(run_out) if kept else None, str(reference_out) if kept else None,

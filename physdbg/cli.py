@@ -223,6 +223,9 @@ def record(
             raise typer.Exit(report.exit_code)
 
 
+NoVerifyOption = Annotated[bool, typer.Option(
+    "--no-verify", help="Read the recordings without checking each state against its stored hash and the frame "
+                        "index (docs/recording.md, \"Integrity\"): for a file known to be altered.")]
 OutputFormat = Annotated[str, typer.Option(
     "--format", "-f", help="text (default), json (schema in docs/diff.md) or markdown (for a CI step summary).")]
 
@@ -253,18 +256,21 @@ def diff(
         "--rrd", help="Also write both runs into one Rerun file, side by side, opened at the divergence.")] = None,
     spawn: Annotated[bool, typer.Option("--spawn", help="Open the overlay in the Rerun viewer.")] = False,
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing --rrd file.")] = False,
+    no_verify: NoVerifyOption = False,
 ) -> None:
-    """Find where two recordings part ways and say why. Exit 0 equivalent, 1 different, 2 error.
+    """Find where two recordings part ways and say why. Exit 0 equivalent, 1 different, 2 error
+    (a file that is missing, damaged or altered).
 
-    Example: physdbg diff recordings/golden/cradle.mcap cradle-index.mcap --markdown
+    Example: physdbg diff recordings/ci/cradle.mcap cradle-index.mcap --markdown
     """
     with _user_errors():
         from . import api
 
-        report = api.diff(a, b, atol=atol, rtol=rtol)
+        report = api.diff(a, b, atol=atol, rtol=rtol, verify=not no_verify)
         typer.echo(_render(report, "diff", output_format, as_json, markdown))
         if overlay or spawn:
-            written = api.overlay(a, b, report, str(overlay) if overlay else None, force=force, spawn=spawn)
+            written = api.overlay(a, b, report, str(overlay) if overlay else None, force=force, spawn=spawn,
+                                  verify=not no_verify)
             if written and not (as_json or markdown):
                 typer.echo(f"overlay  {written}  (both runs side by side, opened at the divergence)")
         raise typer.Exit(report.exit_code)
@@ -276,16 +282,18 @@ def explain(
     as_json: Annotated[bool, typer.Option("--json", help="Print the report as JSON.")] = False,
     markdown: Annotated[bool, typer.Option("--markdown", help="Print the report as Markdown.")] = False,
     output_format: OutputFormat = "text",
+    no_verify: NoVerifyOption = False,
 ) -> None:
     """Audit one recording: tunnelling, overlaps, out-of-order contacts, energy gained, NaN,
-    budgets hit, collapse. Exit 0 clean, 1 findings, 2 error.
+    budgets hit, collapse. Exit 0 clean, 1 findings, 2 error (a file that is missing,
+    damaged or altered).
 
     Example: physdbg explain recordings/bullet-wall.mcap
     """
     with _user_errors():
         from . import api
 
-        report = api.explain(recording)
+        report = api.explain(recording, verify=not no_verify)
         typer.echo(_render(report, "explain", output_format, as_json, markdown))
         raise typer.Exit(0 if report.clean else 1)
 
@@ -302,8 +310,11 @@ def replay(
         "--verify", help="Re-simulate from the embedded scene and check every step's hash; "
                          "exit 1 at the first mismatch.")] = False,
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing --rrd file.")] = False,
+    no_verify: NoVerifyOption = False,
 ) -> None:
     """Rebuild the Rerun view of a recording from the MCAP file alone, or verify it.
+    Every state read is checked against its stored hash (--no-verify skips that);
+    --verify also re-simulates every step.
 
     Example: physdbg replay recordings/bounce.mcap --rrd bounce.rrd --verify
     """
@@ -312,6 +323,8 @@ def replay(
 
         if not (rrd or spawn or web or verify):
             raise PhysdbgError("say what to do: --rrd FILE, --spawn, --web and/or --verify")
+        if verify and no_verify:
+            raise PhysdbgError("--verify checks the file and re-simulates it; --no-verify skips the checks: give one")
         if verify:
             result = api.verify(recording)
             if result.ok:
@@ -326,7 +339,7 @@ def replay(
             scratch = None if rrd else Path(tempfile.mkdtemp(prefix="physdbg-"))
             target = rrd or scratch / (recording.stem + ".rrd")
             try:
-                done = api.replay(recording, str(target), force=force)
+                done = api.replay(recording, str(target), force=force, verify=not no_verify)
                 typer.echo(f"replayed    {done['steps']} steps"
                            + (" (truncated recording)" if done["truncated"] else "") + f" -> {target}")
                 if web:
@@ -440,6 +453,7 @@ def check_run(
     as_json: Annotated[bool, typer.Option("--json", help="Print the report as JSON.")] = False,
     markdown: Annotated[bool, typer.Option("--markdown", help="Print the report as Markdown.")] = False,
     output_format: OutputFormat = "text",
+    no_verify: NoVerifyOption = False,
 ) -> None:
     """Run physdbg's exact version of the scene with the run's own time steps and say where
     the run departs and why: tunnelling, a bounce at the wrong time, energy at a contact,
@@ -450,7 +464,8 @@ def check_run(
     with _user_errors():
         from . import api
 
-        result = api.check_run(run, scene, set_ or [], atol=atol, rtol=rtol, keep=keep, force=force)
+        result = api.check_run(run, scene, set_ or [], atol=atol, rtol=rtol, keep=keep, force=force,
+                               verify=not no_verify)
         typer.echo(_render(result.report, "check_run", output_format, as_json, markdown))
         if result.run and not (as_json or markdown or output_format != "text"):
             me = _command("physdbg")

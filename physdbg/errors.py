@@ -31,6 +31,16 @@ class UnknownSceneError(PhysdbgError):
     """The scene is neither a built-in name nor a readable file."""
 
 
+class RecordingError(PhysdbgError):
+    """A file that is not a readable physdbg recording."""
+
+
+class RecordingIntegrityError(RecordingError):
+    """A recording that reads, but whose parts disagree: a state that does not give its
+    stored hash, a frame index that disagrees with the states, frames out of order, a
+    damaged summary, or more than one recording in one file. Names the file and the frame."""
+
+
 class NonFiniteRunError(PhysdbgError):
     """A position or velocity became NaN or infinite while running: the run stopped there."""
 

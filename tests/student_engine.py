@@ -64,3 +64,142 @@ def write_jsonl(path, times, xs, vs=None) -> None:
             if vs is not None:
                 record["velocities"] = vs[k].tolist()
             f.write(json.dumps(record) + "\n")
+
+
+# ----------------------------------------------------------------------------- a swept student engine
+# The same course's engine done right: explicit Euler as paths (a sphere moves on the
+# straight line of its velocity at the last contact, its velocity gains a·t), contacts
+# found along the path (swept tests against walls and spheres) and resolved one at a time
+# in time order, each sphere moved on for the rest of the step. With integrator = euler
+# this is physdbg's own run to the last bits, so each mistake below is the first thing a
+# check of it finds. MISTAKES: the textbook ones the course warns about.
+MISTAKES = (
+    "drag-per-step",      # v·d each step instead of v·d^dt: the decay depends on the frame rate
+    "tangent-reversed",   # a wall reflects the whole velocity (v = -e·v), not its normal part
+    "restitution-sign",   # (1 - e) where (1 + e) belongs
+    "impulse-doubled",    # the impulse applied twice (once per ordered pair)
+    "wrong-normal",       # the impulse along the relative velocity instead of the line of centres
+    "immovable-moved",    # an immovable sphere (inverse mass 0) taken as mass 1
+    "skipped-rest",       # after a bounce the sphere stays where it touched for the rest of the step
+    "index-order",        # the contacts predicted at the step's start resolved in index order
+)
+
+
+def simulate_swept(scene, steps: int, dt: float, mistake: str | None = None):
+    """(times (F,), positions (F, N, 3), velocities (F, N, 3)) of a physdbg Scene run by
+    the swept student engine, with one of MISTAKES or none."""
+    assert mistake in (None, *MISTAKES), mistake
+    st, walls = scene.state, scene.walls
+    x, v = st.positions.copy(), st.velocities.copy()
+    inv, r, e = st.inverse_mass.copy(), st.radius, st.restitution
+    if mistake == "immovable-moved":
+        inv = np.where(inv > 0, inv, 1.0)
+    g = np.asarray(scene.settings.gravity) * (st.inverse_mass > 0)[:, None] * st.gravity_scale[:, None]
+    drag = float(scene.settings.drag)
+    times, xs, vs = [0.0], [x.copy()], [v.copy()]
+    for k in range(1, steps + 1):
+        x, v = _swept_step(x, v, g, inv, r, e, walls, dt, mistake, drag)
+        times.append(k * dt)
+        xs.append(x.copy())
+        vs.append(v.copy())
+    return np.array(times), np.array(xs), np.array(vs)
+
+
+def _swept_step(x0, v0, g, inv, r, e, walls, dt, mistake, drag):
+    n = len(r)
+    anchor_t = np.zeros(n)
+    anchor_x = x0.copy()
+    anchor_v = v0.copy()  # the path's velocity (Euler: the velocity at the anchor)
+    kicked = np.zeros(n)  # the velocity's own clock: v(t) = anchor_v·d^(t - t_a) + g·(t - t_a)
+    frozen = np.zeros(n, dtype=bool)  # skipped-rest: stays where it touched
+
+    def decay(tau):
+        return drag if mistake == "drag-per-step" and tau == dt else drag ** tau
+
+    def position(i, t):
+        return anchor_x[i] if frozen[i] else anchor_x[i] + anchor_v[i] * (t - anchor_t[i])
+
+    def velocity(i, t):
+        tau = t - anchor_t[i]
+        return anchor_v[i] * decay(tau) + g[i] * tau
+
+    def events(now):
+        """(time, kind, a, other) of every contact ahead, soonest first."""
+        found = []
+        for i in range(n):
+            if inv[i] == 0 or frozen[i]:
+                continue
+            for w, (normal, offset) in enumerate(zip(walls.normals, walls.offsets, strict=True)):
+                h = position(i, now) @ normal - offset - r[i]
+                speed = anchor_v[i] @ normal
+                if speed < 0 and h >= -1e-12:
+                    t = now + max(h, 0.0) / -speed
+                    if t <= dt:
+                        found.append((t, 0, i, w))
+        for i in range(n):
+            for j in range(i + 1, n):
+                if inv[i] + inv[j] == 0:
+                    continue
+                d = position(i, now) - position(j, now)
+                u = (anchor_v[i] if not frozen[i] else 0 * d) - (anchor_v[j] if not frozen[j] else 0 * d)
+                closing = d @ u
+                if closing >= 0:
+                    continue
+                a, b, c = u @ u, 2 * closing, d @ d - (r[i] + r[j]) ** 2
+                disc = b * b - 4 * a * c
+                if disc < 0:
+                    continue
+                t = now + max((-b - np.sqrt(disc)) / (2 * a), 0.0)
+                if t <= dt:
+                    found.append((t, 1, i, j))
+        return sorted(found)
+
+    def resolve(t, kind, a, other):
+        va = velocity(a, t)
+        if kind == 0:
+            normal = walls.normals[other]
+            if mistake == "tangent-reversed":
+                after = -e[a] * va
+            elif mistake == "restitution-sign":
+                after = va - (1 - e[a]) * (va @ normal) * normal
+            else:
+                after = va - (1 + e[a]) * (va @ normal) * normal
+            _anchor(a, t, after)
+            return
+        vb = velocity(other, t)
+        xa, xb = position(a, t), position(other, t)
+        normal = (xa - xb) / np.linalg.norm(xa - xb)
+        if mistake == "wrong-normal":  # back along the way they came
+            rel = va - vb
+            normal = -rel / np.linalg.norm(rel)
+        closing = (va - vb) @ normal
+        rest = min(e[a], e[other])
+        j = -(1 + (-rest if mistake == "restitution-sign" else rest)) * closing / (inv[a] + inv[other])
+        times = 2 if mistake == "impulse-doubled" else 1
+        _anchor(a, t, va + times * j * inv[a] * normal)
+        _anchor(other, t, vb - times * j * inv[other] * normal)
+
+    def _anchor(i, t, velocity_after):
+        anchor_x[i] = position(i, t)
+        anchor_v[i] = velocity_after
+        anchor_t[i] = t
+        if mistake == "skipped-rest":
+            frozen[i] = True
+
+    if mistake == "index-order":
+        for t, kind, a, other in sorted(events(0.0), key=lambda ev: (ev[2], ev[1], ev[3])):
+            resolve(t, kind, a, other)
+    else:
+        now, done = 0.0, set()
+        for _ in range(1000):
+            # each contact once a step (else a wrong impulse that leaves the bodies
+            # approaching would be applied over and over)
+            ahead = [ev for ev in events(now) if ev[1:] not in done]
+            if not ahead:
+                break
+            now, kind, a, other = ahead[0]
+            done.add((kind, a, other))
+            resolve(now, kind, a, other)
+    x1 = np.array([position(i, dt) for i in range(n)])
+    v1 = np.array([velocity(i, dt) for i in range(n)])
+    return x1, v1

@@ -180,3 +180,17 @@ def test_a_bed_that_rattles_and_then_falls_asleep_is_no_collapse(tmp_path):
     assert cut.finding_counts == {"collapse": 3}
     assert cut.findings[0].startswith("step 282: 354 bounces among 29 spheres in one step")
     assert "7 of the 29 spheres were still awake when the run ended (step 290)" in cut.findings[0]
+
+
+def test_an_overlap_names_its_spheres_and_place_and_blames_the_method_that_left_it(tmp_path):
+    index = tmp_path / "index.mcap"
+    api.record("cradle", ["ordering=index"], mcap_path=str(index), rrd=False, detail="contacts")
+    overlap = next(f for f in explain(index).findings if f.kind == "overlap")
+    assert overlap.step == 44 and overlap.particles == [1, 2] and overlap.position is not None
+    assert overlap.message.startswith("spheres 1 and 2 overlap by 3.33 mm")
+    assert "ordering = index" in overlap.advice and "detection" not in overlap.advice
+    discrete = tmp_path / "discrete.mcap"
+    api.record("bounce", ["detection=discrete"], mcap_path=str(discrete), rrd=False, detail="contacts")
+    floor = next(f for f in explain(discrete).findings if f.kind == "overlap")
+    assert floor.particles == [0] and floor.evidence["wall"] == "floor"
+    assert floor.message.startswith("sphere 0 and wall 'floor' overlap by") and "detection = discrete" in floor.advice

@@ -9,6 +9,7 @@ import sys
 import pytest
 from typer.testing import CliRunner
 
+from physdbg import api
 from physdbg.cli import app
 from physdbg.scenes import builtin_names
 
@@ -394,3 +395,15 @@ def test_output_into_a_closed_pipe_stops_quietly(tmp_path):
         os.close(write_end)
     assert "internal error" not in done.stderr and "Traceback" not in done.stderr, done.stderr
     assert done.returncode in (0, 1)  # click's own handling of a closed pipe: exit 1, nothing printed
+
+
+@pytest.mark.parametrize("command", [["replay", "{mcap}", "--rrd", "/proc/physdbg-test.rrd"],
+                                     ["record", "bounce", "-s", "steps=5", "-o", "/proc/physdbg-test.mcap"],
+                                     ["diff", "{mcap}", "{mcap}", "--rrd", "/proc/physdbg-test.rrd"]])
+def test_an_output_that_cannot_be_written_is_one_line_and_exit_2(tmp_path, command):
+    """/proc takes no new files, even from root (a chmod'ed folder would not stop root)."""
+    mcap = tmp_path / "b.mcap"
+    api.record("bounce", ["steps=5"], mcap_path=str(mcap), rrd=False)
+    result = CliRunner().invoke(app, [part.format(mcap=mcap) for part in command])
+    assert result.exit_code == 2, result.output
+    assert "cannot write in /proc" in result.output and "internal error" not in result.output

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import pytest
@@ -88,7 +89,8 @@ def test_a_nudge_of_one_picometre_is_an_outside_change_at_the_next_step(tmp_path
     r = diff(*paths)
     assert r.divergence.step == 51 and _kinds(r) == ["outside-change"]
     assert r.divergence.state.particles[0]["particle"] == 3
-    assert r.growth.model == "exponential" and r.growth.rate > 0
+    assert r.growth.model == "exponential" and r.growth.rate > 0 and r.growth.chaotic
+    assert "finite-time Lyapunov exponent" in r.growth.sentence()
 
 
 def test_a_sphere_asleep_in_one_run_only_is_named_when_it_falls_asleep_and_when_it_is_hit(tmp_path):
@@ -168,10 +170,17 @@ def test_the_overlay_holds_both_runs_under_two_roots(tmp_path):
     out = tmp_path / "overlay.rrd"
     result = CliRunner().invoke(app, ["diff", str(a), str(b), "--rrd", str(out)])
     assert result.exit_code == 1 and out.exists(), result.output
-    paths = {str(chunk.entity_path) for chunk in RrdReader(out).stream()}
+    chunks = list(RrdReader(out).stream())
+    paths = {str(chunk.entity_path) for chunk in chunks}
     for root in ("/a", "/b"):
-        assert {f"{root}/world/spheres", f"{root}/stats/energy/total", f"{root}/world/diverging"} <= paths, paths
+        assert {f"{root}/world/spheres", f"{root}/stats/energy/total", f"{root}/world/diverging/rings",
+                f"{root}/world/diverging/gap"} <= paths, paths
     assert "/divergence" in paths
+    # the blueprint opens on the "diverged" timeline, paused, and a paused viewer opens at its
+    # first time: the rows on it begin at the diverging step
+    opening = [t for chunk in chunks if "diverged" in chunk.timeline_names
+               for t in chunk.to_record_batch().column("diverged").to_pylist() if t is not None]
+    assert min(opening) == 44
     again = CliRunner().invoke(app, ["diff", str(a), str(b), "--rrd", str(out)])
     assert again.exit_code == 2 and "--force" in again.output
 
@@ -183,3 +192,121 @@ def test_every_builtin_scene_still_matches_its_ci_golden(tmp_path, scene):
                                       str(tmp_path / "new.mcap"), "--check-against", str(golden)])
     assert result.exit_code == 0, result.output
     assert "EQUIVALENT" in result.output
+
+
+# ----------------------------------------------------------------------------- verdicts a CI can stake a merge on
+def test_runs_of_different_sizes_are_a_structure_difference_never_equivalent(tmp_path):
+    a = _rec(tmp_path, "a", "rain", ["generate.count=100", "steps=20"], detail="state")
+    b = _rec(tmp_path, "b", "rain", ["generate.count=101", "steps=20"], detail="state")
+    r = diff(a, b)
+    assert r.exit_code == 1 and not r.equivalent and r.causes[0].kind == "structure"
+    assert "100 in A, 101 in B" in r.causes[0].text and r.headline.startswith("different structure")
+    result = CliRunner().invoke(app, ["diff", str(a), str(b)])
+    assert result.exit_code == 1 and "DIFFERENT" in result.output and "EQUIVALENT" not in result.output
+
+
+def test_spheres_of_another_radius_or_kind_are_a_structure_difference(tmp_path):
+    a = _rec(tmp_path, "a", "cradle", ["steps=5"])
+    bigger = diff(a, _rec(tmp_path, "b", "cradle", ["steps=5", "particles.4.radius=0.2"]))
+    assert bigger.exit_code == 1 and bigger.causes[0].kind == "structure"
+    assert "sphere 4: 0.5 m in A, 0.2 m in B" in bigger.causes[0].text
+    pinned = diff(a, _rec(tmp_path, "c", "cradle", ["steps=5", "particles.4.inverse_mass=0"]))
+    assert pinned.exit_code == 1 and "sphere 4 is movable in A and immovable in B" in pinned.causes[0].text
+    other = diff(_rec(tmp_path, "d", "bounce", ["steps=5"]), _rec(tmp_path, "e", "bullet-wall", ["steps=5"]))
+    assert other.exit_code == 1 and "different scenes ('bounce' in A, 'bullet-wall' in B)" in other.causes[0].text
+
+
+def test_runs_that_differ_from_the_start_are_an_initial_state_difference_without_a_crash(tmp_path):
+    a = _rec(tmp_path, "a", "bounce")
+    b = _rec(tmp_path, "b", "bounce", ["particles.0.position=[0, 1.101, 0]"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no numpy warning reaches the user either
+        r = diff(a, b)
+    assert r.exit_code == 1 and r.divergence.step == 0
+    start = next(c for c in r.causes if c.kind == "initial-state")
+    assert "at frame 0, before any step, 1 sphere differs (sphere 0 by 0.001 m" in start.text
+    assert r.headline.startswith("the runs differ from the start")
+    result = CliRunner().invoke(app, ["diff", str(a), str(b), "--json"])
+    assert result.exit_code == 1 and json.loads(result.output)["divergence"]["step"] == 0
+
+
+def test_a_shorter_run_says_how_much_longer_the_other_goes_on(tmp_path):
+    r = diff(_rec(tmp_path, "a", "bounce", ["steps=300"]), _rec(tmp_path, "b", "bounce", ["steps=200"]))
+    length = next(c for c in r.causes if c.kind == "length")
+    assert r.exit_code == 1
+    assert length.text == "the runs agree for the 200 steps both have; run A goes on for 100 more steps"
+
+
+def test_a_run_that_turns_nan_is_named_without_a_numpy_warning(tmp_path, monkeypatch):
+    import math
+
+    from physdbg.engine import World
+    from physdbg.errors import NonFiniteRunError
+
+    good = _rec(tmp_path, "good", "cradle", ["steps=10"])
+    original = World.step
+
+    def step(self, dt):
+        if self.step_index == 2:
+            self.state.velocities[1, 0] = math.nan
+        return original(self, dt)
+
+    monkeypatch.setattr(World, "step", step)
+    with pytest.raises(NonFiniteRunError):
+        _rec(tmp_path, "nan", "cradle", ["steps=10"])
+    monkeypatch.undo()
+    bad = tmp_path / "nan.mcap"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = diff(good, bad)
+        audit = api.explain(bad)
+    assert r.exit_code == 1 and r.divergence.step == 3 and r.causes[0].kind == "non-finite"
+    assert "cannot be measured from step 3 on" in r.growth.sentence()
+    assert audit.counts == {"non-finite": 1}
+    result = CliRunner().invoke(app, ["diff", str(good), str(bad), "--json"])
+    assert result.exit_code == 1 and "Warning" not in result.output
+    json.loads(result.output)
+
+
+def test_a_one_ball_drift_between_integrators_is_not_called_chaotic(tmp_path):
+    """No two spheres collide: however fast the gap grows, it is a drift, not chaos."""
+    scene = tmp_path / "coast.toml"
+    scene.write_text('name = "coast"\ndescription = "a ball thrown up under drag"\ndt = "1/60"\nduration = 5.0\n'
+                     'gravity = [0.0, -9.81, 0.0]\ndrag = 0.5\n[[particles]]\nposition = [0.0, 0.0, 0.0]\n'
+                     'velocity = [1.0, 5.0, 0.0]\nradius = 0.1\nmass = 1.0\n')
+    r = diff(_rec(tmp_path, "a", str(scene)), _rec(tmp_path, "b", str(scene), ["integrator=verlet"]))
+    assert r.exit_code == 1 and not r.growth.chaotic
+    assert "chaotic" not in r.headline and "not chaos: no two spheres collide" in r.growth.sentence()
+
+
+def test_the_overlay_opens_on_the_divergence_in_two_colours_in_the_real_viewer(tmp_path, virtual_display):
+    """A screenshot of the overlay as it opens: run A's spheres blue on the left, run B's
+    orange on the right, the diverging spheres ringed in magenta in both."""
+    import os
+    import subprocess
+
+    import numpy as np
+    from PIL import Image
+
+    from physdbg.record.rerun_sink import viewer_binary
+
+    a, b = _rec(tmp_path, "a", "cradle"), _rec(tmp_path, "b", "cradle", ["ordering=index"])
+    out = tmp_path / "overlay.rrd"
+    assert CliRunner().invoke(app, ["diff", str(a), str(b), "--rrd", str(out)]).exit_code == 1
+    shot = tmp_path / "overlay.png"
+    done = subprocess.run([viewer_binary(), str(out), "--screenshot-to", str(shot), "--window-size", "1200x750"],
+                          env=dict(os.environ, DISPLAY=virtual_display, CI="1"), capture_output=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    image = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    height, width, _ = image.shape
+    top = image[int(height * 0.08): int(height * 0.45)]
+    left, right = top[:, : width // 2], top[:, width // 2:]
+
+    def count(part, rgb, slack=45):
+        return int((np.abs(part - np.array(rgb)).max(axis=2) < slack).sum())
+
+    from physdbg.analysis.overlay import COLOR_A, COLOR_B, RING_COLOR
+
+    assert count(left, COLOR_A) > 300 and count(left, COLOR_B) < count(left, COLOR_A) / 5
+    assert count(right, COLOR_B) > 300 and count(right, COLOR_A) < count(right, COLOR_B)
+    assert count(left, RING_COLOR) > 50 and count(right, RING_COLOR) > 50

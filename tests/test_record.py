@@ -22,9 +22,12 @@ from physdbg.engine import state_hash
 from physdbg.events import BroadPhaseInfo, Contacts, StepEnd, SweptTests
 from physdbg.observe import FanOut, ListObserver
 from physdbg.record import DETAIL_LEVELS, RecordingError, RecordingHeader
+from physdbg.record.reader import RecordingIntegrityError
 from physdbg.record import format as fmt
 from physdbg.record.mcap_sink import McapRecorder
 from physdbg.scene import load_scene
+
+from . import tamper
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -424,50 +427,21 @@ def test_record_never_overwrites_without_force(tmp_path, monkeypatch):
 def test_verify_passes_on_a_good_file_and_names_the_first_bad_step_of_a_tampered_one(tmp_path):
     path, live = record_with_events(tmp_path, "billiards")
     assert api.verify(path).ok
-    # Tamper with the state of one frame: rewrite that message with a nudged position.
-    rec = open_recording(path)
     k = 40
-    bad = rec.state(k)
-    positions = bad.positions.copy()
-    positions[2, 0] += 1e-9
-    rewritten = tmp_path / "tampered.mcap"
-    _rewrite_state(path, rewritten, k, positions, bad.velocities, bad.state_hash)
-    result = api.verify(rewritten)
-    assert not result.ok and result.first_bad_step == k and "altered" in result.reason
-    # A file whose hashes are self-consistent but differ from the physics: the re-simulation catches it.
-    _rewrite_state(path, rewritten, k, positions, bad.velocities, state_hash(positions, bad.velocities))
-    result = api.verify(rewritten)
+    # A state moved by a nanometre, its old hash kept: the file contradicts itself (exit 2).
+    with pytest.raises(RecordingIntegrityError, match="frame 40: the stored state does not give its stored hash"):
+        api.verify(tamper.nudge_state(path, tmp_path / "kept.mcap", k, sphere=2, by=1e-9))
+    # Its hash rewritten, the frame index not: the file still contradicts itself.
+    with pytest.raises(RecordingIntegrityError, match="frame 40: the frame index and the stored state disagree"):
+        api.verify(tamper.nudge_state(path, tmp_path / "rehashed.mcap", k, sphere=2, by=1e-9, rehash=True))
+    # A consistent forgery (state, its hash and the index all rewritten): only the
+    # re-simulation can tell, and it names the step.
+    forged = tamper.nudge_state(path, tmp_path / "forged.mcap", k, sphere=2, by=1e-9, rehash=True, reindex=True)
+    result = api.verify(forged)
     assert not result.ok and result.first_bad_step == k and "re-simulated" in result.reason
-
-
-def _rewrite_state(src: Path, dst: Path, frame: int, x, v, digest: str) -> None:
-    """Copy a recording, with frame's state replaced (every state re-encoded raw, so later
-    frames do not depend on the changed one)."""
-    from mcap.reader import make_reader
-    from mcap.writer import Writer
-
-    rec = open_recording(src)
-    with open(src, "rb") as f, open(dst, "wb") as out:
-        reader = make_reader(f)
-        writer = Writer(out)
-        writer.start(profile="physdbg")
-        schemas, channels = {}, {}
-        for schema, channel, message in reader.iter_messages(log_time_order=True):
-            if channel.id not in channels:
-                schemas[channel.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
-                channels[channel.id] = writer.register_channel(channel.topic, channel.message_encoding,
-                                                               schemas[channel.id])
-            data = message.data
-            if channel.topic == fmt.TOPIC_STATE:
-                s = rec.state(message.sequence)
-                if message.sequence == frame:
-                    data = fmt.encode_state(frame, s.time, s.dt, digest, x, v, fmt.CODEC_RAW)
-                else:
-                    data = fmt.encode_state(s.frame, s.time, s.dt, s.state_hash, s.positions, s.velocities,
-                                            fmt.CODEC_RAW)
-            writer.add_message(channels[channel.id], message.log_time, data, message.publish_time,
-                               sequence=message.sequence)
-        writer.finish()
+    # --no-verify reads the contradictory file anyway: then the re-simulation finds it.
+    result = api.verify(tmp_path / "kept.mcap", check_file=False)
+    assert not result.ok and result.first_bad_step == k
 
 
 def test_the_recorded_scene_repeats_the_run(tmp_path):

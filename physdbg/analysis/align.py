@@ -21,7 +21,6 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..engine.periodic import minimum_image, unwrap_near
-from ..engine.state import state_hash
 
 
 @dataclass
@@ -71,19 +70,6 @@ def same_steps(dt_a: np.ndarray, dt_b: np.ndarray) -> bool:
     return bool(np.array_equal(dt_a[:n], dt_b[:n]))
 
 
-def check_stored_hash(rec, frame) -> None:
-    """RecordingError when a decoded state does not give the hash stored with it."""
-    from ..record.reader import RecordingError
-
-    if state_hash(frame.positions, frame.velocities) != frame.state_hash:
-        raise RecordingError(f"{rec.path}: frame {frame.frame}: the stored state does not match its stored hash "
-                             f"(the file was altered or damaged)")
-    table = rec.frame_table()
-    if table.hash_hex(frame.frame) != frame.state_hash:
-        raise RecordingError(f"{rec.path}: frame {frame.frame}: the frame index and the state disagree "
-                             f"(the file was altered or damaged)")
-
-
 def position_gap(xa, xb, period=None):
     """xa - xb (N, 3), through the minimum image on the periodic axes of period (3,) m."""
     return xa - xb if period is None else minimum_image(xa - xb, period)
@@ -104,14 +90,27 @@ def hermite(t: float, a, b, period=None):
     return x, v
 
 
+# A gap is called chaotic only when the two runs show a finite-time Lyapunov exponent: the
+# gap (below one radius, before it saturates) grows at one exponential rate over at least
+# this many e-folds, fits that rate this well, and spheres collide while it does (flat walls
+# alone amplify no difference: a ball bouncing on a floor, or coasting, drifts, it is not chaos)
+LYAPUNOV_MIN_EFOLDS = 3.0
+LYAPUNOV_MIN_R2 = 0.75  # log gap rises in jumps at collisions: a chaotic gas fits ~0.85
+STEADY_EXPONENT = 0.05
+POOR_FIT_R2 = 0.5  # below this, neither model describes the gap: say so rather than quote a rate  # a power-law exponent this close to 0 is a gap that stays the same size
+
+
 @dataclass
 class Growth:
     """How the gap (largest |Δx| over particles, m) grows after the divergence.
 
     steps_to_mm / steps_to_radius: steps after the first differing one until the gap
     reaches 1 mm / the smallest radius (None: never within the runs); model:
-    "exponential" (gap ~ e^(rate·t), rate in 1/s) or "power" (gap ~ t^rate) or "" when
-    there are too few points; samples: (step, gap) pairs measured."""
+    "exponential" (gap ~ e^(rate·t), rate in 1/s), "power" (gap ~ t^rate), "steady" (the
+    same size throughout) or "" when there are too few points; fit_r2: how well (in log
+    gap); efolds: rate × the span fitted (exponential); chaotic: the exponential rate is a
+    finite-time Lyapunov exponent (see LYAPUNOV_MIN_EFOLDS), not_chaotic: why not, when the
+    exponential fits best; samples: (step, gap) pairs measured."""
 
     steps_to_mm: int | None
     steps_to_radius: int | None
@@ -121,33 +120,75 @@ class Growth:
     fit_r2: float
     final_gap: float
     samples: list[tuple[int, float]]
+    efolds: float = 0.0
+    chaotic: bool = False
+    not_chaotic: str = ""
 
     def as_dict(self) -> dict:
         out = asdict(self)
         out["samples"] = [list(s) for s in self.samples]
         return out
 
-    def sentence(self, dt: float) -> str:
+    def judge_chaos(self, spheres_collide: bool) -> None:
+        """Call the growth chaotic when its exponential rate is a finite-time Lyapunov
+        exponent: steady over LYAPUNOV_MIN_EFOLDS e-folds, a good fit, and spheres that
+        collide (the mechanism that amplifies a difference)."""
+        self.chaotic = False
+        if self.model != "exponential" or not self.rate > 0:
+            self.not_chaotic = ""
+            return
+        if not spheres_collide:
+            self.not_chaotic = "no two spheres collide, and flat walls amplify no difference"
+        elif self.efolds < LYAPUNOV_MIN_EFOLDS:
+            self.not_chaotic = f"only {self.efolds:.1f} e-folds before it saturates, too few to tell chaos from drift"
+        elif self.fit_r2 < LYAPUNOV_MIN_R2:
+            self.not_chaotic = f"the exponential fits it poorly (R² = {self.fit_r2:.2f})"
+        else:
+            self.chaotic, self.not_chaotic = True, ""
+
+    def sentence(self) -> str:
         parts = []
+        broken = next((step for step, gap in self.samples if not np.isfinite(gap)), None)
+        if broken is not None:
+            return (f"the gap cannot be measured from step {broken} on: a position there is NaN or infinite in one "
+                    f"run")
         if self.steps_to_mm == 0 and self.samples:
             parts.append(f"is already {self.samples[0][1]:.3g} m in that step and {self.final_gap:.3g} m at the end")
         elif self.steps_to_mm is not None:
-            parts.append(f"reaches 1 mm after {self.steps_to_mm} more steps")
+            parts.append(f"reaches 1 mm after {_steps(self.steps_to_mm)}")
         if self.steps_to_radius is not None:
-            parts.append(f"one radius ({self.radius:.3g} m) after {self.steps_to_radius}")
+            parts.append(f"one radius ({self.radius:.3g} m) after {_steps(self.steps_to_radius)}")
         if not parts:
             parts.append(f"stays below 1 mm (at most {self.final_gap:.3g} m at the end)")
-        if self.model == "exponential" and self.rate > 0:
-            parts.append(f"it grows exponentially, ×e every {1 / self.rate:.3g} s (chaotic: collisions amplify "
-                         f"any difference)")
+        if self.model in ("exponential", "power") and self.fit_r2 < POOR_FIT_R2:
+            parts.append(f"it rises and falls with no steady trend (no power of time or exponential fits it: "
+                         f"R² = {self.fit_r2:.2f})")
+        elif self.model == "exponential" and self.rate > 0:
+            if self.chaotic:
+                parts.append(f"it grows exponentially, ×e every {1 / self.rate:.3g} s over {self.efolds:.1f} e-folds "
+                             f"(a finite-time Lyapunov exponent of {self.rate:.3g} 1/s: chaotic, collisions amplify "
+                             f"any difference)")
+            else:
+                parts.append(f"it grows about ×e every {1 / self.rate:.3g} s (not chaos: {self.not_chaotic})")
         elif self.model == "power":
-            parts.append(f"it grows like t^{self.rate:.2f} (a smooth drift)")
+            parts.append(f"it grows like t^{self.rate:.2f} (a smooth drift)" if self.rate > STEADY_EXPONENT else
+                         f"it shrinks like t^{self.rate:.2f}" if self.rate < -STEADY_EXPONENT else
+                         "it stays about the same size")
+        elif self.model == "steady":
+            parts.append("it stays the same size")
         return "the gap " + ", ".join(parts)
+
+
+def _steps(n: int) -> str:
+    return f"{n} more step{'' if n == 1 else 's'}"
 
 
 def fit_growth(steps: np.ndarray, times: np.ndarray, gaps: np.ndarray, radius: float, first_step: int,
                first_time: float, dt: float) -> Growth:
-    """Growth of (steps, times, gaps) samples after a divergence at ``first_step``."""
+    """Growth of (steps, times, gaps) samples after a divergence at ``first_step`` (its
+    frame at ``first_time`` s, reached by a step of ``dt`` s; 0 when the runs differ from
+    frame 0, where a typical step is used). Total: any samples (none, one, constant, NaN,
+    infinite) give a Growth, never a warning or an error."""
     order = np.argsort(steps)
     steps, times, gaps = steps[order], times[order], gaps[order]
 
@@ -155,28 +196,42 @@ def fit_growth(steps: np.ndarray, times: np.ndarray, gaps: np.ndarray, radius: f
         at = np.nonzero(gaps >= level)[0]
         return int(steps[at[0]] - first_step) if len(at) else None
 
-    use = (gaps > 0) & np.isfinite(gaps) & (gaps < radius)
-    model, rate, r2 = "", 0.0, 0.0
+    if not dt > 0:  # the runs differ from frame 0: time counts from one typical step before it
+        spacing = np.diff(times)
+        spacing = spacing[np.isfinite(spacing) & (spacing > 0)]
+        dt = float(np.median(spacing)) if len(spacing) else 1.0
+    elapsed_all = times - first_time + dt
+    use = (gaps > 0) & np.isfinite(gaps) & (gaps < radius) & np.isfinite(elapsed_all) & (elapsed_all > 0)
+    model, rate, r2, efolds = "", 0.0, 0.0, 0.0
     if use.sum() >= 3:
-        y = np.log(gaps[use])
-        elapsed = times[use] - first_time + dt
-        best = None
-        for name, x in (("exponential", elapsed), ("power", np.log(elapsed))):
-            if np.ptp(x) == 0:
-                continue
-            slope, intercept = np.polyfit(x, y, 1)
-            residual = y - (slope * x + intercept)
-            total = np.sum((y - y.mean()) ** 2)
-            score = 1 - np.sum(residual**2) / total if total > 0 else 1.0
-            if best is None or score > best[2] + 1e-9:
-                best = (name, float(slope), float(score))
-        if best is not None:
-            model, rate, r2 = best
+        with np.errstate(all="ignore"):
+            y = np.log(gaps[use])
+            elapsed = elapsed_all[use]
+            if np.ptp(y) == 0:
+                model, r2 = "steady", 1.0
+            else:
+                best = None
+                for name, x in (("exponential", elapsed), ("power", np.log(elapsed))):
+                    if not np.ptp(x) > 0:
+                        continue
+                    try:
+                        slope, intercept = np.polyfit(x, y, 1)
+                    except (np.linalg.LinAlgError, ValueError):
+                        continue
+                    residual = y - (slope * x + intercept)
+                    total = float(np.sum((y - y.mean()) ** 2))
+                    score = 1 - float(np.sum(residual**2)) / total if total > 0 else 1.0
+                    if np.isfinite(slope) and np.isfinite(score) and (best is None or score > best[2] + 1e-9):
+                        best = (name, float(slope), float(score))
+                if best is not None:
+                    model, rate, r2 = best
+                    if model == "exponential":
+                        efolds = rate * float(np.ptp(elapsed))
     samples = [(int(s), float(g)) for s, g in zip(steps, gaps, strict=True)]
     return Growth(first_reaching(1e-3), first_reaching(radius), radius, model, rate, r2,
-                  float(gaps[-1]) if len(gaps) else 0.0, samples[:400])
+                  float(gaps[-1]) if len(gaps) else 0.0, samples[:400], efolds)
 
 
-__all__ = ["Growth", "StateDifference", "check_stored_hash", "first_differing_frame", "fit_growth", "hermite",
+__all__ = ["Growth", "StateDifference", "first_differing_frame", "fit_growth", "hermite",
            "same_steps", "state_difference"]
 

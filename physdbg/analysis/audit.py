@@ -28,6 +28,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..events import HOW_IMPULSE, KIND_PAIR, KIND_WALL, Contacts, EngineWarning, StepEnd
+from .quiet import quiet_numerics
 from .tunnel import StepChecker
 
 FINDING_KINDS = ("tunnelling", "overlap", "order", "energy-gain", "non-finite", "budget", "collapse")
@@ -126,6 +127,7 @@ class Auditor:
         self._contacts: Contacts | None = None
         self._warnings: list[EngineWarning] = []
         self._in_overlap = False  # the step before ended overlapping: the same overlap goes on
+        self._non_finite = False  # the step before ended with a NaN or infinity: the same one goes on
         self._saw_contacts = False
         self._energy: float | None = None  # kinetic + potential after the last step (J)
         # with sleeping on, a rattling bed (a collapse finding and its spheres) waits until
@@ -142,13 +144,18 @@ class Auditor:
         elif isinstance(event, EngineWarning):
             self._warnings.append(event)
         elif isinstance(event, StepEnd):
-            self._end_step(event)
+            with quiet_numerics():  # NaN states and immovable spheres are judged in words, not warned about
+                self._end_step(event)
 
     def _end_step(self, end: StepEnd) -> None:
         step = end.step + 1
         contacts = self._contacts
         self._check_warnings(step)
-        if np.isfinite(end.positions).all() and np.isfinite(end.velocities).all():
+        finite = np.isfinite(end.positions).all() and np.isfinite(end.velocities).all()
+        if not finite:
+            self._check_finite(step, end)
+        else:
+            self._non_finite = False
             self._check_crossings(step, end, contacts)
             self._check_overlap(step, end)
             if contacts is not None and len(contacts):
@@ -197,6 +204,27 @@ class Auditor:
                 pile = self._pile()
                 self._add(Finding("budget", step, [], f"the {w.code} budget ({value} {what}) was hit: {consequence}.",
                                   advice + (f"; {pile}" if pile else ""), evidence={"budget": w.code, "value": value}))
+
+    def _check_finite(self, step: int, end: StepEnd) -> None:
+        """A state with a NaN or infinity that no engine warning reported (a run of another
+        engine, or a file): named once, at the step it first appears, with the sphere."""
+        if self._non_finite or any(w.code == "non-finite" for w in self._warnings):
+            self._non_finite = True
+            return
+        self._non_finite = True
+        bad_x = ~np.isfinite(end.positions).all(axis=1)
+        bad_v = ~np.isfinite(end.velocities).all(axis=1)
+        spheres = np.flatnonzero(bad_x | bad_v)
+        i = int(spheres[0])
+        what = "position" if bad_x[i] else "velocity"
+        where = self._x[i] if np.isfinite(self._x[i]).all() else None
+        self._add(Finding("non-finite", step, [int(p) for p in spheres[:10]],
+                          f"sphere {i}'s {what} is NaN or infinite after the step ({len(spheres)} sphere"
+                          f"{'s' if len(spheres) != 1 else ''} in all); it was at {_point(where)} before it",
+                          "look at this step's contacts: a division by a zero distance (two centres at one point), a "
+                          "zero mass or a speed out of proportion usually starts it",
+                          [float(q) for q in where] if where is not None else None,
+                          {"sphere": i, "field": what, "spheres": len(spheres)}))
 
     def _pile(self) -> str | None:
         """advisor.pile_hint for this run (a foreign run's settings say nothing of physdbg's rules)."""
@@ -248,7 +276,7 @@ class Auditor:
                                   {"wall": name, "speed": speed, "dt": end.dt, "detection": detection}))
             else:
                 message = (f"spheres {c.a} and {c.other} passed into each other with no contact at "
-                           f"{c.time / end.dt:.3f}·dt, {c.depth:.3g} m deep"
+                           f"{c.time / end.dt:.3f}·dt, {_length(c.depth)} deep"
                            f"{' (' + how[detection] + ')' if detection in how else ''}")
                 where = 0.5 * (end.positions[c.a] + end.positions[c.other])
                 self._add(Finding("tunnelling", step, [c.a, c.other], message, advice, [float(q) for q in where],
@@ -261,10 +289,70 @@ class Auditor:
         if self._in_overlap:  # counted where it began
             return
         self._in_overlap = True
-        self._add(Finding("overlap", step, [], f"spheres overlap by {end.max_overlap:.3g} m after the step (the "
-                                               f"contact tolerance is {self.tolerance:g} m)",
-                          "overlaps are left by discrete or sampled detection, a budget that stopped a step, or "
-                          "an impossible start; swept detection leaves none", evidence={"depth": end.max_overlap}))
+        depth, spheres, wall, where = self._deepest_overlap(end.positions)
+        if wall is not None:
+            who = f"sphere {spheres[0]} and wall '{self.names[wall]}' overlap"
+        elif spheres:
+            who = f"spheres {spheres[0]} and {spheres[1]} overlap"
+        else:  # across a periodic boundary, where the search below does not look
+            who, depth = "spheres overlap", end.max_overlap
+        self._add(Finding("overlap", step, spheres,
+                          f"{who} by {_length(depth)} after the step (the contact tolerance is {self.tolerance:g} m)",
+                          self._overlap_advice(step),
+                          [float(q) for q in where] if where is not None else None,
+                          {"depth": depth, "max_overlap": end.max_overlap, "wall": self.names[wall]
+                           if wall is not None else None}))
+
+    def _overlap_advice(self, step: int) -> str:
+        """Why a run left an overlap, from what the run says of itself."""
+        if self.header.meta.get("foreign"):
+            return ("the other engine left them inside each other: a contact found late (where the step ends) or "
+                    "resolved with too small an impulse; test along the path (a swept test) and resolve at the "
+                    "time of impact")
+        budgets = [w.code for w in self._warnings if w.code.startswith("max_")]
+        if budgets:
+            return f"this step hit the {budgets[0]} budget, so contacts after it were not resolved: raise it"
+        detection = self.settings.get("detection", "swept")
+        if detection != "swept":
+            return (f"detection = {detection} finds a contact only once the spheres overlap (where a step ends or "
+                    f"at sampled instants): use detection = swept, or a shorter dt")
+        if self.settings.get("ordering") == "index":
+            return ("ordering = index resolves the step's predicted contacts in index order, so a contact that an "
+                    "earlier one creates in the same step is never looked for, and the spheres end inside each "
+                    "other: use ordering = time")
+        return ("a swept, time-ordered run should leave no overlap: if the scene did not start this way, please "
+                "report it with the recording")
+
+    def _deepest_overlap(self, x: np.ndarray):
+        """(depth m, spheres, wall index or None, where (3,) or None) of the deepest
+        overlap after a step: sphere pairs found by the grid broad phase on the spheres'
+        own boxes (not across a periodic boundary), and every sphere with every wall."""
+        from ..engine.broadphase.boxes import NO_LIMIT
+        from ..engine.broadphase.grid import grid_pairs
+
+        r = self.radius
+        best = (0.0, [], None, None)
+        finite = np.isfinite(x).all(axis=1)
+        if len(x) > 1 and finite.all():
+            pairs, _, _ = grid_pairs(x - r[:, None], x + r[:, None], 0.0, NO_LIMIT)
+            if len(pairs):
+                a, b = pairs[:, 0], pairs[:, 1]
+                pen = r[a] + r[b] - np.linalg.norm(x[a] - x[b], axis=1)
+                k = int(np.argmax(pen))
+                if pen[k] > 0:
+                    i, j = int(a[k]), int(b[k])
+                    best = (float(pen[k]), [i, j], None, x[i] + (x[j] - x[i]) * (r[i] / (r[i] + r[j])))
+        walls = self.header.walls
+        if len(walls.names) and finite.any():
+            h = x @ walls.normals.T - walls.offsets[None, :]
+            h = np.where(walls.two_sided[None, :], np.abs(h), h)
+            pen = 0.5 * walls.thickness[None, :] * walls.two_sided[None, :] + r[:, None] - h
+            pen = np.where(walls.two_sided[None, :] & (pen > r[:, None]), 0.0, pen)  # went through: tunnelling
+            pen = np.where(finite[:, None], pen, -np.inf)
+            i, w = np.unravel_index(int(np.argmax(pen)), pen.shape)
+            if pen[i, w] > best[0]:
+                best = (float(pen[i, w]), [int(i)], int(w), x[i])
+        return best
 
     def _check_order(self, step: int, dt: float, c: Contacts) -> None:
         t = c.time_in_step
@@ -407,27 +495,43 @@ class Auditor:
                            self.steps, dict(self.counts), examples, notes)
 
 
-def explain(recording, on_step: Callable[[int, int], None] | None = None) -> AuditReport:
-    """Audit one recording (a path or an open Recording): every check, every step."""
+def explain(recording, on_step: Callable[[int, int], None] | None = None, verify: bool = True) -> AuditReport:
+    """Audit one recording (a path or an open Recording): every check, every step.
+    verify: check every state against its stored hash and the frame index as it is read."""
     from ..record import open_recording
     from ..record.reader import Recording
 
-    rec = recording if isinstance(recording, Recording) else open_recording(recording)
+    rec = recording if isinstance(recording, Recording) else open_recording(recording, verify=verify)
     try:
-        auditor = Auditor(rec.header)
-        detail = "contacts" if rec.detail != "state" else "state"
-        for events in rec.iter_step_events(detail=detail):
-            for event in events:
-                auditor.on_event(event)
-            if on_step is not None:
-                on_step(auditor.steps, rec.steps)
-        report = auditor.report(str(rec.path), rec.steps)
-        if rec.truncated:
-            report.notes.append(f"the file is truncated (its writer was killed): steps 1..{rec.steps} audited")
-        return report
+        with quiet_numerics():
+            return _explain(rec, on_step)
     finally:
         if rec is not recording:
             rec.close()
+
+
+def _explain(rec, on_step) -> AuditReport:
+    auditor = Auditor(rec.header)
+    detail = "contacts" if rec.detail != "state" else "state"
+    for events in rec.iter_step_events(detail=detail):
+        for event in events:
+            auditor.on_event(event)
+        if on_step is not None:
+            on_step(auditor.steps, rec.steps)
+    report = auditor.report(str(rec.path), rec.steps)
+    if rec.truncated:
+        report.notes.append(f"the file is truncated (its writer was killed): steps 1..{rec.steps} audited")
+    return report
+
+
+def _length(metres: float) -> str:
+    """A length in words: mm below a metre, m above."""
+    return f"{metres * 1000:.3g} mm" if abs(metres) < 1 else f"{metres:.3g} m"
+
+
+def _point(x) -> str:
+    """A position in words, with its unit."""
+    return "an unknown place" if x is None else "(" + ", ".join(f"{q:.4g}" for q in x) + ") m"
 
 
 __all__ = ["AuditReport", "Auditor", "Finding", "FINDING_KINDS", "explain"]

@@ -38,6 +38,7 @@ import numpy as np
 
 from ..errors import PhysdbgError
 from ..events import KIND_PAIR, KIND_WALL, contact_words, partner_words
+from .quiet import quiet_numerics
 
 DEFAULT_ATOL = 1e-6  # m and m/s: a body departs when |Δx| or |Δv| exceeds atol + rtol·|reference|
 DEFAULT_RTOL = 1e-6
@@ -167,17 +168,20 @@ def _load(foreign, reference) -> _Runs:
 
 
 # ----------------------------------------------------------------------------- compare
-def compare(foreign, reference, atol: float | None = None, rtol: float | None = None) -> CheckRunReport:
+def compare(foreign, reference, atol: float | None = None, rtol: float | None = None,
+            verify: bool = True) -> CheckRunReport:
     """Compare a foreign run's recording with physdbg's recording of the same scene and
-    steps (paths or open Recordings; any detail level)."""
+    steps (paths or open Recordings; any detail level). verify: check every state read
+    against its stored hash and the frame index."""
     from ..record import open_recording
     from ..record.reader import Recording
 
-    rf = foreign if isinstance(foreign, Recording) else open_recording(foreign)
-    rr = reference if isinstance(reference, Recording) else open_recording(reference)
+    rf = foreign if isinstance(foreign, Recording) else open_recording(foreign, verify=verify)
+    rr = reference if isinstance(reference, Recording) else open_recording(reference, verify=verify)
     try:
-        return _Comparison(rf, rr, DEFAULT_ATOL if atol is None else float(atol),
-                           DEFAULT_RTOL if rtol is None else float(rtol)).run()
+        with quiet_numerics():
+            return _Comparison(rf, rr, DEFAULT_ATOL if atol is None else float(atol),
+                               DEFAULT_RTOL if rtol is None else float(rtol)).run()
     finally:
         for rec, given in ((rf, foreign), (rr, reference)):
             if rec is not given:
@@ -202,15 +206,20 @@ class _Comparison:
         self.departures: list[Departure] = []
         self.notes: list[str] = []
         self.judged = 0
+        self.run_decay: float | None = None  # the run's own drag factor a step, when it is not the scene's
 
     def run(self) -> CheckRunReport:
         first = self._first_departure()
+        self._measure_drag()
+        self._immovable_moved()
         kicked = self._kick_sizes() > self._kick_thresholds()  # (F-1, N)
         self.integrator = self._integrator(kicked)
         self._non_finite()
         self.kicks = self._kicks(kicked)
         if first is not None:  # before it the runs agree, so there is nothing to judge
             self._judge_steps(max(first.step, 1))
+            if not any(first.body in (d.body, d.other) or d.kind in _RUN_WIDE for d in self.departures):
+                self._no_step_departs(first)
         listed = self._fold(self.departures)
         if first is not None:
             first.cause = self._cause_of(first)
@@ -311,9 +320,87 @@ class _Comparison:
                 out[:-1] = np.linalg.norm(change, axis=2)
             return np.nan_to_num(out, nan=0.0)
         dt = r.dt[1:, None, None]
-        factor = self.drag ** dt if 0.0 < self.drag < 1.0 else 1.0
+        factor = self._decay(dt)
         forces = r.vf[:-1] * (factor - 1.0) + self.acc[None, :, :] * dt
         return np.nan_to_num(np.linalg.norm(r.vf[1:] - r.vf[:-1] - forces, axis=2), nan=0.0)
+
+    def _decay(self, dt):
+        """Drag's factor on the velocity over steps of dt (s): the scene's d^dt, or, once
+        the run was found to apply drag its own way (_measure_drag), the run's, so that
+        its drag is not taken for a contact in every step."""
+        if self.run_decay is not None:
+            return self.run_decay + 0.0 * dt
+        return self.drag ** dt if 0.0 < self.drag < 1.0 else 1.0 + 0.0 * dt
+
+    def _measure_drag(self) -> None:
+        """The run's velocity decay per step in free flight, against the scene's drag
+        v·d^dt (the seed: "incorporate time so drag changes if the frame rate varies"):
+        a run that multiplies by d every step (drag-per-step) or not at all (drag-ignored)
+        is named once, with the decay it shows, and its kicks are then measured with it."""
+        self.run_decay = None
+        r = self.runs
+        if self.estimated or not 0.0 < self.drag < 1.0 or len(r.t) < 2:
+            return
+        v0, v1, dt = r.vf[:-1], r.vf[1:], r.dt[1:, None]
+        speed2 = np.einsum("fij,fij->fi", v0, v0)
+        moving = (self.inv > 0)[None, :] & np.isfinite(speed2) & (speed2 > 0) & np.isfinite(v1).all(axis=2)
+        if not moving.any():
+            return
+        ratio = np.einsum("fij,fij->fi", v1 - self.acc[None, :, :] * dt[:, :, None], v0) / np.where(moving, speed2, 1)
+        measured = ratio[moving]
+        wanted = np.broadcast_to(self.drag ** dt, ratio.shape)[moving]
+        mistakes = (("drag-per-step", np.full(measured.shape, self.drag)), ("drag-ignored", np.ones(measured.shape)))
+        fits = {name: float(np.median(np.abs(measured - predicted))) for name, predicted in mistakes}
+        if float(np.median(np.abs(measured - wanted))) <= 1e-9:
+            return
+        name = min(fits, key=fits.get)
+        if fits[name] > 1e-9:
+            return  # neither mistake: the integrator or the forces (drift, named later)
+        self.run_decay = self.drag if name == "drag-per-step" else 1.0
+        step = float(np.median(r.dt[1:]))
+        k = int(np.flatnonzero(moving.any(axis=1))[0]) + 1
+        body = int(np.flatnonzero(moving[k - 1])[0])
+        if name == "drag-per-step":
+            text = (f"your run multiplies the velocity by {float(np.median(measured)):.6g} every step, the drag "
+                    f"d = {self.drag:g} itself; the seed's drag is v·d^t, so a step of {step:.4g} s takes "
+                    f"d^dt = {self.drag ** step:.6g}. Drag per step makes the motion depend on the frame rate: "
+                    f"at {1 / step:.3g} steps a second the speed falls to {self.drag ** (1 / step):.3g} of itself in "
+                    f"one second instead of {self.drag:g}")
+            advice = "multiply by d**dt (the time of the step), not by d: v = v * drag ** dt"
+        else:
+            text = (f"your run keeps the velocity in free flight (a decay of {float(np.median(measured)):.6g} a "
+                    f"step) where the scene's drag d = {self.drag:g} takes d^dt = {self.drag ** step:.6g} a step")
+            advice = "apply the scene's drag every step: v = v * drag ** dt"
+        self.departures.append(Departure(name, k, body, text, advice,
+                                         evidence={"measured": float(np.median(measured)), "drag": self.drag,
+                                                   "expected": float(self.drag ** step), "dt": step}))
+
+    def _immovable_moved(self) -> None:
+        """An immovable sphere (inverse mass 0) that the run moves: named at the step it
+        starts to move, with the sphere that hit it there in physdbg's run."""
+        r = self.runs
+        fixed = np.flatnonzero(self.inv == 0)
+        if not len(fixed) or len(r.t) < 2:
+            return
+        moved = np.linalg.norm(r.xf[:, fixed] - r.xf[:1, fixed], axis=2) > self.atol
+        moved |= np.linalg.norm(r.vf[:, fixed], axis=2) > self.atol
+        frames, which = np.nonzero(moved)
+        if not len(frames):
+            return
+        k, body = max(int(frames[0]), 1), int(fixed[which[0]])
+        speed = float(np.linalg.norm(r.vf[k, body]))
+        hit = None
+        local = self._local_step(k)
+        if local is not None:
+            hit = next((c["other"] if c["a"] == body else c["a"] for c in local[2]
+                        if c["kind"] == KIND_PAIR and body in (c["a"], c["other"])), None)
+        self.departures.append(Departure(
+            "immovable-moved", k, body,
+            f"sphere {body} is immovable (inverse mass 0 in the scene), yet your run moves it from step {k} on "
+            f"({speed:.3g} m/s at its end" + (f", after sphere {hit} hit it" if hit is not None else "") + ")",
+            "an immovable body takes no impulse: scale each impulse by the body's inverse mass (0 for an immovable "
+            "one), never by a mass of 1 or by 1/m with m = 0", other=hit,
+            evidence={"speed": speed, "hit_by": hit}))
 
     def _kick_thresholds(self) -> np.ndarray:
         r = self.runs
@@ -354,8 +441,11 @@ class _Comparison:
         return float(np.clip((lever @ along) / size, 0.0, dt))
 
     # ------------------------------------------------------------------ step by step
-    def _local_step(self, s: int):
-        """physdbg's exact step s from the foreign state at its start: (x, v, contacts as dicts)."""
+    def _local_step(self, s: int, **settings):
+        """physdbg's exact step s from the foreign state at its start: (x, v, contacts as
+        dicts), with the scene's settings or, given, some of them replaced (ordering="index")."""
+        import dataclasses
+
         from ..engine import NonFiniteState, World
         from ..engine.state import State
         from ..events import Contacts
@@ -367,7 +457,8 @@ class _Comparison:
         if self.estimated:  # the velocity at the step's start: the step's average less half the forces' change
             state.velocities = np.ascontiguousarray(r.vf[s] - 0.5 * self.acc * float(r.dt[s]))
         seen = ListObserver()
-        world = World(state, self.scene.walls, self.scene.settings, seen)
+        world = World(state, self.scene.walls, dataclasses.replace(self.scene.settings, **settings) if settings
+                      else self.scene.settings, seen)
         world.time = float(r.t[s - 1])
         try:
             world.step(float(r.dt[s]))
@@ -381,7 +472,8 @@ class _Comparison:
             out.append({"step": s, "index": k, "kind": int(c.kind[k]), "a": int(c.a[k]), "other": int(c.other[k]),
                         "tau": float(c.time_in_step[k]), "time": float(r.t[s - 1] + c.time_in_step[k]),
                         "normal": c.normal[k].copy(), "restitution": float(c.restitution[k]),
-                        "resting": bool(resting[k]), "closing": abs(float(c.closing_speed[k]))})
+                        "resting": bool(resting[k]), "closing": abs(float(c.closing_speed[k])),
+                        "centre": c.point[k] + c.normal[k] * self.radius[int(c.a[k])]})
         return state.positions, state.velocities, out
 
     def _judge_steps(self, start: int) -> None:
@@ -397,11 +489,12 @@ class _Comparison:
                 continue
             x, v, contacts = local
             off = self._beyond(r.xf[s], r.vf[s], x, v)
-            if not off.any():
+            if not off.any() or self._index_ordered(s, contacts, off):
                 for c in contacts:
                     for b in self._bodies(c):
-                        if (s, b) in kicks:
-                            kicks[(s, b)]["matched"] = True
+                        for k in (s, s + 1) if off.any() else (s,):
+                            if (k, b) in kicks:
+                                kicks[(k, b)]["matched"] = True
                 continue
             resting = {b for c in contacts if c["resting"] or self._slow(c, s) for b in self._bodies(c)}
             for b in resting:
@@ -433,6 +526,67 @@ class _Comparison:
                 elif kick is None and self.inv[b] > 0:
                     drift.setdefault(b, []).append(s)
         self._drift(drift)
+
+    def _no_step_departs(self, first: FirstDeparture) -> None:
+        """Every step, taken from the run's own state, ends where physdbg's does, yet the
+        runs part: chaos when the gap between them grows at a finite-time Lyapunov exponent
+        (align.Growth.judge_chaos: steady exponential growth over e-folds while spheres
+        collide), else unexplained."""
+        from .align import fit_growth
+
+        r = self.runs
+        frames = np.arange(first.step, len(r.t))
+        gaps = np.linalg.norm(r.xf[frames] - r.xr[frames], axis=2)
+        gaps = np.where(np.isfinite(gaps).all(axis=1), gaps.max(axis=1), np.inf)
+        movable = self.inv > 0
+        radius = float(self.radius[movable].min()) if movable.any() else float(self.radius.min())
+        growth = fit_growth(frames, r.t[frames], gaps, radius, first.step, float(r.t[first.step]),
+                            float(r.dt[first.step]))
+        collisions = self.rr.stats(first.step)["collisions"] if self.rr.frames > first.step else np.zeros(0)
+        growth.judge_chaos(bool(np.any(collisions > 0)))
+        steps = "every step, taken from your run's own state at its start, ends where physdbg's exact step does"
+        if growth.chaotic:
+            self.departures.append(Departure(
+                "chaos", first.step, first.body,
+                f"{steps} (within the tolerance), and the runs part because differences below it grow: "
+                f"{growth.sentence()}",
+                "nothing your engine does in a step differs from physdbg's beyond the tolerance: to compare a chaotic "
+                "scene for longer, give it the scene's step lengths exactly, or compare with a looser --atol",
+                evidence={"lyapunov": growth.rate, "efolds": growth.efolds}))
+        else:
+            self.departures.append(Departure(
+                "unexplained", first.step, first.body,
+                f"{steps} (within the tolerance), yet the runs part, and not as chaos does ({growth.sentence()}): "
+                f"physdbg cannot say why",
+                "small differences in every step add up: check that the run's steps are the scene's (dt = "
+                f"{float(np.median(r.dt[1:])):.6g} s), and its forces and drag, to the last digit",
+                evidence={"growth": growth.as_dict()}))
+
+    def _index_ordered(self, s: int, contacts: list[dict], off: np.ndarray) -> bool:
+        """The run's step s is physdbg's step taken with ordering = index (the contacts
+        predicted at the step's start resolved in index order, none looked for after): named
+        index-order. Tried where a step of several contacts ends elsewhere."""
+        if len(contacts) < 2 or self.settings.get("ordering", "time") == "index":
+            return False
+        r = self.runs
+        alternative = self._local_step(s, ordering="index")
+        if alternative is None or self._beyond(r.xf[s], r.vf[s], alternative[0], alternative[1]).any():
+            return False
+        body = int(np.flatnonzero(off)[0])
+        dt = float(r.dt[s])
+        order = ", then ".join(f"{self._pair_words(c)} at {c['tau'] / dt:.2f}·dt" for c in contacts[:6])
+        indexed = [c for c in (alternative[2] or [])]
+        self.departures.append(Departure(
+            "index-order", s, body,
+            f"physdbg resolves {order}{' …' if len(contacts) > 6 else ''}; your run ends step {s} exactly where "
+            f"physdbg does when it resolves only the contacts predicted at the step's start, in index order "
+            f"(ordering = index: {len(indexed)} contact{'s' if len(indexed) != 1 else ''}), so a contact that an "
+            f"earlier one creates within the step is never looked for",
+            "resolve contacts one at a time in time order (earliest time of impact first), and look again for new "
+            "contacts after each: a chain of touching spheres passes its impulse along only that way",
+            evidence={"physdbg_order": [[c["a"], c["other"], c["kind"]] for c in contacts],
+                      "index_order": [[c["a"], c["other"], c["kind"]] for c in indexed]}))
+        return True
 
     def _slow(self, c: dict, s: int) -> bool:
         """Not judged one by one: a contact closing slower than the forces' speed over
@@ -482,10 +636,40 @@ class _Comparison:
         i, k = kick["body"], kick["step"] + (1 if self.estimated else 0)  # estimated: between two averages
         change = float(np.linalg.norm(r.vf[min(k, len(r.t) - 1), i] - r.vf[k - 1, i]))
         slack = float(np.linalg.norm(self.acc[i])) * dt / change if change > 0 else 0.0
+        if self._skipped_rest(c):
+            self._judge_energy(c, kick, quiet_if_late=True)
+            return
         late = abs(kick["time"] - c["time"]) > (TIME_TOLERANCE + slack) * dt
         if late:
             self._late(c, kick)
         self._judge_energy(c, kick, quiet_if_late=late)
+
+    def _skipped_rest(self, c: dict) -> bool:
+        """The run left sphere a where it touched for the rest of the step: its position at
+        the step's end is physdbg's centre at the touch (the seed moves a body on after a
+        bounce for the time the step has left)."""
+        r = self.runs
+        s, a = c["step"], c["a"]
+        dt = float(r.dt[s])
+        if c["tau"] >= (1.0 - TIME_TOLERANCE) * dt or self.inv[a] == 0:
+            return False
+        centre = c["centre"]
+        if np.linalg.norm(r.xf[s, a] - centre) > self.atol + self.rtol * float(np.linalg.norm(centre)):
+            return False
+        left = dt - c["tau"]
+        self._add("skipped-rest", s, c,
+                  f"{self._subject(c)} touched {self._what(c)} at {c['tau'] / dt:.2f}·dt into step {s} and stayed "
+                  f"there for the rest of the step ({left:.3g} s, {left / dt:.2f}·dt); physdbg moves it on with its "
+                  f"new velocity, to {float(np.linalg.norm(r.xf[s, a] - self._end_of(s)[a])):.3g} m from where your "
+                  f"run left it",
+                  "after resolving a contact at time τ into the step, move the body on with its new velocity for the "
+                  "time left (dt − τ), and look for further contacts in that time", {"tau": c["tau"], "left": left})
+        return True
+
+    def _end_of(self, s: int) -> np.ndarray:
+        """physdbg's positions (N, 3) at the end of step s taken from the run's own start."""
+        local = self._local_step(s)
+        return local[0] if local is not None else np.full_like(self.runs.xf[s], np.nan)
 
     def _late(self, c: dict, kick: dict) -> None:
         r = self.runs
@@ -540,30 +724,58 @@ class _Comparison:
             for b in self._bodies(c):
                 if (end, b) in self.kicks:
                     self.kicks[(end, b)]["matched"] = True
-        span = float(r.t[end] - r.t[s - 1])
 
-        def readings(i):
+        def readings(i, last=None):
             """(velocity just before, just after) the contact, as each way of applying the
-            forces around it would have them; which one the engine used is not known."""
+            forces around it would have them; which one the engine used is not known.
+            last: the step whose end is "after" (default: the contact's last step)."""
+            last = end if last is None else last
+            length = float(r.t[last] - r.t[s - 1])
             if self.estimated:  # the kick is at the step's end, between its average and the next step's
-                if end + 1 >= len(r.t):
+                if last + 1 >= len(r.t):
                     return []
                 return [(r.vf[s, i] + 0.5 * self.acc[i] * dt,
-                         r.vf[end + 1, i] - 0.5 * self.acc[i] * float(r.dt[end + 1]))]
-            v0, v1, a = r.vf[s - 1, i], r.vf[end, i], self.acc[i]
-            return [(v0 + a * tau, v1 - a * (span - tau)), (v0 + a * dt, v1 - a * (span - dt)), (v0, v1 - a * span)]
+                         r.vf[last + 1, i] - 0.5 * self.acc[i] * float(r.dt[last + 1]))]
+            v0, v1, a = r.vf[s - 1, i], r.vf[last, i], self.acc[i]
+            return [(v0 + a * tau, v1 - a * (length - tau)), (v0 + a * dt, v1 - a * (length - dt)),
+                    (v0, v1 - a * length)]
 
         want = c["restitution"]
-        options = []
-        for (before_a, after_a), other in zip(readings(c["a"]), readings(c["other"]) if c["kind"] == KIND_PAIR
-                                              else [(0.0, 0.0)] * 3):
-            before, after = (before_a - other[0]) @ n, (after_a - other[1]) @ n
-            if math.isfinite(before) and math.isfinite(after) and before < 0:
-                options.append((abs(-after / before - want), -after / before, before, after))
+
+        def effective(last=None):
+            """(|e − want|, e, normal speed before, after) of each reading of the contact."""
+            out = []
+            pair = c["kind"] == KIND_PAIR
+            for (before_a, after_a), other in zip(readings(c["a"], last),
+                                                  readings(c["other"], last) if pair else [(0.0, 0.0)] * 3):
+                before, after = (before_a - other[0]) @ n, (after_a - other[1]) @ n
+                if math.isfinite(before) and math.isfinite(after) and before < 0:
+                    out.append((abs(-after / before - want), -after / before, before, after))
+            return out
+
+        options = effective()
         if not options:
             return
         _, e, before, after = min(options)  # the reading kindest to the run: report only what none explains
+        mistake = _restitution_mistake(e, want)
+        if mistake is None and end > s:  # a mistake shows whole in the contact's own step, before what it leads to
+            first = effective(s)
+            if first and _restitution_mistake(min(first)[1], want) is not None:
+                _, e, before, after = min(first)
+                mistake = _restitution_mistake(e, want)
+        # the direction of the push, over the contact's own step (a wrong normal impulse
+        # that leaves the bodies approaching makes more contacts in the steps after)
+        if self._judge_tangent(c, lambda i: readings(i, s)) and mistake is None:
+            return
         if abs(e - want) <= RESTITUTION_TOLERANCE + 1e-3 * want or (quiet_if_late and 0.0 <= e <= 1.0):
+            return
+        if mistake is not None:
+            code, words, advice = mistake
+            self._add(code, c["step"], c,
+                      f"{self._both(c)}: they met at {abs(before):.3g} m/s and "
+                      f"{'still approach' if after < 0 else 'part'} at {abs(after):.3g} m/s after the contact, an "
+                      f"effective restitution of {e:.3g} where physdbg applies e = {want:g}: {words}", advice,
+                      {"restitution": e, "expected": want, "speed_in": abs(before), "speed_out": abs(after)})
             return
         if e < 0:
             text = (f"{self._both(c)}: after the contact they still approach, at {abs(after):.3g} m/s where they "
@@ -585,6 +797,51 @@ class _Comparison:
                       f"rule here: restitution_rule = {self.settings.get('restitution_rule', 'min')})")
         self._add("contact-energy", c["step"], c, text, advice,
                   {"restitution": e, "expected": want, "speed_in": abs(before), "speed_out": abs(after)})
+
+    def _judge_tangent(self, c: dict, readings) -> bool:
+        """A frictionless contact pushes along its normal only, so each sphere keeps its
+        velocity across the normal (its tangential part). A run that changes it either
+        reflected the whole velocity (tangent-reversed: the seed's R = Ri − 2N(Ri·N) turns
+        only the normal part) or pushed along another direction (wrong-normal). True when
+        one was named."""
+        n = c["normal"]
+        for i in self._bodies(c):
+            if self.inv[i] == 0:
+                continue
+            best = None
+            for before, after in readings(i):
+                t0, t1 = before - (before @ n) * n, after - (after @ n) * n
+                change = float(np.linalg.norm(t1 - t0))
+                if math.isfinite(change) and (best is None or change < best[0]):
+                    best = (change, before, after, t0, t1)
+            if best is None:
+                continue
+            change, before, after, t0, t1 = best
+            scale = float(np.linalg.norm(before)) + float(np.linalg.norm(self.acc[i])) * float(self.runs.dt[c["step"]])
+            if change <= RESTITUTION_TOLERANCE * scale + self.atol:
+                continue
+            c_i = dict(c, a=i, other=c["other"] if i == c["a"] else c["a"]) if c["kind"] == KIND_PAIR else c
+            size0, size1 = float(np.linalg.norm(t0)), float(np.linalg.norm(t1))
+            if size0 > 0 and size1 > 0 and float(t0 @ t1) < -0.9 * size0 * size1:
+                self._add("tangent-reversed", c["step"], c_i,
+                          f"{self._subject(c_i)}: the contact with {self._what(c_i)} reversed its velocity along the "
+                          f"surface too, from {size0:.3g} m/s to {size1:.3g} m/s the other way; a frictionless "
+                          f"contact keeps that part and turns only the part along the normal",
+                          "reflect only the normal part: v − (1 + e)(v·n)n (the seed's R = Ri − 2N(Ri·N) for e = "
+                          "1), not −e·v", {"tangential_before": size0, "tangential_after": -size1})
+            else:
+                kick = after - before
+                along = abs(float(kick @ n)) / max(float(np.linalg.norm(kick)), 1e-300)
+                angle = math.degrees(math.acos(min(1.0, along)))
+                self._add("wrong-normal", c["step"], c_i,
+                          f"{self._subject(c_i)}: the contact with {self._what(c_i)} pushed it {angle:.3g}° away from "
+                          f"the normal at the touch, changing its velocity across the normal by {change:.3g} m/s "
+                          f"(a frictionless contact changes only the part along the normal)",
+                          "push along the normal at the time of impact: for two spheres the line of centres, "
+                          "n = (x_a − x_b)/|x_a − x_b| at the touch, not the direction of their velocities",
+                          {"angle_degrees": angle, "tangential_change": change})
+            return True
+        return False
 
     def _judge_chain(self, s: int, group: list[dict], v_local: np.ndarray) -> None:
         """Contacts of one step that share bodies: the group's outcome as a whole."""
@@ -641,7 +898,7 @@ class _Comparison:
 
     def _drift(self, drift: dict[int, list[int]]) -> None:
         """Free steps that end elsewhere: one departure for all bodies, with the counts."""
-        if not drift:
+        if not drift or self.run_decay is not None:  # the run's own drag, named already, is why
             return
         integrator = self.integrator or {}
         b = min(drift, key=lambda i: (drift[i][0], i))
@@ -717,7 +974,7 @@ class _Comparison:
             k, i = int(frames[0]), int(bodies[0])
             self._add("non-finite", k, {"kind": KIND_WALL, "a": i, "other": -1},
                       f"sphere {i}'s {'position' if not np.isfinite(r.xf[k, i]).all() else 'velocity'} is NaN or "
-                      f"infinite from t = {r.t[k]:.6g} s ({int(bad[k].sum())} bodies then)",
+                      f"infinite from t = {r.t[k]:.6g} s ({_body_count(int(bad[k].sum()))} then)",
                       "look at the step before: a division by a zero distance (two centres at one point) or a "
                       "zero mass is the usual start", {"frame": k})
 
@@ -760,7 +1017,8 @@ class _Comparison:
         departures = sorted(departures, key=lambda d: (d.step, _PRIORITY.index(d.kind), d.body))
         firsts: dict[tuple, Departure] = {}
         for d in departures:
-            key = (d.kind, d.body, d.other, d.wall)
+            # a way of stepping (index order, drag) is one departure, whatever bodies it meets
+            key = (d.kind,) if d.kind in _RUN_WIDE else (d.kind, d.body, d.other, d.wall)
             if key in firsts:
                 firsts[key].more += 1
             else:
@@ -776,11 +1034,6 @@ class _Comparison:
             why = "integrator: " + self.integrator["sentence"]
         elif cause is not None:
             why = f"{_KIND_WORDS[cause.kind]}: {cause.text}"
-        elif not self.departures:
-            why = ("yet every step, taken from the run's own state at its start, ends where physdbg's exact step "
-                   "does (within the tolerance): the runs part because differences below the tolerance grew, as "
-                   "they do in a chaotic scene (a gas, a pile); a step length a bit off the scene's, or rounding, "
-                   "is enough")
         else:
             why = "the states drift apart with no contact to blame (forces, drag or integration differ)"
         out = f"the run departs from physdbg's in step {first.step}, sphere {first.body}: {why}"
@@ -790,15 +1043,63 @@ class _Comparison:
         return out
 
 
+# Effective restitutions that name a mistake: (code, the effective e it gives for the scene's e,
+# words, what to do). Each is told apart from the scene's own e before it is named.
+RESTITUTION_MISTAKES = (
+    ("restitution-sign", lambda e: -e, "−e: the impulse uses (1 − e) where (1 + e) belongs, so the bodies keep "
+                                       "approaching",
+     "j = −(1 + e)·(v_rel·n)/(1/m_a + 1/m_b): with (1 − e) an elastic contact does nothing and every other one "
+     "leaves the bodies approaching"),
+    ("impulse-sign", lambda e: -(2.0 + e), "−(2 + e): the impulse points the wrong way, adding the closing speed "
+                                           "instead of taking it away (energy gained)",
+     "the impulse points the wrong way: j = −(1 + e)·(v_rel·n)/(1/m_a + 1/m_b) pushes a along n (from b towards "
+     "a) and b against it; check its sign and the normal's direction"),
+    ("impulse-doubled", lambda e: 1.0 + 2.0 * e, "1 + 2e: the impulse was applied twice (energy gained)",
+     "apply each contact's impulse once: +j·n/m_a to a and −j·n/m_b to b, for each unordered pair (a loop over "
+     "ordered pairs meets every pair twice)"),
+    ("restitution-squared", lambda e: e * e, "e²: the restitution was applied twice",
+     "scale the normal speed by e once: v_n after = −e·v_n before"),
+)
+
+
+def _restitution_mistake(e: float, want: float):
+    """(code, words, advice) of the mistake whose effective restitution ``e`` is, for a
+    contact whose restitution is ``want``; None when none fits or it cannot be told from
+    the right one."""
+    best = None
+    for code, predicted, words, advice in RESTITUTION_MISTAKES:
+        p = predicted(want)
+        slack = RESTITUTION_TOLERANCE * max(1.0, abs(p))
+        if abs(p - want) <= 2 * slack or abs(e - p) > slack:
+            continue
+        if best is None or abs(e - p) < best[0]:
+            best = (abs(e - p), code, f"{p:.3g} = {words}", advice)
+    return best[1:] if best is not None else None
+
+
+_RUN_WIDE = ("index-order", "drag-per-step", "drag-ignored", "drift", "chaos", "unexplained")
 _TUNNEL_ADVICE = ("test for contacts along the path through the step (a swept test: solve for the time of impact), "
                   "not where the step ends, or take shorter steps")
-_PRIORITY = ("non-finite", "tunnelling", "contact-energy", "collision-order", "bounce-time", "missed-contact",
-             "extra-contact", "drift")
+_PRIORITY = ("non-finite", "immovable-moved", "drag-per-step", "drag-ignored", "tunnelling", "impulse-sign",
+             "impulse-doubled", "restitution-sign", "restitution-squared", "contact-energy", "tangent-reversed",
+             "wrong-normal", "index-order", "collision-order", "skipped-rest", "bounce-time", "missed-contact",
+             "extra-contact", "drift", "chaos", "unexplained")
 _KIND_WORDS = {
     "tunnelling": "tunnelling", "bounce-time": "bounced at the wrong time", "contact-energy": "energy at a contact",
     "collision-order": "contacts resolved out of order", "missed-contact": "a contact missed",
     "extra-contact": "a contact physdbg does not have", "non-finite": "NaN or infinity", "drift": "drift in free flight",
+    "drag-per-step": "drag applied per step, not per second", "drag-ignored": "no drag",
+    "immovable-moved": "an immovable body moved", "impulse-sign": "an impulse of the wrong sign",
+    "impulse-doubled": "an impulse applied twice", "restitution-sign": "restitution with the wrong sign",
+    "restitution-squared": "restitution applied twice", "tangent-reversed": "a reflection of the whole velocity",
+    "wrong-normal": "an impulse along the wrong normal", "index-order": "contacts resolved in index order",
+    "skipped-rest": "a bounce that skips the rest of the step", "unexplained": "unexplained",
+    "chaos": "chaos: differences below the tolerance grew",
 }
+
+
+def _body_count(n: int) -> str:
+    return f"{n} body" if n == 1 else f"{n} bodies"
 
 
 def _chains(contacts: list[dict]) -> list[list[dict]]:

@@ -20,6 +20,7 @@ import numpy as np
 from ..engine.space_order import chosen_order
 from ..events import KIND_PAIR, contact_words
 from . import align
+from .quiet import quiet_numerics
 from .tunnel import StepChecker
 
 DEFAULT_TOLERANCE = 1e-9  # atol (m, m/s) and rtol when a setting that matters differs
@@ -97,10 +98,13 @@ class DiffReport:
     headline: str
 
     same_length: bool = True
+    # what was checked of each file's integrity: {"verified": bool, "a": frames checked,
+    # "frames_a": frames held, "b", "frames_b"} (docs/recording.md, "Integrity")
+    integrity: dict = field(default_factory=dict)
 
     @property
     def equivalent(self) -> bool:
-        return self.divergence is None and self.same_length
+        return self.divergence is None and self.same_length and not any(c.kind == "structure" for c in self.causes)
 
     @property
     def exit_code(self) -> int:
@@ -193,21 +197,24 @@ def _same(a, b) -> bool:
 
 # ----------------------------------------------------------------------------- diff
 def diff(a, b, atol: float | None = None, rtol: float | None = None,
-         on_status: Callable[[str], None] | None = None) -> DiffReport:
+         on_status: Callable[[str], None] | None = None, verify: bool = True) -> DiffReport:
     """Compare two recordings (paths or open Recordings); see the module doc.
 
     atol, rtol: a particle differs when |Δx| > atol + rtol·|x| (or the same for v);
-    default exact (0, 0) when no setting that matters differs, else 1e-9 each."""
+    default exact (0, 0) when no setting that matters differs, else 1e-9 each.
+    verify: check every state read against its stored hash and the frame index, reading
+    both runs from frame 0 up to the divergence (RecordingIntegrityError on a mismatch)."""
     from ..record import open_recording
     from ..record.reader import Recording
 
-    ra = a if isinstance(a, Recording) else open_recording(a)
-    rb = b if isinstance(b, Recording) else open_recording(b)
+    ra = a if isinstance(a, Recording) else open_recording(a, verify=verify)
+    rb = b if isinstance(b, Recording) else open_recording(b, verify=verify)
     try:
-        report = _Differ(ra, rb, atol, rtol).run()
-        foreign = [label for label, rec in (("A", ra), ("B", rb)) if rec.meta.get("foreign")]
-        if len(foreign) == 1 and not report.equivalent:
-            _explain_foreign(report, ra, rb, foreign[0], atol, rtol)
+        with quiet_numerics():
+            report = _Differ(ra, rb, atol, rtol).run()
+            foreign = [label for label, rec in (("A", ra), ("B", rb)) if rec.meta.get("foreign")]
+            if len(foreign) == 1 and not report.equivalent:
+                _explain_foreign(report, ra, rb, foreign[0], atol, rtol)
         return report
     finally:
         for rec, given in ((ra, a), (rb, b)):
@@ -270,22 +277,24 @@ class _Differ:
     # ------------------------------------------------------------------ driver
     def run(self) -> DiffReport:
         ra, rb = self.ra, self.rb
+        structure = self._structure()
         if ra.header.count != rb.header.count:
-            return self._report(None, None, [Cause("settings", f"the runs have different numbers of spheres "
-                                                               f"({ra.header.count} and {rb.header.count}); "
-                                                               f"their states cannot be compared")], 0)
+            return self._report(None, None, structure + self._setting_causes(), 0)
         if self.by_step:
             found, compared = self._first_by_step()
         else:
             found, compared = self._first_by_time()
         if found is None:
-            causes = self._setting_causes()
+            causes = structure + self._setting_causes()
             if not self._same_length():
                 shorter = min(ra.steps, rb.steps)
-                causes.append(Cause("length", f"the runs agree for the {shorter} steps both have; run " if self.by_step
-                                    else f"the runs agree up to t = {min(self.ta.time[-1], self.tb.time[-1]):.6g} s; run "
-                                              f"{'A' if ra.steps > rb.steps else 'B'} goes on for "
-                                              f"{abs(ra.steps - rb.steps)} more",
+                agree = (f"the runs agree for the {shorter} steps both have" if self.by_step else
+                         f"the runs agree up to t = {min(self.ta.time[-1], self.tb.time[-1]):.6g} s")
+                longer = "A" if self.ta.time[-1] > self.tb.time[-1] else "B"
+                more = abs(ra.steps - rb.steps)
+                causes.append(Cause("length", f"{agree}; run {longer} goes on for {_count(more, 'more step')}"
+                                    + ("" if self.by_step else
+                                       f" (to t = {max(self.ta.time[-1], self.tb.time[-1]):.6g} s)"),
                                     {"steps_a": ra.steps, "steps_b": rb.steps}))
             return self._report(None, None, causes, compared)
         fa, fb, xa, va, xb, vb, prev_a, prev_b = found
@@ -293,8 +302,40 @@ class _Differ:
         event, contacts_a, contacts_b = self._first_event(fa, fb)
         divergence = Divergence(fa, fb, float(self.ta.time[fa]), state, event)
         growth = self._growth(fa, fb)
-        causes = self._causes(divergence, prev_a, prev_b, contacts_a, contacts_b, growth)
+        causes = structure + self._causes(divergence, prev_a, prev_b, contacts_a, contacts_b, growth)
         return self._report(divergence, growth, causes, compared)
+
+    def _structure(self) -> list[Cause]:
+        """The runs are not of the same bodies: another count, scene, radius, kind of body
+        (movable or immovable) or set of walls. Always a difference (exit 1), whatever the
+        states do: equal states of different bodies are not the same run."""
+        ha, hb = self.ra.header, self.rb.header
+        found = []
+        if ha.name != hb.name:
+            found.append(f"they are runs of different scenes ('{ha.name}' in A, '{hb.name}' in B)")
+        if ha.count != hb.count:
+            found.append(f"they have different numbers of spheres ({ha.count} in A, {hb.count} in B), so their "
+                         f"states cannot be compared sphere by sphere")
+        else:
+            radius = np.flatnonzero(ha.radius != hb.radius)
+            if len(radius):
+                i = int(radius[0])
+                found.append(f"{len(radius)} sphere{'s have' if len(radius) != 1 else ' has'} another radius "
+                             f"(sphere {i}: {ha.radius[i]:.6g} m in A, {hb.radius[i]:.6g} m in B)")
+            kind = np.flatnonzero((ha.inverse_mass > 0) != (hb.inverse_mass > 0))
+            if len(kind):
+                i = int(kind[0])
+                found.append(f"sphere {i} is {'movable' if ha.inverse_mass[i] > 0 else 'immovable'} in A and "
+                             f"{'movable' if hb.inverse_mass[i] > 0 else 'immovable'} in B"
+                             + (f" ({len(kind)} spheres in all)" if len(kind) > 1 else ""))
+        wa, wb = ha.walls, hb.walls
+        if len(wa.names) != len(wb.names) or list(wa.two_sided) != list(wb.two_sided) \
+                or not np.array_equal(wa.period, wb.period):
+            found.append(f"their walls differ ({_walls_words(wa)} in A, {_walls_words(wb)} in B)")
+        if not found:
+            return []
+        return [Cause("structure", "the runs are not of the same bodies: " + "; ".join(found),
+                      {"differences": found})]
 
     def _report(self, divergence, growth, causes, compared) -> DiffReport:
         ra, rb = self.ra, self.rb
@@ -302,10 +343,13 @@ class _Differ:
                 if self.by_step else
                 "by simulated time: each frame of the run with longer steps against the other run at that time "
                 "(its own frame when one falls there, else Hermite interpolation between its two frames)")
-        if divergence is None:
-            if ra.header.count != rb.header.count:
-                headline = "different: the runs cannot be compared"
-            elif not self._same_length():
+        structure = next((c for c in causes if c.kind == "structure"), None)
+        if structure is not None:
+            headline = "different structure: " + structure.text[len("the runs are not of the same bodies: "):]
+            if divergence is not None:
+                headline += f"; their states part in step {divergence.step}"
+        elif divergence is None:
+            if not self._same_length():
                 headline = (f"different lengths: they agree for the {min(ra.steps, rb.steps)} steps both have, then "
                             f"one run stops" if self.by_step else
                             f"different lengths: they agree up to t = {min(self.ta.time[-1], self.tb.time[-1]):.6g} s, "
@@ -314,13 +358,16 @@ class _Differ:
                 exact = self.atol == 0 and self.rtol == 0
                 headline = ("equivalent: every state is bit-identical" if exact and self.by_step else
                             f"equivalent within atol={self.atol:g}, rtol={self.rtol:g}")
-        else:
-            headline = f"the runs part in step {divergence.step}" + (
+        if divergence is not None and structure is None:
+            headline = ("the runs differ from the start" if divergence.step == 0 else
+                        f"the runs part in step {divergence.step}") + (
                 f" (step {divergence.step_b} of B)" if divergence.step_b != divergence.step else "") + \
                 (": " + re.sub(r"^Step \d+: ", "", _main(causes).text) if causes else "")
         return DiffReport(str(ra.path), str(rb.path), ra.header.name, rb.header.name, ra.steps, rb.steps,
                           "step" if self.by_step else "time", note, self.atol, self.rtol, compared,
-                          self.settings, divergence, growth, causes, headline, self._same_length())
+                          self.settings, divergence, growth, causes, headline, self._same_length(),
+                          {"verified": ra.verify and rb.verify, "a": ra.checked_frames, "frames_a": ra.frames,
+                           "b": rb.checked_frames, "frames_b": rb.frames})
 
     def _same_length(self) -> bool:
         if self.by_step:
@@ -330,34 +377,37 @@ class _Differ:
 
     # ------------------------------------------------------------------ finding the step
     def _gap(self, xa: np.ndarray, xb: np.ndarray) -> float:
-        """The largest distance (m) between a sphere's positions in the two runs."""
-        return float(np.nanmax(np.linalg.norm(align.position_gap(xa, xb, self.period), axis=1)))
+        """The largest distance (m) between a sphere's positions in the two runs (infinite
+        when a position is NaN or infinite in either)."""
+        gaps = np.linalg.norm(align.position_gap(xa, xb, self.period), axis=1)
+        if not len(gaps):
+            return 0.0
+        return float(gaps.max()) if np.isfinite(gaps).all() else math.inf
 
     def _first_by_step(self):
         ra, rb = self.ra, self.rb
         start = align.first_differing_frame(self.ta.hashes, self.tb.hashes)
         common = min(ra.frames, rb.frames)
-        if start is None:
+        if ra.verify or rb.verify:
+            # The frames before `start` are equal by the index's hashes, but the index is only
+            # trusted once each state has been read and found to give it (the reader checks
+            # every state it decodes): so both runs stream from frame 0.
+            first = 0
+        elif start is None:
             return None, common
-        exact = self.atol == 0 and self.rtol == 0
+        else:
+            first = max(start - 1, 0)
         previous = None
-        first = max(start - 1, 0)
         for sa, sb in zip(ra.states(first, common), rb.states(first, common), strict=True):
-            if sa.frame < start:
+            if start is None or sa.frame < start:
                 previous = (sa, sb)
                 continue
-            if sa.frame == start:
-                align.check_stored_hash(ra, sa)
-                align.check_stored_hash(rb, sb)
             d = align.state_difference(sa.positions, sa.velocities, sb.positions, sb.velocities, self.atol,
                                        self.rtol, self.period)
             if d.count:
                 prev_a, prev_b = previous if previous else (None, None)
                 return (sa.frame, sb.frame, sa.positions, sa.velocities, sb.positions, sb.velocities,
                         prev_a, prev_b), sa.frame + 1
-            if exact:  # hashes differ but the states are equal: the frame index lies
-                align.check_stored_hash(ra, sa)
-                align.check_stored_hash(rb, sb)
             previous = (sa, sb)
         return None, common
 
@@ -455,8 +505,10 @@ class _Differ:
         self._refine(gaps, self.radius)
         steps = np.array(sorted(gaps))
         values = np.array([gaps[k] for k in steps])
-        return align.fit_growth(steps, self.ta.time[steps], values, self.radius, fa, float(self.ta.time[fa]),
-                                float(self.ta.dt[fa]))
+        growth = align.fit_growth(steps, self.ta.time[steps], values, self.radius, fa, float(self.ta.time[fa]),
+                                  float(self.ta.dt[fa]))
+        growth.judge_chaos(self._spheres_collide(fa, _last_below(steps, values, self.radius)))
+        return growth
 
     def _refine(self, gaps: dict, level: float) -> None:
         """Fill in every frame between the last sample below ``level`` and the first above."""
@@ -493,8 +545,21 @@ class _Differ:
             gaps.append(self._gap(sa.positions, xb))
         if not steps:
             return None
-        return align.fit_growth(np.array(steps), np.array(times), np.array(gaps), self.radius, fa,
-                                float(self.ta.time[fa]), float(self.ta.dt[fa]))
+        growth = align.fit_growth(np.array(steps), np.array(times), np.array(gaps), self.radius, fa,
+                                  float(self.ta.time[fa]), float(self.ta.dt[fa]))
+        growth.judge_chaos(self._spheres_collide(fa, _last_below(np.array(steps), np.array(gaps), self.radius)))
+        return growth
+
+    def _spheres_collide(self, first: int, last: int) -> bool:
+        """Whether two spheres collide in either run in frames first..last (the stats'
+        ``collisions``, read until the first one)."""
+        for rec in (self.ra, self.rb):
+            if rec.header.count < 2 or not np.any(rec.header.inverse_mass > 0):
+                continue
+            for row in rec.iter_stats(first, last + 1):
+                if int(row["collisions"][0]) > 0:
+                    return True
+        return False
 
     # ------------------------------------------------------------------ causes
     def _setting_causes(self) -> list[Cause]:
@@ -514,6 +579,21 @@ class _Differ:
     def _causes(self, div: Divergence, prev_a, prev_b, ca, cb, growth) -> list[Cause]:
         causes = self._setting_causes()
         step, step_b = div.step, div.step_b
+        if step == 0 or step_b == 0:  # no step was taken: the runs did not start alike
+            worst = div.state.particles[0] if div.state.particles else {}
+            changed = [s.name for s in self.settings if s.matters and s.name.startswith(("particles", "generate"))]
+            causes.append(Cause(
+                "initial-state",
+                f"at frame 0, before any step, {_count(div.state.count, 'sphere')} "
+                f"{'differ' if div.state.count != 1 else 'differs'} "
+                f"(sphere {worst.get('particle')} by {worst.get('position', 0.0):.3g} m and "
+                f"{worst.get('velocity', 0.0):.3g} m/s)"
+                + (f"; the scenes differ there ({', '.join(changed)})" if changed else
+                   "; no scene field differs, so a script set the starting state"),
+                {"particle": worst, "fields": changed}))
+            if growth is not None and growth.model:
+                causes[-1].text += "; " + growth.sentence()
+            return causes
         if prev_a is not None:  # decoded already by the search for the divergence
             self._states[(False, step - 1)], self._states[(True, step_b - 1)] = prev_a, prev_b
         settings_a, settings_b = self.ra.meta["settings"], self.rb.meta["settings"]
@@ -612,7 +692,7 @@ class _Differ:
             if method or not self.by_step:
                 causes.append(Cause("method-drift", f"no event differs up to step {step}: the states drift apart "
                                                     f"smoothly ({', '.join(method) or 'dt'} differ{'s' if len(method) == 1 else ''})"
-                                                    f"; {growth.sentence(float(self.ta.dt[step])) if growth else ''}",
+                                                    f"; {growth.sentence() if growth else ''}",
                                     {"settings": method}))
             else:
                 causes.append(Cause("method-drift", f"no event differs up to step {step}; the states drift apart "
@@ -708,6 +788,24 @@ class _Differ:
         va = np.linalg.norm(self._state(self.ra, div.step).velocities[p])
         vb = np.linalg.norm(self._state(self.rb, div.step_b).velocities[p])
         return f" From there sphere {p} leaves at {va:.2f} m/s in A and {vb:.2f} m/s in B."
+
+
+def _last_below(steps: np.ndarray, gaps: np.ndarray, level: float) -> int:
+    """The last sampled frame before the gap first reaches ``level`` (or the last one)."""
+    above = np.flatnonzero(~(gaps < level))
+    return int(steps[above[0]]) if len(above) else int(steps[-1]) if len(steps) else 0
+
+
+def _count(n: int, noun: str) -> str:
+    """'1 more step', '3 more steps'."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
+def _walls_words(walls) -> str:
+    n = len(walls.names)
+    two = int(np.count_nonzero(walls.two_sided))
+    words = f"{n} wall{'s' if n != 1 else ''}" + (f", {two} two-sided" if two else "")
+    return words + (", a periodic box" if walls.periodic else "")
 
 
 def _main(causes: list[Cause]) -> Cause:

@@ -47,10 +47,23 @@ def _tolerance(r: DiffReport) -> str:
     return "exact (bit for bit)" if r.atol == 0 and r.rtol == 0 else f"atol {r.atol:g}, rtol {r.rtol:g}"
 
 
+def _integrity(r: DiffReport) -> str:
+    """What was checked of the files' integrity, in words."""
+    i = r.integrity
+    if not i:
+        return "nothing"
+    if not i["verified"]:
+        return "no state against its stored hash (--no-verify)"
+    return (f"{i['a']} of {i['frames_a']} states of A and {i['b']} of {i['frames_b']} of B against their stored "
+            f"hashes and the frame index" + ("" if i["a"] == i["frames_a"] and i["b"] == i["frames_b"] else
+                                             " (the ones the verdict rests on)"))
+
+
 def diff_text(r: DiffReport) -> str:
     lines = [f"A  {r.a}  ({r.scene_a}, {r.steps_a} steps)", f"B  {r.b}  ({r.scene_b}, {r.steps_b} steps)",
              f"result   {'EQUIVALENT' if r.equivalent else 'DIFFERENT'}: {r.headline}",
-             f"compared {r.compared} frames aligned by {r.aligned_by}; tolerance {_tolerance(r)}"]
+             f"compared {r.compared} frames aligned by {r.aligned_by}; tolerance {_tolerance(r)}",
+             f"checked  {_integrity(r)}"]
     if r.settings:
         lines.append("settings that differ:")
         for s in r.settings:
@@ -59,14 +72,14 @@ def diff_text(r: DiffReport) -> str:
     d = r.divergence
     if d is not None:
         lines.append(f"first difference: step {d.step}" + (f" of A, step {d.step_b} of B" if d.step_b != d.step else "")
-                     + f" (t = {d.time:.6g} s): {d.state.count} sphere{'s' if d.state.count != 1 else ''} differ")
+                     + f" (t = {d.time:.6g} s): {d.state.count} sphere{'s differ' if d.state.count != 1 else ' differs'}")
         for p in d.state.particles:
             lines.append(f"  sphere {p['particle']}: |Δx| = {p['position']:.3g} m, |Δv| = {p['velocity']:.3g} m/s")
         if d.first_event is not None:
             lines.append(f"  first differing contact: #{d.first_event['index']} of the step: "
                          f"A {_contact(d.first_event['a'])}; B {_contact(d.first_event['b'])}")
     if r.growth is not None and d is not None:
-        lines.append("afterwards: " + r.growth.sentence(0.0))
+        lines.append("afterwards: " + r.growth.sentence())
     if r.causes:
         lines.append("why:")
         lines.extend(f"  - [{c.kind}] {c.text}" for c in r.causes)
@@ -78,7 +91,8 @@ def diff_markdown(r: DiffReport) -> str:
     lines = [f"### {icon} physdbg diff: {'equivalent' if r.equivalent else 'different'}", "",
              f"**{r.headline}**", "", "| | recording | scene | steps |", "|---|---|---|---|",
              f"| A | `{r.a}` | {r.scene_a} | {r.steps_a} |", f"| B | `{r.b}` | {r.scene_b} | {r.steps_b} |", "",
-             f"Compared {r.compared} frames aligned by {r.aligned_by}; tolerance {_tolerance(r)}.", ""]
+             f"Compared {r.compared} frames aligned by {r.aligned_by}; tolerance {_tolerance(r)}. "
+             f"Checked {_integrity(r)}.", ""]
     if r.settings:
         lines += ["| setting | A | B | note |", "|---|---|---|---|"]
         lines += [f"| `{s.name}` | {_show(s.a)} | {_show(s.b)} | {'' if s.matters else 'cannot matter: ' + s.note} |"
@@ -94,7 +108,7 @@ def diff_markdown(r: DiffReport) -> str:
             lines.append(f"- first differing contact #{d.first_event['index']}: A {_contact(d.first_event['a'])}; "
                          f"B {_contact(d.first_event['b'])}")
         if r.growth is not None:
-            lines.append(f"- afterwards: {r.growth.sentence(0.0)}")
+            lines.append(f"- afterwards: {r.growth.sentence()}")
         lines.append("")
     if r.causes:
         lines += ["**Why**", ""] + [f"- *{c.kind}*: {c.text}" for c in r.causes]

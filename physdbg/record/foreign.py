@@ -265,7 +265,10 @@ def _vectors(value, where: str, field: str, bodies: int) -> np.ndarray:
     for i, vec in enumerate(value):
         if not isinstance(vec, list) or len(vec) != 3:
             raise ForeignRunError(f"{where}: field '{field}' entry {i} is not [x, y, z]")
-        out[i] = [_number(x, where, f"{field}[{i}]") if not isinstance(x, (int, float)) else float(x) for x in vec]
+        # JavaScript writes NaN and infinities as null (JSON.stringify(NaN) is "null"): a null
+        # coordinate is a non-finite one, which the checks name by step and body
+        out[i] = [math.nan if x is None else float(x) if isinstance(x, (int, float)) and not isinstance(x, bool)
+                  else _number(x, where, f"{field}[{i}]") for x in vec]
     return out
 
 

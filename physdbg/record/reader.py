@@ -9,6 +9,14 @@ k-th step (see :mod:`.format`). Every message carries its step number (the MCAP
 message maps one to the other, so ``state(k)`` reads only the chunks holding frames from
 the key frame before k up to k. A file whose writer was killed (no summary) is read
 sequentially up to its last complete chunk and its last complete step; ``truncated`` says so.
+
+Integrity (docs/recording.md, "Integrity"). A file is one recording: its summary's CRC
+must match (a damaged summary, or two files joined into one, fails it) and it holds one
+scene message. With ``verify`` (the default), every state the reader decodes is checked
+as it streams by: its decoded positions and velocities must give the hash stored with
+them, that hash must be the frame index's for the frame, and frames must arrive in order
+(0, 1, 2, ...). A mismatch raises RecordingIntegrityError naming the file and the frame.
+``checked_frames`` counts the frames so checked (each once).
 """
 
 from __future__ import annotations
@@ -21,18 +29,16 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import PhysdbgError
+from ..engine.state import state_hash
+from ..errors import RecordingError, RecordingIntegrityError
 from ..events import BroadPhaseInfo, Contacts, EngineWarning, StepBegin, StepEnd, SweptTests
 from . import format as fmt
 from . import proto
 from .header import RecordingHeader
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
-
-
-class RecordingError(PhysdbgError):
-    """A file that is not a readable physdbg recording."""
-
+FOOTER_BYTES = 1 + 8 + 8 + 8 + 4  # opcode, record length, summary_start, summary_offset_start, summary_crc
+OPCODE_FOOTER = 0x02
 
 @dataclass(frozen=True)
 class FrameState:
@@ -71,17 +77,20 @@ class ChannelInfo:
     messages: int
 
 
-def open_recording(path: str | Path) -> Recording:
-    """Open a .mcap recording for reading (RecordingError if it is not one)."""
-    return Recording(path)
+def open_recording(path: str | Path, verify: bool = True) -> Recording:
+    """Open a .mcap recording for reading (RecordingError if it is not one). verify: check
+    every state read against its stored hash and the frame index (see the module doc)."""
+    return Recording(path, verify=verify)
 
 
 class Recording:
     """A physdbg recording. Attributes: path, header (RecordingHeader), meta (dict),
-    frames (states held, frame 0 included), steps (= frames - 1), detail, truncated."""
+    frames (states held, frame 0 included), steps (= frames - 1), detail, truncated,
+    verify (states are checked as they are read), checked_frames (how many were)."""
 
-    def __init__(self, path: str | Path):
+    def __init__(self, path: str | Path, verify: bool = True):
         self.path = Path(path)
+        self.verify = verify
         try:
             # a FIFO or device would block or never end: only regular files are recordings
             if self.path.exists() and not self.path.is_file():
@@ -108,11 +117,14 @@ class Recording:
         self._reader = SeekingReader(self._file, validate_crcs=True)
         self._memory: dict[str, list[tuple[int, bytes]]] | None = None
         self._frame_table: FrameTable | None = None
+        self._index_checked = False  # the frame index's hashes are the states' (set as states are read)
         self.truncated = False
-        try:
-            summary = self._reader.get_summary()
-        except Exception:
-            summary = None
+        summary = None
+        if self._footer_is_whole():
+            try:
+                summary = self._reader.get_summary()
+            except Exception:
+                summary = None
         if summary is None or not summary.chunk_indexes:
             self._recover()
         else:
@@ -123,9 +135,51 @@ class Recording:
             if fmt.TOPIC_STATE not in self._channels:
                 raise RecordingError(f"{self.path}: an MCAP file, but not a physdbg recording (no {fmt.TOPIC_STATE} channel)")
             self.frames = self._counts[fmt.TOPIC_STATE]
+            self._check_one_recording()
             self._check_version(self._first(fmt.TOPIC_SCENE))
             self._read_log_times()
+        self._checked = np.zeros(self.frames, dtype=bool)
         self._read_header()
+
+    def _footer_is_whole(self) -> bool:
+        """Whether the file ends in an MCAP footer whose summary CRC matches (then its
+        summary can be used). False when it has no footer (its writer was killed: read it
+        sequentially); RecordingIntegrityError when the footer is there but the summary
+        does not match it (damaged, or two files joined, whose last footer points into the
+        first)."""
+        import os
+        import struct
+        import zlib
+
+        size = os.fstat(self._file.fileno()).st_size
+        if size < 2 * len(MCAP_MAGIC) + FOOTER_BYTES:
+            return False
+        self._file.seek(size - len(MCAP_MAGIC) - FOOTER_BYTES)
+        tail = self._file.read(FOOTER_BYTES + len(MCAP_MAGIC))
+        if tail[-len(MCAP_MAGIC):] != MCAP_MAGIC or tail[0] != OPCODE_FOOTER:
+            return False
+        length, summary_start, _, summary_crc = struct.unpack("<QQQI", tail[1:FOOTER_BYTES])
+        footer_at = size - len(MCAP_MAGIC) - FOOTER_BYTES
+        if length != FOOTER_BYTES - 9 or summary_start > footer_at:
+            raise RecordingIntegrityError(f"{self.path}: its MCAP footer is damaged (it points past itself)")
+        if summary_crc != 0:  # 0: the writer did not compute one
+            start = summary_start or footer_at
+            self._file.seek(start)
+            crc = zlib.crc32(self._file.read(size - len(MCAP_MAGIC) - 4 - start))
+            if crc != summary_crc:
+                raise RecordingIntegrityError(
+                    f"{self.path}: its summary section does not match its CRC: the file was damaged, or it is "
+                    f"two or more files joined together (a recording is one MCAP file)")
+        self._file.seek(0)
+        return True
+
+    def _check_one_recording(self) -> None:
+        """A file holds one run: one scene, one set of particles and walls, one index."""
+        for topic in (fmt.TOPIC_SCENE, fmt.TOPIC_PARTICLES, fmt.TOPIC_WALLS, fmt.TOPIC_FRAME_INDEX):
+            if self._counts.get(topic, 0) > 1:
+                raise RecordingIntegrityError(
+                    f"{self.path}: holds {self._counts[topic]} {topic} messages: more than one recording in one "
+                    f"file (a recording has one)")
 
     def _first(self, topic: str) -> bytes | None:
         """The first message of a topic, found by the summary's index (no time range)."""
@@ -154,10 +208,17 @@ class Recording:
         data = self._first(fmt.TOPIC_FRAME_INDEX)
         if data is not None:
             _, rows = proto.decode_table(fmt.MESSAGE_OF_TOPIC[fmt.TOPIC_FRAME_INDEX], data)
-            if len(rows) == self.frames:
-                self._log_ns = rows["log_time"].copy()
-                self._frame_table = FrameTable(rows["time"].copy(), rows["dt"].copy(), rows["state_hash"].copy())
-                return
+            if len(rows) != self.frames:
+                raise RecordingIntegrityError(f"{self.path}: its frame index lists {len(rows)} frames and the file "
+                                              f"holds {self.frames} states")
+            log_ns = rows["log_time"]
+            if len(log_ns) > 1 and not np.all(log_ns[1:] > log_ns[:-1]):
+                k = int(np.flatnonzero(log_ns[1:] <= log_ns[:-1])[0]) + 1
+                raise RecordingIntegrityError(f"{self.path}: frames out of order: the frame index puts frame {k} "
+                                              f"no later than frame {k - 1}")
+            self._log_ns = log_ns.copy()
+            self._frame_table = FrameTable(rows["time"].copy(), rows["dt"].copy(), rows["state_hash"].copy())
+            return
         log_ns = np.zeros(self.frames, dtype=np.uint64)
         seen = 0
         for _, _, message in self._reader.iter_messages(topics=[fmt.TOPIC_STATE]):
@@ -174,9 +235,12 @@ class Recording:
 
         self.truncated = True
         self._file.seek(0)
+        from mcap.records import Footer
+
         channels: dict[int, Channel] = {}
         self._schemas: dict[int, Schema] = {}
         memory: dict[str, list[tuple[int, bytes]]] = defaultdict(list)
+        ended = False
         try:
             for record in StreamReader(self._file, validate_crcs=True).records:
                 if isinstance(record, Schema):
@@ -185,11 +249,23 @@ class Recording:
                     channels[record.id] = record
                 elif isinstance(record, Message) and record.channel_id in channels:
                     memory[channels[record.channel_id].topic].append((record.sequence, record.data))
+                elif isinstance(record, Footer):
+                    ended = True
         except Exception:  # the torn end of the file: keep what came before it
             pass
+        if ended:  # a whole MCAP file, and yet its footer is not the file's end: more follows it
+            raise RecordingIntegrityError(f"{self.path}: more data follows the end of its MCAP file: two or more "
+                                          f"files joined together (a recording is one MCAP file)")
         self._channels = {c.topic: c for c in channels.values()}
         if fmt.TOPIC_STATE not in self._channels or not memory.get(fmt.TOPIC_STATE):
             raise RecordingError(f"{self.path}: truncated before its first complete chunk; no steps can be read")
+        self._counts = {topic: len(rows) for topic, rows in memory.items()}
+        self._check_one_recording()
+        sequence = [f for f, _ in memory[fmt.TOPIC_STATE]]
+        if sequence != list(range(len(sequence))):
+            k = next(i for i, f in enumerate(sequence) if f != i)
+            raise RecordingIntegrityError(f"{self.path}: frames out of order: state {k} of the file is frame "
+                                          f"{sequence[k]}")
         last = memory[fmt.TOPIC_STATE][-1][0]
         # A frame is complete when its state arrived (the writer puts the state last).
         self._memory = {topic: [(f, d) for f, d in rows if f <= last] for topic, rows in memory.items()}
@@ -264,18 +340,46 @@ class Recording:
         start = first - first % fmt.KEYFRAME_INTERVAL
         out: list[FrameState] = []
         history: list[np.ndarray] = []
+        expected = start
         for _, frame, data in self._messages([fmt.TOPIC_STATE], start, last):
             try:
                 state, frame_no, time, dt, digest, asleep = fmt.decode_state(
                     data, history[-1] if history else None, history[-2] if len(history) > 1 else None)
             except ValueError as err:
                 raise RecordingError(f"{self.path}: frame {frame}: damaged state message ({err})") from None
+            if self.verify and not frame == frame_no == expected:
+                raise RecordingIntegrityError(f"{self.path}: frames out of order: frame {frame_no} (MCAP sequence "
+                                              f"{frame}) where frame {expected} belongs")
+            expected += 1
             history = [*history[-1:], state]
             if frame_no >= first:
                 out.append(FrameState(frame_no, time, dt, state[:, :3].copy(), state[:, 3:].copy(), digest, asleep))
+                if self.verify:
+                    self._check_state(out[-1])
         if len(out) != last - first + 1:
             raise RecordingError(f"{self.path}: frames {first}..{last} are not all in the file")
         return out
+
+    def _check_state(self, s: FrameState) -> None:
+        """The integrity rule for one decoded state (module doc): its own hash, the index's."""
+        if self._checked[s.frame]:
+            return
+        if state_hash(s.positions, s.velocities) != s.state_hash:
+            raise RecordingIntegrityError(
+                f"{self.path}: frame {s.frame}: the stored state does not give its stored hash: the file was altered "
+                f"or damaged (--no-verify reads it anyway)")
+        table = self._frame_table
+        if table is not None and (table.hash_hex(s.frame) != s.state_hash or table.time[s.frame] != s.time
+                                  or table.dt[s.frame] != s.dt):
+            raise RecordingIntegrityError(
+                f"{self.path}: frame {s.frame}: the frame index and the stored state disagree: the file was altered "
+                f"(--no-verify reads it anyway)")
+        self._checked[s.frame] = True
+
+    @property
+    def checked_frames(self) -> int:
+        """How many frames' states have been checked (each counted once)."""
+        return int(self._checked.sum())
 
     def state(self, k: int) -> FrameState:
         """The state at frame k (negative k counts from the end)."""
@@ -320,10 +424,17 @@ class Recording:
         structured array with the fields of /physdbg/stats (time, dt, kinetic, potential,
         energy, momentum (3,), counts, max_overlap, timings, temperature, virial,
         wall_impulse; see docs/recording-format.md)."""
-        stop = self.frames if stop is None else min(stop, self.frames)
-        rows = [self._table(fmt.TOPIC_STATS, data)
-                for _, _, data in self._messages([fmt.TOPIC_STATS], max(start, 1), stop - 1)] if stop > start else []
+        rows = list(self.iter_stats(start, stop))
         return np.concatenate(rows) if rows else np.zeros(0, dtype=fmt.dtype_of(fmt.STATS_FIELDS))
+
+    def iter_stats(self, start: int = 1, stop: int | None = None) -> Iterator[np.ndarray]:
+        """The step statistics of steps start..stop-1, one single-row array at a time (as
+        stats(), streamed: stop reading when you have what you need)."""
+        stop = self.frames if stop is None else min(stop, self.frames)
+        if stop <= max(start, 1):
+            return
+        for _, _, data in self._messages([fmt.TOPIC_STATS], max(start, 1), stop - 1):
+            yield self._table(fmt.TOPIC_STATS, data)
 
     # ------------------------------------------------------------------ step events
     def step_events(self, k: int) -> list:
@@ -441,4 +552,5 @@ class Recording:
                 f"detail={self.detail!r}{', truncated' if self.truncated else ''})")
 
 
-__all__ = ["ChannelInfo", "FrameState", "FrameTable", "Recording", "RecordingError", "open_recording"]
+__all__ = ["ChannelInfo", "FrameState", "FrameTable", "Recording", "RecordingError", "RecordingIntegrityError",
+           "open_recording"]

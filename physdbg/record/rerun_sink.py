@@ -64,6 +64,20 @@ def viewer_binary() -> str:
     return path if os.access(path, os.X_OK) else "rerun"
 
 
+def file_sink(path):
+    """rerun's FileSink for ``path``, or a RecordingError naming the file when it cannot be
+    created (a read-only folder, a missing one rerun will not make)."""
+    import rerun as rr
+
+    from ..errors import RecordingError
+
+    try:
+        return rr.FileSink(str(path))
+    except (RuntimeError, OSError) as err:
+        reason = str(err).split(", path:")[0].replace("Failed to create file: ", "")
+        raise RecordingError(f"{path}: cannot write the Rerun file ({reason})") from None
+
+
 class RerunSink:
     """Writes (or streams) the Rerun picture of a run.
 
@@ -75,11 +89,17 @@ class RerunSink:
     wants_swept_tests = False  # the view draws states, contacts and the BVH (observe.py)
 
     def __init__(self, header: RecordingHeader, rrd: str | Path | None = None, spawn: bool = False,
-                 detail: str | None = None, recording_id: str | None = None, stream=None, root: str = ""):
+                 detail: str | None = None, recording_id: str | None = None, stream=None, root: str = "",
+                 color: tuple[int, int, int] = view.SPHERE_COLOR, opening: tuple[str, int] | None = None):
+        """color: the moving spheres' colour; opening: (timeline, first step) — every row
+        from that step on also carries that sequence timeline, whose first time is where
+        a paused viewer opens when the blueprint makes it the active one."""
         import rerun as rr
 
         self.rr = rr
         self.header = header
+        self.color = color
+        self.opening = opening
         self.root = root.strip("/") + "/" if root else ""  # e.g. "a/": entities under /a/world, /a/stats
         self.detail = detail or header.detail
         # each run its own id (kept in the MCAP file, so a replay is the same recording as
@@ -91,7 +111,7 @@ class RerunSink:
         self.rec.set_log_time_enabled(False)  # wall-clock time would make live and replay files differ
         sinks = []
         if rrd is not None:
-            sinks.append(rr.FileSink(str(rrd)))
+            sinks.append(file_sink(rrd))
         if spawn:
             try:
                 rr.spawn(connect=False, hide_welcome_screen=True, executable_path=viewer_binary(),
@@ -135,13 +155,28 @@ class RerunSink:
                     static=True)
         self._set_time(0, 0.0)
         rec.log(self.root + "world/spheres", rr.Points3D(np.asarray(h.positions, dtype=np.float32), radii=self.radius,
-                                             colors=sphere_colors(h.inverse_mass)))
+                                             colors=sphere_colors(h.inverse_mass, moving=self.color)))
         settings = " ".join(f"{key}={value}" for key, value in h.meta.get("settings", {}).items())
         rec.log(self.root + "log", rr.TextLog(f"{h.name}: {h.count} spheres, {len(h.walls)} walls; {settings}", level="INFO"))
 
     def _set_time(self, frame: int, time: float) -> None:
         self.rec.set_time("step", sequence=frame)
         self.rec.set_time("sim_time", duration=time)
+        if self.opening is not None:
+            name, first = self.opening
+            if frame >= first:
+                self.rec.set_time(name, sequence=frame)
+            else:
+                self.rec.disable_timeline(name)
+
+    def _time_columns(self, frames: list[int], times: list[float]):
+        """The index columns of rows at frames (with the opening timeline, when every row
+        has it)."""
+        rr = self.rr
+        index = [rr.TimeColumn("step", sequence=frames), rr.TimeColumn("sim_time", duration=times)]
+        if self.opening is not None and frames and frames[0] >= self.opening[1]:
+            index.append(rr.TimeColumn(self.opening[0], sequence=frames))
+        return index
 
     # ------------------------------------------------------------------ observer
     def on_event(self, event) -> None:
@@ -163,11 +198,15 @@ class RerunSink:
         # Copies in float32: rerun may hold the array until it flushes. Colours only when the
         # set of sleeping spheres changes: a pile falling asleep turns grey-blue
         changed = sleep_changed(self._asleep, end.asleep)
-        colors = sphere_colors(self.header.inverse_mass, end.asleep) if changed else None
+        # the opening timeline's first row holds the whole style: latest-at on that timeline
+        # sees nothing logged before it
+        opens = self.opening is not None and frame == self.opening[1]
+        colors = sphere_colors(self.header.inverse_mass, end.asleep, self.color) if changed or opens else None
         sleep_lines = describe_sleep(frame, self._asleep, end.asleep) if changed else []
         self._asleep = end.asleep
         rec.log(self.root + "world/spheres",
-                rr.Points3D.from_fields(positions=np.asarray(end.positions, dtype=np.float32), colors=colors))
+                rr.Points3D.from_fields(positions=np.asarray(end.positions, dtype=np.float32), colors=colors,
+                                        radii=self.radius if opens else None))
         contacts = self._contacts if self.detail != "state" else None
         if self._broad_phase is not None:
             self._bvh(self._broad_phase)
@@ -267,8 +306,7 @@ class RerunSink:
         if not lines:
             return
         rr = self.rr
-        index = [rr.TimeColumn("step", sequence=[frame] * len(lines)),
-                 rr.TimeColumn("sim_time", duration=[time] * len(lines))]
+        index = self._time_columns([frame] * len(lines), [time] * len(lines))
         self.rec.send_columns(self.root + "log", indexes=index, columns=rr.TextLog.columns(
             text=[text for text, _ in lines], level=[level for _, level in lines]))
 
@@ -317,10 +355,16 @@ class RerunSink:
         rr = self.rr
         if not self._series_steps:
             return
-        index = [rr.TimeColumn("step", sequence=self._series_steps),
-                 rr.TimeColumn("sim_time", duration=self._series_times)]
-        for path, values in self._series.items():
-            self.rec.send_columns(self.root + path, indexes=index, columns=rr.Scalars.columns(scalars=values))
+        # rows before the opening step and from it on are sent apart: an index column
+        # covers every row of a send
+        split = 0 if self.opening is None else int(np.searchsorted(self._series_steps, self.opening[1]))
+        for part in (slice(0, split), slice(split, None)):
+            steps, times = self._series_steps[part], self._series_times[part]
+            if not steps:
+                continue
+            index = self._time_columns(steps, times)
+            for path, values in self._series.items():
+                self.rec.send_columns(self.root + path, indexes=index, columns=rr.Scalars.columns(scalars=values[part]))
         self._series = {}
         self._series_steps = []
         self._series_times = []
@@ -339,18 +383,9 @@ def blueprint(header: RecordingHeader):
     camera looks at the whole scene from above and to the side, up against gravity."""
     import rerun.blueprint as rrb
 
-    lo, hi = scene_bounds(header)
-    centre = (lo + hi) / 2
-    up = up_axis(header)
-    helper = np.array([0.0, 0.0, 1.0]) if not up[2] else np.array([0.0, -1.0, 0.0])
-    side = np.cross(up, helper)
-    front = np.cross(side, up)
-    direction = front + 0.55 * side + 0.45 * up
-    eye = centre + direction / np.linalg.norm(direction) * 1.4 * float(np.linalg.norm(hi - lo))
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Spatial3DView(origin="/world", name="scene", eye_controls=rrb.EyeControls3D(
-                position=eye.tolist(), look_target=centre.tolist(), eye_up=up.tolist()), overrides={
+            rrb.Spatial3DView(origin="/world", name="scene", eye_controls=camera(header), overrides={
                 f"/world/bvh/level_{level}": rrb.EntityBehavior(visible=False)
                 for level in range(BVH_LEVELS_SHOWN, 64)}),
             rrb.Vertical(
@@ -367,6 +402,23 @@ def blueprint(header: RecordingHeader):
         rrb.TimePanel(timeline="step"),
         collapse_panels=True,
     )
+
+
+def camera(header: RecordingHeader, distance: float = 1.4):
+    """The 3D view's eye: on the whole scene, from above and to the side, up against
+    gravity (every view of a scene framed alike, so two runs side by side line up);
+    distance: from the scene's centre, in the scene box's diagonals."""
+    import rerun.blueprint as rrb
+
+    lo, hi = scene_bounds(header)
+    centre = (lo + hi) / 2
+    up = up_axis(header)
+    helper = np.array([0.0, 0.0, 1.0]) if not up[2] else np.array([0.0, -1.0, 0.0])
+    side = np.cross(up, helper)
+    front = np.cross(side, up)
+    direction = front + 0.55 * side + 0.45 * up
+    eye = centre + direction / np.linalg.norm(direction) * distance * float(np.linalg.norm(hi - lo))
+    return rrb.EyeControls3D(position=eye.tolist(), look_target=centre.tolist(), eye_up=up.tolist())
 
 
 # ----------------------------------------------------------------------------- geometry

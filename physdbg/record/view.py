@@ -81,10 +81,15 @@ ASLEEP_COLOR = (110, 135, 170)
 SLEEP_IDS_PER_LINE = 12  # spheres named in a "fell asleep" / "woke" log line; the rest are counted
 
 
-def sphere_colors(inverse_mass: np.ndarray, asleep: np.ndarray | None = None) -> np.ndarray:
-    """(N, 3) uint8: immovable spheres grey, the rest a warm orange, and those ``asleep``
-    ((N,) bool, as StepEnd and the recording's state carry it) a cool grey-blue."""
-    colors = np.tile(np.array([[240, 140, 50]], dtype=np.uint8), (len(inverse_mass), 1))
+SPHERE_COLOR = (240, 140, 50)  # a moving sphere: warm orange
+
+
+def sphere_colors(inverse_mass: np.ndarray, asleep: np.ndarray | None = None,
+                  moving: tuple[int, int, int] = SPHERE_COLOR) -> np.ndarray:
+    """(N, 3) uint8: immovable spheres grey, the rest ``moving`` (a warm orange unless a
+    picture of two runs tells them apart by colour), and those ``asleep`` ((N,) bool, as
+    StepEnd and the recording's state carry it) a cool grey-blue."""
+    colors = np.tile(np.array([moving], dtype=np.uint8), (len(inverse_mass), 1))
     if asleep is not None:
         colors[asleep] = ASLEEP_COLOR
     colors[inverse_mass == 0] = (140, 140, 140)
