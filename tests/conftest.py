@@ -77,3 +77,21 @@ def virtual_display():
     finally:
         xvfb.terminate()
         xvfb.wait(timeout=10)
+
+
+def nan_in_step(monkeypatch, step_index: int = 2, sphere: int = 1) -> None:
+    """Make sphere's velocity NaN as step ``step_index`` (0-based) begins, in every World.
+    Validated scenes keep every product finite, so this stands for a NaN that a bug (or a
+    foreign state) brings in. monkeypatch.undo() ends it."""
+    import math
+
+    from physdbg.engine import World
+
+    original = World.step
+
+    def step(self, dt):
+        if self.step_index == step_index:
+            self.state.velocities[sphere, 0] = math.nan
+        return original(self, dt)
+
+    monkeypatch.setattr(World, "step", step)

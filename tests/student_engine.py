@@ -203,3 +203,58 @@ def _swept_step(x0, v0, g, inv, r, e, walls, dt, mistake, drag):
     x1 = np.array([position(i, dt) for i in range(n)])
     v1 = np.array([velocity(i, dt) for i in range(n)])
     return x1, v1
+
+
+# The example runs in docs/examples/mistakes/: one mistake each, on a scene made to show it
+# (with integrator = euler, so the student's Euler is the scene's own and the mistake is the
+# first thing that departs). tests/test_departure.py checks the files are what this writes.
+EXAMPLES = {  # mistake: (scene, overrides)
+    "drag-per-step": ("docs/examples/mistakes/coast.toml", []),
+    "tangent-reversed": ("docs/examples/mistakes/slide.toml", []),
+    "restitution-sign": ("docs/examples/mistakes/glance.toml", []),
+    "impulse-doubled": ("docs/examples/mistakes/glance.toml", []),
+    "wrong-normal": ("docs/examples/mistakes/glance.toml", []),
+    "immovable-moved": ("docs/examples/mistakes/post.toml", []),
+    "skipped-rest": ("docs/examples/mistakes/slide.toml", []),
+    "index-order": ("cradle", ["integrator=euler"]),
+}
+
+
+def example_run(root, mistake: str):
+    """(scene, times, positions, velocities) of the example run of ``mistake``; root: the
+    repository (scene paths are relative to it)."""
+    from pathlib import Path
+
+    from physdbg.scene import load_scene
+
+    name, overrides = EXAMPLES[mistake]
+    scene = load_scene(str(Path(root) / name) if name.endswith(".toml") else name, overrides)
+    steps = scene.steps or round(scene.duration / scene.dt)
+    return (scene, *simulate_swept(scene, steps, scene.dt, mistake))
+
+
+def write_blown_up(root, path) -> None:
+    """docs/examples/mistakes/blown-up.jsonl: the slide scene's right run, from step 30 on
+    NaN in y, written as a JavaScript engine writes NaN in JSON (JSON.stringify(NaN) is null)."""
+    from pathlib import Path
+
+    from physdbg.scene import load_scene
+
+    scene = load_scene(str(Path(root) / "docs" / "examples" / "mistakes" / "slide.toml"))
+    times, xs, vs = simulate_swept(scene, scene.steps, scene.dt)
+    xs[30:, 0, 1] = np.nan
+    vs[30:, 0, 1] = np.nan
+    with open(path, "w") as f:
+        for k, t in enumerate(times):
+            record = {"step": k, "time": float(t), "positions": xs[k].tolist(), "velocities": vs[k].tolist()}
+            f.write(json.dumps(record).replace("NaN", "null") + "\n")
+
+
+if __name__ == "__main__":  # python -m tests.student_engine: write docs/examples/mistakes/
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    for mistake in MISTAKES:
+        _, times, xs, vs = example_run(root, mistake)
+        write_csv(root / "docs" / "examples" / "mistakes" / f"{mistake}.csv", times, xs, vs)
+    write_blown_up(root, root / "docs" / "examples" / "mistakes" / "blown-up.jsonl")

@@ -268,8 +268,15 @@ def test_foreign_or_broken_files_get_one_clear_line(tmp_path, content, words):
 def test_a_damaged_chunk_is_reported_not_raised(tmp_path):
     out = tmp_path / "r.mcap"
     invoke("record", "rain", "-s", "steps=200", "-o", str(out), "--no-rrd", "--detail", "state")
+    from mcap.reader import make_reader
+
+    with open(out, "rb") as f:  # a chunk in the middle of the file that holds states
+        summary = make_reader(f).get_summary()
+    state_channel = next(i for i, c in summary.channels.items() if c.topic == "/physdbg/state")
+    chunks = [c for c in summary.chunk_indexes if state_channel in c.message_index_offsets]
+    chunk = chunks[len(chunks) // 2]
     data = bytearray(out.read_bytes())
-    middle = len(data) // 2
+    middle = chunk.chunk_start_offset + chunk.chunk_length // 2
     data[middle:middle + 64] = bytes(64)  # zeros over compressed chunk data
     out.write_bytes(bytes(data))
     for args in (("replay", str(out), "--verify"), ("replay", str(out), "--rrd", str(tmp_path / "r.rrd"))):

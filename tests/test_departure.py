@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,8 +13,10 @@ from typer.testing import CliRunner
 from physdbg import api, open_recording
 from physdbg.cli import app
 from physdbg.scene import load_scene
-from tests.student_engine import MISTAKES, simulate, simulate_swept, write_csv, write_jsonl
+from tests.student_engine import (EXAMPLES, MISTAKES, example_run, simulate, simulate_swept, write_blown_up,
+                                  write_csv, write_jsonl)
 
+ROOT = Path(__file__).resolve().parents[1]
 HEAD_ON = ["particles.2.position=[20.0, 0.0, 0.0]", "particles.3.position=[30.0, 0.0, 0.0]",
            "particles.4.position=[40.0, 0.0, 0.0]"]
 
@@ -144,88 +147,62 @@ def test_an_mcap_run_is_read_like_the_others_and_a_bad_one_is_refused(tmp_path):
 
 
 # ----------------------------------------------------------------------------- the textbook mistakes
-# Scenes made for one mistake each, run by the swept student engine (tests/student_engine.py),
-# which with integrator = euler is physdbg's own run: so the mistake is the first departure.
-COAST = """name = "coast"\ndescription = "a ball coasting under drag"\ndt = "1/60"\nduration = 1.0
-integrator = "euler"\ngravity = [0.0, 0.0, 0.0]\ndrag = 0.5
-[[particles]]\nposition = [0.0, 0.0, 0.0]\nvelocity = [1.0, 0.5, 0.0]\nradius = 0.1
-"""
-GLANCE = """name = "glance"\ndescription = "an off-centre hit"\ndt = "1/60"\nduration = 1.0
-integrator = "euler"\ngravity = [0.0, 0.0, 0.0]
-[[particles]]\nposition = [0.0, 0.0, 0.0]\nvelocity = [2.0, 0.0, 0.0]\nradius = 0.1\nrestitution = 0.9
-[[particles]]\nposition = [0.7, 0.1, 0.0]\nradius = 0.1\nrestitution = 0.9
-"""
-POST = """name = "post"\ndescription = "a ball against an immovable post"\ndt = "1/60"\nduration = 1.0
-integrator = "euler"\ngravity = [0.0, 0.0, 0.0]
-[[particles]]\nposition = [0.0, 0.0, 0.0]\nvelocity = [2.0, 0.0, 0.0]\nradius = 0.1\nrestitution = 0.9
-[[particles]]\nposition = [1.0, 0.05, 0.0]\nradius = 0.1\ninverse_mass = 0.0\nrestitution = 0.9
-"""
-SLIDE = ["integrator=euler", "particles.0.velocity=[1, 0, 0]", "steps=60"]  # bounce, moving along the floor
-CASES = {  # mistake: (scene, overrides, first step, its sphere)
-    "drag-per-step": (COAST, [], 1, 0),
-    "tangent-reversed": ("bounce", SLIDE, 28, 0),
-    "restitution-sign": (GLANCE, [], 16, 0),
-    "impulse-doubled": (GLANCE, [], 16, 0),
-    "wrong-normal": (GLANCE, [], 16, 0),
-    "immovable-moved": (POST, [], 25, 0),
-    "skipped-rest": ("bounce", SLIDE, 28, 0),
-    "index-order": ("cradle", ["integrator=euler"], 44, 1),
-}
+# One example run per mistake (docs/examples/mistakes/, written by tests/student_engine.py's
+# swept student engine, which with integrator = euler is physdbg's own run), so the mistake
+# is the first departure: (its step, its sphere).
+FIRST = {"drag-per-step": (1, 0), "tangent-reversed": (28, 0), "restitution-sign": (16, 0),
+         "impulse-doubled": (16, 0), "wrong-normal": (16, 0), "immovable-moved": (25, 0), "skipped-rest": (28, 0),
+         "index-order": (44, 1)}
+EXAMPLES_FOLDER = ROOT / "docs" / "examples" / "mistakes"
 
 
-def _scene(tmp_path, text_or_name, overrides):
-    if "\n" in text_or_name:
-        path = tmp_path / "scene.toml"
-        path.write_text(text_or_name)
-        text_or_name = str(path)
-    return load_scene(text_or_name, overrides)
-
-
-def _student_run(tmp_path, scene, mistake):
-    steps = scene.steps or round(scene.duration / scene.dt)
-    run = tmp_path / f"{mistake or 'right'}.csv"
-    write_csv(run, *simulate_swept(scene, steps, scene.dt, mistake))
-    return run
+def test_the_example_runs_in_the_docs_are_the_student_engine_s(tmp_path):
+    for mistake in MISTAKES:
+        _, times, xs, vs = example_run(ROOT, mistake)
+        write_csv(tmp_path / "fresh.csv", times, xs, vs)
+        assert (tmp_path / "fresh.csv").read_text() == (EXAMPLES_FOLDER / f"{mistake}.csv").read_text(), mistake
+    write_blown_up(ROOT, tmp_path / "blown-up.jsonl")
+    assert (tmp_path / "blown-up.jsonl").read_text() == (EXAMPLES_FOLDER / "blown-up.jsonl").read_text()
 
 
 def test_the_swept_student_engine_done_right_does_not_depart(tmp_path):
-    for text, overrides, _, _ in {id(v[0]): v for v in CASES.values()}.values():
-        scene = _scene(tmp_path, text, overrides)
-        report = api.check_run(_student_run(tmp_path, scene, None), scene).report
+    for name, overrides in {str(v): v for v in EXAMPLES.values()}.values():
+        scene = load_scene(str(ROOT / name) if name.endswith(".toml") else name, overrides)
+        steps = scene.steps or round(scene.duration / scene.dt)
+        write_csv(tmp_path / "right.csv", *simulate_swept(scene, steps, scene.dt))
+        report = api.check_run(tmp_path / "right.csv", scene).report
         assert report.exit_code == 0, (scene.name, report.headline)
 
 
 @pytest.mark.parametrize("mistake", MISTAKES)
-def test_each_textbook_mistake_is_named_with_its_step_sphere_and_code(tmp_path, mistake):
-    text, overrides, step, sphere = CASES[mistake]
-    scene = _scene(tmp_path, text, overrides)
-    run = _student_run(tmp_path, scene, mistake)
-    result = CliRunner().invoke(app, ["check-run", str(run), "--scene", str(scene.source if "\n" in text
-                                                                              else text), "--json",
-                                      *[f"--set={o}" for o in overrides]])
+def test_each_textbook_mistake_is_named_with_its_step_sphere_and_code(mistake):
+    name, overrides = EXAMPLES[mistake]
+    scene = str(ROOT / name) if name.endswith(".toml") else name
+    result = CliRunner().invoke(app, ["check-run", str(EXAMPLES_FOLDER / f"{mistake}.csv"), "--scene", scene,
+                                      "--json", *[f"--set={o}" for o in overrides]])
     assert result.exit_code == 1, result.output
     report = json.loads(result.output)
+    step, sphere = FIRST[mistake]
     assert (report["first"]["step"], report["first"]["body"], report["first"]["cause"]) == (step, sphere, mistake)
     named = next(d for d in report["departures"] if d["kind"] == mistake)
     assert named["step"] == step and named["advice"]
 
 
-def test_the_drag_mistake_says_the_decay_it_measured_against_the_seed_s(tmp_path):
-    scene = _scene(tmp_path, COAST, [])
-    report = api.check_run(_student_run(tmp_path, scene, "drag-per-step"), scene).report
+def test_the_drag_mistake_says_the_decay_it_measured_against_the_seed_s():
+    report = api.check_run(EXAMPLES_FOLDER / "drag-per-step.csv", str(EXAMPLES_FOLDER / "coast.toml")).report
     drag = report.departures[0]
     assert kinds(report) == ["drag-per-step"]  # not an extra contact in every step, nor a drift
-    assert drag.evidence["measured"] == pytest.approx(0.5) and drag.evidence["expected"] == pytest.approx(0.5 ** (1 / 60))
+    assert drag.evidence["measured"] == pytest.approx(0.5)
+    assert drag.evidence["expected"] == pytest.approx(0.5 ** (1 / 60))
     assert "depend on the frame rate" in drag.text and "drag ** dt" in drag.advice
 
 
-def test_a_reflection_of_the_whole_velocity_names_the_seed_s_formula(tmp_path):
-    scene = _scene(tmp_path, "bounce", SLIDE)
-    report = api.check_run(_student_run(tmp_path, scene, "tangent-reversed"), scene).report
+def test_a_reflection_of_the_whole_velocity_names_the_seed_s_formula():
+    report = api.check_run(EXAMPLES_FOLDER / "tangent-reversed.csv", str(EXAMPLES_FOLDER / "slide.toml")).report
     reflect = report.departures[0]
     assert reflect.kind == "tangent-reversed" and reflect.wall == "floor"
-    assert reflect.evidence["tangential_before"] == pytest.approx(1.0) and reflect.evidence["tangential_after"] == \
-        pytest.approx(-0.8)
+    assert reflect.evidence["tangential_before"] == pytest.approx(1.0)
+    assert reflect.evidence["tangential_after"] == pytest.approx(-0.8)
     assert "R = Ri − 2N(Ri·N)" in reflect.advice and "chaotic" not in report.headline
 
 

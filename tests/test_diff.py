@@ -238,20 +238,12 @@ def test_a_shorter_run_says_how_much_longer_the_other_goes_on(tmp_path):
 
 
 def test_a_run_that_turns_nan_is_named_without_a_numpy_warning(tmp_path, monkeypatch):
-    import math
-
-    from physdbg.engine import World
     from physdbg.errors import NonFiniteRunError
 
+    from .conftest import nan_in_step
+
     good = _rec(tmp_path, "good", "cradle", ["steps=10"])
-    original = World.step
-
-    def step(self, dt):
-        if self.step_index == 2:
-            self.state.velocities[1, 0] = math.nan
-        return original(self, dt)
-
-    monkeypatch.setattr(World, "step", step)
+    nan_in_step(monkeypatch)  # sphere 1's velocity turns NaN as step 3 begins
     with pytest.raises(NonFiniteRunError):
         _rec(tmp_path, "nan", "cradle", ["steps=10"])
     monkeypatch.undo()

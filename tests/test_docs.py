@@ -47,15 +47,19 @@ def _physdbg_commands(path: Path) -> list[str]:
 
 def _commands_and_exits(path: Path) -> list[tuple[str, int]]:
     """(command, expected exit code): 0, or N when its comment says "exit N"."""
+    return [pair for block in re.findall(r"```sh\n(.*?)```", path.read_text(), re.S)
+            for pair in _commands_and_exits_in(block)]
+
+
+def _commands_and_exits_in(block: str) -> list[tuple[str, int]]:
     commands = []
-    for block in re.findall(r"```sh\n(.*?)```", path.read_text(), re.S):
-        for line in block.splitlines():
-            line, _, comment = line.partition("  #")
-            expected = re.match(r"\s*exit (\d)\b", comment)
-            for part in line.strip().split("&&"):
-                part = part.strip()
-                if part.startswith((".venv/bin/physdbg ", "physdbg ")):
-                    commands.append((part, int(expected.group(1)) if expected else 0))
+    for line in block.splitlines():
+        line, _, comment = line.partition("  #")
+        expected = re.match(r"\s*exit (\d)\b", comment)
+        for part in line.strip().split("&&"):
+            part = part.strip()
+            if part.startswith((".venv/bin/physdbg ", "physdbg ")):
+                commands.append((part, int(expected.group(1)) if expected else 0))
     return commands
 
 
@@ -76,11 +80,20 @@ def test_every_command_and_python_example_in_the_docs_runs_as_written(path, tmp_
     shutil.copytree(ROOT / "recordings" / "ci", tmp_path / "recordings" / "ci")  # the goldens ci.md names
     monkeypatch.chdir(tmp_path)
     runner = CliRunner()
-    for command, expected in _commands_and_exits(path):
-        if any(marker in command for marker in OPENS_A_WINDOW):
+    output = ""
+    for kind, block in re.findall(r"```(sh|text)\n(.*?)```", path.read_text(), re.S):
+        if kind == "text":  # what the command before printed: every line of it, or its start before "…"
+            for line in block.splitlines():
+                shown = line.rstrip().removesuffix("…").rstrip()
+                assert shown in output, f"{path.name}: this line is not in the output of the command before it:\n" \
+                                        f"{line}\n--- the output was:\n{output}"
             continue
-        result = runner.invoke(app, shlex.split(command)[1:])
-        assert result.exit_code == expected, f"{path.name}: `{command}` exited {result.exit_code}:\n{result.output}"
+        for command, expected in _commands_and_exits_in(block):
+            if any(marker in command for marker in OPENS_A_WINDOW):
+                continue
+            result = runner.invoke(app, shlex.split(command)[1:])
+            assert result.exit_code == expected, f"{path.name}: `{command}` exited {result.exit_code}:\n{result.output}"
+            output = result.output
     for block in re.findall(r"```python\n(.*?)```", path.read_text(), re.S):
         exec(compile(block, f"{path.name} example", "exec"), {})  # noqa: S102 - our own docs
     for block in re.findall(r"```toml\n(.*?)```", path.read_text(), re.S):

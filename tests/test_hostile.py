@@ -299,18 +299,10 @@ def test_a_fifo_is_not_opened_as_a_recording(tmp_path):
 
 def test_a_run_that_turns_nan_exits_3_and_leaves_a_readable_recording(tmp_path, monkeypatch):
     from physdbg import open_recording
-    from physdbg.engine import World
 
-    # Validated scenes keep every product finite, so a NaN here stands for one that a bug
-    # (or a foreign state) brings in: sphere 1's velocity turns NaN as step 3 begins.
-    original = World.step
+    from .conftest import nan_in_step
 
-    def step(self, dt):
-        if self.step_index == 2:
-            self.state.velocities[1, 0] = math.nan
-        return original(self, dt)
-
-    monkeypatch.setattr(World, "step", step)
+    nan_in_step(monkeypatch)  # sphere 1's velocity turns NaN as step 3 begins
     out = tmp_path / "cradle.mcap"
     result = _cli("record", "cradle", "-s", "steps=10", "-o", str(out), "--no-rrd")
     assert result.exit_code == 3, result.output

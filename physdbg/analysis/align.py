@@ -156,7 +156,9 @@ class Growth:
             parts.append(f"is already {self.samples[0][1]:.3g} m in that step and {self.final_gap:.3g} m at the end")
         elif self.steps_to_mm is not None:
             parts.append(f"reaches 1 mm after {_steps(self.steps_to_mm)}")
-        if self.steps_to_radius is not None:
+        if self.steps_to_radius == 0:
+            parts.append(f"more than one radius ({self.radius:.3g} m) from the first")
+        elif self.steps_to_radius is not None:
             parts.append(f"one radius ({self.radius:.3g} m) after {_steps(self.steps_to_radius)}")
         if not parts:
             parts.append(f"stays below 1 mm (at most {self.final_gap:.3g} m at the end)")

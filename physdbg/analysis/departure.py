@@ -523,8 +523,8 @@ class _Comparison:
                 if kick is not None and not kick["matched"]:
                     kick["matched"] = True
                     self._extra(kick)
-                elif kick is None and self.inv[b] > 0:
-                    drift.setdefault(b, []).append(s)
+                elif kick is None and self.inv[b] > 0 and np.isfinite(r.xf[s, b]).all() and np.isfinite(r.vf[s, b]).all():
+                    drift.setdefault(b, []).append(s)  # (a body that turned NaN is the non-finite departure)
         self._drift(drift)
 
     def _no_step_departs(self, first: FirstDeparture) -> None:
@@ -904,7 +904,8 @@ class _Comparison:
         b = min(drift, key=lambda i: (drift[i][0], i))
         steps = sorted({k for ks in drift.values() for k in ks})
         who = f"sphere {b} drifts" if len(drift) == 1 else f"{len(drift)} spheres (sphere {b} first) drift"
-        text = (f"{who} in free flight ({len(steps)} steps with no contact end elsewhere than physdbg's from the "
+        text = (f"{who} in free flight ({len(steps)} step{'s' if len(steps) != 1 else ''} with no contact "
+                f"end{'s' if len(steps) == 1 else ''} elsewhere than physdbg's from the "
                 f"same start)")
         if integrator.get("differs") and integrator.get("name"):
             text += ": the integrator"

@@ -362,7 +362,7 @@ class _Differ:
             headline = ("the runs differ from the start" if divergence.step == 0 else
                         f"the runs part in step {divergence.step}") + (
                 f" (step {divergence.step_b} of B)" if divergence.step_b != divergence.step else "") + \
-                (": " + re.sub(r"^Step \d+: ", "", _main(causes).text) if causes else "")
+                (": " + re.sub(r"^step \d+: ", "", _main(causes).text, flags=re.IGNORECASE) if causes else "")
         return DiffReport(str(ra.path), str(rb.path), ra.header.name, rb.header.name, ra.steps, rb.steps,
                           "step" if self.by_step else "time", note, self.atol, self.rtol, compared,
                           self.settings, divergence, growth, causes, headline, self._same_length(),
@@ -392,13 +392,14 @@ class _Differ:
             # The frames before `start` are equal by the index's hashes, but the index is only
             # trusted once each state has been read and found to give it (the reader checks
             # every state it decodes): so both runs stream from frame 0.
-            first = 0
+            pairs = self._paired_states(common)
         elif start is None:
             return None, common
         else:
             first = max(start - 1, 0)
+            pairs = zip(ra.states(first, common), rb.states(first, common), strict=True)
         previous = None
-        for sa, sb in zip(ra.states(first, common), rb.states(first, common), strict=True):
+        for sa, sb in pairs:
             if start is None or sa.frame < start:
                 previous = (sa, sb)
                 continue
@@ -410,6 +411,21 @@ class _Differ:
                         prev_a, prev_b), sa.frame + 1
             previous = (sa, sb)
         return None, common
+
+    def _paired_states(self, stop: int):
+        """(state of A, state of B) of frames 0..stop-1, each checked; where B's stored message
+        is A's byte for byte (and so are the ones it is coded against) B's state is A's,
+        decoded and hashed once: two equivalent runs cost one decoding, not two."""
+        from ..record.reader import StateStream
+
+        stream_a, stream_b = StateStream(self.ra), StateStream(self.rb)
+        for (frame_a, data_a), (frame_b, data_b) in zip(self.ra.state_messages(0, stop),
+                                                         self.rb.state_messages(0, stop), strict=True):
+            sa = stream_a.decode(frame_a, data_a)
+            if data_a == data_b and stream_b.can_share(frame_b, stream_a):
+                yield sa, stream_b.share(frame_b, sa, stream_a)
+            else:
+                yield sa, stream_b.decode(frame_b, data_b)
 
     def _first_by_time(self):
         """Align by simulated time (the coarser run's frames against the finer run)."""
@@ -459,6 +475,7 @@ class _Differ:
             resting = c.resting
             for i in range(len(c)):
                 rows.append({"step": k, "index": i, "time": base + float(c.time_in_step[i]),
+                             "who": contact_words(int(c.kind[i]), int(c.a[i]), int(c.other[i]), self.names_a),
                              "time_in_step": float(c.time_in_step[i]), "dt": float(table.dt[k]),
                              "kind": int(c.kind[i]), "a": int(c.a[i]), "other": int(c.other[i]),
                              "resting": bool(resting[i]), "impulse": float(c.impulse[i]),

@@ -150,9 +150,10 @@ def check_run_json(report: CheckRunReport) -> str:
 
 def _first(r: CheckRunReport) -> str:
     f = r.first
-    return (f"step {f.step} (t = {f.time:.6g} s), sphere {f.body}: position off by {f.position:.3g} m, velocity by "
-            f"{f.velocity:.3g} m/s; {f.bodies} of {r.bodies} bod{'y' if r.bodies == 1 else 'ies'} beyond the "
-            f"tolerance; cause: {f.cause}")
+    off = (f"position off by {f.position:.3g} m, velocity by {f.velocity:.3g} m/s"
+           if math.isfinite(f.position) and math.isfinite(f.velocity) else "its position or velocity is NaN or infinite")
+    return (f"step {f.step} (t = {f.time:.6g} s), sphere {f.body}: {off}; {f.bodies} of {r.bodies} "
+            f"bod{'y' if r.bodies == 1 else 'ies'} beyond the tolerance; cause: {f.cause}")
 
 
 def _more(more: int) -> str:
@@ -201,7 +202,7 @@ def check_run_markdown(r: CheckRunReport) -> str:
 def _contact(c: dict | None) -> str:
     if c is None:
         return "no contact"
-    who = f"{c['a']}–{c['other']}" if c["kind"] == 0 else f"{c['a']}–wall {c['other']}"
+    who = c.get("who") or (f"{c['a']}–{c['other']}" if c["kind"] == 0 else f"{c['a']}–wall {c['other']}")
     return f"{who} at {c['time_in_step'] / c['dt']:.3f}·dt" + (" (resting)" if c["resting"] else "")
 
 

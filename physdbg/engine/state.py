@@ -238,8 +238,8 @@ def _sum_is_finite(x, v):
 def state_hash(positions: np.ndarray, velocities: np.ndarray) -> str:
     """BLAKE2b-128 hex digest of the exact bytes of positions then velocities (float64, C order)."""
     h = hashlib.blake2b(digest_size=16)
-    h.update(np.ascontiguousarray(positions, dtype=np.float64).tobytes())
-    h.update(np.ascontiguousarray(velocities, dtype=np.float64).tobytes())
+    h.update(np.ascontiguousarray(positions, dtype=np.float64).data)  # the buffer itself, not a copy of it
+    h.update(np.ascontiguousarray(velocities, dtype=np.float64).data)
     return h.hexdigest()
 
 

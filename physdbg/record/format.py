@@ -63,8 +63,11 @@ VIEW_WORLD_FRAME = "world"  # Foxglove's display frame (z up)
 VIEW_SCENE_FRAME = "scene"  # the engine's coordinates (y up unless gravity points down z)
 
 # The bulky per-step channels are written in chunks of their own, so reading states,
-# stats and contacts (diff, explain, a replay at detail "state") never decompresses them.
-HEAVY_TOPICS = frozenset({"/physdbg/swept_tests", "/physdbg/broad_phase", "/physdbg/bvh", "/physdbg/bvh_order"})
+# stats and contacts (diff, explain, a replay, every integrity check) never decompresses
+# them: the swept tests and the broad phase, and the view channels (a gas of 1 000 spheres
+# holds 3 bytes of /view/scene for every byte of /physdbg/state, and 21 /view/log messages a step).
+HEAVY_TOPICS = frozenset({"/physdbg/swept_tests", "/physdbg/broad_phase", "/physdbg/bvh", "/physdbg/bvh_order",
+                          *VIEW_TOPICS})
 
 TOPICS_BY_DETAIL = {
     "state": (TOPIC_SCENE, TOPIC_PARTICLES, TOPIC_WALLS, TOPIC_STATE, TOPIC_STATS, TOPIC_WARNINGS,

@@ -56,6 +56,61 @@ class FrameState:
     asleep: np.ndarray | None = None
 
 
+class StateStream:
+    """Decodes one recording's state messages in order, as they stream by (each state is
+    coded against the one or two before it), checking each as the recording's ``verify``
+    says. ``share`` takes a state another stream decoded from the same bytes, when this
+    file's message is byte for byte that one: ``diff`` of two equivalent runs decodes
+    each state once, not twice."""
+
+    def __init__(self, rec: Recording):
+        self.rec = rec
+        self.history: list[np.ndarray] = []  # the (N, 6) states of the last two frames
+        self.expected: int | None = None
+        self.shared = 0  # how many of the latest frames are another stream's states
+
+    def decode(self, frame: int, data: bytes, check: bool = True) -> FrameState:
+        """The FrameState of message ``data`` (MCAP sequence ``frame``)."""
+        rec, history = self.rec, self.history
+        try:
+            state, frame_no, time, dt, digest, asleep = fmt.decode_state(
+                data, history[-1] if history else None, history[-2] if len(history) > 1 else None)
+        except ValueError as err:
+            raise RecordingError(f"{rec.path}: frame {frame}: damaged state message ({err})") from None
+        self._in_order(frame, frame_no)
+        self.history = [*history[-1:], state]
+        self.shared = 0
+        out = FrameState(frame_no, time, dt, state[:, :3].copy(), state[:, 3:].copy(), digest, asleep)
+        if rec.verify and check:
+            rec._check_state(out)
+        return out
+
+    def can_share(self, frame: int, other: StateStream) -> bool:
+        """Whether a message byte for byte the other stream's at ``frame`` decodes, here, to
+        the other's state: the frames it is coded against were shared too (a key frame
+        needs none, the frame after it one)."""
+        needs = 0 if frame % fmt.KEYFRAME_INTERVAL == 0 else 1 if frame % fmt.KEYFRAME_INTERVAL == 1 else 2
+        return self.shared >= needs and self.expected == other.expected - 1
+
+    def share(self, frame: int, state: FrameState, other: StateStream) -> FrameState:
+        """Take the other stream's just-decoded ``state`` for this file's frame (whose message
+        is the same bytes): it gives its hash already; the index is checked against it."""
+        self._in_order(frame, state.frame)
+        self.history = list(other.history)
+        self.shared += 1
+        if self.rec.verify:
+            self.rec._check_state(state, hashed=False)
+        return state
+
+    def _in_order(self, frame: int, frame_no: int) -> None:
+        if self.expected is None:
+            self.expected = frame
+        if self.rec.verify and not frame == frame_no == self.expected:
+            raise RecordingIntegrityError(f"{self.rec.path}: frames out of order: frame {frame_no} (MCAP sequence "
+                                          f"{frame}) where frame {self.expected} belongs")
+        self.expected += 1
+
+
 @dataclass(frozen=True)
 class FrameTable:
     """Per frame (F = frames): time (F,) s; dt (F,) s of the step that led there (0 at
@@ -339,32 +394,26 @@ class Recording:
         """Decode frames first..last, starting from the key frame at or before ``first``."""
         start = first - first % fmt.KEYFRAME_INTERVAL
         out: list[FrameState] = []
-        history: list[np.ndarray] = []
-        expected = start
-        for _, frame, data in self._messages([fmt.TOPIC_STATE], start, last):
-            try:
-                state, frame_no, time, dt, digest, asleep = fmt.decode_state(
-                    data, history[-1] if history else None, history[-2] if len(history) > 1 else None)
-            except ValueError as err:
-                raise RecordingError(f"{self.path}: frame {frame}: damaged state message ({err})") from None
-            if self.verify and not frame == frame_no == expected:
-                raise RecordingIntegrityError(f"{self.path}: frames out of order: frame {frame_no} (MCAP sequence "
-                                              f"{frame}) where frame {expected} belongs")
-            expected += 1
-            history = [*history[-1:], state]
-            if frame_no >= first:
-                out.append(FrameState(frame_no, time, dt, state[:, :3].copy(), state[:, 3:].copy(), digest, asleep))
-                if self.verify:
-                    self._check_state(out[-1])
+        decoder = StateStream(self)
+        for frame, data in self.state_messages(start, last + 1):
+            state = decoder.decode(frame, data, check=frame >= first)
+            if frame >= first:
+                out.append(state)
         if len(out) != last - first + 1:
             raise RecordingError(f"{self.path}: frames {first}..{last} are not all in the file")
         return out
 
-    def _check_state(self, s: FrameState) -> None:
-        """The integrity rule for one decoded state (module doc): its own hash, the index's."""
+    def state_messages(self, start: int, stop: int) -> Iterator[tuple[int, bytes]]:
+        """(frame, raw /physdbg/state message) of frames start..stop-1 as stored, in order."""
+        for _, frame, data in self._messages([fmt.TOPIC_STATE], start, stop - 1):
+            yield frame, data
+
+    def _check_state(self, s: FrameState, hashed: bool = True) -> None:
+        """The integrity rule for one decoded state (module doc): its own hash (unless it
+        is ``hashed`` already, as a state another file holds byte for byte), the index's."""
         if self._checked[s.frame]:
             return
-        if state_hash(s.positions, s.velocities) != s.state_hash:
+        if hashed and state_hash(s.positions, s.velocities) != s.state_hash:
             raise RecordingIntegrityError(
                 f"{self.path}: frame {s.frame}: the stored state does not give its stored hash: the file was altered "
                 f"or damaged (--no-verify reads it anyway)")
@@ -553,4 +602,4 @@ class Recording:
 
 
 __all__ = ["ChannelInfo", "FrameState", "FrameTable", "Recording", "RecordingError", "RecordingIntegrityError",
-           "open_recording"]
+           "StateStream", "open_recording"]
