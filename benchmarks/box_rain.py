@@ -3,20 +3,21 @@
     .venv/bin/python benchmarks/box_rain.py [--count 1000] [--steps 240] [--peers [--rounds R]] [--trace]
         [--stop-above-gb G] [--set KEY=VALUE ...] [--checkpoint FILE [--checkpoint-every K]] [--resume FILE]
 
-The scene of issue 10: the built-in ``rain`` scene with the box grown so the spheres fill
-10 % of it, dt = 1/240 s, under the rain scene's rules for a pile (``rapid_contact_rule =
-"tc"``, sleeping at 0.1 m/s after 0.1 s: docs/engine.md, "Sleeping"); ``--set
-rapid_contact_rule=hold --set sleep_speed=0`` runs the engine's exact defaults instead.
+The built-in ``rain`` scene with the box grown so the spheres fill 10 % of it, dt = 1/240 s;
+its pile rules are left to ``auto``, which picks the TC rule and sleeping at 0.1 m/s after
+0.1 s for a pile (docs/engine.md, "Sleeping"); ``--set rapid_contact_rule=hold --set
+sleep_speed=0`` runs the exact rules instead.
 Prints, for the run: steps stopped by a budget (the event cap or the held-contact
 solve's), the largest overlap after any step, contacts, held contacts and sleeping spheres
 per step at the start, middle and end, rapid-contact rule counts and held contacts
 released (a pile's churn), and ms/step (the first step, which compiles nothing but builds the broad
-phase, is counted). With --peers, pybullet and MuJoCo (PGS, 10 iterations) step the same
-initial state the same number of steps, when importable, and the ratios are printed from
-this one run (these machines are noisy: compare ratios, not absolute times). With --rounds R
+phase, is counted). With --peers, pybullet and MuJoCo, set up by physdbg/peers.py for the
+same physics (frictionless, the same restitution, no damping), step the same initial state
+the same number of steps, when importable, and the ratios are printed from this one run
+(these machines are noisy: compare ratios, not absolute times). With --rounds R
 the three engines run again, one after another, R times in all, and each ratio is
 printed for every round with its median and range: on this machine one round's ratio at
-1k has ranged from 11.8x to 20.7x pybullet within an hour, with no change to any engine.
+1k has ranged over a factor of two with no change to any engine.
 
 A run longer than one sitting (box-rain 100k to rest: hours) can be carried on: with
 ``--checkpoint FILE`` the world and the run's tallies are pickled to FILE every K steps
@@ -38,18 +39,17 @@ import time
 import numpy as np
 
 from physdbg.engine.timeline import Buffers
+from physdbg.analysis.engines import box_rain_scene
 from physdbg.engine.world import warm_up
 from physdbg.errors import SceneError
+from physdbg.peers import PeerSetup, available, build
 from physdbg.scene import load_scene
 
 
 def box_rain(count: int, steps: int, overrides: tuple[str, ...] = ()):
-    """The scene: a box of side L with count·(4/3)πr³ = 0.1·L³; overrides: more KEY=VALUE
-    settings, as `physdbg run -s` takes them (e.g. rapid_contact_time=0)."""
-    side = (count * 4.0 / 3.0 * math.pi * 0.05**3 / 0.1) ** (1.0 / 3.0)
-    return load_scene("rain", [f"generate.count={count}", "generate.radius=0.05", f"box.max=[{side},{side},{side}]",
-                               "dt=1/240", f"steps={steps}", "generate.restitution=0.8", "box.restitution=0.8",
-                               *overrides])
+    """The scene (physdbg.analysis.engines.box_rain_scene: one definition for every
+    benchmark); overrides: more KEY=VALUE settings, as `physdbg run -s` takes them."""
+    return box_rain_scene(count, steps, overrides)
 
 
 def peak_memory_mb() -> float:
@@ -138,76 +138,43 @@ def _options(key) -> str:
     return " ".join([f"--count {count}", *(f"--set {setting}" for setting in settings)])
 
 
-def run_pybullet(scene) -> float | None:
-    try:
-        import pybullet as pb
-    except ImportError:
+# The peers as benchmarked: each set up for physdbg's physics by physdbg/peers.py (the same
+# translation record-peer uses), with the solver settings below; --peer-setups all times
+# every one of them (docs/benchmarks.md, "The peers", says which is fastest and why).
+FAST_SETUPS = (PeerSetup("pybullet"), PeerSetup("mujoco", "PGS", 10, sleep=True))
+ALL_SETUPS = (PeerSetup("pybullet"),
+              *(PeerSetup("mujoco", solver, iterations, speculative=speculative, sleep=sleep)
+                for solver, iterations in (("PGS", 10), ("CG", 20), ("Newton", 10), ("Newton", 100))
+                for speculative in (False, True) for sleep in (False, True)))
+
+
+def run_peer_timed(scene, setup: PeerSetup) -> float | None:
+    """Seconds the peer takes for the scene's steps (building it not counted); None when
+    the peer cannot be imported."""
+    if not available(setup.engine):
         return None
-    client = pb.connect(pb.DIRECT)
-    pb.setGravity(*scene.settings.gravity, physicsClientId=client)
-    pb.setTimeStep(scene.dt, physicsClientId=client)
-    plane = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=client)
-    for normal, offset in zip(scene.walls.normals, scene.walls.offsets):
-        pb.createMultiBody(0, plane, basePosition=(normal * offset).tolist(),
-                           baseOrientation=_plane_orientation(normal), physicsClientId=client)
-    sphere = pb.createCollisionShape(pb.GEOM_SPHERE, radius=float(scene.state.radius[0]), physicsClientId=client)
-    bodies = []
-    for x, v in zip(scene.state.positions, scene.state.velocities):
-        body = pb.createMultiBody(1.0, sphere, basePosition=x.tolist(), physicsClientId=client)
-        pb.resetBaseVelocity(body, v.tolist(), physicsClientId=client)
-        pb.changeDynamics(body, -1, restitution=0.8, physicsClientId=client)
-        bodies.append(body)
-    started = time.perf_counter()
-    for _ in range(scene.steps):
-        pb.stepSimulation(physicsClientId=client)
-    seconds = time.perf_counter() - started
-    pb.disconnect(client)
-    return seconds
-
-
-def _plane_orientation(normal: np.ndarray) -> list[float]:
-    """Quaternion turning +z onto ``normal``."""
-    z = np.array([0.0, 0.0, 1.0])
-    axis = np.cross(z, normal)
-    s = np.linalg.norm(axis)
-    if s < 1e-12:
-        return [0.0, 0.0, 0.0, 1.0] if normal[2] > 0 else [1.0, 0.0, 0.0, 0.0]
-    angle = math.atan2(s, float(z @ normal))
-    axis /= s
-    return [*(axis * math.sin(angle / 2)).tolist(), math.cos(angle / 2)]
-
-
-def run_mujoco(scene) -> float | None:
+    world = build(scene, setup)
     try:
-        import mujoco
-    except ImportError:
-        return None
-    side = -scene.walls.offsets[1]
-    r = float(scene.state.radius[0])
-    walls = "".join(
-        f'<geom type="plane" size="{side} {side} 0.1" pos="{p}" zaxis="{n}"/>'
-        for p, n in (("0 0 0", "0 1 0"), (f"0 {side} 0", "0 -1 0"), ("0 0 0", "1 0 0"), (f"{side} 0 0", "-1 0 0"),
-                     ("0 0 0", "0 0 1"), (f"0 0 {side}", "0 0 -1")))
-    balls = "".join(f'<body pos="{x[0]} {x[1]} {x[2]}"><freejoint/><geom type="sphere" size="{r}" mass="1"/></body>'
-                    for x in scene.state.positions)
-    # size memory: MuJoCo's default arena is too small for 10 000 free bodies
-    xml = (f'<mujoco><size memory="4G"/><option timestep="{scene.dt}" gravity="0 -9.81 0" solver="PGS" iterations="10"/>'
-           f'<worldbody>{walls}{balls}</worldbody></mujoco>')
-    model = mujoco.MjModel.from_xml_string(xml)
-    data = mujoco.MjData(model)
-    for i, v in enumerate(scene.state.velocities):
-        data.qvel[6 * i:6 * i + 3] = v
-    started = time.perf_counter()
-    for _ in range(scene.steps):
-        mujoco.mj_step(model, data)
-    return time.perf_counter() - started
+        started = time.perf_counter()
+        for _ in range(scene.steps):
+            world.step()
+        return time.perf_counter() - started
+    finally:
+        world.close()
 
 
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--count", type=int, default=1000)
     parser.add_argument("--steps", type=int, default=240)
-    parser.add_argument("--peers", action="store_true")
+    parser.add_argument("--peers", action="store_true",
+                        help="also step the scene in pybullet and MuJoCo, set up by physdbg/peers.py for the same "
+                             "physics (frictionless, the same restitution, no damping, the same walls): pybullet with "
+                             "its defaults, MuJoCo with PGS, 10 iterations and sleeping, its fastest honest setting "
+                             "here (docs/benchmarks.md, \"The peers\")")
+    parser.add_argument("--peer-setups", choices=("fast", "all"), default="fast",
+                        help="with --peers: the fastest setting of each peer, or every MuJoCo solver (PGS, CG, "
+                             "Newton), with and without speculative contacts and sleeping")
     parser.add_argument("--rounds", type=int, default=1, metavar="R",
                         help="with --peers: run the engines in turn R times; print each ratio's median and range")
     parser.add_argument("--trace", action="store_true", help="print every step, with the peak memory")
@@ -245,8 +212,8 @@ def main() -> None:
     print(f"box-rain N={args.count}, {steps} of {args.steps} steps of {scene.dt:.6g} s{overrides}")
     s = scene.settings
     print(f"rules: rapid_contact_rule={s.rapid_contact_rule}, sleep_speed={s.sleep_speed:g} m/s, sleep_time="
-          f"{s.sleep_time:g} s (the rain scene sets tc and 0.1/0.1, which let the pile rest; --set "
-          f"rapid_contact_rule=hold --set sleep_speed=0 runs the engine's defaults)")
+          f"{s.sleep_time:g} s" + "".join(f"; auto {name}={why}" for name, why in scene.auto.items()
+                                          if name in ("rapid_contact_rule", "sleep_speed")))
     print(f"physdbg: {ms:.1f} ms/step; steps stopped by a budget: {result['capped']}; largest overlap after any step: "
           f"{result['worst_overlap']:.3g} m (contact tolerance {result['tolerance']:g} m); peak memory "
           f"{result['peak_mb']:.0f} MB")
@@ -256,24 +223,26 @@ def main() -> None:
     print(f"  last 10 steps: mean {rows[-10:, 0].mean():.0f} contacts/step, {rows[-10:, 1].mean():.0f} held, "
           f"{rows[-10:, 3].mean():.0f} released")
     if args.peers:
-        compare_with_peers(scene, result["seconds"], args.rounds)
+        compare_with_peers(scene, result["seconds"], args.rounds, FAST_SETUPS if args.peer_setups == "fast"
+                           else ALL_SETUPS)
 
 
-def compare_with_peers(scene, physdbg_seconds: float, rounds: int) -> dict[str, list[float]]:
-    """Step the scene in pybullet and MuJoCo (when importable) and print physdbg's speed
+def compare_with_peers(scene, physdbg_seconds: float, rounds: int, setups=FAST_SETUPS) -> dict[str, list[float]]:
+    """Step the scene in each peer setup (when importable) and print physdbg's speed
     against each; over ``rounds`` rounds (physdbg, then each peer, in turn; the first
     round's physdbg run is the one already timed) also each ratio's median and range.
-    Returns each peer's ratios, one per round."""
+    Returns each setup's ratios, one per round."""
     ratios: dict[str, list[float]] = {}
     for round_number in range(rounds):
         if round_number:
             physdbg_seconds = run_physdbg(scene)["seconds"]
             print(f"round {round_number + 1}: physdbg {1000 * physdbg_seconds / scene.steps:.1f} ms/step")
-        for name, runner in (("pybullet", run_pybullet), ("mujoco-PGS10", run_mujoco)):
-            seconds = runner(scene)
+        for setup in setups:
+            seconds = run_peer_timed(scene, setup)
+            name = setup.label
             if seconds is None:
                 if not round_number:
-                    print(f"{name}: not importable (pip install {name.split('-')[0]})")
+                    print(f"{name}: not importable (pip install 'physdbg[peers]')")
                 continue
             ratios.setdefault(name, []).append(seconds / physdbg_seconds)
             print(f"{name}: {1000 * seconds / scene.steps:.1f} ms/step; physdbg is {ratios[name][-1]:.2f}x its speed")

@@ -1,4 +1,4 @@
-"""The cold compile: every kernel compiled into an empty cache, timed (issue 10's ≤ 10 s target).
+"""The cold compile: every kernel compiled into an empty cache, timed (the ≤ 10 s target, docs/benchmarks.md).
 
     .venv/bin/python benchmarks/compile.py [--one-process] [--by-function [--top 40]] [--arguments]
 

@@ -1,4 +1,4 @@
-"""The exact gas: pair collisions per second of the time-ordered loop (issue 10's gas targets).
+"""The exact gas: pair collisions per second of the time-ordered loop (docs/benchmarks.md's gas targets).
 
     .venv/bin/python benchmarks/gas.py [--count 1000] [--steps 200] [--packing 0.3] [--dt 0.01]
 
@@ -6,7 +6,7 @@ The built-in ``gas`` scene (e = 1, exact integrator, swept detection) with ``cou
 spheres at the packing fraction; the kernels are loaded (or compiled) first and not
 timed. Prints pair and wall contacts, swept tests, seconds and the rates: pair
 collisions per second is what event-driven codes report (Smallenburg's EDMD: 6.6·10⁵
-per CPU-second), the issue asks 5·10⁵ at N = 1 000 and 3·10⁵ at N = 32 000. Last, the
+per CPU-second); the targets are 5·10⁵ at N = 1 000 and 3·10⁵ at N = 32 000. Last, the
 milliseconds a step spends in each phase of ``World.step``: an event-driven code has no
 steps, so what the once-a-step phases cost is what physdbg pays for its steps; ``--dt``
 (with ``--steps`` for the same simulated time) shows how that cost trades against the

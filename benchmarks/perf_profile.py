@@ -21,7 +21,7 @@ attach perf to a process (root, or a permissive ``kernel.perf_event_paranoid``).
 instruction (``objdump -d`` of the function's object code, offsets from where it was
 loaded), the hottest instructions printed with the ones before them, the whole listing
 written to a file. In the event loop a hot instruction is most often the one after a load
-that missed the cache (docs/benchmarks.md, "sixteenth session"). Only the function's own
+that missed the cache (docs/benchmarks.md, "Where the time goes"). Only the function's own
 library is read: where LLVM inlined it into a caller, those samples are the caller's.
 """
 

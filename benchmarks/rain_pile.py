@@ -2,8 +2,8 @@
 
     .venv/bin/python benchmarks/rain_pile.py [--count 500] [--steps 240] [--every 15]
 
-``physdbg run rain -s generate.count=500`` (r = 0.03 m, dt = 1/120 s, 2 s) is the run
-issue 10 starts from: 500 frictionless spheres with e = 0.8 rain into a 1 m box and, from
+``physdbg run rain -s generate.count=500`` (r = 0.03 m, dt = 1/120 s, 2 s) is a pile's
+textbook case: 500 frictionless spheres with e = 0.8 rain into a 1 m box and, from
 about 1.5 s, form a dense, still-moving pile. Prints every ``--every`` steps (and every
 step slower than a second): the step's wall time, contacts resolved, swept tests, held
 contacts, the held-contact solve's work (updates, ``world.held.count[2]``), the largest

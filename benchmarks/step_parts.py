@@ -14,20 +14,20 @@ they cost (``World._refresh_box``).
 
 ``--order`` renumbers the spheres before the run: as generated, in a random order, or in
 Morton (Z-curve) order of their starting places, which puts spheres close in space close
-in index (memory locality, the issue's suggestion); ``columns``: Morton order of (x, y),
+in index (memory locality); ``columns``: Morton order of (x, y),
 then height (rain falls nearly straight down, so a column stays a column); ``landed``:
 Morton order of where each sphere is after ``--landed-step`` steps (default: nine tenths
 of the run), found by a first, untimed run: what an order kept up as the spheres move
-would give near that step (box-rain 100k's landing: docs/benchmarks.md, fourteenth
-session); ``inside``: as generated, numbered by the world itself (``space_order = "morton"``,
+would give near that step (box-rain 100k's landing: docs/benchmarks.md, "Space
+order"); ``inside``: as generated, numbered by the world itself (``space_order = "morton"``,
 which ``auto`` picks from 4 096 spheres up; every other order here runs with
 ``space_order = "given"``, so the world keeps the order it is given). The contacts have
 come out the same in every order measured (box-rain 1k, 10k and 100k, the gas at 32k),
 though the held-contact solves sweep in index order, so a pile could differ in its last
 bits: the time is the point. The mean index distance of the last
 step's candidate pairs shows how local the order is. Whole runs one after another are no
-way to compare orders on this machine (the same run has taken 544 and 916 ms/step within
-the hour); ``--in-turn`` steps the orders' worlds in turn in one process and prints each
+way to compare orders on this machine (the same run has taken 544 and 916 ms/step an
+hour apart); ``--in-turn`` steps the orders' worlds in turn in one process and prints each
 one's ms/step.
 """
 

@@ -8,8 +8,8 @@ def _engine_cache_dir() -> None:
     numba's cache (``cache=True``) keeps each compiled function with the code of the
     functions it calls, and reuses it after a callee changed: the old callee runs. That
     happened while building physdbg (tests passed on stale kernels that a fresh clone did
-    not have; first with a callee in another file, and on 2026-12-02 with numba 0.68 for
-    a callee in the same file). A folder per version of the engine's sources makes a
+    not have; with a callee in another file, and with numba 0.68 for a callee in the same
+    file). A folder per version of the engine's sources makes a
     stale kernel impossible. A NUMBA_CACHE_DIR set by the user is respected, and then
     nothing protects it: whoever sets one while editing the engine must empty it.
     """

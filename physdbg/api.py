@@ -776,6 +776,31 @@ def bench_accuracy(out_dir: str | Path = "accuracy", quick: bool = False, force:
     return BenchResult([str(p) for p in paths], runs, time.perf_counter() - started)
 
 
+ENGINES_FILES = ("engines.csv", "engines.md", "engines.png", "engines.svg")
+
+
+def bench_engines(out_dir: str | Path = "engines", quick: bool = False, force: bool = False, chart: bool = True,
+                  scenes: Sequence[str] | None = None, on_run: Callable | None = None,
+                  command: str = "physdbg bench engines") -> BenchResult:
+    """physdbg's methods and the peers on the same scenes (analysis.engines): engines.csv,
+    engines.md and (chart) engines.png / .svg, cost against error, in out_dir."""
+    from .analysis import engines
+
+    unknown = [name for name in scenes or () if name not in engines.SCENES]
+    if unknown:
+        raise PhysdbgError(f"no engines scene {unknown[0]!r}; the scenes are: {', '.join(engines.SCENES)}")
+    paths = _bench_paths(out_dir, ENGINES_FILES, chart, force)
+    started = time.perf_counter()
+    runs = engines.run_all(list(scenes) if scenes else None, quick=quick, on_run=on_run)
+    paths[0].write_text(engines.to_csv(runs))
+    paths[1].write_text(engines.to_markdown(runs, command))
+    if chart:
+        from .analysis.charts import engines_chart
+
+        engines_chart(runs, paths[2:], f"Cost against error, physdbg and its peers on the same physics (`{command}`)")
+    return BenchResult([str(p) for p in paths], runs, time.perf_counter() - started)
+
+
 STABILITY_FILES = ("stability.csv", "stability.md", "stability-impact.png", "stability-impact.svg",
                    "stability-stack.png", "stability-stack.svg")
 

@@ -549,6 +549,7 @@ def check(
                     lines.append(f"{'':<11} {mark}{p.value:<14} {p.outcome:<13} {p.why}")
                 if chosen != "tc+sleep":
                     lines.append(f'  to settle {PILE_REMEDY_FLAGS}  (docs/engine.md, "Sleeping")')
+            lines += [f"auto        {name}={why}" for name, why in result.scene.auto.items()]
             lines.append("recommended " + " ".join(f"{k}={v}" for k, v in advice.recommended.items()))
             lines += [f"  {k:<12}{advice.reasons[k]}" for k in advice.recommended]
             settings = " ".join(f"{k}={v}" for k, v in result.current.items())
@@ -619,6 +620,52 @@ def bench_accuracy(
             typer.echo(f"{name:15} {len(best)} on the Pareto front; most accurate {best[-1].method} at "
                        f"dt 1/{round(1 / best[-1].dt)} ({best[-1].error:.1e} {best[-1].unit})"
                        + (f"; {failed} of {len(mine)} runs failed" if failed else ""))
+        for path in result.files:
+            typer.echo(f"wrote       {path}")
+
+
+@bench_app.command("engines")
+def bench_engines(
+    out: Annotated[Path, typer.Option("--out", "-o", help="Folder for engines.csv, .md, .png and .svg.")]
+    = Path("engines"),
+    quick: Annotated[bool, typer.Option("--quick", help="The small scenes and box-rain 1k (a minute or two), "
+                                                       "not box-rain 10k.")] = False,
+    scene: Annotated[Optional[list[str]], typer.Option(
+        "--scene", help="Only this scene (repeat for more): bounce, cradle, bullet-wall, gas, 'box-rain 1k', "
+                        "'box-rain 10k'.")] = None,
+    no_chart: NoChartOption = False,
+    force: BenchForceOption = False,
+    progress: BenchProgressOption = sys.stderr.isatty(),
+) -> None:
+    """physdbg's methods and the peers (pybullet, MuJoCo: pip install 'physdbg[peers]'),
+    each set up for the same frictionless physics, on the same scenes: ms/step against
+    largest overlap, energy error, first-contact time error and tunnelled bodies, each
+    measured against physdbg's exact run; a table, a CSV and a chart.
+
+    Example: physdbg bench engines --quick -o engines
+    """
+    with _user_errors():
+        from .api import bench_engines as run_engines
+
+        bar = _progress_bar(None, show=progress)
+        command = "physdbg bench engines" + (" --quick" if quick else "")
+        try:
+            result = run_engines(out, quick=quick, force=force, chart=not no_chart, scenes=scene,
+                                 on_run=lambda run, done, total: bar.update(done, total), command=command)
+        finally:
+            bar.close()
+        typer.echo(f"{len(result.runs)} runs in {result.seconds:.1f} s")
+        for name in dict.fromkeys(r.scene for r in result.runs):
+            mine = [r for r in result.runs if r.scene == name and not r.failure]
+            exact = next((r for r in mine if r.method == "physdbg exact"), None)
+            fastest = min(mine, key=lambda r: r.ms_per_step, default=None)
+            if exact is not None and fastest is not None:
+                typer.echo(f"{name:13} physdbg exact {exact.ms_per_step:.3g} ms/step; fastest {fastest.method} "
+                           f"{fastest.ms_per_step:.3g} ms/step (largest overlap {fastest.largest_overlap:.2g} m, "
+                           f"{fastest.tunnelled} tunnelled)")
+        for run in result.runs:
+            if run.failure:
+                typer.echo(f"{run.scene:13} {run.method}: could not run ({run.failure})")
         for path in result.files:
             typer.echo(f"wrote       {path}")
 
@@ -899,7 +946,7 @@ def console_main() -> None:
     bounce`` (0.13 s); a larger first threshold makes that 9 times (0.05 s). At exit the
     finalizer runs full collections over every object still alive; freezing them first
     skips that work (0.2-0.3 s). Together about a quarter of the warm ``run bounce`` that
-    issue 10 wants under 1 s. Library callers keep their own settings: only this entry
+    the speed targets want under 1 s (docs/benchmarks.md). Library callers keep their own settings: only this entry
     point changes them.
     """
     gc.set_threshold(20_000, 20, 20)

@@ -67,15 +67,18 @@ TOP_FIELDS = {
     "rapid_contact_time": ("a contact with restitution < 1 within this many seconds of either sphere's previous "
                            "contact is held like a resting one if something presses it, and elastic if not (the TC "
                            "model against inelastic collapse), seconds >= 0, 0 = off (default 1e-4)"),
-    "rapid_contact_rule": ("what the rapid-contact rule does with a pressed contact: hold (hold it at any speed, "
-                           "the default: a pile settles sooner but passes each impact through its held contacts) or "
-                           "tc (hold it only if it closes no faster than its press adds in rapid_contact_time, "
-                           "else elastic: a dense pile is much faster and never churns, but keeps rattling)"),
+    "rapid_contact_rule": ("what the rapid-contact rule does with a pressed contact: hold (hold it at any speed: "
+                           "a pile settles sooner but passes each impact through its held contacts), tc (hold it "
+                           "only if it closes no faster than its press adds in rapid_contact_time, else elastic: a "
+                           "dense pile is much faster and never churns, but keeps rattling), or auto (the default: "
+                           "tc where the spheres will make a pile, hold elsewhere; physdbg check says which)"),
     "contact_tolerance": "allowed overlap and resting gap, metres > 0",
     "sleep_speed": ("a sphere at most this fast (m/s) at the end of every step for sleep_time falls asleep: "
                     "immovable until something hits it faster or what it rests on wakes (a settled pile then "
-                    "costs nothing), m/s >= 0, 0 = off (the default); not with periodic walls"),
-    "sleep_time": "how long a sphere must stay slow to fall asleep, seconds > 0 (default 0.5)",
+                    "costs nothing), m/s >= 0, 0 = off, or auto (the default: 0.1 where the spheres will make a "
+                    "pile, with sleep_time 0.1 unless given; 0 elsewhere); not with periodic walls"),
+    "sleep_time": "how long a sphere must stay slow to fall asleep, seconds > 0 (default 0.5; 0.1 when "
+                  "sleep_speed = auto picks sleeping)",
     "max_events_per_step": ("budget: contacts resolved in one step, integer >= 0 (default 0 = sized to the scene: "
                             "max(10000, 100 per sphere))"),
     "max_pairs_per_step": "budget: broad-phase candidate pairs in one step, integer >= 1 (default 10000000)",
@@ -493,11 +496,12 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
         rest_fraction=c.number(raw, "rest_fraction", "rest_fraction", default=d.rest_fraction, lo=0, hi=1),
         rapid_contact_time=c.number(raw, "rapid_contact_time", "rapid_contact_time", default=d.rapid_contact_time,
                                     lo=0),
-        rapid_contact_rule=c.choice(raw, "rapid_contact_rule", "rapid_contact_rule", RAPID_RULES,
-                                    d.rapid_contact_rule),
+        rapid_contact_rule=c.choice(raw, "rapid_contact_rule", "rapid_contact_rule", (*RAPID_RULES, "auto"),
+                                    "auto"),
         contact_tolerance=c.number(raw, "contact_tolerance", "contact_tolerance",
                                    default=d.contact_tolerance, scale=True),
-        sleep_speed=c.number(raw, "sleep_speed", "sleep_speed", default=d.sleep_speed, lo=0),
+        sleep_speed="auto" if raw.get("sleep_speed", "auto") == "auto" else c.number(raw, "sleep_speed",
+                                                                                      "sleep_speed", lo=0),
         sleep_time=c.number(raw, "sleep_time", "sleep_time", default=d.sleep_time, scale=True),
         **{budget: c.number(raw, budget, budget, default=getattr(d, budget),
                             lo=0 if budget in SIZED_BUDGETS else 1, integer=True)
@@ -614,7 +618,7 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
     walls = Walls(names, np.array(normals, dtype=np.float64).reshape(-1, 3), np.array(offsets, dtype=np.float64),
                   np.array(rest, dtype=np.float64), np.array(two, dtype=np.bool_), np.array(thick, dtype=np.float64),
                   period, box_lo if box_lo is not None else np.zeros(3))
-    if walls.periodic and settings.sleep_speed > 0:
+    if walls.periodic and settings.sleep_speed != "auto" and settings.sleep_speed > 0:
         c.fail("sleep_speed", f"got {settings.sleep_speed:g}; sleeping needs a box with no periodic axis "
                               f"(box.periodic): leave sleep_speed at 0 here")
     if walls.periodic:  # a sphere placed outside the box on a periodic axis is the same sphere inside it

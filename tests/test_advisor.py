@@ -97,7 +97,9 @@ def test_auto_settings_are_decided_said_and_repeat_on_replay(tmp_path):
         [[planes]]
         normal = [0.0, 1.0, 0.0]
     ''')
-    assert set(scene.auto) == {"detection", "ordering"}  # integrator was given, so not decided
+    # integrator was given, so not decided; the pile rules are auto unless given (no pile here)
+    assert set(scene.auto) == {"detection", "ordering", "rapid_contact_rule", "sleep_speed"}
+    assert (scene.settings.rapid_contact_rule, scene.settings.sleep_speed) == ("hold", 0.0)
     assert (scene.settings.integrator, scene.settings.detection) == ("verlet", "swept")
     done = CliRunner().invoke(app, ["run", "bounce", "-s", "detection=automatic"])
     assert done.exit_code == 2 and "allowed: swept, sampled, discrete, auto" in done.output
@@ -116,7 +118,7 @@ def test_check_exits_1_when_the_scene_s_own_settings_are_predicted_to_fail():
     assert {p["outcome"] for p in data["predictions"] if p["setting"] == "ordering"} == {"safe", "overlap left"}
 
 
-# the rain scene's pile rules put back to the engine's defaults (hold, no sleeping)
+# the exact rules for a pile (hold, no sleeping), which rapid_contact_rule = sleep_speed = auto do not pick
 ENGINE_RULES = ["rapid_contact_rule=hold", "sleep_speed=0"]
 
 
@@ -155,10 +157,10 @@ def test_a_pile_is_foreseen_and_each_rule_does_on_it_what_check_says():
     assert settled.asleep_at_end == 100 and settled.max_overlap <= 1e-9 and not settled.warning_counts
 
 
-def test_the_rain_scene_uses_the_rules_check_recommends_for_a_pile():
+def test_a_rain_that_piles_up_gets_the_rules_check_recommends_for_a_pile():
     from physdbg.analysis.advisor import PILE_REMEDY, pile_choice
 
-    settings = load_scene("rain").settings
+    settings = load_scene("rain", ["generate.count=500"]).settings  # rapid_contact_rule, sleep_speed: auto
     assert {name: getattr(settings, name) for name in PILE_REMEDY} == PILE_REMEDY
     assert pile_choice(settings) == "tc+sleep"
 
@@ -178,11 +180,11 @@ def test_check_shows_the_pile_rules_marks_the_scene_s_own_and_keeps_its_exit_cod
     assert "to settle -s rapid_contact_rule=tc -s sleep_speed=0.1 -s sleep_time=0.1" in done.output
     done = runner.invoke(app, ["check", "rain", "-s", "generate.count=500"])  # the scene's own rules
     assert done.exit_code == 0 and " *tc+sleep       settles" in done.output and "to settle" not in done.output
-    assert "pile" not in runner.invoke(app, ["check", "rain"]).output
+    assert "pile        " not in runner.invoke(app, ["check", "rain"]).output  # 100 spheres: no pile
 
 
 def test_run_and_record_say_before_they_start_that_the_pile_will_not_rest(tmp_path):
-    """The user of issue 10 who types `physdbg run rain -s generate.count=500` is told at
+    """A user who types `physdbg run rain -s generate.count=500` is told at
     once (stderr) why the run will be slow and what lets the pile rest; --json stays JSON."""
     runner = CliRunner()
     done = runner.invoke(app, ["run", "rain", "-s", "generate.count=500", "-s", "steps=1", *_flags(ENGINE_RULES),
@@ -197,3 +199,27 @@ def test_run_and_record_say_before_they_start_that_the_pile_will_not_rest(tmp_pa
     assert done.exit_code == 0 and "Under tc it collapses" in done.stderr
     quiet = runner.invoke(app, ["run", "rain", "-s", "generate.count=500", "-s", "steps=1"])  # rain's own rules
     assert quiet.exit_code == 0 and "note:" not in quiet.stderr
+
+
+def test_the_pile_rules_default_to_auto_tc_and_sleeping_only_where_a_pile_forms():
+    from physdbg.scene import load_scene
+
+    pile = load_scene("rain", ["generate.count=500"])
+    assert (pile.settings.rapid_contact_rule, pile.settings.sleep_speed, pile.settings.sleep_time) == ("tc", 0.1, 0.1)
+    assert pile.auto["rapid_contact_rule"].startswith("tc: 500 spheres settle about 1.5 layers deep")
+    assert pile.auto["sleep_speed"] == "0.1: as rapid_contact_rule"
+    thin = load_scene("rain", ["generate.count=100"])  # 0.29 of a layer on the floor
+    assert (thin.settings.rapid_contact_rule, thin.settings.sleep_speed) == ("hold", 0.0)
+    assert "not a pile" in thin.auto["rapid_contact_rule"]
+    for name in ("bounce", "cradle", "gas", "billiards"):  # no closed box under gravity: the exact rules
+        scene = load_scene(name)
+        assert (scene.settings.rapid_contact_rule, scene.settings.sleep_speed) == ("hold", 0.0), name
+    # asked for: kept, and a given sleep_time is kept too
+    asked = load_scene("rain", ["generate.count=500", "rapid_contact_rule=hold", "sleep_time=0.3"])
+    assert (asked.settings.rapid_contact_rule, asked.settings.sleep_speed, asked.settings.sleep_time) == \
+        ("hold", 0.1, 0.3)
+    assert "rapid_contact_rule" not in asked.auto and "sleep_time" not in asked.auto
+    done = CliRunner().invoke(app, ["check", "rain", "-s", "generate.count=500"])
+    assert "auto        rapid_contact_rule=tc: 500 spheres settle" in done.output
+    done = CliRunner().invoke(app, ["run", "rain", "-s", "generate.count=500", "-s", "steps=2"])
+    assert done.exit_code == 0 and "auto        sleep_speed=0.1: as rapid_contact_rule" in done.output

@@ -163,20 +163,22 @@ def test_a_budget_hit_in_a_pile_names_the_settings_that_let_it_rest(tmp_path):
 
 
 def test_a_bed_that_rattles_and_then_falls_asleep_is_no_collapse(tmp_path):
-    """rain's 300 spheres under its own rules (tc, sleeping): from step 282 a few dozen
-    spheres of the bed bounce 10+ times a step, then fall asleep. Run to step 360 every
-    one of them sleeps: a note, no finding, and explain of the recording agrees. Stopped at
-    step 290, some are still awake: collapse findings, which say how many."""
-    whole = api.run("rain", ["generate.count=300", "steps=360"])
+    """rain's 300 spheres under the pile rules (tc, sleeping; auto picks them from about 350
+    spheres): from step 282 a few dozen spheres of the bed bounce 10+ times a step, then
+    fall asleep. Run to step 360 every one of them sleeps: a note, no finding, and explain
+    of the recording agrees. Stopped at step 290, some are still awake: collapse findings,
+    which say how many."""
+    rules = ["rapid_contact_rule=tc", "sleep_speed=0.1", "sleep_time=0.1"]
+    whole = api.run("rain", ["generate.count=300", "steps=360", *rules])
     assert whole.finding_counts == {} and whole.asleep_at_end == 300
     out = tmp_path / "pile.mcap"
-    api.record("rain", ["generate.count=300", "steps=360"], mcap_path=str(out), rrd=False, detail="contacts",
-               view=False)
+    api.record("rain", ["generate.count=300", "steps=360", *rules], mcap_path=str(out), rrd=False,
+               detail="contacts", view=False)
     report = explain(out)
     assert report.counts == {} and any(n.startswith("the bed rattled (at least 10 bounces a sphere) in 6 steps "
                                                     "from step 282") and "asleep by step 346" in n
                                        for n in report.notes), report.notes
-    cut = api.run("rain", ["generate.count=300", "steps=290"])
+    cut = api.run("rain", ["generate.count=300", "steps=290", *rules])
     assert cut.finding_counts == {"collapse": 3}
     assert cut.findings[0].startswith("step 282: 354 bounces among 29 spheres in one step")
     assert "7 of the 29 spheres were still awake when the run ended (step 290)" in cut.findings[0]

@@ -65,15 +65,36 @@ def test_rounds_time_every_engine_in_turn_and_summarise_each_ratio(monkeypatch, 
     from benchmarks import box_rain
 
     peer_seconds = iter([2.0, 1.0, 4.0, 3.0, 6.0, 5.0])  # pybullet, mujoco in each of three rounds
-    monkeypatch.setattr(box_rain, "run_pybullet", lambda scene: next(peer_seconds))
-    monkeypatch.setattr(box_rain, "run_mujoco", lambda scene: next(peer_seconds))
+    monkeypatch.setattr(box_rain, "run_peer_timed", lambda scene, setup: next(peer_seconds))
     physdbg_seconds = iter([0.5, 1.0])  # rounds two and three (round one's time is given)
     monkeypatch.setattr(box_rain, "run_physdbg", lambda scene: {"seconds": next(physdbg_seconds)})
     ratios = box_rain.compare_with_peers(box_rain.box_rain(20, 2), 1.0, rounds=3)
-    assert ratios == {"pybullet": [2.0, 8.0, 6.0], "mujoco-PGS10": [1.0, 6.0, 5.0]}
+    mujoco = box_rain.FAST_SETUPS[1].label
+    assert ratios == {"pybullet": [2.0, 8.0, 6.0], mujoco: [1.0, 6.0, 5.0]}
     out = capsys.readouterr().out
     assert "physdbg against pybullet over 3 rounds: median 6.00x, range 2.00-8.00x" in out
-    assert "physdbg against mujoco-PGS10 over 3 rounds: median 5.00x, range 1.00-6.00x" in out
+    assert f"physdbg against {mujoco} over 3 rounds: median 5.00x, range 1.00-6.00x" in out
+
+
+def test_the_peers_step_the_scene_physdbg_steps():
+    """box_rain's peers are physdbg/peers.py's (record-peer's translation): each steps the
+    same initial state, frictionless, and keeps the spheres in the box."""
+    from benchmarks import box_rain
+    from physdbg.peers import build
+
+    scene = box_rain.box_rain(50, 60)
+    for setup in (box_rain.FAST_SETUPS + box_rain.ALL_SETUPS[1:3]):
+        world = build(scene, setup)
+        try:
+            assert np.array_equal(world.positions(), scene.state.positions)
+            for _ in range(scene.steps):
+                world.step()
+            x = world.positions()
+        finally:
+            world.close()
+        side = -scene.walls.offsets[1]
+        assert np.all(x > -0.01) and np.all(x < side + 0.01), setup.label
+        assert x[:, 1].mean() < scene.state.positions[:, 1].mean(), setup.label  # they fall
 
 
 def test_renumbering_the_spheres_changes_no_contact_and_the_calls_fit_in_the_step():
@@ -186,7 +207,7 @@ Disassembly of section .text:
 
 
 def test_queue_benchmark_times_both_heaps_and_they_pop_the_same_order(monkeypatch, capsys):
-    from benchmarks import event_queue
+    from benchmarks.experiments import event_queue
 
     monkeypatch.setattr("sys.argv", ["event_queue.py", "--sizes", "3", "200", "--ops", "3000"])
     event_queue.main()
@@ -199,7 +220,7 @@ def test_queue_benchmark_times_both_heaps_and_they_pop_the_same_order(monkeypatc
 
 
 def test_partner_scan_replays_the_same_hits_in_every_form(monkeypatch, capsys):
-    from benchmarks import partner_scan
+    from benchmarks.experiments import partner_scan
 
     monkeypatch.setattr("sys.argv", ["partner_scan.py", "--count", "300", "--step", "100", "--spheres", "2000"])
     partner_scan.main()  # raises SystemExit if two forms disagree on the hits

@@ -583,7 +583,8 @@ def test_after_warm_up_a_run_loads_no_kernel(monkeypatch):
     kernels = [k for k in gc.get_objects() if isinstance(k, _OneVersionPerType)]
     for k in kernels:
         monkeypatch.setattr(k, "_can_compile", False)
-    scene = load_scene("rain", ["steps=40", "generate.count=60", "broad_phase=grid"])
+    scene = load_scene("rain", ["steps=40", "generate.count=60", "broad_phase=grid", "rapid_contact_rule=tc",
+                                "sleep_speed=0.1", "sleep_time=0.1"])
     world = scene.build_world()
     seen = set()
     for _ in range(scene.steps):

@@ -50,6 +50,7 @@ from ..engine.toi import DETECTION_NAMES
 
 AUTO = "auto"
 CHOSEN = ("integrator", "detection", "ordering")  # what ``auto`` may decide in a scene
+PILE_RULES = ("rapid_contact_rule", "sleep_speed")  # ``auto`` by default: decided by whether a pile forms
 PILE_LAYERS = 1.0  # layers of spheres at rest on the floor from which the rain makes a pile
 RANDOM_CLOSE_PACKING = 0.64  # the volume fraction of a settled pile of equal spheres
 PILE_REMEDY = {"rapid_contact_rule": "tc", "sleep_speed": 0.1, "sleep_time": 0.1}  # measured on box-rain and rain
@@ -179,31 +180,38 @@ def _pile(state, walls, gravity: np.ndarray) -> dict | None:
     """Whether the spheres end in a pile (see module doc): {"layers", "why"}, or None.
     state: anything with (N,) radius, inverse_mass, restitution and gravity_scale (a
     State, a RecordingHeader)."""
+    return pile_or_why_not(state, walls, gravity)[0]
+
+
+def pile_or_why_not(state, walls, gravity: np.ndarray) -> tuple[dict | None, str]:
+    """(the pile, "") when the spheres end in one (see module doc), else (None, why not)."""
     from .pressure import box_of
 
     movable = (state.inverse_mass > 0) & (state.gravity_scale > 0)
     g = float(np.linalg.norm(gravity))
     box = box_of(walls)
-    if g == 0.0 or box is None or walls.periodic or not np.any(movable):
-        return None
+    if g == 0.0 or not np.any(movable):
+        return None, "nothing falls (no gravity, or no sphere it moves)"
+    if box is None or walls.periodic:
+        return None, "no closed box to pile up in"
     down = gravity / g
     axis = int(np.argmax(np.abs(down)))
     if abs(abs(down[axis]) - 1.0) > 1e-12:  # gravity along no axis of the box: no floor area to speak of
-        return None
+        return None, "gravity points along no axis of the box"
     side = box[1] - box[0]
     floor = float(np.prod(np.delete(side, axis)))
     r = state.radius[movable]
     height = float(np.sum(4.0 / 3.0 * np.pi * r**3)) / RANDOM_CLOSE_PACKING / floor
     layers = height / (2.0 * float(r.mean()))
     if layers < PILE_LAYERS:
-        return None
+        return None, f"the spheres cover {layers:.2g} of a layer on the floor, not a pile"
     e_spheres = float(state.restitution[movable].min())
     e_walls = float(walls.restitution.min()) if len(walls) else 1.0
     if min(e_spheres, e_walls) >= 1.0:  # nothing loses energy: the spheres stay a hot gas, no pile
-        return None
+        return None, "no contact loses energy (restitution 1): the spheres stay a gas"
     return {"layers": layers, "why": (
         f"{int(np.count_nonzero(movable))} spheres settle about {layers:.2g} layers deep on a {floor:.3g} m² floor "
-        f"(restitution {min(e_spheres, e_walls):.2g} < 1)")}
+        f"(restitution {min(e_spheres, e_walls):.2g} < 1)")}, ""
 
 
 def _pile_predictions() -> list[Prediction]:
@@ -327,12 +335,41 @@ def _contacts_possible(x, r, movable, reach, walls) -> bool:
 
 
 def resolve_auto(scene) -> dict[str, str]:
-    """Replace ``auto`` in a scene's integrator, detection and ordering by the advice;
-    returns setting -> "value: why" for each one decided (empty when none was auto)."""
+    """Replace ``auto`` in a scene's settings by the advice; returns setting -> "value: why"
+    for each one decided (empty when none was auto). integrator, detection and ordering
+    take ``advise``'s recommendation; rapid_contact_rule and sleep_speed (``auto`` unless
+    the scene gives them) take the pile rules (resolve_pile_rules)."""
+    decided = resolve_pile_rules(scene)
     asked = [name for name in CHOSEN if getattr(scene.settings, name) == AUTO]
     if not asked:
-        return {}
+        return decided
     advice = advise(scene)
     for name in asked:
         setattr(scene.settings, name, advice.recommended[name])
-    return {name: f"{advice.recommended[name]}: {advice.reasons[name]}" for name in asked}
+    return {**{name: f"{advice.recommended[name]}: {advice.reasons[name]}" for name in asked}, **decided}
+
+
+def resolve_pile_rules(scene) -> dict[str, str]:
+    """``auto`` rapid_contact_rule and sleep_speed: where the spheres will make a pile (an
+    exact pile never rests by itself: module doc), the TC rule and sleeping at 0.1 m/s
+    after 0.1 s (PILE_REMEDY, measured on box-rain and rain; sleep_time only when the scene
+    does not give it); elsewhere the exact rules: hold, and no sleeping."""
+    s = scene.settings
+    asked = [name for name in PILE_RULES if getattr(s, name) == AUTO]
+    if not asked:
+        return {}
+    pile, why_not = pile_or_why_not(scene.state, scene.walls, np.asarray(s.gravity, dtype=float))
+    if pile is not None:
+        values = {name: PILE_REMEDY[name] for name in asked}
+        if "sleep_speed" in asked and "sleep_time" not in scene.raw:
+            values["sleep_time"] = PILE_REMEDY["sleep_time"]
+        why = (f"{pile['why']}: an exact pile does not rest by itself; the TC rule and sleeping let it fall asleep "
+               f"(docs/engine.md, \"Sleeping\")")
+    else:
+        values = {name: {"rapid_contact_rule": "hold", "sleep_speed": 0.0}[name] for name in asked}
+        why = f"{why_not}: contacts are held exactly and nothing sleeps"
+    for name, value in values.items():
+        setattr(s, name, value)
+    # one line says why; the others point to it
+    first = next(iter(values))
+    return {name: f"{value}: {why}" if name == first else f"{value}: as {first}" for name, value in values.items()}

@@ -289,7 +289,7 @@ class Auditor:
         if self._in_overlap:  # counted where it began
             return
         self._in_overlap = True
-        depth, spheres, wall, where = self._deepest_overlap(end.positions)
+        depth, spheres, wall, where = deepest_overlap(end.positions, self.radius, self.header.walls)
         if wall is not None:
             who = f"sphere {spheres[0]} and wall '{self.names[wall]}' overlap"
         elif spheres:
@@ -322,37 +322,6 @@ class Auditor:
                     "other: use ordering = time")
         return ("a swept, time-ordered run should leave no overlap: if the scene did not start this way, please "
                 "report it with the recording")
-
-    def _deepest_overlap(self, x: np.ndarray):
-        """(depth m, spheres, wall index or None, where (3,) or None) of the deepest
-        overlap after a step: sphere pairs found by the grid broad phase on the spheres'
-        own boxes (not across a periodic boundary), and every sphere with every wall."""
-        from ..engine.broadphase.boxes import NO_LIMIT
-        from ..engine.broadphase.grid import grid_pairs
-
-        r = self.radius
-        best = (0.0, [], None, None)
-        finite = np.isfinite(x).all(axis=1)
-        if len(x) > 1 and finite.all():
-            pairs, _, _ = grid_pairs(x - r[:, None], x + r[:, None], 0.0, NO_LIMIT)
-            if len(pairs):
-                a, b = pairs[:, 0], pairs[:, 1]
-                pen = r[a] + r[b] - np.linalg.norm(x[a] - x[b], axis=1)
-                k = int(np.argmax(pen))
-                if pen[k] > 0:
-                    i, j = int(a[k]), int(b[k])
-                    best = (float(pen[k]), [i, j], None, x[i] + (x[j] - x[i]) * (r[i] / (r[i] + r[j])))
-        walls = self.header.walls
-        if len(walls.names) and finite.any():
-            h = x @ walls.normals.T - walls.offsets[None, :]
-            h = np.where(walls.two_sided[None, :], np.abs(h), h)
-            pen = 0.5 * walls.thickness[None, :] * walls.two_sided[None, :] + r[:, None] - h
-            pen = np.where(walls.two_sided[None, :] & (pen > r[:, None]), 0.0, pen)  # went through: tunnelling
-            pen = np.where(finite[:, None], pen, -np.inf)
-            i, w = np.unravel_index(int(np.argmax(pen)), pen.shape)
-            if pen[i, w] > best[0]:
-                best = (float(pen[i, w]), [int(i)], int(w), x[i])
-        return best
 
     def _check_order(self, step: int, dt: float, c: Contacts) -> None:
         t = c.time_in_step
@@ -524,6 +493,38 @@ def _explain(rec, on_step) -> AuditReport:
     return report
 
 
+def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls):
+    """(depth m, spheres, wall index or None, where (3,) or None) of the deepest overlap of
+    positions x (N, 3): sphere pairs found by the grid broad phase on the spheres' own boxes
+    (not across a periodic boundary), and every sphere with every wall (a sphere past a thin
+    wall's middle went through it: tunnelling, not an overlap). Depth 0 when none."""
+    from ..engine.broadphase.boxes import NO_LIMIT
+    from ..engine.broadphase.grid import grid_pairs
+
+    r = radius
+    best = (0.0, [], None, None)
+    finite = np.isfinite(x).all(axis=1)
+    if len(x) > 1 and finite.all():
+        pairs, _, _ = grid_pairs(x - r[:, None], x + r[:, None], 0.0, NO_LIMIT)
+        if len(pairs):
+            a, b = pairs[:, 0], pairs[:, 1]
+            pen = r[a] + r[b] - np.linalg.norm(x[a] - x[b], axis=1)
+            k = int(np.argmax(pen))
+            if pen[k] > 0:
+                i, j = int(a[k]), int(b[k])
+                best = (float(pen[k]), [i, j], None, x[i] + (x[j] - x[i]) * (r[i] / (r[i] + r[j])))
+    if len(walls.names) and finite.any():
+        h = x @ walls.normals.T - walls.offsets[None, :]
+        h = np.where(walls.two_sided[None, :], np.abs(h), h)
+        pen = 0.5 * walls.thickness[None, :] * walls.two_sided[None, :] + r[:, None] - h
+        pen = np.where(walls.two_sided[None, :] & (pen > r[:, None]), 0.0, pen)  # went through: tunnelling
+        pen = np.where(finite[:, None], pen, -np.inf)
+        i, w = np.unravel_index(int(np.argmax(pen)), pen.shape)
+        if pen[i, w] > best[0]:
+            best = (float(pen[i, w]), [int(i)], int(w), x[i])
+    return best
+
+
 def _length(metres: float) -> str:
     """A length in words: mm below a metre, m above."""
     return f"{metres * 1000:.3g} mm" if abs(metres) < 1 else f"{metres:.3g} m"
@@ -534,4 +535,4 @@ def _point(x) -> str:
     return "an unknown place" if x is None else "(" + ", ".join(f"{q:.4g}" for q in x) + ") m"
 
 
-__all__ = ["AuditReport", "Auditor", "Finding", "FINDING_KINDS", "explain"]
+__all__ = ["AuditReport", "Auditor", "Finding", "FINDING_KINDS", "deepest_overlap", "explain"]

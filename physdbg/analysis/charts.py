@@ -171,13 +171,54 @@ def stability_chart(cells, which: str, paths: list[Path], title: str) -> None:
     _finish(plt, fig, handles, title, paths, bottom=0.04, dpi=100)
 
 
+ENGINE_MARKERS = {"physdbg": "D", "pybullet": "o", "mujoco": "s"}
+ENGINE_ERRORS = (("largest_overlap", "largest overlap (m)"), ("energy_error", "energy error (of E at start)"),
+                 ("contact_time_error", "first contact, time error (s)"), ("tunnelled", "bodies tunnelled"))
+
+
+def engines_chart(runs, paths: list[Path], title: str) -> None:
+    """Cost against error across engines: one panel per error measure, ms/step (log) on x,
+    the error (log; 0 drawn on the floor line) on y; marker shape = engine, colour = scene,
+    each point labelled with its setting. Written to every path (.png, .svg)."""
+    plt = _pyplot()
+    from matplotlib import ticker
+
+    scenes = list(dict.fromkeys(r.scene for r in runs))
+    palette = plt.get_cmap("tab10")
+    colors = {scene: palette(k % 10) for k, scene in enumerate(scenes)}
+    fig, axes = plt.subplots(2, 2, figsize=(11.0, 8.5), squeeze=False)
+    for ax, (field, label) in zip(axes.flat, ENGINE_ERRORS, strict=True):
+        measured = [r for r in runs if not r.failure and getattr(r, field) is not None and r.ms_per_step]
+        values = [getattr(r, field) for r in measured if getattr(r, field) > 0]
+        floor = min(values) / 10 if values else 1e-3
+        for run in measured:
+            value = getattr(run, field)
+            ax.scatter(run.ms_per_step, value if value > 0 else floor, marker=ENGINE_MARKERS.get(run.engine, "o"),
+                       s=30, color=colors[run.scene], edgecolors="black" if run.engine == "physdbg" else "none",
+                       linewidths=0.6, alpha=0.85, zorder=2)
+        ax.axhline(floor, color="#999999", linewidth=0.8, linestyle=":", zorder=1)
+        ax.text(0.01, floor, " 0 (exact)", transform=ax.get_yaxis_transform(), fontsize=7, color="#777777",
+                va="bottom")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.xaxis.set_major_formatter(ticker.FuncFormatter(lambda value, _: f"{value:g}"))
+        ax.set_title(label, fontsize=10)
+        ax.set_xlabel("ms per step (log)", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(True, which="major", alpha=0.3)
+    handles = [plt.Line2D([], [], linestyle="", marker=m, color="#555555", label=name)
+               for name, m in ENGINE_MARKERS.items()]
+    handles += [plt.Line2D([], [], linestyle="", marker="o", color=c, label=name) for name, c in colors.items()]
+    _finish(plt, fig, handles, title, paths, bottom=0.06, dpi=110)
+
+
 def _finish(plt, fig, handles, title: str, paths: list[Path], bottom: float, dpi: int) -> None:
     """Legend below the panels, title above, written to every path, closed."""
     fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8, frameon=False)
     fig.suptitle(title, fontsize=11)
     fig.tight_layout(rect=(0, bottom, 1, 0.96))
-    for path in paths:
-        fig.savefig(path, dpi=dpi)
+    for path in paths:  # no creation date in an SVG's metadata: the same run writes the same file
+        fig.savefig(path, dpi=dpi, metadata={"Date": None} if str(path).endswith(".svg") else None)
     plt.close(fig)
 
 

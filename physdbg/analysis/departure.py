@@ -177,7 +177,12 @@ def compare(foreign, reference, atol: float | None = None, rtol: float | None = 
     from ..record.reader import Recording
 
     rf = foreign if isinstance(foreign, Recording) else open_recording(foreign, verify=verify)
-    rr = reference if isinstance(reference, Recording) else open_recording(reference, verify=verify)
+    try:
+        rr = reference if isinstance(reference, Recording) else open_recording(reference, verify=verify)
+    except BaseException:
+        if rf is not foreign:
+            rf.close()
+        raise
     try:
         with quiet_numerics():
             return _Comparison(rf, rr, DEFAULT_ATOL if atol is None else float(atol),

@@ -208,7 +208,12 @@ def diff(a, b, atol: float | None = None, rtol: float | None = None,
     from ..record.reader import Recording
 
     ra = a if isinstance(a, Recording) else open_recording(a, verify=verify)
-    rb = b if isinstance(b, Recording) else open_recording(b, verify=verify)
+    try:
+        rb = b if isinstance(b, Recording) else open_recording(b, verify=verify)
+    except BaseException:
+        if ra is not a:
+            ra.close()
+        raise
     try:
         with quiet_numerics():
             report = _Differ(ra, rb, atol, rtol).run()

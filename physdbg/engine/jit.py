@@ -12,7 +12,7 @@ Why two: a compiled function increfs every array it takes on entry and decrefs i
 exit, each an atomic call into the runtime, and numba's pruning of such pairs removes
 them only where the body does not branch. A helper taking the held-contact store (a
 NamedTuple of 17 arrays) with one ``if`` pays 34 such calls: 200 ns a call, against
-0.5 ns for the same helper compiled without NRT (``benchmarks/call_overhead.py``). In
+0.5 ns for the same helper compiled without NRT (``benchmarks/experiments/call_overhead.py``). In
 rain-500's jammed steps they were 45 % of the time (perf, docs/benchmarks.md).
 
 The same goes for the *caller*: a ``kernel`` increfs every array it hands to a call it

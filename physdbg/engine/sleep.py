@@ -1,6 +1,7 @@
 """Sleeping spheres: a pile that has come to rest costs nothing until something disturbs it.
 
-An exact pile under rain never rests on its own (docs/benchmarks.md, "fourth session"):
+An exact pile under rain never rests on its own (docs/benchmarks.md, "A pile: the rules
+that let it rest"):
 with the held contacts rigid, each impact is passed through the whole held cluster it
 reaches and the far contacts separate and meet again (churn); with fast contacts kept
 elastic, the bed rattles for ever. Box2D (b2_timeToSleep) and DynamO's sleeping particles

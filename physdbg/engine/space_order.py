@@ -6,10 +6,10 @@ them (a generated scene: at random), a partner's row is anywhere among N; past t
 (about 5 000 spheres here) each read waits on memory. Numbering them along a Z-curve
 (Morton order) of their places puts neighbours in space at neighbouring rows. Measured on
 box-rain 100k, stepped in turn in one process with the same run numbered otherwise
-(docs/benchmarks.md, fourteenth session): 17 % off the whole second in Morton order of the
+(docs/benchmarks.md, "Space order"): 17 % off the whole second in Morton order of the
 starting places, 32 % in Morton order of the landed pile; 16–21 % off the exact gas at
 32 000; nothing at 1 000, where everything fits the cache. Kept up inside the world, 30 %
-off box-rain 100k (fifteenth session).
+off box-rain 100k.
 
 So a world of many spheres keeps an internal numbering (``Settings.space_order``):
 
@@ -40,7 +40,7 @@ SPACE_ORDER_NAMES = ("auto", "given", "morton")
 
 # auto numbers a world in Morton order from this many spheres up: box-rain in turn gained
 # nothing at 1 000 and 2 000 spheres, 4 % at 5 000, 7 % at 10 000 and 30 % at 100 000
-# (docs/benchmarks.md, fifteenth session)
+# (docs/benchmarks.md, "Space order")
 SPACE_ORDER_MIN = 4096
 
 MORTON_BITS = 10  # per axis: 1024 cells a side, 30-bit keys

@@ -22,7 +22,7 @@ ORDERING_NAMES = ("time", "index")
 # it sleeps: `physdbg run rain -s generate.count=10000 -s generate.radius=0.02` (dt 1/120)
 # needs up to 62 contacts and 1 280 swept tests a sphere in a step: under 20 and 400 every
 # step from step 49 on was stopped and spheres were left 6 mm inside each other; under
-# these it is exact and asleep by step 185 (docs/benchmarks.md, ninth session)
+# these it is exact and asleep by step 185 (docs/benchmarks.md, "Budgets")
 MIN_EVENT_CAP = 10_000
 EVENTS_PER_SPHERE = 100
 MIN_SWEPT_TESTS = 10_000_000
@@ -99,7 +99,7 @@ class Settings:
     max_swept_tests_per_step: int = 0
     # 10⁹ held-contact updates (tens of seconds of one step at worst): the jammed steps of
     # `physdbg run rain -s generate.count=500` need up to 2.5·10⁸, and 10⁸ left 24 of
-    # them unfinished (docs/benchmarks.md, "second session")
+    # them unfinished (docs/benchmarks.md, "Budgets")
     max_resting_work_per_step: int = 1_000_000_000
     max_memory: float = DEFAULT_MAX_MEMORY
     space_order: str = "auto"

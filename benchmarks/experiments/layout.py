@@ -1,6 +1,6 @@
 """Memory layout for compiled loops: rows of fields against separate arrays (numba).
 
-    .venv/bin/python benchmarks/layout.py [--rows 1000 200000]
+    .venv/bin/python benchmarks/experiments/layout.py [--rows 1000 200000]
 
 A loop of 2 000 000 random row reads, each reading two fields of a row and writing a
 third, over the same data held three ways: one structured array of rows (numba records,

@@ -1,11 +1,11 @@
 """The event queue's cost per operation: the engine's binary heap against a 4-ary one.
 
-    .venv/bin/python benchmarks/event_queue.py [--sizes 1000 5000 50000 500000] [--ops 1000000]
+    .venv/bin/python benchmarks/experiments/event_queue.py [--sizes 1000 5000 50000 500000] [--ops 1000000]
 
 The time-ordered loop (engine/timeline.py) keeps every prediction that hits within the
 step in a binary heap ordered by (time, test-log row) and drops stale ones as they come
 out. At box-rain 10k a contact costs 2.3 pushes and 2.3 pops (the step stats' events per
-contact; docs/benchmarks.md, "sixteenth session"). This replays the queue's work at a
+contact; docs/benchmarks.md, "Where the time goes"). This replays the queue's work at a
 steady size: fill it to ``size`` entries, then ``ops`` times pop the earliest and push a
 later one, with the engine's ``heap_push``/``heap_pop`` and with a 4-ary heap (half the
 levels, four children side by side) written here for the comparison. Both must pop the

@@ -1,6 +1,6 @@
 """The re-prediction's core, replayed in four forms: is the event loop's time the memory's or the code's?
 
-    .venv/bin/python benchmarks/partner_scan.py [--count 10000] [--step 200] [--spheres 400000]
+    .venv/bin/python benchmarks/experiments/partner_scan.py [--count 10000] [--step 200] [--spheres 400000]
 
 Steps box-rain (benchmarks/box_rain.py's scene) to ``--step``, then replays the work the
 loop does for each re-predicted sphere (timeline._repredict): scan its broad-phase
@@ -22,7 +22,7 @@ same data:
 
 Each must find the same hits (checked); prints nanoseconds per re-predicted sphere, best
 of five. If the forms take about the same time, the time is the memory's (first touches
-of scattered rows), not the compiler's (docs/benchmarks.md, "sixteenth session").
+of scattered rows), not the compiler's (docs/benchmarks.md, "Measured and not kept").
 """
 
 from __future__ import annotations
@@ -32,16 +32,13 @@ import ctypes
 import os
 import shutil
 import subprocess
-import sys
 import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
 from numba import njit, uint64
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # run as a script or imported as benchmarks.partner_scan
-from box_rain import box_rain  # noqa: E402
+from physdbg.analysis.engines import box_rain_scene as box_rain  # noqa: E402
 
 C_SOURCE = r"""
 #include <stdint.h>

@@ -1,6 +1,6 @@
 """What one call of a small compiled helper costs, compiled with and without numba's NRT.
 
-    .venv/bin/python benchmarks/call_overhead.py [--calls 10000000]
+    .venv/bin/python benchmarks/experiments/call_overhead.py [--calls 10000000]
 
 The helper is resting._end's body (which sphere is at one end of a held contact), taking
 the held-contact store, a NamedTuple of 17 arrays. Compiled the ordinary way (``kernel``)
