@@ -549,7 +549,7 @@ def check(
                     lines.append(f"{'':<11} {mark}{p.value:<14} {p.outcome:<13} {p.why}")
                 if chosen != "tc+sleep":
                     lines.append(f'  to settle {PILE_REMEDY_FLAGS}  (docs/engine.md, "Sleeping")')
-            lines += [f"auto        {name}={why}" for name, why in result.scene.auto.items()]
+            lines += _auto_lines(result.scene.auto)
             lines.append("recommended " + " ".join(f"{k}={v}" for k, v in advice.recommended.items()))
             lines += [f"  {k:<12}{advice.reasons[k]}" for k in advice.recommended]
             settings = " ".join(f"{k}={v}" for k, v in result.current.items())
@@ -896,7 +896,7 @@ def format_summary(s, observers: str = "the audit") -> str:
     lines = [
         f"scene       {s.scene}  ({s.source})",
         f"methods     integrator={s.integrator} detection={s.detection} ordering={s.ordering}",
-        *[f"auto        {name}={why}" for name, why in s.auto.items()],
+        *_auto_lines(s.auto),
         f"broad phase {s.broad_phase}: {s.broad_phase_reason}",
         f"bodies      {_count(s.particles, 'particle')}, {_count(len(s.walls), 'wall')}",
         f"steps       {s.steps}  ({s.sim_time:.6g} s simulated, {dt_text})",
@@ -919,6 +919,20 @@ def format_summary(s, observers: str = "the audit") -> str:
                                    + "; the first of each kind:"))
     lines += [f"  {line}" for line in s.findings]
     return "\n".join(lines)
+
+
+def _auto_lines(auto: dict[str, str]) -> list[str]:
+    """One line per decision: settings decided together ("value: as first") join the first's
+    line, 'auto  rapid_contact_rule=hold, sleep_speed=0.0: no closed box ...'."""
+    lines: dict[str, list[str]] = {}
+    for name, why in auto.items():
+        value, _, reason = why.partition(": ")
+        joined = reason[3:] if reason.startswith("as ") and reason[3:] in lines else None
+        if joined:
+            lines[joined][0] += f", {name}={value}"
+        else:
+            lines[name] = [f"{name}={value}", reason]
+    return [f"auto        {head}: {reason}" for head, reason in lines.values()]
 
 
 def _warning_totals(counts: dict[str, int]) -> str:

@@ -220,6 +220,6 @@ def test_the_pile_rules_default_to_auto_tc_and_sleeping_only_where_a_pile_forms(
         ("hold", 0.1, 0.3)
     assert "rapid_contact_rule" not in asked.auto and "sleep_time" not in asked.auto
     done = CliRunner().invoke(app, ["check", "rain", "-s", "generate.count=500"])
-    assert "auto        rapid_contact_rule=tc: 500 spheres settle" in done.output
+    assert "auto        rapid_contact_rule=tc, sleep_speed=0.1, sleep_time=0.1: 500 spheres settle" in done.output
     done = CliRunner().invoke(app, ["run", "rain", "-s", "generate.count=500", "-s", "steps=2"])
-    assert done.exit_code == 0 and "auto        sleep_speed=0.1: as rapid_contact_rule" in done.output
+    assert done.exit_code == 0 and "auto        rapid_contact_rule=tc, sleep_speed=0.1, sleep_time=0.1:" in done.output
