@@ -1,5 +1,5 @@
 """physdbg: a physics engine that shows its work."""
-__version__ = "0.1.0"
+from .version import __version__
 
 
 def _engine_cache_dir() -> None:

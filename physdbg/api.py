@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import NonFiniteRunError, PhysdbgError
+from .errors import NonFiniteRunError, PhysdbgError, RecordingInterrupted
 from .scene import Scene, load_scene
 
 
@@ -234,8 +234,7 @@ def view_choice(view: bool | None, spheres: int) -> tuple[bool, str]:
                    "more than the record (--view writes them)")
 
 
-class RecordingInterrupted(PhysdbgError):
-    exit_code = 130
+
 
 
 def default_paths(scene: Scene, mcap_path: str | None, rrd_path: str | None, rrd: bool) -> tuple[Path, Path | None]:
@@ -688,7 +687,7 @@ def record_peer(peer: str, scene: Scene | str, overrides: Sequence[str] = (), mc
 # ----------------------------------------------------------------------------- advice
 @dataclass
 class CheckResult:
-    """What ``check`` found. advice: analysis.advisor.Advice; current: the scene's own
+    """What ``check`` found. advice: advisor.Advice; current: the scene's own
     integrator, detection and ordering; problems: the predictions against them that fail
     (tunnels, overlap left) and warnings (inexact)."""
 
@@ -706,7 +705,7 @@ class CheckResult:
 def check(scene: Scene | str, overrides: Sequence[str] = ()) -> CheckResult:
     """The advisor on a scene: which methods fail on it, the cheapest safe settings, and
     whether the scene's own settings are among the safe ones."""
-    from .analysis.advisor import advise
+    from .advisor import advise
 
     if not isinstance(scene, Scene):
         scene = load_scene(scene, overrides)
@@ -759,8 +758,10 @@ def bench_accuracy(out_dir: str | Path = "accuracy", quick: bool = False, force:
         raise PhysdbgError(f"no accuracy problem {unknown[0]!r}; the problems are: {', '.join(accuracy.PROBLEMS)}")
     paths = _bench_paths(out_dir, ACCURACY_FILES, chart, force, [Path(rrd_path) if rrd_path else None])
     started = time.perf_counter()
+    from .precompile import compile_kernels
+
     runs = accuracy.run_all(list(problems) if problems else None, quick=quick, on_run=on_run, workers=workers,
-                            dask=dask)
+                            dask=dask, warm=compile_kernels)
     paths[0].write_text(accuracy.to_csv(runs))
     paths[1].write_text(accuracy.to_markdown(runs, command))
     if chart:
@@ -814,7 +815,9 @@ def bench_stability(out_dir: str | Path = "stability", quick: bool = False, forc
 
     paths = _bench_paths(out_dir, STABILITY_FILES, chart, force)
     started = time.perf_counter()
-    cells = stability.maps(quick=quick, on_cell=on_cell, workers=workers, dask=dask)
+    from .precompile import compile_kernels
+
+    cells = stability.maps(quick=quick, on_cell=on_cell, workers=workers, dask=dask, warm=compile_kernels)
     paths[0].write_text(stability.to_csv(cells))
     paths[1].write_text(stability.to_markdown(cells, command))
     if chart:

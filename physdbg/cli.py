@@ -33,7 +33,7 @@ app = typer.Typer(
 
 def _show_version(value: bool) -> None:
     if value:
-        from . import __version__
+        from .version import __version__
 
         typer.echo(f"physdbg {__version__}")
         raise typer.Exit()
@@ -92,8 +92,8 @@ def scenes() -> None:
 
 def _pile_note(scene) -> None:
     """Before a run: say on stderr when the scene makes a pile its settings will not let
-    rest (analysis.advisor.pile_note), so nobody waits minutes without knowing why."""
-    from .analysis.advisor import pile_note
+    rest (advisor.pile_note), so nobody waits minutes without knowing why."""
+    from .advisor import pile_note
 
     note = pile_note(scene)
     if note:
@@ -540,7 +540,7 @@ def check(
                     mark = "*" if result.current[setting] == p.value else " "
                     lines.append(f"{setting if k == 0 else '':<11} {mark}{p.value:<14} {p.outcome:<13} {p.why}")
             if f["pile"] is not None:  # speed and resting, not correctness: the exit code ignores it
-                from .analysis.advisor import PILE_REMEDY_FLAGS, pile_choice
+                from .advisor import PILE_REMEDY_FLAGS, pile_choice
 
                 chosen = pile_choice(result.scene.settings)
                 lines.append(f"pile        {f['pile']['why']}; an exact pile does not rest by itself:")

@@ -45,3 +45,44 @@ class NonFiniteRunError(PhysdbgError):
     """A position or velocity became NaN or infinite while running: the run stopped there."""
 
     exit_code = 3
+
+
+class NonFiniteState(FloatingPointError):
+    """A position or velocity became NaN or infinite in a step; the run cannot go on.
+
+    step: the step (0-based index) at whose end it was found; particle: the first such
+    particle; field: "position" or "velocity"; count: how many particles are affected.
+    """
+
+    def __init__(self, step: int, particle: int, field: str, count: int):
+        self.step, self.particle, self.field, self.count = step, particle, field, count
+        others = f" (and {count - 1} more)" if count > 1 else ""
+        super().__init__(f"the {field} of sphere {particle}{others} became NaN or infinite in step {step + 1}")
+
+
+class PeerError(PhysdbgError):
+    """A peer engine that is missing or cannot run the scene."""
+
+
+class ViewerError(PhysdbgError):
+    """The Rerun viewer could not be started."""
+
+
+class ForeignRunError(PhysdbgError):
+    """A trajectory file that does not fit the format or the scene."""
+
+
+class RecordingInterrupted(PhysdbgError):
+    exit_code = 130
+
+
+class CheckRunError(PhysdbgError):
+    """The two runs cannot be compared (different bodies or steps, or too large)."""
+
+
+class DaskMissing(PhysdbgError):
+    """--dask without dask.distributed installed, or a scheduler that cannot be reached."""
+
+
+class ChartsMissing(PhysdbgError):
+    """matplotlib is not installed."""

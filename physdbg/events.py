@@ -17,6 +17,7 @@ engine will not mutate afterwards, so an observer may keep them.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -201,6 +202,31 @@ class Contacts:
 
     def __iter__(self):
         return (self.record(i) for i in range(len(self)))
+
+
+class CollisionSums(NamedTuple):
+    """What a step's contacts add to the equation of state: virial (J·s), wall_impulse
+    (N·s) and collisions (sphere–sphere contacts)."""
+
+    virial: float
+    wall_impulse: float
+    collisions: int
+
+
+NO_COLLISIONS = CollisionSums(0.0, 0.0, 0)
+
+
+def collision_sums(contacts: Contacts, radius: np.ndarray) -> CollisionSums:
+    """The sums of a step's contacts: over sphere pairs r_ab · J_a = (r_a + r_b) j (J·s;
+    r_ab from b to a at contact, J_a = j n the impulse on a), the impulses on spheres at
+    walls (N·s), and the number of sphere–sphere contacts. Over a time T, the collisional
+    virial gives PV = N kT + sum / (3 T), the wall impulses P = sum / (area T)."""
+    if not len(contacts):
+        return NO_COLLISIONS
+    pair = contacts.kind == KIND_PAIR
+    impulse = np.nan_to_num(contacts.impulse, nan=0.0)
+    reach = radius[contacts.a[pair]] + radius[contacts.other[pair]]
+    return CollisionSums(float(reach @ impulse[pair]), float(impulse[~pair].sum()), int(np.count_nonzero(pair)))
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import PhysdbgError
+from .errors import PeerError
 from .record.foreign import ForeignRun
 
 PEERS = ("pybullet", "mujoco")
@@ -38,8 +38,7 @@ CONTACT_STEPS = 4  # MuJoCo: a soft contact lasts this many steps (shorter is st
 MUJOCO_SOLVERS = ("PGS", "CG", "Newton")
 
 
-class PeerError(PhysdbgError):
-    """A peer engine that is missing or cannot run the scene."""
+
 
 
 @dataclass(frozen=True)

@@ -624,7 +624,7 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
     if walls.periodic:  # a sphere placed outside the box on a periodic axis is the same sphere inside it
         wrap_positions(state.positions, walls.period_origin, walls.period)
     scene = Scene(name, description, source, settings, dt, max_dt, steps, duration, seed, state, walls, raw)
-    from .analysis.advisor import resolve_auto  # "auto" settings: decided from the scene (physdbg check)
+    from .advisor import resolve_auto  # "auto" settings: decided from the scene (physdbg check)
 
     scene.auto = resolve_auto(scene)
     return scene

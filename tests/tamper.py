@@ -11,6 +11,7 @@ import numpy as np
 
 from physdbg.engine.state import state_hash
 from physdbg.record import format as fmt
+from physdbg.record import state_codec
 from physdbg.record import open_recording
 from physdbg.record import proto
 
@@ -35,7 +36,7 @@ def copy_with(src: Path, dst: Path, change: Callable[[str, int, bytes], list[byt
             data = message.data
             if channel.topic == fmt.TOPIC_STATE:
                 s = rec.state(message.sequence)
-                data = fmt.encode_state(s.frame, s.time, s.dt, s.state_hash, s.positions, s.velocities,
+                data = state_codec.encode_state(s.frame, s.time, s.dt, s.state_hash, s.positions, s.velocities,
                                         fmt.CODEC_RAW, asleep=s.asleep)
             changed = change(channel.topic, message.sequence, data)
             for item in (changed if isinstance(changed, list) else [data if changed is None else changed]):
@@ -60,7 +61,7 @@ def nudge_state(src: Path, dst: Path, frame: int, sphere: int = 0, by: float = 1
 
     def change(topic, sequence, data):
         if topic == fmt.TOPIC_STATE and sequence == frame:
-            return fmt.encode_state(frame, s.time, s.dt, digest, x, s.velocities, fmt.CODEC_RAW, asleep=s.asleep)
+            return state_codec.encode_state(frame, s.time, s.dt, digest, x, s.velocities, fmt.CODEC_RAW, asleep=s.asleep)
         if topic == fmt.TOPIC_FRAME_INDEX and reindex:
             name = fmt.MESSAGE_OF_TOPIC[fmt.TOPIC_FRAME_INDEX]
             last, rows = proto.decode_table(name, data)
@@ -82,7 +83,7 @@ def swap_frames(src: Path, dst: Path, first: int) -> Path:
         if topic != fmt.TOPIC_STATE or sequence not in (first, first + 1):
             return None
         s = b if sequence == first else a
-        return fmt.encode_state(s.frame, s.time, s.dt, s.state_hash, s.positions, s.velocities, fmt.CODEC_RAW,
+        return state_codec.encode_state(s.frame, s.time, s.dt, s.state_hash, s.positions, s.velocities, fmt.CODEC_RAW,
                                 asleep=s.asleep)
 
     return copy_with(src, dst, change)

@@ -10,7 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from physdbg import api
-from physdbg.analysis.advisor import advise
+from physdbg.advisor import advise
 from physdbg.cli import app
 from physdbg.scene import load_scene, parse_scene
 from physdbg.scenes import builtin_names
@@ -135,7 +135,7 @@ def test_a_pile_is_foreseen_and_each_rule_does_on_it_what_check_says():
     """100 spheres in a 0.3 m × 0.3 m box settle ~3 layers deep. hold churns (held contacts
     let go and held again, the swept tests of a step up a hundredfold), tc collapses (the
     event cap, then overlaps), tc with sleeping falls asleep exactly."""
-    from physdbg.analysis.advisor import pile_choice
+    from physdbg.advisor import pile_choice
 
     scene = load_scene("rain", NARROW_PILE)
     advice = advise(scene)
@@ -158,7 +158,7 @@ def test_a_pile_is_foreseen_and_each_rule_does_on_it_what_check_says():
 
 
 def test_a_rain_that_piles_up_gets_the_rules_check_recommends_for_a_pile():
-    from physdbg.analysis.advisor import PILE_REMEDY, pile_choice
+    from physdbg.advisor import PILE_REMEDY, pile_choice
 
     settings = load_scene("rain", ["generate.count=500"]).settings  # rapid_contact_rule, sleep_speed: auto
     assert {name: getattr(settings, name) for name in PILE_REMEDY} == PILE_REMEDY

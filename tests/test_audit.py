@@ -138,7 +138,7 @@ def test_under_the_tc_rule_the_collapse_advice_names_the_hold_rule():
 
 
 def test_a_budget_hit_in_a_pile_names_the_settings_that_let_it_rest(tmp_path):
-    """A pile (analysis.advisor) under tc alone collapses: the event cap stops step 54.
+    """A pile (advisor.py) under tc alone collapses: the event cap stops step 54.
     The budget finding says, besides raising the budget, what lets the pile fall asleep;
     the bouncing ball above (a budget hit but no pile) says nothing of piles."""
     pile = ["generate.count=100", "box.max=[0.3,1,0.3]", "generate.speed=0", "generate.restitution=0.5",

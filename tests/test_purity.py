@@ -38,7 +38,7 @@ def test_core_source_imports_only_numpy_numba_and_basic_stdlib():
         depth = len(path.relative_to(PACKAGE / "engine").parts)  # 1: engine/x.py, 2: engine/pkg/x.py
         for node in ast.walk(ast.parse(path.read_text())):
             if isinstance(node, ast.ImportFrom) and node.level > depth:
-                assert node.level == depth + 1 and node.module == "events", (
+                assert node.level == depth + 1 and node.module in ("events", "errors"), (
                     f"{path.name} reaches outside the core: {'.' * node.level}{node.module}")
 
 
@@ -57,3 +57,96 @@ def test_importing_the_engine_loads_no_file_or_viewer_library():
             "print(sorted(bad & set(sys.modules)))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+# ----------------------------------------------------------------------------- imports point down
+def _module_graph() -> dict[str, set[str]]:
+    """physdbg's modules (dotted, under the package) and the package modules each imports,
+    at its top or inside a function alike."""
+    def name(path: Path) -> str:
+        parts = list(path.relative_to(PACKAGE).with_suffix("").parts)
+        return ".".join(parts[:-1] if parts[-1] == "__init__" else parts) or "physdbg"
+
+    modules = {name(p): p for p in PACKAGE.rglob("*.py")}
+    graph: dict[str, set[str]] = {m: set() for m in modules}
+    for module, path in modules.items():
+        package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
+        if module == "physdbg":
+            package = []
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.ImportFrom):
+                continue
+            if node.level == 0:
+                if not (node.module or "").startswith("physdbg."):
+                    continue
+                base = node.module.split(".")[1:]
+            else:
+                base = package[:len(package) - (node.level - 1)] + [p for p in (node.module or "").split(".") if p]
+            for alias in node.names:  # "from . import x": x may be a module
+                target = ".".join([*base, alias.name])
+                if target not in modules:
+                    target = ".".join(base)
+                if target in modules and target != module:
+                    graph[module].add(target)
+    return graph
+
+
+def test_no_two_modules_import_each_other_however_indirectly():
+    """Imports point down: errors and events at the bottom, then the engine, scenes and the
+    advisor, recording, analysis, api, the CLI. A circle (record importing analysis, the
+    format and its protobuf classes importing each other) fails here, naming its modules."""
+    graph = _module_graph()
+    graph.pop("physdbg", None)  # the package's own door: it may name anything, lazily
+    for imports in graph.values():
+        imports.discard("physdbg")
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    circles: list[list[str]] = []
+
+    def visit(module: str) -> None:  # Tarjan's strongly connected components
+        index[module] = low[module] = len(index)
+        stack.append(module)
+        for other in graph[module]:
+            if other not in index:
+                visit(other)
+                low[module] = min(low[module], low[other])
+            elif other in stack:
+                low[module] = min(low[module], index[other])
+        if low[module] == index[module]:
+            component = []
+            while True:
+                other = stack.pop()
+                component.append(other)
+                if other == module:
+                    break
+            if len(component) > 1:
+                circles.append(sorted(component))
+
+    for module in list(graph):
+        if module not in index:
+            visit(module)
+    assert circles == [], f"import circles: {circles}"
+
+
+def test_the_layers_import_only_downwards():
+    graph = _module_graph()
+    layer = {"errors": 0, "version": 0, "events": 1, "observe": 2, "engine": 2, "scenes": 3, "advisor": 3,
+             "scene": 4, "record": 5, "peers": 6, "analysis": 7, "precompile": 8, "api": 9, "cli": 10,
+             "__main__": 11, "physdbg": 12}
+    for module, imports in graph.items():
+        here = layer[module.split(".")[0]]
+        for other in imports:
+            there = layer[other.split(".")[0]]
+            assert there <= here, f"{module} (layer {here}) imports {other} (layer {there})"
+
+
+def test_every_exception_class_lives_in_errors_py():
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path.name == "errors.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ClassDef):
+                bases = {getattr(b, "id", getattr(b, "attr", "")) for b in node.bases}
+                assert not bases & {"Exception", "PhysdbgError", "FloatingPointError", "ValueError", "RuntimeError"} \
+                    and not node.name.endswith("Error"), f"{path.name} defines {node.name}"

@@ -24,6 +24,7 @@ from physdbg.observe import FanOut, ListObserver
 from physdbg.record import DETAIL_LEVELS, RecordingError, RecordingHeader
 from physdbg.record.reader import RecordingIntegrityError
 from physdbg.record import format as fmt
+from physdbg.record import state_codec
 from physdbg.record.mcap_sink import McapRecorder
 from physdbg.scene import load_scene
 
@@ -55,13 +56,13 @@ def test_state_codec_is_lossless_for_any_floats_and_any_codec(frames, dt, first_
     history: list[np.ndarray] = []
     for offset, (x, v) in enumerate(frames):
         frame = first_frame + offset
-        codec = fmt.codec_for(frame, len(history))
+        codec = state_codec.codec_for(frame, len(history))
         # a run without sleeping stores no mask; with it, any mask survives (odd counts too)
         mask = None if offset % 2 else (np.arange(len(x)) + frame) % 3 == 0
-        data = fmt.encode_state(frame, frame * dt, dt, state_hash(x, v), x, v, codec,
+        data = state_codec.encode_state(frame, frame * dt, dt, state_hash(x, v), x, v, codec,
                                 history[-1] if history else None, history[-2] if len(history) > 1 else None,
                                 mask)
-        back, frame_no, _, dt_back, digest, asleep = fmt.decode_state(
+        back, frame_no, _, dt_back, digest, asleep = state_codec.decode_state(
             data, history[-1] if history else None, history[-2] if len(history) > 1 else None)
         assert back[:, :3].tobytes() == x.tobytes() and back[:, 3:].tobytes() == v.tobytes()
         assert (frame_no, dt_back, digest) == (frame, dt, state_hash(x, v))
@@ -70,27 +71,27 @@ def test_state_codec_is_lossless_for_any_floats_and_any_codec(frames, dt, first_
 
 
 def test_key_frames_come_every_interval_and_need_nothing_before_them():
-    assert fmt.codec_for(0, 0) == fmt.CODEC_RAW
-    assert fmt.codec_for(fmt.KEYFRAME_INTERVAL, 2) == fmt.CODEC_RAW
-    assert fmt.codec_for(fmt.KEYFRAME_INTERVAL + 1, 2) == fmt.CODEC_PREVIOUS
-    assert fmt.codec_for(fmt.KEYFRAME_INTERVAL + 2, 2) == fmt.CODEC_TWO_PREVIOUS
+    assert state_codec.codec_for(0, 0) == fmt.CODEC_RAW
+    assert state_codec.codec_for(fmt.KEYFRAME_INTERVAL, 2) == fmt.CODEC_RAW
+    assert state_codec.codec_for(fmt.KEYFRAME_INTERVAL + 1, 2) == fmt.CODEC_PREVIOUS
+    assert state_codec.codec_for(fmt.KEYFRAME_INTERVAL + 2, 2) == fmt.CODEC_TWO_PREVIOUS
     x = np.ones((2, 3))
-    data = fmt.encode_state(5, 0.1, 0.01, state_hash(x, x), x, x, fmt.CODEC_TWO_PREVIOUS, np.zeros((2, 6)),
+    data = state_codec.encode_state(5, 0.1, 0.01, state_hash(x, x), x, x, fmt.CODEC_TWO_PREVIOUS, np.zeros((2, 6)),
                             np.zeros((2, 6)))
     with pytest.raises(ValueError, match="needs the frames before"):
-        fmt.decode_state(data)
+        state_codec.decode_state(data)
 
 
 def test_an_asleep_mask_of_the_wrong_length_is_a_damaged_state():
     x = np.ones((9, 3))  # 9 spheres: a mask of 2 bytes
-    good = fmt.encode_state(1, 0.1, 0.1, state_hash(x, x), x, x, fmt.CODEC_RAW, asleep=np.arange(9) % 2 == 0)
-    assert fmt.decode_state(good)[5].tolist() == [True, False] * 4 + [True]
+    good = state_codec.encode_state(1, 0.1, 0.1, state_hash(x, x), x, x, fmt.CODEC_RAW, asleep=np.arange(9) % 2 == 0)
+    assert state_codec.decode_state(good)[5].tolist() == [True, False] * 4 + [True]
     from physdbg.record.proto import message_class
 
     bad = message_class(fmt.STATE_MESSAGE).FromString(good)
     bad.asleep = b"\x01"
     with pytest.raises(ValueError, match="asleep mask of 1 bytes, expected 2"):
-        fmt.decode_state(bad.SerializeToString())
+        state_codec.decode_state(bad.SerializeToString())
 
 
 def test_ballistic_states_compress_to_a_fraction_of_their_raw_size():
@@ -104,8 +105,8 @@ def test_ballistic_states_compress_to_a_fraction_of_their_raw_size():
     history: list[np.ndarray] = []
     sizes = []
     for frame in range(10):
-        codec = fmt.codec_for(frame, len(history))
-        data = fmt.encode_state(frame, frame * dt, dt, state_hash(x, v), x, v, codec,
+        codec = state_codec.codec_for(frame, len(history))
+        data = state_codec.encode_state(frame, frame * dt, dt, state_hash(x, v), x, v, codec,
                                 history[-1] if history else None, history[-2] if len(history) > 1 else None)
         sizes.append(len(zstandard.compress(data)) / n)
         history = [*history[-1:], np.hstack([x, v])]

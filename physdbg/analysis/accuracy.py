@@ -263,7 +263,7 @@ def run_named(problem: str, integrator: str, detection: str, ordering: str, dt: 
 
 def run_all(problems: list[str] | None = None, quick: bool = False,
             on_run: Callable[[Run, int, int], None] | None = None, workers: int | None = None,
-            dask: str | None = None) -> list[Run]:
+            dask: str | None = None, warm: Callable[[], None] | None = None) -> list[Run]:
     """Every method on every problem (or the named ones) at every dt (QUICK_DTS if quick),
     in this process (workers=1), on local cores or on Dask (analysis.sweep; the kernels are
     loaded first, so cost is the stepping, not the compiler). on_run(run, done, total)."""
@@ -271,7 +271,7 @@ def run_all(problems: list[str] | None = None, quick: bool = False,
 
     dts = QUICK_DTS if quick else DTS
     jobs = [(name, *m, dt) for name in (problems or PROBLEMS) for m in methods(PROBLEMS[name]) for dt in dts]
-    return run_jobs(run_named, jobs, workers=workers, dask=dask, on_done=on_run)
+    return run_jobs(run_named, jobs, workers=workers, dask=dask, on_done=on_run, **({"warm": warm} if warm else {}))
 
 
 def pareto(runs: list[Run]) -> list[Run]:

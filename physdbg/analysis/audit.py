@@ -229,7 +229,7 @@ class Auditor:
     def _pile(self) -> str | None:
         """advisor.pile_hint for this run (a foreign run's settings say nothing of physdbg's rules)."""
         if self._pile_hint is False:
-            from .advisor import pile_hint
+            from ..advisor import pile_hint
 
             self._pile_hint = None if self.header.meta.get("foreign") else pile_hint(self.header)
         return self._pile_hint

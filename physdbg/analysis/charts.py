@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import PhysdbgError
+from ..errors import ChartsMissing
 from .accuracy import PROBLEMS, Run, pareto
 
 ERROR_FLOOR = 1e-17  # an error of exactly 0 is drawn here (a log axis has no 0)
@@ -19,8 +19,7 @@ MARKERS = {"euler": "o", "semi-implicit": "s", "verlet": "^", "exact": "D"}
 COLORS = {"swept": "#1f77b4", "sampled": "#ff7f0e", "discrete": "#d62728"}
 
 
-class ChartsMissing(PhysdbgError):
-    """matplotlib is not installed."""
+
 
 
 def _pyplot():

@@ -36,7 +36,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..errors import PhysdbgError
+from ..errors import CheckRunError
 from ..events import KIND_PAIR, KIND_WALL, contact_words, partner_words
 from .quiet import quiet_numerics
 
@@ -62,8 +62,7 @@ INTEGRATOR_FITS = (
 PHYSDBG_FIT = {"euler": "explicit-euler", "semi-implicit": "semi-implicit-euler", "verlet": "exact", "exact": "exact"}
 
 
-class CheckRunError(PhysdbgError):
-    """The two runs cannot be compared (different bodies or steps, or too large)."""
+
 
 
 @dataclass

@@ -21,38 +21,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
-from ..events import KIND_PAIR, Contacts
+from ..events import NO_COLLISIONS, CollisionSums, collision_sums  # noqa: F401 (the step's sums, kept with the contacts)
 
 BLOCKS = 10
-
-
-class CollisionSums(NamedTuple):
-    """What a step's contacts add to the equation of state: virial (J·s), wall_impulse
-    (N·s) and collisions (sphere–sphere contacts)."""
-
-    virial: float
-    wall_impulse: float
-    collisions: int
-
-
-NO_COLLISIONS = CollisionSums(0.0, 0.0, 0)
-
-
-def collision_sums(contacts: Contacts, radius: np.ndarray) -> CollisionSums:
-    """The sums of a step's contacts: over sphere pairs r_ab · J_a = (r_a + r_b) j (J·s;
-    r_ab from b to a at contact, J_a = j n the impulse on a), the impulses on spheres at
-    walls (N·s), and the number of sphere–sphere contacts. Over a time T, the collisional
-    virial gives PV = N kT + sum / (3 T), the wall impulses P = sum / (area T)."""
-    if not len(contacts):
-        return NO_COLLISIONS
-    pair = contacts.kind == KIND_PAIR
-    impulse = np.nan_to_num(contacts.impulse, nan=0.0)
-    reach = radius[contacts.a[pair]] + radius[contacts.other[pair]]
-    return CollisionSums(float(reach @ impulse[pair]), float(impulse[~pair].sum()), int(np.count_nonzero(pair)))
 
 
 def carnahan_starling(phi: float) -> float:
@@ -94,26 +68,6 @@ class EquationOfState:
     collision_rate_enskog: float | None = None
 
 
-def box_of(walls) -> tuple[np.ndarray, np.ndarray] | None:
-    """(lo, hi) of the axis-aligned box on each axis periodic or closed by one-sided walls,
-    one facing in on each side, or None."""
-    lo, hi = np.full(3, np.nan), np.full(3, np.nan)
-    periodic = walls.period > 0
-    lo[periodic] = walls.period_origin[periodic]
-    hi[periodic] = walls.period_origin[periodic] + walls.period[periodic]
-    for normal, offset, two in zip(walls.normals, walls.offsets, walls.two_sided, strict=True):
-        axis = int(np.argmax(np.abs(normal)))
-        if two or abs(abs(normal[axis]) - 1) > 1e-12:
-            continue
-        if normal[axis] > 0:
-            lo[axis] = offset
-        else:
-            hi[axis] = -offset
-    if np.any(np.isnan(lo)) or np.any(np.isnan(hi)) or np.any(hi <= lo):
-        return None
-    return lo, hi
-
-
 def equation_of_state(rec, skip: float = 0.5) -> EquationOfState:
     """Z of a recording (physdbg.Recording) over its steps after the first ``skip`` fraction
     (the gas forgets how it was set up)."""
@@ -138,7 +92,7 @@ def equation_of_state(rec, skip: float = 0.5) -> EquationOfState:
     z_blocks = np.array([1 + stats["virial"][b].sum() / (2 * (kinetic[b] * dt[b]).sum()) for b in blocks])
     z_virial, z_virial_error = mean_and_error(z_blocks)
     kT = float((2 * kinetic * dt).sum() / (3 * n * dt.sum()))
-    box = box_of(header.walls)
+    box = header.walls.box()
     z_wall = z_wall_error = phi = z_cs = None
     if box is not None:
         side = box[1] - box[0]

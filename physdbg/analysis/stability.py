@@ -171,7 +171,7 @@ def cell(which: str, integrator: str, detection: str, x: float, y: float) -> Cel
 
 
 def maps(quick: bool = False, on_cell: Callable[[Cell, int, int], None] | None = None, workers: int | None = None,
-         dask: str | None = None) -> list[Cell]:
+         dask: str | None = None, warm: Callable[[], None] | None = None) -> list[Cell]:
     """Both maps for every integrator × detection, on local cores by default or on Dask
     (analysis.sweep)."""
     from .sweep import run_jobs
@@ -183,7 +183,7 @@ def maps(quick: bool = False, on_cell: Callable[[Cell, int, int], None] | None =
         for detection in DETECTION_NAMES:
             jobs += [("impact", integrator, detection, dt, v) for dt in dts for v in speeds]
             jobs += [("stack", integrator, detection, e, n) for e in STACK_RESTITUTIONS for n in heights]
-    return run_jobs(cell, jobs, workers=workers, dask=dask, on_done=on_cell)
+    return run_jobs(cell, jobs, workers=workers, dask=dask, on_done=on_cell, **({"warm": warm} if warm else {}))
 
 
 def to_csv(cells: list[Cell]) -> str:

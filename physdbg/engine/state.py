@@ -14,6 +14,7 @@ import numpy as np
 from .jit import kernel
 from .motion import INTEGRATOR_NAMES
 from .toi import DETECTION_NAMES
+from ..errors import NonFiniteState  # noqa: F401 (raised here; every exception lives in errors.py)
 
 ORDERING_NAMES = ("time", "index")
 
@@ -164,6 +165,25 @@ class Walls:
         """Is any axis periodic?"""
         return bool(np.any(self.period > 0))
 
+    def box(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(lo, hi) (3,) m of the axis-aligned box on each axis periodic or closed by
+        one-sided walls, one facing in on each side, or None."""
+        lo, hi = np.full(3, np.nan), np.full(3, np.nan)
+        periodic = self.period > 0
+        lo[periodic] = self.period_origin[periodic]
+        hi[periodic] = self.period_origin[periodic] + self.period[periodic]
+        for normal, offset, two in zip(self.normals, self.offsets, self.two_sided, strict=True):
+            axis = int(np.argmax(np.abs(normal)))
+            if two or abs(abs(normal[axis]) - 1) > 1e-12:
+                continue
+            if normal[axis] > 0:
+                lo[axis] = offset
+            else:
+                hi[axis] = -offset
+        if np.any(np.isnan(lo)) or np.any(np.isnan(hi)) or np.any(hi <= lo):
+            return None
+        return lo, hi
+
 
 # State's per-sphere arrays, in its order
 STATE_FIELDS = ("positions", "velocities", "inverse_mass", "radius", "restitution", "gravity_scale")
@@ -196,17 +216,7 @@ class State:
                      self.radius.copy(), self.restitution.copy(), self.gravity_scale.copy())
 
 
-class NonFiniteState(FloatingPointError):
-    """A position or velocity became NaN or infinite in a step; the run cannot go on.
 
-    step: the step (0-based index) at whose end it was found; particle: the first such
-    particle; field: "position" or "velocity"; count: how many particles are affected.
-    """
-
-    def __init__(self, step: int, particle: int, field: str, count: int):
-        self.step, self.particle, self.field, self.count = step, particle, field, count
-        others = f" (and {count - 1} more)" if count > 1 else ""
-        super().__init__(f"the {field} of sphere {particle}{others} became NaN or infinite in step {step + 1}")
 
 
 def first_non_finite(positions: np.ndarray, velocities: np.ndarray) -> tuple[int, str, int] | None:

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import PhysdbgError
+from ..errors import ForeignRunError
 
 MAX_RUN_BYTES = 2**31  # 2 GiB: a trajectory larger than this is refused before it is read
 CSV_COLUMNS = ("step", "time", "body", "x", "y", "z")
@@ -55,8 +55,7 @@ FOREIGN_FRAME_SCHEMA = {
 }
 
 
-class ForeignRunError(PhysdbgError):
-    """A trajectory file that does not fit the format or the scene."""
+
 
 
 @dataclass

@@ -13,7 +13,7 @@ from datetime import datetime, timezone
 
 import numpy as np
 
-from .. import __version__
+from ..version import __version__
 from ..engine import Walls, state_hash
 from .format import DETAIL_LEVELS, FORMAT_NAME, FORMAT_VERSION
 

@@ -31,9 +31,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.pressure import NO_COLLISIONS, collision_sums
-from ..events import BroadPhaseInfo, Contacts, EngineWarning, StepEnd, SweptTests
+from ..events import NO_COLLISIONS, BroadPhaseInfo, Contacts, EngineWarning, StepEnd, SweptTests, collision_sums
 from . import format as fmt
+from .state_codec import codec_for, encode_state
 from . import proto
 from .header import RecordingHeader
 
@@ -230,10 +230,10 @@ class McapRecorder:
 
     def _write_state(self, frame: int, time: float, dt: float, digest: str, x: np.ndarray, v: np.ndarray,
                      ns: int, asleep: np.ndarray | None = None) -> None:
-        codec = fmt.codec_for(frame, len(self._history))
+        codec = codec_for(frame, len(self._history))
         previous = self._history[-1] if self._history else None
         before = self._history[-2] if len(self._history) > 1 else None
-        data = fmt.encode_state(frame, time, dt, digest, x, v, codec, previous, before, asleep)
+        data = encode_state(frame, time, dt, digest, x, v, codec, previous, before, asleep)
         self._write(fmt.TOPIC_STATE, frame, ns, data)
         self._index_rows.append((time, ns, dt, bytes.fromhex(digest)))
         state = np.empty((x.shape[0], 6))

@@ -33,6 +33,7 @@ from ..engine.state import state_hash
 from ..errors import RecordingError, RecordingIntegrityError
 from ..events import BroadPhaseInfo, Contacts, EngineWarning, StepBegin, StepEnd, SweptTests
 from . import format as fmt
+from .state_codec import decode_state, decode_state_header
 from . import proto
 from .header import RecordingHeader
 
@@ -73,7 +74,7 @@ class StateStream:
         """The FrameState of message ``data`` (MCAP sequence ``frame``)."""
         rec, history = self.rec, self.history
         try:
-            state, frame_no, time, dt, digest, asleep = fmt.decode_state(
+            state, frame_no, time, dt, digest, asleep = decode_state(
                 data, history[-1] if history else None, history[-2] if len(history) > 1 else None)
         except ValueError as err:
             raise RecordingError(f"{rec.path}: frame {frame}: damaged state message ({err})") from None
@@ -456,7 +457,7 @@ class Recording:
         seen = 0
         for _, frame, data in self._messages([fmt.TOPIC_STATE], 0, self.frames - 1):
             try:
-                m = fmt.decode_state_header(data)
+                m = decode_state_header(data)
             except ValueError as err:
                 raise RecordingError(f"{self.path}: frame {frame}: damaged state message ({err})") from None
             if m.step != seen:

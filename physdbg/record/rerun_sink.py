@@ -32,9 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import PhysdbgError
-from ..events import KIND_PAIR, BroadPhaseInfo, Contacts, EngineWarning, StepEnd
-from ..analysis.pressure import collision_sums
+from ..errors import ViewerError
+from ..events import KIND_PAIR, BroadPhaseInfo, Contacts, EngineWarning, StepEnd, collision_sums
 from ..engine.periodic import unwrap_near
 from .header import RecordingHeader
 from . import view
@@ -48,8 +47,7 @@ SERIES_BATCH = 128
 BVH_LEVELS_SHOWN = 3  # levels 0..2 are drawn when the file opens; deeper ones are a click away  # steps of scalar series buffered before one send_columns
 
 
-class ViewerError(PhysdbgError):
-    """The Rerun viewer could not be started."""
+
 
 
 def viewer_binary() -> str:

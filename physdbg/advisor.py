@@ -43,10 +43,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..engine.broadphase import choose_broad_phase
-from ..engine.motion import INTEGRATOR_NAMES
-from ..engine.periodic import minimum_image
-from ..engine.toi import DETECTION_NAMES
+from .engine.broadphase import choose_broad_phase
+from .engine.motion import INTEGRATOR_NAMES
+from .engine.periodic import minimum_image
+from .engine.toi import DETECTION_NAMES
 
 AUTO = "auto"
 CHOSEN = ("integrator", "detection", "ordering")  # what ``auto`` may decide in a scene
@@ -185,11 +185,10 @@ def _pile(state, walls, gravity: np.ndarray) -> dict | None:
 
 def pile_or_why_not(state, walls, gravity: np.ndarray) -> tuple[dict | None, str]:
     """(the pile, "") when the spheres end in one (see module doc), else (None, why not)."""
-    from .pressure import box_of
 
     movable = (state.inverse_mass > 0) & (state.gravity_scale > 0)
     g = float(np.linalg.norm(gravity))
-    box = box_of(walls)
+    box = walls.box()
     if g == 0.0 or not np.any(movable):
         return None, "nothing falls (no gravity, or no sphere it moves)"
     if box is None or walls.periodic:
