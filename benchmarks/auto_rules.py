@@ -17,7 +17,7 @@ import time
 
 from physdbg.analysis.engines import box_rain_scene
 from physdbg.engine.world import warm_up
-from physdbg.scene import load_scene
+from physdbg.api import load_scene
 
 HAND = ("rapid_contact_rule=tc", "sleep_speed=0.1", "sleep_time=0.1")
 EXACT = ("rapid_contact_rule=hold", "sleep_speed=0")

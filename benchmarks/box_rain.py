@@ -43,7 +43,7 @@ from physdbg.analysis.engines import box_rain_scene
 from physdbg.engine.world import warm_up
 from physdbg.errors import SceneError
 from physdbg.peers import PeerSetup, available, build
-from physdbg.scene import load_scene
+from physdbg.api import load_scene
 
 
 def box_rain(count: int, steps: int, overrides: tuple[str, ...] = ()):
@@ -79,11 +79,11 @@ def run_physdbg(scene, trace: bool = False, stop_above_gb: float | None = None, 
         stats = world.step(scene.dt)
         run["capped"] += any(w.code.startswith("max_") for w in stats.warnings)
         run["worst_overlap"] = max(run["worst_overlap"], stats.max_overlap)
-        run["rows"].append((stats.contacts, stats.held, stats.rapid, stats.released, stats.events, stats.asleep))
+        run["rows"].append((stats.counts.contacts, stats.counts.held, stats.counts.rapid, stats.counts.released, stats.counts.events, stats.counts.asleep))
         if trace:
-            print(f"{k + 1} {1000 * (time.perf_counter() - t0):.0f} {stats.contacts} {stats.held} {stats.rapid} "
-                  f"{stats.released} {stats.events} {stats.swept_tests} {stats.max_overlap:.2g} {stats.kinetic:.4g} "
-                  f"{stats.asleep} {stats.slept} {stats.woken} {[w.code for w in stats.warnings]} "
+            print(f"{k + 1} {1000 * (time.perf_counter() - t0):.0f} {stats.counts.contacts} {stats.counts.held} {stats.counts.rapid} "
+                  f"{stats.counts.released} {stats.counts.events} {stats.counts.swept_tests} {stats.max_overlap:.2g} {stats.kinetic:.4g} "
+                  f"{stats.counts.asleep} {stats.counts.slept} {stats.counts.woken} {[w.code for w in stats.warnings]} "
                   f"{peak_memory_mb():.0f} {stats.state_hash[:16]}", flush=True)
         stopping = stop_above_gb is not None and peak_memory_mb() > 1024.0 * stop_above_gb
         if checkpoint and ((k + 1) % every == 0 or k + 1 == scene.steps or stopping):

@@ -20,7 +20,7 @@ import time
 
 from physdbg.engine.world import warm_up
 from physdbg.events import KIND_PAIR
-from physdbg.scene import load_scene
+from physdbg.api import load_scene
 
 
 def main() -> None:
@@ -44,10 +44,10 @@ def main() -> None:
         for phase, seconds in stats.timings.items():
             phases[phase] = phases.get(phase, 0.0) + seconds
         # this step's contact rows (the Contacts event's payload, read without observing)
-        kinds = world._buf.contacts["kind"][:stats.contacts]
+        kinds = world._buf.contacts["kind"][:stats.counts.contacts]
         pairs += int((kinds == KIND_PAIR).sum())
-        walls += stats.contacts - int((kinds == KIND_PAIR).sum())
-        tests += stats.swept_tests
+        walls += stats.counts.contacts - int((kinds == KIND_PAIR).sum())
+        tests += stats.counts.swept_tests
     seconds = time.perf_counter() - started
     print(f"gas N={args.count}, packing {args.packing}, {scene.steps} steps of {scene.dt:g} s: {seconds:.2f} s")
     print(f"  pair collisions {pairs} ({pairs / seconds:.3g}/s), wall contacts {walls}, "

@@ -46,7 +46,7 @@ import time  # noqa: E402
 
 from physdbg.engine.world import warm_up  # noqa: E402
 from physdbg.errors import PhysdbgError  # noqa: E402
-from physdbg.scene import load_scene  # noqa: E402
+from physdbg.api import load_scene  # noqa: E402
 
 
 def write_perf_map(annotate: tuple[str, ...] = ()) -> tuple[int, dict[str, tuple[bytes, int, int, int]]]:

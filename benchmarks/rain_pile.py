@@ -16,7 +16,7 @@ import argparse
 import time
 
 from physdbg.engine.world import warm_up
-from physdbg.scene import load_scene
+from physdbg.api import load_scene
 
 
 def main() -> None:
@@ -37,7 +37,7 @@ def main() -> None:
         stats = world.step(dt)
         seconds = time.perf_counter() - t0
         if (index + 1) % args.every == 0 or seconds > 1.0:
-            print(f"{index + 1:4d} {seconds * 1000:8.0f} {stats.contacts:9d} {stats.swept_tests:12d} {stats.held:5d} "
+            print(f"{index + 1:4d} {seconds * 1000:8.0f} {stats.counts.contacts:9d} {stats.counts.swept_tests:12d} {stats.counts.held:5d} "
                   f"{int(world.held.count[2]):11d} {stats.max_overlap:11.2g}  "
                   f"{','.join(sorted({w.code for w in stats.warnings})) or '-'}", flush=True)
     print(f"{min(args.steps, scene.steps)} steps in {time.perf_counter() - started:.1f} s")

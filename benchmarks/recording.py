@@ -53,9 +53,10 @@ def worker(n: int, steps: int, detail: str | None, rerun: bool, folder: str, vie
     from physdbg.observe import FanOut
     from physdbg.record.header import RecordingHeader
     from physdbg.record.mcap_sink import McapRecorder
+    from physdbg.advisor import decide
     from physdbg.scene import parse_scene
 
-    scene = parse_scene(box_rain_toml(n, steps), "bench")
+    scene = decide(parse_scene(box_rain_toml(n, steps), "bench"))
     sinks = []
     mcap = Path(folder) / f"rain-{n}-{detail}-{view}.mcap"
     rrd = Path(folder) / f"rain-{n}.rrd"

@@ -48,7 +48,7 @@ from physdbg.engine.space_order import interleaved, morton_keys, quantised
 from physdbg.engine.state import STATE_FIELDS
 from physdbg.engine.timeline import REQUERY
 from physdbg.engine.world import warm_up
-from physdbg.scene import load_scene
+from physdbg.api import load_scene
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # run as a script or imported as benchmarks.step_parts
 from box_rain import box_rain  # noqa: E402
@@ -166,7 +166,7 @@ def in_turn(name: str, count: int, steps: int | None, orders: list[str], landed_
             started = time.perf_counter()
             stats = world.step(scene.dt)
             spent[order] += time.perf_counter() - started
-            contacts[order] += stats.contacts
+            contacts[order] += stats.counts.contacts
             hashes[order] = stats.state_hash
     return scene.steps, {order: (spent[order], contacts[order], hashes[order]) for order in orders}
 
@@ -184,7 +184,7 @@ def measure(scene) -> dict:
         for _ in range(scene.steps):
             stats = world.step(scene.dt)
             phases.update(stats.timings)
-            contacts += stats.contacts
+            contacts += stats.counts.contacts
         wall = time.perf_counter() - started
     pairs = world.last_step.pairs
     return {"steps": scene.steps, "wall": wall, "phases": phases, "calls": seconds, "contacts": contacts,

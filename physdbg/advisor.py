@@ -333,6 +333,14 @@ def _contacts_possible(x, r, movable, reach, walls) -> bool:
     return False
 
 
+def decide(scene):
+    """Decide a loaded scene's "auto" settings in place (resolve_auto) and return the
+    scene; scene.auto says each decision and why. Deciding twice changes nothing."""
+    if scene.settings.undecided():
+        scene.auto = resolve_auto(scene)
+    return scene
+
+
 def resolve_auto(scene) -> dict[str, str]:
     """Replace ``auto`` in a scene's settings by the advice; returns setting -> "value: why"
     for each one decided (empty when none was auto). integrator, detection and ordering

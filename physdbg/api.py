@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import NonFiniteRunError, PhysdbgError, RecordingInterrupted
-from .scene import Scene, load_scene
+from .advisor import decide
+from .scene import Scene, read_scene
 
 
 @dataclass
@@ -26,7 +27,7 @@ class RunSummary:
     """What a run did. Energies in J, momentum in kg·m/s, times in s (ms_per_step in ms).
 
     rapid: contacts the rapid-contact (TC) rule acted on; released: held contacts let go (all
-    steps; beside rapid, a pile's churn); resting_at_end: contacts held at the end.
+    steps; beside rapid, a pile's churn); held_at_end: contacts held at the end.
     asleep_at_end, slept, woken: spheres asleep at the end, fallen asleep and woken over
     the run (sleeping, engine/sleep.py; 0 with it off).
     energy_drift: (E_end - E_start) / |E_start| of kinetic + potential (0 when E_start = 0);
@@ -55,7 +56,7 @@ class RunSummary:
     sim_time: float
     contacts: int
     swept_tests: int
-    resting_at_end: int
+    held_at_end: int
     rapid: int
     released: int
     asleep_at_end: int
@@ -86,6 +87,23 @@ class RunSummary:
         return asdict(self)
 
 
+def load_scene(scene: str, overrides: Sequence[str] = ()) -> Scene:
+    """Load a built-in scene or a TOML file with ``key=value`` overrides, validate it, and
+    decide its "auto" settings (physdbg.advisor.decide; scene.auto says why): a scene
+    ready to build a World from."""
+    return decide(read_scene(scene, list(overrides)))
+
+
+def ready_scene(scene: Scene | str, overrides: Sequence[str] = ()) -> Scene:
+    """A scene ready to run: a name or path is loaded (load_scene); a Scene has its "auto"
+    settings decided (overrides belong to loading, so a Scene with overrides is refused)."""
+    if not isinstance(scene, Scene):
+        return load_scene(scene, overrides)
+    if overrides:
+        raise PhysdbgError("give overrides when loading the scene, not with a Scene object")
+    return decide(scene)
+
+
 def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         dts: Sequence[float] | None = None,
         on_step: Callable[[int, int | None], None] | None = None,
@@ -101,11 +119,9 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     audit: check every step as it runs (physdbg.analysis.audit); on_finding(finding):
     called with each finding as it is made.
     """
-    if not isinstance(scene, Scene):
-        scene = load_scene(scene, overrides)
-    elif overrides:
-        raise PhysdbgError("give overrides when loading the scene, not with a Scene object")
+    scene = ready_scene(scene, overrides)
     from .engine import NonFiniteState, energies, state_hash
+    from .events import RunTally
     from .observe import FanOut
     from .precompile import compile_kernels
 
@@ -128,32 +144,20 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     k0, p0, mom0 = energies(st, world.gravity)
     total = len(dts) if dts is not None else scene.steps
     used: list[float] = []
-    phase = {"forces": 0.0, "broad_phase": 0.0, "narrow_phase": 0.0, "resolve": 0.0, "finish": 0.0}
-    contacts = tests = max_in_step = rapid = released = slept = woken = asleep = 0
-    max_overlap = 0.0
+    tally = RunTally()
     warnings = WarningTally()
     started = time.perf_counter()
     digest = state_hash(st.positions, st.velocities)
     for dt in scene.step_lengths(dts):
         try:
-            stats = world.step(dt)
+            end = world.step(dt)
         except NonFiniteState as err:
             raise NonFiniteRunError(f"{err}: the run stopped there (a NaN or infinity cannot be stepped on); "
                                     f"look at the contacts of that step") from None
         used.append(dt)
-        for name, seconds in stats.timings.items():
-            phase[name] += seconds
-        contacts += stats.contacts
-        rapid += stats.rapid
-        released += stats.released
-        slept += stats.slept
-        woken += stats.woken
-        asleep = stats.asleep
-        tests += stats.swept_tests
-        max_in_step = max(max_in_step, stats.contacts)
-        max_overlap = max(max_overlap, stats.max_overlap)
-        warnings.add(stats.warnings)
-        digest = stats.state_hash
+        tally.add(end)
+        warnings.add(end.warnings)
+        digest = end.state_hash
         if on_step is not None:
             on_step(len(used), total)
     wall = time.perf_counter() - started
@@ -169,14 +173,15 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         broad_phase=world.broad_phase.name,
         broad_phase_reason=world.broad_phase_reason,
         particles=st.count, walls=list(scene.walls.names), steps=n_steps, sim_time=world.time,
-        contacts=contacts, swept_tests=tests, resting_at_end=world.held_count, rapid=rapid,
-        released=released, asleep_at_end=asleep, slept=slept, woken=woken,
-        max_contacts_in_a_step=max_in_step, energy_start=e0, energy_end=e1, energy_drift=drift,
+        contacts=tally.total["contacts"], swept_tests=tally.total["swept_tests"],
+        held_at_end=tally.total["held"], rapid=tally.total["rapid"], released=tally.total["released"],
+        asleep_at_end=tally.total["asleep"], slept=tally.total["slept"], woken=tally.total["woken"],
+        max_contacts_in_a_step=tally.most["contacts"], energy_start=e0, energy_end=e1, energy_drift=drift,
         momentum_start=[float(c) for c in mom0], momentum_end=[float(c) for c in mom1],
-        momentum_drift=float(np.linalg.norm(mom1 - mom0)), max_overlap=max_overlap,
+        momentum_drift=float(np.linalg.norm(mom1 - mom0)), max_overlap=tally.max_overlap,
         wall_seconds=wall, compile_seconds=compile_seconds, ms_per_step=1000.0 * wall / n_steps if n_steps else math.nan,
-        engine_ms_per_step=1000.0 * sum(phase.values()) / n_steps if n_steps else math.nan,
-        phase_seconds=phase, final_hash=digest, warning_counts=dict(warnings.counts),
+        engine_ms_per_step=1000.0 * sum(tally.seconds.values()) / n_steps if n_steps else math.nan,
+        phase_seconds=tally.seconds, final_hash=digest, warning_counts=dict(warnings.counts),
         warnings=warnings.examples(), findings=report.lines() if report else [],
         finding_counts=dict(auditor.counts) if auditor else {}, dts=used)
 
@@ -286,8 +291,7 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
     from .record.mcap_sink import McapRecorder
     from .observe import FanOut
 
-    if not isinstance(scene, Scene):
-        scene = load_scene(scene, overrides)
+    scene = ready_scene(scene, overrides)
     if detail not in DETAIL_LEVELS:
         raise PhysdbgError(f"--detail must be one of {', '.join(DETAIL_LEVELS)}, not {detail!r}")
     mcap_out, rrd_out = default_paths(scene, mcap_path, rrd_path, rrd)
@@ -580,8 +584,7 @@ def import_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str
     from .record.foreign import import_run as write_run
     from .record.foreign import read_run
 
-    if not isinstance(scene, Scene):
-        scene = load_scene(scene, overrides)
+    scene = ready_scene(scene, overrides)
     out = Path(mcap_path) if mcap_path else Path(run_path).with_suffix(".mcap")
     if out.resolve() == Path(run_path).resolve():
         raise PhysdbgError(f"the run and the recording are the same file: {out}")
@@ -616,8 +619,7 @@ def check_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str]
     from .record.foreign import import_run as write_run
     from .record.foreign import read_run
 
-    if not isinstance(scene, Scene):
-        scene = load_scene(scene, overrides)
+    scene = ready_scene(scene, overrides)
     if scene.walls.periodic:
         raise PhysdbgError(f"scene '{scene.name}' has a periodic box; check-run reads a run's steps from consecutive "
                            f"positions, which wrap there, and does not compare periodic runs yet")
@@ -673,8 +675,7 @@ def record_peer(peer: str, scene: Scene | str, overrides: Sequence[str] = (), mc
     from .peers import run_peer
     from .record.foreign import import_run as write_run
 
-    if not isinstance(scene, Scene):
-        scene = load_scene(scene, overrides)
+    scene = ready_scene(scene, overrides)
     out = Path(mcap_path) if mcap_path else Path(f"{scene.name}-{peer}.mcap")
     check_writable([out], force)
     started = clock.perf_counter()
@@ -707,8 +708,7 @@ def check(scene: Scene | str, overrides: Sequence[str] = ()) -> CheckResult:
     whether the scene's own settings are among the safe ones."""
     from .advisor import advise
 
-    if not isinstance(scene, Scene):
-        scene = load_scene(scene, overrides)
+    scene = ready_scene(scene, overrides)
     advice = advise(scene)
     current = {name: getattr(scene.settings, name) for name in ("integrator", "detection", "ordering")}
     mine = [p for name, value in current.items() for p in advice.fails(name, value)]

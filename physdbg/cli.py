@@ -126,8 +126,8 @@ def run(
     Example: physdbg run bounce --set integrator=verlet --set duration=2
     """
     with _user_errors():
+        from .api import load_scene
         from .api import run as run_scene
-        from .scene import load_scene
 
         loaded = load_scene(scene, set_ or [])
         _pile_note(loaded)
@@ -185,8 +185,8 @@ def record(
     """
     with _user_errors():
         from .api import diff as api_diff
+        from .api import load_scene
         from .api import record as record_scene
-        from .scene import load_scene
 
         if check_against is not None and not check_against.is_file():
             raise PhysdbgError(f"{check_against}: no such recording to check against")
@@ -901,7 +901,7 @@ def format_summary(s, observers: str = "the audit") -> str:
         f"bodies      {_count(s.particles, 'particle')}, {_count(len(s.walls), 'wall')}",
         f"steps       {s.steps}  ({s.sim_time:.6g} s simulated, {dt_text})",
         f"contacts    {s.contacts}  (at most {s.max_contacts_in_a_step} in a step; {s.swept_tests} swept tests; "
-        f"{s.rapid} rapid, {s.released} released; {s.resting_at_end} held at the end)",
+        f"{s.rapid} rapid, {s.released} released; {s.held_at_end} held at the end)",
         *([f"sleep       {s.asleep_at_end} of {s.particles} spheres asleep at the end  ({s.slept} fell asleep, "
            f"{s.woken} woke)"] if s.slept else []),
         f"energy      {s.energy_start:.6g} J -> {s.energy_end:.6g} J  (drift {s.energy_drift:+.3e})",

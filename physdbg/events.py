@@ -259,16 +259,50 @@ class EngineWarning:
     message: str
 
 
+# the step pipeline's phases, in order (engine/world.py runs and times each; StepEnd.timings,
+# the run summary's shares and the recording's seconds_* columns are named by these)
+STEP_PHASES = ("forces", "broad_phase", "narrow_phase", "resolve", "finish")
+
+
+@dataclass(frozen=True)
+class StepCounts:
+    """What one step did, counted (each also a column of the recording's /physdbg/stats).
+
+    contacts: contacts resolved; swept_tests: swept tests run; events: pops of the event
+    queue; held: contacts held at the step's end (resting or rapid, resting.py); rapid:
+    contacts the rapid-contact rule held in the step; released: held contacts let go in
+    the step; asleep: spheres asleep at the step's end; slept, woken: spheres that fell
+    asleep, woke in the step (sleep.py).
+    """
+
+    contacts: int = 0
+    swept_tests: int = 0
+    events: int = 0
+    held: int = 0
+    rapid: int = 0
+    released: int = 0
+    asleep: int = 0
+    slept: int = 0
+    woken: int = 0
+
+
+STEP_COUNTS = tuple(StepCounts.__dataclass_fields__)
+# counts that say how things are at the step's end (a run reports the last); the others
+# say what happened in the step (a run adds them up)
+COUNTS_AT_END = ("held", "asleep")
+
+
 @dataclass(frozen=True)
 class StepEnd:
-    """A step has finished.
+    """A step has finished: the one record of a step, sent to the observer and returned by
+    ``World.step`` alike (a recording gives back the same record).
 
     positions, velocities: (N, 3) state at ``time`` (copies). kinetic, potential: J
     (potential is -m·g_i·x relative to the origin); momentum: (3,) kg·m/s over movable
-    particles. counts: contacts, swept_tests, events (heap pops), resting (contacts held).
-    max_overlap: deepest sphere–sphere or sphere–wall penetration after the step (m,
-    0 when none). timings: seconds per phase. state_hash: hex digest over the exact bytes
-    of positions and velocities. asleep: (N,) bool, the spheres asleep at ``time``
+    particles. counts: StepCounts. max_overlap: deepest sphere–sphere or sphere–wall
+    penetration after the step (m, 0 when none). timings: seconds per phase (STEP_PHASES).
+    state_hash: hex digest over the exact bytes of positions and velocities. warnings:
+    the step's EngineWarning events. asleep: (N,) bool, the spheres asleep at ``time``
     (engine/sleep.py), or None when the run does not let spheres sleep.
     """
 
@@ -280,12 +314,35 @@ class StepEnd:
     kinetic: float
     potential: float
     momentum: np.ndarray
-    counts: dict[str, int]
+    counts: StepCounts
     max_overlap: float
     timings: dict[str, float]
     state_hash: str
-    warnings: tuple[str, ...] = field(default=())
+    warnings: tuple[EngineWarning, ...] = field(default=())
     asleep: np.ndarray | None = None
+
+
+class RunTally:
+    """A run's counts, step by step: ``total`` adds up what happened in each step
+    (COUNTS_AT_END keep the last step's), ``most`` is the largest of each in one step,
+    ``seconds`` the time spent in each phase."""
+
+    def __init__(self):
+        self.steps = 0
+        self.total = dict.fromkeys(STEP_COUNTS, 0)
+        self.most = dict.fromkeys(STEP_COUNTS, 0)
+        self.seconds = dict.fromkeys(STEP_PHASES, 0.0)
+        self.max_overlap = 0.0
+
+    def add(self, end: StepEnd) -> None:
+        self.steps += 1
+        for name in STEP_COUNTS:
+            value = getattr(end.counts, name)
+            self.total[name] = value if name in COUNTS_AT_END else self.total[name] + value
+            self.most[name] = max(self.most[name], value)
+        for name, seconds in end.timings.items():
+            self.seconds[name] = self.seconds.get(name, 0.0) + seconds
+        self.max_overlap = max(self.max_overlap, end.max_overlap)
 
 
 Event = StepBegin | BroadPhaseInfo | Contacts | SweptTests | EngineWarning | StepEnd

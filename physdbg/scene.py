@@ -175,7 +175,8 @@ class Scene:
     walls: Walls
     raw: dict[str, Any] = field(repr=False)
     overrides: tuple[str, ...] = ()  # the --set KEY=VALUE strings applied to the scene file
-    auto: dict[str, str] = field(default_factory=dict)  # setting -> "value: why", for settings given as "auto"
+    auto: dict[str, str] = field(default_factory=dict)  # setting -> "value: why", once the advisor decided them
+
 
     def build_world(self, observer=None) -> World:
         """A fresh World on a copy of the initial state (the scene itself never changes)."""
@@ -232,8 +233,9 @@ def read_scene_text(scene: str) -> tuple[str, str]:
         raise UnknownSceneError(f"{scene}: cannot read the file ({err})") from None
 
 
-def load_scene(scene: str, overrides: list[str] | tuple[str, ...] = ()) -> Scene:
-    """Load a built-in scene or a TOML file, apply ``key=value`` overrides, validate."""
+def read_scene(scene: str, overrides: list[str] | tuple[str, ...] = ()) -> Scene:
+    """Load a built-in scene or a TOML file, apply ``key=value`` overrides, validate.
+    Settings given as "auto" stay so: ``physdbg.api.load_scene`` reads and decides them."""
     text, source = read_scene_text(scene)
     return parse_scene(text, source, overrides)
 
@@ -623,11 +625,9 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
                               f"(box.periodic): leave sleep_speed at 0 here")
     if walls.periodic:  # a sphere placed outside the box on a periodic axis is the same sphere inside it
         wrap_positions(state.positions, walls.period_origin, walls.period)
-    scene = Scene(name, description, source, settings, dt, max_dt, steps, duration, seed, state, walls, raw)
-    from .advisor import resolve_auto  # "auto" settings: decided from the scene (physdbg check)
-
-    scene.auto = resolve_auto(scene)
-    return scene
+    # "auto" settings stay "auto" here: the advisor decides them (physdbg.advisor.decide),
+    # and physdbg.api.load_scene reads and decides in one call
+    return Scene(name, description, source, settings, dt, max_dt, steps, duration, seed, state, walls, raw)
 
 
 def _periodic_axes(c: _Checker, box: dict) -> np.ndarray:

@@ -225,7 +225,7 @@ def example_run(root, mistake: str):
     repository (scene paths are relative to it)."""
     from pathlib import Path
 
-    from physdbg.scene import load_scene
+    from physdbg.api import load_scene
 
     name, overrides = EXAMPLES[mistake]
     scene = load_scene(str(Path(root) / name) if name.endswith(".toml") else name, overrides)
@@ -238,7 +238,7 @@ def write_blown_up(root, path) -> None:
     NaN in y, written as a JavaScript engine writes NaN in JSON (JSON.stringify(NaN) is null)."""
     from pathlib import Path
 
-    from physdbg.scene import load_scene
+    from physdbg.api import load_scene
 
     scene = load_scene(str(Path(root) / "docs" / "examples" / "mistakes" / "slide.toml"))
     times, xs, vs = simulate_swept(scene, scene.steps, scene.dt)

@@ -10,9 +10,10 @@ import pytest
 from typer.testing import CliRunner
 
 from physdbg import api
-from physdbg.advisor import advise
+from physdbg.advisor import advise, decide
+from physdbg.api import load_scene
 from physdbg.cli import app
-from physdbg.scene import load_scene, parse_scene
+from physdbg.scene import parse_scene
 from physdbg.scenes import builtin_names
 
 BAD = {"tunnelling", "overlap", "non-finite", "energy-gain"}
@@ -50,7 +51,7 @@ def test_predicted_failures_happen():
 
 def _two_spheres(second_position: str, second_velocity: str):
     """Two spheres (r = 0.1, no gravity, 1 s): one at the origin moving +x at 1 m/s."""
-    return parse_scene(f"""
+    return decide(parse_scene(f"""
         name = "two"
         dt = 0.01
         duration = 1.0
@@ -63,7 +64,7 @@ def _two_spheres(second_position: str, second_velocity: str):
         position = {second_position}
         velocity = {second_velocity}
         radius = 0.1
-    """)
+    """))
 
 
 def test_where_no_contact_can_happen_it_needs_no_sweep():
@@ -86,7 +87,7 @@ def test_auto_settings_are_decided_said_and_repeat_on_replay(tmp_path):
     # five steps (83 ms) cannot bring the ball down 1 m: no sweep needed
     done = CliRunner().invoke(app, ["run", "bounce", "-s", "detection=auto", "-s", "steps=5"])
     assert done.exit_code == 0 and "auto        detection=discrete: no contact can happen" in done.output
-    scene = parse_scene('''
+    scene = decide(parse_scene('''
         method = "auto"
         integrator = "verlet"
         dt = 0.01
@@ -96,7 +97,7 @@ def test_auto_settings_are_decided_said_and_repeat_on_replay(tmp_path):
         radius = 0.5
         [[planes]]
         normal = [0.0, 1.0, 0.0]
-    ''')
+    '''))
     # integrator was given, so not decided; the pile rules are auto unless given (no pile here)
     assert set(scene.auto) == {"detection", "ordering", "rapid_contact_rule", "sleep_speed"}
     assert (scene.settings.rapid_contact_rule, scene.settings.sleep_speed) == ("hold", 0.0)
@@ -147,7 +148,8 @@ def test_a_pile_is_foreseen_and_each_rule_does_on_it_what_check_says():
 
     world = scene.build_world()
     stats = [world.step(scene.dt) for _ in range(70)]
-    assert max(s.released for s in stats) > 100 and max(s.swept_tests for s in stats) > 100 * stats[9].swept_tests
+    assert max(s.counts.released for s in stats) > 100
+    assert max(s.counts.swept_tests for s in stats) > 100 * stats[9].counts.swept_tests
 
     world = load_scene("rain", NARROW_PILE + ["rapid_contact_rule=tc"]).build_world()
     stats = [world.step(1 / 120) for _ in range(60)]
@@ -202,7 +204,7 @@ def test_run_and_record_say_before_they_start_that_the_pile_will_not_rest(tmp_pa
 
 
 def test_the_pile_rules_default_to_auto_tc_and_sleeping_only_where_a_pile_forms():
-    from physdbg.scene import load_scene
+    from physdbg.api import load_scene
 
     pile = load_scene("rain", ["generate.count=500"])
     assert (pile.settings.rapid_contact_rule, pile.settings.sleep_speed, pile.settings.sleep_time) == ("tc", 0.1, 0.1)
@@ -223,3 +225,29 @@ def test_the_pile_rules_default_to_auto_tc_and_sleeping_only_where_a_pile_forms(
     assert "auto        rapid_contact_rule=tc, sleep_speed=0.1, sleep_time=0.1: 500 spheres settle" in done.output
     done = CliRunner().invoke(app, ["run", "rain", "-s", "generate.count=500", "-s", "steps=2"])
     assert done.exit_code == 0 and "auto        rapid_contact_rule=tc, sleep_speed=0.1, sleep_time=0.1:" in done.output
+
+
+def test_reading_a_scene_decides_nothing_and_a_world_refuses_what_is_still_auto():
+    from physdbg.scene import read_scene
+
+    scene = read_scene("bounce", ["detection=auto"])
+    assert scene.settings.undecided() == ["detection", "rapid_contact_rule", "sleep_speed"] and scene.auto == {}
+    with pytest.raises(ValueError, match="detection, rapid_contact_rule, sleep_speed still 'auto': decide it"):
+        scene.build_world()
+    decide(scene)
+    assert scene.settings.undecided() == [] and set(scene.auto) == {"detection", "rapid_contact_rule", "sleep_speed"}
+    assert api.run(read_scene("bounce", ["steps=3"])).steps == 3  # the api decides what it is given
+
+
+def test_a_recorded_scene_comes_back_with_the_settings_the_run_used(tmp_path):
+    path = tmp_path / "rain.mcap"
+    api.record("rain", ["generate.count=60", "steps=2"], mcap_path=str(path), rrd=False)
+    from physdbg import open_recording
+
+    with open_recording(path) as rec:
+        again = rec.scene
+        used = rec.meta["settings"]
+    assert again.settings.undecided() == []
+    assert (again.settings.rapid_contact_rule, again.settings.sleep_speed, again.settings.sleep_time) == (
+        used["rapid_contact_rule"], used["sleep_speed"], used["sleep_time"])
+    assert again.auto["rapid_contact_rule"].endswith(": as recorded")

@@ -152,7 +152,7 @@ def test_a_budget_hit_in_a_pile_names_the_settings_that_let_it_rest(tmp_path):
     assert all(hint in f.advice for f in report.findings if f.kind == "tunnelling")
     from physdbg.analysis.audit import Auditor
     from physdbg.record.header import RecordingHeader
-    from physdbg.scene import load_scene
+    from physdbg.api import load_scene
 
     auditor = Auditor(RecordingHeader.from_scene(load_scene("rain", pile)))
     assert auditor._pile() == ("this scene makes a pile about 3.3 layers deep, which tc does not let rest: "

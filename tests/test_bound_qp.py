@@ -151,7 +151,7 @@ def test_a_ball_dropped_on_a_large_pile_settles_it_without_overlap_or_endless_ev
         stats = world.step(1 / 120)
         assert stats.max_overlap <= world.settings.contact_tolerance
         assert not stats.warnings
-        contacts.append(stats.contacts)
+        contacts.append(stats.counts.contacts)
         connected += int(world.held.count[3])
     assert world.held_count > 2 * MAX_DIRECT and connected > 0
     # the first step holds the pile's 288 resting contacts; then the impact (step 14) and
@@ -179,6 +179,7 @@ def test_on_euler_paths_a_rounding_sized_approach_is_still_resolved():
     with the anchor), the rounding rule is off: an Euler stack with discrete detection and
     e = 1 has a pair closing at 5.6e-17 m/s between spheres at 0.16 m/s; skipped, the
     narrow phase found it again at once and the step spent its whole swept-test budget."""
+    from physdbg.advisor import decide
     from physdbg.scene import scene_from_dict
 
     r = 0.1
@@ -186,6 +187,6 @@ def test_on_euler_paths_a_rounding_sized_approach_is_still_resolved():
              "gravity": [0.0, -9.81, 0.0], "dt": 1 / 60, "steps": 60, "max_swept_tests_per_step": 20_000,
              "particles": [{"position": [0.0, r + 2 * r * i, 0.0], "radius": r, "restitution": 1.0} for i in range(4)],
              "planes": [{"name": "floor", "normal": [0.0, 1.0, 0.0], "offset": 0.0}]}
-    world = scene_from_dict(table, "euler stack").build_world()
+    world = decide(scene_from_dict(table, "euler stack")).build_world()
     for _ in range(60):
         assert not world.step(1 / 60).warnings

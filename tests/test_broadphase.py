@@ -13,7 +13,7 @@ from physdbg.engine.broadphase import BruteForce, choose_broad_phase, make_broad
 from physdbg.engine.broadphase.bvh import BUILD_NAMES, BVH, build, sah_cost
 from physdbg.events import BroadPhaseInfo
 from physdbg.observe import ListObserver
-from physdbg.scene import load_scene
+from physdbg.api import load_scene
 
 FAST = ["grid", "bvh-sah", "bvh-median", "bvh-mean", "bvh-lbvh"]
 

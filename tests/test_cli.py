@@ -41,13 +41,13 @@ def test_run_prints_the_summary():
 
 def test_the_summary_counts_the_held_contacts_let_go_as_the_steps_do():
     """`run`'s contacts line: rapid and released over the run, each the sum of the steps'."""
-    from physdbg.scene import load_scene
+    from physdbg.api import load_scene
 
     options = ["generate.count=300", "steps=150", "rapid_contact_rule=hold", "sleep_speed=0"]  # the engine's rules
     scene = load_scene("rain", options)
     world = scene.build_world()
     steps = [world.step(dt) for dt in scene.step_lengths(None)]
-    rapid, released = sum(s.rapid for s in steps), sum(s.released for s in steps)
+    rapid, released = sum(s.counts.rapid for s in steps), sum(s.counts.released for s in steps)
     assert released > 0  # a pile forms: some held contacts come apart again
     result = invoke("run", "rain", *[f"--set={o}" for o in options])
     assert f"{rapid} rapid, {released} released; {world.held_count} held at the end" in result.output

@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 
 from physdbg import api, open_recording
 from physdbg.cli import app
-from physdbg.scene import load_scene
+from physdbg.api import load_scene
 from tests.student_engine import (EXAMPLES, MISTAKES, example_run, simulate, simulate_swept, write_blown_up,
                                   write_csv, write_jsonl)
 

@@ -74,7 +74,7 @@ def test_exact_against_verlet_under_drag_is_method_drift_from_step_one(tmp_path)
 def test_a_nudge_of_one_picometre_is_an_outside_change_at_the_next_step(tmp_path):
     from physdbg.record.header import RecordingHeader
     from physdbg.record.mcap_sink import McapRecorder
-    from physdbg.scene import load_scene
+    from physdbg.api import load_scene
 
     paths = []
     for name, nudge in (("plain", False), ("nudged", True)):

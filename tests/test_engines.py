@@ -44,7 +44,7 @@ def test_a_kick_is_read_at_the_instant_that_splits_the_step(tmp_path):
     """A ball at 1 m/s reversed at 0.25 of a 0.1 s step (no forces): the kick's instant."""
     import numpy as np
 
-    from physdbg.scene import load_scene
+    from physdbg.api import load_scene
 
     scene = load_scene("bullet-wall")
     frames = [(0.0, np.array([[0.0, 0, 0]]), np.array([[1.0, 0, 0]])),

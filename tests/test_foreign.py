@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 from physdbg import api, open_recording
 from physdbg.analysis import explain
 from physdbg.cli import app
-from physdbg.scene import load_scene
+from physdbg.api import load_scene
 from tests.student_engine import simulate, write_csv, write_jsonl
 
 

@@ -16,7 +16,8 @@ from hypothesis import strategies as st
 from physdbg.api import run
 from physdbg.engine import NonFiniteState
 from physdbg.errors import NonFiniteRunError, PhysdbgError, SceneError
-from physdbg.scene import FIELDS, load_scene, parse_scene
+from physdbg.api import load_scene
+from physdbg.scene import FIELDS, parse_scene
 
 from .conftest import make_state, make_world
 
@@ -168,7 +169,7 @@ def test_spheres_at_one_point_hit_the_pair_budget_not_memory():
     stats = world.step(0.01)
     assert [w.code for w in stats.warnings] == ["max_pairs_per_step"]
     assert "--set max_pairs_per_step=" in stats.warnings[0].message
-    assert stats.swept_tests == 0  # no sphere–sphere tests were spent
+    assert stats.counts.swept_tests == 0  # no sphere–sphere tests were spent
 
 
 def test_the_swept_test_budget_stops_a_step_that_would_run_long():
@@ -178,7 +179,7 @@ def test_the_swept_test_budget_stops_a_step_that_would_run_long():
     stats = world.step(scene.dt)
     assert [w.code for w in stats.warnings] == ["max_swept_tests_per_step"]
     # the budget is checked before each contact, and one contact re-predicts two particles
-    assert stats.swept_tests <= 5000 + 2 * (64 + 6)
+    assert stats.counts.swept_tests <= 5000 + 2 * (64 + 6)
     assert np.isfinite(world.state.positions).all()
 
 
@@ -196,7 +197,7 @@ def test_strong_gravity_piles_stay_bounded_and_out_of_the_floor():
     world = scene.build_world()
     for _ in range(3):
         stats = world.step(scene.dt)
-        assert stats.swept_tests < scene.settings.swept_test_budget(world.state.count)
+        assert stats.counts.swept_tests < scene.settings.swept_test_budget(world.state.count)
         assert stats.max_overlap <= scene.settings.contact_tolerance
 
 
@@ -246,7 +247,7 @@ def test_an_elastic_gas_keeps_its_energy_at_any_speed(speed):
     summary = run(scene)
     assert summary.contacts > 100  # it really collided
     assert abs(summary.energy_drift) < 1e-12
-    assert summary.resting_at_end == 0
+    assert summary.held_at_end == 0
 
 
 def test_the_slow_gas_from_the_issue_keeps_its_energy():
@@ -338,7 +339,7 @@ def test_a_full_disk_ends_the_recording_readable_with_a_message(tmp_path):
 
 def test_two_recordings_of_one_scene_are_two_rerun_recordings_with_readable_names(tmp_path):
     from physdbg.record.header import RecordingHeader
-    from physdbg.scene import load_scene
+    from physdbg.api import load_scene
 
     a = RecordingHeader.from_scene(load_scene("cradle", ["ordering=index"]))
     b = RecordingHeader.from_scene(load_scene("cradle"))

@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 from physdbg import api, open_recording
 from physdbg.cli import app
 from physdbg.peers import PeerError, run_peer
-from physdbg.scene import load_scene
+from physdbg.api import load_scene
 
 
 def _need(module: str) -> None:

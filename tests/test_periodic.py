@@ -21,7 +21,7 @@ from physdbg.engine.periodic import image, minimum_image, unwrap_near, wrap_posi
 from physdbg.errors import SceneError
 from physdbg.events import KIND_PAIR, Contacts
 from physdbg.observe import ListObserver
-from physdbg.scene import load_scene
+from physdbg.api import load_scene
 
 runner = CliRunner()
 
@@ -101,7 +101,7 @@ def test_a_head_on_collision_across_the_face_is_exact():
 def test_without_the_period_the_same_spheres_never_meet():
     world = World(state_of([[0.1, 0.5, 0.5], [0.9, 0.5, 0.5]], [[-1.0, 0, 0], [1.0, 0, 0]], radius=0.05),
                   periodic_walls(1.0, (False, True, True)), Settings(gravity=(0, 0, 0)))
-    assert world.step(0.1).contacts == 0
+    assert world.step(0.1).counts.contacts == 0
 
 
 def test_a_step_whose_swept_box_is_half_a_period_wide_is_refused_with_a_warning():
@@ -276,7 +276,7 @@ def test_a_box_that_a_contact_grows_past_half_a_period_is_reported():
                   np.ones(3), np.ones(3))
     world = World(state, periodic_walls(5.2), Settings(gravity=(0, 0, 0)))
     stats = world.step(0.1)
-    assert stats.contacts == 2
+    assert stats.counts.contacts == 2
     assert [w.code for w in stats.warnings] == ["periodic"]
     assert "sphere 1's later contacts" in stats.warnings[0].message  # the first box to outgrow it
     calm = World(state_of([[1.0, 1.0, 1.0], [1.11, 1.0, 1.0]], [[10.0, 0, 0], [0, 0, 0]], radius=0.05),

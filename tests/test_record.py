@@ -26,7 +26,7 @@ from physdbg.record.reader import RecordingIntegrityError
 from physdbg.record import format as fmt
 from physdbg.record import state_codec
 from physdbg.record.mcap_sink import McapRecorder
-from physdbg.scene import load_scene
+from physdbg.api import load_scene
 
 from . import tamper
 

@@ -17,7 +17,7 @@ from physdbg.observe import FanOut, ListObserver
 from physdbg.record import RecordingHeader
 from physdbg.record.mcap_sink import McapRecorder
 from physdbg.record.rerun_sink import RerunSink, viewer_binary
-from physdbg.scene import load_scene
+from physdbg.api import load_scene
 
 rerun_chunk = pytest.importorskip("rerun.chunk")
 
@@ -64,7 +64,7 @@ def test_the_rrd_holds_the_engines_positions_at_every_step_and_a_blueprint(billi
         got = np.array(rows[("/world/spheres", k)]["Points3D:positions"][-1], dtype=np.float32)
         np.testing.assert_array_equal(got, ends[k - 1].positions.astype(np.float32))
     for name in ("contacts", "rapid", "released"):
-        assert rows[(f"/stats/{name}", 60)]["Scalars:scalars"][0] == [ends[59].counts[name]]
+        assert rows[(f"/stats/{name}", 60)]["Scalars:scalars"][0] == [getattr(ends[59].counts, name)]
     logged = [text for (entity, _), comps in rows.items() if entity == "/log"
               for row in comps.get("TextLog:text", []) for text in row]
     first = live.contacts[0]

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from physdbg.errors import SceneError, UnknownSceneError
-from physdbg.scene import FIELDS, load_scene, parse_scene
+from physdbg.api import load_scene
+from physdbg.scene import FIELDS, parse_scene
 from physdbg.scenes import builtin_descriptions, builtin_names
 
 EXPECTED = {"bounce", "bullet-wall", "cradle", "billiards", "rain", "gas", "rest"}

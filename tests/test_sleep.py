@@ -10,7 +10,7 @@ from physdbg.events import CONTACT_ROW, KIND_PAIR
 from physdbg.engine.resting import HELD, held_add, new_held
 from physdbg.engine.sleep import SUPPORT_GAP, can_sleep, release_static
 from physdbg.errors import SceneError
-from physdbg.scene import load_scene
+from physdbg.api import load_scene
 
 from .conftest import make_state, make_walls
 
@@ -55,7 +55,7 @@ def _step_until(world, counted: str, limit: int):
     for _ in range(limit):
         stats = world.step(1 / 60)
         assert stats.max_overlap <= world.settings.contact_tolerance
-        if getattr(stats, counted):
+        if getattr(stats.counts, counted):
             return stats
     raise AssertionError(f"no step counted {counted} in {limit} steps")
 
@@ -63,13 +63,13 @@ def _step_until(world, counted: str, limit: int):
 def test_a_dropped_ball_comes_to_rest_then_sleeps_exactly_where_it_lies():
     world = _world([[0.0, 0.6, 0.0]])
     stats = _step_until(world, "slept", 600)
-    assert stats.asleep == 1
+    assert stats.counts.asleep == 1
     lying = world.state.positions.copy()
     assert world.state.velocities.tolist() == [[0.0, 0.0, 0.0]]
     assert lying[0, 1] == pytest.approx(0.1, abs=1e-9)  # on the floor
     for _ in range(60):
         stats = world.step(1 / 60)
-        assert (stats.contacts, stats.asleep, stats.slept, stats.woken) == (0, 1, 0, 0)
+        assert (stats.counts.contacts, stats.counts.asleep, stats.counts.slept, stats.counts.woken) == (0, 1, 0, 0)
         assert stats.kinetic == 0.0
     assert np.array_equal(world.state.positions, lying)  # to the bit: no gravity, no motion
 
@@ -79,7 +79,7 @@ def test_sleeping_is_off_by_default_and_then_nothing_sleeps():
     world = World(state, make_walls(([0, 1, 0], 0.0, 0.5)), Settings())
     for _ in range(300):
         stats = world.step(1 / 60)
-    assert world.sleepers is None and (stats.asleep, stats.slept, stats.woken) == (0, 0, 0)
+    assert world.sleepers is None and (stats.counts.asleep, stats.counts.slept, stats.counts.woken) == (0, 0, 0)
 
 
 def test_a_stack_sleeps_from_the_floor_up_and_a_hit_on_its_foot_wakes_it_all():
@@ -90,7 +90,7 @@ def test_a_stack_sleeps_from_the_floor_up_and_a_hit_on_its_foot_wakes_it_all():
     assert world.sleepers.asleep.tolist() == [True, True, False]  # together: the lower one lets the upper sleep
     stats = _step_until(world, "woken", 180)
     # the bottom ball was hit (rule 2) and the one resting on it woke with it (rule 3)
-    assert stats.woken == 2 and not world.sleepers.asleep.any()
+    assert stats.counts.woken == 2 and not world.sleepers.asleep.any()
     # within the step of the impact the sleeper did not move: the ball bounced off it
     assert world.state.velocities[0].tolist() == [0.0, 0.0, 0.0]
     assert world.state.velocities[2, 0] > 0.0
@@ -102,18 +102,18 @@ def test_a_ball_on_an_awake_one_does_not_fall_asleep_before_it():
     world.sleepers.allowed[0] = False  # the lower ball may never sleep
     for _ in range(60):
         stats = world.step(1 / 60)
-    assert stats.asleep == 0
+    assert stats.counts.asleep == 0
     world.sleepers.allowed[0] = True
     for _ in range(30):
         stats = world.step(1 / 60)
-    assert stats.asleep == 2
+    assert stats.counts.asleep == 2
 
 
 def test_a_slow_ball_in_a_box_without_gravity_never_sleeps():
     world = _world([[0.0, 0.5, 0.0]], [[0.01, 0.0, 0.0]], gravity=(0.0, 0.0, 0.0), restitution=1.0)
     for _ in range(120):
         stats = world.step(1 / 60)
-    assert stats.asleep == 0 and world.state.velocities[0, 0] == 0.01
+    assert stats.counts.asleep == 0 and world.state.velocities[0, 0] == 0.01
 
 
 def test_a_held_contact_between_two_immovable_ends_is_released():
@@ -152,11 +152,11 @@ def test_a_pile_falls_asleep_exactly_and_sleeping_never_adds_energy():
         before = energy
         stats = world.step(scene.dt)
         energy = stats.kinetic + stats.potential
-        slept += stats.slept
+        slept += stats.counts.slept
         assert stats.max_overlap <= scene.settings.contact_tolerance and not stats.warnings
         if before is not None:
             assert energy <= before + 1e-7 * abs(before)
-    assert slept >= 100 and stats.asleep == 100 and (stats.contacts, stats.events, stats.kinetic) == (0, 0, 0.0)
+    assert slept >= 100 and stats.counts.asleep == 100 and (stats.counts.contacts, stats.counts.events, stats.kinetic) == (0, 0, 0.0)
 
 
 def test_only_slow_spheres_fall_asleep_and_only_their_kinetic_energy_goes():

@@ -16,7 +16,7 @@ from physdbg.engine.toi import (
     wall_toi_sampled,
     wall_toi_swept,
 )
-from physdbg.scene import load_scene
+from physdbg.api import load_scene
 
 coord = st.floats(-3.0, 3.0, allow_nan=False)
 vec = st.tuples(coord, coord, coord).map(np.array)

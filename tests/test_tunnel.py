@@ -20,7 +20,7 @@ from physdbg.analysis.tunnel import (
 from physdbg.cli import app
 from physdbg.engine.state import Walls
 from physdbg.events import CONTACT_ROW, KIND_PAIR, KIND_WALL, Contacts
-from physdbg.scene import load_scene
+from physdbg.api import load_scene
 
 R = 0.1
 

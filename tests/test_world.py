@@ -24,7 +24,7 @@ from physdbg.events import (
     SweptTests,
 )
 from physdbg.observe import FanOut, ListObserver
-from physdbg.scene import load_scene
+from physdbg.api import load_scene
 
 from .conftest import make_state, make_walls, make_world
 
@@ -61,23 +61,23 @@ def test_bounce_scene_comes_to_rest_on_the_floor():
         stats = world.step(scene.dt)
     assert world.state.positions[0, 1] == pytest.approx(0.1, abs=1e-9)
     assert np.all(world.state.velocities == 0.0)
-    assert stats.held == 1 and stats.contacts == 0
+    assert stats.counts.held == 1 and stats.counts.contacts == 0
 
 
 def test_a_held_contact_that_is_kicked_apart_is_counted_as_released():
-    """StepStats.released (and StepEnd.counts, the recording's column): the held contacts
+    """StepEnd.counts.released (the recording's column too): the held contacts
     a step let go of — here the resting ball's, once it is thrown upwards."""
     scene = load_scene("bounce")
     obs = ListObserver()
     world = scene.build_world(obs)
     for _ in range(scene.steps):
         stats = world.step(scene.dt)
-    assert stats.held == 1 and stats.released == 0
+    assert stats.counts.held == 1 and stats.counts.released == 0
     world.state.velocities[0] = (0.0, 3.0, 0.0)
     stats = world.step(scene.dt)
-    assert stats.held == 0 and stats.released == 1
-    assert obs.events[-1].counts["released"] == 1
-    assert world.step(scene.dt).released == 0
+    assert stats.counts.held == 0 and stats.counts.released == 1
+    assert obs.events[-1].counts.released == 1
+    assert world.step(scene.dt).counts.released == 0
 
 
 # ----------------------------------------------------------------------------- cradle
@@ -130,7 +130,7 @@ def test_elastic_gas_conserves_energy_over_ten_thousand_steps():
     worst_overlap = 0.0
     for _ in range(scene.steps):
         stats = world.step(scene.dt)
-        contacts += stats.contacts
+        contacts += stats.counts.contacts
         worst_overlap = max(worst_overlap, stats.max_overlap)
         assert not stats.warnings
     k1, _, _ = energies(world.state, world.gravity)
@@ -151,7 +151,7 @@ def test_resting_sphere_stays_at_its_height_with_bounded_events(integrator):
     for _ in range(10_000):
         stats = world.step(1 / 60)
         heights.append(world.state.positions[0, 1])
-        events.append(stats.contacts)
+        events.append(stats.counts.contacts)
     assert max(abs(h - r) for h in heights) <= 1e-9
     assert max(events) <= 2
     assert sum(events) <= 4  # it settles once, then costs nothing
@@ -165,7 +165,7 @@ def test_stacks_and_rows_rest_and_a_dropped_ball_settles():
     per_step = []
     for _ in range(scene.steps):
         stats = world.step(scene.dt)
-        per_step.append(stats.contacts)
+        per_step.append(stats.counts.contacts)
         assert stats.max_overlap <= scene.settings.contact_tolerance
     final = world.state.positions
     np.testing.assert_allclose(final[:6], start[:6], atol=1e-9)  # stack and row unmoved
@@ -173,7 +173,7 @@ def test_stacks_and_rows_rest_and_a_dropped_ball_settles():
     assert np.all(np.abs(world.state.velocities) < 1e-9)
     assert max(per_step) <= 20
     assert sum(per_step[-100:]) == 0  # settled: no events any more
-    assert stats.held == 7
+    assert stats.counts.held == 7
 
 
 def test_event_cap_stops_the_step_and_warns():
@@ -184,7 +184,7 @@ def test_event_cap_stops_the_step_and_warns():
         world.step(scene.dt)
     caps = [w for w in obs.warnings if w.code == "max_events_per_step"]
     assert caps, "the cap must be reported"
-    assert max(e.counts["contacts"] for e in obs.step_ends) == 2
+    assert max(e.counts.contacts for e in obs.step_ends) == 2
 
 
 def test_the_contact_and_swept_test_budgets_are_sized_to_the_scene_unless_set(monkeypatch):
@@ -202,7 +202,7 @@ def test_the_contact_and_swept_test_budgets_are_sized_to_the_scene_unless_set(mo
     for count, budget in ((3, 5_000), (20, 20_000)):
         world = load_scene("gas", ["dt=100", "steps=1", f"generate.count={count}"]).build_world()
         stats = world.step(100.0)  # a long step in a small box: every sphere bounces thousands of times
-        assert budget <= stats.swept_tests <= budget + 2 * (count + 6)
+        assert budget <= stats.counts.swept_tests <= budget + 2 * (count + 6)
         assert stats.warnings[0].message.startswith(f"max_swept_tests_per_step reached ({budget} swept tests)")
 
 
@@ -229,8 +229,8 @@ def test_events_arrive_in_pipeline_order_with_everything_a_recording_needs():
     end = obs.step_ends[-1]
     assert end.positions.shape == (5, 3) and end.velocities.shape == (5, 3)
     assert set(end.timings) == {"forces", "broad_phase", "narrow_phase", "resolve", "finish"}
-    assert set(end.counts) == {"contacts", "swept_tests", "events", "resting", "rapid", "released", "asleep",
-                               "slept", "woken"}
+    assert set(vars(end.counts)) == {"contacts", "swept_tests", "events", "held", "rapid", "released", "asleep",
+                                     "slept", "woken"}
     assert end.kinetic == pytest.approx(0.5)
     contact = obs.contacts[0]
     assert contact.impulse == pytest.approx(1.0)  # j = -(1+1)(1·n)/(1+1), n = -x
@@ -261,9 +261,10 @@ def test_an_unobserved_step_logs_only_the_tests_that_hit(ordering):
     for _ in range(scene.steps):
         a = watched.step(scene.dt)
         b = alone.step(scene.dt)
-        assert (a.state_hash, a.swept_tests, a.contacts) == (b.state_hash, b.swept_tests, b.contacts)
+        assert ((a.state_hash, a.counts.swept_tests, a.counts.contacts)
+                == (b.state_hash, b.counts.swept_tests, b.counts.contacts))
         tests = obs.swept_tests[-1]
-        assert len(tests.kind) == a.swept_tests
+        assert len(tests.kind) == a.counts.swept_tests
         hit = ~np.isnan(tests.toi)
         rows = int(alone._buf.counters[ROWS])
         assert rows == int(hit.sum())
@@ -272,7 +273,7 @@ def test_an_unobserved_step_logs_only_the_tests_that_hit(ordering):
         np.testing.assert_array_equal(alone._buf.test_float[:rows, 1], tests.toi[hit])
         np.testing.assert_array_equal(alone._buf.test_outcome[:rows], tests.outcome[hit])
         kept += rows
-        total += b.swept_tests
+        total += b.counts.swept_tests
     assert 0 < kept < total / 2
 
 
@@ -288,9 +289,10 @@ def test_an_observer_that_reads_no_swept_tests_gets_none_and_the_step_logs_only_
     a, b = scene.build_world(lean), scene.build_world(full)
     for _ in range(scene.steps):
         sa, sb = a.step(scene.dt), b.step(scene.dt)
-        assert (sa.state_hash, sa.swept_tests, sa.contacts) == (sb.state_hash, sb.swept_tests, sb.contacts)
+        assert ((sa.state_hash, sa.counts.swept_tests, sa.counts.contacts)
+                == (sb.state_hash, sb.counts.swept_tests, sb.counts.contacts))
         rows = int(a._buf.counters[ROWS])
-        assert rows == int(np.count_nonzero(~np.isnan(full.swept_tests[-1].toi))) < sb.swept_tests
+        assert rows == int(np.count_nonzero(~np.isnan(full.swept_tests[-1].toi))) < sb.counts.swept_tests
     assert lean.swept_tests == [] and len(full.swept_tests) == scene.steps
     assert [type(e) for e in lean.events] == [type(e) for e in full.events if not isinstance(e, SweptTests)]
     assert len(lean.contacts) == len(full.contacts) > 0
@@ -342,7 +344,7 @@ def test_an_observer_of_the_swept_tests_counts_their_log_against_max_memory():
     lean, full = scene.build_world(_NoTests()), scene.build_world(ListObserver())
     lean_stats = [lean.step(scene.dt) for _ in range(scene.steps)]
     full_stats = [full.step(scene.dt) for _ in range(scene.steps)]
-    assert all(s.warnings == [] for s in lean_stats)
+    assert all(not s.warnings for s in lean_stats)
     message = full_stats[0].warnings[0].message
     assert message.startswith("max_memory reached") and "or record below --detail full" in message
 
@@ -400,8 +402,8 @@ def test_box_rain_piles_up_exactly_with_no_step_stopped_by_a_budget():
         stats = world.step(scene.dt)
         assert not stats.warnings, stats.warnings
         assert stats.max_overlap <= scene.settings.contact_tolerance
-        rapid += stats.rapid
-        held = stats.held
+        rapid += stats.counts.rapid
+        held = stats.counts.held
     assert held > 100  # the first layers lie on the floor, held
     assert rapid > 0  # and the rapid-contact rule acted (reported per step)
 
@@ -420,8 +422,8 @@ def test_box_rain_under_the_tc_rule_is_exact_and_does_not_churn():
             stats = world.step(scene.dt)
             assert not stats.warnings, stats.warnings
             assert stats.max_overlap <= scene.settings.contact_tolerance
-            released[rule] += stats.released
-            rapid += stats.rapid
+            released[rule] += stats.counts.released
+            rapid += stats.counts.rapid
         assert rapid > 1000  # the rule acts under both
     assert released["hold"] > 500 and released["tc"] * 50 < released["hold"], released
 
@@ -437,8 +439,8 @@ def test_box_rain_comes_entirely_to_rest_under_tc_with_sleeping():
         stats = world.step(scene.dt)
         assert not stats.warnings, stats.warnings
         assert stats.max_overlap <= scene.settings.contact_tolerance
-        most = max(most, stats.contacts)
-    assert stats.asleep == 1000 and (stats.contacts, stats.events, stats.held, stats.kinetic) == (0, 0, 0, 0.0)
+        most = max(most, stats.counts.contacts)
+    assert stats.counts.asleep == 1000 and (stats.counts.contacts, stats.counts.events, stats.counts.held, stats.kinetic) == (0, 0, 0, 0.0)
     assert most < 20_000  # bounded on the way: the event cap of 1 000 spheres is 20 000
 
 
@@ -451,8 +453,8 @@ def test_under_the_tc_rule_a_lone_ball_still_comes_to_rest():
         scene = load_scene("bounce", ["rest_fraction=0", f"rapid_contact_rule={rule}"])
         world = scene.build_world()
         steps = [world.step(scene.dt) for _ in range(scene.steps)]
-        assert sum(s.rapid for s in steps) > 0 and steps[-1].held == 1
-        assert sum(s.contacts for s in steps[-20:]) == 0  # at rest: no contact is resolved any more
+        assert sum(s.counts.rapid for s in steps) > 0 and steps[-1].counts.held == 1
+        assert sum(s.counts.contacts for s in steps[-20:]) == 0  # at rest: no contact is resolved any more
         hashes[rule] = steps[-1].state_hash
     assert hashes["hold"] == hashes["tc"]
 
@@ -460,7 +462,7 @@ def test_under_the_tc_rule_a_lone_ball_still_comes_to_rest():
 def test_the_rapid_contact_rule_can_be_turned_off_and_then_never_acts():
     scene = _box_rain(300, "rapid_contact_time=0", "steps=120")
     world = scene.build_world()
-    assert sum(world.step(scene.dt).rapid for _ in range(scene.steps)) == 0
+    assert sum(world.step(scene.dt).counts.rapid for _ in range(scene.steps)) == 0
 
 
 def test_an_unpressed_rapid_contact_is_elastic_so_a_free_row_does_not_collapse():
@@ -474,7 +476,7 @@ def test_an_unpressed_rapid_contact_is_elastic_so_a_free_row_does_not_collapse()
         world.step(0.1)
     rapid = [c for c in obs.contacts if c.restitution == 1.0]
     assert rapid and all(not c.resting for c in obs.contacts)
-    assert sum(s.counts["rapid"] for s in obs.step_ends) == len(rapid)
+    assert sum(s.counts.rapid for s in obs.step_ends) == len(rapid)
 
 
 def test_an_euler_pair_is_predicted_along_the_straight_lines_after_a_partner_bounced():
@@ -513,10 +515,10 @@ def test_a_contact_far_from_the_walls_re_predicts_no_wall():
     state = make_state([[0.4, 0.5, 0.5], [0.6, 0.5, 0.5]], [[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]], radius=0.05)
     world, obs = make_world(state, box, gravity=(0.0, 0.0, 0.0))
     stats = world.step(0.1)
-    assert stats.contacts == 1
+    assert stats.counts.contacts == 1
     tests = obs.swept_tests[-1]
     # the step-start pair test (a hit) and the pair predicted once after the contact
-    assert list(tests.kind) == [KIND_PAIR, KIND_PAIR] and stats.swept_tests == 2
+    assert list(tests.kind) == [KIND_PAIR, KIND_PAIR] and stats.counts.swept_tests == 2
     # elastic, equal masses: they meet at 0.05 s and are back where they started at 0.1 s
     np.testing.assert_allclose(world.state.positions[:, 0], [0.4, 0.6], atol=1e-15)
     np.testing.assert_allclose(world.state.velocities[:, 0], [-1.0, 1.0], atol=1e-15)
@@ -547,7 +549,7 @@ def test_a_changed_sphere_skips_a_partner_its_new_path_cannot_reach():
                        [[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]], radius=0.05)
     world, obs = make_world(state, gravity=(0.0, 0.0, 0.0), broad_phase="brute-force")
     stats = world.step(0.1)
-    assert stats.contacts == 1
+    assert stats.counts.contacts == 1
     tests = obs.swept_tests[-1]
     pairs = [(int(a), int(o)) for a, o in zip(tests.a, tests.other)]
     assert [1, 2] in world.last_step.pairs.tolist()  # a broad-phase pair
@@ -588,6 +590,6 @@ def test_after_warm_up_a_run_loads_no_kernel(monkeypatch):
     world = scene.build_world()
     seen = set()
     for _ in range(scene.steps):
-        seen.add(min(world.step(scene.dt).contacts, 2))
+        seen.add(min(world.step(scene.dt).counts.contacts, 2))
         world._refresh_box(world.last_step, 0)
     assert seen == {0, 1, 2} and world.sleepers is not None

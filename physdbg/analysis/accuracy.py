@@ -217,6 +217,7 @@ def methods(problem: Problem) -> Iterator[tuple[str, str, str]]:
 def run_one(problem: Problem, integrator: str, detection: str, ordering: str, dt: float) -> Run:
     """Run one method on a problem at dt: its error and cost."""
     from ..engine import energies
+    from ..advisor import decide
     from ..scene import scene_from_dict
 
     table = problem.table()
@@ -224,7 +225,7 @@ def run_one(problem: Problem, integrator: str, detection: str, ordering: str, dt
     table.pop("duration", None)
     steps = max(1, round(problem.duration / dt))
     table["steps"] = steps
-    scene = scene_from_dict(table, f"accuracy problem {problem.name}")
+    scene = decide(scene_from_dict(table, f"accuracy problem {problem.name}"))
     world = scene.build_world()
     n = scene.state.count
     times, positions, kinetic = np.empty(steps + 1), np.empty((steps + 1, n, 3)), np.empty(steps + 1)

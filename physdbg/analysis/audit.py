@@ -166,7 +166,7 @@ class Auditor:
                 self._check_energy_of_states(step, end)
         self._asleep = end.asleep
         # a rattling step's spheres can all be asleep only once one of them fell asleep
-        if self._rattling and end.asleep is not None and end.counts.get("slept", 1):
+        if self._rattling and end.asleep is not None and end.counts.slept:
             still = []
             for finding, involved in self._rattling:
                 if end.asleep[involved].all():

@@ -42,12 +42,13 @@ def box_rain_scene(count: int, steps: int, overrides: tuple[str, ...] = ()):
     """box-rain: ``count`` spheres (r = 0.05 m, e = 0.8) rain into a box whose volume they
     fill to 10 %, dt = 1/240 s (the built-in rain scene, grown); the pile rules are the
     scene's (auto: the TC rule and sleeping, as it makes a pile). overrides: KEY=VALUE."""
-    from ..scene import load_scene
+    from ..advisor import decide
+    from ..scene import read_scene
 
     side = (count * 4.0 / 3.0 * math.pi * 0.05**3 / 0.1) ** (1.0 / 3.0)
-    return load_scene("rain", [f"generate.count={count}", "generate.radius=0.05", f"box.max=[{side},{side},{side}]",
-                               "dt=1/240", f"steps={steps}", "generate.restitution=0.8", "box.restitution=0.8",
-                               *overrides])
+    return decide(read_scene("rain", [f"generate.count={count}", "generate.radius=0.05",
+                                      f"box.max=[{side},{side},{side}]", "dt=1/240", f"steps={steps}",
+                                      "generate.restitution=0.8", "box.restitution=0.8", *overrides]))
 
 
 @dataclass(frozen=True)
@@ -82,9 +83,10 @@ SMALL_SCENES = ("bounce", "cradle", "bullet-wall")  # where the contact time is 
 
 
 def _builtin(name: str, overrides=()):
-    from ..scene import load_scene
+    from ..advisor import decide
+    from ..scene import read_scene
 
-    return load_scene(name, list(overrides))
+    return decide(read_scene(name, list(overrides)))
 
 
 @dataclass
@@ -150,10 +152,11 @@ def _run_one(run: EngineRun, method: Method, scene_of, reference: dict, small: b
 
 def _rebuilt(scene, overrides):
     """The scene again with more overrides (its own first)."""
-    from ..scene import load_scene
+    from ..advisor import decide
+    from ..scene import read_scene
 
-    return load_scene(scene.source if scene.source.endswith(".toml") else scene.name,
-                      [*getattr(scene, "overrides", ()), *overrides])
+    return decide(read_scene(scene.source if scene.source.endswith(".toml") else scene.name,
+                             [*getattr(scene, "overrides", ()), *overrides]))
 
 
 def _sample_every(scene) -> int:

@@ -81,10 +81,11 @@ def _run(table: dict, steps: int, dt: float, check: Callable) -> tuple[str, str]
     from ..engine import energies
     from ..events import EngineWarning
     from ..observe import ListObserver
+    from ..advisor import decide
     from ..scene import scene_from_dict
 
     table = dict(table, dt=dt, steps=steps)
-    scene = scene_from_dict(table, "stability map")
+    scene = decide(scene_from_dict(table, "stability map"))
     warnings = ListObserver()
     world = scene.build_world(warnings)
     gravity = np.asarray(scene.settings.gravity)

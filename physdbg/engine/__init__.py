@@ -11,10 +11,10 @@ from .resolve import RESTITUTION_RULES, combine_restitution
 from .resting import RAPID_RULES
 from .state import BUDGETS, ORDERING_NAMES, SIZED_BUDGETS, NonFiniteState, Settings, State, Walls, energies, state_hash
 from .toi import DETECTION_NAMES
-from .world import StepStats, World, warm_up
+from .world import World, warm_up
 
 __all__ = [
     "BROAD_PHASE_NAMES", "BUDGETS", "BruteForce", "choose_broad_phase", "DETECTION_NAMES", "INTEGRATOR_NAMES", "ORDERING_NAMES",
-    "NonFiniteState", "RAPID_RULES", "RESTITUTION_RULES", "SIZED_BUDGETS", "Settings", "State", "StepStats", "Walls", "World",
+    "NonFiniteState", "RAPID_RULES", "RESTITUTION_RULES", "SIZED_BUDGETS", "Settings", "State", "Walls", "World",
     "combine_restitution", "energies", "make_broad_phase", "state_hash", "warm_up",
 ]

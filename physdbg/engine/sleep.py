@@ -41,7 +41,7 @@ sleeping sphere, an immovable sphere) is released when the sphere falls asleep: 
 is left to solve there, and it would hold a contact no swept test then watches.
 
 The counts of each step (spheres asleep at its end, fallen asleep and woken in it) are in
-its stats (StepStats, the recording's /physdbg/stats). Periodic boxes are not supported
+its stats (StepEnd.counts, the recording's /physdbg/stats). Periodic boxes are not supported
 (a scene that asks for both is refused): their gaps need the minimum image, and their
 scenes (gases) have no gravity to rest under.
 """

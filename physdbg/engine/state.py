@@ -53,6 +53,11 @@ BUDGETS = {
 }
 
 
+# settings a scene may give as "auto": the advisor (physdbg.advisor.decide) replaces each by
+# a value before a World is built; the engine itself never decides
+AUTO_SETTINGS = ("integrator", "detection", "ordering", "rapid_contact_rule", "sleep_speed")
+
+
 @dataclass
 class Settings:
     """How the engine steps. Units: s, m, m/s, m/s².
@@ -121,6 +126,10 @@ class Settings:
     def budget(self, name: str, spheres: int) -> int:
         """The value budget ``name`` (a BUDGETS key) takes in a world of this many spheres."""
         return budget_value(name, getattr(self, name), spheres)
+
+    def undecided(self) -> list[str]:
+        """The settings still "auto" (AUTO_SETTINGS): a World refuses them."""
+        return [name for name in AUTO_SETTINGS if getattr(self, name) == "auto"]
 
     @property
     def integrator_code(self) -> int:

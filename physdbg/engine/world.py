@@ -30,7 +30,6 @@ included) are logged and sent only to an observer that reads them (see
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from time import perf_counter
 
 import numpy as np
@@ -43,7 +42,9 @@ from ..events import (
     OUTCOME_SUPERSEDED,
     Contacts,
     EngineWarning,
+    STEP_PHASES,
     StepBegin,
+    StepCounts,
     StepEnd,
     SweptTests,
 )
@@ -102,31 +103,6 @@ from .timeline import (
 SOLVE_TOLERANCE = 1e-12
 
 
-@dataclass
-class StepStats:
-    """What one step reports whether or not anyone observes it."""
-
-    step: int
-    time: float
-    dt: float
-    kinetic: float
-    potential: float
-    momentum: np.ndarray
-    contacts: int
-    swept_tests: int
-    events: int
-    held: int
-    rapid: int
-    released: int
-    asleep: int
-    slept: int
-    woken: int
-    max_overlap: float
-    state_hash: str
-    timings: dict[str, float]
-    warnings: list[EngineWarning]
-
-
 class World:
     """Particles, walls and settings, stepped in place.
 
@@ -143,6 +119,9 @@ class World:
     """
 
     def __init__(self, state: State, walls: Walls, settings: Settings, observer=None):
+        if settings.undecided():
+            raise ValueError(f"{', '.join(settings.undecided())} still 'auto': decide it before building a World "
+                             f"(physdbg.advisor.decide(scene), or load with physdbg.api.load_scene)")
         bad = first_non_finite(state.positions, state.velocities)
         if bad is not None:
             raise ValueError(f"the initial {bad[1]} of sphere {bad[0]} is NaN or infinite")
@@ -234,20 +213,18 @@ class World:
         return int(self.held.count[HELD])
 
     # ------------------------------------------------------------------ the step
-    def step(self, dt: float) -> StepStats:
-        """Advance the world by ``dt`` seconds and report what happened.
+    def step(self, dt: float) -> StepEnd:
+        """Advance the world by ``dt`` seconds and report what happened (the StepEnd the
+        observer also gets).
 
         Raises NonFiniteState (after reporting the step) when a position or velocity
         became NaN or infinite: the world cannot go on from there.
         """
         ctx = self._begin(_checked_step_length(dt))
-        self._timed(ctx, "forces", self._forces)
-        self._timed(ctx, "broad_phase", self._broad_phase)
-        if ctx.observer is not None:
-            ctx.observer.on_event(self._broad_phase_event(ctx))
-        self._timed(ctx, "narrow_phase", self._narrow_phase)
-        self._timed(ctx, "resolve", self._resolve)
-        self._timed(ctx, "finish", self._finish)
+        for name in STEP_PHASES:  # each phase is the method of its name
+            self._timed(ctx, name, getattr(self, f"_{name}"))
+            if name == "broad_phase" and ctx.observer is not None:  # reported outside its timing
+                ctx.observer.on_event(self._broad_phase_event(ctx))
         return self._end(ctx)
 
     def _begin(self, dt: float) -> StepContext:
@@ -371,34 +348,26 @@ class World:
             release_static(self.held, self._inverse_mass)
         ctx.slept, ctx.woken = int(fell.size), int(woke.size)
 
-    def _end(self, ctx: StepContext) -> StepStats:
-        """The step's stats and its closing events; raises NonFiniteState after reporting."""
+    def _end(self, ctx: StepContext) -> StepEnd:
+        """The step's record, after its closing events; raises NonFiniteState after reporting."""
         buf = self._buf
-        contacts = int(buf.counters[CONTACTS])
-        tests = int(buf.counters[TESTS])
-        events = int(buf.counters[EVENTS])
-        rapid = int(buf.counters[RAPID])
-        released = int(self.held.count[STEP_RELEASED])
-        asleep = self.sleepers.count if self.sleepers is not None else 0
-        stats = StepStats(ctx.step, self.time, ctx.dt, ctx.kinetic, ctx.potential, ctx.momentum, contacts, tests,
-                          events, self.held_count, rapid, released, asleep, ctx.slept, ctx.woken, ctx.max_overlap,
-                          ctx.state_hash, ctx.timings, ctx.warnings)
+        counts = StepCounts(contacts=int(buf.counters[CONTACTS]), swept_tests=int(buf.counters[TESTS]),
+                            events=int(buf.counters[EVENTS]), held=self.held_count, rapid=int(buf.counters[RAPID]),
+                            released=int(self.held.count[STEP_RELEASED]),
+                            asleep=self.sleepers.count if self.sleepers is not None else 0,
+                            slept=ctx.slept, woken=ctx.woken)
+        end = StepEnd(ctx.step, self.time, ctx.dt, self.state.positions.copy(), self.state.velocities.copy(),
+                      ctx.kinetic, ctx.potential, ctx.momentum.copy(), counts, ctx.max_overlap, dict(ctx.timings),
+                      ctx.state_hash, tuple(ctx.warnings), self.asleep())
         obs = ctx.observer
         if obs is not None:
-            x, v = self.state.positions, self.state.velocities
             obs.on_event(self._contacts_event(ctx))
             if wants_swept_tests(obs):
                 obs.on_event(self._swept_tests_event(ctx))
-            obs.on_event(StepEnd(ctx.step, self.time, ctx.dt, x.copy(), v.copy(), ctx.kinetic, ctx.potential,
-                                 ctx.momentum.copy(),
-                                 {"contacts": contacts, "swept_tests": tests, "events": events,
-                                  "resting": self.held_count, "rapid": rapid, "released": released,
-                                  "asleep": asleep, "slept": ctx.slept, "woken": ctx.woken},
-                                 ctx.max_overlap, dict(ctx.timings), ctx.state_hash,
-                                 tuple(w.message for w in ctx.warnings), self.asleep()))
+            obs.on_event(end)
         if ctx.non_finite is not None:
             raise NonFiniteState(ctx.step, *ctx.non_finite)
-        return stats
+        return end
 
     def _renumber(self) -> None:
         """Number the spheres in Morton order of where they are now (space_order.py): every

@@ -298,7 +298,7 @@ def import_run(run: ForeignRun, scene, out: Path, notes: list[str] | None = None
     the run as foreign, so ``verify`` says it cannot be re-simulated. notes: how the run
     was made (a peer adapter's translation), kept in the recording."""
     from ..engine import energies, state_hash
-    from ..events import StepEnd
+    from ..events import StepCounts, StepEnd
     from .header import RecordingHeader
     from .mcap_sink import McapRecorder
 
@@ -324,7 +324,7 @@ def import_run(run: ForeignRun, scene, out: Path, notes: list[str] | None = None
             state.positions, state.velocities = run.positions[k].copy(), velocities[k].copy()
             kinetic, potential, momentum = energies(state, gravity)
             recorder.on_event(StepEnd(k - 1, float(run.times[k]), float(run.times[k] - run.times[k - 1]),
-                                      state.positions, state.velocities, kinetic, potential, momentum, {},
+                                      state.positions, state.velocities, kinetic, potential, momentum, StepCounts(),
                                       _max_overlap(state.positions, st.radius, scene.walls), {},
                                       state_hash(state.positions, state.velocities)))
         return recorder.frames

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import events
 from ..events import CONTACT_FIELDS
 
 FORMAT_NAME = "physdbg-recording"
@@ -92,18 +93,30 @@ def topics_for(detail: str, view: bool = False) -> tuple[str, ...]:
 PARTICLE_FIELDS = [
     ("radius", "<f8", ()), ("inverse_mass", "<f8", ()), ("restitution", "<f8", ()), ("gravity_scale", "<f8", ()),
 ]
-STATS_FIELDS = [
-    ("time", "<f8", ()), ("dt", "<f8", ()), ("kinetic", "<f8", ()), ("potential", "<f8", ()),
-    ("energy", "<f8", ()), ("momentum", "<f8", (3,)), ("contacts", "<i8", ()), ("swept_tests", "<i8", ()), ("events", "<i8", ()),
-    ("resting", "<i8", ()), ("rapid", "<i8", ()), ("max_overlap", "<f8", ()),
-    ("seconds_forces", "<f8", ()), ("seconds_broad_phase", "<f8", ()), ("seconds_narrow_phase", "<f8", ()),
-    ("seconds_resolve", "<f8", ()), ("seconds_finish", "<f8", ()),
-    ("temperature", "<f8", ()), ("virial", "<f8", ()), ("wall_impulse", "<f8", ()), ("collisions", "<i8", ()),
-    ("released", "<i8", ()), ("asleep", "<i8", ()), ("slept", "<i8", ()), ("woken", "<i8", ()),
-]
-# the counts of StepEnd.counts, each a column of STATS_FIELDS (a recording made before
-# ``released`` or the sleep counts existed reads 0 there)
-STEP_COUNTS = ("contacts", "swept_tests", "events", "resting", "rapid", "released", "asleep", "slept", "woken")
+# /physdbg/stats: one row a step, its columns derived from the step record (events.StepEnd:
+# its StepCounts and STEP_PHASES) and the collision sums. A protobuf field's number is its
+# column's place in this order, which never changes (files are decoded by number); a count
+# or phase the step record gains becomes a new column at the end, with no edit here, and a
+# recording made before a column existed reads 0 there. ``held`` was written as
+# ``resting`` (the same field number: old files read the same).
+_STATS_NUMBERED = (
+    "time", "dt", "kinetic", "potential", "energy", "momentum", "contacts", "swept_tests", "events", "held", "rapid",
+    "max_overlap", "seconds_forces", "seconds_broad_phase", "seconds_narrow_phase", "seconds_resolve",
+    "seconds_finish", "temperature", "virial", "wall_impulse", "collisions", "released", "asleep", "slept", "woken",
+)
+STEP_COUNTS = events.STEP_COUNTS
+_STATS_COLUMNS = _STATS_NUMBERED + tuple(
+    name for name in (*STEP_COUNTS, *(f"seconds_{phase}" for phase in events.STEP_PHASES))
+    if name not in _STATS_NUMBERED)
+
+
+def _stats_column(name: str) -> tuple[str, str, tuple]:
+    if name == "momentum":
+        return (name, "<f8", (3,))
+    return (name, "<i8" if name in STEP_COUNTS or name == "collisions" else "<f8", ())
+
+
+STATS_FIELDS = [_stats_column(name) for name in _STATS_COLUMNS]
 # CONTACT_FIELDS is the engine's own contact row (imported from events: the loop's buffer,
 # the event and this table are one schema). Files written before its ``how`` column was
 # named hold the same column, under the same protobuf field number, as ``resting``;

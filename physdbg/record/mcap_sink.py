@@ -141,7 +141,7 @@ class McapRecorder:
                  "energy": end.kinetic + end.potential, "momentum": np.asarray(end.momentum),
                  "max_overlap": end.max_overlap}
         for name in fmt.STEP_COUNTS:
-            stats[name] = end.counts.get(name, 0)
+            stats[name] = getattr(end.counts, name)
         for name, _, _ in fmt.STATS_FIELDS:
             if name.startswith("seconds_"):
                 stats[name] = end.timings.get(name[len("seconds_"):], 0.0)

@@ -31,10 +31,10 @@ import numpy as np
 
 from ..engine.state import state_hash
 from ..errors import RecordingError, RecordingIntegrityError
-from ..events import BroadPhaseInfo, Contacts, EngineWarning, StepBegin, StepEnd, SweptTests
+from ..events import STEP_COUNTS, BroadPhaseInfo, Contacts, EngineWarning, StepBegin, StepCounts, StepEnd, SweptTests
 from . import format as fmt
-from .state_codec import decode_state, decode_state_header
 from . import proto
+from .state_codec import decode_state, decode_state_header
 from .header import RecordingHeader
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -542,11 +542,12 @@ class Recording:
         if not stats_data:
             raise RecordingError(f"{self.path}: step {k} has a state but no stats message")
         s = self._table(fmt.TOPIC_STATS, stats_data[0])[0]
-        counts = {name: int(s[name]) for name in fmt.STEP_COUNTS}
+        counts = StepCounts(**{name: int(s[name]) for name in STEP_COUNTS})
         timings = {name[len("seconds_"):]: float(s[name]) for name in s.dtype.names if name.startswith("seconds_")}
         events.append(StepEnd(step, after.time, after.dt, after.positions, after.velocities, float(s["kinetic"]),
                               float(s["potential"]), s["momentum"].copy(), counts, float(s["max_overlap"]),
-                              timings, after.state_hash, tuple(w["message"] for w in warnings), after.asleep))
+                              timings, after.state_hash, tuple(e for e in events if isinstance(e, EngineWarning)),
+                              after.asleep))
         return events
 
     def _contacts(self, step: int, data: bytes) -> Contacts:
@@ -583,10 +584,22 @@ class Recording:
     @property
     def scene(self):
         """The recorded scene, rebuilt from the table kept in the file (to repeat the run)."""
+        from ..engine.state import Settings
         from ..scene import scene_from_dict
 
         info = self.meta["scene"]
-        return scene_from_dict(info["table"], f"{info['source']} (from {self.path.name})")
+        scene = scene_from_dict(info["table"], f"{info['source']} (from {self.path.name})")
+        # settings the table left "auto" take the values the run used (kept in the file),
+        # so the rebuilt scene repeats the run even if the advisor would now decide otherwise
+        # (a file made before a setting existed ran with the engine's own default for it)
+        recorded = self.meta.get("settings", {})
+        decided = scene.settings.undecided()
+        for name in decided:
+            setattr(scene.settings, name, recorded.get(name, Settings.__dataclass_fields__[name].default))
+        if "sleep_speed" in decided and "sleep_time" in recorded:
+            scene.settings.sleep_time = recorded["sleep_time"]
+        scene.auto = {name: f"{getattr(scene.settings, name)}: as recorded" for name in decided}
+        return scene
 
     def close(self) -> None:
         self._file.close()

@@ -329,12 +329,12 @@ class RerunSink:
             "stats/energy/total": end.kinetic + end.potential,
             "stats/momentum/x": end.momentum[0], "stats/momentum/y": end.momentum[1],
             "stats/momentum/z": end.momentum[2],
-            "stats/contacts": end.counts.get("contacts", 0),
+            "stats/contacts": end.counts.contacts,
             # a pile's churn: contacts the rapid rule held, held contacts let go again
-            "stats/rapid": end.counts.get("rapid", 0), "stats/released": end.counts.get("released", 0),
+            "stats/rapid": end.counts.rapid, "stats/released": end.counts.released,
         }
         if self.header.sleeping:  # spheres asleep (sleep.py); with sleeping off it is 0: not drawn
-            values["stats/asleep"] = end.counts.get("asleep", 0)
+            values["stats/asleep"] = end.counts.asleep
         # Z = PV/NkT of this step, from its collisions; NaN (a gap) where no sphere moves, so
         # that every series keeps one value a step (rerun refuses columns of unequal length,
         # and did drop a batch once a pile fell asleep)
