@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .engine.broadphase import choose_broad_phase
-from .engine.motion import INTEGRATOR_NAMES
+from .engine.motion import EXACT_UNDER, INTEGRATOR_NAMES
 from .engine.periodic import minimum_image
 from .engine.toi import DETECTION_NAMES
 
@@ -108,13 +108,11 @@ def advise(scene) -> Advice:
     # integrators
     forces = "gravity and drag" if s.drag < 1 else "gravity"
     act = "act" if s.drag < 1 else "acts"
-    for name in INTEGRATOR_NAMES:
+    for name, exact_under in zip(INTEGRATOR_NAMES, EXACT_UNDER, strict=True):
         if gravity == 0 and s.drag == 1:
             predictions.append(Prediction("integrator", name, "safe", "no force acts: every integrator is exact"))
-        elif name == "exact":
+        elif exact_under == "gravity and drag" or (exact_under == "gravity" and s.drag == 1):
             predictions.append(Prediction("integrator", name, "safe", f"exact under {forces} at any dt"))
-        elif name == "verlet" and s.drag == 1:
-            predictions.append(Prediction("integrator", name, "safe", "exact under gravity alone (its parabola)"))
         else:
             predictions.append(Prediction("integrator", name, "inexact",
                                           f"first-order error in flight under {forces} (docs/accuracy.md)"))

@@ -21,20 +21,48 @@ from typing import NamedTuple
 
 import numpy as np
 
-# Kinds of swept-test candidate / contact (the engine's table of them: engine/colliders).
-KIND_PAIR = 0
-KIND_WALL = 1
+# Collider kinds: what a contact's partner is (a swept test, a contact and a held contact
+# are (kind, a, other): sphere ``a`` against partner ``other`` of that kind). The table,
+# one row per kind indexed by its code, is what readers ask (is the partner a sphere that
+# moves? what is it called?) instead of testing for a kind; the engine's colliders read the
+# same rows (engine/colliders/kinds.py) and add each kind's geometry (engine/colliders/).
+KIND_PAIR = 0  # the partner is sphere ``other``
+KIND_WALL = 1  # the partner is wall (plane) ``other`` of the scene's walls
+KIND_NAMES = ("sphere", "wall")
+# the partner is a sphere that moves and takes impulses (its own velocity, version, anchor
+# time and held-contact list); the others (a wall; next, a mesh triangle) are immovable
+PARTNER_IS_SPHERE = (True, False)
+_PARTNER_IS_SPHERE = np.array(PARTNER_IS_SPHERE, dtype=bool)
+
+
+def check_kinds(kind, where: str = "") -> None:
+    """Raise RecordingError when a kind code (or array of them) is not in the table: a
+    file from a physdbg that knows more kinds, or a damaged one. where: the file."""
+    codes = np.asarray(kind)
+    if codes.size and (int(codes.min()) < 0 or int(codes.max()) >= len(KIND_NAMES)):
+        from .errors import RecordingError
+
+        bad = int(codes.max()) if int(codes.max()) >= len(KIND_NAMES) else int(codes.min())
+        raise RecordingError(f"{where + ': ' if where else ''}a contact or swept test of collider kind {bad}, which "
+                             f"this physdbg does not know (its kinds: " +
+                             ", ".join(f"{code} {name}" for code, name in enumerate(KIND_NAMES)) + ")")
+
+
+def partner_is_sphere(kind):
+    """Whether the partner of a contact of this kind is a sphere (an array of kinds gives
+    an array of bools): a row of the table."""
+    return _PARTNER_IS_SPHERE[kind]
 
 
 def partner_words(kind: int, other: int, wall_names) -> str:
     """How reports name a contact's partner: "sphere 4", or "wall 'floor'" (wall_names:
-    the recording's wall names, by index)."""
-    return f"sphere {other}" if kind == KIND_PAIR else f"wall '{wall_names[other]}'"
+    the recording's names of the partners of that kind, by index)."""
+    return f"sphere {other}" if PARTNER_IS_SPHERE[kind] else f"{KIND_NAMES[kind]} '{wall_names[other]}'"
 
 
 def contact_words(kind: int, a: int, other: int, wall_names) -> str:
     """How reports name a contact in few words: "3–4" (a sphere pair), "3–wall 'floor'"."""
-    return f"{a}–{other}" if kind == KIND_PAIR else f"{a}–{partner_words(kind, other, wall_names)}"
+    return f"{a}–{other}" if PARTNER_IS_SPHERE[kind] else f"{a}–{partner_words(kind, other, wall_names)}"
 
 # how a contact was resolved (Contacts.how; the recording's contacts ``how`` column)
 HOW_IMPULSE = 0  # the seed's impulse (or reflection), alone
@@ -85,7 +113,8 @@ class BroadPhaseInfo:
 class ContactResolved:
     """One contact (a row of :class:`Contacts`), resolved at ``time_in_step`` seconds after the step began.
 
-    kind: KIND_PAIR (``other`` is particle b) or KIND_WALL (``other`` is the wall index).
+    kind: a collider kind (KIND_NAMES): KIND_PAIR (``other`` is particle b) or KIND_WALL
+    (``other`` is the wall index).
     order: 0-based position among this step's contacts.
     point: (3,) contact point on the surface of ``a``; normal: (3,) unit, from b (or the
     wall) towards a. impulse: j (N·s) applied along ``normal`` to ``a`` (and -j to b);
@@ -191,7 +220,7 @@ class Contacts:
 
     def record(self, i: int) -> ContactResolved:
         r = self.rows[i]
-        pair = int(r["kind"]) == KIND_PAIR
+        pair = PARTNER_IS_SPHERE[int(r["kind"])]
         how = int(r["how"])
         return ContactResolved(
             self.step, i, float(r["time_in_step"]), int(r["kind"]), int(r["a"]), int(r["other"]),
@@ -223,10 +252,11 @@ def collision_sums(contacts: Contacts, radius: np.ndarray) -> CollisionSums:
     virial gives PV = N kT + sum / (3 T), the wall impulses P = sum / (area T)."""
     if not len(contacts):
         return NO_COLLISIONS
-    pair = contacts.kind == KIND_PAIR
+    pair = partner_is_sphere(contacts.kind)
+    wall = contacts.kind == KIND_WALL  # the box's walls: what the pressure on them is measured from
     impulse = np.nan_to_num(contacts.impulse, nan=0.0)
     reach = radius[contacts.a[pair]] + radius[contacts.other[pair]]
-    return CollisionSums(float(reach @ impulse[pair]), float(impulse[~pair].sum()), int(np.count_nonzero(pair)))
+    return CollisionSums(float(reach @ impulse[pair]), float(impulse[wall].sum()), int(np.count_nonzero(pair)))
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..events import HOW_IMPULSE, KIND_PAIR, KIND_WALL, Contacts, EngineWarning, StepEnd
+from ..events import (HOW_IMPULSE, KIND_WALL, PARTNER_IS_SPHERE, Contacts, EngineWarning, StepEnd, contact_words,
+                      partner_is_sphere)
 from .quiet import quiet_numerics
 from .tunnel import StepChecker
 
@@ -254,7 +255,7 @@ class Auditor:
                           "take shorter steps")
             elif detection != "swept":
                 advice = "use detection = swept (exact time of impact), or a shorter dt"
-            elif self.settings.get("ordering") == "index" and c.kind == KIND_PAIR:
+            elif self.settings.get("ordering") == "index" and PARTNER_IS_SPHERE[c.kind]:
                 advice = ("ordering = index resolves the step's predicted contacts in index order, so a contact "
                           "that an earlier one creates is missed: use ordering = time")
             else:
@@ -340,9 +341,7 @@ class Auditor:
                                     "ordering": ordering}))
 
     def _who(self, c: Contacts, i: int) -> str:
-        if c.kind[i] == KIND_PAIR:
-            return f"{int(c.a[i])}–{int(c.other[i])}"
-        return f"{int(c.a[i])}–wall '{self.names[int(c.other[i])]}'"
+        return contact_words(int(c.kind[i]), int(c.a[i]), int(c.other[i]), self.names)
 
     def _check_energy_of_states(self, step: int, end: StepEnd) -> None:
         """A run of another engine has no contact records: a step that gains more mechanical
@@ -369,7 +368,7 @@ class Auditor:
         finite_a = np.isfinite(ma)
         before = np.where(finite_a, 0.5 * ma * np.einsum("ij,ij->i", c.velocity_a_before, c.velocity_a_before), 0.0)
         after = np.where(finite_a, 0.5 * ma * np.einsum("ij,ij->i", c.velocity_a_after, c.velocity_a_after), 0.0)
-        pair = c.kind == KIND_PAIR
+        pair = partner_is_sphere(c.kind)
         if pair.any():
             mb = self.mass[c.other[pair]]
             finite_b = np.isfinite(mb)
@@ -385,7 +384,7 @@ class Auditor:
         if not len(bad):
             return
         i = int(bad[0])
-        self._add(Finding("energy-gain", step, [int(c.a[i])] + ([int(c.other[i])] if c.kind[i] == KIND_PAIR else []),
+        self._add(Finding("energy-gain", step, [int(c.a[i])] + ([int(c.other[i])] if PARTNER_IS_SPHERE[c.kind[i]] else []),
                           f"contact {self._who(c, i)} left {gain[i]:.3g} J more kinetic energy than it found "
                           f"({before[i]:.3g} J before, e = {c.restitution[i]:.3g})",
                           "a restitution above 1, or an impulse applied twice", list(map(float, c.point[i])),
@@ -396,7 +395,7 @@ class Auditor:
         bounces = int(bounce.sum())
         if bounces < COLLAPSE_MIN_CONTACTS:
             return
-        involved = np.unique(np.concatenate([c.a[bounce], c.other[bounce & (c.kind == KIND_PAIR)]]))
+        involved = np.unique(np.concatenate([c.a[bounce], c.other[bounce & partner_is_sphere(c.kind)]]))
         if bounces < COLLAPSE_CONTACTS_PER_SPHERE * len(involved):
             return
         spheres = f"{len(involved)} sphere{'s' if len(involved) != 1 else ''}"

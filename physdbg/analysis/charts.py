@@ -11,12 +11,25 @@ from pathlib import Path
 
 import numpy as np
 
+from ..engine import motion, toi
 from ..errors import ChartsMissing
 from .accuracy import PROBLEMS, Run, pareto
 
 ERROR_FLOOR = 1e-17  # an error of exactly 0 is drawn here (a log axis has no 0)
-MARKERS = {"euler": "o", "semi-implicit": "s", "verlet": "^", "exact": "D"}
-COLORS = {"swept": "#1f77b4", "sampled": "#ff7f0e", "discrete": "#d62728"}
+# a marker per integrator and a colour per detection, in the engine's order of them (a
+# method added to the engine gets the next one: nothing here names a method)
+_MARKER_CYCLE = ("o", "s", "^", "D", "v", "P", "X", "*")
+_COLOR_CYCLE = ("#1f77b4", "#ff7f0e", "#d62728", "#2ca02c", "#9467bd", "#8c564b")
+
+
+def marker_of(integrator: str) -> str:
+    """The chart marker of an integrator (by its place in motion.INTEGRATOR_NAMES)."""
+    return _MARKER_CYCLE[motion.INTEGRATOR_NAMES.index(integrator) % len(_MARKER_CYCLE)]
+
+
+def color_of(detection: str) -> str:
+    """The chart colour of a detection method (by its place in toi.DETECTION_NAMES)."""
+    return _COLOR_CYCLE[toi.DETECTION_NAMES.index(detection) % len(_COLOR_CYCLE)]
 
 
 
@@ -55,8 +68,8 @@ def accuracy_chart(runs: list[Run], paths: list[Path], title: str) -> None:
                 ax.scatter(run.ms_per_second, error, marker="x", color="black", s=30, zorder=3)
                 continue
             hollow = run.ordering == "index"
-            color = COLORS[run.detection]
-            ax.scatter(run.ms_per_second, max(error, ERROR_FLOOR), marker=MARKERS[run.integrator], s=28,
+            color = color_of(run.detection)
+            ax.scatter(run.ms_per_second, max(error, ERROR_FLOOR), marker=marker_of(run.integrator), s=28,
                        facecolors="none" if hollow else color, edgecolors=color, linewidths=1.0, alpha=0.85,
                        zorder=2)
         front = [r for r in pareto(mine) if math.isfinite(r.error)]
@@ -74,8 +87,10 @@ def accuracy_chart(runs: list[Run], paths: list[Path], title: str) -> None:
         ax.grid(True, which="major", alpha=0.3)
     for ax in list(axes.flat)[len(names):]:
         ax.axis("off")
-    handles = [plt.Line2D([], [], linestyle="", marker=m, color="#555555", label=name) for name, m in MARKERS.items()]
-    handles += [plt.Line2D([], [], linestyle="", marker="o", color=c, label=name) for name, c in COLORS.items()]
+    handles = [plt.Line2D([], [], linestyle="", marker=marker_of(name), color="#555555", label=name)
+               for name in motion.INTEGRATOR_NAMES]
+    handles += [plt.Line2D([], [], linestyle="", marker="o", color=color_of(name), label=name)
+                for name in toi.DETECTION_NAMES]
     handles += [plt.Line2D([], [], linestyle="", marker="o", markerfacecolor="none", color="#555555",
                            label="index ordering"),
                 plt.Line2D([], [], linestyle="", marker="x", color="black", label="blew up"),
@@ -99,7 +114,7 @@ def accuracy_rrd(runs: list[Run], path: Path) -> None:
         top = max([r.error for r in mine if math.isfinite(r.error)] + [ERROR_FLOOR]) * 10
         points = [[math.log10(r.ms_per_second), -math.log10(max(r.error if math.isfinite(r.error) else top,
                                                                    ERROR_FLOOR))] for r in mine]
-        colors = [[int(COLORS[r.detection][i:i + 2], 16) for i in (1, 3, 5)] for r in mine]
+        colors = [[int(color_of(r.detection)[i:i + 2], 16) for i in (1, 3, 5)] for r in mine]
         labels = [f"{r.method} 1/{round(1 / r.dt)}: {r.error:.2g} {r.unit}" + (f" ({r.failure})" if r.failure else "")
                   for r in mine]
         rec.log(f"accuracy/{name}/runs", rr.Points2D(points, colors=colors, labels=labels, radii=[-4.0]), static=True)

@@ -37,7 +37,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..errors import CheckRunError
-from ..events import KIND_PAIR, KIND_WALL, contact_words, partner_words
+from ..events import KIND_NAMES, KIND_WALL, PARTNER_IS_SPHERE, contact_words, partner_words
 from .quiet import quiet_numerics
 
 DEFAULT_ATOL = 1e-6  # m and m/s: a body departs when |Δx| or |Δv| exceeds atol + rtol·|reference|
@@ -59,10 +59,41 @@ INTEGRATOR_FITS = (
     ("exact", "the exact path for a constant force (x += v·dt + a·dt²/2, as physdbg's exact and verlet integrators)",
      (0.5, 0.5)),
 )
-PHYSDBG_FIT = {"euler": "explicit-euler", "semi-implicit": "semi-implicit-euler", "verlet": "exact", "exact": "exact"}
+
+
+def family_of(integrator: str) -> str | None:
+    """The family (INTEGRATOR_FITS) of physdbg's integrator of this name: the one whose
+    weights are its free flight's (motion.FREE_FLIGHT_WEIGHTS); None for a name physdbg
+    does not have."""
+    from ..engine.motion import FREE_FLIGHT_WEIGHTS, INTEGRATOR_NAMES
+
+    if integrator not in INTEGRATOR_NAMES:
+        return None
+    weights = FREE_FLIGHT_WEIGHTS[INTEGRATOR_NAMES.index(integrator)]
+    return next((name for name, _, fit in INTEGRATOR_FITS if fit == weights), None)
+
+
+def integrator_of(family: str | None) -> str:
+    """physdbg's integrator that moves like a family (the last of INTEGRATOR_NAMES with its
+    weights: exact before verlet); physdbg's default integrator for none."""
+    from ..engine.motion import INTEGRATOR_NAMES
+    from ..engine.state import Settings
+
+    matches = [name for name in INTEGRATOR_NAMES if family is not None and family_of(name) == family]
+    return matches[-1] if matches else Settings.integrator
 
 
 
+
+
+def _body_only(i: int) -> dict:
+    """What a departure of one body alone is about (no contact: no kind, no partner)."""
+    return {"kind": None, "a": i, "other": None}
+
+
+def _no_geometry(kind: int) -> CheckRunError:
+    return CheckRunError(f"check-run has no geometry for a contact with a {KIND_NAMES[kind]} (collider kind {kind}): "
+                         f"analysis/departure.py's _gap and _tunnelled need a branch for it")
 
 
 @dataclass
@@ -297,12 +328,13 @@ class _Comparison:
             words = (f"none of the usual integrators fits its free steps (the nearest, {best}, misses by "
                      f"{residual[best]:.3g} m a step on average): forces or drag differ from the scene's")
             return {"name": None, "residual": residual, "differs": True, "sentence": words}
-        ours = PHYSDBG_FIT[self.settings.get("integrator", "exact")]
+        ours = family_of(self.settings.get("integrator", integrator_of(None)))
         described = dict((n, w) for n, w, _ in INTEGRATOR_FITS)[best]
         differs = best != ours
         sentence = f"your engine moves bodies like {described}"
         if differs:
-            sentence += (f"; the scene's integrator ({self.settings.get('integrator')}) is {ours}, so in free flight "
+            sentence += (f"; the scene's integrator ({self.settings.get('integrator')}) is {ours or 'of no family here'}, "
+                         f"so in free flight "
                          f"under {a:.3g} m/s² the paths part by {step_error:.3g} m a step (a·dt²/2), growing as "
                          f"they go")
         else:
@@ -397,7 +429,7 @@ class _Comparison:
         local = self._local_step(k)
         if local is not None:
             hit = next((c["other"] if c["a"] == body else c["a"] for c in local[2]
-                        if c["kind"] == KIND_PAIR and body in (c["a"], c["other"])), None)
+                        if PARTNER_IS_SPHERE[c["kind"]] and body in (c["a"], c["other"])), None)
         self.departures.append(Departure(
             "immovable-moved", k, body,
             f"sphere {body} is immovable (inverse mass 0 in the scene), yet your run moves it from step {k} on "
@@ -604,7 +636,7 @@ class _Comparison:
         return a > 0 and c["closing"] < RESTING_SPEED_STEPS * a * float(self.runs.dt[s])
 
     def _bodies(self, c: dict) -> tuple[int, ...]:
-        return (c["a"], c["other"]) if c["kind"] == KIND_PAIR else (c["a"],)
+        return (c["a"], c["other"]) if PARTNER_IS_SPHERE[c["kind"]] else (c["a"],)
 
     def _kick_for(self, c: dict) -> dict | None:
         """The foreign kick of contact c: on its sphere (or the other sphere of a pair), in
@@ -715,7 +747,7 @@ class _Comparison:
         end = s
 
         def normal_speed(k):
-            v = r.vf[k, c["a"]] - (r.vf[k, c["other"]] if c["kind"] == KIND_PAIR else 0.0)
+            v = r.vf[k, c["a"]] - (r.vf[k, c["other"]] if PARTNER_IS_SPHERE[c["kind"]] else 0.0)
             return float(v @ n)
 
         def pushing_apart(k):  # step k's kick pushes the bodies apart while they touch or approach
@@ -749,7 +781,7 @@ class _Comparison:
         def effective(last=None):
             """(|e − want|, e, normal speed before, after) of each reading of the contact."""
             out = []
-            pair = c["kind"] == KIND_PAIR
+            pair = PARTNER_IS_SPHERE[c["kind"]]
             for (before_a, after_a), other in zip(readings(c["a"], last),
                                                   readings(c["other"], last) if pair else [(0.0, 0.0)] * 3):
                 before, after = (before_a - other[0]) @ n, (after_a - other[1]) @ n
@@ -824,7 +856,7 @@ class _Comparison:
             scale = float(np.linalg.norm(before)) + float(np.linalg.norm(self.acc[i])) * float(self.runs.dt[c["step"]])
             if change <= RESTITUTION_TOLERANCE * scale + self.atol:
                 continue
-            c_i = dict(c, a=i, other=c["other"] if i == c["a"] else c["a"]) if c["kind"] == KIND_PAIR else c
+            c_i = dict(c, a=i, other=c["other"] if i == c["a"] else c["a"]) if PARTNER_IS_SPHERE[c["kind"]] else c
             size0, size1 = float(np.linalg.norm(t0)), float(np.linalg.norm(t1))
             if size0 > 0 and size1 > 0 and float(t0 @ t1) < -0.9 * size0 * size1:
                 self._add("tangent-reversed", c["step"], c_i,
@@ -893,8 +925,7 @@ class _Comparison:
         r = self.runs
         s, i = kick["step"], kick["body"]
         size = float(np.linalg.norm(r.vf[s, i] - r.vf[s - 1, i]))
-        c = {"kind": KIND_WALL, "a": i, "other": -1}
-        self._add("extra-contact", s, c,
+        self._add("extra-contact", s, _body_only(i),
                   f"sphere {i} changed velocity by {size:.3g} m/s at t ≈ {kick['time']:.6g} s; physdbg, stepping "
                   f"from the same state, touches nothing in that step",
                   "a contact physdbg does not see: a test that fires too early or against the wrong body, or a "
@@ -927,8 +958,7 @@ class _Comparison:
             from .tunnel import StepChecker
 
             settings = dict(self.settings)
-            settings["integrator"] = {"explicit-euler": "euler", "semi-implicit-euler": "semi-implicit"}.get(
-                (self.integrator or {}).get("name"), "exact")
+            settings["integrator"] = integrator_of((self.integrator or {}).get("name"))
             self._checker = StepChecker(self.radius, self.inv, self.rr.header.gravity_scale, self.walls, settings)
         r = self.runs
         if not (np.isfinite(r.xf[s]).all() and np.isfinite(r.xf[s - 1]).all()):
@@ -941,7 +971,7 @@ class _Comparison:
             if s >= len(self.runs.t):
                 break
             for x in self._crossings_in(s):
-                if x.kind == c["kind"] and {x.a, x.other} == ({c["a"], c["other"]} if c["kind"] == KIND_PAIR
+                if x.kind == c["kind"] and {x.a, x.other} == ({c["a"], c["other"]} if PARTNER_IS_SPHERE[c["kind"]]
                                                               else {x.a, c["other"]}) and x.a in self._bodies(c):
                     return s, x
         return None
@@ -951,18 +981,20 @@ class _Comparison:
         s, x = crossing
         a, dt = c["a"], float(r.dt[c["step"]])
         speed = float(np.linalg.norm(r.vf[s - 1, a]))
-        if c["kind"] == KIND_WALL:
+        if PARTNER_IS_SPHERE[c["kind"]]:
+            room = 2 * float(self.radius[a] + self.radius[c["other"]])
+            what = f"more than the two spheres' diameters ({room:.3g} m)"
+        elif c["kind"] == KIND_WALL:
             room = float(self.walls.thickness[c["other"]]) + 2 * float(self.radius[a])
             what = f"more than the wall's thickness plus the sphere's diameter ({room:.3g} m)"
         else:
-            room = 2 * float(self.radius[a] + self.radius[c["other"]])
-            what = f"more than the two spheres' diameters ({room:.3g} m)"
+            raise _no_geometry(c["kind"])
         text = (f"{self._subject(c)} went through {self._what(c)} with no contact; physdbg's swept test, from the "
                 f"same state, finds the touch at t = {c['time']:.6g} s ({c['tau'] / dt:.2f}·dt) and bounces it back")
         advice = _TUNNEL_ADVICE
         carried = speed * float(r.dt[s])
         inside = -self._gap(c, a, r.xf[s - 1, a], s, 0.0)
-        if inside > self.settings.get("contact_tolerance", 0.0) and c["kind"] == KIND_PAIR:
+        if inside > self.settings.get("contact_tolerance", 0.0) and PARTNER_IS_SPHERE[c["kind"]]:
             text += f"; it was already {inside * 1000:.3g} mm inside at the step's start"
             advice = ("it started the step inside the other sphere, after a contact resolved late or with the wrong "
                       "impulse: fix that first (see the departure before this one)")
@@ -977,7 +1009,7 @@ class _Comparison:
         frames, bodies = np.nonzero(bad)
         if len(frames):
             k, i = int(frames[0]), int(bodies[0])
-            self._add("non-finite", k, {"kind": KIND_WALL, "a": i, "other": -1},
+            self._add("non-finite", k, _body_only(i),
                       f"sphere {i}'s {'position' if not np.isfinite(r.xf[k, i]).all() else 'velocity'} is NaN or "
                       f"infinite from t = {r.t[k]:.6g} s ({_body_count(int(bad[k].sum()))} then)",
                       "look at the step before: a division by a zero distance (two centres at one point) or a "
@@ -994,6 +1026,8 @@ class _Comparison:
             if self.walls.two_sided[w]:
                 return abs(h) - 0.5 * float(self.walls.thickness[w]) - float(self.radius[a])
             return h - float(self.radius[a])
+        if not PARTNER_IS_SPHERE[c["kind"]]:
+            raise _no_geometry(c["kind"])
         b = c["other"] if a == c["a"] else c["a"]
         xb = r.xf[s - 1, b] + (r.xf[s, b] - r.xf[s - 1, b]) * (tau / float(r.dt[s]))
         return float(np.linalg.norm(x - xb)) - float(self.radius[a] + self.radius[b])
@@ -1005,14 +1039,14 @@ class _Comparison:
         return f"sphere {c['a']}"
 
     def _both(self, c: dict) -> str:
-        return f"spheres {c['a']} and {c['other']}" if c["kind"] == KIND_PAIR else f"sphere {c['a']}"
+        return f"spheres {c['a']} and {c['other']}" if PARTNER_IS_SPHERE[c["kind"]] else f"sphere {c['a']}"
 
     def _pair_words(self, c: dict) -> str:
         return contact_words(c["kind"], c["a"], c["other"], self.names)
 
     def _add(self, kind: str, step: int, c: dict, text: str, advice: str, evidence: dict | None = None) -> None:
-        other = c["other"] if c["kind"] == KIND_PAIR else None
-        wall = self.names[c["other"]] if c["kind"] == KIND_WALL and c["other"] >= 0 else None
+        other = c["other"] if c["kind"] is not None and PARTNER_IS_SPHERE[c["kind"]] else None
+        wall = self.names[c["other"]] if c["kind"] == KIND_WALL else None
         self.departures.append(Departure(kind, step, c["a"], text, advice, other, wall, evidence or {}))
 
     @staticmethod
@@ -1119,7 +1153,7 @@ def _chains(contacts: list[dict]) -> list[list[dict]]:
 
     for c in contacts:
         find(c["a"])
-        if c["kind"] == KIND_PAIR:
+        if PARTNER_IS_SPHERE[c["kind"]]:
             parent[find(c["a"])] = find(c["other"])
     groups: dict[int, list[dict]] = {}
     for c in contacts:

@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..engine.space_order import chosen_order
-from ..events import KIND_PAIR, contact_words
+from ..events import PARTNER_IS_SPHERE, contact_words, partner_words
 from . import align
 from .quiet import quiet_numerics
 from .tunnel import StepChecker
@@ -645,8 +645,8 @@ class _Differ:
                 for c in crossed[label]:
                     if (c.kind, c.a, c.other) in theirs:
                         continue
-                    what = (f"went through wall '{self.names_a[c.other]}'" if c.kind != KIND_PAIR
-                            else f"passed into sphere {c.other}")
+                    what = (f"passed into sphere {c.other}" if PARTNER_IS_SPHERE[c.kind]
+                            else f"went through {partner_words(c.kind, c.other, self.names_a)}")
                     rec = self.ra if label == "A" else self.rb
                     run_settings = rec.meta["settings"]
                     if run_settings.get("detection") != "swept":
@@ -849,15 +849,17 @@ def _why_order(ordering: str | None) -> str:
 
 
 def _key(r: dict) -> tuple:
-    if r["kind"] == KIND_PAIR:
+    if PARTNER_IS_SPHERE[r["kind"]]:  # a pair is the same pair either way round
         return (r["kind"], min(r["a"], r["other"]), max(r["a"], r["other"]))
     return (r["kind"], r["a"], r["other"])
 
 
 def _touches(r: dict, crossing) -> bool:
-    if crossing.kind == KIND_PAIR:
-        return r["kind"] == KIND_PAIR and {r["a"], r["other"]} == {crossing.a, crossing.other}
-    return r["kind"] != KIND_PAIR and r["a"] == crossing.a and r["other"] == crossing.other
+    if r["kind"] != crossing.kind:
+        return False
+    if PARTNER_IS_SPHERE[crossing.kind]:
+        return {r["a"], r["other"]} == {crossing.a, crossing.other}
+    return r["a"] == crossing.a and r["other"] == crossing.other
 
 
 def _close(a: float, b: float, atol: float, rtol: float) -> bool:

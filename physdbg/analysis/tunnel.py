@@ -194,7 +194,13 @@ class StepChecker:
         self.radius = np.asarray(radius, dtype=np.float64)
         self.n = len(self.radius)
         self.walls = walls
-        self.integrator = INTEGRATOR_NAMES.index(settings.get("integrator", "exact"))
+        name = settings.get("integrator", "exact")
+        if name not in INTEGRATOR_NAMES:
+            from ..errors import RecordingError
+
+            raise RecordingError(f"the run's integrator '{name}' is not one this physdbg has "
+                                 f"({', '.join(INTEGRATOR_NAMES)}): a recording from a newer physdbg?")
+        self.integrator = INTEGRATOR_NAMES.index(name)
         self.drag = float(settings.get("drag", 1.0))
         self.k = -math.log(self.drag) if 0.0 < self.drag < 1.0 else 0.0
         gravity = np.asarray(settings.get("gravity", (0.0, 0.0, 0.0)), dtype=np.float64)

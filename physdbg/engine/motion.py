@@ -60,10 +60,35 @@ INTEGRATOR_NAMES = ("euler", "semi-implicit", "verlet", "exact")
 #                       velocity, Verlet's parabola ignores drag's curve
 #   REST_STEP_FACTOR    a straight path arrives at a rest with about one step of acceleration
 #                       still in its velocity: how many dt of it count as resting (resting.py)
+#   POLYNOMIAL_WITH_DRAG  the path stays a polynomial in tau (P1 = tau) under drag too: its
+#                       roots and extremes have closed forms at any drag (closed_form_path)
+#   EXACT_UNDER         the forces under which the integrator's free flight is exact at any
+#                       dt: "none", "gravity" or "gravity and drag" (the advisor's words)
+#   FREE_FLIGHT_WEIGHTS (w0, w1): with no drag, a step with no contact moves a body by
+#                       (w0·v_start + w1·v_end)·dt (check-run names a foreign run's integrator by it)
 STRAIGHT_PATH = (True, True, False, False)
 KICK_AT_STEP_START = (False, True, False, False)
 FLOW = ((False, False), (True, True), (True, False), (True, True))
 REST_STEP_FACTOR = (1.5, 1.5, 0.0, 0.0)
+POLYNOMIAL_WITH_DRAG = (True, True, True, False)
+EXACT_UNDER = ("none", "none", "gravity", "gravity and drag")
+FREE_FLIGHT_WEIGHTS = ((1.0, 0.0), (0.0, 1.0), (0.5, 0.5), (0.5, 0.5))
+INTEGRATOR_TABLES = {"STRAIGHT_PATH": STRAIGHT_PATH, "KICK_AT_STEP_START": KICK_AT_STEP_START, "FLOW": FLOW,
+                     "REST_STEP_FACTOR": REST_STEP_FACTOR, "POLYNOMIAL_WITH_DRAG": POLYNOMIAL_WITH_DRAG,
+                     "EXACT_UNDER": EXACT_UNDER, "FREE_FLIGHT_WEIGHTS": FREE_FLIGHT_WEIGHTS}
+
+
+def check_integrator_tables(names=INTEGRATOR_NAMES, tables=None) -> None:
+    """Raise ValueError naming each table above that has not one row per integrator name
+    (an integrator added to INTEGRATOR_NAMES without its rows). Run at import."""
+    tables = INTEGRATOR_TABLES if tables is None else tables
+    short = [f"{name} has {len(rows)} rows" for name, rows in tables.items() if len(rows) != len(names)]
+    if short:
+        raise ValueError(f"engine/motion.py: {len(names)} integrators ({', '.join(names)}) but " + "; ".join(short)
+                         + ": give each integrator its row in every table (docs/engine.md, \"Adding an integrator\")")
+
+
+check_integrator_tables()
 
 # Below this k*tau, phi1 and phi2 come from their Taylor series (truncation < 1e-17
 # relative); above it the closed forms lose at most ~1e-14 to cancellation.
@@ -94,6 +119,27 @@ def path_coefficients(integrator, k, tau):
     if integrator == VERLET:
         return tau, 0.5 * tau * tau, 1.0
     return tau, 0.0, 1.0
+
+
+@njit(cache=True, inline="always")
+def closed_form_path(integrator, k):
+    """Whether the path is a polynomial in tau of degree <= 2 (P1 = tau, P2 = tau²/2 or
+    0), so that its roots and extremes have closed forms: every path without drag
+    (k = 0), and those of POLYNOMIAL_WITH_DRAG with it."""
+    return k == 0.0 or POLYNOMIAL_WITH_DRAG[integrator]
+
+
+@borrowing
+def time_of_p1(integrator, k, u):
+    """The local time tau (s) at which P1(tau) = u (the table above), or inf when the path
+    never gets that far (drag stops it first): tau itself on a closed-form path, the
+    inverse of phi1 on exact's curve under drag."""
+    if closed_form_path(integrator, k):
+        return u
+    ku = k * u
+    if ku >= 1.0:
+        return math.inf
+    return -math.log1p(-ku) / k
 
 
 @njit(cache=True, inline="always")
@@ -179,7 +225,7 @@ def particle_box(x, v, a, radius, sigma, i, step_end, integrator, k, margin, out
             f_lo = v[i, c]
             q1, _, dq = path_coefficients(integrator, k, hi_t)
             f_hi = v[i, c] * dq + a[i, c] * q1
-            if f_lo * f_hi < 0.0 and (integrator == VERLET or (integrator == EXACT and k == 0.0)):
+            if f_lo * f_hi < 0.0 and closed_form_path(integrator, k):
                 # a parabola (P1 = tau, P2 = tau²/2): the extremum is at tau = -v/a, in
                 # closed form (the bisection below took 1.6 µs a call, 60 steps on each axis)
                 t_ext = min(max(-v[i, c] / a[i, c], 0.0), tau_end)

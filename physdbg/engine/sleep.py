@@ -52,7 +52,6 @@ import math
 
 import numpy as np
 
-from ..events import KIND_PAIR
 from .broadphase.grid import bucket_starts
 from .colliders.kinds import partner_sphere
 from .jit import borrowing, kernel
@@ -200,10 +199,10 @@ def sleep_rules(asleep, still, allowed, down, dt, x, velocities, radius, pair_li
     # rule 2: a sleeper hit by an awake sphere closing faster than sleep_speed
     waking = np.zeros(n, dtype=np.bool_)
     for t in range(hit_kind.shape[0]):
-        if hit_kind[t] != KIND_PAIR or not hit_closing[t] > sleep_speed:
+        b = partner_sphere(hit_kind[t], hit_b[t])  # an immovable partner wakes no one
+        if b < 0 or not hit_closing[t] > sleep_speed:
             continue
         a = hit_a[t]
-        b = hit_b[t]
         if asleep[a] and not asleep[b]:
             waking[a] = True
         if asleep[b] and not asleep[a]:

@@ -32,7 +32,7 @@ import math
 
 
 from .jit import borrowing, kernel
-from .motion import EXACT, STRAIGHT_PATH, curvature_scale, path_coefficients
+from .motion import STRAIGHT_PATH, closed_form_path, curvature_scale, path_coefficients, time_of_p1
 
 INF = math.inf
 
@@ -51,7 +51,7 @@ def _gap(g0, p, q, integrator, k, tau):
 @borrowing
 def _root_in_bracket(g0, p, q, integrator, k, lo, hi):
     """The one root of the gap in [lo, hi], where the gap falls from >= 0 to <= 0."""
-    if integrator != EXACT or k == 0.0:
+    if closed_form_path(integrator, k):
         # g0 + p*t + (q/2)*t² (q = 0 for Euler paths): numerically stable quadratic.
         aa = 0.0 if STRAIGHT_PATH[integrator] else 0.5 * q
         if aa == 0.0:
@@ -92,7 +92,7 @@ def _root_in_bracket(g0, p, q, integrator, k, lo, hi):
 @borrowing
 def _stationary_point(g0, p, q, integrator, k, horizon):
     """Where the gap's derivative (monotone, by the constant curvature) crosses zero."""
-    if integrator != EXACT or k == 0.0:
+    if closed_form_path(integrator, k):
         return -p / q if q != 0.0 else horizon
     lo = 0.0
     hi = horizon
@@ -190,16 +190,6 @@ def _linear_pair_u(dx0, dx1, dx2, dv0, dv1, dv2, radius_sum):
 
 
 @borrowing
-def _u_to_tau(integrator, k, u):
-    if integrator == EXACT and k > 0.0:
-        ku = k * u
-        if ku >= 1.0:
-            return INF  # drag stops the pair before it gets there
-        return -math.log1p(-ku) / k
-    return u
-
-
-@borrowing
 def _relative_path(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, integrator, k, t):
     """Relative position D(t) = dx + dv·P1 + da·P2 and its rate D'(t), as six floats."""
     p1, p2, dp1 = path_coefficients(integrator, k, t)
@@ -233,13 +223,12 @@ def pair_toi_swept_scalar(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, radius_su
         u = _linear_pair_u(dx0, dx1, dx2, dv0, dv1, dv2, radius_sum)
         if u == INF:
             return INF
-        t = _u_to_tau(integrator, k, u)
+        t = time_of_p1(integrator, k, u)
         return t if t <= horizon else INF
     # conservative advancement with a second-order bound
-    if integrator == EXACT:
-        m = _norm(da0 - k * dv0, da1 - k * dv1, da2 - k * dv2)
-    else:
-        m = _norm(da0, da1, da2)
+    # |D''| <= |cq·da + cp·dv| (curvature_scale: exact's curve bends by a − k·v)
+    cq, cp = curvature_scale(integrator, k)
+    m = _norm(cq * da0 + cp * dv0, cq * da1 + cp * dv1, cq * da2 + cp * dv2)
     t = 0.0
     for _ in range(500):
         if t > horizon:

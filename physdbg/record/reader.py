@@ -31,7 +31,7 @@ import numpy as np
 
 from ..engine.state import state_hash
 from ..errors import RecordingError, RecordingIntegrityError
-from ..events import STEP_COUNTS, BroadPhaseInfo, Contacts, EngineWarning, StepBegin, StepCounts, StepEnd, SweptTests
+from ..events import STEP_COUNTS, BroadPhaseInfo, check_kinds, Contacts, EngineWarning, StepBegin, StepCounts, StepEnd, SweptTests
 from . import format as fmt
 from . import proto
 from .state_codec import decode_state, decode_state_header
@@ -536,6 +536,7 @@ class Recording:
             events.append(self._contacts(step, parts.get(fmt.TOPIC_CONTACTS, [b""])[0]))
         if fmt.TOPIC_SWEPT in self._channels and fmt.TOPIC_SWEPT in topics:
             rows = self._table(fmt.TOPIC_SWEPT, parts.get(fmt.TOPIC_SWEPT, [b""])[0])
+            check_kinds(rows["kind"], str(self.path))
             events.append(SweptTests(step, rows["kind"].copy(), rows["a"].copy(), rows["other"].copy(),
                                      rows["start"].copy(), rows["toi"].copy(), rows["outcome"].copy()))
         stats_data = parts.get(fmt.TOPIC_STATS)
@@ -551,7 +552,9 @@ class Recording:
         return events
 
     def _contacts(self, step: int, data: bytes) -> Contacts:
-        return Contacts(step, self._table(fmt.TOPIC_CONTACTS, data))
+        rows = self._table(fmt.TOPIC_CONTACTS, data)
+        check_kinds(rows["kind"], str(self.path))  # every reader may then ask the kinds table
+        return Contacts(step, rows)
 
     def contacts(self, k: int) -> Contacts:
         """Contacts of the k-th step (detail contacts or full)."""

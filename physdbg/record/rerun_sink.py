@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ViewerError
-from ..events import KIND_PAIR, BroadPhaseInfo, Contacts, EngineWarning, StepEnd, collision_sums
+from ..events import BroadPhaseInfo, Contacts, EngineWarning, StepEnd, collision_sums, partner_is_sphere
 from ..engine.periodic import unwrap_near
 from .header import RecordingHeader
 from . import view
@@ -248,7 +248,7 @@ class RerunSink:
         n = len(after)
         if contacts is not None and len(contacts):
             radius = self.header.radius
-            pair = contacts.kind == KIND_PAIR
+            pair = partner_is_sphere(contacts.kind)
             who = np.concatenate([contacts.a, contacts.other[pair]]).astype(np.int64)
             where = np.concatenate([contact_centres(contacts, radius),
                                     contacts.point[pair] - contacts.normal[pair] * radius[contacts.other[pair]][:, None]])

@@ -12,13 +12,9 @@ from __future__ import annotations
 
 from numba import njit
 
-from ...events import KIND_PAIR, KIND_WALL
+from ...events import KIND_NAMES, KIND_PAIR, KIND_WALL, PARTNER_IS_SPHERE
 
-# indexed by the kind's code (events.KIND_PAIR = 0, KIND_WALL = 1)
-KIND_NAMES = ("sphere", "wall")
-# the partner is a sphere that moves and takes impulses (its own velocity, version, anchor
-# time and held-contact list); the others (a wall; next, a mesh triangle) are immovable
-PARTNER_IS_SPHERE = (True, False)
+# the rows themselves are events' (readers ask them too): indexed by the kind's code
 KINDS = len(KIND_NAMES)
 
 assert KIND_NAMES[KIND_PAIR] == "sphere" and KIND_NAMES[KIND_WALL] == "wall"
