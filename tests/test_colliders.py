@@ -15,13 +15,13 @@ from physdbg.engine.colliders import (
     PARTNER_IS_SPHERE,
     contact_gap,
     every_candidate,
+    geometry_of,
     max_overlap,
     narrow_candidates,
     partner_restitution,
     partner_sphere,
     time_of_impact,
 )
-from physdbg.engine.kernel_args import LoopWalls
 from physdbg.engine.motion import EULER, EXACT, VERLET, advance_particle
 from physdbg.engine.state import Walls
 from physdbg.engine.toi import SWEPT
@@ -33,8 +33,8 @@ vector = st.tuples(coordinate, coordinate, coordinate).map(np.array)
 
 def _walls(normal: np.ndarray, offset: float, two_sided: bool, thickness: float) -> tuple:
     unit = normal / np.linalg.norm(normal)
-    return tuple(LoopWalls.of(Walls(["w"], unit[None, :], np.array([offset]), np.array([0.7]),
-                                    np.array([two_sided]), np.array([thickness]))))
+    return geometry_of(Walls(["w"], unit[None, :], np.array([offset]), np.array([0.7]), np.array([two_sided]),
+                             np.array([thickness])))
 
 
 def test_the_table_names_each_kind_and_which_partners_move():
@@ -59,7 +59,7 @@ def test_each_kind_s_gap_closes_at_its_time_of_impact(kind, integrator, xa, xb, 
     zero there (sphere 0 is aimed at its partner, plus a random velocity)."""
     assume(np.linalg.norm(normal) > 0.1)
     walls = _walls(normal, offset, two_sided, 0.04 if two_sided else 0.0)
-    unit = walls[0][0]
+    unit = walls[KIND_WALL][0][0]
     height = unit @ xa - offset
     if kind == KIND_PAIR:
         va = va + aim * (xb - xa)

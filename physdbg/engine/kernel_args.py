@@ -1,13 +1,17 @@
-"""The argument groups of the compiled contact loop and its resolver.
+"""The argument groups of the compiled kernels: the step's arrays and settings.
 
-``timeline.run_time_order`` and ``resolve.resolve_contact`` take the step's arrays and
-settings in these few groups instead of fifty loose parameters. Each group is declared
-here once, as a NamedTuple (its fields named, typed and documented), built by name in
+The forces phase (``resolve.settle_held``), the predictions (``timeline.predict_into``),
+the contact loop (``timeline.run_time_order``) and the resolver
+(``resolve.resolve_contact``) take the step's arrays and settings in these few groups
+instead of fifty loose parameters, and hand them down whole. Each group is declared here
+once, as a NamedTuple (its fields named, typed and documented), built by name in
 ``World._kernel_groups``, and handed to the kernels as a plain tuple (``tuple(group)``):
 numba's dispatcher types a plain tuple in C, as fast as loose arguments, but a named
-tuple in Python (4.6 µs against 1.6 µs a call, measured with two groups). A kernel
-unpacks a group once at its top, positionally in the order below. A leaf module (numpy
-only), so the loop, the resolver and the world all import it.
+tuple in Python (4.6 µs against 1.6 µs a call, measured with two groups). The colliders'
+geometry is a group of groups, one per collider kind, declared by each kind's own module
+(colliders.geometry_of). A kernel reads the fields it needs through this module's
+unpack helpers (``paths``, ``sweep``, ``test_log``, ...), which name them by their index
+in the NamedTuple: a field added to a group changes the group and its helpers, no kernel.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
 
 class LoopParticles(NamedTuple):
@@ -60,28 +65,6 @@ class LoopMethod(NamedTuple):
     atol: float
 
 
-class LoopWalls(NamedTuple):
-    """The planes (W rows): normals (W, 3), offsets, half_thickness (m), two_sided,
-    restitution; and period (3,) m (0 = not periodic)."""
-
-    normals: np.ndarray
-    offsets: np.ndarray
-    half_thickness: np.ndarray
-    two_sided: np.ndarray
-    restitution: np.ndarray
-    period: np.ndarray
-
-    @classmethod
-    def of(cls, walls) -> LoopWalls:
-        """The group of a scene's walls (state.Walls), as the kernels' contiguous float64
-        (two_sided: bool) arrays."""
-        def floats(values) -> np.ndarray:
-            return np.ascontiguousarray(values, dtype=np.float64)
-        return cls(floats(walls.normals).reshape(-1, 3), floats(walls.offsets), floats(walls.thickness * 0.5),
-                   np.ascontiguousarray(walls.two_sided, dtype=np.bool_), floats(walls.restitution),
-                   floats(walls.period).reshape(3))
-
-
 class LoopCandidates(NamedTuple):
     """The broad phase's answer: CSR partners (adj_start (N+1,), adj), the swept boxes
     box_lo, box_hi (N, 3) m (grown to each sphere's reach) with their margin (m), the
@@ -124,3 +107,74 @@ class LoopBuffers(NamedTuple):
     batch_mark: np.ndarray
     requery: np.ndarray
     requery_count: np.ndarray
+
+
+# ----------------------------------------------------------------------------- unpack helpers
+# Each field's index in its group, from the NamedTuple itself (constants to numba: a
+# tuple of arrays of different shapes is indexed by a compile-time constant).
+_P = {name: i for i, name in enumerate(LoopParticles._fields)}
+_M = {name: i for i, name in enumerate(LoopMethod._fields)}
+_C = {name: i for i, name in enumerate(LoopCandidates._fields)}
+_B = {name: i for i, name in enumerate(LoopBuffers._fields)}
+P_X, P_V, P_A, P_ACC, P_RADIUS, P_INVERSE_MASS, P_RESTITUTION, P_SIGMA, P_LAST_CONTACT = (
+    _P[n] for n in ("x", "v", "a", "acc", "radius", "inverse_mass", "restitution", "sigma", "last_contact"))
+M_RUN_TIME, M_STEP_END, M_INTEGRATOR, M_DRAG, M_K, M_DETECTION, M_SAMPLES, M_TOLERANCE = (
+    _M[n] for n in ("run_time", "step_end", "integrator", "drag", "k", "detection", "samples", "tolerance"))
+M_REST_FRACTION, M_REST_STEP_FACTOR, M_ANCHOR_IS_FLOW, M_PATH_FOLLOWS_ACC, M_VTOL, M_ATOL = (
+    _M[n] for n in ("rest_fraction", "rest_step_factor", "anchor_is_flow", "path_follows_acc", "vtol", "atol"))
+C_ADJ_START, C_ADJ, C_BOX_LO, C_BOX_HI, C_BOX_MARGIN, C_MAX_DEGREE, C_PATH_LO, C_PATH_HI = (
+    _C[n] for n in ("adj_start", "adj", "box_lo", "box_hi", "box_margin", "max_degree", "path_lo", "path_hi"))
+B_HEAP_TOI, B_HEAP_DATA, B_TEST_INT, B_TEST_FLOAT, B_TEST_OUTCOME, B_COUNTERS, B_BATCH_MARK = (
+    _B[n] for n in ("heap_toi", "heap_data", "test_int", "test_float", "test_outcome", "counters", "batch_mark"))
+
+
+@njit(cache=True, inline="always")
+def paths(particles):
+    """(x, v, a, radius, sigma): what a sphere's path over the step is read from."""
+    return particles[P_X], particles[P_V], particles[P_A], particles[P_RADIUS], particles[P_SIGMA]
+
+
+@njit(cache=True, inline="always")
+def forces(particles):
+    """(acc, inverse_mass): the contact-solved accelerations and who can move."""
+    return particles[P_ACC], particles[P_INVERSE_MASS]
+
+
+@njit(cache=True, inline="always")
+def sweep(method):
+    """(step_end, integrator, k, detection, samples, tolerance): how a swept test runs."""
+    return (method[M_STEP_END], method[M_INTEGRATOR], method[M_K], method[M_DETECTION], method[M_SAMPLES],
+            method[M_TOLERANCE])
+
+
+@njit(cache=True, inline="always")
+def motion_of(method):
+    """(step_end, integrator, drag, k): how the paths move."""
+    return method[M_STEP_END], method[M_INTEGRATOR], method[M_DRAG], method[M_K]
+
+
+@njit(cache=True, inline="always")
+def solve_tolerances(method):
+    """(vtol, atol): the held solves' velocity and acceleration tolerances."""
+    return method[M_VTOL], method[M_ATOL]
+
+
+@njit(cache=True, inline="always")
+def boxes(candidates):
+    """(box_lo, box_hi, box_margin, path_lo, path_hi): the swept boxes and the current paths' boxes."""
+    return (candidates[C_BOX_LO], candidates[C_BOX_HI], candidates[C_BOX_MARGIN], candidates[C_PATH_LO],
+            candidates[C_PATH_HI])
+
+
+@njit(cache=True, inline="always")
+def partner_lists(candidates):
+    """(adj_start, adj): the broad phase's partners, CSR."""
+    return candidates[C_ADJ_START], candidates[C_ADJ]
+
+
+@njit(cache=True, inline="always")
+def test_log(buffers):
+    """(test_int, test_float, test_outcome, heap_toi, heap_data, counters): where a swept
+    test is logged and a hit queued."""
+    return (buffers[B_TEST_INT], buffers[B_TEST_FLOAT], buffers[B_TEST_OUTCOME], buffers[B_HEAP_TOI],
+            buffers[B_HEAP_DATA], buffers[B_COUNTERS])

@@ -176,6 +176,17 @@ def velocity_coefficients(integrator, drag, k, tau):
 
 
 @borrowing
+def kick(v, acc, drag, dt) -> None:
+    """The velocity update of an integrator that kicks at a step's start
+    (KICK_AT_STEP_START: semi-implicit Euler), in place: v <- v·d^dt + acc·dt for every
+    row of v, acc (N, 3) (m/s, m/s²); drag d, dt (s). The one place it is written."""
+    damp = 1.0 if drag == 1.0 else drag ** dt
+    for i in range(v.shape[0]):
+        for d in range(3):
+            v[i, d] = v[i, d] * damp + acc[i, d] * dt
+
+
+@borrowing
 def advance_particle(x, v, a, sigma, i, to_time, integrator, drag, k) -> None:
     """Move particle i's anchor forward to time ``to_time`` in the step (s).
 

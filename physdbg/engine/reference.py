@@ -30,18 +30,14 @@ class ReferenceWorld(World):
 
     def _resolve_in_time_order(self, ctx: StepContext) -> str | None:
         st = self._st
-        s = self.settings
-        every = [(kind, *every_candidate(kind, st.count, self._walls_group)) for kind in range(KINDS)]
+        every = [(kind, *every_candidate(kind, st.count, self._geometry)) for kind in range(KINDS)]
+        particles, method, geometry = self._kernel_groups(ctx)
         scratch = Buffers(st.count, heap=1, tests=max(sum(len(ia) for _, ia, _ in every), 1))
         while True:
             candidates = []
             for kind, ia, ib in every:
                 scratch.reset()
-                predict_into(kind, ia, ib, st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma,
-                             ctx.dt, self._integrator, self._k, self._detection, s.samples,
-                             s.contact_tolerance * 1e-3, self._walls_group, self.held, scratch.test_int,
-                             scratch.test_float, scratch.test_outcome, scratch.heap_toi, scratch.heap_data,
-                             scratch.counters, False)
+                predict_into(kind, ia, ib, particles, method, geometry, self.held, scratch.loop(), False)
                 m = int(scratch.counters[ROWS])
                 for row in range(m):
                     toi = float(scratch.test_float[row, 1])

@@ -32,7 +32,18 @@ import numpy as np
 from ..events import HOW_IMPULSE, HOW_RAPID, HOW_RESTING, HOW_WITH_HELD
 from .colliders import contact_gap, contact_normal, partner_restitution, partner_sphere
 from .jit import borrowing, kernel
-from .motion import advance_particle
+from .kernel_args import (
+    M_ANCHOR_IS_FLOW,
+    M_PATH_FOLLOWS_ACC,
+    M_REST_FRACTION,
+    M_REST_STEP_FACTOR,
+    P_V,
+    forces,
+    motion_of,
+    paths,
+    solve_tolerances,
+)
+from .motion import KICK_AT_STEP_START, advance_particle, kick
 from .resting import (
     HELD,
     STEP_RELEASED,
@@ -47,6 +58,7 @@ from .resting import (
     rapid_holds,
     relative_normal,
     release_loose,
+    rest_window,
     rests,
     solve_contacts,
     touch,
@@ -88,17 +100,17 @@ def seed_impulse(closing, restitution, inverse_mass_sum):
 
 
 @kernel
-def resolve_contact(kind, ia, other, toi, particles, method, walls, h, contacts, counters, contacts_slot, rapid_slot,
-                    changed, work_budget):
+def resolve_contact(kind, ia, other, toi, particles, method, geometry, h, contacts, counters, contacts_slot,
+                    rapid_slot, changed, work_budget):
     """Resolve the predicted contact (kind, ia, other) at time ``toi`` in the step.
 
     Advances the spheres to the contact, judges it (approaching? resting? rapid?),
     applies the seed's impulse or the simultaneous solve with held contacts, writes one
     contact row (events.CONTACT_ROW, ``contacts[counters[contacts_slot]]``) and lists in ``changed``
-    (count first) the spheres whose paths changed. particles, method, walls: the groups of
-    kernel_args (LoopParticles, LoopMethod, LoopWalls; method.path_follows_acc: the path
-    acceleration is the contact-solved acceleration, every integrator but semi-implicit);
-    h: the held store. Returns SKIPPED (not approaching: nothing resolved), RESOLVED, or
+    (count first) the spheres whose paths changed. particles, method: the groups of
+    kernel_args (LoopParticles, LoopMethod; method.path_follows_acc: the path acceleration
+    is the contact-solved acceleration, every integrator but semi-implicit); geometry:
+    colliders.geometry_of; h: the held store. Returns SKIPPED (not approaching: nothing resolved), RESOLVED, or
     OUT_OF_WORK (the held-contact solve ran out of its budget). On periodic axes the
     contact point is on a's surface next to a's centre, whichever image of b it met.
 
@@ -106,8 +118,8 @@ def resolve_contact(kind, ia, other, toi, particles, method, walls, h, contacts,
     involves no held contact (it allocates nothing, so the time-ordered loop runs it
     without reference counting, jit.py), and :func:`finish_with_held` for the rest.
     """
-    status, closing, used, how, is_rapid = judge_contact(kind, ia, other, toi, particles, method, walls, h, contacts,
-                                                         counters, contacts_slot, rapid_slot, changed)
+    status, closing, used, how, is_rapid = judge_contact(kind, ia, other, toi, particles, method, geometry, h,
+                                                         contacts, counters, contacts_slot, rapid_slot, changed)
     if status != NEEDS_HELD:
         return status
     return finish_with_held(kind, ia, other, toi, particles, method, h, contacts, counters, contacts_slot, rapid_slot,
@@ -115,7 +127,7 @@ def resolve_contact(kind, ia, other, toi, particles, method, walls, h, contacts,
 
 
 @borrowing
-def judge_contact(kind, ia, other, toi, particles, method, walls, h, contacts, counters, contacts_slot, rapid_slot,
+def judge_contact(kind, ia, other, toi, particles, method, geometry, h, contacts, counters, contacts_slot, rapid_slot,
                   changed):
     """The first stage of :func:`resolve_contact` (its arguments but the budget): advance,
     judge, begin the contact's row and, for a contact that involves no held contact,
@@ -132,10 +144,10 @@ def judge_contact(kind, ia, other, toi, particles, method, walls, h, contacts, c
     advance_particle(x, v, a, sigma, ia, toi, integrator, drag, k)
     if ib >= 0:
         advance_particle(x, v, a, sigma, ib, toi, integrator, drag, k)
-    nx, ny, nz = contact_normal(kind, x, ia, other, walls)
+    nx, ny, nz = contact_normal(kind, x, ia, other, geometry)
     closing = -relative_normal(v, ia, ib, nx, ny, nz)
     rel_acc = relative_normal(acc, ia, ib, nx, ny, nz)
-    e = combine(rule, restitution[ia], partner_restitution(kind, other, restitution, walls))
+    e = combine(rule, restitution[ia], partner_restitution(kind, other, restitution, geometry))
     wsum = inverse_mass[ia] + inverse_mass[ib] if ib >= 0 else inverse_mass[ia]
     # (the velocities' rounding counts only on paths that are the flow: there a contact
     # judged no approach is not predicted again, while on Euler paths it is, at once, by a
@@ -190,15 +202,11 @@ def finish_with_held(kind, ia, other, toi, particles, method, h, contacts, count
     involves held contacts (its status NEEDS_HELD, and closing, used, how, is_rapid as it
     returned them): solve it with the held contacts it reaches and finish its row.
     Returns RESOLVED or OUT_OF_WORK."""
-    x, v, a, acc, _radius, inverse_mass, _restitution, sigma, _last_contact = particles
-    (_run_time, step_end, integrator, drag, k, _detection, _samples, _tolerance, rest_fraction, rest_step_factor,
-     _rule, _rapid_time, _rapid_rule, anchor_is_flow, path_follows_acc, vtol, atol) = method
+    v = particles[P_V]
     ib = partner_sphere(kind, other)
     row = contacts[counters[contacts_slot]]
-    stick = step_end * (rest_step_factor + rest_fraction)
     j, ok = _solve_with_held(kind, ia, ib, other, toi, row.normal[0], row.normal[1], row.normal[2], used * closing,
-                             how != HOW_IMPULSE, x, v, a, acc, inverse_mass, sigma, integrator, drag, k, anchor_is_flow,
-                             path_follows_acc, h, changed, work_budget, vtol, atol, stick)
+                             how != HOW_IMPULSE, particles, method, h, changed, work_budget)
     _finish_row(kind, ia, other, ib, v, j, used, closing, how if how != HOW_IMPULSE else HOW_WITH_HELD, is_rapid,
                 contacts, counters, contacts_slot, rapid_slot)
     return RESOLVED if ok else OUT_OF_WORK
@@ -227,11 +235,16 @@ def _finish_row(kind, ia, other, ib, v, j, used, closing, how, is_rapid, contact
 
 
 @kernel
-def _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, target, hold, x, v, a, acc, inverse_mass, sigma,
-                     integrator, drag, k, anchor_is_flow, path_follows_acc, h, changed, work_budget, vtol, atol,
-                     stick):
+def _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, target, hold, particles, method, h, changed,
+                     work_budget):
     """The contact solved together with the held contacts it reaches (resting.py); returns
     (its impulse, whether the work budget sufficed) and lists the changed spheres."""
+    x, v, a, _radius, sigma = paths(particles)
+    acc, inverse_mass = forces(particles)
+    step_end, integrator, drag, k = motion_of(method)
+    vtol, atol = solve_tolerances(method)
+    anchor_is_flow, path_follows_acc = method[M_ANCHOR_IS_FLOW], method[M_PATH_FOLLOWS_ACC]
+    stick = rest_window(step_end, method[M_REST_STEP_FACTOR], method[M_REST_FRACTION])
     solve = begin_solve(h)
     touch(h, ia, x, v, a, sigma, toi, integrator, drag, k, solve)
     if ib >= 0:
@@ -310,21 +323,28 @@ def _visit_all(h, v) -> None:
 
 
 @kernel
-def settle_held(h, x, v, a, acc, free_accel, radius, inverse_mass, sigma, dt, integrator, drag, k,
-                semi_implicit, walls, contact_tolerance, work_budget, vtol, atol, stick) -> bool:
+def settle_held(h, particles, method, geometry, free_accel, contact_tolerance, work_budget) -> bool:
     """The forces phase of a step, for held contacts (all anchors at the step start).
 
     Releases contacts whose gap exceeds the contact tolerance, refreshes pair normals,
     rebuilds the accelerations from the kept multipliers (the warm start), solves them,
     releases contacts that are pulled apart, then (semi-implicit: after the velocity
-    kick) removes any approach along held contacts from the velocities. acc (N, 3) is
-    written; a (N, 3), the path accelerations, is set to acc unless semi-implicit (0).
+    kick) removes any approach along held contacts from the velocities. The particles'
+    acc (N, 3) is written, starting from free_accel (N, 3) m/s²; their a (N, 3), the path
+    accelerations, is set to acc unless the integrator kicks at step start (then 0).
+    particles, method: kernel_args' groups; geometry: colliders.geometry_of.
     Returns False when the work budget ran out.
     """
+    x, v, a, radius, sigma = paths(particles)
+    acc, inverse_mass = forces(particles)
+    dt, integrator, drag, k = motion_of(method)
+    vtol, atol = solve_tolerances(method)
+    stick = rest_window(dt, method[M_REST_STEP_FACTOR], method[M_REST_FRACTION])
+    semi_implicit = KICK_AT_STEP_START[integrator]
     n = x.shape[0]
     c = 0
     while c < h.count[HELD]:
-        gap, n0, n1, n2, renewed = contact_gap(h.kind[c], x, v, a, radius, h.a[c], h.other[c], walls)
+        gap, n0, n1, n2, renewed = contact_gap(h.kind[c], x, v, a, radius, h.a[c], h.other[c], geometry)
         if renewed:
             h.normal[c, 0] = n0
             h.normal[c, 1] = n1
@@ -345,10 +365,7 @@ def settle_held(h, x, v, a, acc, free_accel, radius, inverse_mass, sigma, dt, in
     ok = _solve_accelerations(h, x, v, a, acc, inverse_mass, sigma, 0.0, integrator, drag, k, work_budget, math.inf,
                               atol, stick)
     if semi_implicit:
-        damp = 1.0 if drag == 1.0 else drag ** dt
-        for i in range(n):
-            for d in range(3):
-                v[i, d] = v[i, d] * damp + acc[i, d] * dt
+        kick(v, acc, drag, dt)
     if ok and h.count[HELD] > 0:
         for c in range(h.count[HELD]):
             h.target[c] = 0.0

@@ -69,7 +69,17 @@ def rests(closing: float, rel_acc: float, dt: float, step_factor: float, fractio
     along the normal (m/s², < 0 when it presses the contact); dt: the step (s);
     step_factor: the integrator's f; fraction: Settings.rest_fraction.
     """
-    return rel_acc < 0.0 and closing <= -rel_acc * dt * (step_factor + fraction)
+    return rel_acc < 0.0 and closing <= -rel_acc * rest_window(dt, step_factor, fraction)
+
+
+@borrowing
+def rest_window(dt: float, step_factor: float, fraction: float) -> float:
+    """The resting window (s), the one place it is written: a pressed contact closing no
+    faster than |a_n| times it rests (rule 1, ``rests``), and a held contact resists
+    separation with at most the impulse its pressing force gives in it (``stick``, the
+    held solves). dt: the step (s); step_factor: the integrator's f; fraction:
+    Settings.rest_fraction."""
+    return dt * (step_factor + fraction)
 
 
 @borrowing

@@ -35,9 +35,9 @@ from numba import njit
 
 from ..events import CONTACT_ROW, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_SUPERSEDED
 from .broadphase.boxes import box_meets
-from .colliders import KINDS, partner_sphere, partners_of, time_of_impact
+from .colliders import KINDS, most_partners, partner_sphere, partners_bound, partners_of, time_of_impact
 from .jit import borrowing, kernel
-from .kernel_args import LoopBuffers
+from .kernel_args import B_BATCH_MARK, B_COUNTERS, LoopBuffers, boxes, partner_lists, paths, sweep, test_log
 from .motion import particle_box
 from .resolve import NEEDS_HELD, OUT_OF_WORK, SKIPPED, finish_with_held, judge_contact
 from .resting import held_find, held_room
@@ -218,11 +218,11 @@ def heap_pop(toi, data, counters):
 
 # ------------------------------------------------------------------------------ predict
 @njit(cache=True, inline="always")
-def _record(kind, i, j, start, t, step_end, test_int, test_float, test_outcome, heap_toi, heap_data,
-            counters, push):
+def _record(kind, i, j, start, t, step_end, buffers, push):
     """Count a swept test, log it (every test, or only a hit: counters[KEEP_MISSES]) and
     push a hit onto the heap if ``push``. Rows keep the order of the tests, so the heap's
     tie-break by row is the same either way."""
+    test_int, test_float, test_outcome, heap_toi, heap_data, counters = test_log(buffers)
     counters[TESTS] += 1
     hit = start + t <= step_end
     if not hit and counters[KEEP_MISSES] == 0:
@@ -240,37 +240,34 @@ def _record(kind, i, j, start, t, step_end, test_int, test_float, test_outcome, 
 
 
 @njit(cache=True, inline="always")
-def _predict(kind, ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
-             tolerance, walls, held, test_int, test_float, test_outcome, heap_toi, heap_data, counters, push):
+def _predict(kind, ia, other, particles, method, geometry, held, buffers, push):
     """Swept test of (kind, ia, other) (pairs: ia < other) from the anchors; record it,
     push a hit. A held contact is not tested."""
     b = partner_sphere(kind, other)
     if held.deg[ia] > 0 and (b < 0 or held.deg[b] > 0) and held_find(held, kind, ia, other) >= 0:
         return
+    x, v, a, radius, sigma = paths(particles)
+    step_end, integrator, k, detection, samples, tolerance = sweep(method)
     start, t = time_of_impact(kind, ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
-                              tolerance, walls)
-    _record(kind, ia, other, start, t, step_end, test_int, test_float, test_outcome, heap_toi, heap_data,
-            counters, push)
+                              tolerance, geometry)
+    _record(kind, ia, other, start, t, step_end, buffers, push)
 
 
 @borrowing
-def predict_into(kind, ia, ib, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
-                 tolerance, walls, held, test_int, test_float, test_outcome, heap_toi, heap_data, counters, push):
+def predict_into(kind, ia, ib, particles, method, geometry, held, buffers, push):
     """Swept-test candidates (kind, ia[m], ib[m]); record each test; push hits if ``push``.
 
-    walls: kernel_args.LoopWalls (as a tuple); held: the held contacts
-    (resting.HeldContacts), which are not tested.
+    particles, method, buffers: kernel_args' groups (as plain tuples); geometry:
+    colliders.geometry_of; held: the held contacts (resting.HeldContacts), which are not
+    tested.
     """
     for m in range(ia.shape[0]):
-        _predict(kind, ia[m], ib[m], x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
-                 tolerance, walls, held, test_int, test_float, test_outcome, heap_toi, heap_data, counters, push)
+        _predict(kind, ia[m], ib[m], particles, method, geometry, held, buffers, push)
 
 
 # ------------------------------------------------------------------------------ resolve
 @borrowing
-def _repredict(p, x, v, a, radius, sigma, step_end, integrator, k, detection, samples, tolerance, walls,
-               held, adj_start, adj, batch_mark, batch, test_int, test_float, test_outcome, heap_toi, heap_data,
-               counters, box_lo, box_hi, box_margin, path_lo, path_hi, scratch, found):
+def _repredict(p, particles, method, geometry, held, candidates, buffers, scratch, found):
     """Push new predictions of particle p against the partners of every kind it can reach
     (colliders.partners_of: what p's new path can meet, judged by boxes); returns whether
     p's new path stays inside its swept box (if not, the caller queries the broad phase
@@ -282,17 +279,28 @@ def _repredict(p, x, v, a, radius, sigma, step_end, integrator, k, detection, sa
     against p's path as it is. (The grown boxes are for finding partners at all; judged by
     them, box-rain 10k tested ~1.6 times as many pairs that could not meet.)
     """
+    x, v, a, radius, sigma = paths(particles)
+    step_end, integrator, k, _detection, _samples, _tolerance = sweep(method)
+    box_lo, box_hi, box_margin, path_lo, path_hi = boxes(candidates)
+    adj_start, adj = partner_lists(candidates)
+    batch_mark = buffers[B_BATCH_MARK]
+    batch = buffers[B_COUNTERS][BATCH]
     inside = _inside_box(x, v, a, radius, sigma, p, step_end, integrator, k, box_margin, box_lo, box_hi, scratch)
     for c in range(3):
         path_lo[p, c] = scratch[0, c]
         path_hi[p, c] = scratch[1, c]
     for kind in range(KINDS):
-        m = partners_of(kind, p, scratch, adj_start, adj, path_lo, path_hi, batch_mark, batch, walls, found)
+        m = partners_of(kind, p, scratch, adj_start, adj, path_lo, path_hi, batch_mark, batch, geometry, found)
         for s in range(m):
-            _predict(kind, found[s, 0], found[s, 1], x, v, a, radius, sigma, step_end, integrator, k,
-                     detection, samples, tolerance, walls, held, test_int, test_float, test_outcome, heap_toi,
-                     heap_data, counters, True)
+            _predict(kind, found[s, 0], found[s, 1], particles, method, geometry, held, buffers, True)
     return inside
+
+
+@njit(cache=True, inline="always")
+def prediction_room(geometry, max_degree):
+    """Room (heap slots, log rows) the loop keeps free before re-predicting a sphere: two
+    predictions for each candidate a sphere can have (colliders.partners_bound), and 4."""
+    return 2 * partners_bound(geometry, max_degree) + 4
 
 
 @njit(cache=True, inline="always")
@@ -362,9 +370,10 @@ _HELD_SOLVE = -1  # _run_events: the contact in ``judged`` is to be solved with 
 
 
 @kernel
-def run_time_order(particles, method, walls, held, candidates, budgets, buffers):
+def run_time_order(particles, method, geometry, held, candidates, budgets, buffers):
     """Resolve contacts in time order until done or a pause (see module doc); the groups
-    are kernel_args' (as plain tuples), held the store (resting.HeldContacts).
+    are kernel_args' (as plain tuples), geometry colliders.geometry_of, held the store
+    (resting.HeldContacts).
 
     The event loop itself is :func:`_run_events`, compiled without reference counting
     (jit.py): a compiled function that counts references increfs every array it hands to
@@ -377,13 +386,12 @@ def run_time_order(particles, method, walls, held, candidates, budgets, buffers)
     work_budget = budgets[2]
     (_heap_toi, heap_data, _test_int, _test_float, test_outcome, contacts, counters, pending, changed, batch_mark,
      _requery, requery_count) = buffers
-    nw = walls[0].shape[0]
     scratch = np.empty((2, 3))  # the lo, hi rows of _inside_box
-    found = np.empty((max(max_degree, nw) + 1, 2), dtype=np.int64)  # one kind's candidates (_repredict)
+    found = np.empty((most_partners(geometry, max_degree) + 1, 2), dtype=np.int64)  # one kind's (_repredict)
     judged = np.empty(5, dtype=np.int64)  # a contact _run_events left for the held solve: rid, kind, a, other, how
     judged_f = np.empty(4)  # ... its time, closing speed, restitution used, rapid (1.0) or not
     while True:
-        status = _run_events(particles, method, walls, held, candidates, budgets, buffers, scratch, found, judged,
+        status = _run_events(particles, method, geometry, held, candidates, budgets, buffers, scratch, found, judged,
                              judged_f)
         if status != _HELD_SOLVE:
             return status
@@ -412,21 +420,17 @@ def _after_contact(status, rid, batch_mark, pending, changed, test_outcome, coun
 
 
 @borrowing
-def _run_events(particles, method, walls, held, candidates, budgets, buffers, scratch, found, judged, judged_f):
+def _run_events(particles, method, geometry, held, candidates, budgets, buffers, scratch, found, judged, judged_f):
     """run_time_order's loop: re-predict, pop, resolve (resolve.judge_contact), until
     done, a pause, or a contact that must be solved with held contacts (_HELD_SOLVE,
     the contact in judged, judged_f: see run_time_order)."""
     # positional, in kernel_args' field order (the groups come as plain tuples, see there);
     # distinct names for what the loop does not read itself: numba types each name once
-    x, v, a, _acc, radius, _inverse_mass, _restitution, sigma, _last_contact = particles
-    (_run_time, step_end, integrator, _drag, k, detection, samples, tolerance, _rest_fraction, _rest_step_factor,
-     _rule, _rapid_time, _rapid_rule, _anchor_is_flow, _path_follows_acc, _vtol, _atol) = method
-    nw = walls[0].shape[0]
-    adj_start, adj, box_lo, box_hi, box_margin, max_degree, path_lo, path_hi, scan_boxes = candidates
+    adj_start, adj, box_lo, box_hi, _box_margin, max_degree, _path_lo, _path_hi, scan_boxes = candidates
     cap, max_tests, _work_budget = budgets
-    (heap_toi, heap_data, test_int, test_float, test_outcome, contacts, counters, pending, changed, batch_mark,
+    (heap_toi, heap_data, test_int, _test_float, test_outcome, contacts, counters, pending, changed, batch_mark,
      requery, requery_count) = buffers
-    room = 2 * max_degree + 2 * nw + 4
+    room = prediction_room(geometry, max_degree)
     while True:
         # re-predict the spheres the last contact changed, pausing if a buffer fills up
         if counters[PENDING_COUNT] > 0:
@@ -435,10 +439,7 @@ def _run_events(particles, method, walls, held, candidates, budgets, buffers, sc
                     return GROW
                 p = pending[counters[PENDING_AT]]
                 counters[PENDING_AT] += 1
-                if not _repredict(p, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
-                                  tolerance, walls, held, adj_start, adj, batch_mark, counters[BATCH], test_int,
-                                  test_float, test_outcome, heap_toi, heap_data, counters, box_lo, box_hi,
-                                  box_margin, path_lo, path_hi, scratch, found):
+                if not _repredict(p, particles, method, geometry, held, candidates, buffers, scratch, found):
                     # a path that left its swept box may meet particles it was never paired
                     # with: the world re-queries for it, unless the loop's own scan shows
                     # it meets none (nearly always: box-rain 10k paused 2.5 times a step
@@ -479,7 +480,7 @@ def _run_events(particles, method, walls, held, candidates, budgets, buffers, sc
             mark_capped(heap_data, test_outcome, counters)
             return CAPPED
         # resolve.resolve_contact's first stage; the second, which allocates, is run_time_order's
-        status, closing, used, how, is_rapid = judge_contact(kind, ia, other, toi, particles, method, walls, held,
+        status, closing, used, how, is_rapid = judge_contact(kind, ia, other, toi, particles, method, geometry, held,
                                                              contacts, counters, CONTACTS, RAPID, changed)
         if status == NEEDS_HELD:
             judged[0] = rid

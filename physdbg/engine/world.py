@@ -51,8 +51,8 @@ from ..events import (
 from .broadphase import choose_broad_phase, make_broad_phase
 from .broadphase.boxes import boxes_meet, overlapping
 from .broadphase.periodic import PeriodicBroadPhase
-from .colliders import KINDS, PARTNER_IS_SPHERE, max_overlap, narrow_candidates
-from .kernel_args import LoopBudgets, LoopCandidates, LoopMethod, LoopParticles, LoopWalls
+from .colliders import KINDS, PARTNER_IS_SPHERE, geometry_of, max_overlap, narrow_candidates
+from .kernel_args import LoopBudgets, LoopCandidates, LoopMethod, LoopParticles
 from .motion import (
     FLOW,
     KICK_AT_STEP_START,
@@ -94,6 +94,7 @@ from .timeline import (
     mark_capped,
     merge_sorted_pairs,
     predict_into,
+    prediction_room,
     run_time_order,
 )
 
@@ -134,9 +135,9 @@ class World:
         self.time = 0.0
         movable = state.inverse_mass > 0
         state.velocities[~movable] = 0.0
-        # the planes never change in a run: their kernel group is built once
-        self._walls_group = tuple(LoopWalls.of(walls))
-        self._period = self._walls_group[-1]
+        # the colliders' geometry never changes in a run: its kernel group is built once
+        self._geometry = geometry_of(walls)
+        self._period = np.ascontiguousarray(walls.period, dtype=np.float64).reshape(3)
         self._period_origin = np.ascontiguousarray(walls.period_origin, dtype=np.float64)
         self._periodic = walls.periodic
         if self._periodic:
@@ -248,14 +249,13 @@ class World:
 
     def _forces(self, ctx: StepContext) -> None:
         """Held contacts -> the accelerations the paths follow (resolve.settle_held)."""
-        st, s, n, dt = self._st, self.settings, self._st.count, ctx.dt
+        s, n = self.settings, self._st.count
         self.held.count[STEP_WORK:STEP_RELEASED + 1] = 0  # this step's resting work, whole solves, releases
         ctx.path_accel = np.empty_like(self._acc)
         ctx.sigma = np.zeros(n)
-        if not settle_held(self.held, st.positions, st.velocities, ctx.path_accel, self._acc, self._free_accel,
-                           st.radius, self._inverse_mass, ctx.sigma, dt, self._integrator, self._drag, self._k,
-                           self._kick_first, self._walls_group, s.contact_tolerance, s.max_resting_work_per_step,
-                           ctx.vtol, self._atol, dt * (self._rest_step_factor + s.rest_fraction)):
+        particles, method, geometry = self._kernel_groups(ctx)
+        if not settle_held(self.held, particles, method, geometry, self._free_accel, s.contact_tolerance,
+                           s.max_resting_work_per_step):
             ctx.warn("max_resting_work_per_step", _budget_message("max_resting_work_per_step",
                                                                   s.max_resting_work_per_step))
 
@@ -292,7 +292,7 @@ class World:
         self._buf.reset(keep_misses=wants_swept_tests(ctx.observer))
         push = self.settings.ordering == "time"
         for kind in range(KINDS):  # in the kinds' order: ties in the queue break by test
-            ia, other = narrow_candidates(kind, ctx.pairs, ctx.path_lo, ctx.path_hi, self._walls_group)
+            ia, other = narrow_candidates(kind, ctx.pairs, ctx.path_lo, ctx.path_hi, self._geometry)
             self._predict(ctx, kind, ia, other, push)
 
     def _resolve(self, ctx: StepContext) -> None:
@@ -479,15 +479,10 @@ class World:
         none if the buffers cannot grow for them within max_memory (ctx.out_of_memory)."""
         if ia.size == 0:
             return
-        st = self._st
-        s = self.settings
-        buf = self._buf
         if ctx.out_of_memory or not self._ensure(ctx, ia.size, ia.size, 0):
             return  # the step stops before resolving anything more (_resolve)
-        predict_into(kind, ia, ib, st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma, ctx.dt,
-                     self._integrator, self._k, self._detection, s.samples, s.contact_tolerance * 1e-3,
-                     self._walls_group, self.held, buf.test_int, buf.test_float, buf.test_outcome, buf.heap_toi,
-                     buf.heap_data, buf.counters, push)
+        particles, method, geometry = self._kernel_groups(ctx)
+        predict_into(kind, ia, ib, particles, method, geometry, self.held, self._buf.loop(), push)
 
     # ------------------------------------------------------------------ policies
     def _resolve_in_time_order(self, ctx: StepContext) -> str | None:
@@ -495,8 +490,7 @@ class World:
         budget that stopped it (a Settings field name), or None."""
         s = self.settings
         buf = self._buf
-        nw = len(self.walls)
-        particles, method, walls = self._kernel_groups(ctx)
+        particles, method, geometry = self._kernel_groups(ctx)
         budgets = tuple(LoopBudgets(self.event_cap, s.swept_test_budget(self._st.count),
                                     s.max_resting_work_per_step))
         while True:
@@ -506,7 +500,7 @@ class World:
             # the held store, the adjacency and the buffers are replaced when they grow
             candidates = tuple(LoopCandidates(ctx.adj_start, ctx.adj, ctx.lo, ctx.hi, self._box_margin,
                                               ctx.max_degree, ctx.path_lo, ctx.path_hi, self._scan_boxes))
-            status = run_time_order(particles, method, walls, self.held, candidates, budgets, buf.loop())
+            status = run_time_order(particles, method, geometry, self.held, candidates, budgets, buf.loop())
             if status == DONE:
                 return None
             if status == CAPPED:
@@ -516,7 +510,7 @@ class World:
             if status == RESTING_BUDGET:
                 return "max_resting_work_per_step"
             if status == GROW:
-                room = 2 * ctx.max_degree + 2 * nw + 4
+                room = prediction_room(geometry, ctx.max_degree)
                 self._ensure(ctx, room, room, 2)
             elif status == GROW_HELD:
                 self._grow_held(ctx)
@@ -617,15 +611,16 @@ class World:
         buf.ensure(0, 0, 1)
         while not held_room(self.held, a, other if PARTNER_IS_SPHERE[kind] else -1):
             self.held = grow_held(self.held)
-        particles, method, walls = self._kernel_groups(ctx)
-        return resolve_contact(kind, a, other, when, particles, method, walls, self.held, buf.contacts, buf.counters,
-                               CONTACTS, RAPID, buf.changed, self.settings.max_resting_work_per_step)
+        particles, method, geometry = self._kernel_groups(ctx)
+        return resolve_contact(kind, a, other, when, particles, method, geometry, self.held, buf.contacts,
+                               buf.counters, CONTACTS, RAPID, buf.changed, self.settings.max_resting_work_per_step)
 
     def _kernel_groups(self, ctx: StepContext) -> tuple[tuple, tuple, tuple]:
         """The step's arrays and settings as the compiled loop and resolver take them:
-        kernel_args' LoopParticles, LoopMethod and LoopWalls, as plain tuples. Built once
-        a step (the index-ordered policy asks for them at every contact): none of their
-        arrays is replaced after the narrow phase."""
+        kernel_args' LoopParticles and LoopMethod, as plain tuples, and the colliders'
+        geometry. Built once a step, in the forces phase (the index-ordered policy asks for
+        them at every contact): none of their arrays is replaced after the forces phase
+        makes the path accelerations and anchor times."""
         if ctx.kernel_groups is None:
             ctx.kernel_groups = self._build_kernel_groups(ctx)
         return ctx.kernel_groups
@@ -639,7 +634,7 @@ class World:
                             RESTITUTION_RULES.index(s.restitution_rule), s.rapid_contact_time,
                             RAPID_RULES.index(s.rapid_contact_rule), self._anchor_is_flow,
                             not self._kick_first, ctx.vtol, self._atol)
-        return tuple(particles), tuple(method), self._walls_group
+        return tuple(particles), tuple(method), self._geometry
 
     # ------------------------------------------------------------------ events
     def _contacts_event(self, ctx: StepContext) -> Contacts:
@@ -651,7 +646,7 @@ class World:
 
     def _max_overlap(self, ctx: StepContext) -> float:
         """Deepest penetration (m) among candidate pairs and particle–wall pairs."""
-        return float(max_overlap(self._st.positions, self._st.radius, ctx.pairs, self._walls_group,
+        return float(max_overlap(self._st.positions, self._st.radius, ctx.pairs, self._geometry,
                                  self.settings.detection != "swept"))
 
     def _broad_phase_event(self, ctx: StepContext) -> BroadPhaseInfo:

@@ -338,7 +338,7 @@ def _max_overlap(x: np.ndarray, radius: np.ndarray, walls) -> float:
     from ..engine.broadphase.periodic import PeriodicBroadPhase
     from ..engine.periodic import wrap_positions
     from ..engine.colliders import max_overlap
-    from ..engine.kernel_args import LoopWalls
+    from ..engine.colliders import geometry_of
 
     finite = np.all(np.isfinite(x), axis=1)
     x, r = np.ascontiguousarray(x[finite]), np.ascontiguousarray(radius[finite])
@@ -348,7 +348,7 @@ def _max_overlap(x: np.ndarray, radius: np.ndarray, walls) -> float:
         x = x.copy()
         wrap_positions(x, walls.period_origin, walls.period)
     pairs = broad.pairs(x - r[:, None], x + r[:, None]) if len(x) > 1 else np.zeros((0, 2), np.int64)
-    return float(max_overlap(x, r, pairs, tuple(LoopWalls.of(walls)), True))
+    return float(max_overlap(x, r, pairs, geometry_of(walls), True))
 
 
 def write_mcap_run(path: str | Path, times, positions, velocities=None) -> None:

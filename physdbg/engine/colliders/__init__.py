@@ -1,18 +1,21 @@
-"""Collider kinds: what a sphere can hit, as one table and one switch.
+"""Collider kinds: what a sphere can hit, as one table, one geometry and one switch.
 
 A contact is sphere ``a`` against a partner of some kind (events.KIND_*): another sphere
 (sphere.py) or a wall (plane.py). The engine never branches on a kind itself; it asks
 
-* the table (kinds.py) what a kind is in general: its name, and whether the partner is a
-  sphere that moves (``partner_sphere``) or immovable;
+* the table (kinds.py, events' rows) what a kind is in general: its name, and whether the
+  partner is a sphere that moves (``partner_sphere``) or immovable;
 * the switch below about its geometry: the swept test, the contact normal, the gap of a
   held contact, the partner's restitution, which partners a re-predicted sphere can meet,
   the narrow phase's candidates and the deepest overlap.
 
-Adding a kind (next: triangle meshes) is one module beside sphere.py and plane.py, its row
-in kinds.py, and one branch in each function here (docs/engine.md lists what else a kind
-with new data needs). The world's arrays reach the kinds as kernel_args.LoopWalls
-(``walls``: the planes, and the periodic axes the sphere pairs use).
+What the kinds read besides the particles is the *geometry*: one group per kind, in the
+order of their codes (``geometry_of``: ``geometry[KIND_PAIR]`` is sphere.SphereGeometry,
+``geometry[KIND_WALL]`` plane.PlaneGeometry), each built and unpacked by its own module
+and handed down whole to every kernel that reaches a kind. Adding a kind (next: triangle
+meshes) is one module beside sphere.py and plane.py (its functions and its group), its row
+in the table (events.KIND_NAMES, PARTNER_IS_SPHERE), its module in KIND_MODULES, and one
+branch in each function of the switch (docs/engine.md, "Adding a collider kind").
 """
 
 from __future__ import annotations
@@ -20,97 +23,127 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ...events import KIND_PAIR
+from ...events import KIND_PAIR, KIND_WALL
 from ..jit import borrowing
 from . import plane, sphere
 from .kinds import KIND_NAMES, KINDS, PARTNER_IS_SPHERE, partner_sphere
 
-__all__ = ["KIND_NAMES", "KINDS", "PARTNER_IS_SPHERE", "partner_sphere", "time_of_impact", "contact_normal",
-           "contact_gap", "partner_restitution", "partners_of", "max_overlap", "narrow_candidates",
-           "every_candidate"]
+__all__ = ["KIND_NAMES", "KINDS", "KIND_MODULES", "PARTNER_IS_SPHERE", "partner_sphere", "geometry_of",
+           "check_kind_modules", "time_of_impact", "contact_normal", "contact_gap", "partner_restitution",
+           "partners_of", "max_overlap", "narrow_candidates", "every_candidate", "most_partners", "partners_bound"]
+
+# each kind's module, in the order of the kinds' codes: its geometry group is ``module.<Name>Geometry``
+KIND_MODULES = (sphere, plane)
+
+
+def check_kind_modules(names=KIND_NAMES, modules=KIND_MODULES) -> None:
+    """Raise ValueError when the table of kinds and the kinds' modules disagree (a kind
+    added to the table without its module, or the other way round). Run at import."""
+    if len(names) != len(modules):
+        missing = ", ".join(f"{code} {name}" for code, name in enumerate(names) if code >= len(modules))
+        raise ValueError(f"engine/colliders: {len(names)} collider kinds in the table ({', '.join(names)}) but "
+                         f"{len(modules)} modules in KIND_MODULES" + (f"; no module for {missing}" if missing else "")
+                         + ": a kind is one module, its table row and one branch per switch function "
+                           "(docs/engine.md, \"Adding a collider kind\")")
+
+
+check_kind_modules()
+
+
+def geometry_of(walls) -> tuple:
+    """The geometry the kernels read (a plain tuple of each kind's group, as plain tuples,
+    in kind order) from a scene's walls and box (state.Walls)."""
+    return (tuple(sphere.SphereGeometry.of(walls)), tuple(plane.PlaneGeometry.of(walls)))
 
 
 @njit(cache=True, inline="always")
 def time_of_impact(kind, ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples, tolerance,
-                   walls):
+                   geometry):
     """Swept test of (kind, ia, other) on the paths (x, v, a: (N, 3)) from their anchors
     sigma (s): (start, t), the test's start in the step and the time of impact after it
     (s; inf or beyond step_end: none). tolerance (m): the sphere pairs' root tolerance."""
-    normals, offsets, half_thickness, two_sided, _restitution, period = walls
     if kind == KIND_PAIR:
         return sphere.time_of_impact(ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
-                                     tolerance, period)
+                                     tolerance, geometry[KIND_PAIR])
     return plane.time_of_impact(ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
-                                normals, offsets, half_thickness, two_sided)
+                                geometry[KIND_WALL])
 
 
 @njit(cache=True, inline="always")
-def contact_normal(kind, x, ia, other, walls):
+def contact_normal(kind, x, ia, other, geometry):
     """Unit normal (3 floats) from the partner to sphere ia at the anchors."""
-    normals, offsets, _half_thickness, two_sided, _restitution, period = walls
     if kind == KIND_PAIR:
-        return sphere.normal(x, ia, other, period)
-    return plane.normal(x, ia, other, normals, offsets, two_sided)
+        return sphere.normal(x, ia, other, geometry[KIND_PAIR])
+    return plane.normal(x, ia, other, geometry[KIND_WALL])
 
 
 @borrowing
-def contact_gap(kind, x, v, a, radius, ia, other, walls):
+def contact_gap(kind, x, v, a, radius, ia, other, geometry):
     """(gap (m, < 0: overlap), n0, n1, n2, renewed) of a held contact at the anchors: where
     renewed, (n0, n1, n2) is the contact's normal now (a sphere pair turns as it rolls)."""
-    normals, offsets, half_thickness, two_sided, _restitution, period = walls
     if kind == KIND_PAIR:
-        return sphere.gap(x, radius, ia, other, period)
-    return plane.gap(x, v, a, radius, ia, other, normals, offsets, half_thickness, two_sided)
+        return sphere.gap(x, radius, ia, other, geometry[KIND_PAIR])
+    return plane.gap(x, v, a, radius, ia, other, geometry[KIND_WALL])
 
 
 @njit(cache=True, inline="always")
-def partner_restitution(kind, other, restitution, walls):
+def partner_restitution(kind, other, restitution, geometry):
     """The partner's restitution coefficient: restitution (N,) for spheres, the walls' own."""
-    wall_restitution = walls[4]  # kernel_args.LoopWalls.restitution
     if kind == KIND_PAIR:
         return restitution[other]
-    return wall_restitution[other]
+    return plane.restitution(other, geometry[KIND_WALL])
 
 
 @njit(cache=True, inline="always")
-def partners_of(kind, p, box, adj_start, adj, path_lo, path_hi, batch_mark, batch, walls, out) -> int:
+def partners_of(kind, p, box, adj_start, adj, path_lo, path_hi, batch_mark, batch, geometry, out) -> int:
     """The candidates of ``kind`` that sphere p's new path must be swept-tested against, as
     rows (a, other) of out (K, 2); returns how many. box (2, 3): the new path's box, also
     p's row of path_lo, path_hi (N, 3), the boxes of every sphere's current path;
     adj_start, adj: the broad phase's partners (CSR); batch_mark (N,): the batch that last
     changed each sphere (batch: this one)."""
-    normals, offsets, half_thickness, two_sided, _restitution, period = walls
     if kind == KIND_PAIR:
-        return sphere.partners_of(p, box, path_lo, path_hi, adj_start, adj, batch_mark, batch, period, out)
-    return plane.partners_of(p, path_lo, path_hi, normals, offsets, half_thickness, two_sided, out)
+        return sphere.partners_of(p, box, path_lo, path_hi, adj_start, adj, batch_mark, batch, geometry[KIND_PAIR],
+                                  out)
+    return plane.partners_of(p, path_lo, path_hi, geometry[KIND_WALL], out)
+
+
+@njit(cache=True, inline="always")
+def most_partners(geometry, max_degree) -> int:
+    """The most candidates of one kind a re-predicted sphere can have (the size of
+    partners_of's ``out``): its broad-phase partners (at most max_degree), every wall."""
+    return max(max_degree, plane.count(geometry[KIND_WALL]))
+
+
+@njit(cache=True, inline="always")
+def partners_bound(geometry, max_degree) -> int:
+    """The most candidates of every kind together a re-predicted sphere can have."""
+    return max_degree + plane.count(geometry[KIND_WALL])
 
 
 @borrowing
-def max_overlap(x, radius, pairs, walls, ignore_tunnelled):
+def max_overlap(x, radius, pairs, geometry, ignore_tunnelled):
     """Deepest overlap (m, >= 0) of the candidate sphere pairs (M, 2) and of every sphere
     with every wall (ignore_tunnelled: see plane.deepest)."""
-    normals, offsets, half_thickness, two_sided, _restitution, period = walls
-    return max(sphere.deepest(x, radius, pairs, period),
-               plane.deepest(x, radius, normals, offsets, half_thickness, two_sided, ignore_tunnelled))
+    return max(sphere.deepest(x, radius, pairs, geometry[KIND_PAIR]),
+               plane.deepest(x, radius, geometry[KIND_WALL], ignore_tunnelled))
 
 
 def narrow_candidates(kind: int, pairs: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                      walls: tuple) -> tuple[np.ndarray, np.ndarray]:
+                      geometry: tuple) -> tuple[np.ndarray, np.ndarray]:
     """The narrow phase's candidates of ``kind`` at step start, (a (M,), other (M,)) int64:
     the broad phase's sphere pairs (M, 2) whose path boxes lo, hi (N, 3) meet, or the walls
     each path box reaches."""
-    normals, offsets, half_thickness, two_sided, _restitution, period = walls
     if kind == KIND_PAIR:
-        return sphere.candidates(pairs, lo, hi, period)
-    return plane.reachable(lo, hi, normals, offsets, half_thickness, two_sided)
+        return sphere.candidates(pairs, lo, hi, geometry[KIND_PAIR])
+    return plane.reachable(lo, hi, geometry[KIND_WALL])
 
 
-def every_candidate(kind: int, count: int, walls: tuple) -> tuple[np.ndarray, np.ndarray]:
+def every_candidate(kind: int, count: int, geometry: tuple) -> tuple[np.ndarray, np.ndarray]:
     """Every candidate of ``kind`` among ``count`` spheres, with no broad phase (the slow
     reference loop's): (a (M,), other (M,)) int64, every pair i < j or every sphere–wall."""
     if kind == KIND_PAIR:
         a, other = np.triu_indices(count, 1)
         return a.astype(np.int64), other.astype(np.int64)
-    walls_count = walls[0].shape[0]
+    walls_count = plane.count(geometry[KIND_WALL])
     return (np.repeat(np.arange(count, dtype=np.int64), walls_count),
             np.tile(np.arange(walls_count, dtype=np.int64), count))

@@ -6,12 +6,14 @@ pushes a sphere back to whichever side its anchor is on). What the engine asks a
 sphere i against wall w, each function reached through the switch in
 ``colliders/__init__``: its swept test, its contact normal and gap, which walls a
 sphere's box reaches, and the deepest overlap. Immovable: the partner takes no impulse
-(colliders.kinds.PARTNER_IS_SPHERE).
+(colliders.kinds.PARTNER_IS_SPHERE). What a wall reads is this kind's group,
+``PlaneGeometry``, unpacked by ``_unpack`` alone.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -20,11 +22,50 @@ from ..jit import borrowing, kernel
 from ..toi import DISCRETE, SWEPT, wall_gap_terms, wall_toi_sampled, wall_toi_swept
 
 
+class PlaneGeometry(NamedTuple):
+    """This kind's group of the geometry (colliders.geometry_of), the planes n·x = d (W
+    rows): normals (W, 3) unit, offsets (W,) m, half_thickness (W,) m, two_sided (W,)
+    bool, restitution (W,)."""
+
+    normals: np.ndarray
+    offsets: np.ndarray
+    half_thickness: np.ndarray
+    two_sided: np.ndarray
+    restitution: np.ndarray
+
+    @classmethod
+    def of(cls, walls) -> PlaneGeometry:
+        """The group of a scene's walls (state.Walls), as contiguous float64 (two_sided:
+        bool) arrays."""
+        def floats(values) -> np.ndarray:
+            return np.ascontiguousarray(values, dtype=np.float64)
+        return cls(floats(walls.normals).reshape(-1, 3), floats(walls.offsets), floats(walls.thickness * 0.5),
+                   np.ascontiguousarray(walls.two_sided, dtype=np.bool_), floats(walls.restitution))
+
+
 @njit(cache=True, inline="always")
-def time_of_impact(i, w, x, v, a, radius, sigma, step_end, integrator, k, detection, samples, normals, offsets,
-                   half_thickness, two_sided):
+def _unpack(planes):
+    """The group's fields (PlaneGeometry's order), the one place a kernel reads them."""
+    return planes[0], planes[1], planes[2], planes[3], planes[4]
+
+
+@njit(cache=True, inline="always")
+def count(planes) -> int:
+    """How many walls."""
+    return planes[0].shape[0]
+
+
+@njit(cache=True, inline="always")
+def restitution(w, planes) -> float:
+    """Wall w's restitution coefficient."""
+    return planes[4][w]
+
+
+@njit(cache=True, inline="always")
+def time_of_impact(i, w, x, v, a, radius, sigma, step_end, integrator, k, detection, samples, planes):
     """Swept test of sphere i against wall w from i's anchor: (start, t), the test's start
     in the step (s) and the time of impact after it (s; inf or beyond the step: none)."""
+    normals, offsets, half_thickness, two_sided, _restitution = _unpack(planes)
     g0, p, q, _ = wall_gap_terms(x, v, a, radius, i, normals[w], offsets[w], half_thickness[w], two_sided[w])
     start = sigma[i]
     horizon = step_end - start
@@ -37,8 +78,9 @@ def time_of_impact(i, w, x, v, a, radius, sigma, step_end, integrator, k, detect
 
 
 @njit(cache=True, inline="always")
-def normal(x, ia, w, normals, offsets, two_sided):
+def normal(x, ia, w, planes):
     """Unit normal (3 floats) from wall w to sphere a: towards a's side of a two-sided wall."""
+    normals, offsets, _half_thickness, two_sided, _restitution = _unpack(planes)
     nx = normals[w, 0]
     ny = normals[w, 1]
     nz = normals[w, 2]
@@ -48,8 +90,9 @@ def normal(x, ia, w, normals, offsets, two_sided):
 
 
 @borrowing
-def gap(x, v, a, radius, i, w, normals, offsets, half_thickness, two_sided):
+def gap(x, v, a, radius, i, w, planes):
     """(gap (m, < 0: overlap), 0, 0, 0, False): a wall's normal never needs renewing."""
+    normals, offsets, half_thickness, two_sided, _restitution = _unpack(planes)
     return wall_gap_terms(x, v, a, radius, i, normals[w], offsets[w], half_thickness[w], two_sided[w])[0], \
         0.0, 0.0, 0.0, False
 
@@ -72,10 +115,11 @@ def reaches(lo, hi, i, normals, offsets, half_thickness, two_sided, w) -> bool:
 
 
 @njit(cache=True, inline="always")
-def partners_of(p, path_lo, path_hi, normals, offsets, half_thickness, two_sided, out) -> int:
+def partners_of(p, path_lo, path_hi, planes, out) -> int:
     """The walls (rows (p, w) of out (K, 2)) sphere p's new path must be tested against;
     returns how many: those the box of that path (row p of path_lo, path_hi) reaches (the
     step-start rule, :func:`reachable`)."""
+    normals, offsets, half_thickness, two_sided, _restitution = _unpack(planes)
     m = 0
     for w in range(normals.shape[0]):
         if not reaches(path_lo, path_hi, p, normals, offsets, half_thickness, two_sided, w):
@@ -87,10 +131,11 @@ def partners_of(p, path_lo, path_hi, normals, offsets, half_thickness, two_sided
 
 
 @kernel
-def reachable(lo, hi, normals, offsets, half_thickness, two_sided):
+def reachable(lo, hi, planes):
     """Sphere–wall candidates (spheres (K,), walls (K,)) whose swept box (lo, hi (N, 3), the
     radius included) reaches the wall: a box entirely beyond the plane (or slab) cannot
     touch it on its current path."""
+    normals, offsets, half_thickness, two_sided, _restitution = _unpack(planes)
     n = lo.shape[0]
     nw = normals.shape[0]
     ip = np.empty(n * nw, dtype=np.int64)
@@ -106,10 +151,11 @@ def reachable(lo, hi, normals, offsets, half_thickness, two_sided):
 
 
 @borrowing
-def deepest(x, radius, normals, offsets, half_thickness, two_sided, ignore_tunnelled):
+def deepest(x, radius, planes, ignore_tunnelled):
     """Deepest overlap (m, >= 0) of any sphere with any wall. ignore_tunnelled: a sphere
     past the middle of a thin wall went through it (discrete or sampled detection) and is
     not counted as overlapping it."""
+    normals, offsets, half_thickness, two_sided, _restitution = _unpack(planes)
     worst = 0.0
     for i in range(x.shape[0]):
         for w in range(normals.shape[0]):

@@ -2,13 +2,15 @@
 
 What the engine asks about a pair of spheres i < j, each function reached through the
 switch in ``colliders/__init__``: its swept test, its contact normal and gap, which
-partners a re-predicted sphere can meet, and the deepest overlap. Positions are (N, 3) m;
-period (3,) m gives the periodic axes (0 = not periodic), where the minimum image counts.
+partners a re-predicted sphere can meet, and the deepest overlap. Positions are (N, 3) m.
+What a pair reads besides the particles is this kind's group, ``SphereGeometry``: the
+period (3,) m of the periodic axes (0 = not periodic), where the minimum image counts.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -18,6 +20,24 @@ from ..jit import borrowing, kernel
 from ..motion import path_acceleration_weight, path_coefficients
 from ..periodic import image
 from ..toi import DISCRETE, SWEPT, pair_toi_sampled_scalar, pair_toi_swept_scalar
+
+
+class SphereGeometry(NamedTuple):
+    """This kind's group of the geometry (colliders.geometry_of): period (3,) m, each
+    periodic axis's length (0 = not periodic)."""
+
+    period: np.ndarray
+
+    @classmethod
+    def of(cls, walls) -> SphereGeometry:
+        """The group of a scene's walls and box (state.Walls)."""
+        return cls(np.ascontiguousarray(walls.period, dtype=np.float64).reshape(3))
+
+
+@njit(cache=True, inline="always")
+def _unpack(spheres):
+    """The group's fields (SphereGeometry's order), the one place a kernel reads them."""
+    return spheres[0]
 
 
 @njit(cache=True, inline="always")
@@ -31,9 +51,10 @@ def separation(x, ia, ib, period):
 
 
 @njit(cache=True, inline="always")
-def time_of_impact(i, j, x, v, a, radius, sigma, step_end, integrator, k, detection, samples, tolerance, period):
+def time_of_impact(i, j, x, v, a, radius, sigma, step_end, integrator, k, detection, samples, tolerance, spheres):
     """Swept test of spheres i < j from the later of their anchors: (start, t), the test's
     start in the step (s) and the time of impact after it (s; inf or beyond the step: none)."""
+    period = _unpack(spheres)
     start = max(sigma[i], sigma[j])
     pi1, pi2, dpi = path_coefficients(integrator, k, start - sigma[i])
     pj1, pj2, dpj = path_coefficients(integrator, k, start - sigma[j])
@@ -59,19 +80,19 @@ def time_of_impact(i, j, x, v, a, radius, sigma, step_end, integrator, k, detect
 
 
 @njit(cache=True, inline="always")
-def normal(x, ia, ib, period):
+def normal(x, ia, ib, spheres):
     """Unit normal (3 floats) from b to a at the anchors; coincident centres give +x."""
-    d0, d1, d2, length = separation(x, ia, ib, period)
+    d0, d1, d2, length = separation(x, ia, ib, _unpack(spheres))
     if length == 0.0:
         return 1.0, 0.0, 0.0
     return d0 / length, d1 / length, d2 / length
 
 
 @borrowing
-def gap(x, radius, ia, ib, period):
+def gap(x, radius, ia, ib, spheres):
     """(gap (m, < 0: overlap), n0, n1, n2, renewed): the gap between the surfaces at the
     anchors and the normal from b to a (renewed False where the centres coincide)."""
-    d0, d1, d2, length = separation(x, ia, ib, period)
+    d0, d1, d2, length = separation(x, ia, ib, _unpack(spheres))
     g = length - radius[ia] - radius[ib]
     if length > 0.0:
         return g, d0 / length, d1 / length, d2 / length, True
@@ -79,7 +100,7 @@ def gap(x, radius, ia, ib, period):
 
 
 @njit(cache=True, inline="always")
-def partners_of(p, box, path_lo, path_hi, adj_start, adj, batch_mark, batch, period, out) -> int:
+def partners_of(p, box, path_lo, path_hi, adj_start, adj, batch_mark, batch, spheres, out) -> int:
     """The pairs (a < other, rows of out (K, 2)) sphere p's new path must be tested against;
     returns how many.
 
@@ -92,6 +113,7 @@ def partners_of(p, box, path_lo, path_hi, adj_start, adj, batch_mark, batch, per
     to be tested: in box-rain 10k's last steps 3–4.6 million tests a step, 95 % of them
     misses; judging by the swept boxes grown to each sphere's reach left 55 % of them.)
     """
+    period = _unpack(spheres)
     m = 0
     for s in range(adj_start[p], adj_start[p + 1]):
         q = adj[s]
@@ -107,8 +129,9 @@ def partners_of(p, box, path_lo, path_hi, adj_start, adj, batch_mark, batch, per
 
 
 @borrowing
-def deepest(x, radius, pairs, period):
+def deepest(x, radius, pairs, spheres):
     """Deepest overlap (m, >= 0) among the pairs (M, 2)."""
+    period = _unpack(spheres)
     worst = 0.0
     for m in range(pairs.shape[0]):
         i = pairs[m, 0]
@@ -119,10 +142,11 @@ def deepest(x, radius, pairs, period):
 
 
 @kernel
-def candidates(pairs, lo, hi, period):
+def candidates(pairs, lo, hi, spheres):
     """The narrow phase's pairs (a (K,), other (K,)): those of the broad phase's (M, 2),
-    i < j, whose boxes lo, hi (N, 3) meet (box_misses: on a periodic axis, period (3,) m,
-    the minimum image decides, so the axis never tells them apart); in their order."""
+    i < j, whose boxes lo, hi (N, 3) meet (box_misses: on a periodic axis the minimum
+    image decides, so the axis never tells them apart); in their order."""
+    period = _unpack(spheres)
     m = pairs.shape[0]
     a = np.empty(m, dtype=np.int64)
     other = np.empty(m, dtype=np.int64)
