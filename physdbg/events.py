@@ -299,7 +299,7 @@ class StepCounts:
     """What one step did, counted (each also a column of the recording's /physdbg/stats).
 
     contacts: contacts resolved; swept_tests: swept tests run; events: pops of the event
-    queue; held: contacts held at the step's end (resting or rapid, resting.py); rapid:
+    queue; held: contacts held at the step's end (resting or rapid, resting/); rapid:
     contacts the rapid-contact rule held in the step; released: held contacts let go in
     the step; asleep: spheres asleep at the step's end; slept, woken: spheres that fell
     asleep, woke in the step (sleep.py).

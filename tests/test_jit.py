@@ -52,7 +52,7 @@ def test_every_engine_kernel_compiles_one_version_per_type():
     for module in pkgutil.walk_packages(physdbg.engine.__path__, "physdbg.engine."):
         importlib.import_module(module.name)
     dispatchers = dict(_engine_dispatchers())
-    assert {"physdbg.engine.resting.solve_contacts", "physdbg.engine.broadphase.bvh.build_lbvh"} <= set(dispatchers)
+    assert {"physdbg.engine.resting.solves.solve_contacts", "physdbg.engine.broadphase.bvh.build_lbvh"} <= set(dispatchers)
     plain = sorted(name for name, d in dispatchers.items()
                    if not isinstance(d, _OneVersionPerType) and d.targetoptions.get("inline") != "always")
     assert plain == []

@@ -1,4 +1,4 @@
-"""The held-contact solve (engine/resting.py): the direct cluster solve against plain
+"""The held-contact solve (engine/resting/): the direct cluster solve against plain
 projected Gauss–Seidel, on the held contacts of resting stacks."""
 
 from __future__ import annotations
@@ -11,10 +11,6 @@ from physdbg.engine.resting import (
     RAPID_HOLD,
     RAPID_TC,
     HeldContacts,
-    _cholesky_solve,
-    _contact_matrix,
-    _gauss_seidel,
-    _relative,
     begin_solve,
     grow_held,
     held_add,
@@ -23,6 +19,7 @@ from physdbg.engine.resting import (
     rapid_holds,
     solve_contacts,
 )
+from physdbg.engine.resting.solves import _cholesky_solve, _contact_matrix, _gauss_seidel, _relative
 from physdbg.events import KIND_PAIR, KIND_WALL
 
 from .conftest import make_state, make_walls, make_world

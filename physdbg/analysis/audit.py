@@ -499,6 +499,7 @@ def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls):
     wall's middle went through it: tunnelling, not an overlap). Depth 0 when none."""
     from ..engine.broadphase.boxes import NO_LIMIT
     from ..engine.broadphase.grid import grid_pairs
+    from ..engine.colliders.plane import sides
 
     r = radius
     best = (0.0, [], None, None)
@@ -514,7 +515,7 @@ def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls):
                 best = (float(pen[k]), [i, j], None, x[i] + (x[j] - x[i]) * (r[i] / (r[i] + r[j])))
     if len(walls.names) and finite.any():
         h = x @ walls.normals.T - walls.offsets[None, :]
-        h = np.where(walls.two_sided[None, :], np.abs(h), h)
+        h = h * sides(h, walls.two_sided[None, :])  # on the side each centre is pushed back to
         pen = 0.5 * walls.thickness[None, :] * walls.two_sided[None, :] + r[:, None] - h
         pen = np.where(walls.two_sided[None, :] & (pen > r[:, None]), 0.0, pen)  # went through: tunnelling
         pen = np.where(finite[:, None], pen, -np.inf)

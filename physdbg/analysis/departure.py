@@ -1021,11 +1021,12 @@ class _Comparison:
         the foreign run had it at that instant."""
         r = self.runs
         if c["kind"] == KIND_WALL:
+            from ..engine.colliders.plane import sides
+
             w = c["other"]
             h = float(x @ self.walls.normals[w] - self.walls.offsets[w])
-            if self.walls.two_sided[w]:
-                return abs(h) - 0.5 * float(self.walls.thickness[w]) - float(self.radius[a])
-            return h - float(self.radius[a])
+            h *= float(sides(h, self.walls.two_sided[w]))  # on the side the centre is pushed back to
+            return h - 0.5 * float(self.walls.thickness[w]) * bool(self.walls.two_sided[w]) - float(self.radius[a])
         if not PARTNER_IS_SPHERE[c["kind"]]:
             raise _no_geometry(c["kind"])
         b = c["other"] if a == c["a"] else c["a"]

@@ -1,6 +1,6 @@
 """A large held-contact cluster solved as a bound-constrained quadratic program (MPRGP).
 
-The held contacts' complementarity problem (resting.py) is: multipliers x (m,) with
+The held contacts' complementarity problem (resting/) is: multipliers x (m,) with
 x >= lower, and relative normal values rel(x) = rel0 + K (x - x0) that end >= target,
 equal to it wherever x > lower, with K = J W Jᵀ (m, m) symmetric positive semidefinite.
 That is the optimality condition of
@@ -25,7 +25,7 @@ scaling, which keeps the bounds simple bounds) so that walls, whose contacts hav
 the diagonal of a pair's, do not slow it.
 
 Pure numeric code on arrays: it knows nothing of the held-contact store, which
-resting.py gathers into these arrays and writes back.
+resting/ gathers into these arrays and writes back.
 """
 
 from __future__ import annotations

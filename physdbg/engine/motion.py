@@ -59,7 +59,7 @@ INTEGRATOR_NAMES = ("euler", "semi-implicit", "verlet", "exact")
 #                       with drag, index 1): Euler's straight line restarts from the new
 #                       velocity, Verlet's parabola ignores drag's curve
 #   REST_STEP_FACTOR    a straight path arrives at a rest with about one step of acceleration
-#                       still in its velocity: how many dt of it count as resting (resting.py)
+#                       still in its velocity: how many dt of it count as resting (resting/)
 #   POLYNOMIAL_WITH_DRAG  the path stays a polynomial in tau (P1 = tau) under drag too: its
 #                       roots and extremes have closed forms at any drag (closed_form_path)
 #   EXACT_UNDER         the forces under which the integrator's free flight is exact at any

@@ -12,7 +12,7 @@ give the same contacts in the same order and the same states; a hypothesis test
 phase judges the grid.
 
 It shares with the fast loop only what is not the loop: the swept tests (toi.py), the
-resolver and the held-contact solve (resolve.py, resting.py) and the step's other phases.
+resolver and the held-contact solve (resolve.py, resting/) and the step's other phases.
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ Restitution of a contact combines the two coefficients by the scene's
 (timeline.py) and the index-ordered policy (world.py) both call it. A contact that
 involves no held contact takes the seed's impulse alone; one that rests, is rapid, or
 touches a sphere with held contacts is solved with the held contacts it reaches
-(resting.py).
+(resting/).
 """
 
 from __future__ import annotations
@@ -237,7 +237,7 @@ def _finish_row(kind, ia, other, ib, v, j, used, closing, how, is_rapid, contact
 @kernel
 def _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, target, hold, particles, method, h, changed,
                      work_budget):
-    """The contact solved together with the held contacts it reaches (resting.py); returns
+    """The contact solved together with the held contacts it reaches (resting/); returns
     (its impulse, whether the work budget sufficed) and lists the changed spheres."""
     x, v, a, _radius, sigma = paths(particles)
     acc, inverse_mass = forces(particles)

@@ -66,9 +66,9 @@ class Settings:
     samples: k for ``sampled``; ordering: ``time`` or ``index``; gravity: (3,) m/s²;
     drag: d in v·d^t, in (0, 1] (1 = none); restitution_rule: see resolve.py;
     rest_fraction: a pressed contact rests when its closing speed is at most this fraction
-    of |a_n|·dt (resting.py); rapid_contact_time: a contact with restitution < 1 this soon
+    of |a_n|·dt (resting/); rapid_contact_time: a contact with restitution < 1 this soon
     (s) after either sphere's previous one is held like a resting one if something presses
-    it, else elastic (resting.py, 0 = off); rapid_contact_rule: "hold" holds such a pressed
+    it, else elastic (resting/, 0 = off); rapid_contact_rule: "hold" holds such a pressed
     contact at any speed, "tc" only a slow one (resting.rapid_holds);
     contact_tolerance: allowed overlap / resting gap (m); sleep_speed: a sphere at most
     this fast (m/s) for sleep_time (s) falls asleep, immovable until disturbed (sleep.py;

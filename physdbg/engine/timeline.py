@@ -10,7 +10,7 @@ normal, impulse, velocities before and after ...). The world turns them into typ
 events afterwards, only if someone observes.
 
 Resolving is resolve.resolve_contact, the one resolver (it also solves resting, rapid
-and held contacts, resting.py), called in its two stages (judge_contact in the loop,
+and held contacts, resting/), called in its two stages (judge_contact in the loop,
 finish_with_held outside it: run_time_order says why). The spheres it changed are
 re-predicted one by one from a pending list, so the loop can pause between any two of
 them. It *pauses* and returns

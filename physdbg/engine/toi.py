@@ -280,19 +280,3 @@ def pair_toi_sampled_scalar(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, radius_
             return t
     return INF
 
-
-@borrowing
-def wall_gap_terms(x, v, a, radius, i, normal, offset, half_thickness, two_sided):
-    """(g0, p, q, side) of particle i's anchor against a wall n·x = d.
-
-    One-sided walls keep spheres on the side n points to; two-sided walls (thin slabs of
-    half-thickness h) push a sphere back to whichever side its anchor is on.
-    """
-    h = normal[0] * x[i, 0] + normal[1] * x[i, 1] + normal[2] * x[i, 2] - offset
-    side = 1.0
-    if two_sided and h < 0.0:
-        side = -1.0
-    g0 = side * h - half_thickness - radius[i]
-    p = side * (normal[0] * v[i, 0] + normal[1] * v[i, 1] + normal[2] * v[i, 2])
-    q = side * (normal[0] * a[i, 0] + normal[1] * a[i, 1] + normal[2] * a[i, 2])
-    return g0, p, q, side

@@ -210,7 +210,7 @@ class World:
 
     @property
     def held_count(self) -> int:
-        """How many contacts are held (resting or rapid, resting.py)."""
+        """How many contacts are held (resting or rapid, resting/)."""
         return int(self.held.count[HELD])
 
     # ------------------------------------------------------------------ the step

@@ -5,7 +5,7 @@ partner of kind ``kind`` (events.KIND_*), whose index is ``other``. Whatever the
 asks about a kind *in general* is a column of this table; what it asks about the
 geometry is the kind's own module (sphere.py, plane.py), reached through the switch in
 ``colliders/__init__``. A leaf (events' codes and numba only), so the
-held-contact store (resting.py) reads it too.
+held-contact store (resting/) reads it too.
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 
 from ..jit import borrowing, kernel
-from ..toi import DISCRETE, SWEPT, wall_gap_terms, wall_toi_sampled, wall_toi_swept
+from ..toi import DISCRETE, SWEPT, wall_toi_sampled, wall_toi_swept
 
 
 class PlaneGeometry(NamedTuple):
@@ -47,6 +47,32 @@ class PlaneGeometry(NamedTuple):
 def _unpack(planes):
     """The group's fields (PlaneGeometry's order), the one place a kernel reads them."""
     return planes[0], planes[1], planes[2], planes[3], planes[4]
+
+
+@njit(cache=True, inline="always")
+def side_of(h, two_sided) -> float:
+    """The side of a wall a centre at signed distance h = n·x - d (m) is pushed back to:
+    +1, the side n points to, or -1 behind a two-sided wall (a thin slab pushes a sphere
+    back to whichever side its centre is on). The one place a two-sided wall turns round."""
+    return -1.0 if two_sided and h < 0.0 else 1.0
+
+
+def sides(h: np.ndarray, two_sided: np.ndarray) -> np.ndarray:
+    """side_of over arrays (readers of recordings): h (..., W) m, two_sided (W,) bool."""
+    return np.where(np.asarray(two_sided, dtype=bool) & (np.asarray(h) < 0.0), -1.0, 1.0)
+
+
+@borrowing
+def wall_gap_terms(x, v, a, radius, i, normal, offset, half_thickness, two_sided):
+    """(g0, p, q, side) of particle i's anchor against a wall n·x = d: the gap between the
+    surfaces (m), its rate (m/s) and its path acceleration (m/s²) on i's side of the wall,
+    and that side (side_of)."""
+    h = normal[0] * x[i, 0] + normal[1] * x[i, 1] + normal[2] * x[i, 2] - offset
+    side = side_of(h, two_sided)
+    g0 = side * h - half_thickness - radius[i]
+    p = side * (normal[0] * v[i, 0] + normal[1] * v[i, 1] + normal[2] * v[i, 2])
+    q = side * (normal[0] * a[i, 0] + normal[1] * a[i, 1] + normal[2] * a[i, 2])
+    return g0, p, q, side
 
 
 @njit(cache=True, inline="always")
@@ -84,7 +110,7 @@ def normal(x, ia, w, planes):
     nx = normals[w, 0]
     ny = normals[w, 1]
     nz = normals[w, 2]
-    if two_sided[w] and nx * x[ia, 0] + ny * x[ia, 1] + nz * x[ia, 2] - offsets[w] < 0.0:
+    if side_of(nx * x[ia, 0] + ny * x[ia, 1] + nz * x[ia, 2] - offsets[w], two_sided[w]) < 0.0:
         return -nx, -ny, -nz
     return nx, ny, nz
 
@@ -160,9 +186,7 @@ def deepest(x, radius, planes, ignore_tunnelled):
     for i in range(x.shape[0]):
         for w in range(normals.shape[0]):
             h = normals[w, 0] * x[i, 0] + normals[w, 1] * x[i, 1] + normals[w, 2] * x[i, 2] - offsets[w]
-            if two_sided[w]:
-                h = abs(h)
-            pen = half_thickness[w] + radius[i] - h
+            pen = half_thickness[w] + radius[i] - side_of(h, two_sided[w]) * h
             if ignore_tunnelled and two_sided[w] and pen > radius[i]:
                 pen = 0.0
             worst = max(worst, pen)
