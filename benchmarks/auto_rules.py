@@ -16,7 +16,7 @@ import argparse
 import time
 
 from physdbg.analysis.engines import box_rain_scene
-from physdbg.engine.world import warm_up
+from physdbg.engine.warm import warm_up
 from physdbg.api import load_scene
 
 HAND = ("rapid_contact_rule=tc", "sleep_speed=0.1", "sleep_time=0.1")

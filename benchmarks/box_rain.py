@@ -40,7 +40,7 @@ import numpy as np
 
 from physdbg.engine.timeline import Buffers
 from physdbg.analysis.engines import box_rain_scene
-from physdbg.engine.world import warm_up
+from physdbg.engine.warm import warm_up
 from physdbg.errors import SceneError
 from physdbg.peers import PeerSetup, available, build
 from physdbg.api import load_scene

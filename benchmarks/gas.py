@@ -18,7 +18,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from physdbg.engine.world import warm_up
+from physdbg.engine.warm import warm_up
 from physdbg.events import KIND_PAIR
 from physdbg.api import load_scene
 

@@ -44,7 +44,7 @@ import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
-from physdbg.engine.world import warm_up  # noqa: E402
+from physdbg.engine.warm import warm_up  # noqa: E402
 from physdbg.errors import PhysdbgError  # noqa: E402
 from physdbg.api import load_scene  # noqa: E402
 

@@ -47,7 +47,7 @@ from physdbg.engine import world as world_module
 from physdbg.engine.space_order import interleaved, morton_keys, quantised
 from physdbg.engine.state import STATE_FIELDS
 from physdbg.engine.timeline import REQUERY
-from physdbg.engine.world import warm_up
+from physdbg.engine.warm import warm_up
 from physdbg.api import load_scene
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # run as a script or imported as benchmarks.step_parts

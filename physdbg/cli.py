@@ -126,6 +126,7 @@ def run(
     Example: physdbg run bounce --set integrator=verlet --set duration=2
     """
     with _user_errors():
+        from .analysis.report import summary_text
         from .api import load_scene
         from .api import run as run_scene
 
@@ -146,7 +147,7 @@ def run(
         if as_json:
             typer.echo(json.dumps(summary.as_dict(), indent=2))
         else:
-            typer.echo(format_summary(summary))
+            typer.echo(summary_text(summary))
 
 
 @app.command()
@@ -184,6 +185,7 @@ def record(
     Example: physdbg record bounce        then: rerun recordings/bounce.rrd
     """
     with _user_errors():
+        from .analysis.report import size_words, summary_text
         from .api import diff as api_diff
         from .api import load_scene
         from .api import record as record_scene
@@ -202,11 +204,11 @@ def record(
                                   on_step=bar.update, on_status=bar.status, view=view)
         finally:
             bar.close()
-        typer.echo(format_summary(result.summary, "the recording and the audit"))
+        typer.echo(summary_text(result.summary, "the recording and the audit"))
         typer.echo(f"recorded    {result.frames - 1} steps, detail {result.detail}")
-        typer.echo(f"mcap        {result.mcap}  ({_size(result.bytes_mcap)})")
+        typer.echo(f"mcap        {result.mcap}  ({size_words(result.bytes_mcap)})")
         if result.rrd:
-            typer.echo(f"rerun       {result.rrd}  ({_size(result.bytes_rrd)})")
+            typer.echo(f"rerun       {result.rrd}  ({size_words(result.bytes_rrd)})")
         typer.echo(f"view        {result.view_note}")
         if result.bvh_note:
             typer.echo(f"note        {result.bvh_note}")
@@ -424,13 +426,14 @@ def import_(
     Example: physdbg import my-engine.csv --scene bullet-wall -o mine.mcap
     """
     with _user_errors():
+        from .analysis.report import size_words
         from .api import import_run
 
         result = import_run(run, scene, set_ or [], output, force)
         me = _command("physdbg")
         bodies = f"{result.bodies} body" if result.bodies == 1 else f"{result.bodies} bodies"
         typer.echo(f"imported    {result.frames - 1} steps of {bodies} from {run} (velocities {result.velocities})")
-        typer.echo(f"mcap        {result.mcap}  ({_size(result.bytes)})")
+        typer.echo(f"mcap        {result.mcap}  ({size_words(result.bytes)})")
         typer.echo(f"then try    {me} explain {result.mcap}   |   {me} replay {result.mcap} --spawn")
 
 
@@ -517,6 +520,7 @@ def check(
     with _user_errors():
         from dataclasses import asdict
 
+        from .analysis.report import check_text
         from .api import check as check_scene
 
         result = check_scene(scene, set_ or [])
@@ -527,39 +531,7 @@ def check(
                                    "facts": advice.facts, "predictions": [asdict(p) for p in advice.predictions]},
                                   indent=2))
         else:
-            f = advice.facts
-            dt = f"dt {f['dt']:.6g} s" if result.scene.dt is not None else f"real-time steps up to {f['dt']:.6g} s"
-            lines = [f"scene       {result.scene.name}  ({result.scene.source})",
-                     f"facts       {_count(f['particles'], 'particle')}, {_count(f['walls'], 'wall')}; {dt}; "
-                     f"{f['duration']:.6g} s; speeds up to {f['speed_bound']:.3g} m/s ({f['speed_bound_why']}); "
-                     + ("contacts can happen" if f["contacts_possible"] else "no contact can happen")]
-            if f["periodic"] is not None:
-                lines.append(f"periodic    {f['periodic']['why']}")
-            for setting in ("integrator", "detection", "ordering"):
-                for k, p in enumerate(x for x in advice.predictions if x.setting == setting):
-                    mark = "*" if result.current[setting] == p.value else " "
-                    lines.append(f"{setting if k == 0 else '':<11} {mark}{p.value:<14} {p.outcome:<13} {p.why}")
-            if f["pile"] is not None:  # speed and resting, not correctness: the exit code ignores it
-                from .advisor import PILE_REMEDY_FLAGS, pile_choice
-
-                chosen = pile_choice(result.scene.settings)
-                lines.append(f"pile        {f['pile']['why']}; an exact pile does not rest by itself:")
-                for p in (x for x in advice.predictions if x.setting == "pile"):
-                    mark = "*" if p.value == chosen else " "
-                    lines.append(f"{'':<11} {mark}{p.value:<14} {p.outcome:<13} {p.why}")
-                if chosen != "tc+sleep":
-                    lines.append(f'  to settle {PILE_REMEDY_FLAGS}  (docs/engine.md, "Sleeping")')
-            lines += _auto_lines(result.scene.auto)
-            lines.append("recommended " + " ".join(f"{k}={v}" for k, v in advice.recommended.items()))
-            lines += [f"  {k:<12}{advice.reasons[k]}" for k in advice.recommended]
-            settings = " ".join(f"{k}={v}" for k, v in result.current.items())
-            if result.ok:
-                lines.append(f"this scene  {settings} (*): predicted safe"
-                             + (f"; {', '.join(p.value for p in result.warnings)} inexact" if result.warnings else ""))
-            else:
-                lines.append(f"this scene  {settings} (*): predicted to fail: "
-                             + "; ".join(f"{p.setting}={p.value} {p.outcome}" for p in result.problems))
-            typer.echo("\n".join(lines))
+            typer.echo(check_text(result))
         if not result.ok:
             raise typer.Exit(1)
 
@@ -722,58 +694,14 @@ def info(
     Example: physdbg info recordings/bounce.mcap
     """
     with _user_errors():
+        from .analysis.report import info_text
         from .api import info as recording_info
 
         data = recording_info(recording)
         if as_json:
             typer.echo(json.dumps(data, indent=2))
             return
-        settings = " ".join(f"{k}={v}" for k, v in data["settings"].items())
-        lines = [
-            f"recording   {data['path']}  ({_size(data['bytes'])}"
-            + (", TRUNCATED: the writer stopped before closing it" if data["truncated"] else "") + ")",
-            f"scene       {data['scene']}  ({data['source']})",
-            f"settings    {settings}",
-            f"steps       {data['steps']}  ({data['sim_time']:.6g} s simulated), detail {data['detail']}",
-            f"bodies      {_count(data['particles'], 'particle')}, {_count(len(data['walls']), 'wall')}",
-            *([f"sleep       {data['asleep_at_end']} of {data['particles']} spheres asleep at the end "
-               f"(sleep_speed {data['settings'].get('sleep_speed')} m/s)"] if data["asleep_at_end"] is not None else []),
-            f"size        {data['bytes_per_particle_step']:.1f} bytes per particle-step (everything)"
-            if data["bytes_per_particle_step"] else "size        -",
-            f"final hash  {data['final_hash']}",
-            f"written by  physdbg {data['physdbg_version']}, format {data['format_version']}",
-            *([f"foreign     another engine's run, from {data['foreign']['source']} ({data['foreign']['format']}, "
-               f"velocities {data['foreign']['velocities']})"] if data.get("foreign") else []),
-            *[f"how         {note}" for note in (data.get("foreign") or {}).get("notes", [])],
-            *_eos_lines(data["equation_of_state"]),
-            "channels",
-        ]
-        width = max(len(c["topic"]) for c in data["channels"])
-        for c in data["channels"]:
-            lines.append(f"  {c['topic']:<{width}}  {c['messages']:>7} messages  {c['encoding']:<14} {c['schema']}")
-        typer.echo("\n".join(lines))
-
-
-def _eos_lines(eos: dict | None) -> list[str]:
-    """The equation of state read off the collisions (physdbg.analysis.pressure), if any."""
-    if eos is None:
-        return []
-    first, last = eos["steps"]
-    line = f"pressure    Z = PV/NkT = {eos['z_virial']:.4g} ± {eos['z_virial_error']:.2g} from the collisions"
-    if eos["z_wall"] is not None:
-        line += f", {eos['z_wall']:.4g} ± {eos['z_wall_error']:.2g} from the walls"
-    line += f" (steps {first}..{last})"
-    lines = [line, f"temperature kT = {eos['kT']:.4g} J"]
-    if eos["collision_rate"]:
-        line = (f"collisions  {eos['collision_rate']:.4g} ± {eos['collision_rate_error']:.2g} per sphere per second")
-        if eos["collision_rate_enskog"] is not None:
-            line += f" (Enskog: {eos['collision_rate_enskog']:.4g})"
-        lines.append(line)
-    if eos["z_carnahan_starling"] is not None:
-        walls = "a periodic box has none" if eos["periodic"] else "walls shift a small box's Z"
-        lines.append(f"reference   Carnahan–Starling at packing fraction {eos['packing_fraction']:.4g}: "
-                     f"Z = {eos['z_carnahan_starling']:.4f} (a bulk fluid; {walls})")
-    return lines
+        typer.echo(info_text(data))
 
 
 def _command(name: str) -> str:
@@ -789,14 +717,6 @@ def _command(name: str) -> str:
         return name
     relative = os.path.relpath(beside)
     return relative if not relative.startswith("..") else beside
-
-
-def _size(n: int) -> str:
-    for unit in ("bytes", "KiB", "MiB", "GiB"):
-        if n < 1024 or unit == "GiB":
-            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
-        n /= 1024
-    return str(n)
 
 
 def _read_dts(path: Path) -> list[float]:
@@ -883,72 +803,6 @@ class _progress_bar:
         self._cancel()
         if self._drawn:
             sys.stderr.write("\n")
-
-
-def format_summary(s, observers: str = "the audit") -> str:
-    """The human-readable run summary; observers: what watched the run besides the engine
-    (its time is in the second speed figure only)."""
-    share = sum(s.phase_seconds.values()) or 1.0
-    phases = ", ".join(f"{name.replace('_', ' ')} {100 * sec / share:.0f}%" for name, sec in s.phase_seconds.items())
-    dts = s.dts
-    dt_text = f"dt {dts[0]:.6g} s" if dts and min(dts) == max(dts) else (
-        f"dt {min(dts):.3g}..{max(dts):.3g} s" if dts else "no steps")
-    lines = [
-        f"scene       {s.scene}  ({s.source})",
-        f"methods     integrator={s.integrator} detection={s.detection} ordering={s.ordering}",
-        *_auto_lines(s.auto),
-        f"broad phase {s.broad_phase}: {s.broad_phase_reason}",
-        f"bodies      {_count(s.particles, 'particle')}, {_count(len(s.walls), 'wall')}",
-        f"steps       {s.steps}  ({s.sim_time:.6g} s simulated, {dt_text})",
-        f"contacts    {s.contacts}  (at most {s.max_contacts_in_a_step} in a step; {s.swept_tests} swept tests; "
-        f"{s.rapid} rapid, {s.released} released; {s.held_at_end} held at the end)",
-        *([f"sleep       {s.asleep_at_end} of {s.particles} spheres asleep at the end  ({s.slept} fell asleep, "
-           f"{s.woken} woke)"] if s.slept else []),
-        f"energy      {s.energy_start:.6g} J -> {s.energy_end:.6g} J  (drift {s.energy_drift:+.3e})",
-        f"momentum    {_vec(s.momentum_start)} -> {_vec(s.momentum_end)} kg·m/s  (drift {s.momentum_drift:.3e})",
-        f"overlap     max {s.max_overlap:.3g} m",
-        f"speed       {s.engine_ms_per_step:.3f} ms/step in the engine ({phases}); "
-        f"{s.ms_per_step:.3f} ms/step with {observers}; kernels compiled/loaded in {s.compile_seconds:.2f} s",
-        f"state hash  {s.final_hash}",
-        "warnings    " + _warning_totals(s.warning_counts),
-    ]
-    lines += [f"  {line}" for line in s.warnings]
-    lines.append("audit       " + ("clean (no tunnelling, overlap, out-of-order contact, energy gain or collapse)"
-                                   if not s.finding_counts else
-                                   ", ".join(f"{n} {kind}" for kind, n in s.finding_counts.items())
-                                   + "; the first of each kind:"))
-    lines += [f"  {line}" for line in s.findings]
-    return "\n".join(lines)
-
-
-def _auto_lines(auto: dict[str, str]) -> list[str]:
-    """One line per decision: settings decided together ("value: as first") join the first's
-    line, 'auto  rapid_contact_rule=hold, sleep_speed=0.0: no closed box ...'."""
-    lines: dict[str, list[str]] = {}
-    for name, why in auto.items():
-        value, _, reason = why.partition(": ")
-        joined = reason[3:] if reason.startswith("as ") and reason[3:] in lines else None
-        if joined:
-            lines[joined][0] += f", {name}={value}"
-        else:
-            lines[name] = [f"{name}={value}", reason]
-    return [f"auto        {head}: {reason}" for head, reason in lines.values()]
-
-
-def _warning_totals(counts: dict[str, int]) -> str:
-    """'none', or the total and a count per kind: '197: 76 max_events_per_step, 121 overlap'."""
-    if not counts:
-        return "none"
-    kinds = ", ".join(f"{n} {code}" for code, n in sorted(counts.items(), key=lambda item: -item[1]))
-    return f"{sum(counts.values())} ({kinds}); the first of each kind:"
-
-
-def _count(n: int, noun: str) -> str:
-    return f"{n} {noun}" + ("" if n == 1 else "s")
-
-
-def _vec(values) -> str:
-    return "[" + ", ".join(f"{v:.4g}" for v in values) + "]"
 
 
 def console_main() -> None:

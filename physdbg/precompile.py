@@ -5,7 +5,7 @@ this project's 2-core machines, in one thread, nearly all of it in two call tree
 ``engine.warm_up``'s world: the forces phase's held-contact solve (``settle_held`` and
 the resting solve beneath it, about 40 %) and the rest of the step (the grid, the narrow
 phase, the time-ordered loop). On a cold cache with a second CPU free, a helper process
-compiles the first tree (``engine.world.warm_up_held_solve``) while this one compiles the
+compiles the first tree (``engine.warm.warm_up_held_solve``) while this one compiles the
 second (``warm_up_without_forces``). Both write numba's on-disk cache (the folder
 ``physdbg`` names per version of the engine's sources), and numba looks there before it
 compiles any function, callees included. The trees meet in one place, the resting solve,
@@ -47,7 +47,7 @@ def compile_kernels(broad_phase: str | None = None, sleeping: bool = False, para
     and two CPUs are free (module docstring); audit: also the audit's step checker
     (``analysis.tunnel.warm_up``, ~11 s cold; on the helper, after the held solve, where it
     fits in the time this process spends on the rest); returns the seconds taken."""
-    from .engine.world import warm_up, warm_up_without_forces
+    from .engine.warm import warm_up, warm_up_without_forces
 
     started = perf_counter()
     helper = start_helper(audit) if parallel and cache_is_cold() and usable_cpus() >= 2 else None
@@ -101,7 +101,7 @@ def helper_command(audit: bool = False) -> list[str]:
     after the held solve."""
     root = str(Path(__file__).resolve().parent.parent)
     program = (f"import sys; sys.path.insert(0, {root!r}); "
-               "from physdbg.engine.world import warm_up_held_solve; warm_up_held_solve()")
+               "from physdbg.engine.warm import warm_up_held_solve; warm_up_held_solve()")
     if audit:
         program += "; from physdbg.analysis.tunnel import warm_up; warm_up()"
     return [sys.executable, "-c", program]

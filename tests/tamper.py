@@ -98,3 +98,34 @@ def concatenate(parts: list[Path], dst: Path) -> Path:
     """The files one after another, as `cat a.mcap b.mcap > dst` makes them."""
     dst.write_bytes(b"".join(p.read_bytes() for p in parts))
     return dst
+
+
+def edit_contact(src: Path, dst: Path, frame: int, **fields) -> Path:
+    """The first contact of ``frame`` with ``fields`` changed (e.g. kind=2: a collider kind
+    from a physdbg that knows more of them; impulse=...: a hand edit)."""
+    name = fmt.MESSAGE_OF_TOPIC[fmt.TOPIC_CONTACTS]
+
+    def change(topic, sequence, data):
+        if topic != fmt.TOPIC_CONTACTS or sequence != frame:
+            return None
+        step, rows = proto.decode_table(name, data)
+        rows = rows.copy()
+        for field, value in fields.items():
+            rows[field][0] = value
+        return proto.encode_table(name, step, lambda column: rows[column])
+
+    return copy_with(src, dst, change)
+
+
+def with_setting(src: Path, dst: Path, setting: str, value) -> Path:
+    """The recording's settings say ``setting`` = ``value`` (as a newer physdbg's might)."""
+    import json
+
+    def change(topic, sequence, data):
+        if topic != fmt.TOPIC_SCENE:
+            return None
+        meta = json.loads(data)
+        meta["settings"][setting] = value
+        return json.dumps(meta).encode()
+
+    return copy_with(src, dst, change)

@@ -141,6 +141,25 @@ def test_a_tampered_file_is_an_error_naming_the_frame_or_the_damage(tmp_path):
     assert str(b) in result.output
 
 
+def test_bit_identical_states_with_an_edited_contact_record_are_different_records(tmp_path):
+    """Every state agrees bit for bit, but one recorded contact's impulse was edited: not
+    the same record, and never "equivalent" (the states alone cannot show it)."""
+    from . import tamper
+
+    a = _rec(tmp_path, "a", "bounce")
+    from physdbg import open_recording
+
+    with open_recording(a) as rec:
+        frame = next(k for k in range(1, rec.frames) if len(rec.contacts(k)))
+        impulse = float(rec.contacts(frame).impulse[0])
+    b = tamper.edit_contact(a, tmp_path / "b.mcap", frame, impulse=impulse * 1.5)
+    report = diff(a, b)
+    assert report.exit_code == 1 and _kinds(report) == ["records"] and report.divergence is None
+    assert report.headline == (f"different records: every state is bit-identical, but the contacts recorded for step "
+                               f"{frame} differ: contact 1 (0–wall 'floor') has another impulse")
+    assert diff(a, a).exit_code == 0  # the same file is the same record
+
+
 def test_cli_formats_and_exit_codes(tmp_path):
     a, b = _rec(tmp_path, "a", "cradle"), _rec(tmp_path, "b", "cradle", ["ordering=index"])
     runner = CliRunner()

@@ -9,7 +9,7 @@ import sys
 import numpy as np
 
 from physdbg import precompile
-from physdbg.engine.world import warm_up_without_forces
+from physdbg.engine.warm import warm_up_without_forces
 
 
 def test_a_warm_cache_starts_no_helper(monkeypatch):
@@ -41,7 +41,7 @@ def test_a_cold_cache_with_two_cpus_compiles_the_held_solve_in_a_helper(monkeypa
     monkeypatch.setattr(precompile, "start_helper",
                         lambda audit=False: calls.append(f"helper started, audit {audit}") or Helper())
     import physdbg.analysis.tunnel as tunnel
-    import physdbg.engine.world as world
+    import physdbg.engine.warm as world
 
     monkeypatch.setattr(world, "warm_up_without_forces", lambda bp: calls.append(f"without forces {bp}"))
     monkeypatch.setattr(world, "warm_up", lambda bp, sleeping: calls.append(f"warm up {bp} {sleeping}"))
@@ -74,7 +74,7 @@ def test_an_interrupted_compile_kills_the_helper(monkeypatch):
     monkeypatch.setattr(precompile, "cache_is_cold", lambda: True)
     monkeypatch.setattr(precompile, "usable_cpus", lambda: 2)
     monkeypatch.setattr(precompile, "start_helper", lambda audit=False: helper)
-    import physdbg.engine.world as world
+    import physdbg.engine.warm as world
 
     def interrupted(bp):
         raise KeyboardInterrupt

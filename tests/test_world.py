@@ -579,7 +579,7 @@ def test_after_warm_up_a_run_loads_no_kernel(monkeypatch):
     import gc
 
     from physdbg.engine.jit import _OneVersionPerType
-    from physdbg.engine.world import warm_up
+    from physdbg.engine.warm import warm_up
 
     warm_up("grid", sleeping=True)
     kernels = [k for k in gc.get_objects() if isinstance(k, _OneVersionPerType)]

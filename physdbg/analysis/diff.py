@@ -19,6 +19,7 @@ import numpy as np
 
 from ..engine.space_order import chosen_order
 from ..events import PARTNER_IS_SPHERE, contact_words, partner_words
+from ..record.format import TOPIC_CONTACTS as CONTACTS_TOPIC
 from . import align
 from .quiet import quiet_numerics
 from .tunnel import StepChecker
@@ -49,11 +50,16 @@ class SettingDifference:
     note: str = ""
 
 
+# causes that make runs different whatever their states do
+DIFFERENT_ALONE = ("structure", "records")
+
+
 @dataclass
 class Cause:
     """One reason the runs part. kind: settings | engine-version | engine-limits |
     non-finite | tunnelling | collision-order | missed-contact | contact-outcome |
-    method-drift | outside-change | length; where one run is another engine's, the kinds of
+    method-drift | outside-change | length | records (bit-identical states, other recorded
+    contacts); where one run is another engine's, the kinds of
     analysis.departure (bounce-time, contact-energy, extra-contact, drift, integrator,
     foreign); text: the sentence; evidence: its numbers."""
 
@@ -104,7 +110,8 @@ class DiffReport:
 
     @property
     def equivalent(self) -> bool:
-        return self.divergence is None and self.same_length and not any(c.kind == "structure" for c in self.causes)
+        return self.divergence is None and self.same_length and not any(c.kind in DIFFERENT_ALONE
+                                                                         for c in self.causes)
 
     @property
     def exit_code(self) -> int:
@@ -301,6 +308,10 @@ class _Differ:
                                     + ("" if self.by_step else
                                        f" (to t = {max(self.ta.time[-1], self.tb.time[-1]):.6g} s)"),
                                     {"steps_a": ra.steps, "steps_b": rb.steps}))
+            elif np.array_equal(self.ta.hashes, self.tb.hashes):
+                records = self._records()
+                if records is not None:
+                    causes.append(records)
             return self._report(None, None, causes, compared)
         fa, fb, xa, va, xb, vb, prev_a, prev_b = found
         state = align.state_difference(xa, va, xb, vb, self.atol, self.rtol, self.period)
@@ -342,6 +353,30 @@ class _Differ:
         return [Cause("structure", "the runs are not of the same bodies: " + "; ".join(found),
                       {"differences": found})]
 
+    def _records(self) -> Cause | None:
+        """Runs whose every state is bit-identical: their recorded contacts must be the
+        same too, message for message (byte for byte: the same rows encode the same), or,
+        where the bytes differ, row for row once contacts at one instant are put in one
+        order (another numbering of the spheres, ``space_order``, resolves simultaneous
+        contacts in another order to the same states). One that differs is an edited or
+        damaged file, or an engine that reports other contacts for the same motion; either
+        way not the same record. None when they agree, or when a run records no contacts."""
+        ra, rb = self.ra, self.rb
+        last = min(ra.frames, rb.frames) - 1
+        if last < 1 or not (ra.records_contacts and rb.records_contacts):
+            return None
+        for (fa, da), (fb, db) in zip(ra.raw_messages(CONTACTS_TOPIC, 1, last), rb.raw_messages(CONTACTS_TOPIC, 1, last),
+                                      strict=False):
+            if fa == fb and da == db:
+                continue
+            k = min(fa, fb)
+            ca, cb = ra.contacts(k), rb.contacts(k)
+            if fa == fb and _same_rows_at_each_instant(ca, cb):
+                continue
+            return Cause("records", f"every state is bit-identical, but the contacts recorded for step {k} differ: "
+                                    f"{_contacts_differ(ca, cb, self.names_a)}", {"step": k})
+        return None
+
     def _report(self, divergence, growth, causes, compared) -> DiffReport:
         ra, rb = self.ra, self.rb
         note = ("frame k of A against frame k of B (the same steps); stored hashes compared first"
@@ -349,10 +384,13 @@ class _Differ:
                 "by simulated time: each frame of the run with longer steps against the other run at that time "
                 "(its own frame when one falls there, else Hermite interpolation between its two frames)")
         structure = next((c for c in causes if c.kind == "structure"), None)
+        records = next((c for c in causes if c.kind == "records"), None)
         if structure is not None:
             headline = "different structure: " + structure.text[len("the runs are not of the same bodies: "):]
             if divergence is not None:
                 headline += f"; their states part in step {divergence.step}"
+        elif records is not None:
+            headline = "different records: " + records.text
         elif divergence is None:
             if not self._same_length():
                 headline = (f"different lengths: they agree for the {min(ra.steps, rb.steps)} steps both have, then "
@@ -846,6 +884,58 @@ def _order_note(sa: dict, sb: dict) -> str:
 
 def _why_order(ordering: str | None) -> str:
     return {"index": " because it orders by index", "time": " because it orders by time"}.get(ordering or "", "")
+
+
+POINT_ULPS = 8  # a pair's contact point, computed from the other sphere's side, may differ by rounding
+
+
+def _instant_order(contacts) -> np.ndarray:
+    """Rows of one step's contacts (events.Contacts) in one form and one order: a sphere
+    pair written with the lower sphere number as ``a`` (the normal and the two spheres'
+    velocities turned to match), sorted by time in the step, kind and partners. The same
+    contacts come out the same whatever order, and whichever way round, the engine met
+    them in."""
+    rows = contacts.rows.copy()
+    pair = np.array([PARTNER_IS_SPHERE[k] for k in rows["kind"]], dtype=bool)
+    swap = pair & (rows["a"] > rows["other"])
+    if swap.any():
+        turned = rows[swap]
+        turned["a"], turned["other"] = rows["other"][swap], rows["a"][swap]
+        turned["normal"] = -rows["normal"][swap]
+        for when in ("before", "after"):
+            turned[f"velocity_a_{when}"] = rows[f"velocity_b_{when}"][swap]
+            turned[f"velocity_b_{when}"] = rows[f"velocity_a_{when}"][swap]
+        rows[swap] = turned
+    return rows[np.lexsort((rows["other"], rows["a"], rows["kind"], rows["time_in_step"]))]
+
+
+def _same_rows_at_each_instant(a, b) -> bool:
+    """Do two records of one step's contacts hold the same contacts once put in one form
+    and order (``_instant_order``): every field bit for bit, but the contact point, which
+    is computed from one sphere's side and may differ by ``POINT_ULPS`` units of rounding?"""
+    if len(a) != len(b):
+        return False
+    x, y = _instant_order(a), _instant_order(b)
+    if any(x[name].tobytes() != y[name].tobytes() for name in x.dtype.names if name != "point"):
+        return False
+    px, py = x["point"], y["point"]
+    return bool(np.all(np.abs(px - py) <= POINT_ULPS * np.spacing(np.maximum(np.abs(px), np.abs(py)))))
+
+
+def _contacts_differ(a, b, wall_names) -> str:
+    """In words, where two records of one step's contacts (events.Contacts) first differ."""
+    if len(a) != len(b):
+        return f"A holds {_count(len(a), 'contact')}, B {len(b)}"
+    for i in range(len(a)):
+        x, y = a.rows[i], b.rows[i]
+        if (x["kind"], x["a"], x["other"]) != (y["kind"], y["a"], y["other"]):
+            return (f"contact {i + 1} is {contact_words(int(x['kind']), int(x['a']), int(x['other']), wall_names)} "
+                    f"in A and {contact_words(int(y['kind']), int(y['a']), int(y['other']), wall_names)} in B")
+        fields = [name for name in x.dtype.names if x[name].tobytes() != y[name].tobytes()]
+        if fields:
+            return f"contact {i + 1} ({contact_words(int(x['kind']), int(x['a']), int(x['other']), wall_names)}) " \
+                   f"has another {', '.join(fields)}"
+    return "their messages differ, not their rows"
 
 
 def _key(r: dict) -> tuple:

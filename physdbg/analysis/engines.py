@@ -164,7 +164,7 @@ def _sample_every(scene) -> int:
 
 
 def _time_physdbg(scene) -> float:
-    from ..engine.world import warm_up
+    from ..engine.warm import warm_up
 
     world = scene.build_world()
     warm_up(world.broad_phase.name, sleeping=world.sleepers is not None)

@@ -1,4 +1,6 @@
-"""Diff and audit reports as text (the terminal), Markdown (a CI step summary) and JSON.
+"""What the commands print: diff, audit and check-run reports as text (the terminal),
+Markdown (a CI step summary) and JSON, and the run summary, ``physdbg check``'s advice
+and ``physdbg info``'s description as text. The CLI only chooses which.
 
 The JSON form is ``report.as_dict()``; its fields are the dataclass fields documented in
 docs/diff.md. Text and Markdown say the same things in the same order.
@@ -9,9 +11,12 @@ from __future__ import annotations
 import json
 import math
 
-from .audit import AuditReport
-from .departure import CheckRunReport
-from .diff import DiffReport
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # for the annotations only: printing a summary loads no analysis
+    from .audit import AuditReport
+    from .departure import CheckRunReport
+    from .diff import DiffReport
 
 
 def to_json(report: DiffReport | AuditReport) -> str:
@@ -210,3 +215,168 @@ def _show(value) -> str:
     if isinstance(value, float):
         return f"{value:.6g}"
     return str(value)
+
+
+# ----------------------------------------------------------------------------- runs, scenes, files
+def summary_text(s, observers: str = "the audit") -> str:
+    """The human-readable run summary; observers: what watched the run besides the engine
+    (its time is in the second speed figure only)."""
+    share = sum(s.phase_seconds.values()) or 1.0
+    phases = ", ".join(f"{name.replace('_', ' ')} {100 * sec / share:.0f}%" for name, sec in s.phase_seconds.items())
+    dts = s.dts
+    dt_text = f"dt {dts[0]:.6g} s" if dts and min(dts) == max(dts) else (
+        f"dt {min(dts):.3g}..{max(dts):.3g} s" if dts else "no steps")
+    lines = [
+        f"scene       {s.scene}  ({s.source})",
+        f"methods     integrator={s.integrator} detection={s.detection} ordering={s.ordering}",
+        *auto_lines(s.auto),
+        f"broad phase {s.broad_phase}: {s.broad_phase_reason}",
+        f"bodies      {count_words(s.particles, 'particle')}, {count_words(len(s.walls), 'wall')}",
+        f"steps       {s.steps}  ({s.sim_time:.6g} s simulated, {dt_text})",
+        f"contacts    {s.contacts}  (at most {s.max_contacts_in_a_step} in a step; {s.swept_tests} swept tests; "
+        f"{s.rapid} rapid, {s.released} released; {s.held_at_end} held at the end)",
+        *([f"sleep       {s.asleep_at_end} of {s.particles} spheres asleep at the end  ({s.slept} fell asleep, "
+           f"{s.woken} woke)"] if s.slept else []),
+        f"energy      {s.energy_start:.6g} J -> {s.energy_end:.6g} J  (drift {s.energy_drift:+.3e})",
+        f"momentum    {_vec(s.momentum_start)} -> {_vec(s.momentum_end)} kg·m/s  (drift {s.momentum_drift:.3e})",
+        f"overlap     max {s.max_overlap:.3g} m",
+        f"speed       {s.engine_ms_per_step:.3f} ms/step in the engine ({phases}); "
+        f"{s.ms_per_step:.3f} ms/step with {observers}; kernels compiled/loaded in {s.compile_seconds:.2f} s",
+        f"state hash  {s.final_hash}",
+        "warnings    " + _warning_totals(s.warning_counts),
+    ]
+    lines += [f"  {line}" for line in s.warnings]
+    lines.append("audit       " + ("clean (no tunnelling, overlap, out-of-order contact, energy gain or collapse)"
+                                   if not s.finding_counts else
+                                   ", ".join(f"{n} {kind}" for kind, n in s.finding_counts.items())
+                                   + "; the first of each kind:"))
+    lines += [f"  {line}" for line in s.findings]
+    return "\n".join(lines)
+
+
+def auto_lines(auto: dict[str, str]) -> list[str]:
+    """One line per decision: settings decided together ("value: as first") join the first's
+    line, 'auto  rapid_contact_rule=hold, sleep_speed=0.0: no closed box ...'."""
+    lines: dict[str, list[str]] = {}
+    for name, why in auto.items():
+        value, _, reason = why.partition(": ")
+        joined = reason[3:] if reason.startswith("as ") and reason[3:] in lines else None
+        if joined:
+            lines[joined][0] += f", {name}={value}"
+        else:
+            lines[name] = [f"{name}={value}", reason]
+    return [f"auto        {head}: {reason}" for head, reason in lines.values()]
+
+
+def _warning_totals(counts: dict[str, int]) -> str:
+    """'none', or the total and a count per kind: '197: 76 max_events_per_step, 121 overlap'."""
+    if not counts:
+        return "none"
+    kinds = ", ".join(f"{n} {code}" for code, n in sorted(counts.items(), key=lambda item: -item[1]))
+    return f"{sum(counts.values())} ({kinds}); the first of each kind:"
+
+
+def count_words(n: int, noun: str) -> str:
+    return f"{n} {noun}" + ("" if n == 1 else "s")
+
+
+def _vec(values) -> str:
+    return "[" + ", ".join(f"{v:.4g}" for v in values) + "]"
+
+
+def _eos_lines(eos: dict | None) -> list[str]:
+    """The equation of state read off the collisions (physdbg.analysis.pressure), if any."""
+    if eos is None:
+        return []
+    first, last = eos["steps"]
+    line = f"pressure    Z = PV/NkT = {eos['z_virial']:.4g} ± {eos['z_virial_error']:.2g} from the collisions"
+    if eos["z_wall"] is not None:
+        line += f", {eos['z_wall']:.4g} ± {eos['z_wall_error']:.2g} from the walls"
+    line += f" (steps {first}..{last})"
+    lines = [line, f"temperature kT = {eos['kT']:.4g} J"]
+    if eos["collision_rate"]:
+        line = (f"collisions  {eos['collision_rate']:.4g} ± {eos['collision_rate_error']:.2g} per sphere per second")
+        if eos["collision_rate_enskog"] is not None:
+            line += f" (Enskog: {eos['collision_rate_enskog']:.4g})"
+        lines.append(line)
+    if eos["z_carnahan_starling"] is not None:
+        walls = "a periodic box has none" if eos["periodic"] else "walls shift a small box's Z"
+        lines.append(f"reference   Carnahan–Starling at packing fraction {eos['packing_fraction']:.4g}: "
+                     f"Z = {eos['z_carnahan_starling']:.4f} (a bulk fluid; {walls})")
+    return lines
+
+
+def size_words(n: int) -> str:
+    for unit in ("bytes", "KiB", "MiB", "GiB"):
+        if n < 1024 or unit == "GiB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1024
+    return str(n)
+
+
+def check_text(result) -> str:
+    """`physdbg check`'s text: the scene's facts, each method's prediction (* marks the
+    scene's own), the pile advice, the auto decisions and the recommendation (result: an
+    api.CheckResult)."""
+    advice = result.advice
+    f = advice.facts
+    dt = f"dt {f['dt']:.6g} s" if result.scene.dt is not None else f"real-time steps up to {f['dt']:.6g} s"
+    lines = [f"scene       {result.scene.name}  ({result.scene.source})",
+             f"facts       {count_words(f['particles'], 'particle')}, {count_words(f['walls'], 'wall')}; {dt}; "
+             f"{f['duration']:.6g} s; speeds up to {f['speed_bound']:.3g} m/s ({f['speed_bound_why']}); "
+             + ("contacts can happen" if f["contacts_possible"] else "no contact can happen")]
+    if f["periodic"] is not None:
+        lines.append(f"periodic    {f['periodic']['why']}")
+    for setting in ("integrator", "detection", "ordering"):
+        for k, p in enumerate(x for x in advice.predictions if x.setting == setting):
+            mark = "*" if result.current[setting] == p.value else " "
+            lines.append(f"{setting if k == 0 else '':<11} {mark}{p.value:<14} {p.outcome:<13} {p.why}")
+    if f["pile"] is not None:  # speed and resting, not correctness: the exit code ignores it
+        from ..advisor import PILE_REMEDY_FLAGS, pile_choice
+
+        chosen = pile_choice(result.scene.settings)
+        lines.append(f"pile        {f['pile']['why']}; an exact pile does not rest by itself:")
+        for p in (x for x in advice.predictions if x.setting == "pile"):
+            mark = "*" if p.value == chosen else " "
+            lines.append(f"{'':<11} {mark}{p.value:<14} {p.outcome:<13} {p.why}")
+        if chosen != "tc+sleep":
+            lines.append(f'  to settle {PILE_REMEDY_FLAGS}  (docs/engine.md, "Sleeping")')
+    lines += auto_lines(result.scene.auto)
+    lines.append("recommended " + " ".join(f"{k}={v}" for k, v in advice.recommended.items()))
+    lines += [f"  {k:<12}{advice.reasons[k]}" for k in advice.recommended]
+    settings = " ".join(f"{k}={v}" for k, v in result.current.items())
+    if result.ok:
+        lines.append(f"this scene  {settings} (*): predicted safe"
+                     + (f"; {', '.join(p.value for p in result.warnings)} inexact" if result.warnings else ""))
+    else:
+        lines.append(f"this scene  {settings} (*): predicted to fail: "
+                     + "; ".join(f"{p.setting}={p.value} {p.outcome}" for p in result.problems))
+    return "\n".join(lines)
+
+
+def info_text(data: dict) -> str:
+    """`physdbg info`'s text (data: api.info's dict)."""
+    settings = " ".join(f"{k}={v}" for k, v in data["settings"].items())
+    lines = [
+        f"recording   {data['path']}  ({size_words(data['bytes'])}"
+        + (", TRUNCATED: the writer stopped before closing it" if data["truncated"] else "") + ")",
+        f"scene       {data['scene']}  ({data['source']})",
+        f"settings    {settings}",
+        f"steps       {data['steps']}  ({data['sim_time']:.6g} s simulated), detail {data['detail']}",
+        f"bodies      {count_words(data['particles'], 'particle')}, {count_words(len(data['walls']), 'wall')}",
+        *([f"sleep       {data['asleep_at_end']} of {data['particles']} spheres asleep at the end "
+           f"(sleep_speed {data['settings'].get('sleep_speed')} m/s)"] if data["asleep_at_end"] is not None else []),
+        f"size        {data['bytes_per_particle_step']:.1f} bytes per particle-step (everything)"
+        if data["bytes_per_particle_step"] else "size        -",
+        f"final hash  {data['final_hash']}",
+        f"written by  physdbg {data['physdbg_version']}, format {data['format_version']}",
+        *([f"foreign     another engine's run, from {data['foreign']['source']} ({data['foreign']['format']}, "
+           f"velocities {data['foreign']['velocities']})"] if data.get("foreign") else []),
+        *[f"how         {note}" for note in (data.get("foreign") or {}).get("notes", [])],
+        *_eos_lines(data["equation_of_state"]),
+        "channels",
+    ]
+    width = max(len(c["topic"]) for c in data["channels"])
+    for c in data["channels"]:
+        lines.append(f"  {c['topic']:<{width}}  {c['messages']:>7} messages  {c['encoding']:<14} {c['schema']}")
+    return "\n".join(lines)

@@ -28,7 +28,7 @@ from ..errors import DaskMissing
 
 def warm_engine() -> None:
     """Compile (or load) the engine's kernels (the default ``warm`` of run_jobs)."""
-    from ..engine.world import warm_up
+    from ..engine.warm import warm_up
 
     warm_up()
 

@@ -398,7 +398,7 @@ def warm_up() -> None:
     step checked is written out, not run, so this compiles nothing of the engine's: two
     spheres 1 m apart closing at 2 m/s along x meet head on at 0.4 s and swap velocities;
     every piece of their paths is pinned, so the pair sweep runs."""
-    from ..engine.world import warm_up_world
+    from ..engine.warm import warm_up_world
 
     state, walls = warm_up_world()  # (their radii, masses and the floor; the states are below)
     x0 = np.array([[-0.5, 0.3, 0.0], [0.5, 0.3, 0.0]])

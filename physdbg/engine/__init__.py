@@ -11,7 +11,8 @@ from .resolve import RESTITUTION_RULES, combine_restitution
 from .resting import RAPID_RULES
 from .state import BUDGETS, ORDERING_NAMES, SIZED_BUDGETS, NonFiniteState, Settings, State, Walls, energies, state_hash
 from .toi import DETECTION_NAMES
-from .world import World, warm_up
+from .warm import warm_up
+from .world import World
 
 __all__ = [
     "BROAD_PHASE_NAMES", "BUDGETS", "BruteForce", "choose_broad_phase", "DETECTION_NAMES", "INTEGRATOR_NAMES", "ORDERING_NAMES",

@@ -41,7 +41,6 @@ from ..events import (
     OUTCOME_HIT,
     OUTCOME_SUPERSEDED,
     Contacts,
-    EngineWarning,
     STEP_PHASES,
     StepBegin,
     StepCounts,
@@ -49,10 +48,11 @@ from ..events import (
     SweptTests,
 )
 from .broadphase import choose_broad_phase, make_broad_phase
-from .broadphase.boxes import boxes_meet, overlapping
+from .broadphase.boxes import boxes_meet
 from .broadphase.periodic import PeriodicBroadPhase
 from .colliders import KINDS, PARTNER_IS_SPHERE, geometry_of, max_overlap, narrow_candidates
 from .kernel_args import LoopBudgets, LoopCandidates, LoopMethod, LoopParticles
+from .memory import MemoryBudget
 from .motion import (
     FLOW,
     KICK_AT_STEP_START,
@@ -73,9 +73,9 @@ from .resolve import (
 from .resting import HELD, RAPID_RULES, STEP_RELEASED, STEP_WORK, grow_held, held_room, new_held, renumber_held
 from .sleep import SUPPORT_GAP, Sleepers, release_static, split_sleeping
 from .space_order import RENUMBER_EVERY, Numbering, chosen_order, inverse_permutation, morton_order
-from .state import (BUDGETS, BYTES_PER_PARTICLE, STATE_FIELDS, NonFiniteState, Settings, State, Walls, energies,
-                    first_non_finite, state_hash)
-from .step_context import StepContext
+from .state import (BUDGETS, STATE_FIELDS, NonFiniteState, Settings, State, Walls, energies, first_non_finite,
+                    state_hash)
+from .step_context import StepContext, wants_swept_tests
 from .timeline import (
     CAPPED,
     CONTACTS,
@@ -131,7 +131,7 @@ class World:
         self.settings = settings
         self.observer = observer
         self.step_index = 0
-        self._particle_bytes = state.count * BYTES_PER_PARTICLE  # what max_memory counts besides the buffers
+        self._memory = MemoryBudget(settings.max_memory, state.count)
         self.time = 0.0
         movable = state.inverse_mass > 0
         state.velocities[~movable] = 0.0
@@ -302,7 +302,7 @@ class World:
         if ctx.too_wide_mid_step and not ctx.warned("periodic"):
             ctx.warn("periodic", ctx.too_wide_mid_step)
         if budget == "max_memory" and not ctx.warned(budget):
-            ctx.warn(budget, self._memory_message(ctx))
+            ctx.warn(budget, self._memory.message(ctx))
         elif budget is not None and not ctx.warned(budget):
             ctx.warn(budget, _budget_message(budget, s.budget(budget, self._st.count)))
 
@@ -548,51 +548,16 @@ class World:
         return None
 
     # ------------------------------------------------------------------ memory
-    def _memory_message(self, ctx: StepContext) -> str:
-        """What the warning says when max_memory stopped a step."""
-        limit = self.settings.max_memory
-        logging = (" or record below --detail full (an observer of the swept tests keeps every test, misses "
-                   "included)" if wants_swept_tests(ctx.observer) else "")
-        return (f"max_memory reached: this step's buffers (event queue, swept-test log, contacts, held contacts) "
-                f"would have taken the run to about {_bytes(ctx.out_of_memory)}, more than max_memory = {limit:.3g} "
-                f"bytes (the {self._st.count} particles count ~{BYTES_PER_PARTICLE // 1024} KiB each); the "
-                f"remaining contacts of the step were not resolved; raise it with --set "
-                f"max_memory={max(ctx.out_of_memory * 1.5, limit * 2):.2g}{logging}")
-
     def _ensure(self, ctx: StepContext, heap_room: int, test_room: int, contact_room: int) -> bool:
-        """Grow the loop's buffers for this much more (Buffers.ensure), unless that would
-        take the particles' own memory (BYTES_PER_PARTICLE each), the held contacts, the
-        buffers and the copies the step's events take of them (_buffer_bytes) past
-        Settings.max_memory: then nothing is allocated, ctx.out_of_memory holds what it
-        would have needed (bytes), and False."""
-        if not self._fits(ctx, _nbytes(self.held) + self._buffer_bytes(ctx, heap_room, test_room, contact_room)):
-            return False
-        self._buf.ensure(heap_room, test_room, contact_room)
-        return True
-
-    def _fits(self, ctx: StepContext, need: int) -> bool:
-        """Whether the particles' own memory and ``need`` more bytes stay within max_memory;
-        if not, ctx.out_of_memory keeps the largest total asked for."""
-        need += self._particle_bytes
-        if need > self.settings.max_memory:
-            ctx.out_of_memory = max(ctx.out_of_memory, need)
-            return False
-        return True
-
-    def _buffer_bytes(self, ctx: StepContext, heap_room: int, test_room: int, contact_room: int) -> int:
-        """The loop's buffers after growing by these rooms, and the copies the step's events
-        will take of them: the contact rows for any observer, the test log for one that
-        reads the swept tests (bytes)."""
-        total, log, rows = self._buf.bytes_after(heap_room, test_room, contact_room)
-        return (total + (rows if ctx.observer is not None else 0)
-                + (log if wants_swept_tests(ctx.observer) else 0))
+        """Grow the loop's buffers for this much more within max_memory (memory.py)."""
+        return self._memory.ensure(ctx, self._buf, self.held, heap_room, test_room, contact_room)
 
     def _grow_held(self, ctx: StepContext) -> bool:
-        """Grow the held-contact store (resting.grow_held: at most twice its size) within
-        max_memory, as _ensure; False (ctx.out_of_memory set) if it would not fit."""
-        if not self._fits(ctx, 2 * _nbytes(self.held) + self._buffer_bytes(ctx, 0, 0, 0)):
+        """Grow the held-contact store within max_memory (memory.py); False if it would not fit."""
+        grown = self._memory.grow_held(ctx, self._buf, self.held)
+        if grown is None:
             return False
-        self.held = grow_held(self.held)
+        self.held = grown
         return True
 
     def _held_room(self, ctx: StepContext, a: int, b: int) -> bool:
@@ -674,29 +639,6 @@ class World:
                           buf.test_outcome[:count].copy())
 
 
-def _bytes(count: float) -> str:
-    """A size for a message: 950 kB, 1.26 MB, 4.1 GB (powers of 1000, as max_memory is given)."""
-    for unit, size in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
-        if count >= size:
-            return f"{count / size:.3g} {unit}"
-    return f"{count:.0f} bytes"
-
-
-def _nbytes(arrays) -> int:
-    return sum(a.nbytes for a in arrays)
-
-
-def wants_swept_tests(observer) -> bool:
-    """Whether the step logs every swept test, misses included, and sends the
-    ``SweptTests`` event: only for an observer that reads it. An observer says so with a
-    ``wants_swept_tests`` attribute (physdbg.observe.FanOut asks each of its observers);
-    one without it gets every event. A dense step runs tens of millions of tests, about
-    95 % misses, at 41 bytes a row: the audit, the Rerun view and a recording below
-    detail "full" read none of them. Logging or not changes no result (the hits keep
-    their order: Buffers.reset)."""
-    return observer is not None and bool(getattr(observer, "wants_swept_tests", True))
-
-
 def _checked_step_length(dt) -> float:
     if isinstance(dt, bool) or not isinstance(dt, (int, float, np.floating)) or not 0.0 < dt < math.inf:
         raise ValueError(f"World.step needs dt, a positive finite number of seconds; got {dt!r} (a scene with "
@@ -709,79 +651,3 @@ def _budget_message(budget: str, value: int) -> str:
     counts, consequence = BUDGETS[budget]
     return (f"{budget} reached ({value} {counts}); {consequence}; raise it with --set {budget}=N "
             f"if the scene really needs more")
-
-
-def warm_up(broad_phase: str | None = None, sleeping: bool = False) -> float:
-    """Compile (or load from numba's cache) every kernel a step uses; returns seconds taken.
-
-    Runs a two-sphere, one-wall world for one step with contacts, so the first real step
-    is not charged with compilation. The kernels take the integrator and detection as
-    arguments, so one run compiles every method. broad_phase: also compile this one;
-    sleeping: also the sleep rules' (sleep.py; only a run that sleeps loads them).
-    (physdbg.precompile runs this on two cores when the cache is cold.)
-    """
-    started = perf_counter()
-    _warm_up_broad_phase(broad_phase)
-    state, walls = warm_up_world()
-    for detection in ("swept", "sampled"):
-        world = World(state.copy(), walls, Settings(detection=detection))
-        world.step(0.5)
-    # a mid-step re-query's (World._refresh_box, _add_partners), rare in this small world:
-    # otherwise the first one in a run pays ~5 ms loading particle_box's Python entry
-    world._refresh_box(world.last_step, 0)
-    no_pairs = np.empty((0, 2), dtype=np.int64)
-    merge_sorted_pairs(no_pairs, no_pairs)
-    overlapping(state.positions, state.positions, state.positions[0], state.positions[0])
-    if sleeping:
-        World(state.copy(), walls, Settings(sleep_speed=0.1, sleep_time=0.1)).step(0.5)
-        release_static(new_held(state.count), np.zeros(state.count))
-    return perf_counter() - started
-
-
-def warm_up_held_solve() -> None:
-    """The first of warm_up's call trees: the forces phase of its world (settle_held and
-    the resting solve beneath it, about 40 % of a cold compile)."""
-    state, walls = warm_up_world()
-    world = World(state, walls, Settings())
-    world._forces(world._begin(0.5))
-
-
-def warm_up_without_forces(broad_phase: str | None = None) -> None:
-    """The second: the rest of the step, with no forces phase (its outputs set as it
-    leaves them when nothing is held: the free accelerations, every anchor at the step's
-    start). First all that needs no resting solve (the grid and the broad phase named;
-    the broad, narrow and finish phases of a sleeping world, the sleep rules included),
-    the time-ordered loop last: its held solve calls the resting solve, which a process
-    compiling warm_up_held_solve beside this one has by then cached, nearly or wholly
-    (physdbg.precompile). The worlds are thrown away: only the compiling counts."""
-    _warm_up_broad_phase("grid")
-    _warm_up_broad_phase(broad_phase)
-    _phases_without_forces("finish", sleep_speed=0.1, sleep_time=0.1)
-    _phases_without_forces("resolve")
-
-
-def _phases_without_forces(last: str, **settings) -> None:
-    state, walls = warm_up_world()
-    world = World(state, walls, Settings(**settings))
-    ctx = world._begin(0.5)
-    ctx.path_accel = world._free_accel.copy()
-    ctx.sigma = np.zeros(state.count)
-    world._broad_phase(ctx)
-    world._narrow_phase(ctx)
-    (world._finish if last == "finish" else world._resolve)(ctx)
-
-
-def _warm_up_broad_phase(broad_phase: str | None) -> None:
-    if broad_phase is not None and broad_phase != "brute-force":
-        boxes = np.random.default_rng(0).uniform(0.0, 1.0, (8, 3))
-        make_broad_phase(broad_phase).pairs(boxes, boxes + 0.3)
-
-
-def warm_up_world() -> tuple[State, Walls]:
-    """Two spheres that meet each other and a floor within 0.5 s (warm_up's, and the
-    audit's: analysis.tunnel.warm_up)."""
-    state = State(np.array([[0.0, 0.3, 0.0], [0.5, 0.3, 0.0]]), np.array([[1.0, -1.0, 0.0], [-1.0, 0.0, 0.0]]),
-                  np.ones(2), np.full(2, 0.1), np.ones(2), np.ones(2))
-    walls = Walls(["floor"], np.array([[0.0, 1.0, 0.0]]), np.zeros(1), np.ones(1), np.zeros(1, dtype=np.bool_),
-                  np.zeros(1))
-    return state, walls

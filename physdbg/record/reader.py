@@ -370,6 +370,18 @@ class Recording:
                                      f"({type(err).__name__}: {err})") from None
             yield channel.topic, message.sequence, message.data
 
+    @property
+    def records_contacts(self) -> bool:
+        """Whether the file has a contacts channel (detail contacts or full)."""
+        return fmt.TOPIC_CONTACTS in self._channels
+
+    def raw_messages(self, topic: str, first: int = 1, last: int | None = None) -> Iterator[tuple[int, bytes]]:
+        """(frame, message bytes) of one topic for frames first..last, in frame order,
+        undecoded (to compare two files' records byte for byte)."""
+        last = self.frames - 1 if last is None else last
+        for _, frame, data in self._messages([topic], first, last):
+            yield frame, data
+
     def _one(self, topic: str) -> bytes | None:
         for _, _, data in self._messages([topic], 0, 0):
             return data

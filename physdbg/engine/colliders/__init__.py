@@ -15,7 +15,7 @@ order of their codes (``geometry_of``: ``geometry[KIND_PAIR]`` is sphere.SphereG
 and handed down whole to every kernel that reaches a kind. Adding a kind (next: triangle
 meshes) is one module beside sphere.py and plane.py (its functions and its group), its row
 in the table (events.KIND_NAMES, PARTNER_IS_SPHERE), its module in KIND_MODULES, and one
-branch in each function of the switch (docs/engine.md, "Adding a collider kind").
+branch in each function of the switch (docs/engine.md, "Adding an integrator or a collider kind").
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ __all__ = ["KIND_NAMES", "KINDS", "KIND_MODULES", "PARTNER_IS_SPHERE", "partner_
            "check_kind_modules", "time_of_impact", "contact_normal", "contact_gap", "partner_restitution",
            "partners_of", "max_overlap", "narrow_candidates", "every_candidate", "most_partners", "partners_bound"]
 
-# each kind's module, in the order of the kinds' codes: its geometry group is ``module.<Name>Geometry``
+# each kind's module, in the order of the kinds' codes: its geometry group is ``module.GEOMETRY``
 KIND_MODULES = (sphere, plane)
 
 
@@ -44,7 +44,7 @@ def check_kind_modules(names=KIND_NAMES, modules=KIND_MODULES) -> None:
         raise ValueError(f"engine/colliders: {len(names)} collider kinds in the table ({', '.join(names)}) but "
                          f"{len(modules)} modules in KIND_MODULES" + (f"; no module for {missing}" if missing else "")
                          + ": a kind is one module, its table row and one branch per switch function "
-                           "(docs/engine.md, \"Adding a collider kind\")")
+                           "(docs/engine.md, \"Adding an integrator or a collider kind\")")
 
 
 check_kind_modules()
@@ -53,7 +53,7 @@ check_kind_modules()
 def geometry_of(walls) -> tuple:
     """The geometry the kernels read (a plain tuple of each kind's group, as plain tuples,
     in kind order) from a scene's walls and box (state.Walls)."""
-    return (tuple(sphere.SphereGeometry.of(walls)), tuple(plane.PlaneGeometry.of(walls)))
+    return tuple(tuple(module.GEOMETRY.of(walls)) for module in KIND_MODULES)
 
 
 @njit(cache=True, inline="always")

@@ -43,6 +43,9 @@ class PlaneGeometry(NamedTuple):
                    np.ascontiguousarray(walls.two_sided, dtype=np.bool_), floats(walls.restitution))
 
 
+GEOMETRY = PlaneGeometry  # this kind's group (colliders.geometry_of)
+
+
 @njit(cache=True, inline="always")
 def _unpack(planes):
     """The group's fields (PlaneGeometry's order), the one place a kernel reads them."""

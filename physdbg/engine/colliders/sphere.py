@@ -34,6 +34,9 @@ class SphereGeometry(NamedTuple):
         return cls(np.ascontiguousarray(walls.period, dtype=np.float64).reshape(3))
 
 
+GEOMETRY = SphereGeometry  # this kind's group (colliders.geometry_of)
+
+
 @njit(cache=True, inline="always")
 def _unpack(spheres):
     """The group's fields (SphereGeometry's order), the one place a kernel reads them."""

@@ -1,0 +1,151 @@
+"""Adding an integrator or a collider kind (docs/engine.md, "Adding an integrator or a
+collider kind"): a dummy of each, added where the docs say, is handled by every table and
+reader; one left out of a table, or met in a recording this physdbg does not know, is
+refused with a message that says what is missing."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from physdbg import events
+from physdbg.cli import app
+from physdbg.engine import colliders, motion
+
+from . import tamper
+
+
+def _as_if_in_the_source(monkeypatch, module, name: str, value) -> None:
+    """Give ``module.name`` a new value everywhere physdbg bound it (``from x import name``
+    copies the binding): what editing the table in its source does."""
+    import sys
+
+    old = getattr(module, name)
+    for other in list(sys.modules.values()):
+        if getattr(other, "__name__", "").startswith("physdbg") and getattr(other, name, None) is old:
+            monkeypatch.setattr(other, name, value)
+
+
+# ----------------------------------------------------------------------------- integrators
+def test_an_integrator_without_its_row_in_a_table_is_refused_naming_every_such_table():
+    names = (*motion.INTEGRATOR_NAMES, "dummy")
+    with pytest.raises(ValueError) as raised:
+        motion.check_integrator_tables(names)
+    message = str(raised.value)
+    assert "5 integrators (euler, semi-implicit, verlet, exact, dummy)" in message
+    for table in motion.INTEGRATOR_TABLES:
+        assert f"{table} has 4 rows" in message
+    assert 'docs/engine.md, "Adding an integrator or a collider kind"' in message
+
+
+@pytest.fixture
+def dummy_integrator(monkeypatch):
+    """A fifth integrator, "dummy", with Verlet's row in every table of motion.py (what
+    docs/engine.md says a new integrator adds there), as every reader sees the tables."""
+    import physdbg.advisor  # noqa: F401  (the readers, loaded before their tables change)
+    import physdbg.analysis.charts  # noqa: F401
+    import physdbg.analysis.departure  # noqa: F401
+    import physdbg.scene  # noqa: F401
+
+    names = (*motion.INTEGRATOR_NAMES, "dummy")
+    tables = {name: (*rows, rows[motion.VERLET]) for name, rows in motion.INTEGRATOR_TABLES.items()}
+    motion.check_integrator_tables(names, tables)  # every table has its row
+    _as_if_in_the_source(monkeypatch, motion, "INTEGRATOR_NAMES", names)
+    for name, rows in tables.items():
+        _as_if_in_the_source(monkeypatch, motion, name, rows)
+    return "dummy"
+
+
+def test_a_new_integrator_with_its_rows_is_handled_by_every_reader_of_the_tables(dummy_integrator):
+    from physdbg.advisor import advise
+    from physdbg.analysis.charts import marker_of
+    from physdbg.analysis.departure import family_of, integrator_of
+    from physdbg.api import load_scene
+
+    # the charts give it a marker of its own, check-run knows how it moves
+    assert marker_of("dummy") not in {marker_of(name) for name in ("euler", "semi-implicit", "verlet", "exact")}
+    assert family_of("dummy") == family_of("verlet") == "exact"
+    assert integrator_of("explicit-euler") == "euler" and integrator_of(None) == "exact"
+    # the advisor judges it by its row (exact under gravity alone, like Verlet)
+    predictions = {p.value: p for p in advise(load_scene("bounce")).predictions if p.setting == "integrator"}
+    assert predictions["dummy"].outcome == predictions["verlet"].outcome == "safe"
+    # a scene may name it
+    from physdbg.scene import parse_scene
+
+    assert parse_scene('integrator = "dummy"\ndt = 0.01\nsteps = 1\n').settings.integrator == "dummy"
+
+
+def test_a_recording_made_with_an_integrator_this_physdbg_lacks_is_refused_clearly(tmp_path):
+    runner = CliRunner()
+    recorded = tmp_path / "bounce.mcap"
+    assert runner.invoke(app, ["record", "bounce", "-s", "steps=60", "-o", str(recorded), "--no-rrd"]).exit_code == 0
+    newer = tamper.with_setting(recorded, tmp_path / "newer.mcap", "integrator", "leapfrog")
+    done = runner.invoke(app, ["explain", str(newer)])
+    assert done.exit_code == 2, done.output
+    assert "the run's integrator 'leapfrog' is not one this physdbg has (euler, semi-implicit, verlet, exact)" \
+        in done.output
+
+
+# ----------------------------------------------------------------------------- collider kinds
+def test_a_collider_kind_without_its_module_is_refused_naming_it():
+    with pytest.raises(ValueError) as raised:
+        colliders.check_kind_modules((*events.KIND_NAMES, "mesh"))
+    message = str(raised.value)
+    assert "3 collider kinds in the table (sphere, wall, mesh) but 2 modules" in message
+    assert "no module for 2 mesh" in message and 'docs/engine.md, "Adding an integrator or a collider kind"' in message
+    colliders.check_kind_modules()  # the engine's own table and modules agree
+
+
+@pytest.fixture
+def contact_of_kind_2(tmp_path):
+    """A recording of bounce whose first contact is of collider kind 2."""
+    recorded = tmp_path / "bounce.mcap"
+    done = CliRunner().invoke(app, ["record", "bounce", "-s", "steps=120", "-o", str(recorded), "--no-rrd"])
+    assert done.exit_code == 0, done.output
+    from physdbg import open_recording
+
+    with open_recording(recorded) as rec:
+        frame = next(k for k in range(1, rec.frames) if len(rec.contacts(k)))
+    return recorded, tamper.edit_contact(recorded, tmp_path / "kind2.mcap", frame, kind=2), frame
+
+
+def test_a_recording_with_a_kind_this_physdbg_does_not_know_is_refused_by_every_reader(contact_of_kind_2, tmp_path):
+    recorded, changed, _ = contact_of_kind_2
+    runner = CliRunner()
+    for command in (["explain", str(changed)], ["diff", str(recorded), str(changed)],
+                    ["replay", str(changed), "--rrd", str(tmp_path / "kind2.rrd")]):
+        done = runner.invoke(app, command)
+        assert done.exit_code == 2, (command, done.output)
+        assert "a contact or swept test of collider kind 2, which this physdbg does not know (its kinds: 0 sphere, " \
+               "1 wall)" in done.output, command
+
+
+def test_a_new_kind_in_the_table_is_handled_by_every_reader(contact_of_kind_2, tmp_path, monkeypatch):
+    """With "dummy" (an immovable partner, like a wall) in the table, the readers take the
+    kind-2 contact: they ask the table, not for a kind, and name it by its row."""
+    import physdbg.analysis.audit  # noqa: F401  (the readers, loaded before the table changes)
+    import physdbg.analysis.departure  # noqa: F401
+    import physdbg.analysis.diff  # noqa: F401
+    import physdbg.record.rerun_sink  # noqa: F401
+    from physdbg.record import open_recording
+
+    _as_if_in_the_source(monkeypatch, events, "KIND_NAMES", (*events.KIND_NAMES, "dummy"))
+    _as_if_in_the_source(monkeypatch, events, "PARTNER_IS_SPHERE", (*events.PARTNER_IS_SPHERE, False))
+    monkeypatch.setattr(events, "_PARTNER_IS_SPHERE", np.array(events.PARTNER_IS_SPHERE, dtype=bool))
+    recorded, changed, frame = contact_of_kind_2
+
+    with open_recording(changed, verify=False) as rec:
+        contact = rec.contacts(frame).record(0)
+        assert contact.kind == 2 and contact.velocity_b_before is None  # an immovable partner has no velocity
+        assert events.partner_words(contact.kind, contact.other, ["floor"]) == "dummy 'floor'"
+        assert events.collision_sums(rec.contacts(frame), rec.header.radius).collisions == 0
+    runner = CliRunner()
+    for command in (["explain", str(changed)], ["diff", str(recorded), str(changed)],
+                    ["replay", str(changed), "--rrd", str(tmp_path / "kind2.rrd")], ["info", str(changed)]):
+        done = runner.invoke(app, command)
+        assert done.exception is None or isinstance(done.exception, SystemExit), (command, done.output)
+        assert done.exit_code in (0, 1), (command, done.output)
+    # the diff sees the contacts differ and names the new partner by its row
+    done = runner.invoke(app, ["diff", str(recorded), str(changed)])
+    assert done.exit_code == 1 and "dummy 'floor'" in done.output, done.output
