@@ -704,6 +704,39 @@ def info(
         typer.echo(info_text(data))
 
 
+@app.command()
+def overlap(
+    a: Annotated[str, typer.Argument(help="A mesh: an .obj or .stl file, or a built-in shape (ramp, funnel, "
+                                          "box-with-hole, paddle, icosphere).")],
+    b: Annotated[str, typer.Argument(help="The other mesh, likewise.")],
+    pose: Annotated[Optional[str], typer.Option(
+        "--pose", help="Where B sits: x,y,z or x,y,z,rx,ry,rz (m, then degrees about x, y and z). Default: at the "
+                       "origin, unturned.")] = None,
+    pose_a: Annotated[Optional[str], typer.Option("--pose-a", help="Where A sits, likewise.")] = None,
+    volume: Annotated[str, typer.Option(
+        "--volume", help="The bounding volume tested at every node: auto, aabb, obb or sphere.")] = "auto",
+    builder: Annotated[str, typer.Option("--builder", help="How each BVH is built: median, mean, sah or lbvh.")]
+    = "sah",
+    hull: Annotated[bool, typer.Option("--hull/--no-hull", help="Test the convex hulls (qhull) before the trees.")]
+    = True,
+    max_lines: Annotated[int, typer.Option("--max-lines", min=0,
+                                           help="Node pairs of the search tree to print (0: all).")] = 40,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the report as JSON (the whole search tree).")]
+    = False,
+) -> None:
+    """Do two meshes overlap? Search both BVHs at once and print the search tree: every node
+    pair visited and what its volumes said. Exit 0 apart, 1 they meet, 2 error.
+
+    Example: physdbg overlap icosphere paddle --pose 0.5,0,0,0,0,30
+    """
+    with _user_errors():
+        from .analysis.overlap import overlap as search, overlap_text
+
+        report = search(a, b, pose_a=pose_a, pose_b=pose, volume=volume, builder=builder, hull=hull)
+        typer.echo(json.dumps(report.as_dict(), indent=2) if as_json else overlap_text(report, max_lines))
+        raise typer.Exit(report.exit_code)
+
+
 def _command(name: str) -> str:
     """How to run ``name`` (rerun, physdbg) from here: the bare name if it is on PATH, else
     its path in this venv (after README command 1 the venv is not activated)."""

@@ -86,3 +86,7 @@ class DaskMissing(PhysdbgError):
 
 class ChartsMissing(PhysdbgError):
     """matplotlib is not installed."""
+
+
+class MeshError(PhysdbgError):
+    """A mesh file or shape that cannot be used: the message names the file, the line and the problem."""
