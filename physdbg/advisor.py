@@ -97,10 +97,13 @@ def advise(scene) -> Advice:
     r_min = float(r.min()) if n else 0.0
     contacts_possible = _contacts_possible(state.positions, r, movable, reach, walls)
     periodic = _periodic_fit(walls, r, bound, dt)
-    two_sided = [(name, float(t)) for name, two, t in zip(walls.names, walls.two_sided, walls.thickness, strict=True)
-                 if two]
+    two_sided = [(f"wall '{name}'", float(t)) for name, two, t
+                 in zip(walls.names, walls.two_sided, walls.thickness, strict=True) if two]
+    # a mesh's triangles have no thickness: a centre carried past one by more than a
+    # radius is through it, as through a two-sided wall of thickness 0
+    two_sided += [(f"mesh '{name}'", 0.0) for name in walls.meshes.names]
     several = n >= 3 or (n >= 2 and len(walls) > 0)  # a step can hold more than one contact
-    facts = {"particles": n, "walls": len(walls), "speed_bound": bound, "speed_bound_why": bound_why, "dt": dt, "duration": duration,
+    facts = {"particles": n, "walls": len(walls), "meshes": mesh_sizes(walls.meshes), "speed_bound": bound, "speed_bound_why": bound_why, "dt": dt, "duration": duration,
              "gravity": gravity, "drag": s.drag, "radius_min": r_min, "radius_max": float(r.max()) if n else 0.0,
              "contacts_possible": contacts_possible, "samples": s.samples, "periodic": periodic}
 
@@ -147,7 +150,7 @@ def advise(scene) -> Advice:
                                 "(docs/stability.md)")
     else:
         recommended["detection"] = "discrete"
-        reasons["detection"] = ("no contact can happen: no sphere can reach another or a wall within the run "
+        reasons["detection"] = ("no contact can happen: no sphere can reach another, a wall or a mesh within the run "
                                 f"(at most {reach:.3g} m from where it starts), so no swept test is needed")
     recommended["ordering"] = "time"
     reasons["ordering"] = ("a step can hold several contacts: time order resolves them as they happen"
@@ -164,7 +167,7 @@ def _detection(name, contacts_possible, bound, dt, samples, r_min, two_sided, n)
     if not contacts_possible:
         return Prediction("detection", name, "safe", "no contact can happen in this run")
     travel = bound * dt / (samples if name == "sampled" else 1)  # the most a test's interval can carry a centre
-    tunnels = [f"wall '{wall}' (t/2 + r = {t / 2 + r_min:.3g} m)" for wall, t in two_sided if travel > t / 2 + r_min]
+    tunnels = [f"{wall} (t/2 + r = {t / 2 + r_min:.3g} m)" for wall, t in two_sided if travel > t / 2 + r_min]
     if n >= 2 and 2 * travel > 2 * r_min:
         tunnels.append(f"another sphere (r_a + r_b = {2 * r_min:.3g} m at closing speeds up to {2 * bound:.3g} m/s)")
     step = f"{travel:.3g} m a {'sample' if name == 'sampled' else 'step'} at {bound:.3g} m/s"
@@ -311,9 +314,9 @@ def _periodic_fit(walls, r, bound: float, dt: float) -> dict | None:
 
 
 def _contacts_possible(x, r, movable, reach, walls) -> bool:
-    """Whether any two spheres, or a sphere and a wall, can touch within the run: each
-    movable sphere stays within ``reach`` of where it starts (in a periodic box, pairs
-    are as near as their nearest images)."""
+    """Whether any two spheres, or a sphere and a wall or a mesh, can touch within the run:
+    each movable sphere stays within ``reach`` of where it starts (in a periodic box, pairs
+    are as near as their nearest images; a mesh is as near as its nearest corner's box)."""
     n = len(r)
     if n == 0:
         return False
@@ -327,6 +330,12 @@ def _contacts_possible(x, r, movable, reach, walls) -> bool:
         gap = x @ normal - offset  # signed distance of each centre from the plane
         distance = np.abs(gap) - t / 2 if two else gap  # a one-sided wall is a half-space: behind it is touching
         if np.any(distance <= extent):
+            return True
+    if walls.meshes.triangles:
+        corners = walls.meshes.corners.reshape(-1, 3)
+        lo, hi = corners.min(axis=0), corners.max(axis=0)  # the meshes' box: no sphere farther can touch one
+        outside = np.linalg.norm(np.maximum(0.0, np.maximum(lo - x, x - hi)), axis=1)
+        if np.any(outside <= extent):
             return True
     return False
 
@@ -378,3 +387,9 @@ def resolve_pile_rules(scene) -> dict[str, str]:
     # one line says why; the others point to it
     first = next(iter(values))
     return {name: f"{value}: {why}" if name == first else f"{value}: as {first}" for name, value in values.items()}
+
+
+def mesh_sizes(meshes) -> dict[str, int]:
+    """Each fixed mesh's name and its number of triangles (state.Meshes)."""
+    first = meshes.first
+    return {name: int(first[k + 1] - first[k]) for k, name in enumerate(meshes.names)}

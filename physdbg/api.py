@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import NonFiniteRunError, PhysdbgError, RecordingInterrupted
-from .advisor import decide
+from .advisor import decide, mesh_sizes
 from .scene import Scene, read_scene
 
 
@@ -83,6 +83,7 @@ class RunSummary:
     dts: list[float] = field(default_factory=list, repr=False)
     auto: dict[str, str] = field(default_factory=dict)  # setting -> "value: why" for settings given as auto
 
+    meshes: dict[str, int] = field(default_factory=dict)  # each fixed mesh's name: its triangles
     def as_dict(self) -> dict:
         return asdict(self)
 
@@ -172,7 +173,8 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         detection=scene.settings.detection, ordering=scene.settings.ordering,
         broad_phase=world.broad_phase.name,
         broad_phase_reason=world.broad_phase_reason,
-        particles=st.count, walls=list(scene.walls.names), steps=n_steps, sim_time=world.time,
+        particles=st.count, walls=list(scene.walls.names), meshes=mesh_sizes(scene.walls.meshes), steps=n_steps,
+        sim_time=world.time,
         contacts=tally.total["contacts"], swept_tests=tally.total["swept_tests"],
         held_at_end=tally.total["held"], rapid=tally.total["rapid"], released=tally.total["released"],
         asleep_at_end=tally.total["asleep"], slept=tally.total["slept"], woken=tally.total["woken"],
@@ -507,6 +509,7 @@ def info(path: str | Path) -> dict:
             "description": meta["scene"]["description"],
             "physdbg_version": meta["physdbg_version"], "format_version": meta["format_version"],
             "detail": rec.detail, "particles": n, "walls": list(rec.header.walls.names),
+            "meshes": mesh_sizes(rec.header.walls.meshes),
             "steps": rec.steps, "sim_time": last.time, "final_hash": last.state_hash,
             "settings": meta["settings"], "dt": meta.get("dt"), "bvh_max_nodes": meta.get("bvh_max_nodes"),
             "bytes_per_particle_step": size / (n * rec.frames) if n and rec.frames else None,

@@ -28,10 +28,11 @@ import numpy as np
 # same rows (engine/colliders/kinds.py) and add each kind's geometry (engine/colliders/).
 KIND_PAIR = 0  # the partner is sphere ``other``
 KIND_WALL = 1  # the partner is wall (plane) ``other`` of the scene's walls
-KIND_NAMES = ("sphere", "wall")
+KIND_MESH = 2  # the partner is triangle ``other`` of the scene's meshes (numbered across them)
+KIND_NAMES = ("sphere", "wall", "mesh")
 # the partner is a sphere that moves and takes impulses (its own velocity, version, anchor
-# time and held-contact list); the others (a wall; next, a mesh triangle) are immovable
-PARTNER_IS_SPHERE = (True, False)
+# time and held-contact list); the others (a wall, a mesh's triangle) are immovable
+PARTNER_IS_SPHERE = (True, False, False)
 _PARTNER_IS_SPHERE = np.array(PARTNER_IS_SPHERE, dtype=bool)
 
 
@@ -54,15 +55,16 @@ def partner_is_sphere(kind):
     return _PARTNER_IS_SPHERE[kind]
 
 
-def partner_words(kind: int, other: int, wall_names) -> str:
-    """How reports name a contact's partner: "sphere 4", or "wall 'floor'" (wall_names:
-    the recording's names of the partners of that kind, by index)."""
-    return f"sphere {other}" if PARTNER_IS_SPHERE[kind] else f"{KIND_NAMES[kind]} '{wall_names[other]}'"
+def partner_words(kind: int, other: int, names) -> str:
+    """How reports name a contact's partner: "sphere 4", "wall 'floor'" or "mesh 'ramp'
+    triangle 3" (names: the recording's names of the partners, one sequence per kind
+    indexed by the partner's number: state.Walls.partner_names)."""
+    return f"sphere {other}" if PARTNER_IS_SPHERE[kind] else f"{KIND_NAMES[kind]} {names[kind][other]}"
 
 
-def contact_words(kind: int, a: int, other: int, wall_names) -> str:
+def contact_words(kind: int, a: int, other: int, names) -> str:
     """How reports name a contact in few words: "3–4" (a sphere pair), "3–wall 'floor'"."""
-    return f"{a}–{other}" if PARTNER_IS_SPHERE[kind] else f"{a}–{partner_words(kind, other, wall_names)}"
+    return f"{a}–{other}" if PARTNER_IS_SPHERE[kind] else f"{a}–{partner_words(kind, other, names)}"
 
 # how a contact was resolved (Contacts.how; the recording's contacts ``how`` column)
 HOW_IMPULSE = 0  # the seed's impulse (or reflection), alone

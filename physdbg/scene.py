@@ -40,7 +40,7 @@ from .engine import (
 )
 from .engine.periodic import wrap_positions
 from .engine.space_order import RENUMBER_EVERY, SPACE_ORDER_MIN, SPACE_ORDER_NAMES
-from .engine.state import BYTES_PER_PARTICLE, DEFAULT_MAX_MEMORY
+from .engine.state import BYTES_PER_PARTICLE, DEFAULT_MAX_MEMORY, Meshes
 from .errors import SceneError, UnknownSceneError
 from .scenes import builtin_names, builtin_text
 
@@ -96,6 +96,7 @@ TOP_FIELDS = {
     "max_particle_steps": "refuse a run of more particle-steps (particles × steps) than this (default 1e10)",
     "particles": "array of [[particles]] tables",
     "planes": "array of [[planes]] tables",
+    "meshes": "array of [[meshes]] tables: fixed triangle meshes (docs/meshes.md)",
     "box": "[box] table: axis-aligned container, closed by walls or periodic on the axes box.periodic names",
     "generate": "[generate] table: generated particles",
 }
@@ -116,6 +117,15 @@ PLANE_FIELDS = {
     "two_sided": "true for a thin wall spheres bounce off from either side (default false)",
     "thickness": "thickness of a two-sided wall, metres >= 0 (default 0)",
 }
+MESH_FIELDS = {
+    "name": "text shown in events (default mesh<k>)",
+    "shape": "a built-in shape: ramp, funnel, box-with-hole, paddle or icosphere (or give file)",
+    "file": "an .obj or .stl file, relative to the scene file's folder (or give shape)",
+    "position": "[x, y, z] in m: where the mesh's origin goes (default [0, 0, 0])",
+    "rotation": "[x, y, z] in degrees: turned about the world's x, then y, then z axis (default [0, 0, 0])",
+    "scale": "multiplies the mesh's size, > 0 (default 1)",
+    "restitution": "0 <= e <= 1 (default 1)",
+}
 BOX_FIELDS = {
     "min": "[x, y, z] lower corner (m)",
     "max": "[x, y, z] upper corner (m), larger than min on every axis",
@@ -132,7 +142,7 @@ GENERATE_FIELDS = {
     "speed": "typical speed, m/s >= 0 (rain: each speed within ±10 % of it; gas: rms speed)",
     "packing_fraction": "gas only: sphere volume / box volume, 0 < phi <= 0.45",
 }
-FIELDS = {"scene": TOP_FIELDS, "particles": PARTICLE_FIELDS, "planes": PLANE_FIELDS,
+FIELDS = {"scene": TOP_FIELDS, "particles": PARTICLE_FIELDS, "planes": PLANE_FIELDS, "meshes": MESH_FIELDS,
           "box": BOX_FIELDS, "generate": GENERATE_FIELDS}
 
 # Fields that were renamed: the hint an old scene file gets.
@@ -258,12 +268,14 @@ def parse_scene(text: str, source: str = "<scene>", overrides=()) -> Scene:
     return scene
 
 
-def scene_from_dict(raw: dict, source: str) -> Scene:
-    """Validate an already-parsed scene table (e.g. the one kept in a recording)."""
+def scene_from_dict(raw: dict, source: str, meshes: Meshes | None = None) -> Scene:
+    """Validate an already-parsed scene table (e.g. the one kept in a recording). meshes:
+    the scene's meshes as recorded (state.Meshes), used instead of reading its [[meshes]]
+    again (a recording keeps its triangles; the files may be gone)."""
     if not isinstance(raw, dict):
         raise SceneError(source, "", "the scene is not a table")
     _check_nesting(raw, source)
-    return _validate(copy.deepcopy(raw), source, {})
+    return _validate(copy.deepcopy(raw), source, {}, meshes)
 
 
 def _check_nesting(raw: dict, source: str) -> None:
@@ -460,7 +472,49 @@ def _clip(text: str, limit: int) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
-def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
+def _meshes(c: _Checker, raw: dict, max_memory: float) -> Meshes:
+    """The scene's [[meshes]], loaded (physdbg.meshes) and posed in the world."""
+    from .engine.mesh import Pose
+    from .errors import MeshError
+    from .meshes import load_mesh
+
+    names, restitution, corners, mesh_of, sources = [], [], [], [], []
+    folder = Path(c.source).parent if Path(c.source).is_file() else Path.cwd()
+    for k, table in enumerate(c.tables(raw, "meshes", "meshes")):
+        p = f"meshes.{k}."
+        c.known(table, MESH_FIELDS, p)
+        if ("shape" in table) == ("file" in table):
+            c.fail(p + "shape", "give shape (a built-in shape) or file (an .obj or .stl file), not both or neither")
+        if "shape" in table:
+            from .meshes import SHAPES
+
+            spec = c.choice(table, "shape", p + "shape", tuple(SHAPES), None)
+        else:
+            spec = str(folder / c.text(table, "file", p + "file", ""))
+        name = c.text(table, "name", p + "name", f"mesh{k}")
+        position = c.vector(table, "position", p + "position", (0.0, 0.0, 0.0))
+        rotation = c.vector(table, "rotation", p + "rotation", (0.0, 0.0, 0.0))
+        scale = c.number(table, "scale", p + "scale", default=1.0, lo=0, lo_open=True)
+        restitution.append(c.number(table, "restitution", p + "restitution", default=1.0, lo=0, hi=1))
+        try:
+            mesh = load_mesh(spec, name, max_memory=max_memory, hull=False)
+        except MeshError as err:
+            c.fail(p + ("shape" if "shape" in table else "file"), str(err))
+        if mesh.skipped:
+            import warnings
+
+            warnings.warn(mesh.skipped_words(), stacklevel=2)
+        pose = Pose.of(position, rotation)
+        corners.append(pose.apply(mesh.vertices * scale)[mesh.faces])
+        mesh_of.append(np.full(mesh.triangles, k, dtype=np.int64))
+        names.append(name)
+        sources.append(mesh.source)
+    if not names:
+        return Meshes()
+    return Meshes(names, np.array(restitution), np.concatenate(corners), np.concatenate(mesh_of), sources)
+
+
+def _validate(raw: dict, source: str, origins: dict[str, str], meshes: Meshes | None = None) -> Scene:
     c = _Checker(source, origins)
     c.known(raw, TOP_FIELDS, "")
     name = c.text(raw, "name", "name", Path(source).stem if source.endswith(".toml") else "scene")
@@ -619,7 +673,10 @@ def _validate(raw: dict, source: str, origins: dict[str, str]) -> Scene:
                   np.array(inv), np.array(rad), np.array(res), np.array(gs))
     walls = Walls(names, np.array(normals, dtype=np.float64).reshape(-1, 3), np.array(offsets, dtype=np.float64),
                   np.array(rest, dtype=np.float64), np.array(two, dtype=np.bool_), np.array(thick, dtype=np.float64),
-                  period, box_lo if box_lo is not None else np.zeros(3))
+                  period, box_lo if box_lo is not None else np.zeros(3),
+                  meshes if meshes is not None else _meshes(c, raw, max_memory))
+    if len(walls.meshes) and walls.periodic:
+        c.fail("meshes", "a scene with meshes has no periodic axis (box.periodic): a mesh is not repeated")
     if walls.periodic and settings.sleep_speed != "auto" and settings.sleep_speed > 0:
         c.fail("sleep_speed", f"got {settings.sleep_speed:g}; sleeping needs a box with no periodic axis "
                               f"(box.periodic): leave sleep_speed at 0 here")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from hypothesis import assume, event, given, settings
 from hypothesis import strategies as st
 
@@ -38,7 +39,7 @@ def _walls(normal: np.ndarray, offset: float, two_sided: bool, thickness: float)
 
 
 def test_the_table_names_each_kind_and_which_partners_move():
-    assert KINDS == len(KIND_NAMES) == len(PARTNER_IS_SPHERE) == 2
+    assert KINDS == len(KIND_NAMES) == len(PARTNER_IS_SPHERE) == 3
     assert KIND_NAMES[KIND_PAIR] == "sphere" and KIND_NAMES[KIND_WALL] == "wall"
     assert partner_sphere(KIND_PAIR, 7) == 7  # a sphere partner is sphere 7 ...
     assert partner_sphere(KIND_WALL, 7) == -1  # ... wall 7 is immovable
@@ -111,3 +112,70 @@ def test_the_deepest_overlap_is_the_largest_negative_gap_and_no_overlap_is_prune
             if g <= 0.0:
                 assert (i, j) in kept, (KIND_NAMES[kind], i, j, g)
     assert math.isclose(max_overlap(x, r, pairs, walls, False), deepest, rel_tol=0.0, abs_tol=1e-12)
+
+
+# ----------------------------------------------------------------------------- meshes (KIND_MESH)
+def _mesh_walls(shape: str = "icosphere", position=(0.0, 0.0, 0.0), degrees=(0.0, 0.0, 0.0), restitution=0.6):
+    from physdbg.engine.mesh import Pose
+    from physdbg.engine.state import Meshes
+    from physdbg.meshes import load_mesh
+
+    mesh = load_mesh(shape, hull=False)
+    corners = Pose.of(position, degrees).apply(mesh.vertices)[mesh.faces]
+    return Walls([], np.zeros((0, 3)), np.zeros(0), np.zeros(0), np.zeros(0, dtype=np.bool_), np.zeros(0),
+                 meshes=Meshes([shape], np.array([restitution]), corners, np.zeros(len(corners), dtype=np.int64),
+                               [f"shape {shape}"]))
+
+
+def test_a_mesh_is_a_kind_of_immovable_partner_with_its_mesh_restitution():
+    from physdbg.events import KIND_MESH
+
+    assert KIND_NAMES[KIND_MESH] == "mesh" and not PARTNER_IS_SPHERE[KIND_MESH] and partner_sphere(KIND_MESH, 5) == -1
+    geometry = geometry_of(_mesh_walls(restitution=0.6))
+    assert partner_restitution(KIND_MESH, 7, np.ones(3), geometry) == 0.6
+
+
+@settings(max_examples=60, deadline=None)
+@given(lo=st.tuples(*[st.floats(-0.8, 0.8)] * 3), size=st.tuples(*[st.floats(0.0, 0.6)] * 3))
+def test_the_stackless_walk_finds_exactly_the_triangles_a_box_meets(lo, size):
+    from physdbg.engine.colliders import mesh
+    from physdbg.events import KIND_MESH
+
+    walls = _mesh_walls("icosphere", degrees=(10, 20, 30))
+    geometry = geometry_of(walls)
+    box_lo = np.array([lo])
+    box_hi = box_lo + np.array([size])
+    a, t = narrow_candidates(KIND_MESH, np.zeros((0, 2), dtype=np.int64), box_lo, box_hi, geometry)
+    corners = walls.meshes.corners
+    brute = np.flatnonzero(np.all(corners.min(axis=1) <= box_hi, axis=1) & np.all(corners.max(axis=1) >= box_lo, axis=1))
+    assert sorted(t.tolist()) == brute.tolist() and set(a.tolist()) <= {0}
+    out = np.empty((len(corners), 2), dtype=np.int64)
+    assert mesh.partners_of(0, box_lo, box_hi, geometry[KIND_MESH], out) == len(brute)
+
+
+def test_a_sphere_meets_a_mesh_at_the_swept_time_with_the_normal_from_the_closest_point():
+    from physdbg.events import KIND_MESH
+
+    geometry = geometry_of(_mesh_walls("paddle"))  # a 1 × 0.2 × 0.05 m plate at the origin
+    x = np.array([[0.2, 0.0, 1.0]])
+    v = np.array([[0.0, 0.0, -10.0]])
+    a = np.zeros((1, 3))
+    radius = np.array([0.1])
+    found = []
+    for t in range(12):
+        start, when = time_of_impact(KIND_MESH, 0, t, x, v, a, radius, np.zeros(1), 1.0, EULER, 0.0, SWEPT, 4, 1e-12,
+                                     geometry)
+        found.append(when)
+    first = min(found)
+    assert first == pytest.approx((1.0 - 0.025 - 0.1) / 10.0, abs=1e-12)  # the top face, at z = 0.025
+    touched = found.index(first)
+    at = x + v * first
+    gap, n0, n1, n2, renewed = contact_gap(KIND_MESH, at, v, a, radius, 0, touched, geometry)
+    assert abs(gap) < 1e-12 and renewed and (n0, n1, n2) == pytest.approx((0.0, 0.0, 1.0))
+    # past the plate's edge, the normal turns with the closest point (an edge contact)
+    beside = np.array([[0.6, 0.0, 0.1]])
+    best = min(range(12), key=lambda t: contact_gap(KIND_MESH, beside, v, a, radius, 0, t, geometry)[0])
+    gap, n0, n1, n2, _ = contact_gap(KIND_MESH, beside, v, a, radius, 0, best, geometry)
+    assert n0 > 0.5 and n2 > 0.5
+    assert max_overlap(at - [[0.0, 0.0, 0.01]], radius, np.zeros((0, 2), dtype=np.int64), geometry, False) == \
+        pytest.approx(0.01, abs=1e-12)

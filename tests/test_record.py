@@ -19,6 +19,7 @@ from hypothesis.extra import numpy as hnp
 
 from physdbg import api, open_recording
 from physdbg.engine import state_hash
+from physdbg.engine.state import Walls
 from physdbg.events import BroadPhaseInfo, Contacts, StepEnd, SweptTests
 from physdbg.observe import FanOut, ListObserver
 from physdbg.record import DETAIL_LEVELS, RecordingError, RecordingHeader
@@ -523,6 +524,8 @@ def test_the_contact_log_names_each_partner_and_how_it_was_met():
     c = Contacts.empty(3, 2)
     c.kind[:], c.a[:], c.other[:], c.how[:] = [KIND_PAIR, KIND_WALL], [0, 2], [1, 0], [HOW_IMPULSE, HOW_RESTING]
     c.time_in_step[:] = [0.005, 0.0]
-    (first, level_1), (second, level_2) = describe_contacts(3, c, 0.01, ["floor"])
+    names = Walls(["floor"], np.array([[0.0, 1.0, 0.0]]), np.zeros(1), np.ones(1), np.zeros(1, dtype=bool),
+                  np.zeros(1)).partner_names()
+    (first, level_1), (second, level_2) = describe_contacts(3, c, 0.01, names)
     assert first.startswith("step 3: sphere 0 hit sphere 1 at 0.500·dt") and level_1 == "INFO"
     assert second.startswith("step 3: sphere 2 rests on wall 'floor' at 0.000·dt") and level_2 == "DEBUG"

@@ -27,8 +27,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..events import (HOW_IMPULSE, KIND_WALL, PARTNER_IS_SPHERE, Contacts, EngineWarning, StepEnd, contact_words,
-                      partner_is_sphere)
+from ..events import (HOW_IMPULSE, KIND_MESH, KIND_WALL, PARTNER_IS_SPHERE, Contacts, EngineWarning, StepEnd, contact_words,
+                      partner_is_sphere, partner_words)
 from .quiet import quiet_numerics
 from .tunnel import StepChecker
 
@@ -111,7 +111,8 @@ class Auditor:
     def __init__(self, header, on_finding: Callable[[Finding], None] | None = None):
         self.header = header
         self.settings = header.meta.get("settings", {})
-        self.names = list(header.walls.names)
+        self.names = header.walls.partner_names()
+        self.wall_names = list(header.walls.names)
         self.radius = header.radius
         self.mass = np.where(header.inverse_mass > 0, 1.0 / np.where(header.inverse_mass > 0,
                                                                         header.inverse_mass, 1.0), np.inf)
@@ -262,7 +263,7 @@ class Auditor:
                 advice = "a swept, time-ordered run should never do this: please report it with the recording"
             speed = float(np.linalg.norm(self._v[c.a]))
             if c.kind == KIND_WALL:
-                name = self.names[c.other]
+                name = self.wall_names[c.other]
                 message = (f"sphere {c.a} went through wall '{name}' with no contact "
                            f"(it moved {speed * end.dt:.3g} m in the step at {speed:.3g} m/s"
                            f"{'; ' + how[detection] if detection in how else ''})")
@@ -275,6 +276,14 @@ class Auditor:
                     where = x0 + (x1 - x0) * (h0 / (h0 - h1))
                 self._add(Finding("tunnelling", step, [c.a], message, advice, [float(q) for q in where],
                                   {"wall": name, "speed": speed, "dt": end.dt, "detection": detection}))
+            elif not PARTNER_IS_SPHERE[c.kind]:  # a mesh's triangle
+                partner = partner_words(c.kind, c.other, self.names)
+                message = (f"sphere {c.a} went through {partner} with no contact (it moved {speed * end.dt:.3g} m "
+                           f"in the step at {speed:.3g} m/s, ending {_length(c.depth)} past the triangle's plane"
+                           f"{'; ' + how[detection] if detection in how else ''})")
+                self._add(Finding("tunnelling", step, [c.a], message, advice, [float(q) for q in c.where],
+                                  {"mesh": partner, "triangle": c.other, "speed": speed, "dt": end.dt,
+                                   "detection": detection}))
             else:
                 message = (f"spheres {c.a} and {c.other} passed into each other with no contact at "
                            f"{c.time / end.dt:.3f}·dt, {_length(c.depth)} deep"
@@ -290,9 +299,10 @@ class Auditor:
         if self._in_overlap:  # counted where it began
             return
         self._in_overlap = True
-        depth, spheres, wall, where = deepest_overlap(end.positions, self.radius, self.header.walls)
-        if wall is not None:
-            who = f"sphere {spheres[0]} and wall '{self.names[wall]}' overlap"
+        depth, spheres, partner, where = deepest_overlap(end.positions, self.radius, self.header.walls)
+        wall = partner[1] if partner is not None and partner[0] == KIND_WALL else None
+        if partner is not None:
+            who = f"sphere {spheres[0]} and {partner_words(*partner, self.names)} overlap"
         elif spheres:
             who = f"spheres {spheres[0]} and {spheres[1]} overlap"
         else:  # across a periodic boundary, where the search below does not look
@@ -301,7 +311,7 @@ class Auditor:
                           f"{who} by {_length(depth)} after the step (the contact tolerance is {self.tolerance:g} m)",
                           self._overlap_advice(step),
                           [float(q) for q in where] if where is not None else None,
-                          {"depth": depth, "max_overlap": end.max_overlap, "wall": self.names[wall]
+                          {"depth": depth, "max_overlap": end.max_overlap, "wall": self.wall_names[wall]
                            if wall is not None else None}))
 
     def _overlap_advice(self, step: int) -> str:
@@ -493,10 +503,11 @@ def _explain(rec, on_step) -> AuditReport:
 
 
 def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls):
-    """(depth m, spheres, wall index or None, where (3,) or None) of the deepest overlap of
-    positions x (N, 3): sphere pairs found by the grid broad phase on the spheres' own boxes
-    (not across a periodic boundary), and every sphere with every wall (a sphere past a thin
-    wall's middle went through it: tunnelling, not an overlap). Depth 0 when none."""
+    """(depth m, spheres, partner (kind, index) or None, where (3,) or None) of the deepest
+    overlap of positions x (N, 3): sphere pairs found by the grid broad phase on the
+    spheres' own boxes (not across a periodic boundary; partner None), every sphere with
+    every wall (a sphere past a thin wall's middle went through it: tunnelling, not an
+    overlap) and with every mesh triangle. Depth 0 when none."""
     from ..engine.broadphase.boxes import NO_LIMIT
     from ..engine.broadphase.grid import grid_pairs
     from ..engine.colliders.plane import sides
@@ -521,7 +532,14 @@ def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls):
         pen = np.where(finite[:, None], pen, -np.inf)
         i, w = np.unravel_index(int(np.argmax(pen)), pen.shape)
         if pen[i, w] > best[0]:
-            best = (float(pen[i, w]), [int(i)], int(w), x[i])
+            best = (float(pen[i, w]), [int(i)], (KIND_WALL, int(w)), x[i])
+    if walls.meshes.triangles and finite.all():
+        from ..engine.colliders.mesh import MeshGeometry, deepest_where
+
+        depth, i, t = deepest_where(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(r, dtype=np.float64),
+                                    tuple(MeshGeometry.of(walls)), True)
+        if depth > best[0]:
+            best = (float(depth), [int(i)], (KIND_MESH, int(t)), x[int(i)])
     return best
 
 

@@ -37,7 +37,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..errors import CheckRunError
-from ..events import KIND_NAMES, KIND_WALL, PARTNER_IS_SPHERE, contact_words, partner_words
+from ..events import KIND_MESH, KIND_NAMES, KIND_WALL, PARTNER_IS_SPHERE, contact_words, partner_words
 from .quiet import quiet_numerics
 
 DEFAULT_ATOL = 1e-6  # m and m/s: a body departs when |Δx| or |Δv| exceeds atol + rtol·|reference|
@@ -230,7 +230,8 @@ class _Comparison:
         h = rr.header
         self.scene = rr.scene
         self.radius, self.inv, self.walls = h.radius, h.inverse_mass, h.walls
-        self.names = list(h.walls.names)
+        self.names = h.walls.partner_names()
+        self.wall_names = list(h.walls.names)
         settings = rr.meta["settings"]
         self.settings = settings
         gravity = np.asarray(settings.get("gravity", (0.0, 0.0, 0.0)), dtype=float)
@@ -987,6 +988,9 @@ class _Comparison:
         elif c["kind"] == KIND_WALL:
             room = float(self.walls.thickness[c["other"]]) + 2 * float(self.radius[a])
             what = f"more than the wall's thickness plus the sphere's diameter ({room:.3g} m)"
+        elif c["kind"] == KIND_MESH:
+            room = 2 * float(self.radius[a])
+            what = f"more than the sphere's diameter ({room:.3g} m: a mesh's triangle has no thickness)"
         else:
             raise _no_geometry(c["kind"])
         text = (f"{self._subject(c)} went through {self._what(c)} with no contact; physdbg's swept test, from the "
@@ -1027,6 +1031,11 @@ class _Comparison:
             h = float(x @ self.walls.normals[w] - self.walls.offsets[w])
             h *= float(sides(h, self.walls.two_sided[w]))  # on the side the centre is pushed back to
             return h - 0.5 * float(self.walls.thickness[w]) * bool(self.walls.two_sided[w]) - float(self.radius[a])
+        if c["kind"] == KIND_MESH:
+            from ..engine.mesh.closest import closest_on_triangle
+
+            q = np.array(closest_on_triangle(*(float(v) for v in x), *self.walls.meshes.corners[c["other"]].ravel())[:3])
+            return float(np.linalg.norm(x - q)) - float(self.radius[a])
         if not PARTNER_IS_SPHERE[c["kind"]]:
             raise _no_geometry(c["kind"])
         b = c["other"] if a == c["a"] else c["a"]
@@ -1047,7 +1056,7 @@ class _Comparison:
 
     def _add(self, kind: str, step: int, c: dict, text: str, advice: str, evidence: dict | None = None) -> None:
         other = c["other"] if c["kind"] is not None and PARTNER_IS_SPHERE[c["kind"]] else None
-        wall = self.names[c["other"]] if c["kind"] == KIND_WALL else None
+        wall = self.wall_names[c["other"]] if c["kind"] == KIND_WALL else None
         self.departures.append(Departure(kind, step, c["a"], text, advice, other, wall, evidence or {}))
 
     @staticmethod

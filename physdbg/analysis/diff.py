@@ -271,7 +271,7 @@ class _Differ:
         self.atol = default if atol is None else float(atol)
         self.rtol = default if rtol is None else float(rtol)
         self.by_step = align.same_steps(self.ta.dt, self.tb.dt)
-        self.names_a = list(ra.header.walls.names)
+        self.names_a = ra.header.walls.partner_names()
         # positions of a periodic box differ through the minimum image (None: no box)
         self.period = ra.header.walls.period if ra.header.walls.periodic else None
         movable = ra.header.inverse_mass > 0
@@ -922,18 +922,18 @@ def _same_rows_at_each_instant(a, b) -> bool:
     return bool(np.all(np.abs(px - py) <= POINT_ULPS * np.spacing(np.maximum(np.abs(px), np.abs(py)))))
 
 
-def _contacts_differ(a, b, wall_names) -> str:
+def _contacts_differ(a, b, names) -> str:
     """In words, where two records of one step's contacts (events.Contacts) first differ."""
     if len(a) != len(b):
         return f"A holds {_count(len(a), 'contact')}, B {len(b)}"
     for i in range(len(a)):
         x, y = a.rows[i], b.rows[i]
         if (x["kind"], x["a"], x["other"]) != (y["kind"], y["a"], y["other"]):
-            return (f"contact {i + 1} is {contact_words(int(x['kind']), int(x['a']), int(x['other']), wall_names)} "
-                    f"in A and {contact_words(int(y['kind']), int(y['a']), int(y['other']), wall_names)} in B")
+            return (f"contact {i + 1} is {contact_words(int(x['kind']), int(x['a']), int(x['other']), names)} "
+                    f"in A and {contact_words(int(y['kind']), int(y['a']), int(y['other']), names)} in B")
         fields = [name for name in x.dtype.names if x[name].tobytes() != y[name].tobytes()]
         if fields:
-            return f"contact {i + 1} ({contact_words(int(x['kind']), int(x['a']), int(x['other']), wall_names)}) " \
+            return f"contact {i + 1} ({contact_words(int(x['kind']), int(x['a']), int(x['other']), names)}) " \
                    f"has another {', '.join(fields)}"
     return "their messages differ, not their rows"
 

@@ -218,6 +218,14 @@ def _show(value) -> str:
 
 
 # ----------------------------------------------------------------------------- runs, scenes, files
+def _mesh_words(meshes: dict) -> str:
+    """", 2 meshes (left 8, right 8 triangles)" or "" (meshes: name -> triangles)."""
+    if not meshes:
+        return ""
+    return (f", {len(meshes)} mesh{'es' if len(meshes) != 1 else ''} ("
+            + ", ".join(f"{name} {size}" for name, size in meshes.items()) + " triangles)")
+
+
 def summary_text(s, observers: str = "the audit") -> str:
     """The human-readable run summary; observers: what watched the run besides the engine
     (its time is in the second speed figure only)."""
@@ -231,7 +239,8 @@ def summary_text(s, observers: str = "the audit") -> str:
         f"methods     integrator={s.integrator} detection={s.detection} ordering={s.ordering}",
         *auto_lines(s.auto),
         f"broad phase {s.broad_phase}: {s.broad_phase_reason}",
-        f"bodies      {count_words(s.particles, 'particle')}, {count_words(len(s.walls), 'wall')}",
+        f"bodies      {count_words(s.particles, 'particle')}, {count_words(len(s.walls), 'wall')}"
+        + _mesh_words(getattr(s, "meshes", {})),
         f"steps       {s.steps}  ({s.sim_time:.6g} s simulated, {dt_text})",
         f"contacts    {s.contacts}  (at most {s.max_contacts_in_a_step} in a step; {s.swept_tests} swept tests; "
         f"{s.rapid} rapid, {s.released} released; {s.held_at_end} held at the end)",
@@ -322,7 +331,8 @@ def check_text(result) -> str:
     f = advice.facts
     dt = f"dt {f['dt']:.6g} s" if result.scene.dt is not None else f"real-time steps up to {f['dt']:.6g} s"
     lines = [f"scene       {result.scene.name}  ({result.scene.source})",
-             f"facts       {count_words(f['particles'], 'particle')}, {count_words(f['walls'], 'wall')}; {dt}; "
+             f"facts       {count_words(f['particles'], 'particle')}, {count_words(f['walls'], 'wall')}"
+             f"{_mesh_words(f.get('meshes') or {})}; {dt}; "
              f"{f['duration']:.6g} s; speeds up to {f['speed_bound']:.3g} m/s ({f['speed_bound_why']}); "
              + ("contacts can happen" if f["contacts_possible"] else "no contact can happen")]
     if f["periodic"] is not None:
@@ -363,7 +373,8 @@ def info_text(data: dict) -> str:
         f"scene       {data['scene']}  ({data['source']})",
         f"settings    {settings}",
         f"steps       {data['steps']}  ({data['sim_time']:.6g} s simulated), detail {data['detail']}",
-        f"bodies      {count_words(data['particles'], 'particle')}, {count_words(len(data['walls']), 'wall')}",
+        f"bodies      {count_words(data['particles'], 'particle')}, {count_words(len(data['walls']), 'wall')}"
+        + _mesh_words(data.get("meshes") or {}),
         *([f"sleep       {data['asleep_at_end']} of {data['particles']} spheres asleep at the end "
            f"(sleep_speed {data['settings'].get('sleep_speed')} m/s)"] if data["asleep_at_end"] is not None else []),
         f"size        {data['bytes_per_particle_step']:.1f} bytes per particle-step (everything)"

@@ -20,6 +20,9 @@ recorded contact, and its rebuilt path then ran through a neighbour it never cam
 * Two-sided (thin) walls: the centre is on the other side at the end of the step and no
   contact with that wall was resolved: it went through (true for any path).
 * One-sided walls: the centre ends more than a radius behind the plane with no contact.
+* Mesh triangles (two-sided, no thickness): the centre's straight path from the step's
+  start to its end passes through a triangle, and the sphere resolved no contact with
+  that mesh in the step (a sphere that bounced off the mesh is not checked: conservative).
 * Sphere pairs: the swept test on the rebuilt paths finds a touch while approaching,
   no contact between the two was resolved, and they go on to overlap by more than the
   tolerance (a graze within rounding is not a crossing).
@@ -38,22 +41,25 @@ from ..engine.broadphase.grid import grid_pairs
 from ..engine.motion import KICK_AT_STEP_START, STRAIGHT_PATH, path_coefficients, velocity_coefficients
 from ..engine.periodic import unwrap_near
 from ..engine.toi import INF, pair_toi_swept_scalar
-from ..events import CONTACT_ROW, HOW_IMPULSE, KIND_PAIR, KIND_WALL, Contacts
+from ..events import CONTACT_ROW, HOW_IMPULSE, KIND_MESH, KIND_PAIR, KIND_WALL, Contacts
 
 DEPTH_SAMPLES = 32  # instants at which a touched pair's overlap is measured after the touch
 
 
 @dataclass(frozen=True)
 class Crossing:
-    """One crossing in a step: kind KIND_WALL (other = wall index) or KIND_PAIR (other =
-    sphere); time: s after the step began (for walls: NaN, the instant is not known);
-    depth: how far into the other sphere it went (m; for walls the distance past the plane)."""
+    """One crossing in a step: kind KIND_WALL (other = wall index), KIND_MESH (other =
+    triangle) or KIND_PAIR (other = sphere); time: s after the step began (for walls and
+    meshes: NaN, the instant is not known); depth: how far into the other sphere it went
+    (m; for walls and triangles the distance past the plane); where: the point the
+    centre's straight path crossed a triangle (meshes only)."""
 
     kind: int
     a: int
     other: int
     time: float
     depth: float
+    where: tuple[float, float, float] | None = None
 
 
 @njit(cache=True)
@@ -181,6 +187,29 @@ def pair_crossings(anchor_start, anchor_t, anchor_x, anchor_v, pinned, acc, radi
     return found
 
 
+def _segments_through_triangles(start: np.ndarray, end: np.ndarray, corners: np.ndarray):
+    """Which segments start→end (K, 3) pass through triangle corners (K, 3, 3) (Möller–
+    Trumbore, the triangle's edges included): (hit (K,) bool, the crossing point (K, 3),
+    how far the segment's end lies past the triangle's plane (K,) m)."""
+    d = end - start
+    e1 = corners[:, 1] - corners[:, 0]
+    e2 = corners[:, 2] - corners[:, 0]
+    h = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", e1, h)
+    ok = np.abs(det) > 1e-300
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    s = start - corners[:, 0]
+    u = inv * np.einsum("ij,ij->i", s, h)
+    q = np.cross(s, e1)
+    v = inv * np.einsum("ij,ij->i", d, q)
+    t = inv * np.einsum("ij,ij->i", e2, q)
+    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0) & (t <= 1)
+    normal = np.cross(e1, e2)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    past = np.abs(np.einsum("ij,ij->i", end - corners[:, 0], normal))
+    return hit, start + t[:, None] * d, past
+
+
 class StepChecker:
     """Finds crossings in recorded steps of one run.
 
@@ -211,6 +240,7 @@ class StepChecker:
         self.path_acc_size = np.linalg.norm(self.path_acc, axis=1)  # (N,) m/s², the same every step
         self.tolerance = max(float(settings.get("contact_tolerance", 1e-9)), 0.0)
         self.two_sided = np.asarray(walls.two_sided, dtype=bool)
+        self._mesh_geometry = None  # the engine's mesh group, built at the first step with meshes
         self.half_thickness = 0.5 * np.asarray(walls.thickness, dtype=np.float64)
         # pieces of path (anchor to anchor) seen, and those the recording pins (_pinned)
         self.pieces = 0
@@ -229,6 +259,8 @@ class StepChecker:
         if self.walls.periodic:
             x1 = unwrap_near(x1, x0, self.walls.period)
         out = self._walls(x0, x1, contacts)
+        if self.walls.meshes.triangles:
+            out += self._meshes(x0, x1, contacts)
         if self.n > 1:
             out += self._pairs(x0, v0, x1, dt, contacts)
         return out
@@ -250,6 +282,37 @@ class StepChecker:
         for i, w, depth in found.tolist():
             if (int(i), int(w)) not in touched:
                 out.append(Crossing(KIND_WALL, int(i), int(w), math.nan, depth))
+        return out
+
+    def _meshes(self, x0, x1, contacts) -> list[Crossing]:
+        """Spheres whose centre's straight path through the step passes through a triangle
+        of a mesh they resolved no contact with (module doc)."""
+        from ..engine.colliders import mesh
+
+        if self._mesh_geometry is None:
+            self._mesh_geometry = tuple(mesh.MeshGeometry.of(self.walls))
+        x0 = np.ascontiguousarray(x0, dtype=np.float64)
+        x1 = np.ascontiguousarray(x1, dtype=np.float64)
+        sphere, triangle = mesh.reachable(np.minimum(x0, x1), np.maximum(x0, x1), self._mesh_geometry)
+        if not len(sphere):
+            return []
+        corners = self.walls.meshes.corners[triangle]  # (K, 3, 3)
+        start, end = x0[sphere], x1[sphere]
+        hit, where, past = _segments_through_triangles(start, end, corners)
+        if not hit.any():
+            return []
+        mesh_of = self.walls.meshes.mesh_of
+        touched = set()
+        if contacts is not None:
+            on_mesh = contacts.kind == KIND_MESH
+            touched = set(zip(contacts.a[on_mesh].tolist(), mesh_of[contacts.other[on_mesh]].tolist(), strict=True))
+        out, seen = [], set()
+        for k in np.flatnonzero(hit).tolist():
+            i, t = int(sphere[k]), int(triangle[k])
+            if (i, int(mesh_of[t])) in touched or i in seen:
+                continue
+            seen.add(i)
+            out.append(Crossing(KIND_MESH, i, t, math.nan, float(past[k]), tuple(float(q) for q in where[k])))
         return out
 
     def _pairs(self, x0, v0, x1, dt, contacts) -> list[Crossing]:

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..events import KIND_NAMES
 from .jit import kernel
 from .motion import INTEGRATOR_NAMES
 from .toi import DETECTION_NAMES
@@ -141,8 +142,68 @@ class Settings:
 
 
 @dataclass
+class Meshes:
+    """Fixed triangle meshes, in the world frame (the immovable partners of kind mesh).
+
+    names (M,) and restitution (M,) per mesh; corners (T, 3, 3) m: every triangle's
+    corners as rows, the meshes' triangles one after another; mesh_of (T,) int64: whose
+    each is; first (M + 1,) int64: where each mesh's triangles start (and the end);
+    sources (M,): the file or "shape NAME" each came from.
+    """
+
+    names: list[str] = field(default_factory=list)
+    restitution: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    corners: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
+    mesh_of: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    sources: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.corners = np.ascontiguousarray(self.corners, dtype=np.float64).reshape(-1, 3, 3)
+        self.mesh_of = np.ascontiguousarray(self.mesh_of, dtype=np.int64).reshape(-1)
+        self.restitution = np.ascontiguousarray(self.restitution, dtype=np.float64).reshape(-1)
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    @property
+    def triangles(self) -> int:
+        return int(self.corners.shape[0])
+
+    @property
+    def first(self) -> np.ndarray:
+        """(M + 1,) int64: where each mesh's triangles start in ``corners`` (and the end)."""
+        return np.searchsorted(self.mesh_of, np.arange(len(self.names) + 1)).astype(np.int64)
+
+    def triangle_words(self, t: int) -> str:
+        """A triangle as reports name it: "'ramp' triangle 3" (its number in its own mesh)."""
+        mesh = int(self.mesh_of[t])
+        return f"'{self.names[mesh]}' triangle {t - int(self.first[mesh])}"
+
+
+class _Numbered:
+    """A kind's partners named by number alone ("#3"): a kind with no names of its own."""
+
+    def __getitem__(self, other: int) -> str:
+        return f"#{int(other)}"
+
+
+class _TriangleNames:
+    """Meshes.triangle_words as a sequence (partner_names' entry for kind mesh)."""
+
+    def __init__(self, meshes: Meshes):
+        self._meshes = meshes
+
+    def __getitem__(self, t: int) -> str:
+        return self._meshes.triangle_words(int(t))
+
+    def __len__(self) -> int:
+        return self._meshes.triangles
+
+
+@dataclass
 class Walls:
-    """W planes n·x = d (arrays of length W; normals (W, 3) unit).
+    """The immovable geometry: W planes n·x = d (arrays of length W; normals (W, 3) unit)
+    and the fixed meshes (``meshes``, a Meshes).
 
     One-sided walls keep spheres where n·x - d >= r; two-sided walls are thin slabs of
     ``thickness`` centred on the plane that spheres bounce off from either side.
@@ -161,6 +222,7 @@ class Walls:
     thickness: np.ndarray = field(default_factory=lambda: np.zeros(0))
     period: np.ndarray = field(default_factory=lambda: np.zeros(3))
     period_origin: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    meshes: Meshes = field(default_factory=Meshes)
 
     def __post_init__(self) -> None:
         self.period = np.ascontiguousarray(self.period, dtype=np.float64).reshape(3)
@@ -168,6 +230,14 @@ class Walls:
 
     def __len__(self) -> int:
         return len(self.names)
+
+    def partner_names(self) -> tuple:
+        """How reports name each kind's partners, one sequence per kind in the kinds' order
+        (events.partner_words): the walls' quoted names, the meshes' triangles ("'ramp'
+        triangle 3"), and numbers ("#3") for a kind without names (spheres are named by
+        events.partner_words itself)."""
+        named = {"wall": [f"'{name}'" for name in self.names], "mesh": _TriangleNames(self.meshes)}
+        return tuple(named.get(kind, _Numbered()) for kind in KIND_NAMES)
 
     @property
     def periodic(self) -> bool:

@@ -32,6 +32,7 @@ import math
 
 
 from .jit import borrowing, kernel
+from .mesh.closest import closest_on_triangle
 from .motion import STRAIGHT_PATH, closed_form_path, curvature_scale, path_coefficients, time_of_p1
 
 INF = math.inf
@@ -280,3 +281,88 @@ def pair_toi_sampled_scalar(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, radius_
             return t
     return INF
 
+
+
+# ----------------------------------------------------------------------------- sphere–triangle
+# A triangle is a convex set, so the distance f(x) from a point to it is convex and has unit
+# gradient n = (x − q)/|x − q| (q its closest point): along the centre's path x(tau) the gap
+# g = f(x) − r has g'' = x'ᵀ∇²f x' + n·x'' ≥ −|x''| ≥ −M, the same second-order lower bound
+# as a sphere pair's, so the same conservative advancement can never step over the first
+# touch, converges like Newton when approaching head-on, and finds a face, an edge or a
+# corner alike (the closest point's feature says which).
+
+
+@borrowing
+def _center_path(x0, x1, x2, v0, v1, v2, a0, a1, a2, integrator, k, t):
+    """The centre at local time t and its rate, as six floats (x + v·P1 + a·P2)."""
+    return _relative_path(x0, x1, x2, v0, v1, v2, a0, a1, a2, integrator, k, t)
+
+
+@borrowing
+def triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, integrator, k, horizon, tolerance):
+    """(t, feature): the first local time in [0, horizon] a sphere (centre x + v·P1 + a·P2,
+    ``radius`` m) touches the fixed triangle ``tri`` (3, 3: corners as rows, m) while
+    approaching it, and the feature touched (closest.FACE, an edge or a corner); (INF, -1)
+    when it does not. ``tolerance`` (m): the gap below which it counts as touching."""
+    if STRAIGHT_PATH[integrator]:
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+    cq, cp = curvature_scale(integrator, k)
+    m = _norm(cq * a0 + cp * v0, cq * a1 + cp * v1, cq * a2 + cp * v2)
+    t = 0.0
+    feature = -1
+    for _ in range(500):
+        if t > horizon:
+            return INF, -1
+        p0, p1, p2, e0, e1, e2 = _center_path(x0, x1, x2, v0, v1, v2, a0, a1, a2, integrator, k, t)
+        q0, q1, q2, feature = closest_on_triangle(p0, p1, p2, tri[0, 0], tri[0, 1], tri[0, 2], tri[1, 0], tri[1, 1],
+                                                  tri[1, 2], tri[2, 0], tri[2, 1], tri[2, 2])
+        d0 = p0 - q0
+        d1 = p1 - q1
+        d2 = p2 - q2
+        dist = _norm(d0, d1, d2)
+        g = dist - radius
+        rate = (d0 * e0 + d1 * e1 + d2 * e2) / dist if dist > 0.0 else -1.0
+        if g <= tolerance:
+            if rate < 0.0:
+                return t, feature
+            if rate == 0.0 and (d0 * a0 + d1 * a1 + d2 * a2) < 0.0:
+                return t, feature
+            if m == 0.0:
+                return INF, -1
+            gg = max(g, 0.0)
+            t += (rate + math.sqrt(rate * rate + 2.0 * m * gg)) / m + 1e-15 * max(horizon, 1.0)
+            continue
+        if rate < 0.0:
+            step = 2.0 * g / (math.sqrt(rate * rate + 2.0 * m * g) - rate)
+        else:
+            if m == 0.0:
+                return INF, -1
+            step = (rate + math.sqrt(rate * rate + 2.0 * m * g)) / m
+        t += step
+    if t <= horizon:
+        return t, feature
+    return INF, -1
+
+
+@borrowing
+def triangle_toi_sampled(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, integrator, k, horizon, samples):
+    """(t, feature): the first of ``samples`` instants in (0, horizon] at which the sphere
+    overlaps the triangle while approaching it (the seed's case c; ``samples`` = 1 is the
+    discrete test), or (INF, -1)."""
+    if STRAIGHT_PATH[integrator]:
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+    for s in range(1, samples + 1):
+        t = horizon * s / samples
+        p0, p1, p2, e0, e1, e2 = _center_path(x0, x1, x2, v0, v1, v2, a0, a1, a2, integrator, k, t)
+        q0, q1, q2, feature = closest_on_triangle(p0, p1, p2, tri[0, 0], tri[0, 1], tri[0, 2], tri[1, 0], tri[1, 1],
+                                                  tri[1, 2], tri[2, 0], tri[2, 1], tri[2, 2])
+        d0 = p0 - q0
+        d1 = p1 - q1
+        d2 = p2 - q2
+        if d0 * d0 + d1 * d1 + d2 * d2 < radius * radius and d0 * e0 + d1 * e1 + d2 * e2 < 0.0:
+            return t, feature
+    return INF, -1

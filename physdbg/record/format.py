@@ -184,7 +184,11 @@ JSON_SCHEMAS[TOPIC_WALLS] = ("physdbg.Walls", {"type": "object", "properties": {
         "thickness": {"type": "number"}}}},
     # periodic axes: period (m, 0 = not periodic) and the box's lower corner on them
     "period": {"type": "array", "items": {"type": "number"}},
-    "period_origin": {"type": "array", "items": {"type": "number"}}},
+    "period_origin": {"type": "array", "items": {"type": "number"}},
+    # fixed meshes: corners (m, world frame) of each triangle, 9 numbers a triangle
+    "meshes": {"type": "array", "items": {"type": "object", "properties": {
+        "name": {"type": "string"}, "source": {"type": "string"}, "restitution": {"type": "number"},
+        "corners": {"type": "array", "items": {"type": "number"}}}}}},
     "required": ["step", "walls"]})
 SCENE_SCHEMA_NAME = "physdbg.Scene"  # its JSON Schema is json_schema_of(the message)
 

@@ -6,7 +6,8 @@ anything of physdbg; docs/foxglove-layout.json arranges them like the Rerun blue
     /view/transform  foxglove.FrameTransform  frame 0: the scene's frame ("scene") in
                      Foxglove's z-up "world" (a quarter turn about x when gravity is -y)
     /view/scene      foxglove.SceneUpdate     frame 0: the walls (outline and a faint face,
-                     entity "walls"); every frame: one entity per sphere ("sphere 17", a
+                     entity "walls") and each fixed mesh (its triangles, translucent,
+                     entity "mesh <name>"); every frame: one entity per sphere ("sphere 17", a
                      SpherePrimitive of its diameter) and, at detail contacts or full,
                      entity "contacts": an arrow along each contact normal at its point
                      (length = the sphere's radius; the first DRAWN_CONTACTS_PER_STEP)
@@ -102,7 +103,7 @@ class FoxgloveView:
         out.append((fmt.TOPIC_VIEW_POINTS, self._point_cloud(ns, end.positions)))
         lines = [(f"step {frame}: {w.message}", "WARN") for w in warnings]
         if contacts is not None:
-            lines += view.describe_contacts(frame, contacts, end.dt, self.header.walls.names)
+            lines += view.describe_contacts(frame, contacts, end.dt, self.header.walls.partner_names())
         lines += sleep_lines
         out += self._log(ns, lines)
         return out
@@ -146,6 +147,16 @@ class FoxgloveView:
             for x, y, z in outline.tolist():
                 line.points.add(x=x, y=y, z=z)
             entity.metadata.add(key="periodic face", value=name)
+        meshes = self.header.walls.meshes
+        for k, name in enumerate(meshes.names):  # each fixed mesh: its triangles, translucent
+            mesh = update.entities.add(id=f"mesh {name}", frame_id=fmt.VIEW_SCENE_FRAME)
+            mesh.timestamp.FromNanoseconds(ns)
+            surface = mesh.triangles.add()
+            surface.pose.orientation.w = 1.0
+            surface.color.r, surface.color.g, surface.color.b, surface.color.a = 0.67, 0.67, 0.72, 0.55
+            for x, y, z in meshes.corners[meshes.mesh_of == k].reshape(-1, 3).tolist():
+                surface.points.add(x=x, y=y, z=z)
+            mesh.metadata.add(key="mesh", value=name)
         return update.SerializeToString()
 
     def _spheres(self, ns: int, positions: np.ndarray, contacts: Contacts | None = None) -> bytes:

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..version import __version__
 from ..engine import Walls, state_hash
+from ..engine.state import Meshes
 from .format import DETAIL_LEVELS, FORMAT_NAME, FORMAT_VERSION
 
 NULLABLE_META = ("dt", "bvh_max_nodes")  # None in meta: left out of the file (Foxglove has no null type)
@@ -104,7 +105,13 @@ class RecordingHeader:
              "restitution": float(restitution), "two_sided": bool(two_sided), "thickness": float(thickness)}
             for name, normal, offset, restitution, two_sided, thickness
             in zip(w.names, w.normals, w.offsets, w.restitution, w.two_sided, w.thickness, strict=True)],
-            "period": [float(x) for x in w.period], "period_origin": [float(x) for x in w.period_origin]}
+            "period": [float(x) for x in w.period], "period_origin": [float(x) for x in w.period_origin],
+            # each fixed mesh once: its triangles' corners in the world frame, flat (T·9
+            # numbers; Foxglove shows no nested arrays), exact (JSON floats round-trip)
+            "meshes": [{"name": name, "source": source, "restitution": float(e),
+                        "corners": w.meshes.corners[w.meshes.mesh_of == k].ravel().tolist()}
+                       for k, (name, source, e) in enumerate(zip(w.meshes.names, w.meshes.sources,
+                                                                 w.meshes.restitution, strict=True))]}
 
     @staticmethod
     def walls_from_json(data: dict) -> Walls:
@@ -115,7 +122,19 @@ class RecordingHeader:
                      np.array([w["two_sided"] for w in walls], dtype=np.bool_),
                      np.array([w["thickness"] for w in walls], dtype=np.float64),
                      np.array(data.get("period", (0.0, 0.0, 0.0)), dtype=np.float64),
-                     np.array(data.get("period_origin", (0.0, 0.0, 0.0)), dtype=np.float64))
+                     np.array(data.get("period_origin", (0.0, 0.0, 0.0)), dtype=np.float64),
+                     RecordingHeader.meshes_from_json(data.get("meshes") or []))
+
+    @staticmethod
+    def meshes_from_json(meshes: list) -> Meshes:
+        """The fixed meshes of a /physdbg/walls message (none in files made before meshes)."""
+        if not meshes:
+            return Meshes()
+        corners = [np.array(m["corners"], dtype=np.float64).reshape(-1, 3, 3) for m in meshes]
+        return Meshes([m["name"] for m in meshes], np.array([m["restitution"] for m in meshes], dtype=np.float64),
+                      np.concatenate(corners), np.concatenate([np.full(len(c), k, dtype=np.int64)
+                                                               for k, c in enumerate(corners)]),
+                      [m.get("source", "") for m in meshes])
 
     def scene_json(self) -> dict:
         """The /physdbg/scene message: meta with the scene table as a JSON string (a TOML

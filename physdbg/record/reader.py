@@ -603,7 +603,8 @@ class Recording:
         from ..scene import scene_from_dict
 
         info = self.meta["scene"]
-        scene = scene_from_dict(info["table"], f"{info['source']} (from {self.path.name})")
+        scene = scene_from_dict(info["table"], f"{info['source']} (from {self.path.name})",
+                                self.header.walls.meshes if len(self.header.walls.meshes) else None)
         # settings the table left "auto" take the values the run used (kept in the file),
         # so the rebuilt scene repeats the run even if the advisor would now decide otherwise
         # (a file made before a setting existed ran with the engine's own default for it)

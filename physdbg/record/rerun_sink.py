@@ -8,6 +8,7 @@ Entities (timelines ``step`` = frame, steps completed, and ``sim_time`` in secon
     world/spheres            Points3D, one per particle, with radii (float32 copies)
     world/walls/<name>       LineStrips3D outline of each wall, so walls never hide spheres
     world/periodic/<face>    LineStrips3D outline (blue) of each face of a periodic axis
+    world/meshes/<name>      Mesh3D of each fixed mesh (translucent), and /edges its triangles' edges
     world/bvh/level_<d>      Boxes3D wireframes, one entity per BVH level (toggle levels;
                              the blueprint shows the first BVH_LEVELS_SHOWN)
     world/paths              LineStrips3D: each particle's path through the step,
@@ -148,6 +149,15 @@ class RerunSink:
         for name, strip in wall_outlines(h.walls, lo, hi):
             rec.log(self.root + f"world/walls/{rr.escape_entity_path_part(name)}", rr.LineStrips3D([strip], colors=[[150, 150, 160]], radii=[-1.5]),
                     static=True)
+        meshes = h.walls.meshes
+        for k, name in enumerate(meshes.names):  # fixed meshes: translucent grey surfaces with their edges
+            corners = meshes.corners[meshes.mesh_of == k].reshape(-1, 3).astype(np.float32)
+            path = self.root + f"world/meshes/{rr.escape_entity_path_part(name)}"
+            rec.log(path, rr.Mesh3D(vertex_positions=corners,
+                                    triangle_indices=np.arange(len(corners), dtype=np.uint32).reshape(-1, 3),
+                                    albedo_factor=[170, 170, 185, 140]), static=True)
+            edges = corners.reshape(-1, 3, 3)[:, [0, 1, 2, 0]]
+            rec.log(path + "/edges", rr.LineStrips3D(list(edges), colors=[[120, 120, 135]], radii=[-0.75]), static=True)
         for name, strip in periodic_faces(h.walls, lo, hi):  # faces a sphere passes through: blue, thin
             rec.log(self.root + f"world/periodic/{rr.escape_entity_path_part(name)}", rr.LineStrips3D([strip], colors=[[80, 140, 230]], radii=[-1.0]),
                     static=True)
@@ -294,7 +304,7 @@ class RerunSink:
                                                        colors=[[255, 90, 60]]))
 
     def _describe(self, frame: int, c: Contacts, dt: float) -> list[tuple[str, str]]:
-        lines = describe_contacts(frame, c, dt, self.header.walls.names)
+        lines = describe_contacts(frame, c, dt, self.header.walls.partner_names())
         if len(c) > view.DRAWN_CONTACTS_PER_STEP and len(c) > view.LOG_LINES_PER_STEP:  # the last line counts the rest
             lines[-1] = (lines[-1][0] + f"; ghosts and arrows for the first {view.DRAWN_CONTACTS_PER_STEP}", lines[-1][1])
         return lines

@@ -30,7 +30,7 @@ def contact_centres(c: Contacts, radius: np.ndarray) -> np.ndarray:
 
 
 def scene_bounds(h: RecordingHeader) -> tuple[np.ndarray, np.ndarray]:
-    """A box around the initial spheres and every axis-aligned wall, at least half as deep
+    """A box around the initial spheres, every axis-aligned wall and every mesh, at least half as deep
     on each axis as on its longest, so a lone floor is drawn bigger than one ball."""
     r = float(h.radius.max()) if h.count else 0.5
     lo = h.positions.min(axis=0) - r if h.count else np.full(3, -1.0)
@@ -40,6 +40,9 @@ def scene_bounds(h: RecordingHeader) -> tuple[np.ndarray, np.ndarray]:
         if abs(normal[axis]) > 1 - 1e-12:
             coordinate = offset / normal[axis]
             lo[axis], hi[axis] = min(lo[axis], coordinate), max(hi[axis], coordinate)
+    if h.walls.meshes.triangles:  # and every mesh
+        corners = h.walls.meshes.corners.reshape(-1, 3)
+        lo, hi = np.minimum(lo, corners.min(axis=0)), np.maximum(hi, corners.max(axis=0))
     periodic = h.walls.period > 0
     lo[periodic] = np.minimum(lo, h.walls.period_origin)[periodic]
     hi[periodic] = np.maximum(hi, h.walls.period_origin + h.walls.period)[periodic]
@@ -120,13 +123,13 @@ def describe_sleep(frame: int, before: np.ndarray | None, after: np.ndarray | No
     return lines
 
 
-def describe_contacts(frame: int, c: Contacts, dt: float, wall_names) -> list[tuple[str, str]]:
+def describe_contacts(frame: int, c: Contacts, dt: float, names) -> list[tuple[str, str]]:
     """(text, level) lines for a step's first LOG_LINES_PER_STEP contacts, in words, and
-    one line counting the rest. level: "INFO" for impacts, "DEBUG" for held contacts."""
+    one line counting the rest (names: Walls.partner_names). level: "INFO" for impacts, "DEBUG" for held contacts."""
     lines = []
     resting = c.resting
     for row in range(min(len(c), LOG_LINES_PER_STEP)):
-        other = partner_words(int(c.kind[row]), int(c.other[row]), wall_names)
+        other = partner_words(int(c.kind[row]), int(c.other[row]), names)
         verb = "rests on" if resting[row] else "hit"
         lines.append((
             f"step {frame}: sphere {int(c.a[row])} {verb} {other} at {c.time_in_step[row] / dt:.3f}·dt "

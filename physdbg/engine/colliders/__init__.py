@@ -1,7 +1,7 @@
 """Collider kinds: what a sphere can hit, as one table, one geometry and one switch.
 
 A contact is sphere ``a`` against a partner of some kind (events.KIND_*): another sphere
-(sphere.py) or a wall (plane.py). The engine never branches on a kind itself; it asks
+(sphere.py), a wall (plane.py) or a fixed mesh's triangle (mesh.py). The engine never branches on a kind itself; it asks
 
 * the table (kinds.py, events' rows) what a kind is in general: its name, and whether the
   partner is a sphere that moves (``partner_sphere``) or immovable;
@@ -11,9 +11,10 @@ A contact is sphere ``a`` against a partner of some kind (events.KIND_*): anothe
 
 What the kinds read besides the particles is the *geometry*: one group per kind, in the
 order of their codes (``geometry_of``: ``geometry[KIND_PAIR]`` is sphere.SphereGeometry,
-``geometry[KIND_WALL]`` plane.PlaneGeometry), each built and unpacked by its own module
-and handed down whole to every kernel that reaches a kind. Adding a kind (next: triangle
-meshes) is one module beside sphere.py and plane.py (its functions and its group), its row
+``geometry[KIND_WALL]`` plane.PlaneGeometry, ``geometry[KIND_MESH]`` mesh.MeshGeometry),
+each built and unpacked by its own module and handed down whole to every kernel that
+reaches a kind. Adding a kind is one module beside sphere.py, plane.py and mesh.py (its
+functions and its group), its row
 in the table (events.KIND_NAMES, PARTNER_IS_SPHERE), its module in KIND_MODULES, and one
 branch in each function of the switch (docs/engine.md, "Adding an integrator or a collider kind").
 """
@@ -23,9 +24,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ...events import KIND_PAIR, KIND_WALL
+from ...events import KIND_MESH, KIND_PAIR, KIND_WALL
 from ..jit import borrowing
-from . import plane, sphere
+from . import mesh, plane, sphere
 from .kinds import KIND_NAMES, KINDS, PARTNER_IS_SPHERE, partner_sphere
 
 __all__ = ["KIND_NAMES", "KINDS", "KIND_MODULES", "PARTNER_IS_SPHERE", "partner_sphere", "geometry_of",
@@ -33,7 +34,7 @@ __all__ = ["KIND_NAMES", "KINDS", "KIND_MODULES", "PARTNER_IS_SPHERE", "partner_
            "partners_of", "max_overlap", "narrow_candidates", "every_candidate", "most_partners", "partners_bound"]
 
 # each kind's module, in the order of the kinds' codes: its geometry group is ``module.GEOMETRY``
-KIND_MODULES = (sphere, plane)
+KIND_MODULES = (sphere, plane, mesh)
 
 
 def check_kind_modules(names=KIND_NAMES, modules=KIND_MODULES) -> None:
@@ -65,8 +66,11 @@ def time_of_impact(kind, ia, other, x, v, a, radius, sigma, step_end, integrator
     if kind == KIND_PAIR:
         return sphere.time_of_impact(ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
                                      tolerance, geometry[KIND_PAIR])
-    return plane.time_of_impact(ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
-                                geometry[KIND_WALL])
+    if kind == KIND_WALL:
+        return plane.time_of_impact(ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
+                                    geometry[KIND_WALL])
+    return mesh.time_of_impact(ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
+                               tolerance, geometry[KIND_MESH])
 
 
 @njit(cache=True, inline="always")
@@ -74,7 +78,9 @@ def contact_normal(kind, x, ia, other, geometry):
     """Unit normal (3 floats) from the partner to sphere ia at the anchors."""
     if kind == KIND_PAIR:
         return sphere.normal(x, ia, other, geometry[KIND_PAIR])
-    return plane.normal(x, ia, other, geometry[KIND_WALL])
+    if kind == KIND_WALL:
+        return plane.normal(x, ia, other, geometry[KIND_WALL])
+    return mesh.normal(x, ia, other, geometry[KIND_MESH])
 
 
 @borrowing
@@ -83,7 +89,9 @@ def contact_gap(kind, x, v, a, radius, ia, other, geometry):
     renewed, (n0, n1, n2) is the contact's normal now (a sphere pair turns as it rolls)."""
     if kind == KIND_PAIR:
         return sphere.gap(x, radius, ia, other, geometry[KIND_PAIR])
-    return plane.gap(x, v, a, radius, ia, other, geometry[KIND_WALL])
+    if kind == KIND_WALL:
+        return plane.gap(x, v, a, radius, ia, other, geometry[KIND_WALL])
+    return mesh.gap(x, radius, ia, other, geometry[KIND_MESH])
 
 
 @njit(cache=True, inline="always")
@@ -91,7 +99,9 @@ def partner_restitution(kind, other, restitution, geometry):
     """The partner's restitution coefficient: restitution (N,) for spheres, the walls' own."""
     if kind == KIND_PAIR:
         return restitution[other]
-    return plane.restitution(other, geometry[KIND_WALL])
+    if kind == KIND_WALL:
+        return plane.restitution(other, geometry[KIND_WALL])
+    return mesh.restitution(other, geometry[KIND_MESH])
 
 
 @njit(cache=True, inline="always")
@@ -104,28 +114,32 @@ def partners_of(kind, p, box, adj_start, adj, path_lo, path_hi, batch_mark, batc
     if kind == KIND_PAIR:
         return sphere.partners_of(p, box, path_lo, path_hi, adj_start, adj, batch_mark, batch, geometry[KIND_PAIR],
                                   out)
-    return plane.partners_of(p, path_lo, path_hi, geometry[KIND_WALL], out)
+    if kind == KIND_WALL:
+        return plane.partners_of(p, path_lo, path_hi, geometry[KIND_WALL], out)
+    return mesh.partners_of(p, path_lo, path_hi, geometry[KIND_MESH], out)
 
 
 @njit(cache=True, inline="always")
 def most_partners(geometry, max_degree) -> int:
     """The most candidates of one kind a re-predicted sphere can have (the size of
-    partners_of's ``out``): its broad-phase partners (at most max_degree), every wall."""
-    return max(max_degree, plane.count(geometry[KIND_WALL]))
+    partners_of's ``out``): its broad-phase partners (at most max_degree), every wall,
+    every triangle."""
+    return max(max_degree, plane.count(geometry[KIND_WALL]), mesh.count(geometry[KIND_MESH]))
 
 
 @njit(cache=True, inline="always")
 def partners_bound(geometry, max_degree) -> int:
     """The most candidates of every kind together a re-predicted sphere can have."""
-    return max_degree + plane.count(geometry[KIND_WALL])
+    return max_degree + plane.count(geometry[KIND_WALL]) + mesh.count(geometry[KIND_MESH])
 
 
 @borrowing
 def max_overlap(x, radius, pairs, geometry, ignore_tunnelled):
     """Deepest overlap (m, >= 0) of the candidate sphere pairs (M, 2) and of every sphere
-    with every wall (ignore_tunnelled: see plane.deepest)."""
+    with every wall and triangle (ignore_tunnelled: see plane.deepest, mesh.deepest)."""
     return max(sphere.deepest(x, radius, pairs, geometry[KIND_PAIR]),
-               plane.deepest(x, radius, geometry[KIND_WALL], ignore_tunnelled))
+               plane.deepest(x, radius, geometry[KIND_WALL], ignore_tunnelled),
+               mesh.deepest(x, radius, geometry[KIND_MESH], ignore_tunnelled))
 
 
 def narrow_candidates(kind: int, pairs: np.ndarray, lo: np.ndarray, hi: np.ndarray,
@@ -135,15 +149,17 @@ def narrow_candidates(kind: int, pairs: np.ndarray, lo: np.ndarray, hi: np.ndarr
     each path box reaches."""
     if kind == KIND_PAIR:
         return sphere.candidates(pairs, lo, hi, geometry[KIND_PAIR])
-    return plane.reachable(lo, hi, geometry[KIND_WALL])
+    if kind == KIND_WALL:
+        return plane.reachable(lo, hi, geometry[KIND_WALL])
+    return mesh.reachable(lo, hi, geometry[KIND_MESH])
 
 
 def every_candidate(kind: int, count: int, geometry: tuple) -> tuple[np.ndarray, np.ndarray]:
     """Every candidate of ``kind`` among ``count`` spheres, with no broad phase (the slow
-    reference loop's): (a (M,), other (M,)) int64, every pair i < j or every sphere–wall."""
+    reference loop's): (a (M,), other (M,)) int64, every pair i < j, every sphere–wall or every sphere–triangle."""
     if kind == KIND_PAIR:
         a, other = np.triu_indices(count, 1)
         return a.astype(np.int64), other.astype(np.int64)
-    walls_count = plane.count(geometry[KIND_WALL])
-    return (np.repeat(np.arange(count, dtype=np.int64), walls_count),
-            np.tile(np.arange(walls_count, dtype=np.int64), count))
+    partners = plane.count(geometry[KIND_WALL]) if kind == KIND_WALL else mesh.count(geometry[KIND_MESH])
+    return (np.repeat(np.arange(count, dtype=np.int64), partners),
+            np.tile(np.arange(partners, dtype=np.int64), count))
