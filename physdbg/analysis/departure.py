@@ -203,24 +203,11 @@ def compare(foreign, reference, atol: float | None = None, rtol: float | None = 
     """Compare a foreign run's recording with physdbg's recording of the same scene and
     steps (paths or open Recordings; any detail level). verify: check every state read
     against its stored hash and the frame index."""
-    from ..record import open_recording
-    from ..record.reader import Recording
+    from ..record.reader import opened
 
-    rf = foreign if isinstance(foreign, Recording) else open_recording(foreign, verify=verify)
-    try:
-        rr = reference if isinstance(reference, Recording) else open_recording(reference, verify=verify)
-    except BaseException:
-        if rf is not foreign:
-            rf.close()
-        raise
-    try:
-        with quiet_numerics():
-            return _Comparison(rf, rr, DEFAULT_ATOL if atol is None else float(atol),
-                               DEFAULT_RTOL if rtol is None else float(rtol)).run()
-    finally:
-        for rec, given in ((rf, foreign), (rr, reference)):
-            if rec is not given:
-                rec.close()
+    with opened(foreign, reference, verify=verify) as (rf, rr), quiet_numerics():
+        return _Comparison(rf, rr, DEFAULT_ATOL if atol is None else float(atol),
+                           DEFAULT_RTOL if rtol is None else float(rtol)).run()
 
 
 class _Comparison:

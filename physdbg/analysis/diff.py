@@ -211,27 +211,14 @@ def diff(a, b, atol: float | None = None, rtol: float | None = None,
     default exact (0, 0) when no setting that matters differs, else 1e-9 each.
     verify: check every state read against its stored hash and the frame index, reading
     both runs from frame 0 up to the divergence (RecordingIntegrityError on a mismatch)."""
-    from ..record import open_recording
-    from ..record.reader import Recording
+    from ..record.reader import opened
 
-    ra = a if isinstance(a, Recording) else open_recording(a, verify=verify)
-    try:
-        rb = b if isinstance(b, Recording) else open_recording(b, verify=verify)
-    except BaseException:
-        if ra is not a:
-            ra.close()
-        raise
-    try:
-        with quiet_numerics():
-            report = _Differ(ra, rb, atol, rtol).run()
-            foreign = [label for label, rec in (("A", ra), ("B", rb)) if rec.meta.get("foreign")]
-            if len(foreign) == 1 and not report.equivalent:
-                _explain_foreign(report, ra, rb, foreign[0], atol, rtol)
+    with opened(a, b, verify=verify) as (ra, rb), quiet_numerics():
+        report = _Differ(ra, rb, atol, rtol).run()
+        foreign = [label for label, rec in (("A", ra), ("B", rb)) if rec.meta.get("foreign")]
+        if len(foreign) == 1 and not report.equivalent:
+            _explain_foreign(report, ra, rb, foreign[0], atol, rtol)
         return report
-    finally:
-        for rec, given in ((ra, a), (rb, b)):
-            if rec is not given:
-                rec.close()
 
 
 def _explain_foreign(report: DiffReport, ra, rb, label: str, atol, rtol) -> None:

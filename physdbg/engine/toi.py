@@ -236,27 +236,37 @@ def pair_toi_swept_scalar(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, radius_su
             return INF
         d0, d1, d2, e0, e1, e2 = _relative_path(dx0, dx1, dx2, dv0, dv1, dv2, da0, da1, da2, integrator, k, t)
         dist = _norm(d0, d1, d2)
-        g = dist - radius_sum
         rate = (d0 * e0 + d1 * e1 + d2 * e2) / dist if dist > 0.0 else -1.0
-        if g <= tolerance:
-            if rate < 0.0:
-                return t
-            if rate == 0.0 and (d0 * da0 + d1 * da1 + d2 * da2) < 0.0:
-                return t
-            if m == 0.0:
-                return INF
-            # separating from a touch: the bound says it cannot return before this
-            gg = max(g, 0.0)
-            t += (rate + math.sqrt(rate * rate + 2.0 * m * gg)) / m + 1e-15 * max(horizon, 1.0)
-            continue
-        if rate < 0.0:
-            step = 2.0 * g / (math.sqrt(rate * rate + 2.0 * m * g) - rate)
-        else:
-            if m == 0.0:
-                return INF
-            step = (rate + math.sqrt(rate * rate + 2.0 * m * g)) / m
+        step = _advance(dist - radius_sum, rate, (d0 * da0 + d1 * da1 + d2 * da2) < 0.0, m, tolerance, horizon)
+        if step == 0.0:
+            return t
+        if step == INF:
+            return INF
         t += step
     return t if t <= horizon else INF
+
+
+@borrowing
+def _advance(g, rate, pulled_in, m, tolerance, horizon):
+    """Conservative advancement's next move, for a gap g (m) changing at ``rate`` (m/s)
+    whose second derivative is at least -m (m/s²): 0.0 when it touches now (within
+    ``tolerance``, approaching, or at rest and ``pulled_in`` by the path's acceleration);
+    INF when it can never touch; else the longest step (s) the bound g + rate·s - m·s²/2
+    allows before the gap could reach zero (or, separating from a touch, return to it).
+    The one rule of the sphere pairs' and the triangles' swept tests."""
+    if g <= tolerance:
+        if rate < 0.0 or (rate == 0.0 and pulled_in):
+            return 0.0
+        if m == 0.0:
+            return INF
+        # separating from a touch: the bound says it cannot return before this
+        gg = max(g, 0.0)
+        return (rate + math.sqrt(rate * rate + 2.0 * m * gg)) / m + 1e-15 * max(horizon, 1.0)
+    if rate < 0.0:
+        return 2.0 * g / (math.sqrt(rate * rate + 2.0 * m * g) - rate)
+    if m == 0.0:
+        return INF
+    return (rate + math.sqrt(rate * rate + 2.0 * m * g)) / m
 
 
 @kernel
@@ -299,6 +309,15 @@ def _center_path(x0, x1, x2, v0, v1, v2, a0, a1, a2, integrator, k, t):
 
 
 @borrowing
+def _from_triangle(p0, p1, p2, tri):
+    """(d0, d1, d2, feature): from the point of triangle ``tri`` (3, 3) closest to p to p,
+    and the feature it lies on (mesh.closest)."""
+    q0, q1, q2, feature = closest_on_triangle(p0, p1, p2, tri[0, 0], tri[0, 1], tri[0, 2], tri[1, 0], tri[1, 1],
+                                              tri[1, 2], tri[2, 0], tri[2, 1], tri[2, 2])
+    return p0 - q0, p1 - q1, p2 - q2, feature
+
+
+@borrowing
 def triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, integrator, k, horizon, tolerance):
     """(t, feature): the first local time in [0, horizon] a sphere (centre x + v·P1 + a·P2,
     ``radius`` m) touches the fixed triangle ``tri`` (3, 3: corners as rows, m) while
@@ -316,30 +335,14 @@ def triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, integrat
         if t > horizon:
             return INF, -1
         p0, p1, p2, e0, e1, e2 = _center_path(x0, x1, x2, v0, v1, v2, a0, a1, a2, integrator, k, t)
-        q0, q1, q2, feature = closest_on_triangle(p0, p1, p2, tri[0, 0], tri[0, 1], tri[0, 2], tri[1, 0], tri[1, 1],
-                                                  tri[1, 2], tri[2, 0], tri[2, 1], tri[2, 2])
-        d0 = p0 - q0
-        d1 = p1 - q1
-        d2 = p2 - q2
+        d0, d1, d2, feature = _from_triangle(p0, p1, p2, tri)
         dist = _norm(d0, d1, d2)
-        g = dist - radius
         rate = (d0 * e0 + d1 * e1 + d2 * e2) / dist if dist > 0.0 else -1.0
-        if g <= tolerance:
-            if rate < 0.0:
-                return t, feature
-            if rate == 0.0 and (d0 * a0 + d1 * a1 + d2 * a2) < 0.0:
-                return t, feature
-            if m == 0.0:
-                return INF, -1
-            gg = max(g, 0.0)
-            t += (rate + math.sqrt(rate * rate + 2.0 * m * gg)) / m + 1e-15 * max(horizon, 1.0)
-            continue
-        if rate < 0.0:
-            step = 2.0 * g / (math.sqrt(rate * rate + 2.0 * m * g) - rate)
-        else:
-            if m == 0.0:
-                return INF, -1
-            step = (rate + math.sqrt(rate * rate + 2.0 * m * g)) / m
+        step = _advance(dist - radius, rate, (d0 * a0 + d1 * a1 + d2 * a2) < 0.0, m, tolerance, horizon)
+        if step == 0.0:
+            return t, feature
+        if step == INF:
+            return INF, -1
         t += step
     if t <= horizon:
         return t, feature
@@ -358,11 +361,7 @@ def triangle_toi_sampled(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, integr
     for s in range(1, samples + 1):
         t = horizon * s / samples
         p0, p1, p2, e0, e1, e2 = _center_path(x0, x1, x2, v0, v1, v2, a0, a1, a2, integrator, k, t)
-        q0, q1, q2, feature = closest_on_triangle(p0, p1, p2, tri[0, 0], tri[0, 1], tri[0, 2], tri[1, 0], tri[1, 1],
-                                                  tri[1, 2], tri[2, 0], tri[2, 1], tri[2, 2])
-        d0 = p0 - q0
-        d1 = p1 - q1
-        d2 = p2 - q2
+        d0, d1, d2, feature = _from_triangle(p0, p1, p2, tri)
         if d0 * d0 + d1 * d1 + d2 * d2 < radius * radius and d0 * e0 + d1 * e1 + d2 * e2 < 0.0:
             return t, feature
     return INF, -1

@@ -22,6 +22,7 @@ them, that hash must be the frame index's for the frame, and frames must arrive 
 from __future__ import annotations
 
 import json
+from contextlib import ExitStack, contextmanager
 from collections import defaultdict
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -137,6 +138,15 @@ def open_recording(path: str | Path, verify: bool = True) -> Recording:
     """Open a .mcap recording for reading (RecordingError if it is not one). verify: check
     every state read against its stored hash and the frame index (see the module doc)."""
     return Recording(path, verify=verify)
+
+
+@contextmanager
+def opened(*sources, verify: bool = True) -> Iterator[list[Recording]]:
+    """The recordings of ``sources`` (paths, or Recordings used as given), in order; the
+    ones opened here are closed on leaving, also when opening a later one fails."""
+    with ExitStack() as stack:
+        yield [source if isinstance(source, Recording) else stack.enter_context(open_recording(source, verify))
+               for source in sources]
 
 
 class Recording:

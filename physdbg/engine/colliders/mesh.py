@@ -26,7 +26,7 @@ from numba import njit
 from ..broadphase.bvh import build
 from ..jit import borrowing, kernel
 from ..mesh.closest import closest_on_triangle
-from ..toi import INF, SWEPT, DISCRETE, triangle_toi_sampled, triangle_toi_swept
+from ..toi import DISCRETE, SWEPT, triangle_toi_sampled, triangle_toi_swept
 
 
 class MeshGeometry(NamedTuple):
@@ -128,16 +128,22 @@ def time_of_impact(i, t, x, v, a, radius, sigma, step_end, integrator, k, detect
     return start, found
 
 
+@borrowing
+def _away(x, i, corners, t):
+    """(d0, d1, d2, length): from triangle t's point closest to sphere i's centre to the centre."""
+    q0, q1, q2, _feature = _closest(x, i, corners, t)
+    d0 = x[i, 0] - q0
+    d1 = x[i, 1] - q1
+    d2 = x[i, 2] - q2
+    return d0, d1, d2, math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+
+
 @njit(cache=True, inline="always")
 def normal(x, ia, t, meshes):
     """Unit normal (3 floats) from triangle t to sphere a: from the closest point to the
-    centre (the face's normal, towards the centre's side, if the centre lies on the face)."""
+    centre (the face's own normal if the centre lies on the face)."""
     corners = meshes[0]
-    q0, q1, q2, _feature = _closest(x, ia, corners, t)
-    d0 = x[ia, 0] - q0
-    d1 = x[ia, 1] - q1
-    d2 = x[ia, 2] - q2
-    length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    d0, d1, d2, length = _away(x, ia, corners, t)
     if length > 0.0:
         return d0 / length, d1 / length, d2 / length
     e0 = corners[t, 1, 0] - corners[t, 0, 0]
@@ -158,11 +164,7 @@ def gap(x, radius, i, t, meshes):
     """(gap (m, < 0: overlap), n0, n1, n2, True): the gap from the closest point and the
     normal now (it turns as a sphere rolls over an edge or a corner)."""
     corners = meshes[0]
-    q0, q1, q2, _feature = _closest(x, i, corners, t)
-    d0 = x[i, 0] - q0
-    d1 = x[i, 1] - q1
-    d2 = x[i, 2] - q2
-    length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    d0, d1, d2, length = _away(x, i, corners, t)
     if length == 0.0:
         return -radius[i], 0.0, 0.0, 0.0, False
     return length - radius[i], d0 / length, d1 / length, d2 / length, True
@@ -273,9 +275,7 @@ def deepest_where(x, radius, meshes, ignore_tunnelled):
                     and box_lo[q, 1] <= x[i, 1] + r and x[i, 2] - r <= box_hi[q, 2] and box_lo[q, 2] <= x[i, 2] + r):
                 t = leaf[q]
                 if t >= 0:
-                    q0, q1, q2, _feature = _closest(x, i, corners, t)
-                    dist = math.sqrt((x[i, 0] - q0) ** 2 + (x[i, 1] - q1) ** 2 + (x[i, 2] - q2) ** 2)
-                    pen = r - dist
+                    pen = r - _away(x, i, corners, t)[3]
                     if not (ignore_tunnelled and pen >= r) and pen > worst:
                         worst = pen
                         who = i

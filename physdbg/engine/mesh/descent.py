@@ -92,6 +92,16 @@ def _volumes_meet(volume, a, i, b, j):
 
 
 @kernel
+def _room_for_one_more(rows, used):
+    """``rows`` (R, C) int64, or a copy twice as long when all ``used`` rows are taken."""
+    if used < rows.shape[0]:
+        return rows
+    bigger = np.empty((2 * rows.shape[0], rows.shape[1]), dtype=np.int64)
+    bigger[:used] = rows[:used]
+    return bigger
+
+
+@kernel
 def _descend(volume, a, b, root_a, root_b):
     """The simultaneous descent; returns (pairs (K, 2) face indices, log (L, 3): node of
     a, node of b, outcome; volume tests, triangle tests)."""
@@ -112,10 +122,7 @@ def _descend(volume, a, b, root_a, root_b):
         i = stack[top, 0]
         j = stack[top, 1]
         volume_tests += 1
-        if logged == log.shape[0]:
-            bigger = np.empty((2 * logged, 3), dtype=np.int64)
-            bigger[:logged] = log
-            log = bigger
+        log = _room_for_one_more(log, logged)
         log[logged, 0] = i
         log[logged, 1] = j
         if not _volumes_meet(volume, a, i, b, j):
@@ -135,10 +142,7 @@ def _descend(volume, a, b, root_a, root_b):
             if triangles_meet(va[fa[ta, 0]], va[fa[ta, 1]], va[fa[ta, 2]], vb[fb[tb, 0]], vb[fb[tb, 1]],
                               vb[fb[tb, 2]], scratch):
                 log[logged, 2] = LEAVES_MEET
-                if found == pairs.shape[0]:
-                    more = np.empty((2 * found, 2), dtype=np.int64)
-                    more[:found] = pairs
-                    pairs = more
+                pairs = _room_for_one_more(pairs, found)
                 pairs[found, 0] = ta
                 pairs[found, 1] = tb
                 found += 1
@@ -148,10 +152,7 @@ def _descend(volume, a, b, root_a, root_b):
             continue
         log[logged, 2] = MEET
         logged += 1
-        if top + 2 > stack.shape[0]:
-            deeper = np.empty((2 * stack.shape[0], 2), dtype=np.int64)
-            deeper[:top] = stack[:top]
-            stack = deeper
+        stack = _room_for_one_more(stack, top + 1)
         if leaf_b or (not leaf_a and a.radius[i] >= b.radius[j]):
             stack[top, 0] = a.right[i]
             stack[top, 1] = j
