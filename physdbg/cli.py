@@ -706,7 +706,7 @@ def info(
 
 @app.command()
 def overlap(
-    a: Annotated[str, typer.Argument(help="A mesh: an .obj or .stl file, or a built-in shape (ramp, funnel, "
+    a: Annotated[str, typer.Argument(help="A mesh: an .obj or .stl file, or a built-in shape (box, ramp, funnel, "
                                           "box-with-hole, paddle, icosphere).")],
     b: Annotated[str, typer.Argument(help="The other mesh, likewise.")],
     pose: Annotated[Optional[str], typer.Option(

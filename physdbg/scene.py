@@ -119,11 +119,11 @@ PLANE_FIELDS = {
 }
 MESH_FIELDS = {
     "name": "text shown in events (default mesh<k>)",
-    "shape": "a built-in shape: ramp, funnel, box-with-hole, paddle or icosphere (or give file)",
+    "shape": "a built-in shape: box, ramp, funnel, box-with-hole, paddle or icosphere (or give file)",
     "file": "an .obj or .stl file, relative to the scene file's folder (or give shape)",
     "position": "[x, y, z] in m: where the mesh's origin goes (default [0, 0, 0])",
     "rotation": "[x, y, z] in degrees: turned about the world's x, then y, then z axis (default [0, 0, 0])",
-    "scale": "multiplies the mesh's size, > 0 (default 1)",
+    "scale": "multiplies the mesh's size: a number > 0, or [x, y, z] each > 0 along the mesh's own axes (default 1)",
     "restitution": "0 <= e <= 1 (default 1)",
 }
 BOX_FIELDS = {
@@ -494,7 +494,12 @@ def _meshes(c: _Checker, raw: dict, max_memory: float) -> Meshes:
         name = c.text(table, "name", p + "name", f"mesh{k}")
         position = c.vector(table, "position", p + "position", (0.0, 0.0, 0.0))
         rotation = c.vector(table, "rotation", p + "rotation", (0.0, 0.0, 0.0))
-        scale = c.number(table, "scale", p + "scale", default=1.0, lo=0, lo_open=True)
+        if isinstance(table.get("scale"), list):
+            scale = c.vector(table, "scale", p + "scale")
+            if not np.all(scale > 0):
+                c.fail(p + "scale", f"got {scale.tolist()}; each of [x, y, z] must be > 0")
+        else:
+            scale = c.number(table, "scale", p + "scale", default=1.0, lo=0, lo_open=True)
         restitution.append(c.number(table, "restitution", p + "restitution", default=1.0, lo=0, hi=1))
         try:
             mesh = load_mesh(spec, name, max_memory=max_memory, hull=False)

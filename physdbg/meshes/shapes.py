@@ -16,6 +16,13 @@ def _box(lo: tuple[float, float, float], hi: tuple[float, float, float]) -> tupl
     return v, f
 
 
+def box(size: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """A closed cube of side ``size`` centred on the origin (12 triangles); scaled per axis
+    in a scene, a thin wall or a room."""
+    s = 0.5 * size
+    return _box((-s, -s, -s), (s, s, s))
+
+
 def ramp(length: float = 2.0, width: float = 1.0, height: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
     """A wedge (a triangular prism): the slope rises along +x from z = 0 to ``height``."""
     h = 0.5 * width
@@ -89,4 +96,4 @@ def icosphere(radius: float = 0.5, subdivisions: int = 2) -> tuple[np.ndarray, n
     return np.array(verts) * radius, np.array(f, dtype=np.int64)
 
 
-SHAPES = {"ramp": ramp, "funnel": funnel, "box-with-hole": box_with_hole, "paddle": paddle, "icosphere": icosphere}
+SHAPES = {"box": box, "ramp": ramp, "funnel": funnel, "box-with-hole": box_with_hole, "paddle": paddle, "icosphere": icosphere}
