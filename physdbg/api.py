@@ -549,11 +549,12 @@ def diff(a: str | Path, b: str | Path, atol: float | None = None, rtol: float | 
     return _diff(a, b, atol=atol, rtol=rtol, verify=verify)
 
 
-def explain(path: str | Path, verify: bool = True):
-    """Audit one recording (physdbg.analysis.audit.AuditReport); verify as for diff."""
+def explain(path: str | Path, verify: bool = True, every_finding: bool = False):
+    """Audit one recording (physdbg.analysis.audit.AuditReport); verify as for diff;
+    every_finding: list every finding, not the first few of each kind."""
     from .analysis.audit import explain as _explain
 
-    return _explain(path, verify=verify)
+    return _explain(path, verify=verify, every_finding=every_finding)
 
 
 def overlay(a: str | Path, b: str | Path, report=None, rrd_path: str | None = None, force: bool = False,

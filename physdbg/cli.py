@@ -285,6 +285,8 @@ def explain(
     markdown: Annotated[bool, typer.Option("--markdown", help="Print the report as Markdown.")] = False,
     output_format: OutputFormat = "text",
     no_verify: NoVerifyOption = False,
+    every: Annotated[bool, typer.Option("--all", help="List every finding (default: the first 5 of each kind, "
+                                                      "with the count of each).")] = False,
 ) -> None:
     """Audit one recording: tunnelling, overlaps, out-of-order contacts, energy gained, NaN,
     budgets hit, collapse. Exit 0 clean, 1 findings, 2 error (a file that is missing,
@@ -295,7 +297,7 @@ def explain(
     with _user_errors():
         from . import api
 
-        report = api.explain(recording, verify=not no_verify)
+        report = api.explain(recording, verify=not no_verify, every_finding=every)
         typer.echo(_render(report, "explain", output_format, as_json, markdown))
         raise typer.Exit(0 if report.clean else 1)
 

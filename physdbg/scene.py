@@ -141,6 +141,9 @@ GENERATE_FIELDS = {
     "restitution": "0 <= e <= 1 (default 1)",
     "speed": "typical speed, m/s >= 0 (rain: each speed within ±10 % of it; gas: rms speed)",
     "packing_fraction": "gas only: sphere volume / box volume, 0 < phi <= 0.45",
+    "min": "rain only: [x, y, z] lower corner of the region to fill (default: the [box]'s; with min and max "
+           "no [box] is needed, e.g. inside walls made of meshes)",
+    "max": "rain only: [x, y, z] upper corner of the region to fill (default: the [box]'s)",
 }
 FIELDS = {"scene": TOP_FIELDS, "particles": PARTICLE_FIELDS, "planes": PLANE_FIELDS, "meshes": MESH_FIELDS,
           "box": BOX_FIELDS, "generate": GENERATE_FIELDS}
@@ -729,6 +732,9 @@ def _generate(c: _Checker, gen: dict, kind: str, count: int, seed: int, box_lo, 
     rng = np.random.default_rng(seed)
     out: dict[str, Any] = {}
     if kind == "gas":
+        for key in ("min", "max"):
+            if key in gen:
+                c.fail(f"generate.{key}", 'only for kind = "rain" (a gas makes its own box)')
         phi = c.number(gen, "packing_fraction", "generate.packing_fraction", lo=0, hi=0.45, lo_open=True)
         if count == 0:
             c.fail("generate.count", "a gas needs at least one particle (it sizes the box)")
@@ -741,8 +747,16 @@ def _generate(c: _Checker, gen: dict, kind: str, count: int, seed: int, box_lo, 
     else:
         if "packing_fraction" in gen:
             c.fail("generate.packing_fraction", "only for kind = \"gas\"")
+        if ("min" in gen) != ("max" in gen):
+            c.fail("generate.min" if "min" not in gen else "generate.max", "give both min and max, or neither")
+        if "min" in gen:
+            box_lo, box_hi = c.vector(gen, "min", "generate.min"), c.vector(gen, "max", "generate.max")
+            if not np.all(box_hi > box_lo):
+                c.fail("generate.max", f"got {box_hi.tolist()}; must exceed generate.min {box_lo.tolist()} on every "
+                                       f"axis")
         if box_lo is None:
-            c.fail("box", "generate.kind = \"rain\" fills the [box]; add a [box] table")
+            c.fail("box", "generate.kind = \"rain\" fills the [box] (or the region generate.min, generate.max); "
+                          "add a [box] table")
         directions = rng.normal(size=(count, 3))
         directions /= np.maximum(np.linalg.norm(directions, axis=1, keepdims=True), 1e-300)
         velocities = directions * (speed * (1.0 + 0.1 * rng.uniform(-1.0, 1.0, size=(count, 1))))

@@ -67,8 +67,8 @@ class Finding:
 @dataclass
 class AuditReport:
     """What the audit of one run found. counts: findings per kind (all of them);
-    findings: the first EXAMPLES_PER_KIND of each kind, in step order; checked: the steps
-    audited; notes: what could not be checked and why."""
+    findings: the first EXAMPLES_PER_KIND of each kind (every one with every_finding), in
+    step order; checked: the steps audited; notes: what could not be checked and why."""
 
     source: str
     scene: str
@@ -108,8 +108,10 @@ class Auditor:
 
     wants_swept_tests = False  # it judges contacts and states, not the test log (observe.py)
 
-    def __init__(self, header, on_finding: Callable[[Finding], None] | None = None):
+    def __init__(self, header, on_finding: Callable[[Finding], None] | None = None,
+                 examples_per_kind: int | None = EXAMPLES_PER_KIND):
         self.header = header
+        self.examples_per_kind = examples_per_kind  # findings kept of each kind (None: every one)
         self.settings = header.meta.get("settings", {})
         self.names = header.walls.partner_names()
         self.wall_names = list(header.walls.names)
@@ -184,7 +186,7 @@ class Auditor:
 
     def _add(self, finding: Finding) -> None:
         self.counts[finding.kind] = self.counts.get(finding.kind, 0) + 1
-        if sum(1 for f in self.examples if f.kind == finding.kind) < EXAMPLES_PER_KIND:
+        if self.examples_per_kind is None or self.counts[finding.kind] <= self.examples_per_kind:
             self.examples.append(finding)
         for listener in self.listeners:
             listener(finding)
@@ -242,7 +244,11 @@ class Auditor:
             how = {"discrete": "detection = discrete tests only where each step ends",
                    "sampled": f"detection = sampled tests only {self.settings.get('samples', 4)} instants a step"}
             budgets = [w.code for w in self._warnings if w.code != "non-finite" and w.code != "overlap"]
-            if budgets and budgets[0] == "max_memory":
+            if detection in how:  # a test that looks only at some instants: the first cause, whatever followed
+                advice = "use detection = swept (exact time of impact), or a shorter dt" + (
+                    f" (this step also hit the {budgets[0]} budget: spheres left inside a thin wall by the missed "
+                    f"contacts keep meeting it)" if budgets else "")
+            elif budgets and budgets[0] == "max_memory":
                 advice = ("this step reached max_memory, so contacts after it were not resolved: raise it (the "
                           "step's warning names a value), or record at --detail contacts, which logs only the "
                           "swept tests that hit")
@@ -278,11 +284,14 @@ class Auditor:
                                   {"wall": name, "speed": speed, "dt": end.dt, "detection": detection}))
             elif not PARTNER_IS_SPHERE[c.kind]:  # a mesh's triangle
                 partner = partner_words(c.kind, c.other, self.names)
+                meshes = self.header.walls.meshes
+                mesh = int(meshes.mesh_of[c.other])
                 message = (f"sphere {c.a} went through {partner} with no contact (it moved {speed * end.dt:.3g} m "
                            f"in the step at {speed:.3g} m/s, ending {_length(c.depth)} past the triangle's plane"
                            f"{'; ' + how[detection] if detection in how else ''})")
                 self._add(Finding("tunnelling", step, [c.a], message, advice, [float(q) for q in c.where],
-                                  {"mesh": partner, "triangle": c.other, "speed": speed, "dt": end.dt,
+                                  {"mesh": meshes.names[mesh], "triangle": c.other - int(meshes.first[mesh]),
+                                   "triangle_index": c.other, "speed": speed, "dt": end.dt,
                                    "detection": detection}))
             else:
                 message = (f"spheres {c.a} and {c.other} passed into each other with no contact at "
@@ -473,23 +482,25 @@ class Auditor:
                            self.steps, dict(self.counts), examples, notes)
 
 
-def explain(recording, on_step: Callable[[int, int], None] | None = None, verify: bool = True) -> AuditReport:
+def explain(recording, on_step: Callable[[int, int], None] | None = None, verify: bool = True,
+            every_finding: bool = False) -> AuditReport:
     """Audit one recording (a path or an open Recording): every check, every step.
-    verify: check every state against its stored hash and the frame index as it is read."""
+    verify: check every state against its stored hash and the frame index as it is read;
+    every_finding: list every finding, not the first EXAMPLES_PER_KIND of each kind."""
     from ..record import open_recording
     from ..record.reader import Recording
 
     rec = recording if isinstance(recording, Recording) else open_recording(recording, verify=verify)
     try:
         with quiet_numerics():
-            return _explain(rec, on_step)
+            return _explain(rec, on_step, every_finding)
     finally:
         if rec is not recording:
             rec.close()
 
 
-def _explain(rec, on_step) -> AuditReport:
-    auditor = Auditor(rec.header)
+def _explain(rec, on_step, every_finding: bool = False) -> AuditReport:
+    auditor = Auditor(rec.header, examples_per_kind=None if every_finding else EXAMPLES_PER_KIND)
     detail = "contacts" if rec.detail != "state" else "state"
     for events in rec.iter_step_events(detail=detail):
         for event in events:
