@@ -204,7 +204,7 @@ def test_the_overlay_holds_both_runs_under_two_roots(tmp_path):
     assert again.exit_code == 2 and "--force" in again.output
 
 
-@pytest.mark.parametrize("scene", ["billiards", "bounce", "bullet-wall", "cradle", "gas", "rain", "ramp", "rest"])
+@pytest.mark.parametrize("scene", ["billiards", "bounce", "bullet-wall", "cradle", "funnel", "gas", "rain", "ramp", "rest"])
 def test_every_builtin_scene_still_matches_its_ci_golden(tmp_path, scene):
     """Every built-in scene but highspeed (5,000 spheres for 600 steps: a golden of tens of
     MB and half a minute a run; tests/test_mesh_runs.py runs it small)."""

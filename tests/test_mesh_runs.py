@@ -210,3 +210,15 @@ def test_highspeed_keeps_every_sphere_in_swept_mode_and_explain_names_each_escap
     assert first["message"].startswith(f"sphere {first['particles'][0]} went through mesh '{mesh}' triangle "
                                        f"{triangle} with no contact")
     assert 0 <= triangle < 12 and first["advice"].startswith("use detection = swept")
+
+
+def test_the_funnel_scene_pours_every_sphere_through_the_spout_with_a_clean_audit():
+    done = runner.invoke(app, ["run", "funnel", "-s", "generate.count=60", "-s", "duration=2"])
+    assert done.exit_code == 0, done.output
+    assert "1 mesh (funnel 48 triangles)" in done.output and "audit       clean" in done.output
+    scene = api.load_scene("funnel", ["generate.count=60", "duration=2"])
+    world = scene.build_world()
+    for dt in scene.step_lengths():
+        end = world.step(dt)
+    assert np.all(world.state.positions[:, 1] < 1.0)  # all below the spout, on the floor
+    assert end.max_overlap <= scene.settings.contact_tolerance

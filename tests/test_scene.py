@@ -12,7 +12,7 @@ from physdbg.api import load_scene
 from physdbg.scene import FIELDS, parse_scene
 from physdbg.scenes import builtin_descriptions, builtin_names
 
-EXPECTED = {"bounce", "bullet-wall", "cradle", "billiards", "rain", "gas", "rest", "ramp", "highspeed"}
+EXPECTED = {"bounce", "bullet-wall", "cradle", "billiards", "rain", "gas", "rest", "ramp", "highspeed", "funnel"}
 
 MINIMAL = """
 dt = 0.01
