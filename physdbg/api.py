@@ -84,6 +84,7 @@ class RunSummary:
     auto: dict[str, str] = field(default_factory=dict)  # setting -> "value: why" for settings given as auto
 
     meshes: dict[str, int] = field(default_factory=dict)  # each fixed mesh's name: its triangles
+    mesh_notes: list[str] = field(default_factory=list)  # what loading the meshes left out
     def as_dict(self) -> dict:
         return asdict(self)
 
@@ -173,7 +174,8 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         detection=scene.settings.detection, ordering=scene.settings.ordering,
         broad_phase=world.broad_phase.name,
         broad_phase_reason=world.broad_phase_reason,
-        particles=st.count, walls=list(scene.walls.names), meshes=mesh_sizes(scene.walls.meshes), steps=n_steps,
+        particles=st.count, walls=list(scene.walls.names), meshes=mesh_sizes(scene.walls.meshes),
+        mesh_notes=list(scene.walls.meshes.notes), steps=n_steps,
         sim_time=world.time,
         contacts=tally.total["contacts"], swept_tests=tally.total["swept_tests"],
         held_at_end=tally.total["held"], rapid=tally.total["rapid"], released=tally.total["released"],

@@ -46,7 +46,8 @@ class PeerSetup:
     """One way to set a peer up. engine: "pybullet" or "mujoco"; for MuJoCo: solver (PGS,
     CG or Newton), iterations, speculative (MuJoCo 4's speculative contacts, its continuous
     collision), sleep (MuJoCo 4's sleeping islands), midphase (its BVH midphase, on by
-    default). pybullet keeps its own defaults (its solver, its sleeping)."""
+    default). pybullet keeps its own defaults (its solver, its sleeping); ccd turns on its
+    continuous collision for the spheres (a swept sphere of 0.9 of each radius)."""
 
     engine: str
     solver: str = "Newton"
@@ -54,11 +55,12 @@ class PeerSetup:
     speculative: bool = False
     sleep: bool = False
     midphase: bool = True
+    ccd: bool = False
 
     @property
     def label(self) -> str:
         if self.engine == "pybullet":
-            return "pybullet"
+            return "pybullet +ccd" if self.ccd else "pybullet"
         flags = "".join(f" +{name}" for name in ("speculative", "sleep") if getattr(self, name))
         return f"mujoco {self.solver}-{self.iterations}{flags}{'' if self.midphase else ' -midphase'}"
 
@@ -191,24 +193,25 @@ def _plane_quaternion(normal: np.ndarray) -> list[float]:
     return [*(axis * math.sin(angle / 2)).tolist(), math.cos(angle / 2)]
 
 
-def _restitution_factors(scene) -> tuple[np.ndarray, np.ndarray, str]:
-    """pybullet's restitution for each sphere and wall, whose products give the scene's:
-    √e each where every body has the same e; otherwise each its own (pybullet's product,
-    not the scene's rule, then decides: said in the notes)."""
-    spheres, walls = scene.state.restitution, scene.walls.restitution
-    every = np.concatenate([spheres, walls])
+def _restitution_factors(scene) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
+    """pybullet's restitution for each sphere, wall and mesh, whose products give the
+    scene's: √e each where every body has the same e; otherwise each its own (pybullet's
+    product, not the scene's rule, then decides: said in the notes)."""
+    spheres, walls, meshes = scene.state.restitution, scene.walls.restitution, scene.walls.meshes.restitution
+    every = np.concatenate([spheres, walls, meshes])
     if len(every) and np.all(every == every[0]):
         root = math.sqrt(float(every[0]))
-        return np.full(len(spheres), root), np.full(len(walls), root), f"√e = {root:.6g} on every body (e = {every[0]:g})"
-    return spheres.copy(), walls.copy(), "each body its own e (pybullet multiplies two bodies' e; the scene's rule is " \
-                                         f"{scene.settings.restitution_rule})"
+        return (np.full(len(spheres), root), np.full(len(walls), root), np.full(len(meshes), root),
+                f"√e = {root:.6g} on every body (e = {every[0]:g})")
+    return spheres.copy(), walls.copy(), meshes.copy(), "each body its own e (pybullet multiplies two bodies' e; " \
+                                                        f"the scene's rule is {scene.settings.restitution_rule})"
 
 
 class _Pybullet(PeerWorld):
     def __init__(self, scene, setup: PeerSetup):
         pb = self.pb = _need("pybullet")
         st, walls, settings = scene.state, scene.walls, scene.settings
-        e_spheres, e_walls, restitution_words = _restitution_factors(scene)
+        e_spheres, e_walls, e_meshes, restitution_words = _restitution_factors(scene)
         self.client = client = pb.connect(pb.DIRECT)
         pb.setGravity(*settings.gravity, physicsClientId=client)
         pb.setTimeStep(scene.dt, physicsClientId=client)
@@ -224,6 +227,14 @@ class _Pybullet(PeerWorld):
                                       baseOrientation=_plane_quaternion(normal), physicsClientId=client)
             pb.changeDynamics(wall, -1, restitution=float(e), lateralFriction=0.0, rollingFriction=0.0,
                               spinningFriction=0.0, physicsClientId=client)
+        meshes = walls.meshes
+        for k in range(len(meshes)):  # each fixed mesh: a static triangle mesh (mass 0), in the world frame
+            corners = meshes.corners[meshes.mesh_of == k].reshape(-1, 3)
+            shape = pb.createCollisionShape(pb.GEOM_MESH, vertices=corners.tolist(),
+                                            indices=list(range(len(corners))), physicsClientId=client)
+            mesh = pb.createMultiBody(0, shape, physicsClientId=client)
+            pb.changeDynamics(mesh, -1, restitution=float(e_meshes[k]), lateralFriction=0.0, rollingFriction=0.0,
+                              spinningFriction=0.0, physicsClientId=client)
         shapes: dict[float, int] = {}
         self.bodies = []
         for x, v, inv, r, e in zip(st.positions, st.velocities, st.inverse_mass, st.radius, e_spheres, strict=True):
@@ -236,11 +247,14 @@ class _Pybullet(PeerWorld):
             pb.changeDynamics(body, -1, restitution=float(e), lateralFriction=0.0, rollingFriction=0.0,
                               spinningFriction=0.0, linearDamping=1.0 - float(settings.drag), angularDamping=0.0,
                               physicsClientId=client)
+            if setup.ccd:
+                pb.changeDynamics(body, -1, ccdSweptSphereRadius=0.9 * float(r), physicsClientId=client)
             self.bodies.append(body)
         version = pb.getAPIVersion(physicsClientId=client)
         self.notes = [f"pybullet (API {version}): one stepSimulation per step of {scene.dt:g} s, its default solver "
                       f"and sleeping; restitution {restitution_words}; friction off; linearDamping = 1 − drag, "
-                      f"angularDamping 0"]
+                      f"angularDamping 0" + ("; continuous collision on (ccdSweptSphereRadius 0.9 r)" if setup.ccd
+                                             else "") + ("; each mesh a static triangle mesh" if len(meshes) else "")]
 
     def step(self) -> None:
         self.pb.stepSimulation(physicsClientId=self.client)
@@ -286,6 +300,13 @@ class _Mujoco(PeerWorld):
                     if two_sided else 'type="plane" size="0 0 1"')
             geoms.append(f'<geom name="wall{k}" {kind} pos="{fmt(normal * offset)}" zaxis="{fmt(normal)}" condim="1" '
                          f'{solref(float(e))}/>')
+        meshes = walls.meshes
+        assets = []
+        for k in range(len(meshes)):  # MuJoCo collides with a mesh's convex hull: exact for a box-shaped slab
+            corners = meshes.corners[meshes.mesh_of == k].reshape(-1, 3)
+            assets.append(f'<mesh name="mesh{k}" vertex="{fmt(corners.ravel())}"/>')
+            geoms.append(f'<geom name="meshgeom{k}" type="mesh" mesh="mesh{k}" condim="1" '
+                         f'{solref(float(meshes.restitution[k]))}/>')
         damping = -math.log(settings.drag) if 0.0 < settings.drag < 1.0 else 0.0
         self.movable = []
         for i, (x, inv, r, e) in enumerate(zip(st.positions, st.inverse_mass, st.radius, st.restitution,
@@ -302,7 +323,8 @@ class _Mujoco(PeerWorld):
         if not setup.midphase:
             flags.append('midphase="disable"')
         memory = max(64, 400 * st.count // 1000)  # MB: the default arena is too small for thousands of free bodies
-        xml = (f'<mujoco><size memory="{memory}M"/><option timestep="{dt!r}" gravity="{fmt(settings.gravity)}" '
+        xml = (f'<mujoco><size memory="{memory}M"/>' + (f'<asset>{"".join(assets)}</asset>' if assets else '')
+               + f'<option timestep="{dt!r}" gravity="{fmt(settings.gravity)}" '
                f'solver="{setup.solver}" iterations="{setup.iterations}"><flag {" ".join(flags)}/></option>'
                f'<worldbody>{"".join(geoms)}</worldbody></mujoco>')
         try:
@@ -319,7 +341,8 @@ class _Mujoco(PeerWorld):
                                                                  if getattr(setup, name))
                       + f"; soft spring–damper contacts lasting {CONTACT_STEPS} steps, damped to return each geom's "
                         f"restitution (MuJoCo mixes two geoms' solref by averaging); frictionless (condim 1); drag as "
-                        f"free-joint damping"]
+                        f"free-joint damping" + ("; each mesh as its convex hull (MuJoCo's meshes are convex)"
+                                                 if len(meshes) else "")]
 
     def step(self) -> None:
         self.mujoco.mj_step(self.model, self.data)

@@ -481,7 +481,7 @@ def _meshes(c: _Checker, raw: dict, max_memory: float) -> Meshes:
     from .errors import MeshError
     from .meshes import load_mesh
 
-    names, restitution, corners, mesh_of, sources = [], [], [], [], []
+    names, restitution, corners, mesh_of, sources, notes = [], [], [], [], [], []
     folder = Path(c.source).parent if Path(c.source).is_file() else Path.cwd()
     for k, table in enumerate(c.tables(raw, "meshes", "meshes")):
         p = f"meshes.{k}."
@@ -509,9 +509,7 @@ def _meshes(c: _Checker, raw: dict, max_memory: float) -> Meshes:
         except MeshError as err:
             c.fail(p + ("shape" if "shape" in table else "file"), str(err))
         if mesh.skipped:
-            import warnings
-
-            warnings.warn(mesh.skipped_words(), stacklevel=2)
+            notes.append(mesh.skipped_words())
         pose = Pose.of(position, rotation)
         corners.append(pose.apply(mesh.vertices * scale)[mesh.faces])
         mesh_of.append(np.full(mesh.triangles, k, dtype=np.int64))
@@ -519,7 +517,7 @@ def _meshes(c: _Checker, raw: dict, max_memory: float) -> Meshes:
         sources.append(mesh.source)
     if not names:
         return Meshes()
-    return Meshes(names, np.array(restitution), np.concatenate(corners), np.concatenate(mesh_of), sources)
+    return Meshes(names, np.array(restitution), np.concatenate(corners), np.concatenate(mesh_of), sources, notes)
 
 
 def _validate(raw: dict, source: str, origins: dict[str, str], meshes: Meshes | None = None) -> Scene:

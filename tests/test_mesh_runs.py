@@ -222,3 +222,14 @@ def test_the_funnel_scene_pours_every_sphere_through_the_spout_with_a_clean_audi
         end = world.step(dt)
     assert np.all(world.state.positions[:, 1] < 1.0)  # all below the spout, on the floor
     assert end.max_overlap <= scene.settings.contact_tolerance
+
+
+def test_a_scene_s_degenerate_triangles_are_named_in_the_run_summary_not_as_a_python_warning(tmp_path):
+    (tmp_path / "flat.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nf 1 2 3\nf 1 2 4\n")
+    scene = tmp_path / "s.toml"
+    scene.write_text('dt = 0.01\nsteps = 2\n[[meshes]]\nfile = "flat.obj"\n[[particles]]\n'
+                     'position = [0.2, 0.2, 1.0]\nradius = 0.1\n')
+    done = runner.invoke(app, ["run", str(scene)])
+    assert done.exit_code == 0 and "Warning" not in done.output, done.output
+    assert "meshes      " + str(tmp_path / "flat.obj") + ": skipped 1 degenerate triangle(s): line 6 (zero area)" \
+        in done.output

@@ -56,3 +56,23 @@ def test_a_peer_is_refused_clearly(tmp_path):
     done = CliRunner().invoke(app, ["record-peer", "pybullet", "bounce", "-s", "duration=500000",
                                     "-o", str(tmp_path / "x.mcap")])
     assert done.exit_code == 2 and "more than a peer run may take" in done.output
+
+
+@pytest.mark.parametrize("setup", ["pybullet", "pybullet +ccd", "mujoco"])
+def test_a_peer_collides_with_the_scene_s_meshes(setup):
+    """record-peer and the benchmarks translate fixed meshes too: a static triangle mesh in
+    pybullet, its convex hull in MuJoCo. A ball dropped on a ramp lands on it, above the floor."""
+    from physdbg.peers import PeerSetup, build
+
+    _need(setup.split()[0])
+    peer_setup = PeerSetup(setup.split()[0], ccd=setup.endswith("+ccd"))
+    scene = load_scene("ramp", ["duration=0.7"])  # long enough that a free fall would end below 0
+    peer = build(scene, peer_setup)
+    try:
+        for _ in range(scene.steps):
+            peer.step()
+        heights = peer.positions()[:, 1]
+        assert np.all(heights > 0.2)  # on the ramps (the floor would leave them at 0.1 m)
+        assert "mesh" in peer.notes[-1]
+    finally:
+        peer.close()

@@ -241,6 +241,7 @@ def summary_text(s, observers: str = "the audit") -> str:
         f"broad phase {s.broad_phase}: {s.broad_phase_reason}",
         f"bodies      {count_words(s.particles, 'particle')}, {count_words(len(s.walls), 'wall')}"
         + _mesh_words(getattr(s, "meshes", {})),
+        *(f"meshes      {note}" for note in getattr(s, "mesh_notes", [])),
         f"steps       {s.steps}  ({s.sim_time:.6g} s simulated, {dt_text})",
         f"contacts    {s.contacts}  (at most {s.max_contacts_in_a_step} in a step; {s.swept_tests} swept tests; "
         f"{s.rapid} rapid, {s.released} released; {s.held_at_end} held at the end)",

@@ -148,7 +148,8 @@ class Meshes:
     names (M,) and restitution (M,) per mesh; corners (T, 3, 3) m: every triangle's
     corners as rows, the meshes' triangles one after another; mesh_of (T,) int64: whose
     each is; first (M + 1,) int64: where each mesh's triangles start (and the end);
-    sources (M,): the file or "shape NAME" each came from.
+    sources (M,): the file or "shape NAME" each came from; notes: what loading them left
+    out (degenerate triangles, by line), for the run summary.
     """
 
     names: list[str] = field(default_factory=list)
@@ -156,6 +157,7 @@ class Meshes:
     corners: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
     mesh_of: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     sources: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.corners = np.ascontiguousarray(self.corners, dtype=np.float64).reshape(-1, 3, 3)
