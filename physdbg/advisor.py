@@ -92,16 +92,23 @@ def advise(scene) -> Advice:
     duration = scene.duration if scene.duration is not None else (scene.steps or 0) * (scene.dt or 0.0)
     dt = scene.dt if scene.dt is not None else scene.max_dt  # a real-time run's steps are at most max_dt
     bound, bound_why = _speed_bound(state, walls, np.asarray(s.gravity, dtype=float), duration)
+    surface = walls.meshes.surface_speeds()  # (M,) m/s: each kinematic mesh's fastest surface point
+    if surface.size and surface.max() > 0:
+        # a moving mesh does work on what it strikes, every time: no energy bounds a sphere
+        bound += 2.0 * float(surface.max())
+        bound_why = (f"an estimate, not a bound (a kinematic mesh can add energy at every strike): {bound_why}, plus "
+                     f"twice the fastest kinematic mesh surface ({surface.max():.3g} m/s), what one strike adds")
     reach = bound * duration  # how far any sphere can get from where it starts
     r = state.radius
     r_min = float(r.min()) if n else 0.0
-    contacts_possible = _contacts_possible(state.positions, r, movable, reach, walls)
+    contacts_possible = _contacts_possible(state.positions, r, movable, reach, walls, duration)
     periodic = _periodic_fit(walls, r, bound, dt)
-    two_sided = [(f"wall '{name}'", float(t)) for name, two, t
+    two_sided = [(f"wall '{name}'", float(t), 0.0) for name, two, t
                  in zip(walls.names, walls.two_sided, walls.thickness, strict=True) if two]
     # a mesh's triangles have no thickness: a centre carried past one by more than a
-    # radius is through it, as through a two-sided wall of thickness 0
-    two_sided += [(f"mesh '{name}'", 0.0) for name in walls.meshes.names]
+    # radius is through it, as through a two-sided wall of thickness 0; a kinematic mesh
+    # closes on a sphere faster by its own surface speed
+    two_sided += [(f"mesh '{name}'", 0.0, float(u)) for name, u in zip(walls.meshes.names, surface, strict=True)]
     several = n >= 3 or (n >= 2 and len(walls) > 0)  # a step can hold more than one contact
     facts = {"particles": n, "walls": len(walls), "meshes": mesh_sizes(walls.meshes), "speed_bound": bound, "speed_bound_why": bound_why, "dt": dt, "duration": duration,
              "gravity": gravity, "drag": s.drag, "radius_min": r_min, "radius_max": float(r.max()) if n else 0.0,
@@ -166,8 +173,11 @@ def _detection(name, contacts_possible, bound, dt, samples, r_min, two_sided, n)
         return Prediction("detection", name, "safe", "every contact at its time of impact, at any speed and dt")
     if not contacts_possible:
         return Prediction("detection", name, "safe", "no contact can happen in this run")
-    travel = bound * dt / (samples if name == "sampled" else 1)  # the most a test's interval can carry a centre
-    tunnels = [f"{wall} (t/2 + r = {t / 2 + r_min:.3g} m)" for wall, t in two_sided if travel > t / 2 + r_min]
+    per = dt / (samples if name == "sampled" else 1)
+    travel = bound * per  # the most a test's interval can carry a centre
+    tunnels = [f"{wall} (t/2 + r = {t / 2 + r_min:.3g} m" + (f"; it moves at up to {extra:.3g} m/s itself)" if extra
+                                                              else ")")
+               for wall, t, extra in two_sided if (bound + extra) * per > t / 2 + r_min]
     if n >= 2 and 2 * travel > 2 * r_min:
         tunnels.append(f"another sphere (r_a + r_b = {2 * r_min:.3g} m at closing speeds up to {2 * bound:.3g} m/s)")
     step = f"{travel:.3g} m a {'sample' if name == 'sampled' else 'step'} at {bound:.3g} m/s"
@@ -313,7 +323,7 @@ def _periodic_fit(walls, r, bound: float, dt: float) -> dict | None:
     return {"axes": axes, "period": period, "width": width, "fits": fits, "why": why}
 
 
-def _contacts_possible(x, r, movable, reach, walls) -> bool:
+def _contacts_possible(x, r, movable, reach, walls, duration: float = 0.0) -> bool:
     """Whether any two spheres, or a sphere and a wall or a mesh, can touch within the run:
     each movable sphere stays within ``reach`` of where it starts (in a periodic box, pairs
     are as near as their nearest images; a mesh is as near as its nearest corner's box)."""
@@ -334,7 +344,11 @@ def _contacts_possible(x, r, movable, reach, walls) -> bool:
     if walls.meshes.triangles:
         corners = walls.meshes.corners.reshape(-1, 3)
         lo, hi = corners.min(axis=0), corners.max(axis=0)  # the meshes' box: no sphere farther can touch one
-        outside = np.linalg.norm(np.maximum(0.0, np.maximum(lo - x, x - hi)), axis=1)
+        # a kinematic mesh can be anywhere within its turning radius and its drift of where it starts
+        meshes = walls.meshes
+        spread = float(np.max(meshes.turn_radii() * (np.linalg.norm(meshes.angular_velocity, axis=1) > 0)
+                              + np.linalg.norm(meshes.velocity, axis=1) * duration, initial=0.0))
+        outside = np.linalg.norm(np.maximum(0.0, np.maximum(lo - spread - x, x - hi - spread)), axis=1)
         if np.any(outside <= extent):
             return True
     return False

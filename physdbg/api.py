@@ -85,6 +85,7 @@ class RunSummary:
 
     meshes: dict[str, int] = field(default_factory=dict)  # each fixed mesh's name: its triangles
     mesh_notes: list[str] = field(default_factory=list)  # what loading the meshes left out
+    meshes_move: bool = False  # two meshes or more, one kinematic: the audit looks for them passing into each other
     def as_dict(self) -> dict:
         return asdict(self)
 
@@ -175,7 +176,10 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         broad_phase=world.broad_phase.name,
         broad_phase_reason=world.broad_phase_reason,
         particles=st.count, walls=list(scene.walls.names), meshes=mesh_sizes(scene.walls.meshes),
-        mesh_notes=list(scene.walls.meshes.notes), steps=n_steps,
+        meshes_move=bool(scene.walls.meshes.moving.any()) and len(scene.walls.meshes) > 1,
+        mesh_notes=list(scene.walls.meshes.notes) + [
+            f"'{name}' {scene.walls.meshes.motion_words(k)}" for k, name in enumerate(scene.walls.meshes.names)
+            if scene.walls.meshes.moving[k]], steps=n_steps,
         sim_time=world.time,
         contacts=tally.total["contacts"], swept_tests=tally.total["swept_tests"],
         held_at_end=tally.total["held"], rapid=tally.total["rapid"], released=tally.total["released"],

@@ -121,12 +121,14 @@ class ContactResolved:
     point: (3,) contact point on the surface of ``a``; normal: (3,) unit, from b (or the
     wall) towards a. impulse: j (N·s) applied along ``normal`` to ``a`` (and -j to b);
     for a wall it is m_a times the change of normal speed (inf for an immovable sphere).
-    velocity_*: (3,) m/s just before and after. restitution: the combined coefficient
+    velocity_*: (3,) m/s just before and after (b's: None for a partner standing still,
+    a kinematic mesh's surface velocity at the point). restitution: the combined coefficient
     used; resting: True when the contact was held (restitution 0: the resting rule or
     the rapid-contact rule). closing_speed: normal approach speed before the contact
     (m/s, >= 0). how: HOW_IMPULSE (the seed's impulse alone), HOW_RESTING, HOW_RAPID
     (held by that rule) or HOW_WITH_HELD (an impulse solved together with the held
-    contacts it reached, which also moved other spheres).
+    contacts it reached, which also moved other spheres). feature: for a mesh's triangle,
+    1 + the index in FEATURE_NAMES of where it was touched (face, edge, corner); else 0.
     """
 
     step: int
@@ -146,6 +148,7 @@ class ContactResolved:
     closing_speed: float
     resting: bool
     how: int = 0
+    feature: int = 0
 
 
 # The contact row: one schema for the compiled loop's buffer, the Contacts event and the
@@ -157,7 +160,17 @@ CONTACT_FIELDS = [
     ("velocity_a_before", "<f8", (3,)), ("velocity_a_after", "<f8", (3,)),
     ("velocity_b_before", "<f8", (3,)), ("velocity_b_after", "<f8", (3,)),
     ("restitution", "<f8", ()), ("closing_speed", "<f8", ()),
+    # the feature of a mesh's triangle touched: 0 for any other partner (and in files made
+    # before it was kept), else 1 + its index in FEATURE_NAMES
+    ("feature", "i1", ()),
 ]
+# a triangle's features (engine/mesh/closest.py's codes): where a sphere touches it
+FEATURE_NAMES = ("face", "edge 0-1", "edge 1-2", "edge 2-0", "corner 0", "corner 1", "corner 2")
+
+
+def feature_words(feature: int) -> str:
+    """A contact row's feature in words: "" for none, else "face", "edge 1-2", "corner 0"."""
+    return FEATURE_NAMES[feature - 1] if 0 < feature <= len(FEATURE_NAMES) else ""
 CONTACT_ROW = np.dtype([(name, kind, shape) if shape else (name, kind) for name, kind, shape in CONTACT_FIELDS])
 
 
@@ -175,7 +188,9 @@ class Contacts:
     wrote (a copy). Each field is also an attribute, a view of its column:
     time_in_step: (M,) s; kind: (M,) int8; a, other: (M,) int32; point, normal,
     velocity_a_before, velocity_a_after: (M, 3); velocity_b_before/after: (M, 3), NaN rows
-    for walls; impulse, restitution, closing_speed: (M,); how: (M,) int8 HOW_*. resting:
+    for walls and fixed meshes, a kinematic mesh's surface velocity at the point; impulse,
+    restitution, closing_speed: (M,); how: (M,) int8 HOW_*; feature: (M,) int8 (a mesh
+    triangle's face, edge or corner touched: feature_words). resting:
     (M,) bool, derived from ``how`` (held by the resting or the rapid-contact rule).
     Meanings as in :class:`ContactResolved`; ``record(i)`` or iteration gives one contact
     as that type.
@@ -202,6 +217,7 @@ class Contacts:
     velocity_b_after = _column("velocity_b_after")
     restitution = _column("restitution")
     closing_speed = _column("closing_speed")
+    feature = _column("feature")
 
     @property
     def resting(self) -> np.ndarray:
@@ -222,14 +238,16 @@ class Contacts:
 
     def record(self, i: int) -> ContactResolved:
         r = self.rows[i]
-        pair = PARTNER_IS_SPHERE[int(r["kind"])]
+        # a sphere partner's velocities, or a kinematic mesh's surface's (a fixed one's are NaN)
+        moves = PARTNER_IS_SPHERE[int(r["kind"])] or bool(np.isfinite(r["velocity_b_before"]).all())
         how = int(r["how"])
         return ContactResolved(
             self.step, i, float(r["time_in_step"]), int(r["kind"]), int(r["a"]), int(r["other"]),
             r["point"].copy(), r["normal"].copy(), float(r["impulse"]),
             r["velocity_a_before"].copy(), r["velocity_a_after"].copy(),
-            r["velocity_b_before"].copy() if pair else None, r["velocity_b_after"].copy() if pair else None,
-            float(r["restitution"]), float(r["closing_speed"]), how in (HOW_RESTING, HOW_RAPID), how)
+            r["velocity_b_before"].copy() if moves else None, r["velocity_b_after"].copy() if moves else None,
+            float(r["restitution"]), float(r["closing_speed"]), how in (HOW_RESTING, HOW_RAPID), how,
+            int(r["feature"]))
 
     def __iter__(self):
         return (self.record(i) for i in range(len(self)))

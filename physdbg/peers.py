@@ -114,7 +114,8 @@ def available(engine: str) -> bool:
 
 
 def check_scene(name: str, scene) -> None:
-    """PeerError when the peer cannot run the scene (a real-time dt, a periodic box, too long)."""
+    """PeerError when the peer cannot run the scene (a real-time dt, a periodic box, a
+    kinematic mesh, too long)."""
     if name not in PEERS:
         raise PeerError(f"unknown peer {name!r}; choose one of {', '.join(PEERS)}")
     if scene.dt is None:
@@ -122,6 +123,10 @@ def check_scene(name: str, scene) -> None:
     if scene.walls.periodic:
         raise PeerError(f"scene '{scene.name}' has a periodic box, which {name} has no counterpart for; "
                         f"record-peer translates closed boxes and planes only")
+    moving = [m for m, move in zip(scene.walls.meshes.names, scene.walls.meshes.moving, strict=True) if move]
+    if moving:
+        raise PeerError(f"scene '{scene.name}' has a kinematic mesh ({', '.join(repr(m) for m in moving)}), which "
+                        f"record-peer does not move in {name} yet: the peer would see it fixed")
     if scene.state.count * scene.steps > MAX_PEER_BODY_STEPS:
         bodies = "1 body" if scene.state.count == 1 else f"{scene.state.count} bodies"
         raise PeerError(f"{bodies} × {scene.steps} steps is more than a peer run may take "

@@ -125,6 +125,10 @@ MESH_FIELDS = {
     "rotation": "[x, y, z] in degrees: turned about the world's x, then y, then z axis (default [0, 0, 0])",
     "scale": "multiplies the mesh's size: a number > 0, or [x, y, z] each > 0 along the mesh's own axes (default 1)",
     "restitution": "0 <= e <= 1 (default 1)",
+    "velocity": "[x, y, z] in m/s: a kinematic mesh's constant velocity (default [0, 0, 0]: fixed)",
+    "angular_velocity": "[x, y, z] in degrees per second: a kinematic mesh turns at this rate about its pivot "
+                        "(default [0, 0, 0])",
+    "pivot": "[x, y, z] in m: the point the mesh turns about at time 0 (default: its position)",
 }
 BOX_FIELDS = {
     "min": "[x, y, z] lower corner (m)",
@@ -482,6 +486,7 @@ def _meshes(c: _Checker, raw: dict, max_memory: float) -> Meshes:
     from .meshes import load_mesh
 
     names, restitution, corners, mesh_of, sources, notes = [], [], [], [], [], []
+    velocity, angular_velocity, pivot = [], [], []
     folder = Path(c.source).parent if Path(c.source).is_file() else Path.cwd()
     for k, table in enumerate(c.tables(raw, "meshes", "meshes")):
         p = f"meshes.{k}."
@@ -504,6 +509,10 @@ def _meshes(c: _Checker, raw: dict, max_memory: float) -> Meshes:
         else:
             scale = c.number(table, "scale", p + "scale", default=1.0, lo=0, lo_open=True)
         restitution.append(c.number(table, "restitution", p + "restitution", default=1.0, lo=0, hi=1))
+        velocity.append(c.vector(table, "velocity", p + "velocity", (0.0, 0.0, 0.0)))
+        angular_velocity.append(np.radians(c.vector(table, "angular_velocity", p + "angular_velocity",
+                                                    (0.0, 0.0, 0.0))))
+        pivot.append(c.vector(table, "pivot", p + "pivot", tuple(position)))
         try:
             mesh = load_mesh(spec, name, max_memory=max_memory, hull=False)
         except MeshError as err:
@@ -517,7 +526,8 @@ def _meshes(c: _Checker, raw: dict, max_memory: float) -> Meshes:
         sources.append(mesh.source)
     if not names:
         return Meshes()
-    return Meshes(names, np.array(restitution), np.concatenate(corners), np.concatenate(mesh_of), sources, notes)
+    return Meshes(names, np.array(restitution), np.concatenate(corners), np.concatenate(mesh_of), sources, notes,
+                  np.array(velocity), np.array(angular_velocity), np.array(pivot))
 
 
 def _validate(raw: dict, source: str, origins: dict[str, str], meshes: Meshes | None = None) -> Scene:

@@ -29,14 +29,22 @@ def test_the_recommended_settings_never_tunnel_overlap_or_blow_up(name):
 
 @pytest.mark.parametrize("name", builtin_names())
 def test_no_sphere_outruns_the_speed_bound(name):
+    """The speed bound holds in every built-in scene; where it cannot be a bound (a
+    kinematic mesh pumps energy at every strike: paddle) the advice says it is an estimate,
+    and the run shows why: a sphere goes faster than one strike can make it."""
     scene = load_scene(name)
-    bound = advise(scene).facts["speed_bound"]
+    facts = advise(scene).facts
+    bound = facts["speed_bound"]
     world = scene.build_world()
     fastest = 0.0
     for dt in scene.step_lengths():
         world.step(dt)
         fastest = max(fastest, float(np.linalg.norm(world.state.velocities, axis=1).max()))
-    assert fastest <= bound * (1 + 1e-9), (fastest, bound)
+    if scene.walls.meshes.moving.any():
+        assert facts["speed_bound_why"].startswith("an estimate, not a bound (a kinematic mesh can add energy")
+        assert fastest > bound
+    else:
+        assert fastest <= bound * (1 + 1e-9), (fastest, bound)
 
 
 def test_predicted_failures_happen():

@@ -167,3 +167,27 @@ def test_a_hull_too_big_to_pay_is_skipped_and_said():
     assert 2 * len(tree.hull_offsets) * len(tree.hull_points) > HULL_TEST_WORK
     found = descend(tree, Pose(), tree, Pose.of((1.02, 0.0, 0.0)), "aabb")
     assert found.hull_test == "too big" and not found.meet and found.volume_tests > 0
+
+
+@settings(max_examples=30, deadline=None)
+@given(shape=st.sampled_from(["icosphere", "funnel", "paddle", "box-with-hole"]), builder=st.sampled_from(BUILD_NAMES),
+       pose=pose_strategy, seed=st.integers(0, 2**32 - 1))
+def test_spheres_against_a_mesh_find_the_brute_force_triangles_with_every_volume(shape, builder, pose, seed):
+    """engine/mesh/query.py: each sphere's lowest touching triangle, by a walk of the BVH
+    with the sphere, the AABB or the OBB at every node, is the all-triangles answer; and
+    the walk culls (fewer triangle tests than spheres × triangles)."""
+    from physdbg.engine.mesh.query import brute_force as spheres_brute_force
+    from physdbg.engine.mesh.query import query_spheres
+
+    tree = _TREES[(shape, builder)]
+    placed = Pose.of(*pose)
+    corners = placed.apply(tree.vertices)
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    rng = np.random.default_rng(seed)
+    centers = rng.uniform(lo - 0.2, hi + 0.2, (60, 3))
+    radii = rng.uniform(0.01, 0.15, 60)
+    expected = spheres_brute_force(tree, placed, centers, radii)
+    for volume in VOLUME_NAMES:
+        found = query_spheres(tree, placed, centers, radii, volume)
+        assert found.first.tolist() == expected.tolist(), volume
+        assert found.triangle_tests < 60 * tree.faces.shape[0]

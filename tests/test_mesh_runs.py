@@ -233,3 +233,216 @@ def test_a_scene_s_degenerate_triangles_are_named_in_the_run_summary_not_as_a_py
     assert done.exit_code == 0 and "Warning" not in done.output, done.output
     assert "meshes      " + str(tmp_path / "flat.obj") + ": skipped 1 degenerate triangle(s): line 6 (zero area)" \
         in done.output
+
+
+# ----------------------------------------------------------------------------- kinematic meshes
+class _MeshContacts:
+    def __init__(self):
+        self.rows = []
+
+    def on_event(self, event):
+        if isinstance(event, Contacts):
+            for i in np.flatnonzero(event.kind == KIND_MESH):
+                self.rows.append((event.step, event.time_in_step[i], event.a[i], event.point[i].copy(),
+                                  event.normal[i].copy(), event.velocity_a_before[i].copy(),
+                                  event.velocity_a_after[i].copy(), event.velocity_b_before[i].copy(),
+                                  event.restitution[i]))
+
+
+def test_the_paddle_strikes_every_ball_and_its_surface_velocity_enters_each_impulse():
+    """Every ball is struck; at each strike the recorded surface velocity is the paddle's
+    own, ω × (point - pivot), computed here from the scene, and the impulse reverses the
+    normal velocity *relative to that surface* by the restitution used."""
+    scene = api.load_scene("paddle")
+    meshes = scene.walls.meshes
+    assert meshes.moving.tolist() == [True]
+    seen = _MeshContacts()
+    world = scene.build_world(seen)
+    for dt in scene.step_lengths():
+        end = world.step(dt)
+    assert {int(a) for _s, _t, a, *_ in seen.rows} == set(range(scene.state.count))
+    spin, pivot = meshes.angular_velocity[0], meshes.pivot[0]
+    for step, when, _a, point, normal, before, after, surface, e in seen.rows:
+        assert np.allclose(surface, np.cross(spin, point - pivot), rtol=1e-9, atol=1e-9)
+        closing = -(before - surface) @ normal
+        assert closing > 0
+        assert (after - surface) @ normal == pytest.approx(e * closing, rel=1e-9, abs=1e-9)
+    assert end.max_overlap <= scene.settings.contact_tolerance
+
+
+def test_a_moving_mesh_sweeps_a_resting_ball_away_at_twice_its_surface_speed(tmp_path):
+    """A wall of triangles sliding at 3 m/s into a ball at rest (no gravity, e = 1): the
+    ball leaves at 6 m/s, the seed's impulse against a partner of infinite mass that
+    moves; the contact is found at the instant the gap closes."""
+    scene = tmp_path / "push.toml"
+    scene.write_text('dt = 0.01\nsteps = 20\ngravity = [0.0, 0.0, 0.0]\n'
+                     '[[meshes]]\nshape = "box"\nscale = [0.1, 1.0, 1.0]\nposition = [-0.5, 0.0, 0.0]\n'
+                     'velocity = [3.0, 0.0, 0.0]\n'
+                     '[[particles]]\nposition = [0.0, 0.0, 0.0]\nradius = 0.1\n')
+    loaded = api.load_scene(str(scene))
+    seen = _MeshContacts()
+    world = loaded.build_world(seen)
+    for dt in loaded.step_lengths():
+        world.step(dt)
+    assert len(seen.rows) == 1
+    step, when, *_ = seen.rows[0]
+    # the box's face (x = -0.45) meets the ball (x = -0.1) after 0.35 m at 3 m/s
+    assert step * 0.01 + when == pytest.approx(0.35 / 3.0, rel=1e-9)
+    assert world.state.velocities[0] == pytest.approx([6.0, 0.0, 0.0], rel=1e-12)
+
+
+def test_a_discrete_paddle_run_is_tunnelling_by_the_paddle_named_by_explain(tmp_path):
+    recorded = tmp_path / "paddle.mcap"
+    done = runner.invoke(app, ["record", "paddle", "-s", "detection=discrete", "-s", "duration=0.3", "-o",
+                               str(recorded), "--no-rrd"])
+    assert done.exit_code == 0, done.output
+    explained = runner.invoke(app, ["explain", str(recorded), "--json", "--all"])
+    findings = [f for f in json.loads(explained.output)["findings"] if f["kind"] == "tunnelling"]
+    assert findings
+    first = findings[0]
+    assert first["message"].startswith(f"mesh 'paddle' triangle {first['evidence']['triangle']} (turns at 1080 "
+                                       f"deg/s (3 rev/s) about [0, 0.12, 0]) swept through sphere "
+                                       f"{first['particles'][0]} with no contact")
+    assert first["advice"].startswith("use detection = swept")
+    swept = runner.invoke(app, ["run", "paddle", "-s", "duration=0.3"])
+    assert swept.exit_code == 0 and "audit       clean" in swept.output, swept.output
+    assert "meshes      'paddle' turns at 1080 deg/s (3 rev/s) about [0, 0.12, 0]" in swept.output
+
+
+def test_a_kinematic_mesh_recording_keeps_its_motion_and_replays_bit_for_bit(tmp_path):
+    recorded = tmp_path / "paddle.mcap"
+    done = runner.invoke(app, ["record", "paddle", "-s", "duration=0.5", "-o", str(recorded), "--no-rrd"])
+    assert done.exit_code == 0, done.output
+    assert runner.invoke(app, ["replay", str(recorded), "--verify"]).exit_code == 0
+    from physdbg import open_recording
+
+    with open_recording(recorded) as rec:
+        meshes = rec.header.walls.meshes
+        scene = api.load_scene("paddle").walls.meshes
+        assert np.array_equal(meshes.angular_velocity, scene.angular_velocity)
+        assert np.array_equal(meshes.pivot, scene.pivot) and np.array_equal(meshes.corners, scene.corners)
+    assert runner.invoke(app, ["diff", str(recorded), str(recorded)]).exit_code == 0
+    # the Foxglove view poses the paddle every frame where it is (3 rev/s: 18 degrees a step)
+    from mcap_protobuf.decoder import DecoderFactory
+    from mcap.reader import make_reader
+
+    with open(recorded, "rb") as f:
+        poses = [e.triangles[0].pose for _, _, _, message in make_reader(f, decoder_factories=[DecoderFactory()])
+                 .iter_decoded_messages(topics=["/view/scene"]) for e in message.entities if e.id == "mesh paddle"]
+    assert len(poses) == 31  # the first frame and each of 30 steps
+    turn = 2 * np.degrees(np.arccos(np.clip([p.orientation.w for p in poses], -1, 1)))
+    assert turn[0] == 0.0 and turn[1] == pytest.approx(18.0)
+
+
+def test_a_moving_mesh_s_swept_boxes_hold_its_triangles_through_the_step():
+    """colliders/mesh.place: every node box of the refitted tree holds its triangles at
+    every instant of the step (sampled), for a paddle turning 18 degrees a step."""
+    from physdbg.engine.colliders.mesh import MeshGeometry, place
+
+    scene = api.load_scene("paddle")
+    meshes = scene.walls.meshes
+    group = tuple(MeshGeometry.of(scene.walls))
+    dt = 1 / 60
+    assert place(group, meshes, 0.3, dt) == len(group[5])
+    box_lo, box_hi, leaf = group[3], group[4], group[5]
+    for tau in np.linspace(0.0, dt, 13):
+        corners = meshes.placed(0.3 + tau)[0]
+        for q in np.flatnonzero(leaf >= 0):
+            t = leaf[q]
+            assert np.all(corners[t] >= box_lo[q] - 1e-12) and np.all(corners[t] <= box_hi[q] + 1e-12)
+    root_lo, root_hi = box_lo[0], box_hi[0]
+    assert np.all(box_lo[leaf >= 0] >= root_lo) and np.all(box_hi[leaf >= 0] <= root_hi)
+
+
+def test_the_rerun_view_draws_a_mesh_s_bvh_and_the_search_at_its_first_contact():
+    """mesh_view.search on the engine's own tree finds exactly the triangles whose swept
+    boxes meet a sphere's box (brute force), and its search tree links every visited pair
+    to the pair it descended from."""
+    from physdbg.record import mesh_view
+
+    scene = api.load_scene("paddle")
+    meshes = scene.walls.meshes
+    rng = np.random.default_rng(5)
+    x0 = rng.uniform(-1.5, 1.5, (40, 3)) * [1, 0.1, 1] + [0, 0.1, 0]
+    x1 = x0 + rng.normal(0, 0.2, (40, 3))
+    radius = np.full(40, 0.1)
+    lo, hi = mesh_view.path_boxes(x0, x1, radius)
+    group = mesh_view.engine_tree(meshes)
+    found = mesh_view.search(group, meshes, lo, hi, 0.1, 1 / 60)
+    box_lo, box_hi, leaf = group[3], group[4], group[5]
+    leaves = np.flatnonzero(leaf >= 0)
+    meets = np.all((lo[:, None] <= box_hi[leaves][None]) & (box_lo[leaves][None] <= hi[:, None]), axis=2)
+    assert found.triangles.tolist() == sorted(set(leaf[leaves][np.any(meets, axis=0)].tolist()))
+    assert found.spheres.tolist() == np.flatnonzero(meets.any(axis=1)).tolist()
+    visits = found.visits
+    assert np.all(visits[visits[:, 3] >= 0, 3] < np.flatnonzero(visits[:, 3] >= 0))  # parents come first
+    assert np.all(visits[visits[:, 3] >= 0][:, 0] == visits[visits[visits[:, 3] >= 0, 3], 0])  # same sphere
+    assert len(mesh_view.tree_layout(visits)) == len(visits)
+
+
+def test_a_peer_run_of_a_kinematic_mesh_is_refused_by_name_not_run_with_the_mesh_fixed():
+    done = runner.invoke(app, ["record-peer", "pybullet", "paddle"])
+    assert done.exit_code == 2
+    assert ("scene 'paddle' has a kinematic mesh ('paddle'), which record-peer does not move in pybullet yet: the "
+            "peer would see it fixed") in done.output
+
+
+def test_a_kinematic_mesh_passing_into_another_is_a_mesh_overlap_finding_at_the_instant_they_meet(tmp_path):
+    """A 2 m paddle turning at 180 deg/s about z meets a post whose near corner is at
+    (0.05, 0.75): its side (0.1 m from its axis) reaches the corner when it has turned
+    atan2(0.75, 0.05) - asin(0.1 / |corner|), at 0.436 s; the audit names both meshes and
+    the instant, to a millionth of a step."""
+    scene = tmp_path / "crash.toml"
+    scene.write_text('dt = 0.01\nduration = 1.0\ngravity = [0.0, 0.0, 0.0]\n'
+                     '[[meshes]]\nname = "paddle"\nshape = "paddle"\nscale = [2.0, 1.0, 1.0]\n'
+                     'angular_velocity = [0.0, 0.0, 180.0]\n'
+                     '[[meshes]]\nname = "post"\nshape = "box"\nscale = [0.1, 0.1, 0.5]\nposition = [0.0, 0.8, 0.0]\n'
+                     '[[particles]]\nposition = [0.0, -0.6, 0.0]\nradius = 0.05\n')
+    recorded = tmp_path / "crash.mcap"
+    assert runner.invoke(app, ["record", str(scene), "-o", str(recorded), "--no-rrd"]).exit_code == 0
+    explained = runner.invoke(app, ["explain", str(recorded), "--json", "--all"])
+    assert explained.exit_code == 1, explained.output
+    overlaps = [f for f in json.loads(explained.output)["findings"] if f["kind"] == "mesh-overlap"]
+    assert len(overlaps) == 1 and overlaps[0]["step"] == 44
+    corner = np.hypot(0.05, 0.75)
+    expected = (np.arctan2(0.75, 0.05) - np.arcsin(0.1 / corner)) / np.pi
+    assert overlaps[0]["evidence"]["time"] == pytest.approx(expected, abs=1e-7)
+    assert overlaps[0]["evidence"]["meshes"] == ["paddle", "post"]
+    assert overlaps[0]["message"].startswith("meshes 'paddle' and 'post' pass into each other from t = 0.436")
+    # apart all run long (the post moved out of the sweep): clean, and the summary says it looked
+    scene.write_text(scene.read_text().replace("[0.0, 0.8, 0.0]", "[0.0, 1.3, 0.0]"))
+    clean = runner.invoke(app, ["run", str(scene)])
+    assert clean.exit_code == 0
+    assert "audit       clean (no tunnelling, overlap, out-of-order contact, energy gain or collapse, and no meshes " \
+           "passing into each other)" in clean.output
+
+
+@pytest.mark.parametrize("where, part", [((0.3, -0.2), "face"), ((1.0, 0.4), "edge"), ((1.0, 1.0), "corner")])
+def test_a_contact_with_a_mesh_records_the_face_edge_or_corner_it_touched(tmp_path, where, part):
+    """A ball falling straight onto the 2 m plate (two triangles) over its face, over its
+    outer edge x = 1, or over its corner (1, 1): the contact row's feature, and the event
+    log's words."""
+    from physdbg.events import feature_words
+    from physdbg.record.view import describe_contacts
+
+    (tmp_path / "plate.obj").write_text(PLATE)
+    scene = tmp_path / "drop.toml"
+    scene.write_text(f'dt = 0.01\nsteps = 10\ngravity = [0.0, 0.0, 0.0]\n[[meshes]]\nname = "plate"\nfile = "plate.obj"\n'
+                     f'[[particles]]\nposition = [{where[0]}, {where[1]}, 0.5]\nvelocity = [0.0, 0.0, -10.0]\n'
+                     f'radius = 0.1\n')
+    loaded = api.load_scene(str(scene))
+    rows = []
+
+    class Keep:
+        def on_event(self, event):
+            if isinstance(event, Contacts) and len(event):
+                rows.append(event)
+
+    world = loaded.build_world(Keep())
+    for dt in loaded.step_lengths():
+        world.step(dt)
+    first = rows[0]
+    assert first.kind[0] == KIND_MESH
+    assert feature_words(int(first.feature[0])).startswith(part)
+    line = describe_contacts(1, first, 0.01, loaded.walls.partner_names())[0][0]
+    assert f"hit mesh 'plate' triangle {int(first.other[0])} ({feature_words(int(first.feature[0]))})" in line

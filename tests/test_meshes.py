@@ -137,7 +137,7 @@ def test_cli_overlap_prints_the_search_tree_and_exits_1_when_meshes_meet():
     assert result.exit_code == 1, result.output
     lines = result.output.splitlines()
     assert lines[2] == "volume: obb (auto: B turned, so AABBs would be refitted; an OBB only turns)"
-    assert lines[5].startswith("MEET: 14 triangle pair(s) meet")
+    assert lines[5].startswith("MEET: 16 triangle pair(s) meet")
     assert lines[7] == "  A0×B0 volumes meet" and "more node pairs (--max-lines 0 shows all)" in lines[-1]
 
 

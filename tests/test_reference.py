@@ -148,7 +148,8 @@ def test_the_comparison_has_teeth():
 
 @st.composite
 def scenes_with_a_mesh(draw):
-    """Spheres in a 1 m box around a fixed mesh (a turned paddle or an icosphere) in its middle."""
+    """Spheres in a 1 m box around a mesh (a turned paddle or an icosphere) in its middle,
+    fixed or turning about its centre."""
     from physdbg.engine.mesh import Pose
     from physdbg.engine.state import Meshes
     from physdbg.meshes import load_mesh
@@ -174,8 +175,12 @@ def scenes_with_a_mesh(draw):
     state = State(np.array([positions[i] for i in keep]).reshape(-1, 3), rng.normal(0.0, 3.0, (len(keep), 3)),
                   np.ones(len(keep)), radius[keep], rng.uniform(0.5, 1.0, len(keep)), np.ones(len(keep)))
     walls = _box(1.0, 0.8)
+    # fixed, or kinematic: turning about its centre (up to ~30 rad/s) and drifting a little
+    spin = rng.normal(0.0, 12.0, (1, 3)) if draw(st.booleans()) else np.zeros((1, 3))
+    drift = rng.normal(0.0, 0.05, (1, 3)) if spin.any() else np.zeros((1, 3))
     walls.meshes = Meshes([shape], np.array([draw(st.floats(0.3, 1.0))]), corners,
-                          np.zeros(len(corners), dtype=np.int64), [f"shape {shape}"])
+                          np.zeros(len(corners), dtype=np.int64), [f"shape {shape}"], [], drift, spin,
+                          np.full((1, 3), 0.5))
     method = Settings(integrator=draw(st.sampled_from(["exact", "verlet", "euler", "semi-implicit"])),
                       gravity=draw(st.sampled_from([(0.0, 0.0, 0.0), (0.0, -9.81, 0.0)])))
     return state, walls, method, draw(st.sampled_from([1 / 60, 1 / 240]))
@@ -185,5 +190,5 @@ def scenes_with_a_mesh(draw):
 @given(scenes_with_a_mesh())
 def test_the_compiled_loop_gives_the_reference_contacts_and_states_with_a_mesh(scene):
     """Meshes are a collider kind like the others: both loops meet the same triangles at
-    the same times and end every step in the same state."""
+    the same times and end every step in the same state, also when the mesh turns."""
     _both_loops_agree(*scene, steps=40)

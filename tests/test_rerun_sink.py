@@ -207,3 +207,33 @@ def test_a_pile_falling_asleep_turns_grey_blue_live_and_replayed(tmp_path):
     assert recording.state(0).asleep is None
     assert recording.state(-1).asleep.dtype == bool and recording.state(-1).asleep.all()
 
+
+
+def test_a_mesh_scene_draws_its_bvh_moves_its_kinematic_mesh_and_opens_on_the_search_at_its_first_contact(tmp_path):
+    """paddle: the mesh's BVH by volume and level (static), the paddle's transform every
+    step, and at the first step with a contact on it the search of the triangles' BVH, in
+    3D and as a tree, where the file opens (a second, final blueprint)."""
+    from typer.testing import CliRunner
+
+    from physdbg.cli import app
+
+    rrd = tmp_path / "paddle.rrd"
+    done = CliRunner().invoke(app, ["record", "paddle", "-s", "duration=0.2", "-o", str(tmp_path / "paddle.mcap"),
+                                    "--rrd", str(rrd)])
+    assert done.exit_code == 0, done.output
+    reader = rerun_chunk.RrdReader(rrd)
+    static = {chunk.entity_path for chunk in reader.stream() if chunk.is_static}
+    for volume in ("aabb", "obb", "sphere"):
+        assert {f"/world/meshes/paddle/bvh/{volume}/level_{d}" for d in range(8)} <= static
+    rows = read_rrd(rrd)
+    turned = [k for (entity, k), comps in rows.items() if entity == "/world/meshes/paddle"
+              and any(name.startswith("Transform3D") for name in comps)]
+    assert sorted(turned) == list(range(1, 13))
+    searched = sorted(k for entity, k in rows if entity == "/search/triangles")
+    assert len(searched) == 1
+    assert any(entity == "/world/mesh_search/met" and k == searched[0] for entity, k in rows)
+    logged = [text for (entity, k), comps in rows.items() if entity == "/log" and k == searched[0]
+              for row in comps.get("TextLog:text", []) for text in row]
+    assert any(text.startswith(f"step {searched[0]}: the first contact on a mesh; the search") for text in logged)
+    assert any(f"step {searched[0]}: sphere" in text and "hit mesh 'paddle' triangle" in text for text in logged)
+    assert len(reader.blueprints()) == 2

@@ -17,7 +17,9 @@ Checks (kind: what it means):
 * ``budget``: a step hit the event cap or another work budget and left work undone;
 * ``collapse``: a collision rate that blows up (inelastic collapse). With sleeping on, a
   bed that rattles like that is judged when its spheres are asleep: if every sphere of
-  the step is asleep by the end of the run, sleeping ended it, and a note says so instead.
+  the step is asleep by the end of the run, sleeping ended it, and a note says so instead;
+* ``mesh-overlap``: two meshes, at least one of them kinematic, pass into each other (their
+  prescribed motions are a scene bug: :mod:`.mesh_overlap`).
 """
 
 from __future__ import annotations
@@ -27,12 +29,13 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..events import (HOW_IMPULSE, KIND_MESH, KIND_WALL, PARTNER_IS_SPHERE, Contacts, EngineWarning, StepEnd, contact_words,
+from ..events import (FEATURE_NAMES, HOW_IMPULSE, KIND_MESH, KIND_WALL, PARTNER_IS_SPHERE, Contacts, EngineWarning, StepEnd, contact_words,
                       partner_is_sphere, partner_words)
+from .mesh_overlap import MeshOverlaps
 from .quiet import quiet_numerics
 from .tunnel import StepChecker
 
-FINDING_KINDS = ("tunnelling", "overlap", "order", "energy-gain", "non-finite", "budget", "collapse")
+FINDING_KINDS = ("tunnelling", "overlap", "order", "energy-gain", "non-finite", "budget", "collapse", "mesh-overlap")
 EXAMPLES_PER_KIND = 5
 # a step with more bounces (contacts resolved by an impulse with restitution above 0) than
 # this many per sphere they involve (and at least COLLAPSE_MIN_CONTACTS) is a collision
@@ -137,6 +140,8 @@ class Auditor:
         # with sleeping on, a rattling bed (a collapse finding and its spheres) waits until
         # they are all asleep (then a note: sleeping ended it) or the run ends (a finding)
         self._rattling: list[tuple[Finding, np.ndarray]] = []
+        # meshes whose prescribed motions pass through each other (mesh_overlap.py)
+        self._mesh_overlaps = MeshOverlaps(header.walls.meshes) if header.walls.meshes.moving.any() else None
         self._rattled: list[tuple[int, int]] = []  # (step of the rattle, step all were asleep)
         self._asleep: np.ndarray | None = None  # the last step's asleep mask
 
@@ -155,6 +160,8 @@ class Auditor:
         step = end.step + 1
         contacts = self._contacts
         self._check_warnings(step)
+        if self._mesh_overlaps is not None and self._mesh_overlaps.pairs:
+            self._check_mesh_overlap(step, end)
         finite = np.isfinite(end.positions).all() and np.isfinite(end.velocities).all()
         if not finite:
             self._check_finite(step, end)
@@ -192,6 +199,23 @@ class Auditor:
             listener(finding)
 
     # ------------------------------------------------------------------ checks
+    def _check_mesh_overlap(self, step: int, end: StepEnd) -> None:
+        meshes = self.header.walls.meshes
+        for m in self._mesh_overlaps.step(end.time - end.dt, end.time):
+            a, b = meshes.names[m.first], meshes.names[m.second]
+            moving = " and ".join(f"'{meshes.names[k]}' {meshes.motion_words(k)}" for k in (m.first, m.second)
+                                  if meshes.moving[k])
+            at = (f"at the start of the run" if m.time == 0.0 else
+                  f"from t = {m.time:.6g} s ({(m.time - (end.time - end.dt)) / end.dt:.3f}·dt into the step)")
+            self._add(Finding("mesh-overlap", step, [],
+                              f"meshes '{a}' and '{b}' pass into each other {at}: '{a}' triangle {m.triangles[0]} "
+                              f"meets '{b}' triangle {m.triangles[1]} ({moving}); no contact between meshes is "
+                              f"resolved, and a sphere caught between them is crushed",
+                              "a kinematic mesh moves whatever it meets: change the meshes' positions or motions "
+                              "so that they stay apart (physdbg overlap A B --pose ... shows where two meshes meet)",
+                              [float(q) for q in m.point],
+                              {"meshes": [a, b], "triangles": list(m.triangles), "time": m.time}))
+
     def _check_warnings(self, step: int) -> None:
         from ..engine.state import BUDGETS, budget_value
 
@@ -239,7 +263,7 @@ class Auditor:
         return self._pile_hint
 
     def _check_crossings(self, step: int, end: StepEnd, contacts: Contacts | None) -> None:
-        for c in self.checker.check(self._x, self._v, end.positions, end.dt, contacts):
+        for c in self.checker.check(self._x, self._v, end.positions, end.dt, contacts, end.time - end.dt):
             detection = "foreign" if self.header.meta.get("foreign") else self.settings.get("detection", "swept")
             how = {"discrete": "detection = discrete tests only where each step ends",
                    "sampled": f"detection = sampled tests only {self.settings.get('samples', 4)} instants a step"}
@@ -286,11 +310,23 @@ class Auditor:
                 partner = partner_words(c.kind, c.other, self.names)
                 meshes = self.header.walls.meshes
                 mesh = int(meshes.mesh_of[c.other])
-                message = (f"sphere {c.a} went through {partner} with no contact (it moved {speed * end.dt:.3g} m "
-                           f"in the step at {speed:.3g} m/s, ending {_length(c.depth)} past the triangle's plane"
-                           f"{'; ' + how[detection] if detection in how else ''})")
+                part = FEATURE_NAMES[c.feature] if c.feature >= 0 else "face"
+                if meshes.moving[mesh]:  # the mesh swept through the sphere, more than the other way round
+                    arm = np.asarray(c.where) - (meshes.pivot[mesh] + meshes.velocity[mesh] * end.time)
+                    surface = float(np.linalg.norm(meshes.velocity[mesh]
+                                                   + np.cross(meshes.angular_velocity[mesh], arm)))
+                    message = (f"{partner} ({meshes.motion_words(mesh)}) swept through sphere {c.a} with no contact "
+                               f"(across its {part}; its surface there moved {surface * end.dt:.3g} m in the step "
+                               f"at {surface:.3g} m/s, the sphere {speed:.3g} m/s; the sphere ended "
+                               f"{_length(c.depth)} past the triangle's plane"
+                               f"{'; ' + how[detection] if detection in how else ''})")
+                else:
+                    message = (f"sphere {c.a} went through {partner} with no contact (across its {part}; it moved "
+                               f"{speed * end.dt:.3g} m in the step at {speed:.3g} m/s, ending {_length(c.depth)} "
+                               f"past the triangle's plane{'; ' + how[detection] if detection in how else ''})")
                 self._add(Finding("tunnelling", step, [c.a], message, advice, [float(q) for q in c.where],
                                   {"mesh": meshes.names[mesh], "triangle": c.other - int(meshes.first[mesh]),
+                                   "feature": part,
                                    "triangle_index": c.other, "speed": speed, "dt": end.dt,
                                    "detection": detection}))
             else:
@@ -385,9 +421,13 @@ class Auditor:
     def _check_energy(self, step: int, c: Contacts) -> None:
         ma = self.mass[c.a]
         finite_a = np.isfinite(ma)
-        before = np.where(finite_a, 0.5 * ma * np.einsum("ij,ij->i", c.velocity_a_before, c.velocity_a_before), 0.0)
-        after = np.where(finite_a, 0.5 * ma * np.einsum("ij,ij->i", c.velocity_a_after, c.velocity_a_after), 0.0)
         pair = partner_is_sphere(c.kind)
+        # a moving mesh's surface (its velocity is recorded as b's) does work on what it
+        # strikes: the energy that must not grow is the one relative to that surface
+        surface = np.where((~pair & np.isfinite(c.velocity_b_before).all(axis=1))[:, None], c.velocity_b_before, 0.0)
+        va0, va1 = c.velocity_a_before - surface, c.velocity_a_after - surface
+        before = np.where(finite_a, 0.5 * ma * np.einsum("ij,ij->i", va0, va0), 0.0)
+        after = np.where(finite_a, 0.5 * ma * np.einsum("ij,ij->i", va1, va1), 0.0)
         if pair.any():
             mb = self.mass[c.other[pair]]
             finite_b = np.isfinite(mb)

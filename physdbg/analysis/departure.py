@@ -951,7 +951,7 @@ class _Comparison:
         r = self.runs
         if not (np.isfinite(r.xf[s]).all() and np.isfinite(r.xf[s - 1]).all()):
             return []
-        return self._checker.check(r.xf[s - 1], r.vf[s - 1], r.xf[s], float(r.dt[s]), None)
+        return self._checker.check(r.xf[s - 1], r.vf[s - 1], r.xf[s], float(r.dt[s]), None, float(r.t[s - 1]))
 
     def _crossing(self, c: dict):
         """The foreign crossing of contact c's bodies in its step or the next, or None."""
@@ -1021,7 +1021,11 @@ class _Comparison:
         if c["kind"] == KIND_MESH:
             from ..engine.mesh.closest import closest_on_triangle
 
-            q = np.array(closest_on_triangle(*(float(v) for v in x), *self.walls.meshes.corners[c["other"]].ravel())[:3])
+            meshes = self.walls.meshes
+            corners = meshes.corners[c["other"]]
+            if meshes.moving[meshes.mesh_of[c["other"]]]:  # a kinematic mesh, where it was then
+                corners = meshes.placed(float(r.t[s - 1]) + tau)[0][c["other"]]
+            q = np.array(closest_on_triangle(*(float(v) for v in x), *corners.ravel())[:3])
             return float(np.linalg.norm(x - q)) - float(self.radius[a])
         if not PARTNER_IS_SPHERE[c["kind"]]:
             raise _no_geometry(c["kind"])

@@ -664,7 +664,8 @@ class _Differ:
                 after = self._state(rec, step)
                 checker = StepChecker(rec.header.radius, rec.header.inverse_mass, rec.header.gravity_scale,
                                       rec.header.walls, rec.meta["settings"])
-                crossed[label] = checker.check(prev.positions, prev.velocities, after.positions, after.dt, contacts)
+                crossed[label] = checker.check(prev.positions, prev.velocities, after.positions, after.dt, contacts,
+                                               after.time - after.dt)
             for label, other in (("A", "B"), ("B", "A")):
                 theirs = {(c.kind, c.a, c.other) for c in crossed[other]}
                 for c in crossed[label]:

@@ -52,7 +52,9 @@ class Crossing:
     triangle) or KIND_PAIR (other = sphere); time: s after the step began (for walls and
     meshes: NaN, the instant is not known); depth: how far into the other sphere it went
     (m; for walls and triangles the distance past the plane); where: the point the
-    centre's straight path crossed a triangle (meshes only)."""
+    centre's straight path crossed a triangle and feature the triangle's part it crossed
+    (events.FEATURE_NAMES index: its face, or an edge or a corner where it crossed on one;
+    meshes only, else -1)."""
 
     kind: int
     a: int
@@ -60,6 +62,7 @@ class Crossing:
     time: float
     depth: float
     where: tuple[float, float, float] | None = None
+    feature: int = -1
 
 
 @njit(cache=True)
@@ -187,6 +190,39 @@ def pair_crossings(anchor_start, anchor_t, anchor_x, anchor_v, pinned, acc, radi
     return found
 
 
+def _crossed_feature(point: np.ndarray, corners: np.ndarray, tolerance: float = 1e-9) -> int:
+    """Which part of a triangle (corners (3, 3)) a point on it lies on: its face, or an edge
+    or a corner within ``tolerance`` of the triangle's size (events.FEATURE_NAMES order)."""
+    size = float(np.linalg.norm(corners.max(axis=0) - corners.min(axis=0)))
+    near_corner = np.linalg.norm(corners - point, axis=1) <= tolerance * size
+    if near_corner.any():
+        return 4 + int(np.argmax(near_corner))
+    for edge, (p, q) in enumerate(((0, 1), (1, 2), (2, 0))):
+        along = corners[q] - corners[p]
+        s = float(np.clip((point - corners[p]) @ along / (along @ along), 0.0, 1.0))
+        if np.linalg.norm(corners[p] + s * along - point) <= tolerance * size:
+            return 1 + edge
+    return 0
+
+
+def _in_mesh_frame(meshes, k: int, x0: np.ndarray, x1: np.ndarray, time: float, dt: float):
+    """(spheres (K,), triangles (K,), start (K, 3), end (K, 3)): the centres at the step's
+    start (x0, run time ``time``) and end (x1, ``time + dt``) seen from kinematic mesh k
+    where it was at run time 0, paired with each of its triangles whose box their
+    segment's box meets."""
+    ends = []
+    for when, x in ((time, x0), (time + dt, x1)):
+        turn, shift = meshes.transform(k, when)
+        ends.append((x - shift) @ turn)  # R^T (x - shift), row by row
+    start, end = ends
+    own = np.flatnonzero(meshes.mesh_of == k)
+    corners = meshes.corners[own]
+    lo, hi = np.minimum(start, end), np.maximum(start, end)
+    meets = ((lo[:, None, :] <= corners.max(axis=1)[None]) & (hi[:, None, :] >= corners.min(axis=1)[None])).all(axis=2)
+    spheres, which = np.nonzero(meets)
+    return spheres.astype(np.int64), own[which].astype(np.int64), start[spheres], end[spheres]
+
+
 def _segments_through_triangles(start: np.ndarray, end: np.ndarray, corners: np.ndarray):
     """Which segments start→end (K, 3) pass through triangle corners (K, 3, 3) (Möller–
     Trumbore, the triangle's edges included): (hit (K,) bool, the crossing point (K, 3),
@@ -246,9 +282,10 @@ class StepChecker:
         self.pieces = 0
         self.pinned_pieces = 0
 
-    def check(self, x0, v0, x1, dt: float, contacts) -> list[Crossing]:
+    def check(self, x0, v0, x1, dt: float, contacts, time: float | None = None) -> list[Crossing]:
         """Crossings in one step from frame state (x0, v0) to positions x1 (all (N, 3));
-        contacts: the step's Contacts (None when not recorded).
+        contacts: the step's Contacts (None when not recorded); time: the run time (s) at
+        the step's start, where the kinematic meshes are (None: they are not checked).
 
         In a periodic box the engine wraps each end position into the box and records a
         pair contact's point next to sphere a, whichever image of b it met: every position
@@ -260,7 +297,7 @@ class StepChecker:
             x1 = unwrap_near(x1, x0, self.walls.period)
         out = self._walls(x0, x1, contacts)
         if self.walls.meshes.triangles:
-            out += self._meshes(x0, x1, contacts)
+            out += self._meshes(x0, x1, contacts, time, dt)
         if self.n > 1:
             out += self._pairs(x0, v0, x1, dt, contacts)
         return out
@@ -284,24 +321,43 @@ class StepChecker:
                 out.append(Crossing(KIND_WALL, int(i), int(w), math.nan, depth))
         return out
 
-    def _meshes(self, x0, x1, contacts) -> list[Crossing]:
+    def _meshes(self, x0, x1, contacts, time, dt) -> list[Crossing]:
         """Spheres whose centre's straight path through the step passes through a triangle
-        of a mesh they resolved no contact with (module doc)."""
+        of a mesh they resolved no contact with (module doc). A kinematic mesh is checked
+        in its own frame: the centre's start and end seen from where the mesh was at each
+        (the chord between them stands for the path, which that frame bends)."""
         from ..engine.colliders import mesh
 
+        meshes = self.walls.meshes
         if self._mesh_geometry is None:
             self._mesh_geometry = tuple(mesh.MeshGeometry.of(self.walls))
         x0 = np.ascontiguousarray(x0, dtype=np.float64)
         x1 = np.ascontiguousarray(x1, dtype=np.float64)
         sphere, triangle = mesh.reachable(np.minimum(x0, x1), np.maximum(x0, x1), self._mesh_geometry)
+        moving = meshes.moving
+        mesh_of = meshes.mesh_of
+        start, end = x0[sphere], x1[sphere]
+        if moving.any():
+            fixed = ~moving[mesh_of[triangle]]
+            sphere, triangle, start, end = sphere[fixed], triangle[fixed], start[fixed], end[fixed]
+            if time is not None:
+                more = [_in_mesh_frame(meshes, k, x0, x1, time, dt) for k in np.flatnonzero(moving)]
+                sphere = np.concatenate([sphere] + [m[0] for m in more])
+                triangle = np.concatenate([triangle] + [m[1] for m in more])
+                start = np.concatenate([start] + [m[2] for m in more])
+                end = np.concatenate([end] + [m[3] for m in more])
         if not len(sphere):
             return []
-        corners = self.walls.meshes.corners[triangle]  # (K, 3, 3)
-        start, end = x0[sphere], x1[sphere]
+        corners = meshes.corners[triangle]  # (K, 3, 3), at run time 0 (a moving mesh's frame)
         hit, where, past = _segments_through_triangles(start, end, corners)
         if not hit.any():
             return []
-        mesh_of = self.walls.meshes.mesh_of
+        features = np.full(len(hit), -1, dtype=np.int64)
+        for k in np.flatnonzero(hit):  # the part of the triangle crossed (in the mesh's frame)
+            features[k] = _crossed_feature(where[k], corners[k])
+        for k in np.flatnonzero(moving[mesh_of[triangle]] & hit):  # back to the world, where the step ends
+            turn, shift = meshes.transform(int(mesh_of[triangle[k]]), time + dt)
+            where[k] = turn @ where[k] + shift
         touched = set()
         if contacts is not None:
             on_mesh = contacts.kind == KIND_MESH
@@ -312,7 +368,8 @@ class StepChecker:
             if (i, int(mesh_of[t])) in touched or i in seen:
                 continue
             seen.add(i)
-            out.append(Crossing(KIND_MESH, i, t, math.nan, float(past[k]), tuple(float(q) for q in where[k])))
+            out.append(Crossing(KIND_MESH, i, t, math.nan, float(past[k]), tuple(float(q) for q in where[k]),
+                                int(features[k])))
         return out
 
     def _pairs(self, x0, v0, x1, dt, contacts) -> list[Crossing]:
@@ -469,7 +526,7 @@ def warm_up() -> None:
     x1 = np.array([[-0.2, 0.3, 0.0], [0.2, 0.3, 0.0]])
     rows = np.zeros(1, dtype=CONTACT_ROW)
     rows[0] = (0.4, KIND_PAIR, HOW_IMPULSE, 0, 1, (0.0, 0.3, 0.0), (-1.0, 0.0, 0.0), 2.0, v0[0], v0[1], v0[1], v0[0],
-               1.0, 2.0)
+               1.0, 2.0, 0)
     checker = StepChecker(state.radius, state.inverse_mass, state.gravity_scale, walls,
                           {"integrator": "exact", "drag": 1.0, "gravity": (0.0, 0.0, 0.0), "contact_tolerance": 1e-9})
     checker.check(x0, v0, x1, 0.5, Contacts(0, rows))

@@ -30,7 +30,8 @@ import math
 import numpy as np
 
 from ..events import HOW_IMPULSE, HOW_RAPID, HOW_RESTING, HOW_WITH_HELD
-from .colliders import contact_gap, contact_normal, partner_restitution, partner_sphere
+from .colliders import (contact_feature, contact_gap, contact_normal, partner_restitution, partner_sphere,
+                        partner_surface)
 from .jit import borrowing, kernel
 from .kernel_args import (
     M_ANCHOR_IS_FLOW,
@@ -144,8 +145,13 @@ def judge_contact(kind, ia, other, toi, particles, method, geometry, h, contacts
     advance_particle(x, v, a, sigma, ia, toi, integrator, drag, k)
     if ib >= 0:
         advance_particle(x, v, a, sigma, ib, toi, integrator, drag, k)
-    nx, ny, nz = contact_normal(kind, x, ia, other, geometry)
+    nx, ny, nz = contact_normal(kind, x, sigma, ia, other, geometry)
     closing = -relative_normal(v, ia, ib, nx, ny, nz)
+    # a kinematic mesh's surface moves: the closing speed is relative to it, and the
+    # contact is the seed's impulse alone (a moving partner holds no sphere: colliders/mesh.py)
+    u0, u1, u2, driven = partner_surface(kind, x, sigma, radius, ia, other, nx, ny, nz, geometry)
+    if driven:
+        closing += u0 * nx + u1 * ny + u2 * nz
     rel_acc = relative_normal(acc, ia, ib, nx, ny, nz)
     e = combine(rule, restitution[ia], partner_restitution(kind, other, restitution, geometry))
     wsum = inverse_mass[ia] + inverse_mass[ib] if ib >= 0 else inverse_mass[ia]
@@ -160,8 +166,8 @@ def judge_contact(kind, ia, other, toi, particles, method, geometry, h, contacts
             changed[2] = ib
         return SKIPPED, closing, 0.0, HOW_IMPULSE, False
     now = run_time + toi
-    resting = rests(closing, rel_acc, step_end, rest_step_factor, rest_fraction)
-    is_rapid = not resting and rapid(now, last_contact[ia], last_contact[ib] if ib >= 0 else -math.inf, e,
+    resting = not driven and rests(closing, rel_acc, step_end, rest_step_factor, rest_fraction)
+    is_rapid = not resting and not driven and rapid(now, last_contact[ia], last_contact[ib] if ib >= 0 else -math.inf, e,
                                      rapid_time)
     # a rapid contact that something presses is held like a resting one (under the "tc"
     # rule only a slow one); one that is not held is elastic (the original TC model): a
@@ -172,6 +178,7 @@ def judge_contact(kind, ia, other, toi, particles, method, geometry, h, contacts
     used = 0.0 if held != HOW_IMPULSE else (1.0 if is_rapid else e)
     row = contacts[counters[contacts_slot]]
     row.time_in_step = toi
+    row.feature = contact_feature(kind, x, sigma, ia, other, geometry)
     row.normal[0] = nx
     row.normal[1] = ny
     row.normal[2] = nz
@@ -179,10 +186,14 @@ def judge_contact(kind, ia, other, toi, particles, method, geometry, h, contacts
         row.point[c] = x[ia, c] - row.normal[c] * radius[ia]
         row.velocity_a_before[c] = v[ia, c]
         row.velocity_b_before[c] = v[ib, c] if ib >= 0 else math.nan
+    if driven:  # an immovable partner's velocity is NaN, a moving surface's its own
+        row.velocity_b_before[0] = u0
+        row.velocity_b_before[1] = u1
+        row.velocity_b_before[2] = u2
     last_contact[ia] = now
     if ib >= 0:
         last_contact[ib] = now
-    if held != HOW_IMPULSE or h.deg[ia] != 0 or (ib >= 0 and h.deg[ib] != 0):
+    if not driven and (held != HOW_IMPULSE or h.deg[ia] != 0 or (ib >= 0 and h.deg[ib] != 0)):
         return NEEDS_HELD, closing, used, held, is_rapid
     # the seed's impulse, alone
     j = seed_impulse(closing, used, wsum)
@@ -192,6 +203,9 @@ def judge_contact(kind, ia, other, toi, particles, method, geometry, h, contacts
     changed[2] = ib
     _finish_row(kind, ia, other, ib, v, j, used, closing, held, is_rapid, contacts, counters, contacts_slot,
                 rapid_slot)
+    if driven:
+        for c in range(3):
+            row.velocity_b_after[c] = row.velocity_b_before[c]
     return RESOLVED, closing, used, held, is_rapid
 
 

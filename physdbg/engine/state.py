@@ -143,13 +143,19 @@ class Settings:
 
 @dataclass
 class Meshes:
-    """Fixed triangle meshes, in the world frame (the immovable partners of kind mesh).
+    """Triangle meshes, in the world frame (the immovable partners of kind mesh).
 
     names (M,) and restitution (M,) per mesh; corners (T, 3, 3) m: every triangle's
-    corners as rows, the meshes' triangles one after another; mesh_of (T,) int64: whose
-    each is; first (M + 1,) int64: where each mesh's triangles start (and the end);
-    sources (M,): the file or "shape NAME" each came from; notes: what loading them left
-    out (degenerate triangles, by line), for the run summary.
+    corners as rows at run time 0, the meshes' triangles one after another; mesh_of (T,)
+    int64: whose each is; first (M + 1,) int64: where each mesh's triangles start (and the
+    end); sources (M,): the file or "shape NAME" each came from; notes: what loading them
+    left out (degenerate triangles, by line), for the run summary.
+
+    A mesh may move by a prescribed rigid motion (it is kinematic: immovable by any
+    contact, the seed's inverse mass 0, but carried along): velocity (M, 3) m/s, the
+    pivot's, and angular_velocity (M, 3) rad/s about its pivot (M, 3) m (where the pivot
+    is at run time 0). At run time t a corner c is at R(ω·t)(c - pivot) + pivot + v·t
+    (``placed``): the closed form, so a pose never accumulates rounding.
     """
 
     names: list[str] = field(default_factory=list)
@@ -158,11 +164,74 @@ class Meshes:
     mesh_of: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     sources: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    velocity: np.ndarray | None = None
+    angular_velocity: np.ndarray | None = None
+    pivot: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.corners = np.ascontiguousarray(self.corners, dtype=np.float64).reshape(-1, 3, 3)
         self.mesh_of = np.ascontiguousarray(self.mesh_of, dtype=np.int64).reshape(-1)
         self.restitution = np.ascontiguousarray(self.restitution, dtype=np.float64).reshape(-1)
+        m = len(self.names)
+        for name in ("velocity", "angular_velocity", "pivot"):
+            value = getattr(self, name)
+            value = np.zeros((m, 3)) if value is None else np.asarray(value, dtype=np.float64).reshape(m, 3)
+            setattr(self, name, np.ascontiguousarray(value))
+
+    @property
+    def moving(self) -> np.ndarray:
+        """(M,) bool: the meshes with a prescribed motion (kinematic)."""
+        return np.any(self.velocity != 0.0, axis=1) | np.any(self.angular_velocity != 0.0, axis=1)
+
+    def rotations(self, time: float) -> np.ndarray:
+        """(M, 3, 3): each mesh's turn R(ω·time) since run time 0."""
+        from .mesh.pose import rotation_about
+
+        return np.stack([rotation_about(w, time) for w in self.angular_velocity]) if len(self) else np.zeros((0, 3, 3))
+
+    def placed(self, time: float) -> tuple[np.ndarray, np.ndarray]:
+        """(corners (T, 3, 3), pivots (M, 3)) m at run time ``time`` s (the closed form of
+        the class doc; a fixed mesh's corners are its own, bit for bit)."""
+        corners = self.corners.copy()
+        pivots = self.pivot + self.velocity * time
+        for k in np.nonzero(self.moving)[0]:
+            rows = self.mesh_of == k
+            turn = self.rotations(time)[k]
+            corners[rows] = (self.corners[rows] - self.pivot[k]) @ turn.T + pivots[k]
+        return corners, pivots
+
+    def transform(self, k: int, time: float) -> tuple[np.ndarray, np.ndarray]:
+        """(rotation (3, 3), translation (3,)) that carries mesh k's run-time-0 corners c
+        to where they are at ``time``: R·c + translation (the views' per-step transform)."""
+        turn = self.rotations(time)[k]
+        return turn, self.pivot[k] + self.velocity[k] * time - turn @ self.pivot[k]
+
+    def turn_radii(self) -> np.ndarray:
+        """(M,) m: how far each mesh's farthest corner is from its pivot at run time 0."""
+        out = np.zeros(len(self))
+        for k in range(len(self)):
+            rows = self.corners[self.mesh_of == k].reshape(-1, 3)
+            if len(rows):
+                out[k] = float(np.linalg.norm(rows - self.pivot[k], axis=1).max())
+        return out
+
+    def surface_speeds(self) -> np.ndarray:
+        """(M,) m/s: the fastest any point of each mesh moves, |v| + |ω|·(its turn radius)
+        (0 for a fixed mesh)."""
+        return np.linalg.norm(self.velocity, axis=1) + np.linalg.norm(self.angular_velocity, axis=1) * self.turn_radii()
+
+    def motion_words(self, k: int) -> str:
+        """How mesh k moves, as the run summary says it ("" when fixed)."""
+        if not self.moving[k]:
+            return ""
+        parts = []
+        if np.any(self.velocity[k]):
+            parts.append(f"moves at {np.linalg.norm(self.velocity[k]):.3g} m/s")
+        if np.any(self.angular_velocity[k]):
+            spin = np.linalg.norm(self.angular_velocity[k])
+            parts.append(f"turns at {np.degrees(spin):.4g} deg/s ({spin / (2 * np.pi):.3g} rev/s) about "
+                         f"[{', '.join(f'{q:g}' for q in self.pivot[k])}]")
+        return " and ".join(parts)
 
     def __len__(self) -> int:
         return len(self.names)

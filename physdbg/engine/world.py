@@ -36,6 +36,7 @@ import numpy as np
 
 from ..events import (
     BroadPhaseInfo,
+    KIND_MESH,
     KIND_PAIR,
     OUTCOME_CAPPED,
     OUTCOME_HIT,
@@ -51,6 +52,7 @@ from .broadphase import choose_broad_phase, make_broad_phase
 from .broadphase.boxes import boxes_meet
 from .broadphase.periodic import PeriodicBroadPhase
 from .colliders import KINDS, PARTNER_IS_SPHERE, geometry_of, max_overlap, narrow_candidates
+from .colliders.mesh import place
 from .kernel_args import LoopBudgets, LoopCandidates, LoopMethod, LoopParticles
 from .memory import MemoryBudget
 from .motion import (
@@ -135,8 +137,10 @@ class World:
         self.time = 0.0
         movable = state.inverse_mass > 0
         state.velocities[~movable] = 0.0
-        # the colliders' geometry never changes in a run: its kernel group is built once
+        # the colliders' geometry is built once; only a kinematic mesh's arrays are
+        # rewritten in place, at each step's start (_place_meshes)
         self._geometry = geometry_of(walls)
+        self._meshes_move = bool(walls.meshes.moving.any())
         self._period = np.ascontiguousarray(walls.period, dtype=np.float64).reshape(3)
         self._period_origin = np.ascontiguousarray(walls.period_origin, dtype=np.float64)
         self._periodic = walls.periodic
@@ -232,6 +236,7 @@ class World:
         # a velocity residue of vtol moves a sphere vtol·dt in a step: SOLVE_TOLERANCE·a·dt²
         ctx = StepContext(self.step_index, dt, self.time, SOLVE_TOLERANCE * self._accel_scale * dt, self.observer)
         self.last_step = ctx
+        self._place_meshes(self.time, dt)
         if self.numbering is not None:  # World.state is the world: what was written to it counts
             self.numbering.inward(self.state.positions, out=self._st.positions)
             self.numbering.inward(self.state.velocities, out=self._st.velocities)
@@ -240,6 +245,12 @@ class World:
         if ctx.observer is not None:
             ctx.observer.on_event(StepBegin(ctx.step, ctx.run_time, dt))
         return ctx
+
+    def _place_meshes(self, time: float, span: float) -> None:
+        """Kinematic meshes where they are at run time ``time``, their triangles' boxes
+        swept over the next ``span`` s (colliders/mesh.place); nothing when none moves."""
+        if self._meshes_move:
+            place(self._geometry[KIND_MESH], self.walls.meshes, time, span)
 
     @staticmethod
     def _timed(ctx: StepContext, name: str, phase) -> None:
@@ -315,6 +326,7 @@ class World:
         ctx.sigma[:] = 0.0
         if self._periodic:  # the paths were continuous through the step; the state is in the box
             wrap_positions(x, self._period_origin, self._period)
+        self._place_meshes(self.time + ctx.dt, 0.0)  # the audit sees the meshes where the spheres are
         ctx.max_overlap = self._max_overlap(ctx)
         if s.detection == "swept" and ctx.max_overlap > s.contact_tolerance and not ctx.warnings:
             ctx.warn("overlap", f"spheres overlap by {ctx.max_overlap:.3g} m, more than the contact tolerance "

@@ -66,9 +66,24 @@ def box_with_hole(size: float = 1.0, hole: float = 0.4) -> tuple[np.ndarray, np.
     return np.array(verts, dtype=np.float64), np.array(faces, dtype=np.int64)
 
 
-def paddle(length: float = 1.0, width: float = 0.2, thickness: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
-    """A flat box, long along x, centred on the origin (its pivot)."""
-    return _box((-0.5 * length, -0.5 * width, -0.5 * thickness), (0.5 * length, 0.5 * width, 0.5 * thickness))
+def paddle(length: float = 1.0, width: float = 0.2, thickness: float = 0.05,
+           segments: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """A flat box, long along x, centred on the origin (its pivot), its four long sides
+    cut into ``segments`` pieces along x (8·segments + 4 triangles),
+    so that its BVH splits along the length as a blade's would."""
+    xs = np.linspace(-0.5 * length, 0.5 * length, segments + 1)
+    h, t = 0.5 * width, 0.5 * thickness
+    # ring k: the four corners of the cross-section at xs[k] (y, z) = (-,-), (+,-), (+,+), (-,+)
+    v = np.array([[x, y, z] for x in xs for y, z in ((-h, -t), (h, -t), (h, t), (-h, t))], dtype=np.float64)
+    f = []
+    for k in range(segments):
+        a, b = 4 * k, 4 * (k + 1)
+        for side in range(4):
+            n = (side + 1) % 4
+            f += [[a + side, b + n, b + side], [a + side, a + n, b + n]]
+    last = 4 * segments
+    f += [[0, 2, 1], [0, 3, 2], [last, last + 1, last + 2], [last, last + 2, last + 3]]  # the two ends
+    return v, np.array(f, dtype=np.int64)
 
 
 def icosphere(radius: float = 0.5, subdivisions: int = 2) -> tuple[np.ndarray, np.ndarray]:

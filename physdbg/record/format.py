@@ -185,10 +185,15 @@ JSON_SCHEMAS[TOPIC_WALLS] = ("physdbg.Walls", {"type": "object", "properties": {
     # periodic axes: period (m, 0 = not periodic) and the box's lower corner on them
     "period": {"type": "array", "items": {"type": "number"}},
     "period_origin": {"type": "array", "items": {"type": "number"}},
-    # fixed meshes: corners (m, world frame) of each triangle, 9 numbers a triangle
+    # meshes: corners (m, world frame, at run time 0) of each triangle, 9 numbers a
+    # triangle; a kinematic mesh also its velocity (m/s), angular velocity (rad/s) and
+    # pivot (m, at time 0): at time t a corner c is at R(w t)(c - pivot) + pivot + v t
     "meshes": {"type": "array", "items": {"type": "object", "properties": {
         "name": {"type": "string"}, "source": {"type": "string"}, "restitution": {"type": "number"},
-        "corners": {"type": "array", "items": {"type": "number"}}}}}},
+        "corners": {"type": "array", "items": {"type": "number"}},
+        "velocity": {"type": "array", "items": {"type": "number"}},
+        "angular_velocity": {"type": "array", "items": {"type": "number"}},
+        "pivot": {"type": "array", "items": {"type": "number"}}}}}},
     "required": ["step", "walls"]})
 SCENE_SCHEMA_NAME = "physdbg.Scene"  # its JSON Schema is json_schema_of(the message)
 

@@ -6,8 +6,8 @@ anything of physdbg; docs/foxglove-layout.json arranges them like the Rerun blue
     /view/transform  foxglove.FrameTransform  frame 0: the scene's frame ("scene") in
                      Foxglove's z-up "world" (a quarter turn about x when gravity is -y)
     /view/scene      foxglove.SceneUpdate     frame 0: the walls (outline and a faint face,
-                     entity "walls") and each fixed mesh (its triangles, translucent,
-                     entity "mesh <name>"); every frame: one entity per sphere ("sphere 17", a
+                     entity "walls") and each mesh (its triangles, translucent,
+                     entity "mesh <name>"; a kinematic mesh's again each frame, posed); every frame: one entity per sphere ("sphere 17", a
                      SpherePrimitive of its diameter) and, at detail contacts or full,
                      entity "contacts": an arrow along each contact normal at its point
                      (length = the sphere's radius; the first DRAWN_CONTACTS_PER_STEP)
@@ -100,6 +100,12 @@ class FoxgloveView:
             sleep_lines = view.describe_sleep(frame, self._asleep, end.asleep)
         self._asleep = end.asleep
         out = [(fmt.TOPIC_VIEW_SCENE, self._spheres(ns, end.positions, contacts))]
+        moving = np.flatnonzero(self.header.walls.meshes.moving)
+        if len(moving):  # kinematic meshes, where they are at the frame's time
+            update = self.classes[fmt.TOPIC_VIEW_SCENE]()
+            for k in moving.tolist():
+                self._mesh(update, k, ns, end.time)
+            out.append((fmt.TOPIC_VIEW_SCENE, update.SerializeToString()))
         out.append((fmt.TOPIC_VIEW_POINTS, self._point_cloud(ns, end.positions)))
         lines = [(f"step {frame}: {w.message}", "WARN") for w in warnings]
         if contacts is not None:
@@ -147,17 +153,29 @@ class FoxgloveView:
             for x, y, z in outline.tolist():
                 line.points.add(x=x, y=y, z=z)
             entity.metadata.add(key="periodic face", value=name)
-        meshes = self.header.walls.meshes
-        for k, name in enumerate(meshes.names):  # each fixed mesh: its triangles, translucent
-            mesh = update.entities.add(id=f"mesh {name}", frame_id=fmt.VIEW_SCENE_FRAME)
-            mesh.timestamp.FromNanoseconds(ns)
-            surface = mesh.triangles.add()
-            surface.pose.orientation.w = 1.0
-            surface.color.r, surface.color.g, surface.color.b, surface.color.a = 0.67, 0.67, 0.72, 0.55
-            for x, y, z in meshes.corners[meshes.mesh_of == k].reshape(-1, 3).tolist():
-                surface.points.add(x=x, y=y, z=z)
-            mesh.metadata.add(key="mesh", value=name)
+        for k in range(len(self.header.walls.meshes)):  # each mesh: its triangles, translucent
+            self._mesh(update, k, ns, 0.0)
         return update.SerializeToString()
+
+    def _mesh(self, update, k: int, ns: int, time: float) -> None:
+        """Entity "mesh <name>": mesh k's triangles as they were at run time 0, posed where
+        the mesh is at ``time`` (a kinematic mesh's entity is sent again every frame)."""
+        from .mesh_view import quaternions
+
+        meshes = self.header.walls.meshes
+        name = meshes.names[k]
+        mesh = update.entities.add(id=f"mesh {name}", frame_id=fmt.VIEW_SCENE_FRAME)
+        mesh.timestamp.FromNanoseconds(ns)
+        surface = mesh.triangles.add()
+        turn, shift = meshes.transform(k, time)
+        q = surface.pose.orientation
+        q.x, q.y, q.z, q.w = quaternions(turn.T[None])[0].tolist()
+        p = surface.pose.position
+        p.x, p.y, p.z = shift.tolist()
+        surface.color.r, surface.color.g, surface.color.b, surface.color.a = 0.67, 0.67, 0.72, 0.55
+        for x, y, z in meshes.corners[meshes.mesh_of == k].reshape(-1, 3).tolist():
+            surface.points.add(x=x, y=y, z=z)
+        mesh.metadata.add(key="mesh", value=name)
 
     def _spheres(self, ns: int, positions: np.ndarray, contacts: Contacts | None = None) -> bytes:
         """One entity per sphere (a stable id Foxglove shows on a click), copied from a

@@ -108,8 +108,13 @@ class RecordingHeader:
             "period": [float(x) for x in w.period], "period_origin": [float(x) for x in w.period_origin],
             # each fixed mesh once: its triangles' corners in the world frame, flat (T·9
             # numbers; Foxglove shows no nested arrays), exact (JSON floats round-trip)
+            # at run time 0; a kinematic mesh adds its motion (state.Meshes: where it is at
+            # any time follows in closed form)
             "meshes": [{"name": name, "source": source, "restitution": float(e),
-                        "corners": w.meshes.corners[w.meshes.mesh_of == k].ravel().tolist()}
+                        "corners": w.meshes.corners[w.meshes.mesh_of == k].ravel().tolist(),
+                        **({"velocity": w.meshes.velocity[k].tolist(),
+                            "angular_velocity": w.meshes.angular_velocity[k].tolist(),
+                            "pivot": w.meshes.pivot[k].tolist()} if w.meshes.moving[k] else {})}
                        for k, (name, source, e) in enumerate(zip(w.meshes.names, w.meshes.sources,
                                                                  w.meshes.restitution, strict=True))]}
 
@@ -134,7 +139,10 @@ class RecordingHeader:
         return Meshes([m["name"] for m in meshes], np.array([m["restitution"] for m in meshes], dtype=np.float64),
                       np.concatenate(corners), np.concatenate([np.full(len(c), k, dtype=np.int64)
                                                                for k, c in enumerate(corners)]),
-                      [m.get("source", "") for m in meshes])
+                      [m.get("source", "") for m in meshes], [],
+                      np.array([m.get("velocity", (0.0, 0.0, 0.0)) for m in meshes], dtype=np.float64),
+                      np.array([m.get("angular_velocity", (0.0, 0.0, 0.0)) for m in meshes], dtype=np.float64),
+                      np.array([m.get("pivot", (0.0, 0.0, 0.0)) for m in meshes], dtype=np.float64))
 
     def scene_json(self) -> dict:
         """The /physdbg/scene message: meta with the scene table as a JSON string (a TOML

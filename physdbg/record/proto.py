@@ -126,6 +126,8 @@ def decode_table(name: str, data: bytes) -> tuple[int, np.ndarray]:
     rows = np.zeros(count, dtype=dtype)
     for field, kind, axis, source, is_bytes in parts:
         value = getattr(message, field)
+        if table and count and not len(value):  # a column newer than the file: its zeros
+            continue
         if is_bytes:
             raw = b"".join(value) if table else value
             rows[source] = np.frombuffer(raw, dtype=np.uint8).reshape(count, -1) if count else rows[source]

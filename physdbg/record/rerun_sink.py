@@ -8,7 +8,16 @@ Entities (timelines ``step`` = frame, steps completed, and ``sim_time`` in secon
     world/spheres            Points3D, one per particle, with radii (float32 copies)
     world/walls/<name>       LineStrips3D outline of each wall, so walls never hide spheres
     world/periodic/<face>    LineStrips3D outline (blue) of each face of a periodic axis
-    world/meshes/<name>      Mesh3D of each fixed mesh (translucent), and /edges its triangles' edges
+    world/meshes/<name>      Mesh3D of each mesh (translucent), and /edges its triangles' edges; a
+                             kinematic mesh's Transform3D every step (it carries what is below)
+    world/meshes/<name>/bvh/<volume>/level_<d>
+                             the mesh's BVH (mesh_view.py), one entity per volume (aabb, obb,
+                             sphere) and level: AABB levels 0..2 shown, the rest a click away
+    world/mesh_search/{met,culled,triangles}
+                             the first step with a contact on a mesh: the nodes of the triangles'
+                             BVH the spheres' boxes met and culled, and the triangles reached
+    search/triangles         the same search as a tree (GraphNodes, GraphEdges): the seed's
+                             "search tree", a node per sphere–node pair visited, in its own view
     world/bvh/level_<d>      Boxes3D wireframes, one entity per BVH level (toggle levels;
                              the blueprint shows the first BVH_LEVELS_SHOWN)
     world/paths              LineStrips3D: each particle's path through the step,
@@ -34,10 +43,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ViewerError
-from ..events import BroadPhaseInfo, Contacts, EngineWarning, StepEnd, collision_sums, partner_is_sphere
+from ..events import KIND_MESH, BroadPhaseInfo, Contacts, EngineWarning, StepEnd, collision_sums, partner_is_sphere
 from ..engine.periodic import unwrap_near
 from .header import RecordingHeader
-from . import view
+from . import mesh_view, view
 from .view import (contact_centres, describe_contacts, describe_sleep, periodic_faces, scene_bounds, sleep_changed,
                    sphere_colors, up_axis, wall_outlines)
 
@@ -45,6 +54,8 @@ APPLICATION_ID = "physdbg"
 IMPULSE_ARROW_SECONDS = 0.05  # an impulse arrow shows how far its velocity change moves a in 50 ms
 PATHS_ALL_UP_TO = 2000  # above this many particles, only paths of particles with contacts are drawn
 SERIES_BATCH = 128
+SEARCHED_SPHERES = 12  # the most spheres whose search of the triangles' BVH is drawn (one tree each)
+MESH_CONTACT_TIMELINE = "from first mesh contact"  # a mesh scene's file opens here (paused)
 BVH_LEVELS_SHOWN = 3  # levels 0..2 are drawn when the file opens; deeper ones are a click away  # steps of scalar series buffered before one send_columns
 
 
@@ -137,6 +148,11 @@ class RerunSink:
         self._virial = 0.0
         self._movable = int(np.count_nonzero(header.inverse_mass > 0))
         self._asleep: np.ndarray | None = None  # the spheres last drawn asleep (None: none)
+        # a file of its own with meshes opens paused at the first contact on a mesh, with the
+        # search drawn: the rows from there on carry the timeline MESH_CONTACT_TIMELINE
+        self._open_at_mesh_contact = not self.shared and opening is None and len(header.walls.meshes) > 0
+        self._trees = mesh_view.mesh_trees(header.walls.meshes) if len(header.walls.meshes) else []
+        self._searched = False  # the search at the first mesh contact is drawn
         self._log_static(header)
 
     # ------------------------------------------------------------------ static
@@ -158,6 +174,7 @@ class RerunSink:
                                     albedo_factor=[170, 170, 185, 140]), static=True)
             edges = corners.reshape(-1, 3, 3)[:, [0, 1, 2, 0]]
             rec.log(path + "/edges", rr.LineStrips3D(list(edges), colors=[[120, 120, 135]], radii=[-0.75]), static=True)
+            self._mesh_bvh(path, self._trees[k])
         for name, strip in periodic_faces(h.walls, lo, hi):  # faces a sphere passes through: blue, thin
             rec.log(self.root + f"world/periodic/{rr.escape_entity_path_part(name)}", rr.LineStrips3D([strip], colors=[[80, 140, 230]], radii=[-1.0]),
                     static=True)
@@ -202,6 +219,9 @@ class RerunSink:
         rr, rec = self.rr, self.rec
         frame = end.step + 1
         self._last_time = (frame, end.time)
+        if self._open_at_mesh_contact and self.opening is None and self._contacts is not None and bool(
+                np.any(self._contacts.kind == KIND_MESH)):
+            self.opening = (MESH_CONTACT_TIMELINE, frame)
         self._set_time(frame, end.time)
         # Copies in float32: rerun may hold the array until it flushes. Colours only when the
         # set of sleeping spheres changes: a pile falling asleep turns grey-blue
@@ -221,6 +241,7 @@ class RerunSink:
             self._broad_phase = None
         self._paths(end, contacts)
         lines = [(f"step {frame}: {warning.message}", "WARN") for warning in self._warnings]
+        lines += self._meshes_at(end, contacts)
         if contacts is not None:
             self._draw_contacts(contacts.first(view.DRAWN_CONTACTS_PER_STEP))
             lines += self._describe(frame, contacts, end.dt)
@@ -318,6 +339,89 @@ class RerunSink:
         self.rec.send_columns(self.root + "log", indexes=index, columns=rr.TextLog.columns(
             text=[text for text, _ in lines], level=[level for _, level in lines]))
 
+    def _mesh_bvh(self, path: str, tree) -> None:
+        """A mesh's BVH, static, one entity per volume and level (mesh_view.py)."""
+        rr, rec = self.rr, self.rec
+        depth = mesh_view.node_depths(tree)
+        nodes = tree.nodes
+        for level in range(int(depth.max()) + 1):
+            at = depth == level
+            color = [_level_color(level)]
+            rec.log(path + f"/bvh/aabb/level_{level}", rr.Boxes3D(
+                centers=(0.5 * (nodes.lo[at] + nodes.hi[at])).astype(np.float32),
+                half_sizes=(0.5 * (nodes.hi[at] - nodes.lo[at])).astype(np.float32),
+                colors=color, radii=[-0.5], fill_mode="majorwireframe"), static=True)
+            rec.log(path + f"/bvh/obb/level_{level}", rr.Boxes3D(
+                centers=tree.obb_center[at].astype(np.float32), half_sizes=tree.obb_half[at].astype(np.float32),
+                quaternions=mesh_view.quaternions(tree.obb_axes[at]).astype(np.float32),
+                colors=color, radii=[-0.5], fill_mode="majorwireframe"), static=True)
+            rec.log(path + f"/bvh/sphere/level_{level}", rr.Ellipsoids3D(
+                centers=tree.sphere_center[at].astype(np.float32),
+                half_sizes=np.repeat(tree.sphere_radius[at, None], 3, axis=1).astype(np.float32),
+                colors=color, line_radii=[-0.5], fill_mode="majorwireframe"), static=True)
+
+    def _meshes_at(self, end: StepEnd, contacts: Contacts | None) -> list[tuple[str, str]]:
+        """Each kinematic mesh's transform at the step's end, and at the first step with a
+        contact on a mesh the search the triangles' BVH answered (mesh_view.search); the
+        log lines."""
+        rr, rec = self.rr, self.rec
+        meshes = self.header.walls.meshes
+        if not len(meshes):
+            return []
+        for k, name in enumerate(meshes.names):
+            if meshes.moving[k]:
+                turn, shift = meshes.transform(k, end.time)
+                rec.log(self.root + f"world/meshes/{rr.escape_entity_path_part(name)}",
+                        rr.Transform3D(translation=shift.astype(np.float32), mat3x3=turn.astype(np.float32)))
+        if self._searched or contacts is None or not np.any(contacts.kind == KIND_MESH):
+            return []
+        self._searched = True
+        # the spheres that hit a mesh in this step (at most SEARCHED_SPHERES: a tree per sphere)
+        hitters = np.unique(contacts.a[contacts.kind == KIND_MESH])[:SEARCHED_SPHERES]
+        lo, hi = mesh_view.path_boxes(self.previous[hitters], end.positions[hitters], self.header.radius[hitters])
+        group = mesh_view.engine_tree(meshes)
+        found = mesh_view.search(group, meshes, lo, hi, end.time - end.dt, end.dt)
+        found.spheres = hitters[found.spheres]
+        found.visits[:, 0] = hitters[found.visits[:, 0]]
+        box_lo, box_hi = group[3], group[4]
+        path = self.root + "world/mesh_search"
+        for part, which, color in (("met", found.met, [60, 220, 90]), ("culled", found.culled, [230, 70, 60])):
+            rec.log(path + f"/{part}", rr.Boxes3D(
+                centers=(0.5 * (box_lo[which] + box_hi[which])).astype(np.float32),
+                half_sizes=(0.5 * (box_hi[which] - box_lo[which])).astype(np.float32),
+                colors=[color], radii=[-1.5 if part == "met" else -0.75], fill_mode="majorwireframe"))
+        corners = meshes.placed(end.time)[0][found.triangles].reshape(-1, 3).astype(np.float32)
+        rec.log(path + "/triangles", rr.Mesh3D(
+            vertex_positions=corners, triangle_indices=np.arange(len(corners), dtype=np.uint32).reshape(-1, 3),
+            albedo_factor=[250, 210, 40, 220]))
+        self._search_graph(found)
+        who = ", ".join(str(int(i)) for i in hitters)
+        return [(f"step {end.step + 1}: the first contact on a mesh; the search of the triangles' BVH (its boxes "
+                 f"swept over the step) by the boxes of the sphere{'s' if len(hitters) != 1 else ''} that hit a mesh "
+                 f"({who}): {found.pairs} sphere-node pairs visited, {len(found.met)} nodes met (green), "
+                 f"{len(found.culled)} culled (red), {len(found.triangles)} triangles reached (yellow)", "INFO")]
+
+    def _search_graph(self, found) -> None:
+        """The search tree as a graph (search/triangles): a node per sphere–node pair
+        visited, green where the boxes met, red where the branch ended, yellow at a triangle
+        reached; an edge from each pair to the pairs descended from it."""
+        rr = self.rr
+        if not len(found.visits):
+            return
+        meshes = self.header.walls.meshes
+        ids = [f"{k}:{q}" for k, q, _o, _p in found.visits.tolist()]
+        labels = []
+        group_leaf = mesh_view.engine_tree(meshes)[5]
+        for k, q, outcome, parent in found.visits.tolist():
+            what = meshes.triangle_words(int(group_leaf[q])) if outcome == mesh_view.REACHED else f"node {q}"
+            labels.append(f"sphere {k}: {what}" if parent < 0 else what)
+        colors = [[(60, 200, 90), (230, 70, 60), (250, 210, 40)][o] for o in found.visits[:, 2].tolist()]
+        position = mesh_view.tree_layout(found.visits) * [110.0, 70.0]
+        path = self.root + "search/triangles"
+        self.rec.log(path, rr.GraphNodes(ids, labels=labels, colors=colors, positions=position.astype(np.float32)))
+        edges = [(ids[p], ids[row]) for row, p in enumerate(found.visits[:, 3].tolist()) if p >= 0]
+        self.rec.log(path, rr.GraphEdges(edges, graph_type="directed"))
+
     def _bvh(self, info: BroadPhaseInfo) -> None:
         rr, rec = self.rr, self.rec
         nodes = info.nodes
@@ -381,21 +485,31 @@ class RerunSink:
         self._send_series()
         if self.shared:
             return
+        if self._open_at_mesh_contact and self.opening is not None:
+            self.rec.send_blueprint(blueprint(self.header, self.opening), make_active=True, make_default=True)
         self.rec.flush()
         self.rec.disconnect()
 
 
 # ----------------------------------------------------------------------------- blueprint
-def blueprint(header: RecordingHeader):
+def blueprint(header: RecordingHeader, opening: tuple[str, int] | None = None):
     """3D view of the world beside the energy and contact plots and the event log; the
-    camera looks at the whole scene from above and to the side, up against gravity."""
+    camera looks at the whole scene from above and to the side, up against gravity.
+    opening: (timeline, step) to open on, paused (else the step timeline, playing)."""
     import rerun.blueprint as rrb
 
+    # a mesh scene's view shares its column with the search tree: the eye comes closer
+    eye = camera(header, distance=1.0 if len(header.walls.meshes) else 1.4)
+    scene = rrb.Spatial3DView(origin="/world", name="scene", eye_controls=eye, overrides={
+        **{f"/world/bvh/level_{level}": rrb.EntityBehavior(visible=False) for level in range(BVH_LEVELS_SHOWN, 64)},
+        **_hidden_mesh_volumes(header)})
+    if len(header.walls.meshes):  # the search tree under the scene, as wide
+        scene = rrb.Vertical(scene, rrb.GraphView(origin="/search", name="BVH search at the first mesh contact "
+                                                                          "(green: met, red: culled, yellow: triangle)"),
+                             row_shares=[3, 2])
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Spatial3DView(origin="/world", name="scene", eye_controls=camera(header), overrides={
-                f"/world/bvh/level_{level}": rrb.EntityBehavior(visible=False)
-                for level in range(BVH_LEVELS_SHOWN, 64)}),
+            scene,
             rrb.Vertical(
                 rrb.TimeSeriesView(origin="/stats/energy", name="energy (J)"),
                 rrb.TimeSeriesView(origin="/stats", contents=["/stats/contacts", "/stats/rapid", "/stats/released",
@@ -407,9 +521,25 @@ def blueprint(header: RecordingHeader):
             ),
             column_shares=[3, 2],
         ),
-        rrb.TimePanel(timeline="step"),
+        rrb.TimePanel(timeline=opening[0], play_state="paused") if opening else rrb.TimePanel(timeline="step"),
         collapse_panels=True,
     )
+
+
+def _hidden_mesh_volumes(header: RecordingHeader) -> dict:
+    """Blueprint overrides: each mesh's OBBs and spheres hidden, and its AABBs below the
+    first BVH_LEVELS_SHOWN levels (all a click away in the view's entity tree)."""
+    import rerun as rr
+    import rerun.blueprint as rrb
+
+    hidden = {}
+    for name in header.walls.meshes.names:
+        path = f"/world/meshes/{rr.escape_entity_path_part(name)}/bvh"
+        hidden[f"{path}/obb"] = rrb.EntityBehavior(visible=False)
+        hidden[f"{path}/sphere"] = rrb.EntityBehavior(visible=False)
+        for level in range(BVH_LEVELS_SHOWN, 64):
+            hidden[f"{path}/aabb/level_{level}"] = rrb.EntityBehavior(visible=False)
+    return hidden
 
 
 def camera(header: RecordingHeader, distance: float = 1.4):

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..events import Contacts, partner_words
+from ..events import Contacts, feature_words, partner_words
 from .header import RecordingHeader
 
 LOG_LINES_PER_STEP = 20  # contacts described in words per step; the rest are counted
@@ -130,6 +130,8 @@ def describe_contacts(frame: int, c: Contacts, dt: float, names) -> list[tuple[s
     resting = c.resting
     for row in range(min(len(c), LOG_LINES_PER_STEP)):
         other = partner_words(int(c.kind[row]), int(c.other[row]), names)
+        where = feature_words(int(c.feature[row]))
+        other += f" ({where})" if where else ""  # a mesh's triangle: on its face, an edge or a corner
         verb = "rests on" if resting[row] else "hit"
         lines.append((
             f"step {frame}: sphere {int(c.a[row])} {verb} {other} at {c.time_in_step[row] / dt:.3f}·dt "

@@ -30,7 +30,7 @@ from . import mesh, plane, sphere
 from .kinds import KIND_NAMES, KINDS, PARTNER_IS_SPHERE, partner_sphere
 
 __all__ = ["KIND_NAMES", "KINDS", "KIND_MODULES", "PARTNER_IS_SPHERE", "partner_sphere", "geometry_of",
-           "check_kind_modules", "time_of_impact", "contact_normal", "contact_gap", "partner_restitution",
+           "check_kind_modules", "time_of_impact", "contact_normal", "contact_feature", "partner_surface", "contact_gap", "partner_restitution",
            "partners_of", "max_overlap", "narrow_candidates", "every_candidate", "most_partners", "partners_bound"]
 
 # each kind's module, in the order of the kinds' codes: its geometry group is ``module.GEOMETRY``
@@ -74,13 +74,33 @@ def time_of_impact(kind, ia, other, x, v, a, radius, sigma, step_end, integrator
 
 
 @njit(cache=True, inline="always")
-def contact_normal(kind, x, ia, other, geometry):
-    """Unit normal (3 floats) from the partner to sphere ia at the anchors."""
+def contact_normal(kind, x, sigma, ia, other, geometry):
+    """Unit normal (3 floats) from the partner to sphere ia at the anchors (times sigma (N,)
+    s in the step: where a moving partner is then)."""
     if kind == KIND_PAIR:
         return sphere.normal(x, ia, other, geometry[KIND_PAIR])
     if kind == KIND_WALL:
         return plane.normal(x, ia, other, geometry[KIND_WALL])
-    return mesh.normal(x, ia, other, geometry[KIND_MESH])
+    return mesh.normal(x, sigma, ia, other, geometry[KIND_MESH])
+
+
+@njit(cache=True, inline="always")
+def contact_feature(kind, x, sigma, ia, other, geometry) -> int:
+    """Where sphere ia touches the partner, for the contact's row: 1 + the feature of a
+    mesh's triangle (events.FEATURE_NAMES: face, edge, corner), 0 for other kinds."""
+    if kind == KIND_MESH:
+        return 1 + mesh.feature(x, sigma, ia, other, geometry[KIND_MESH])
+    return 0
+
+
+@njit(cache=True, inline="always")
+def partner_surface(kind, x, sigma, radius, ia, other, n0, n1, n2, geometry):
+    """(u0, u1, u2, moving): the velocity (m/s) of an immovable partner's surface where
+    sphere ia touches it along the normal n (a kinematic mesh's); (0, 0, 0, False) for a
+    partner that stands still (and for a sphere, whose velocity the resolver reads itself)."""
+    if kind == KIND_MESH:
+        return mesh.surface(x, sigma, radius, ia, other, n0, n1, n2, geometry[KIND_MESH])
+    return 0.0, 0.0, 0.0, False
 
 
 @borrowing

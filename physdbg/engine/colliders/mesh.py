@@ -10,9 +10,17 @@ own path), its contact normal and gap (from the closest point, so the normal tur
 sphere rolls over an edge), which triangles a sphere's box reaches, and the deepest overlap.
 
 Which triangles a box reaches is asked of a BVH over every triangle's box (world frame,
-built once: the meshes do not move), walked without a stack in pre-order with skip links
-(``preorder``, ``skip``), so that the contact loop, which allocates nothing, can ask it.
-What a triangle reads is this kind's group, ``MeshGeometry``, unpacked by ``_unpack`` alone.
+built once), walked without a stack in pre-order with skip links (``preorder``, ``skip``),
+so that the contact loop, which allocates nothing, can ask it. What a triangle reads is
+this kind's group, ``MeshGeometry``, unpacked by ``_unpack`` alone.
+
+A kinematic mesh (state.Meshes: a prescribed velocity and angular velocity about a pivot)
+is placed by the world at each step's start (``place``: its corners then, its pivot then,
+and each triangle's box swept over the step, refitted up the same tree): its triangles'
+tests run in the mesh's own frame (toi.moving_triangle_toi_swept), its contact normal is
+turned with it, and its surface velocity at the contact point enters the impulse
+(``surface``). A moving triangle never holds a sphere: every contact with it is the seed's
+impulse alone (a resting contact on a moving mesh is not modelled).
 """
 
 from __future__ import annotations
@@ -26,14 +34,18 @@ from numba import njit
 from ..broadphase.bvh import build
 from ..jit import borrowing, kernel
 from ..mesh.closest import closest_on_triangle
-from ..toi import DISCRETE, SWEPT, triangle_toi_sampled, triangle_toi_swept
+from ..toi import (DISCRETE, SWEPT, in_body_frame, moving_triangle_toi_sampled, moving_triangle_toi_swept,
+                   surface_velocity, triangle_toi_sampled, triangle_toi_swept, turned)
 
 
 class MeshGeometry(NamedTuple):
     """This kind's group of the geometry (colliders.geometry_of): corners (T, 3, 3) m (world
     frame, a triangle's corners as rows), mesh_of (T,) int64, restitution (M,) per mesh, and
     the triangles' BVH in pre-order: box_lo, box_hi (Q, 3) m, leaf_triangle (Q,) int64 (-1
-    inside the tree), skip (Q,) int64 (the position after a node's subtree)."""
+    inside the tree), skip (Q,) int64 (the position after a node's subtree); motion (M, 9)
+    per mesh: its pivot at the step's start (m), velocity (m/s), angular velocity (rad/s);
+    moving (M,) bool. A kinematic mesh's corners, pivot and boxes are rewritten in place
+    at each step's start (``place``); a fixed mesh's never change."""
 
     corners: np.ndarray
     mesh_of: np.ndarray
@@ -42,17 +54,71 @@ class MeshGeometry(NamedTuple):
     box_hi: np.ndarray
     leaf_triangle: np.ndarray
     skip: np.ndarray
+    motion: np.ndarray
+    moving: np.ndarray
 
     @classmethod
     def of(cls, walls) -> MeshGeometry:
-        """The group of a scene's meshes (state.Walls.meshes, a state.Meshes)."""
+        """The group of a scene's meshes (state.Walls.meshes, a state.Meshes) at run time 0."""
         meshes = walls.meshes
         corners = np.ascontiguousarray(meshes.corners, dtype=np.float64).reshape(-1, 3, 3)
         lo = np.ascontiguousarray(corners.min(axis=1)) if len(corners) else np.zeros((0, 3))
         hi = np.ascontiguousarray(corners.max(axis=1)) if len(corners) else np.zeros((0, 3))
         box_lo, box_hi, leaf, skip = preorder(lo, hi)
-        return cls(corners, np.ascontiguousarray(meshes.mesh_of, dtype=np.int64),
-                   np.ascontiguousarray(meshes.restitution, dtype=np.float64), box_lo, box_hi, leaf, skip)
+        motion = np.ascontiguousarray(np.hstack([meshes.pivot, meshes.velocity, meshes.angular_velocity])
+                                      if len(meshes) else np.zeros((0, 9)))
+        return cls(corners.copy(), np.ascontiguousarray(meshes.mesh_of, dtype=np.int64),
+                   np.ascontiguousarray(meshes.restitution, dtype=np.float64), box_lo, box_hi, leaf, skip,
+                   motion, np.ascontiguousarray(meshes.moving, dtype=np.bool_))
+
+
+def place(group: tuple, meshes, time: float, span: float) -> int:
+    """Put the kinematic meshes of ``group`` (a MeshGeometry as a tuple, rewritten in place)
+    where they are at run time ``time`` s: corners and pivots (state.Meshes.placed), and
+    each triangle's box swept over the next ``span`` s (its corners then and at the span's
+    end, grown by the most a turning corner leaves the chord between them), refitted up
+    the tree. Returns how many tree nodes were refitted (0 when no mesh moves)."""
+    moving = meshes.moving
+    if not moving.any():
+        return 0
+    corners, _mesh_of, _restitution, box_lo, box_hi, leaf, skip, motion, _moving = group
+    now, pivots = meshes.placed(time)
+    corners[...] = now
+    motion[:, 0:3] = pivots
+    later = meshes.placed(time + span)[0] if span > 0 else now
+    lo = np.minimum(now.min(axis=1), later.min(axis=1))
+    hi = np.maximum(now.max(axis=1), later.max(axis=1))
+    # a corner at distance ρ from the turning axis sweeps an arc of angle θ = |ω|·span; the
+    # arc leaves its chord by at most ρ(1 - cos(θ/2)) (θ <= π), by ρ past a half turn
+    spin = np.linalg.norm(meshes.angular_velocity, axis=1)
+    angle = spin * span
+    rho = np.zeros(len(meshes))
+    for k in np.nonzero(moving & (spin > 0))[0]:
+        rho[k] = float(np.linalg.norm(now[meshes.mesh_of == k] - pivots[k], axis=2).max())
+    grow = np.where(angle >= np.pi, rho, rho * (1.0 - np.cos(0.5 * np.minimum(angle, np.pi))))
+    grow = grow[meshes.mesh_of][:, None]
+    return int(_refit(box_lo, box_hi, leaf, skip, np.ascontiguousarray(lo - grow), np.ascontiguousarray(hi + grow)))
+
+
+@kernel
+def _refit(box_lo, box_hi, leaf, skip, lo, hi) -> int:
+    """Refit the pre-order tree's boxes bottom-up to the triangles' boxes lo, hi (T, 3): a
+    leaf takes its triangle's, an inner node the union of its children (q + 1 and the
+    node after that child's subtree). Returns the nodes refitted."""
+    n = box_lo.shape[0]
+    for q in range(n - 1, -1, -1):
+        t = leaf[q]
+        if t >= 0:
+            for c in range(3):
+                box_lo[q, c] = lo[t, c]
+                box_hi[q, c] = hi[t, c]
+        else:
+            left = q + 1
+            right = skip[left]
+            for c in range(3):
+                box_lo[q, c] = min(box_lo[left, c], box_lo[right, c])
+                box_hi[q, c] = max(box_hi[left, c], box_hi[right, c])
+    return n
 
 
 GEOMETRY = MeshGeometry  # this kind's group (colliders.geometry_of)
@@ -87,8 +153,15 @@ def preorder(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
 
 @njit(cache=True, inline="always")
 def _unpack(meshes):
-    """The group's fields (MeshGeometry's order), the one place a kernel reads them."""
+    """The group's first seven fields (MeshGeometry's order; _motion_of reads the rest)."""
     return meshes[0], meshes[1], meshes[2], meshes[3], meshes[4], meshes[5], meshes[6]
+
+
+@njit(cache=True, inline="always")
+def _motion_of(t, meshes):
+    """(moving, motion (9,)) of triangle t's mesh."""
+    k = meshes[1][t]
+    return meshes[8][k], meshes[7][k]
 
 
 @njit(cache=True, inline="always")
@@ -118,6 +191,18 @@ def time_of_impact(i, t, x, v, a, radius, sigma, step_end, integrator, k, detect
     corners = meshes[0]
     start = sigma[i]
     horizon = step_end - start
+    moving, motion = _motion_of(t, meshes)
+    if moving:
+        if detection == SWEPT:
+            found, _feature = moving_triangle_toi_swept(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2], a[i, 0],
+                                                        a[i, 1], a[i, 2], radius[i], corners[t], motion, start,
+                                                        integrator, k, horizon, tolerance)
+        else:
+            found, _feature = moving_triangle_toi_sampled(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2],
+                                                          a[i, 0], a[i, 1], a[i, 2], radius[i], corners[t], motion,
+                                                          start, integrator, k, horizon,
+                                                          1 if detection == DISCRETE else samples)
+        return start, found
     if detection == SWEPT:
         found, _feature = triangle_toi_swept(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2], a[i, 0], a[i, 1],
                                              a[i, 2], radius[i], corners[t], integrator, k, horizon, tolerance)
@@ -139,13 +224,69 @@ def _away(x, i, corners, t):
 
 
 @njit(cache=True, inline="always")
-def normal(x, ia, t, meshes):
-    """Unit normal (3 floats) from triangle t to sphere a: from the closest point to the
-    centre (the face's own normal if the centre lies on the face)."""
+def normal(x, sigma, ia, t, meshes):
+    """Unit normal (3 floats) from triangle t to sphere a at its anchor time sigma[ia]: from
+    the closest point to the centre (the face's own normal if the centre lies on the
+    face); a moving triangle's is found in its mesh's frame and turned with it."""
     corners = meshes[0]
-    d0, d1, d2, length = _away(x, ia, corners, t)
+    moving, motion = _motion_of(t, meshes)
+    if moving:
+        tau = sigma[ia]
+        y0, y1, y2, _r0, _r1, _r2 = in_body_frame(x[ia, 0], x[ia, 1], x[ia, 2], 0.0, 0.0, 0.0, motion, tau)
+        q0, q1, q2, _feature = closest_on_triangle(y0, y1, y2, corners[t, 0, 0], corners[t, 0, 1], corners[t, 0, 2],
+                                                   corners[t, 1, 0], corners[t, 1, 1], corners[t, 1, 2],
+                                                   corners[t, 2, 0], corners[t, 2, 1], corners[t, 2, 2])
+        d0, d1, d2 = _turned_with(y0 - q0, y1 - q1, y2 - q2, motion, tau)
+    else:
+        d0, d1, d2, _length = _away(x, ia, corners, t)
+    length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     if length > 0.0:
         return d0 / length, d1 / length, d2 / length
+    f0, f1, f2 = _face_normal(corners, t)
+    if moving:
+        return _turned_with(f0, f1, f2, motion, sigma[ia])
+    return f0, f1, f2
+
+
+@njit(cache=True, inline="always")
+def feature(x, sigma, ia, t, meshes) -> int:
+    """The feature of triangle t (mesh.closest: FACE, an edge, a corner) closest to sphere
+    ia's centre at its anchor time (in a moving mesh's frame)."""
+    corners = meshes[0]
+    moving, motion = _motion_of(t, meshes)
+    y0, y1, y2 = x[ia, 0], x[ia, 1], x[ia, 2]
+    if moving:
+        y0, y1, y2, _r0, _r1, _r2 = in_body_frame(y0, y1, y2, 0.0, 0.0, 0.0, motion, sigma[ia])
+    return closest_on_triangle(y0, y1, y2, corners[t, 0, 0], corners[t, 0, 1], corners[t, 0, 2], corners[t, 1, 0],
+                               corners[t, 1, 1], corners[t, 1, 2], corners[t, 2, 0], corners[t, 2, 1],
+                               corners[t, 2, 2])[3]
+
+
+@njit(cache=True, inline="always")
+def _turned_with(d0, d1, d2, motion, tau):
+    """A direction fixed in a moving mesh's frame at the step's start, as it points at tau."""
+    w0, w1, w2 = motion[6], motion[7], motion[8]
+    speed = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    if speed == 0.0:
+        return d0, d1, d2
+    return turned(d0, d1, d2, w0 / speed, w1 / speed, w2 / speed, math.cos(speed * tau), math.sin(speed * tau))
+
+
+@njit(cache=True, inline="always")
+def surface(x, sigma, radius, ia, t, n0, n1, n2, meshes):
+    """(u0, u1, u2, moving): the velocity (m/s) of triangle t's surface where sphere ia
+    touches it along the normal n, at ia's anchor time; (0, 0, 0, False) for a fixed mesh."""
+    moving, motion = _motion_of(t, meshes)
+    if not moving:
+        return 0.0, 0.0, 0.0, False
+    u0, u1, u2 = surface_velocity(x[ia, 0] - n0 * radius[ia], x[ia, 1] - n1 * radius[ia], x[ia, 2] - n2 * radius[ia],
+                                  motion, sigma[ia])
+    return u0, u1, u2, True
+
+
+@njit(cache=True, inline="always")
+def _face_normal(corners, t):
+    """Triangle t's unit face normal (3 floats), from its corners' order."""
     e0 = corners[t, 1, 0] - corners[t, 0, 0]
     e1 = corners[t, 1, 1] - corners[t, 0, 1]
     e2 = corners[t, 1, 2] - corners[t, 0, 2]

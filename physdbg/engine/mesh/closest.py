@@ -8,10 +8,10 @@ EDGE_1 (1–2), EDGE_2 (2–0), CORNER_0, CORNER_1, CORNER_2.
 
 from __future__ import annotations
 
+from ...events import FEATURE_NAMES  # noqa: F401 (the features' names, one table: events.py)
 from ..jit import borrowing
 
 FACE, EDGE_0, EDGE_1, EDGE_2, CORNER_0, CORNER_1, CORNER_2 = range(7)
-FEATURE_NAMES = ("face", "edge 0-1", "edge 1-2", "edge 2-0", "corner 0", "corner 1", "corner 2")
 
 
 @borrowing

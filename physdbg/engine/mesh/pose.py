@@ -23,6 +23,19 @@ def rotation_from_degrees(angles: np.ndarray | tuple[float, float, float]) -> np
     return rz @ ry @ rx
 
 
+def rotation_about(angular_velocity: np.ndarray, time: float) -> np.ndarray:
+    """(3, 3) rotation by |ω|·time radians about ω's direction (Rodrigues), for an angular
+    velocity ω (3,) rad/s; the identity when ω = 0."""
+    w = np.asarray(angular_velocity, dtype=np.float64).reshape(3)
+    speed = float(np.sqrt(w @ w))
+    if speed == 0.0 or time == 0.0:
+        return np.eye(3)
+    axis = w / speed
+    angle = speed * time
+    cross = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * cross + (1.0 - np.cos(angle)) * (cross @ cross)
+
+
 @dataclass(frozen=True)
 class Pose:
     """Rigid transform: ``position`` (3,) m, ``rotation`` (3, 3) (columns: local axes in the world)."""

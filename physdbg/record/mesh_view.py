@@ -1,0 +1,167 @@
+"""What the views draw of a mesh: its BVH by level with every volume, and one step's search.
+
+A recording keeps each mesh's triangles at run time 0 (and a kinematic mesh's motion), so
+its BVH is rebuilt here the way ``physdbg overlap`` builds it (engine/mesh/tree.py, SAH):
+per node an AABB, an OBB and a bounding sphere, in the mesh's own frame (the frame the
+mesh had at run time 0; a view turns them with the mesh).
+
+The search drawn for a step is the seed's "search tree … that records descent into each
+BVH", for spheres against the triangles, walked on the engine's own tree
+(colliders/mesh.py: one SAH tree over every triangle of the scene, in pre-order, its boxes
+in the world frame, a kinematic mesh's swept over the step by the same ``place``): every
+sphere's box for the step (its centres at the step's start and end, grown by its radius)
+walks down from the root; a node whose box meets it is descended into (met), one whose
+box does not ends that branch (culled), and the leaves met are the triangles the narrow
+phase tests. The engine's walk is the same but for its boxes, which follow each sphere's
+path through the step and add the contact tolerance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+MET, CULLED, REACHED = 0, 1, 2  # a visited pair's outcome: descended into, ended, a triangle reached
+
+
+@dataclass
+class MeshSearch:
+    """The triangles' search for one step: ``met`` and ``culled`` (nodes of the engine's
+    tree, each visited node once: met when any sphere's box met it), ``pairs`` (how many
+    sphere–node pairs were visited), ``triangles`` (the triangles reached, numbered in the
+    scene) and ``spheres`` (those whose box reached a triangle).
+
+    The search tree itself: ``visits`` (P, 4) int64, one row per sphere–node pair in the
+    order visited: sphere, node, outcome (MET, CULLED or REACHED), the row of the pair it
+    was descended from (-1 for a sphere's root pair)."""
+
+    met: np.ndarray
+    culled: np.ndarray
+    pairs: int
+    triangles: np.ndarray
+    spheres: np.ndarray
+    visits: np.ndarray
+
+
+def mesh_trees(meshes) -> list:
+    """Each mesh's tree (engine.mesh.MeshTree, SAH) from a recording's meshes (state.Meshes),
+    in the frame the mesh had at run time 0."""
+    from ..engine.mesh.tree import build_mesh_tree
+
+    trees = []
+    for k in range(len(meshes)):
+        corners = meshes.corners[meshes.mesh_of == k].reshape(-1, 3)
+        trees.append(build_mesh_tree(corners, np.arange(len(corners), dtype=np.int64).reshape(-1, 3), "sah"))
+    return trees
+
+
+def node_depths(tree) -> np.ndarray:
+    """(M,) int64: each node's depth below the root (0)."""
+    nodes = tree.nodes
+    depth = np.zeros(nodes.size, dtype=np.int64)
+    stack = [int(nodes.root)]
+    while stack:
+        q = stack.pop()
+        if nodes.left[q] >= 0:
+            for child in (int(nodes.left[q]), int(nodes.right[q])):
+                depth[child] = depth[q] + 1
+                stack.append(child)
+    return depth
+
+
+def engine_tree(meshes):
+    """The engine's triangle tree for a recording's meshes (state.Meshes): a MeshGeometry
+    as a tuple (colliders/mesh.py), at run time 0; ``search`` places it for a step."""
+    from ..engine.colliders.mesh import MeshGeometry
+    from ..engine.state import Walls
+
+    return tuple(MeshGeometry.of(Walls(meshes=meshes)))
+
+
+def search(group, meshes, lo: np.ndarray, hi: np.ndarray, time: float, dt: float) -> MeshSearch:
+    """Walk the engine's triangle tree ``group`` (engine_tree; its boxes rewritten for the
+    step that begins at run time ``time`` and lasts ``dt`` s) with each box lo, hi (K, 3)
+    (world frame), from the root. Nodes are the tree's pre-order positions; a triangle is
+    its number in the scene (state.Meshes.triangle_words names it)."""
+    from ..engine.colliders.mesh import place
+
+    place(group, meshes, time, dt)
+    box_lo, box_hi, leaf, skip = group[3], group[4], group[5], group[6]
+    size = len(leaf)
+    met = np.zeros(size, dtype=bool)
+    visited = np.zeros(size, dtype=bool)
+    reached, who = set(), set()
+    visits = []
+    for k in range(len(lo) if size else 0):
+        stack = [(0, -1)]
+        while stack:
+            q, parent = stack.pop()
+            row = len(visits)
+            visited[q] = True
+            if np.any(lo[k] > box_hi[q]) or np.any(box_lo[q] > hi[k]):
+                visits.append((k, q, CULLED, parent))
+                continue
+            met[q] = True
+            if leaf[q] >= 0:
+                visits.append((k, q, REACHED, parent))
+                reached.add(int(leaf[q]))
+                who.add(k)
+            else:
+                visits.append((k, q, MET, parent))
+                stack += [(int(skip[q + 1]), row), (q + 1, row)]
+    return MeshSearch(np.flatnonzero(met), np.flatnonzero(visited & ~met), len(visits),
+                      np.array(sorted(reached), dtype=np.int64), np.array(sorted(who), dtype=np.int64),
+                      np.array(visits, dtype=np.int64).reshape(-1, 4))
+
+
+def tree_layout(visits: np.ndarray) -> np.ndarray:
+    """(P, 2) positions of the search tree's pairs for a graph view: depth down (y), and
+    across (x) each pair over the middle of the pairs below it, leaves side by side in the
+    order visited, one sphere's tree after another."""
+    count = len(visits)
+    children: list[list[int]] = [[] for _ in range(count)]
+    roots = []
+    for row, (_k, _q, _outcome, parent) in enumerate(visits.tolist()):
+        (children[parent] if parent >= 0 else roots).append(row)
+    position = np.zeros((count, 2))
+    next_x = 0.0
+    for root in roots:  # iteratively: post-order, so a pair is placed after those below it
+        stack = [(root, 0, False)]
+        while stack:
+            row, depth, done = stack.pop()
+            if not done:
+                stack.append((row, depth, True))
+                stack += [(child, depth + 1, False) for child in reversed(children[row])]
+                continue
+            if children[row]:
+                position[row, 0] = position[children[row], 0].mean()
+            else:
+                position[row, 0] = next_x
+                next_x += 1.0
+            position[row, 1] = depth
+        next_x += 1.0  # a gap between two spheres' trees
+    return position
+
+
+def path_boxes(x0: np.ndarray, x1: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) (N, 3): each sphere's box from its centre x0 to x1, grown by its radius."""
+    r = np.asarray(radius, dtype=np.float64)[:, None]
+    return np.minimum(x0, x1) - r, np.maximum(x0, x1) + r
+
+
+def quaternions(axes: np.ndarray) -> np.ndarray:
+    """(M, 4) x, y, z, w quaternions of rotations whose columns are axes[m]'s rows (the OBBs'
+    unit axes, (M, 3, 3)), made proper (a reflected frame has one axis flipped)."""
+    out = np.empty((len(axes), 4))
+    for m, rows in enumerate(axes):
+        r = rows.T.copy()
+        if np.linalg.det(r) < 0:
+            r[:, 2] = -r[:, 2]
+        w = np.sqrt(max(0.0, 1.0 + r[0, 0] + r[1, 1] + r[2, 2])) / 2
+        x = np.copysign(np.sqrt(max(0.0, 1.0 + r[0, 0] - r[1, 1] - r[2, 2])) / 2, r[2, 1] - r[1, 2])
+        y = np.copysign(np.sqrt(max(0.0, 1.0 - r[0, 0] + r[1, 1] - r[2, 2])) / 2, r[0, 2] - r[2, 0])
+        z = np.copysign(np.sqrt(max(0.0, 1.0 - r[0, 0] - r[1, 1] + r[2, 2])) / 2, r[1, 0] - r[0, 1])
+        out[m] = (x, y, z, w)
+    return out
