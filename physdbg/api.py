@@ -85,6 +85,7 @@ class RunSummary:
 
     meshes: dict[str, int] = field(default_factory=dict)  # each fixed mesh's name: its triangles
     mesh_notes: list[str] = field(default_factory=list)  # what loading the meshes left out
+    kernels: str = "compiled"  # the engine's tier and why (tier.py)
     meshes_move: bool = False  # two meshes or more, one kinematic: the audit looks for them passing into each other
     def as_dict(self) -> dict:
         return asdict(self)
@@ -127,6 +128,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     from .events import RunTally
     from .observe import FanOut
     from .precompile import compile_kernels
+    from .tier import chosen as chosen_tier
 
     auditor = None
     if audit:
@@ -136,10 +138,11 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         auditor = Auditor(RecordingHeader.from_scene(scene), on_finding)
         observer = FanOut(observer, auditor) if observer is not None else auditor
     world = scene.build_world(observer)
-    if on_status is not None:
+    kernels = chosen_tier()
+    if on_status is not None and not kernels.interpreted:
         on_status("compiling")
-    compile_seconds = compile_kernels(world.broad_phase.name, sleeping=world.sleepers is not None,
-                                      audit=auditor is not None)
+    compile_seconds = 0.0 if kernels.interpreted else compile_kernels(
+        world.broad_phase.name, sleeping=world.sleepers is not None, audit=auditor is not None)
     if on_status is not None:
         on_status("running")
     st = world.state
@@ -187,7 +190,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         max_contacts_in_a_step=tally.most["contacts"], energy_start=e0, energy_end=e1, energy_drift=drift,
         momentum_start=[float(c) for c in mom0], momentum_end=[float(c) for c in mom1],
         momentum_drift=float(np.linalg.norm(mom1 - mom0)), max_overlap=tally.max_overlap,
-        wall_seconds=wall, compile_seconds=compile_seconds, ms_per_step=1000.0 * wall / n_steps if n_steps else math.nan,
+        kernels=kernels.reason, wall_seconds=wall, compile_seconds=compile_seconds, ms_per_step=1000.0 * wall / n_steps if n_steps else math.nan,
         engine_ms_per_step=1000.0 * sum(tally.seconds.values()) / n_steps if n_steps else math.nan,
         phase_seconds=tally.seconds, final_hash=digest, warning_counts=dict(warnings.counts),
         warnings=warnings.examples(), findings=report.lines() if report else [],

@@ -100,6 +100,41 @@ def _pile_note(scene) -> None:
         typer.echo(f"note: {note}", err=True)
 
 
+def _choose_tier(scene: str, overrides) -> object:
+    """Compiled or interpreted for a run of ``scene`` (physdbg/tier.py), chosen and
+    applied before the engine is loaded."""
+    from . import tier
+
+    try:
+        return tier.apply(tier.choose(tier.estimate(scene, overrides or [])))
+    except ValueError as err:  # a wrong PHYSDBG_COMPILE
+        raise PhysdbgError(str(err)) from None
+
+
+def _choose_tier_for(*recordings: Path) -> object:
+    """The tier for commands that read recordings (the audit's and the diff's checks are
+    compiled functions too): the work is the recordings' sphere-steps."""
+    from . import tier
+
+    works = [tier.estimate_recording(path) for path in recordings]
+    try:
+        return tier.apply(tier.choose(None if None in works else sum(works)))
+    except ValueError as err:
+        raise PhysdbgError(str(err)) from None
+
+
+def _after_interpreted(chosen, quiet: bool = False) -> None:
+    """After an interpreted run on a cold cache, start the background compile (tier.py)."""
+    from . import tier
+
+    if getattr(chosen, "background", False):
+        pid = tier.start_background_compile()
+        if not quiet:
+            typer.echo("note: the kernels are compiling in the background for the next run "
+                       + (f"(pid {pid}; it ends by itself, at most {tier.BACKGROUND_TIMEOUT:.0f} s)" if pid
+                          else "(it could not start: the next large run compiles them)"), err=True)
+
+
 SetOption = Annotated[
     Optional[list[str]],
     typer.Option("--set", "-s", metavar="KEY=VALUE",
@@ -126,6 +161,7 @@ def run(
     Example: physdbg run bounce --set integrator=verlet --set duration=2
     """
     with _user_errors():
+        tier = _choose_tier(scene, set_)
         from .analysis.report import summary_text
         from .api import load_scene
         from .api import run as run_scene
@@ -144,6 +180,7 @@ def run(
                 dts_out.write_text("".join(f"{d!r}\n" for d in summary.dts))
             except OSError as err:
                 raise PhysdbgError(f"{dts_out}: cannot write the step lengths ({err})") from None
+        _after_interpreted(tier, quiet=as_json)
         if as_json:
             typer.echo(json.dumps(summary.as_dict(), indent=2))
         else:
@@ -185,6 +222,7 @@ def record(
     Example: physdbg record bounce        then: rerun recordings/bounce.rrd
     """
     with _user_errors():
+        tier = _choose_tier(scene, set_)
         from .analysis.report import size_words, summary_text
         from .api import diff as api_diff
         from .api import load_scene
@@ -204,6 +242,7 @@ def record(
                                   on_step=bar.update, on_status=bar.status, view=view)
         finally:
             bar.close()
+        _after_interpreted(tier)
         typer.echo(summary_text(result.summary, "the recording and the audit"))
         typer.echo(f"recorded    {result.frames - 1} steps, detail {result.detail}")
         typer.echo(f"mcap        {result.mcap}  ({size_words(result.bytes_mcap)})")
@@ -266,9 +305,11 @@ def diff(
     Example: physdbg diff recordings/ci/cradle.mcap cradle-index.mcap --markdown
     """
     with _user_errors():
+        tier = _choose_tier_for(a, b)
         from . import api
 
         report = api.diff(a, b, atol=atol, rtol=rtol, verify=not no_verify)
+        _after_interpreted(tier, quiet=True)
         typer.echo(_render(report, "diff", output_format, as_json, markdown))
         if overlay or spawn:
             written = api.overlay(a, b, report, str(overlay) if overlay else None, force=force, spawn=spawn,
@@ -295,9 +336,11 @@ def explain(
     Example: physdbg explain recordings/bullet-wall.mcap
     """
     with _user_errors():
+        tier = _choose_tier_for(recording)
         from . import api
 
         report = api.explain(recording, verify=not no_verify, every_finding=every)
+        _after_interpreted(tier, quiet=True)
         typer.echo(_render(report, "explain", output_format, as_json, markdown))
         raise typer.Exit(0 if report.clean else 1)
 
@@ -323,6 +366,7 @@ def replay(
     Example: physdbg replay recordings/bounce.mcap --rrd bounce.rrd --verify
     """
     with _user_errors():
+        _choose_tier_for(recording)
         from . import api
 
         if not (rrd or spawn or web or verify):
@@ -467,10 +511,12 @@ def check_run(
     Example: physdbg check-run docs/examples/student-bounce.csv --scene bounce
     """
     with _user_errors():
+        tier = _choose_tier(scene, set_)
         from . import api
 
         result = api.check_run(run, scene, set_ or [], atol=atol, rtol=rtol, keep=keep, force=force,
                                verify=not no_verify)
+        _after_interpreted(tier, quiet=True)
         typer.echo(_render(result.report, "check_run", output_format, as_json, markdown))
         if result.run and not (as_json or markdown or output_format != "text"):
             me = _command("physdbg")

@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
-import numpy as np
-import pytest
+import os
 
-from physdbg.engine import Settings, State, Walls, World
-from physdbg.observe import ListObserver
+# The suite compiles the kernels itself (pytest_sessionstart): a physdbg process it starts
+# must not start a background compile of its own (physdbg/tier.py) that would outlive it
+# and take a core from the tests. Tests of the tiers set PHYSDBG_COMPILE themselves.
+os.environ.setdefault("PHYSDBG_COMPILE", "now")
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from physdbg.engine import Settings, State, Walls, World  # noqa: E402
+from physdbg.observe import ListObserver  # noqa: E402
 
 
 def pytest_sessionstart(session):

@@ -226,6 +226,11 @@ def _mesh_words(meshes: dict) -> str:
             + ", ".join(f"{name} {size}" for name, size in meshes.items()) + " triangles)")
 
 
+def _interpreted(s) -> bool:
+    """Whether a run summary's engine ran interpreted (tier.py)."""
+    return str(getattr(s, "kernels", "compiled")).startswith("interpreted")
+
+
 def summary_text(s, observers: str = "the audit") -> str:
     """The human-readable run summary; observers: what watched the run besides the engine
     (its time is in the second speed figure only)."""
@@ -251,7 +256,9 @@ def summary_text(s, observers: str = "the audit") -> str:
         f"momentum    {_vec(s.momentum_start)} -> {_vec(s.momentum_end)} kg·m/s  (drift {s.momentum_drift:.3e})",
         f"overlap     max {s.max_overlap:.3g} m",
         f"speed       {s.engine_ms_per_step:.3f} ms/step in the engine ({phases}); "
-        f"{s.ms_per_step:.3f} ms/step with {observers}; kernels compiled/loaded in {s.compile_seconds:.2f} s",
+        f"{s.ms_per_step:.3f} ms/step with {observers}"
+        + (f"; kernels compiled/loaded in {s.compile_seconds:.2f} s" if not _interpreted(s) else ""),
+        *([f"kernels     {s.kernels}"] if _interpreted(s) else []),
         f"state hash  {s.final_hash}",
         "warnings    " + _warning_totals(s.warning_counts),
     ]

@@ -109,7 +109,7 @@ def _sign(h):
     """np.sign of a float: -1, 0 or 1, NaN for NaN."""
     if h != h:
         return h
-    return (h > 0.0) - (h < 0.0)
+    return 1.0 if h > 0.0 else (-1.0 if h < 0.0 else 0.0)
 
 
 @njit(cache=True)

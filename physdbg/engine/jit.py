@@ -40,7 +40,7 @@ the same arithmetic in the same order, so no result changes by a bit (the golden
 
 from __future__ import annotations
 
-from numba.core import types
+from numba.core import config, types
 from numba.core.registry import CPUDispatcher
 
 
@@ -62,8 +62,12 @@ class _OneVersionPerType(CPUDispatcher):
 
 
 def _compiled(**options):
-    """A decorator compiling with numba in nopython mode, cached on disk, one version per type."""
+    """A decorator compiling with numba in nopython mode, cached on disk, one version per
+    type; the function itself, interpreted, when numba's JIT is off (NUMBA_DISABLE_JIT=1,
+    as numba's own ``njit`` does)."""
     def decorate(function):
+        if config.DISABLE_JIT:
+            return function
         dispatcher = _OneVersionPerType(py_func=function, locals={},
                                         targetoptions={"nopython": True, "boundscheck": None, **options})
         dispatcher.enable_caching()
@@ -73,3 +77,14 @@ def _compiled(**options):
 
 kernel = _compiled()
 borrowing = _compiled(_nrt=False)
+
+
+def records(array):
+    """A structured array as the engine's functions index it: itself when they are compiled
+    (numba reads a row's fields by name), a ``numpy.recarray`` view when they are
+    interpreted (a plain row has no attributes in Python)."""
+    if config.DISABLE_JIT:
+        import numpy as np
+
+        return array.view(np.recarray)
+    return array

@@ -36,7 +36,7 @@ from numba import njit
 from ..events import CONTACT_ROW, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_SUPERSEDED
 from .broadphase.boxes import box_meets
 from .colliders import KINDS, most_partners, partner_sphere, partners_bound, partners_of, time_of_impact
-from .jit import borrowing, kernel
+from .jit import borrowing, kernel, records
 from .kernel_args import B_BATCH_MARK, B_COUNTERS, LoopBuffers, boxes, partner_lists, paths, sweep, test_log
 from .motion import particle_box
 from .resolve import NEEDS_HELD, OUT_OF_WORK, SKIPPED, finish_with_held, judge_contact
@@ -88,7 +88,7 @@ class Buffers:
         """The arrays as run_time_order takes them (kernel_args.LoopBuffers, as a plain
         tuple; again after any growth)."""
         return tuple(LoopBuffers(self.heap_toi, self.heap_data, self.test_int, self.test_float, self.test_outcome,
-                                 self.contacts, self.counters, self.pending, self.changed, self.batch_mark,
+                                 records(self.contacts), self.counters, self.pending, self.changed, self.batch_mark,
                                  self.requery, self.requery_count))
 
     def renumber(self, old_of_new: np.ndarray) -> None:

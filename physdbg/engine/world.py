@@ -53,6 +53,7 @@ from .broadphase.boxes import boxes_meet
 from .broadphase.periodic import PeriodicBroadPhase
 from .colliders import KINDS, PARTNER_IS_SPHERE, geometry_of, max_overlap, narrow_candidates
 from .colliders.mesh import place
+from .jit import records
 from .kernel_args import LoopBudgets, LoopCandidates, LoopMethod, LoopParticles
 from .memory import MemoryBudget
 from .motion import (
@@ -589,7 +590,7 @@ class World:
         while not held_room(self.held, a, other if PARTNER_IS_SPHERE[kind] else -1):
             self.held = grow_held(self.held)
         particles, method, geometry = self._kernel_groups(ctx)
-        return resolve_contact(kind, a, other, when, particles, method, geometry, self.held, buf.contacts,
+        return resolve_contact(kind, a, other, when, particles, method, geometry, self.held, records(buf.contacts),
                                buf.counters, CONTACTS, RAPID, buf.changed, self.settings.max_resting_work_per_step)
 
     def _kernel_groups(self, ctx: StepContext) -> tuple[tuple, tuple, tuple]:

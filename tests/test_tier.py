@@ -1,0 +1,103 @@
+"""Compiled or interpreted (physdbg/tier.py): the same hashes both ways, and the rule."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from physdbg import api, tier
+from physdbg.scenes import builtin_names
+
+# every built-in scene at a size the interpreted tier runs in a few seconds
+SMALL = {"highspeed": ["generate.count=40", "duration=0.2"], "rain": ["generate.count=40", "duration=0.5"],
+         "funnel": ["generate.count=30", "duration=0.5"], "gas": ["duration=0.5"], "ramp": ["duration=1"]}
+
+
+def _interpreted_run(name: str, overrides: list[str]) -> dict:
+    command = [sys.executable, "-m", "physdbg", "run", name, "--json"]
+    for item in overrides:
+        command += ["-s", item]
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
+    done = subprocess.run(command, capture_output=True, text=True, env=env, timeout=300)
+    assert done.returncode == 0, done.stderr + done.stdout
+    return json.loads(done.stdout)
+
+
+@pytest.mark.parametrize("name", builtin_names())
+def test_every_built_in_scene_gives_the_same_hash_interpreted_and_compiled(name):
+    overrides = SMALL.get(name, [])
+    interpreted = _interpreted_run(name, overrides)
+    assert interpreted["kernels"] == "interpreted (NUMBA_DISABLE_JIT=1)"
+    compiled = api.run(name, overrides)
+    assert interpreted["final_hash"] == compiled.final_hash
+    assert interpreted["contacts"] == compiled.contacts and interpreted["steps"] == compiled.steps
+
+
+def test_the_work_of_a_scene_is_estimated_from_its_file_before_it_is_loaded(tmp_path):
+    assert tier.estimate("bounce") == 300  # one ball, 5 s at 1/60
+    assert tier.estimate("rain", ["generate.count=2000"]) == 2000 * 240
+    assert tier.estimate("cradle", ["duration=1"]) == 5 * 60
+    scene = tmp_path / "s.toml"
+    scene.write_text('dt = 0.01\nsteps = 7\n[[particles]]\nposition = [0, 0, 0]\n[[particles]]\nposition = [1, 0, 0]\n')
+    assert tier.estimate(str(scene)) == 14
+    scene.write_text('dt = "real"\nduration = 1\n[[particles]]\nposition = [0, 0, 0]\n')
+    assert tier.estimate(str(scene)) is None  # unknown: counts as large
+    assert tier.estimate("no-such-scene") is None
+
+
+@pytest.fixture
+def cold(tmp_path, monkeypatch):
+    """A kernel cache folder with nothing in it, and no numba switch set by the user."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv("PHYSDBG_COMPILE", raising=False)
+    monkeypatch.setattr(tier, "interpreted", lambda: False)
+    return tmp_path / "cache"
+
+
+def test_a_small_run_on_a_cold_cache_is_interpreted_and_compiles_in_the_background(cold):
+    chosen = tier.choose(300)
+    assert chosen.interpreted and chosen.background
+    assert chosen.reason.startswith("interpreted: 300 sphere-steps on a cold kernel cache (compiled from 20,000)")
+    large = tier.choose(tier.INTERPRET_UP_TO + 1)
+    assert not large.interpreted and "the first compile takes" in large.reason
+    assert not tier.choose(None).interpreted  # unknown work: compiled
+
+
+def test_a_warm_cache_and_the_setting_decide(cold, monkeypatch):
+    for name in ("resolve.settle_held-1.py311.1.nbc", "timeline.run_time_order-2.py311.1.nbc"):
+        (cold / "engine_x").mkdir(parents=True, exist_ok=True)
+        (cold / "engine_x" / name).write_bytes(b"")
+    assert tier.cache_is_warm()
+    assert tier.choose(300) == tier.Tier(False, "compiled (the kernel cache is warm)")
+    (cold / "engine_x" / "timeline.run_time_order-2.py311.1.nbc").unlink()
+    assert not tier.cache_is_warm()
+    monkeypatch.setenv("PHYSDBG_COMPILE", "now")
+    assert not tier.choose(300).interpreted
+    monkeypatch.setenv("PHYSDBG_COMPILE", "never")
+    chosen = tier.choose(10**9)
+    assert chosen.interpreted and not chosen.background
+    monkeypatch.setenv("PHYSDBG_COMPILE", "sometimes")
+    with pytest.raises(ValueError, match="PHYSDBG_COMPILE='sometimes': one of auto, now, background, never"):
+        tier.choose(300)
+
+
+def test_a_cold_first_run_answers_in_seconds_and_says_why(tmp_path):
+    """README's first scene on an empty kernel cache, as a fresh clone meets it (the
+    background compile not started: PHYSDBG_COMPILE=never)."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PHYSDBG_COMPILE="never")
+    env.pop("NUMBA_DISABLE_JIT", None)
+    done = subprocess.run([sys.executable, "-m", "physdbg", "run", "bounce"], capture_output=True, text=True,
+                          env=env, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "kernels     interpreted (PHYSDBG_COMPILE=never, and the kernel cache is cold)" in done.stdout
+    assert "state hash  8001b275691de3af018776bfb275eecf" in done.stdout  # the golden hash of bounce
+    assert not (tmp_path / "cache").exists() or not any((tmp_path / "cache").rglob("*.nbc"))
+
+
+def test_the_background_compile_runs_this_physdbg_without_the_numba_switch():
+    command = tier.background_command()
+    assert command[0] == sys.executable and "physdbg.tier" in command[-1] and "t.main()" in command[-1]
