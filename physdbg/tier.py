@@ -221,14 +221,50 @@ def background_command() -> list[str]:
     return [sys.executable, "-c", f"import sys; sys.path.insert(0, {root!r}); import physdbg.tier as t; t.main()"]
 
 
+def _marker() -> Path | None:
+    """The file a running background compile holds its pid in (in the cache folder)."""
+    folder = os.environ.get("NUMBA_CACHE_DIR")
+    return Path(folder) / "background-compile.pid" if folder else None
+
+
+def running_background_compile() -> int | None:
+    """The pid of a background compile running for this cache folder, or None."""
+    marker = _marker()
+    try:
+        pid = int(marker.read_text()) if marker is not None else 0
+    except (OSError, ValueError):
+        return None
+    if pid <= 0:
+        return None
+    try:
+        os.kill(pid, 0)  # is it alive? (signal 0 only checks)
+    except ProcessLookupError:
+        return None
+    except PermissionError:
+        return pid
+    return pid
+
+
 def start_background_compile() -> int | None:
-    """Start the background compile (module doc); its pid, or None when it could not start."""
+    """Start the background compile (module doc), unless one is running for this cache
+    already (several quick commands in a row start one, not one each); its pid, or None
+    when it could not start."""
+    running = running_background_compile()
+    if running is not None:
+        return running
     env = {key: value for key, value in os.environ.items() if key != "NUMBA_DISABLE_JIT"}
     try:
         process = subprocess.Popen(background_command(), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                    stderr=subprocess.DEVNULL, env=env, start_new_session=True)
     except OSError:
         return None
+    marker = _marker()
+    if marker is not None:
+        try:
+            marker.parent.mkdir(parents=True, exist_ok=True)
+            marker.write_text(str(process.pid))
+        except OSError:
+            pass
     return process.pid
 
 
@@ -245,7 +281,15 @@ def main() -> None:
         signal.alarm(int(BACKGROUND_TIMEOUT))  # ends it, whatever it is doing
     from .precompile import compile_kernels
 
-    compile_kernels(None, sleeping=True, parallel=False, audit=True)
+    try:
+        compile_kernels(None, sleeping=True, parallel=False, audit=True)
+    finally:
+        marker = _marker()
+        try:
+            if marker is not None and marker.read_text().strip() == str(os.getpid()):
+                marker.unlink()
+        except OSError:
+            pass
 
 
 if __name__ == "__main__":

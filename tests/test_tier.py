@@ -101,3 +101,20 @@ def test_a_cold_first_run_answers_in_seconds_and_says_why(tmp_path):
 def test_the_background_compile_runs_this_physdbg_without_the_numba_switch():
     command = tier.background_command()
     assert command[0] == sys.executable and "physdbg.tier" in command[-1] and "t.main()" in command[-1]
+
+
+def test_quick_commands_in_a_row_start_one_background_compile_not_one_each(tmp_path, monkeypatch):
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))
+    started = []
+
+    class FakeProcess:
+        pid = os.getpid()  # alive: this very process
+
+    monkeypatch.setattr(tier.subprocess, "Popen", lambda *a, **k: started.append(a) or FakeProcess())
+    first = tier.start_background_compile()
+    again = tier.start_background_compile()
+    assert first == again == os.getpid() and len(started) == 1
+    (tmp_path / "cache" / "background-compile.pid").write_text("999999999")  # a process long gone
+    assert tier.running_background_compile() is None
+    tier.start_background_compile()
+    assert len(started) == 2
