@@ -323,30 +323,8 @@ def triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, integrat
     ``radius`` m) touches the fixed triangle ``tri`` (3, 3: corners as rows, m) while
     approaching it, and the feature touched (closest.FACE, an edge or a corner); (INF, -1)
     when it does not. ``tolerance`` (m): the gap below which it counts as touching."""
-    if STRAIGHT_PATH[integrator]:
-        a0 = 0.0
-        a1 = 0.0
-        a2 = 0.0
-    cq, cp = curvature_scale(integrator, k)
-    m = _norm(cq * a0 + cp * v0, cq * a1 + cp * v1, cq * a2 + cp * v2)
-    t = 0.0
-    feature = -1
-    for _ in range(500):
-        if t > horizon:
-            return INF, -1
-        p0, p1, p2, e0, e1, e2 = _center_path(x0, x1, x2, v0, v1, v2, a0, a1, a2, integrator, k, t)
-        d0, d1, d2, feature = _from_triangle(p0, p1, p2, tri)
-        dist = _norm(d0, d1, d2)
-        rate = (d0 * e0 + d1 * e1 + d2 * e2) / dist if dist > 0.0 else -1.0
-        step = _advance(dist - radius, rate, (d0 * a0 + d1 * a1 + d2 * a2) < 0.0, m, tolerance, horizon)
-        if step == 0.0:
-            return t, feature
-        if step == INF:
-            return INF, -1
-        t += step
-    if t <= horizon:
-        return t, feature
-    return INF, -1
+    return _triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, False, tri[0], 0.0, integrator, k,
+                               horizon, tolerance)
 
 
 @borrowing
@@ -354,17 +332,8 @@ def triangle_toi_sampled(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, integr
     """(t, feature): the first of ``samples`` instants in (0, horizon] at which the sphere
     overlaps the triangle while approaching it (the seed's case c; ``samples`` = 1 is the
     discrete test), or (INF, -1)."""
-    if STRAIGHT_PATH[integrator]:
-        a0 = 0.0
-        a1 = 0.0
-        a2 = 0.0
-    for s in range(1, samples + 1):
-        t = horizon * s / samples
-        p0, p1, p2, e0, e1, e2 = _center_path(x0, x1, x2, v0, v1, v2, a0, a1, a2, integrator, k, t)
-        d0, d1, d2, feature = _from_triangle(p0, p1, p2, tri)
-        if d0 * d0 + d1 * d1 + d2 * d2 < radius * radius and d0 * e0 + d1 * e1 + d2 * e2 < 0.0:
-            return t, feature
-    return INF, -1
+    return _triangle_toi_sampled(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, False, tri[0], 0.0, integrator, k,
+                                 horizon, samples)
 
 
 # ------------------------------------------------------------------ sphere–moving triangle
@@ -445,29 +414,58 @@ def moving_triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, m
     """(t, feature): triangle_toi_swept for a triangle of a moving mesh: ``tri`` (3, 3) its
     corners at the step's start, ``motion`` (9,) as in_body_frame's, ``tau0`` (s) the
     sphere's anchor time in the step (the test's local time t is at tau0 + t)."""
+    return _triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, True, motion, tau0, integrator, k,
+                               horizon, tolerance)
+
+
+@borrowing
+def moving_triangle_toi_sampled(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, motion, tau0, integrator, k,
+                                horizon, samples):
+    """(t, feature): triangle_toi_sampled for a triangle of a moving mesh (arguments as
+    moving_triangle_toi_swept's): overlap and approach judged in the mesh's frame."""
+    return _triangle_toi_sampled(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, True, motion, tau0, integrator, k,
+                                 horizon, samples)
+
+
+@borrowing
+def _seen_from_triangle(p0, p1, p2, e0, e1, e2, moving, motion, tau):
+    """A centre and its rate as the triangle sees them: themselves for a fixed triangle, in
+    the mesh's frame (in_body_frame) for a moving one."""
+    if moving:
+        return in_body_frame(p0, p1, p2, e0, e1, e2, motion, tau)
+    return p0, p1, p2, e0, e1, e2
+
+
+@borrowing
+def _triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, moving, motion, tau0, integrator, k,
+                        horizon, tolerance):
+    """The swept test against a fixed or (``moving``) a moving triangle: conservative
+    advancement (_advance) on the gap seen from the triangle, with the path's curvature
+    bound, plus the frame's Coriolis and centripetal terms when it moves (section doc)."""
     if STRAIGHT_PATH[integrator]:
         a0 = 0.0
         a1 = 0.0
         a2 = 0.0
     cq, cp = curvature_scale(integrator, k)
-    m_path = _norm(cq * a0 + cp * v0, cq * a1 + cp * v1, cq * a2 + cp * v2)
-    # bounds over the horizon: |x'| <= |v| + |x''|·h, |z'| <= that + |v_m|, |z| <= |z(0)| + |z'|·h
-    rate_bound = _norm(v0, v1, v2) + m_path * horizon + _norm(motion[3], motion[4], motion[5])
-    z_bound = _norm(x0 - motion[0] - motion[3] * tau0, x1 - motion[1] - motion[4] * tau0,
-                    x2 - motion[2] - motion[5] * tau0) + rate_bound * horizon
-    spin = _norm(motion[6], motion[7], motion[8])
-    m = m_path + 2.0 * spin * rate_bound + spin * spin * z_bound
+    m = _norm(cq * a0 + cp * v0, cq * a1 + cp * v1, cq * a2 + cp * v2)
+    if moving:
+        # bounds over the horizon: |x'| <= |v| + |x''|·h, |z'| <= that + |v_m|, |z| <= |z(0)| + |z'|·h
+        rate_bound = _norm(v0, v1, v2) + m * horizon + _norm(motion[3], motion[4], motion[5])
+        z_bound = _norm(x0 - motion[0] - motion[3] * tau0, x1 - motion[1] - motion[4] * tau0,
+                        x2 - motion[2] - motion[5] * tau0) + rate_bound * horizon
+        spin = _norm(motion[6], motion[7], motion[8])
+        m = m + 2.0 * spin * rate_bound + spin * spin * z_bound
     t = 0.0
     feature = -1
     for _ in range(500):
         if t > horizon:
             return INF, -1
         p0, p1, p2, e0, e1, e2 = _center_path(x0, x1, x2, v0, v1, v2, a0, a1, a2, integrator, k, t)
-        y0, y1, y2, r0, r1, r2 = in_body_frame(p0, p1, p2, e0, e1, e2, motion, tau0 + t)
+        y0, y1, y2, r0, r1, r2 = _seen_from_triangle(p0, p1, p2, e0, e1, e2, moving, motion, tau0 + t)
         d0, d1, d2, feature = _from_triangle(y0, y1, y2, tri)
         dist = _norm(d0, d1, d2)
         rate = (d0 * r0 + d1 * r1 + d2 * r2) / dist if dist > 0.0 else -1.0
-        # pulled in: the path's own acceleration towards the triangle (the frame's is in m)
+        # pulled in: the path's own acceleration towards the triangle (a moving frame's is in m)
         step = _advance(dist - radius, rate, (d0 * a0 + d1 * a1 + d2 * a2) < 0.0, m, tolerance, horizon)
         if step == 0.0:
             return t, feature
@@ -480,10 +478,10 @@ def moving_triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, m
 
 
 @borrowing
-def moving_triangle_toi_sampled(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, motion, tau0, integrator, k,
-                                horizon, samples):
-    """(t, feature): triangle_toi_sampled for a triangle of a moving mesh (arguments as
-    moving_triangle_toi_swept's): overlap and approach judged in the mesh's frame."""
+def _triangle_toi_sampled(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, moving, motion, tau0, integrator, k,
+                          horizon, samples):
+    """The sampled test against a fixed or (``moving``) a moving triangle: overlap and
+    approach at each sample, seen from the triangle."""
     if STRAIGHT_PATH[integrator]:
         a0 = 0.0
         a1 = 0.0
@@ -491,7 +489,7 @@ def moving_triangle_toi_sampled(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri,
     for s in range(1, samples + 1):
         t = horizon * s / samples
         p0, p1, p2, e0, e1, e2 = _center_path(x0, x1, x2, v0, v1, v2, a0, a1, a2, integrator, k, t)
-        y0, y1, y2, r0, r1, r2 = in_body_frame(p0, p1, p2, e0, e1, e2, motion, tau0 + t)
+        y0, y1, y2, r0, r1, r2 = _seen_from_triangle(p0, p1, p2, e0, e1, e2, moving, motion, tau0 + t)
         d0, d1, d2, feature = _from_triangle(y0, y1, y2, tri)
         if d0 * d0 + d1 * d1 + d2 * d2 < radius * radius and d0 * r0 + d1 * r1 + d2 * r2 < 0.0:
             return t, feature
