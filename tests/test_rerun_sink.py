@@ -33,7 +33,7 @@ def read_rrd(path: Path) -> dict:
         names = batch.schema.names
         steps = batch.column("step").to_pylist()
         for name in names:
-            if name in ("step", "sim_time") or name.startswith("rerun."):
+            if ":" not in name or name.startswith("rerun."):  # timelines (step, sim_time, the opening's)
                 continue
             for step, value in zip(steps, batch.column(name).to_pylist(), strict=True):
                 rows.setdefault((chunk.entity_path, step), {}).setdefault(name, []).append(value)
@@ -57,9 +57,17 @@ def billiards_live(tmp_path_factory):
 def test_the_rrd_holds_the_engines_positions_at_every_step_and_a_blueprint(billiards_live):
     _, rrd, live = billiards_live
     reader = rerun_chunk.RrdReader(rrd)
-    assert len(reader.blueprints()) == 1 and len(reader.recordings()) == 1
+    # the default blueprint, then the one that opens the file paused at the first contact
+    assert len(reader.blueprints()) == 2 and len(reader.recordings()) == 1
     rows = read_rrd(rrd)
     ends = live.of_type(StepEnd)
+    first = next(k for k, event in enumerate(ends) if event.counts.contacts) + 1
+    opening = [value for chunk in reader.stream() if not chunk.is_static
+               and "from first contact" in chunk.to_record_batch().schema.names
+               for value in chunk.to_record_batch().column("from first contact").to_pylist()]
+    assert min(opening) == first  # the timeline the file opens on begins at the first contact
+    labels = rows[("/world/spheres", 0)]["Points3D:labels"][0]
+    assert labels == [str(i) for i in range(len(ends[0].positions))]  # every sphere numbered
     for k in (1, 17, 60, 120):
         got = np.array(rows[("/world/spheres", k)]["Points3D:positions"][-1], dtype=np.float32)
         np.testing.assert_array_equal(got, ends[k - 1].positions.astype(np.float32))
@@ -154,9 +162,10 @@ def test_a_step_with_more_contacts_than_are_drawn_says_so(tmp_path, monkeypatch)
     texts = [t for row in rows[("/log", 44)]["TextLog:text"] for t in row]
     assert "step 44: ... and 3 more contacts; ghosts and arrows for the first 2" in texts
     # sleeping is off in cradle: no flat-zero "asleep" series beside the contacts, and the
-    # spheres keep the colours logged once, though the resting balls are exactly still
+    # spheres keep the colours logged at the start (and again on the first contact's row,
+    # where the timeline the file opens on begins), though the resting balls are exactly still
     assert not any(entity == "/stats/asleep" for entity, _ in rows)
-    assert not any(entity == "/world/spheres" and step > 0 and "Points3D:colors" in comps
+    assert not any(entity == "/world/spheres" and step not in (0, 44) and "Points3D:colors" in comps
                    for (entity, step), comps in rows.items())
 
 

@@ -31,7 +31,10 @@ Entities (timelines ``step`` = frame, steps completed, and ``sim_time`` in secon
                              Scalars, sent in columns
     log                      TextLog: contacts and warnings in words
 
-A default blueprint (3D view, energy and contact plots, the event log) goes in the file.
+A default blueprint (3D view, energy and contact plots, the event log) goes in the file;
+once the run has a contact, a second one opens it paused there (the timeline "from first
+contact", or "from first mesh contact" where the BVH search is drawn), and up to
+LABELLED_SPHERES spheres carry their numbers.
 """
 
 from __future__ import annotations
@@ -55,7 +58,9 @@ IMPULSE_ARROW_SECONDS = 0.05  # an impulse arrow shows how far its velocity chan
 PATHS_ALL_UP_TO = 2000  # above this many particles, only paths of particles with contacts are drawn
 SERIES_BATCH = 128
 SEARCHED_SPHERES = 12  # the most spheres whose search of the triangles' BVH is drawn (one tree each)
+FIRST_CONTACT_TIMELINE = "from first contact"  # a file opens here, paused (a scene without meshes)
 MESH_CONTACT_TIMELINE = "from first mesh contact"  # a mesh scene's file opens here (paused)
+LABELLED_SPHERES = 40  # up to this many spheres are drawn with their numbers
 BVH_LEVELS_SHOWN = 3  # levels 0..2 are drawn when the file opens; deeper ones are a click away  # steps of scalar series buffered before one send_columns
 
 
@@ -148,9 +153,12 @@ class RerunSink:
         self._virial = 0.0
         self._movable = int(np.count_nonzero(header.inverse_mass > 0))
         self._asleep: np.ndarray | None = None  # the spheres last drawn asleep (None: none)
-        # a file of its own with meshes opens paused at the first contact on a mesh, with the
-        # search drawn: the rows from there on carry the timeline MESH_CONTACT_TIMELINE
-        self._open_at_mesh_contact = not self.shared and opening is None and len(header.walls.meshes) > 0
+        # a file of its own opens paused at the first contact (a scene with meshes: the first
+        # on a mesh, where the search is drawn): the rows from there on carry the timeline
+        # FIRST_CONTACT_TIMELINE (MESH_CONTACT_TIMELINE), and the last blueprint opens it
+        self._open_at_first_contact = not self.shared and opening is None
+        # each sphere's number beside it, where there are few enough to read
+        self._labels = [str(i) for i in range(header.count)] if header.count <= LABELLED_SPHERES else None
         self._trees = mesh_view.mesh_trees(header.walls.meshes) if len(header.walls.meshes) else []
         self._searched = False  # the search at the first mesh contact is drawn
         self._log_static(header)
@@ -180,7 +188,8 @@ class RerunSink:
                     static=True)
         self._set_time(0, 0.0)
         rec.log(self.root + "world/spheres", rr.Points3D(np.asarray(h.positions, dtype=np.float32), radii=self.radius,
-                                             colors=sphere_colors(h.inverse_mass, moving=self.color)))
+                                             colors=sphere_colors(h.inverse_mass, moving=self.color),
+                                             labels=self._labels, show_labels=self._labels is not None))
         settings = " ".join(f"{key}={value}" for key, value in h.meta.get("settings", {}).items())
         rec.log(self.root + "log", rr.TextLog(f"{h.name}: {h.count} spheres, {len(h.walls)} walls; {settings}", level="INFO"))
 
@@ -219,9 +228,10 @@ class RerunSink:
         rr, rec = self.rr, self.rec
         frame = end.step + 1
         self._last_time = (frame, end.time)
-        if self._open_at_mesh_contact and self.opening is None and self._contacts is not None and bool(
-                np.any(self._contacts.kind == KIND_MESH)):
-            self.opening = (MESH_CONTACT_TIMELINE, frame)
+        if self._open_at_first_contact and self.opening is None and self._contacts is not None:
+            meshes = len(self.header.walls.meshes) > 0
+            if np.any(self._contacts.kind == KIND_MESH) if meshes else len(self._contacts) > 0:
+                self.opening = (MESH_CONTACT_TIMELINE if meshes else FIRST_CONTACT_TIMELINE, frame)
         self._set_time(frame, end.time)
         # Copies in float32: rerun may hold the array until it flushes. Colours only when the
         # set of sleeping spheres changes: a pile falling asleep turns grey-blue
@@ -234,7 +244,9 @@ class RerunSink:
         self._asleep = end.asleep
         rec.log(self.root + "world/spheres",
                 rr.Points3D.from_fields(positions=np.asarray(end.positions, dtype=np.float32), colors=colors,
-                                        radii=self.radius if opens else None))
+                                        radii=self.radius if opens else None,
+                                        labels=self._labels if opens else None,
+                                        show_labels=(self._labels is not None) if opens else None))
         contacts = self._contacts if self.detail != "state" else None
         if self._broad_phase is not None:
             self._bvh(self._broad_phase)
@@ -485,7 +497,7 @@ class RerunSink:
         self._send_series()
         if self.shared:
             return
-        if self._open_at_mesh_contact and self.opening is not None:
+        if self._open_at_first_contact and self.opening is not None:
             self.rec.send_blueprint(blueprint(self.header, self.opening), make_active=True, make_default=True)
         self.rec.flush()
         self.rec.disconnect()
