@@ -77,7 +77,10 @@ def _user_errors():
 
 
 @app.command()
-def scenes() -> None:
+def scenes(
+    as_json: Annotated[bool, typer.Option("--json", help="Print the scenes as JSON (name and description).")]
+    = False,
+) -> None:
     """List the built-in scenes, one line each.
 
     Example: physdbg scenes
@@ -85,6 +88,9 @@ def scenes() -> None:
     from .scenes import builtin_descriptions
 
     rows = builtin_descriptions()
+    if as_json:
+        typer.echo(json.dumps([{"name": name, "description": description} for name, description in rows], indent=2))
+        return
     width = max(len(name) for name, _ in rows)
     for name, description in rows:
         typer.echo(f"{name:<{width}}  {description}")
@@ -153,7 +159,8 @@ def run(
     dts_out: Annotated[Optional[Path], typer.Option(
         "--dts-out", help="Write each step's dt to this file (to repeat a real-time run with --dts).")] = None,
     progress: Annotated[bool, typer.Option(
-        "--progress/--no-progress", help="Show a progress bar on long runs (default: when stderr is a terminal).")]
+        "--progress/--no-progress", show_default=False,
+        help="Show a progress bar on long runs (default: when stderr is a terminal).")]
     = sys.stderr.isatty(),
 ) -> None:
     """Run a scene and print a summary: steps, contacts, energy and momentum drift, ms/step.
@@ -211,7 +218,8 @@ def record(
     dts: Annotated[Optional[Path], typer.Option(
         "--dts", help="Repeat a run exactly: read each step's dt (one number per line) from this file.")] = None,
     progress: Annotated[bool, typer.Option(
-        "--progress/--no-progress", help="Show a progress bar on long runs (default: when stderr is a terminal).")]
+        "--progress/--no-progress", show_default=False,
+        help="Show a progress bar on long runs (default: when stderr is a terminal).")]
     = sys.stderr.isatty(),
     check_against: Annotated[Optional[Path], typer.Option(
         "--check-against", help="After recording, diff against this golden recording: exit 1 (and say why) when "

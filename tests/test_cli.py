@@ -414,3 +414,19 @@ def test_an_output_that_cannot_be_written_is_one_line_and_exit_2(tmp_path, comma
     result = CliRunner().invoke(app, [part.format(mcap=mcap) for part in command])
     assert result.exit_code == 2, result.output
     assert "cannot write in /proc" in result.output and "internal error" not in result.output
+
+
+def test_scenes_as_json_and_the_progress_option_shows_one_default():
+    from typer.testing import CliRunner
+
+    from physdbg.cli import app
+    from physdbg.scenes import builtin_names
+
+    listed = CliRunner().invoke(app, ["scenes", "--json"])
+    assert listed.exit_code == 0
+    rows = json.loads(listed.output)
+    assert [row["name"] for row in rows] == builtin_names() and all(row["description"] for row in rows)
+    for command in ("run", "record"):
+        shown = CliRunner().invoke(app, [command, "--help"], terminal_width=200).output
+        assert "(default: when stderr is a terminal)" in shown and "[default: no-progress]" not in shown \
+            and "[default: progress]" not in shown
