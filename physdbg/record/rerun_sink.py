@@ -406,26 +406,26 @@ class RerunSink:
         rec.log(path + "/triangles", rr.Mesh3D(
             vertex_positions=corners, triangle_indices=np.arange(len(corners), dtype=np.uint32).reshape(-1, 3),
             albedo_factor=[250, 210, 40, 220]))
-        self._search_graph(found)
+        self._search_graph(found, group[5])
         who = ", ".join(str(int(i)) for i in hitters)
         return [(f"step {end.step + 1}: the first contact on a mesh; the search of the triangles' BVH (its boxes "
                  f"swept over the step) by the boxes of the sphere{'s' if len(hitters) != 1 else ''} that hit a mesh "
                  f"({who}): {found.pairs} sphere-node pairs visited, {len(found.met)} nodes met (green), "
                  f"{len(found.culled)} culled (red), {len(found.triangles)} triangles reached (yellow)", "INFO")]
 
-    def _search_graph(self, found) -> None:
+    def _search_graph(self, found, leaf_triangle) -> None:
         """The search tree as a graph (search/triangles): a node per sphere–node pair
         visited, green where the boxes met, red where the branch ended, yellow at a triangle
-        reached; an edge from each pair to the pairs descended from it."""
+        reached; an edge from each pair to the pairs descended from it. leaf_triangle: the
+        searched tree's (mesh_view.engine_tree), each node's triangle."""
         rr = self.rr
         if not len(found.visits):
             return
         meshes = self.header.walls.meshes
         ids = [f"{k}:{q}" for k, q, _o, _p in found.visits.tolist()]
         labels = []
-        group_leaf = mesh_view.engine_tree(meshes)[5]
         for k, q, outcome, parent in found.visits.tolist():
-            what = meshes.triangle_words(int(group_leaf[q])) if outcome == mesh_view.REACHED else f"node {q}"
+            what = meshes.triangle_words(int(leaf_triangle[q])) if outcome == mesh_view.REACHED else f"node {q}"
             labels.append(f"sphere {k}: {what}" if parent < 0 else what)
         colors = [[(60, 200, 90), (230, 70, 60), (250, 210, 40)][o] for o in found.visits[:, 2].tolist()]
         position = mesh_view.tree_layout(found.visits) * [110.0, 70.0]
