@@ -126,6 +126,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     scene = ready_scene(scene, overrides)
     from .engine import NonFiniteState, energies, state_hash
     from .events import RunTally
+    from .interrupt import StopOnCtrlC
     from .observe import FanOut
     from .precompile import compile_kernels
     from .tier import chosen as chosen_tier
@@ -154,18 +155,19 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     warnings = WarningTally()
     started = time.perf_counter()
     digest = state_hash(st.positions, st.velocities)
-    for dt in scene.step_lengths(dts):
-        try:
-            end = world.step(dt)
-        except NonFiniteState as err:
-            raise NonFiniteRunError(f"{err}: the run stopped there (a NaN or infinity cannot be stepped on); "
-                                    f"look at the contacts of that step") from None
-        used.append(dt)
-        tally.add(end)
-        warnings.add(end.warnings)
-        digest = end.state_hash
-        if on_step is not None:
-            on_step(len(used), total)
+    with StopOnCtrlC(world):  # Ctrl-C ends even a long step within a second (interrupt.py)
+        for dt in scene.step_lengths(dts):
+            try:
+                end = world.step(dt)
+            except NonFiniteState as err:
+                raise NonFiniteRunError(f"{err}: the run stopped there (a NaN or infinity cannot be stepped on); "
+                                        f"look at the contacts of that step") from None
+            used.append(dt)
+            tally.add(end)
+            warnings.add(end.warnings)
+            digest = end.state_hash
+            if on_step is not None:
+                on_step(len(used), total)
     wall = time.perf_counter() - started
     report = auditor.report(scene.name) if auditor else None  # before its counts: it ends what waits
     k1, p1, mom1 = energies(st, world.gravity)
@@ -300,6 +302,7 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
     from .record.format import DETAIL_LEVELS
     from .record.header import DEFAULT_BVH_MAX_NODES, RecordingHeader
     from .record.mcap_sink import McapRecorder
+    from .record.outputs import claim
     from .observe import FanOut
 
     scene = ready_scene(scene, overrides)
@@ -312,36 +315,39 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
     cap = DEFAULT_BVH_MAX_NODES if bvh_max_nodes is None else (bvh_max_nodes or None)
     header = RecordingHeader.from_scene(scene, detail, cap)
     view, view_note = view_choice(view, header.count)
+    outputs = claim([mcap_out, rrd_out], force)  # one writer per file: see record/outputs.py
+    mcap_file, rrd_file = outputs.paths
     sinks = []
     summary = None
     mcap_sink = None
     interrupted = False
     failure: str | None = None  # why writing failed, if it did
     non_finite: NonFiniteRunError | None = None
-    stop = _StopAtStepEnd(on_step)
     try:
         if rrd_out is not None or spawn:  # first: if the viewer cannot start, no file is left behind
             from .record.rerun_sink import RerunSink
 
             try:
-                sinks.append(RerunSink(header, rrd_out, spawn=spawn))
+                sinks.append(RerunSink(header, rrd_file, spawn=spawn))
             except RuntimeError as err:  # rerun's file sink: an unwritable folder or file
                 raise PhysdbgError(f"{rrd_out}: cannot write the Rerun file ({err})") from None
         try:
-            mcap_sink = McapRecorder(mcap_out, header, view=view)
+            mcap_sink = McapRecorder(mcap_file, header, view=view)
         except OSError as err:
             raise PhysdbgError(f"{mcap_out}: cannot write the recording ({err.strerror or err})") from None
         sinks.insert(0, mcap_sink)
-        marker = next((s.mark_finding for s in sinks if hasattr(s, "mark_finding")), None)
-        with stop:
-            summary = run(scene, observer=FanOut(*sinks), dts=dts, on_step=stop.on_step, on_status=on_status,
-                          on_finding=marker)
+        markers = [s.mark_finding for s in sinks if hasattr(s, "mark_finding")]  # both views mark findings
+        summary = run(scene, observer=FanOut(*sinks), dts=dts, on_step=on_step, on_status=on_status,
+                      on_finding=lambda finding: [mark(finding) for mark in markers])
     except KeyboardInterrupt:
         interrupted = True
     except NonFiniteRunError as err:
         non_finite = err
     except (OSError, RuntimeError) as err:
         failure = str(err)
+    except BaseException:
+        outputs.abandon()  # an error before or during the run (a bad scene for the viewer, ...)
+        raise
     finally:
         for sink in sinks:
             try:
@@ -349,11 +355,17 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
             except (OSError, RuntimeError) as err:
                 failure = failure or str(err)
     if mcap_sink is None:  # Ctrl-C before the first byte was written
+        outputs.abandon()
         raise RecordingInterrupted("interrupted before the recording began; nothing was written")
-    if failure is not None:
-        raise PhysdbgError(f"writing the recording failed ({failure}); {_what_is_kept(mcap_out)}")
-    if non_finite is not None:
-        raise NonFiniteRunError(f"{non_finite}; {_what_is_kept(mcap_out)}")
+    if failure is not None or non_finite is not None:
+        kept = _what_is_kept(mcap_file, mcap_out)
+        if not mcap_file.exists():
+            outputs.abandon()
+        outputs.publish()
+        if failure is not None:
+            raise PhysdbgError(f"writing the recording failed ({failure}); {kept}")
+        raise NonFiniteRunError(f"{non_finite}; {kept}")
+    outputs.publish()
     note = ""
     if mcap_sink.bvh_capped_steps:
         note = (f"BVH logged down to depth {mcap_sink.bvh_logged_depth} ({cap} nodes at most) in "
@@ -363,59 +375,31 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
                           note, view_note)
     if interrupted:
         raise RecordingInterrupted(
-            f"interrupted: {mcap_out} holds steps 1..{mcap_sink.frames - 1} (every step completed)")
+            f"interrupted: {mcap_out} holds {_steps_held(mcap_sink.frames - 1)}")
     return result
 
 
-def _what_is_kept(mcap_out: Path) -> str:
-    """What a user can still read after a recording stopped early: which steps, or nothing."""
+def _steps_held(steps: int) -> str:
+    """What a recording stopped early holds, in words."""
+    if steps <= 0:
+        return "the initial state only (no step was completed)"
+    return f"steps 1..{steps} (every step completed)"
+
+
+def _what_is_kept(written: Path, mcap_out: Path) -> str:
+    """What a user can still read after a recording stopped early: which steps, or nothing.
+    written: the file the run wrote (mcap_out, or its partial name under --force); removed
+    when nothing in it is readable."""
     from .record import open_recording
 
     try:
-        with open_recording(mcap_out) as rec:
-            return f"{mcap_out} is readable and holds steps 1..{rec.steps}"
+        with open_recording(written) as rec:
+            return f"{mcap_out} is readable and holds {_steps_held(rec.steps)}"
     except PhysdbgError:
-        if not mcap_out.is_file():
+        if not written.is_file():
             return f"nothing readable could be written to {mcap_out}"
-        mcap_out.unlink()
-        return f"nothing readable could be written, so {mcap_out} was removed"
-
-
-class _StopAtStepEnd:
-    """Defers Ctrl-C to the end of the current step, so no sink is stopped mid-write.
-
-    A second Ctrl-C interrupts at once. Only in the main thread (where signals arrive).
-    """
-
-    def __init__(self, on_step):
-        self.forward = on_step
-        self.requested = False
-        self.previous = None
-
-    def _handler(self, signum, frame):
-        if self.requested:
-            raise KeyboardInterrupt
-        self.requested = True
-
-    def on_step(self, done, total):
-        if self.forward is not None:
-            self.forward(done, total)
-        if self.requested:
-            raise KeyboardInterrupt
-
-    def __enter__(self):
-        import signal
-        import threading
-
-        if threading.current_thread() is threading.main_thread():
-            self.previous = signal.signal(signal.SIGINT, self._handler)
-        return self
-
-    def __exit__(self, *exc):
-        import signal
-
-        if self.previous is not None:
-            signal.signal(signal.SIGINT, self.previous)
+        written.unlink()
+        return f"nothing readable could be written, so {mcap_out} was {'left as it was' if written != mcap_out else 'removed'}"
 
 
 @dataclass
@@ -427,6 +411,7 @@ class VerifyResult:
     checked: int
     first_bad_step: int | None = None
     reason: str = ""
+    truncated: bool = False  # the file has no summary: its writer was stopped, or is still writing
 
 
 def verify(path: str | Path, on_step: Callable[[int, int | None], None] | None = None,
@@ -449,27 +434,37 @@ def verify(path: str | Path, on_step: Callable[[int, int | None], None] | None =
         if world.state.positions.tobytes() != first.positions.tobytes() or \
                 world.state.velocities.tobytes() != first.velocities.tobytes():
             return VerifyResult(False, 0, 0, "the scene in the file does not give the recorded initial state")
-        checked = 0
-        for frame in rec.states(1):
-            k = frame.frame
-            stats = world.step(frame.dt)
-            # the states themselves, not only the hashes: without check_file a stored state
-            # need not give its stored hash
-            if stats.state_hash != frame.state_hash or \
-                    world.state.positions.tobytes() != frame.positions.tobytes() or \
-                    world.state.velocities.tobytes() != frame.velocities.tobytes():
-                from .analysis.align import state_difference
+        from .interrupt import StopOnCtrlC
 
-                d = state_difference(world.state.positions, world.state.velocities, frame.positions,
-                                     frame.velocities)
-                worst = ", ".join(f"sphere {p['particle']} |Δx| = {p['position']:.3g} m" for p in d.particles[:3])
-                return VerifyResult(False, checked, k, f"step {k}: re-simulated state (hash {stats.state_hash}) is "
-                                                      f"not the recorded one (hash {frame.state_hash}); {d.count} "
-                                                      f"spheres differ ({worst})")
-            checked += 1
-            if on_step is not None:
-                on_step(checked, rec.steps)
-        return VerifyResult(True, checked)
+        with StopOnCtrlC(world):  # Ctrl-C ends even a long step within a second
+            result = _verify_steps(rec, world, on_step)
+        result.truncated = rec.truncated
+        return result
+
+
+def _verify_steps(rec, world, on_step) -> VerifyResult:
+    """verify's loop: re-simulate each step and compare it with the file."""
+    checked = 0
+    for frame in rec.states(1):
+        k = frame.frame
+        stats = world.step(frame.dt)
+        # the states themselves, not only the hashes: without check_file a stored state
+        # need not give its stored hash
+        if stats.state_hash != frame.state_hash or \
+                world.state.positions.tobytes() != frame.positions.tobytes() or \
+                world.state.velocities.tobytes() != frame.velocities.tobytes():
+            from .analysis.align import state_difference
+
+            d = state_difference(world.state.positions, world.state.velocities, frame.positions,
+                                 frame.velocities)
+            worst = ", ".join(f"sphere {p['particle']} |Δx| = {p['position']:.3g} m" for p in d.particles[:3])
+            return VerifyResult(False, checked, k, f"step {k}: re-simulated state (hash {stats.state_hash}) is "
+                                                  f"not the recorded one (hash {frame.state_hash}); {d.count} "
+                                                  f"spheres differ ({worst})")
+        checked += 1
+        if on_step is not None:
+            on_step(checked, rec.steps)
+    return VerifyResult(True, checked)
 
 
 def replay(path: str | Path, rrd_path: str | None = None, force: bool = False, spawn: bool = False,
@@ -479,13 +474,16 @@ def replay(path: str | Path, rrd_path: str | None = None, force: bool = False, s
     from .record import open_recording
     from .record.rerun_sink import RerunSink
 
+    from .record.outputs import claim
+
     out = Path(rrd_path) if rrd_path else None
     if out is not None:
         check_writable([out], force)
     from .analysis.audit import Auditor
 
     with open_recording(path, verify=verify) as rec:
-        sink = RerunSink(rec.header, out, spawn=spawn)
+        outputs = claim([out], force)
+        sink = RerunSink(rec.header, outputs.paths[0], spawn=spawn)
         auditor = Auditor(rec.header, sink.mark_finding)  # the findings marked, as in the live picture
         try:
             for events in rec.iter_step_events():
@@ -495,10 +493,10 @@ def replay(path: str | Path, rrd_path: str | None = None, force: bool = False, s
             auditor.finish()  # a rattling bed that never fell asleep is marked too
         except BaseException:
             sink.close()
-            if out is not None:
-                out.unlink(missing_ok=True)  # no half-made picture left behind
+            outputs.abandon()  # no half-made picture left behind
             raise
         sink.close()
+        outputs.publish()
         return {"mcap": str(path), "rrd": str(out) if out else None, "steps": rec.steps,
                 "truncated": rec.truncated}
 
@@ -571,10 +569,15 @@ def overlay(a: str | Path, b: str | Path, report=None, rrd_path: str | None = No
     """Both runs in one Rerun recording, side by side, opened at the divergence."""
     from .analysis.overlay import write_overlay
 
-    if rrd_path is not None:
-        check_writable([Path(rrd_path)], force)
-    return write_overlay(a, b, report if report is not None else diff(a, b, verify=verify), rrd_path, spawn=spawn,
-                         verify=verify)
+    from .record.outputs import write_claimed
+
+    report = report if report is not None else diff(a, b, verify=verify)
+    if rrd_path is None:
+        return write_overlay(a, b, report, None, spawn=spawn, verify=verify)
+    check_writable([Path(rrd_path)], force)
+    write_claimed(Path(rrd_path), force,
+                  lambda path: write_overlay(a, b, report, str(path), spawn=spawn, verify=verify))
+    return rrd_path
 
 
 # ----------------------------------------------------------------------------- other engines
@@ -596,6 +599,7 @@ def import_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str
     ``scene`` into a physdbg recording, so explain, diff and replay work on it."""
     from .record.foreign import import_run as write_run
     from .record.foreign import read_run
+    from .record.outputs import write_claimed
 
     scene = ready_scene(scene, overrides)
     out = Path(mcap_path) if mcap_path else Path(run_path).with_suffix(".mcap")
@@ -603,7 +607,7 @@ def import_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str
         raise PhysdbgError(f"the run and the recording are the same file: {out}")
     check_writable([out], force)
     run = read_run(run_path, scene.state.count)
-    frames = write_run(run, scene, out)
+    frames = write_claimed(out, force, lambda path: write_run(run, scene, path))
     return ImportResult(str(out), frames, scene.state.count, "given" if run.velocities is not None else "estimated",
                         out.stat().st_size)
 
@@ -631,6 +635,7 @@ def check_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str]
     from .analysis.departure import compare
     from .record.foreign import import_run as write_run
     from .record.foreign import read_run
+    from .record.outputs import write_claimed
 
     scene = ready_scene(scene, overrides)
     if scene.walls.periodic:
@@ -649,7 +654,7 @@ def check_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str]
         check_writable([run_out, reference_out], force)
         if on_status is not None:
             on_status("importing")
-        write_run(run, scene, run_out)
+        write_claimed(run_out, force, lambda path: write_run(run, scene, path))
         dts = np.diff(run.times)
         if scene.dt is not None and np.all(np.abs(dts - scene.dt) <= 1e-9 * scene.dt):
             # the scene's steps, summed up in the run's time column: take the scene's dt itself,
@@ -687,6 +692,7 @@ def record_peer(peer: str, scene: Scene | str, overrides: Sequence[str] = (), mc
 
     from .peers import run_peer
     from .record.foreign import import_run as write_run
+    from .record.outputs import write_claimed
 
     scene = ready_scene(scene, overrides)
     out = Path(mcap_path) if mcap_path else Path(f"{scene.name}-{peer}.mcap")
@@ -694,7 +700,7 @@ def record_peer(peer: str, scene: Scene | str, overrides: Sequence[str] = (), mc
     started = clock.perf_counter()
     run, notes = run_peer(peer, scene)
     seconds = clock.perf_counter() - started
-    frames = write_run(run, scene, out, notes=notes)
+    frames = write_claimed(out, force, lambda path: write_run(run, scene, path, notes=notes))
     return PeerResult(str(out), peer, frames, scene.state.count, notes, seconds)
 
 
@@ -739,6 +745,20 @@ class BenchResult:
     files: list[str]
     runs: list
     seconds: float
+    note: str = ""  # why no chart was drawn, and how to get one
+
+
+def _chart_choice(chart: bool | None) -> tuple[bool, str]:
+    """Whether to draw the chart: as asked, or (None) when matplotlib is installed; and
+    the note that says so when it is not."""
+    if chart is not None:
+        return chart, ""
+    import importlib.util
+
+    if importlib.util.find_spec("matplotlib") is not None:
+        return True, ""
+    return False, ("no chart drawn: matplotlib is not installed (pip install 'physdbg[charts]' draws it; the CSV "
+                   "and the table are written)")
 
 
 ACCURACY_FILES = ("accuracy.csv", "accuracy.md", "accuracy.png", "accuracy.svg")
@@ -747,7 +767,8 @@ ACCURACY_FILES = ("accuracy.csv", "accuracy.md", "accuracy.png", "accuracy.svg")
 def _bench_paths(out_dir: str | Path, names: Sequence[str], chart: bool, force: bool,
                  extra: Sequence[Path | None] = ()) -> list[Path]:
     """The files a benchmark will write (its first two, the CSV and the table, without the
-    chart), checked writable; and matplotlib checked before any run, not after."""
+    chart), checked writable; and matplotlib checked before any run, not after (chart:
+    as _chart_choice decided)."""
     paths = [Path(out_dir) / name for name in (names if chart else names[:2])]
     check_writable([*paths, *extra], force)
     if chart:
@@ -757,7 +778,8 @@ def _bench_paths(out_dir: str | Path, names: Sequence[str], chart: bool, force: 
     return paths
 
 
-def bench_accuracy(out_dir: str | Path = "accuracy", quick: bool = False, force: bool = False, chart: bool = True,
+def bench_accuracy(out_dir: str | Path = "accuracy", quick: bool = False, force: bool = False,
+                   chart: bool | None = None,
                    rrd_path: str | None = None, problems: Sequence[str] | None = None,
                    on_run: Callable | None = None, command: str = "physdbg bench accuracy",
                    workers: int | None = None, dask: str | None = None) -> BenchResult:
@@ -769,6 +791,7 @@ def bench_accuracy(out_dir: str | Path = "accuracy", quick: bool = False, force:
     unknown = [p for p in problems or () if p not in accuracy.PROBLEMS]
     if unknown:
         raise PhysdbgError(f"no accuracy problem {unknown[0]!r}; the problems are: {', '.join(accuracy.PROBLEMS)}")
+    chart, note = _chart_choice(chart)
     paths = _bench_paths(out_dir, ACCURACY_FILES, chart, force, [Path(rrd_path) if rrd_path else None])
     started = time.perf_counter()
     from .precompile import compile_kernels
@@ -787,13 +810,14 @@ def bench_accuracy(out_dir: str | Path = "accuracy", quick: bool = False, force:
 
         accuracy_rrd(runs, Path(rrd_path))
         paths.append(Path(rrd_path))
-    return BenchResult([str(p) for p in paths], runs, time.perf_counter() - started)
+    return BenchResult([str(p) for p in paths], runs, time.perf_counter() - started, note)
 
 
 ENGINES_FILES = ("engines.csv", "engines.md", "engines.png", "engines.svg")
 
 
-def bench_engines(out_dir: str | Path = "engines", quick: bool = False, force: bool = False, chart: bool = True,
+def bench_engines(out_dir: str | Path = "engines", quick: bool = False, force: bool = False,
+                  chart: bool | None = None,
                   scenes: Sequence[str] | None = None, on_run: Callable | None = None,
                   command: str = "physdbg bench engines") -> BenchResult:
     """physdbg's methods and the peers on the same scenes (analysis.engines): engines.csv,
@@ -803,6 +827,7 @@ def bench_engines(out_dir: str | Path = "engines", quick: bool = False, force: b
     unknown = [name for name in scenes or () if name not in engines.SCENES]
     if unknown:
         raise PhysdbgError(f"no engines scene {unknown[0]!r}; the scenes are: {', '.join(engines.SCENES)}")
+    chart, note = _chart_choice(chart)
     paths = _bench_paths(out_dir, ENGINES_FILES, chart, force)
     started = time.perf_counter()
     runs = engines.run_all(list(scenes) if scenes else None, quick=quick, on_run=on_run)
@@ -812,20 +837,22 @@ def bench_engines(out_dir: str | Path = "engines", quick: bool = False, force: b
         from .analysis.charts import engines_chart
 
         engines_chart(runs, paths[2:], f"Cost against error, physdbg and its peers on the same physics (`{command}`)")
-    return BenchResult([str(p) for p in paths], runs, time.perf_counter() - started)
+    return BenchResult([str(p) for p in paths], runs, time.perf_counter() - started, note)
 
 
 STABILITY_FILES = ("stability.csv", "stability.md", "stability-impact.png", "stability-impact.svg",
                    "stability-stack.png", "stability-stack.svg")
 
 
-def bench_stability(out_dir: str | Path = "stability", quick: bool = False, force: bool = False, chart: bool = True,
+def bench_stability(out_dir: str | Path = "stability", quick: bool = False, force: bool = False,
+                    chart: bool | None = None,
                     on_cell: Callable | None = None, command: str = "physdbg bench stability",
                     workers: int | None = None, dask: str | None = None) -> BenchResult:
     """Where each method breaks (analysis.stability): stability.csv, stability.md and (chart)
     a heatmap per map as PNG and SVG in out_dir. workers, dask: as bench_accuracy."""
     from .analysis import stability
 
+    chart, note = _chart_choice(chart)
     paths = _bench_paths(out_dir, STABILITY_FILES, chart, force)
     started = time.perf_counter()
     from .precompile import compile_kernels
@@ -838,4 +865,4 @@ def bench_stability(out_dir: str | Path = "stability", quick: bool = False, forc
 
         stability_chart(cells, "impact", paths[2:4], f"Impact: a sphere at a thin wall, pass or fail (`{command}`)")
         stability_chart(cells, "stack", paths[4:6], f"Resting stacks for 1 s at dt = 1/60 (`{command}`)")
-    return BenchResult([str(p) for p in paths], cells, time.perf_counter() - started)
+    return BenchResult([str(p) for p in paths], cells, time.perf_counter() - started, note)

@@ -48,12 +48,16 @@ def main(
 
 
 @contextmanager
-def _user_errors():
-    """Turn PhysdbgError (and unreadable files) into a one-line message and exit code 2."""
+def _user_errors(as_json: bool = False):
+    """Turn PhysdbgError (and unreadable files) into a one-line message and exit code 2.
+    as_json: the command was asked for JSON, so the error is also printed on stdout as
+    {"error": ..., "exit_code": ...} (a script reading stdout gets JSON either way)."""
     try:
         yield
     except PhysdbgError as err:
         typer.echo(f"error: {err}", err=True)
+        if as_json:
+            _json_error(str(err), err.exit_code)
         raise typer.Exit(err.exit_code) from None
     except KeyboardInterrupt:
         typer.echo("interrupted", err=True)
@@ -71,9 +75,18 @@ def _user_errors():
 
         if os.environ.get("PHYSDBG_TRACEBACK"):
             raise
-        typer.echo(f"error: internal error ({type(err).__name__}: {err}); this is a bug in physdbg: please "
-                   f"report it with the command you ran (PHYSDBG_TRACEBACK=1 shows the traceback)", err=True)
+        message = (f"internal error ({type(err).__name__}: {err}); this is a bug in physdbg: please report it "
+                   f"with the command you ran (PHYSDBG_TRACEBACK=1 shows the traceback)")
+        typer.echo(f"error: {message}", err=True)
+        if as_json:
+            _json_error(message, 70)
         raise typer.Exit(70) from None
+
+
+def _json_error(message: str, code: int) -> None:
+    from .analysis.report import versioned
+
+    typer.echo(json.dumps(versioned({"error": message, "exit_code": code}), indent=2))
 
 
 @app.command()
@@ -162,12 +175,16 @@ def run(
         "--progress/--no-progress", show_default=False,
         help="Show a progress bar on long runs (default: when stderr is a terminal).")]
     = sys.stderr.isatty(),
+    fail_on_findings: Annotated[bool, typer.Option(
+        "--fail-on-findings", help="Exit 1 when the audit finds anything (tunnelling, overlap, energy gain, a "
+                                   "budget hit, ...), for CI; without it a run that finished exits 0.")] = False,
 ) -> None:
-    """Run a scene and print a summary: steps, contacts, energy and momentum drift, ms/step.
+    """Run a scene and print a summary: steps, contacts, energy and momentum change, ms/step,
+    and the audit's findings.
 
-    Example: physdbg run bounce --set integrator=verlet --set duration=2
+    Example: physdbg run bullet-wall --set detection=discrete --fail-on-findings
     """
-    with _user_errors():
+    with _user_errors(as_json):
         tier = _choose_tier(scene, set_)
         from .analysis.report import summary_text
         from .api import load_scene
@@ -189,9 +206,13 @@ def run(
                 raise PhysdbgError(f"{dts_out}: cannot write the step lengths ({err})") from None
         _after_interpreted(tier, quiet=as_json)
         if as_json:
-            typer.echo(json.dumps(summary.as_dict(), indent=2))
+            from .analysis.report import versioned
+
+            typer.echo(json.dumps(versioned(summary.as_dict()), indent=2))
         else:
             typer.echo(summary_text(summary))
+        if fail_on_findings and summary.finding_counts:
+            raise typer.Exit(1)
 
 
 @app.command()
@@ -227,7 +248,7 @@ def record(
 ) -> None:
     """Run a scene and record every step: MCAP (lossless) and Rerun (.rrd, to look at).
 
-    Example: physdbg record bounce        then: rerun recordings/bounce.rrd
+    Example: physdbg record bounce        then: .venv/bin/rerun recordings/bounce.rrd
     """
     with _user_errors():
         tier = _choose_tier(scene, set_)
@@ -312,7 +333,7 @@ def diff(
 
     Example: physdbg diff recordings/ci/cradle.mcap cradle-index.mcap --markdown
     """
-    with _user_errors():
+    with _user_errors(as_json or output_format == "json"):
         tier = _choose_tier_for(a, b)
         from . import api
 
@@ -343,7 +364,7 @@ def explain(
 
     Example: physdbg explain recordings/bullet-wall.mcap
     """
-    with _user_errors():
+    with _user_errors(as_json or output_format == "json"):
         tier = _choose_tier_for(recording)
         from . import api
 
@@ -385,6 +406,10 @@ def replay(
             result = api.verify(recording)
             if result.ok:
                 typer.echo(f"verify      ok: {result.checked} steps re-simulated, every state hash matches")
+                if result.truncated:
+                    typer.echo(f"            INCOMPLETE: {recording} has no summary (its writer was stopped before "
+                               f"closing it, or is still writing it): only the {result.checked} whole steps it "
+                               f"holds so far were checked")
             else:
                 typer.echo(f"verify      MISMATCH at step {result.first_bad_step}: {result.reason}")
                 raise typer.Exit(1)
@@ -518,7 +543,7 @@ def check_run(
 
     Example: physdbg check-run docs/examples/student-bounce.csv --scene bounce
     """
-    with _user_errors():
+    with _user_errors(as_json or output_format == "json"):
         tier = _choose_tier(scene, set_)
         from . import api
 
@@ -573,7 +598,7 @@ def check(
 
     Example: physdbg check bullet-wall -s detection=discrete
     """
-    with _user_errors():
+    with _user_errors(as_json):
         from dataclasses import asdict
 
         from .analysis.report import check_text
@@ -582,10 +607,13 @@ def check(
         result = check_scene(scene, set_ or [])
         advice = result.advice
         if as_json:
-            typer.echo(json.dumps({"scene": result.scene.name, "ok": result.ok, "current": result.current,
-                                   "recommended": advice.recommended, "reasons": advice.reasons,
-                                   "facts": advice.facts, "predictions": [asdict(p) for p in advice.predictions]},
-                                  indent=2))
+            from .analysis.report import versioned
+
+            typer.echo(json.dumps(versioned({"scene": result.scene.name, "ok": result.ok, "current": result.current,
+                                             "recommended": advice.recommended, "reasons": advice.reasons,
+                                             "facts": advice.facts,
+                                             "predictions": [asdict(p) for p in advice.predictions]}),
+                                  indent=2, default=str))
         else:
             typer.echo(check_text(result))
         if not result.ok:
@@ -597,7 +625,9 @@ JobsOption = Annotated[Optional[int], typer.Option(
 DaskOption = Annotated[Optional[str], typer.Option(
     "--dask", help="Run the sweep on an existing Dask cluster: its scheduler's address (tcp://host:8786); "
                    "needs pip install 'physdbg[dask]'.")]
-NoChartOption = Annotated[bool, typer.Option("--no-chart", help="Only the CSV and the table (no matplotlib needed).")]
+NoChartOption = Annotated[bool, typer.Option(
+    "--no-chart", help="Only the CSV and the table. Without it the chart is drawn when matplotlib is installed "
+                       "(pip install 'physdbg[charts]'), and a note says so when it is not.")]
 BenchForceOption = Annotated[bool, typer.Option("--force", help="Overwrite files from an earlier run.")]
 BenchProgressOption = Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")]
 bench_app = typer.Typer(help="Benchmarks users run: methods charted against each other.", no_args_is_help=True)
@@ -631,7 +661,7 @@ def bench_accuracy(
         bar = _progress_bar(None, show=progress)
         command = "physdbg bench accuracy" + (" --quick" if quick else "")
         try:
-            result = run_accuracy(out, quick=quick, force=force, chart=not no_chart, rrd_path=str(rrd) if rrd else None,
+            result = run_accuracy(out, quick=quick, force=force, chart=False if no_chart else None, rrd_path=str(rrd) if rrd else None,
                                   problems=problem, on_run=lambda run, done, total: bar.update(done, total),
                                   command=command, workers=jobs, dask=dask)
         finally:
@@ -647,9 +677,9 @@ def bench_accuracy(
             failed = sum(1 for r in mine if r.failure)
             typer.echo(f"{name:15} {len(best)} on the Pareto front; most accurate {best[-1].method} at "
                        f"dt 1/{round(1 / best[-1].dt)} ({best[-1].error:.1e} {best[-1].unit})"
-                       + (f"; {failed} of {len(mine)} runs failed" if failed else ""))
-        for path in result.files:
-            typer.echo(f"wrote       {path}")
+                       + (f"; {failed} of {len(mine)} runs broke (tunnelled, overlapped or blew up: the methods "
+                          f"kept to show where they fail; each named in the table)" if failed else ""))
+        _bench_files(result)
 
 
 @bench_app.command("engines")
@@ -678,7 +708,7 @@ def bench_engines(
         bar = _progress_bar(None, show=progress)
         command = "physdbg bench engines" + (" --quick" if quick else "")
         try:
-            result = run_engines(out, quick=quick, force=force, chart=not no_chart, scenes=scene,
+            result = run_engines(out, quick=quick, force=force, chart=False if no_chart else None, scenes=scene,
                                  on_run=lambda run, done, total: bar.update(done, total), command=command)
         finally:
             bar.close()
@@ -694,8 +724,7 @@ def bench_engines(
         for run in result.runs:
             if run.failure:
                 typer.echo(f"{run.scene:13} {run.method}: could not run ({run.failure})")
-        for path in result.files:
-            typer.echo(f"wrote       {path}")
+        _bench_files(result)
 
 
 @bench_app.command("stability")
@@ -720,7 +749,7 @@ def bench_stability(
         bar = _progress_bar(None, show=progress)
         command = "physdbg bench stability" + (" --quick" if quick else "")
         try:
-            result = run_stability(out, quick=quick, force=force, chart=not no_chart,
+            result = run_stability(out, quick=quick, force=force, chart=False if no_chart else None,
                                    on_cell=lambda cell, done, total: bar.update(done, total), command=command,
                                    workers=jobs, dask=dask)
         finally:
@@ -736,8 +765,15 @@ def bench_stability(
                        + ("never tunnels" if math.isinf(step) else
                           f"tunnels from v·dt = {step:.3g} m ({step / REACH:.2g} × REACH)")
                        + f"; stacks {sum(c.outcome == 'pass' for c in stack)}/{len(stack)} pass")
-        for path in result.files:
-            typer.echo(f"wrote       {path}")
+        _bench_files(result)
+
+
+def _bench_files(result) -> None:
+    """The files a benchmark wrote, and the note when it drew no chart."""
+    for path in result.files:
+        typer.echo(f"wrote       {path}")
+    if result.note:
+        typer.echo(f"note        {result.note}")
 
 
 @app.command()
@@ -749,7 +785,7 @@ def info(
 
     Example: physdbg info recordings/bounce.mcap
     """
-    with _user_errors():
+    with _user_errors(as_json):
         from .analysis.report import info_text
         from .api import info as recording_info
 
@@ -785,11 +821,13 @@ def overlap(
 
     Example: physdbg overlap icosphere paddle --pose 0.5,0,0,0,0,30
     """
-    with _user_errors():
+    with _user_errors(as_json):
         from .analysis.overlap import overlap as search, overlap_text
 
         report = search(a, b, pose_a=pose_a, pose_b=pose, volume=volume, builder=builder, hull=hull)
-        typer.echo(json.dumps(report.as_dict(), indent=2) if as_json else overlap_text(report, max_lines))
+        from .analysis.report import versioned
+
+        typer.echo(json.dumps(versioned(report.as_dict()), indent=2) if as_json else overlap_text(report, max_lines))
         raise typer.Exit(report.exit_code)
 
 

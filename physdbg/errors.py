@@ -60,6 +60,17 @@ class NonFiniteState(FloatingPointError):
         super().__init__(f"the {field} of sphere {particle}{others} became NaN or infinite in step {step + 1}")
 
 
+class StepStopped(KeyboardInterrupt):
+    """A step left half done because the world was asked to stop (World.request_stop:
+    Ctrl-C). The world's state is mid-step; the step was never reported (no StepEnd), so
+    a recording holds every step before it. A KeyboardInterrupt, so a caller that stops
+    on Ctrl-C stops on this."""
+
+    def __init__(self, step: int):
+        self.step = step
+        super().__init__(f"stopped in step {step + 1}, which was left half done and not reported")
+
+
 class PeerError(PhysdbgError):
     """A peer engine that is missing or cannot run the scene."""
 

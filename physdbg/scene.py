@@ -16,6 +16,8 @@ import copy
 import dataclasses
 import difflib
 import math
+import re
+import sys
 import tomllib
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -84,8 +86,8 @@ TOP_FIELDS = {
     "max_pairs_per_step": "budget: broad-phase candidate pairs in one step, integer >= 1 (default 10000000)",
     "max_swept_tests_per_step": ("budget: swept tests in one step, integer >= 0 (default 0 = sized to the scene: "
                                  "max(10000000, 2000 per sphere))"),
-    "max_resting_work_per_step": ("budget: held-contact solve updates in one step, "
-                                  "integer >= 1 (default 1000000000)"),
+    "max_resting_work_per_step": ("budget: held-contact solve updates in one step, integer >= 0 (default 0 = "
+                                  "sized to the scene: 1000000 per sphere, from 10000000 to 1000000000)"),
     "max_memory": ("the most memory a run may use, bytes (default 4e9): a scene whose particles need more (about "
                    "4 KiB each) is refused, and a step whose buffers (event queue, swept-test log, contacts) would "
                    "grow past it is stopped like a budget"),
@@ -257,14 +259,45 @@ def read_scene(scene: str, overrides: list[str] | tuple[str, ...] = ()) -> Scene
     return parse_scene(text, source, overrides)
 
 
+# Strings and comments of TOML text (so the dots inside them are not counted as a key's),
+# then a run of text between TOML's delimiters holding more dots than any scene key has.
+_TOML_STRINGS_AND_COMMENTS = re.compile(r'"""[\s\S]*?"""|\'\'\'[\s\S]*?\'\'\'|"(?:[^"\\\n]|\\.)*"|\'[^\'\n]*\'|#[^\n]*')
+# (anchored at a run's start, so each run is scanned once: linear time on any text)
+_DEEP_KEY = re.compile(r"(?<![^=,{}\[\]\n])(?:[^=,{}\[\]\n.]*\.){%d}" % (MAX_NESTING + 2))
+
+
+def _set_aside(match: re.Match) -> str:
+    """A string as "" (its lines kept, so line numbers stay), a comment as nothing."""
+    found = match.group()
+    return "\n" * found.count("\n") if found.startswith("#") else '""' + "\n" * found.count("\n")
+
+
+def _check_key_depth(text: str, source: str) -> None:
+    """Refuse a dotted key deeper than any scene field *before* TOML parses it: Python's
+    parser keeps every prefix of a dotted key, so a key 100,000 parts deep takes tens of
+    GB. A value never has more than one dot in a row of text between TOML's delimiters
+    (1.5, 07:32:00.5), and a scene key has at most MAX_NESTING parts; strings and comments
+    are set aside first. Linear in the text, by regular expressions."""
+    bare = _TOML_STRINGS_AND_COMMENTS.sub(_set_aside, text)
+    found = _DEEP_KEY.search(bare)
+    if found is not None:
+        line = bare.count("\n", 0, found.start()) + 1
+        raise SceneError(source, "", f"a dotted key on line {line} has more parts than any scene field "
+                                     f"(at most {MAX_NESTING}): not read")
+
+
 def parse_scene(text: str, source: str = "<scene>", overrides=()) -> Scene:
     """Validate TOML ``text`` (from ``source``) after applying overrides."""
+    _check_key_depth(text, source)
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise SceneError(source, "", f"not valid TOML: {err}") from None
     except RecursionError:
         raise SceneError(source, "", f"nested more deeply than a scene can be ({MAX_NESTING} levels)") from None
+    except ValueError as err:  # an integer of more digits than Python converts (sys.get_int_max_str_digits)
+        raise SceneError(source, "", f"a number of more than {sys.get_int_max_str_digits()} digits: "
+                                     f"not read (a scene's numbers are at most {MAX_MAGNITUDE:g})") from None
     origins: dict[str, str] = {}
     for item in overrides:
         _apply_override(raw, item, source)
@@ -299,9 +332,11 @@ def _check_nesting(raw: dict, source: str) -> None:
 
 
 def _parse_value(text: str) -> Any:
+    if _DEEP_KEY.search(_TOML_STRINGS_AND_COMMENTS.sub(_set_aside, text)):
+        return text  # a dotted key deeper than any field: kept as text, refused by validation
     try:
         return tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
+    except (tomllib.TOMLDecodeError, ValueError):  # ValueError: an integer of over 4,300 digits
         return text
     except RecursionError:
         return None  # reported by the nesting check, which names the field
@@ -347,6 +382,15 @@ def _apply_override(raw: dict, item: str, source: str) -> None:
 
 
 # ----------------------------------------------------------------------------- validation
+MAX_FIELDS_LISTED = 12  # an unknown field's message lists the allowed ones up to this many
+
+
+def _some_fields(allowed: dict) -> str:
+    """The tables among the allowed names, or the first few (what a newcomer looks for)."""
+    tables = [name for name in allowed if name in ("box", "generate", "particles", "planes", "meshes")]
+    return "tables among them: " + ", ".join(tables) if tables else "among them " + ", ".join(list(allowed)[:5])
+
+
 class _Checker:
     """Small helpers that raise SceneError with the file, the field and what is allowed."""
 
@@ -366,8 +410,13 @@ class _Checker:
                 if key in RENAMED:
                     self.fail(prefix + key, RENAMED[key])
                 close = difflib.get_close_matches(str(key), list(allowed), n=1)
-                hint = f"did you mean '{close[0]}'? " if close else ""
-                self.fail(prefix + key, f"unknown field; {hint}allowed: {', '.join(allowed)}")
+                if close:  # the likely fix, not a wall of every field
+                    self.fail(prefix + key, f"unknown field; did you mean '{prefix}{close[0]}'? (every field: "
+                                            f"docs/scenes.md)")
+                if len(allowed) <= MAX_FIELDS_LISTED:
+                    self.fail(prefix + key, f"unknown field; allowed: {', '.join(allowed)}")
+                self.fail(prefix + key, f"unknown field; the {len(allowed)} fields allowed here are listed in "
+                                        f"docs/scenes.md ({_some_fields(allowed)})")
 
     def number(self, table, key, name, *, default=None, lo=None, hi=None, lo_open=False, integer=False,
                scale=False):
@@ -746,7 +795,12 @@ def _generate(c: _Checker, gen: dict, kind: str, count: int, seed: int, box_lo, 
         phi = c.number(gen, "packing_fraction", "generate.packing_fraction", lo=0, hi=0.45, lo_open=True)
         if count == 0:
             c.fail("generate.count", "a gas needs at least one particle (it sizes the box)")
-        box_lo, box_hi = np.zeros(3), np.full(3, _gas_side(count, radius, phi))
+        side = _gas_side(count, radius, phi)
+        if not side <= MAX_MAGNITUDE:  # inf (or NaN) when phi is near the smallest float
+            least = count * 4.0 / 3.0 * math.pi * radius**3 / MAX_MAGNITUDE**3
+            c.fail("generate.packing_fraction", f"got {phi:g}: the box would be {side:.3g} m on a side, more than "
+                                                f"{MAX_MAGNITUDE:g} m; give at least {least:.3g}")
+        box_lo, box_hi = np.zeros(3), np.full(3, side)
         out["box"] = (box_lo, box_hi, restitution)
         velocities = rng.normal(size=(count, 3))
         velocities -= velocities.mean(axis=0) if count > 1 else 0.0

@@ -129,3 +129,32 @@ def with_setting(src: Path, dst: Path, setting: str, value) -> Path:
         return json.dumps(meta).encode()
 
     return copy_with(src, dst, change)
+
+
+def damage_byte(src: Path, dst: Path, offset: int) -> Path:
+    """Copy ``src`` with one bit of the byte at ``offset`` flipped (a bad disk or a bad copy:
+    nothing re-written around it)."""
+    data = bytearray(Path(src).read_bytes())
+    data[offset] ^= 0x20
+    Path(dst).write_bytes(bytes(data))
+    return dst
+
+
+def chunk_places(path: Path) -> list[tuple[int, set[str]]]:
+    """(byte in the middle of the chunk, topics it holds) of every chunk, from the summary."""
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    topics = {cid: c.topic for cid, c in summary.channels.items()}
+    return [(c.chunk_start_offset + c.chunk_length // 2, {topics[k] for k in c.message_index_offsets})
+            for c in summary.chunk_indexes]
+
+
+def summary_schema_byte(path: Path) -> int:
+    """A byte of a schema name in the summary section (found from the footer)."""
+    import struct
+
+    data = Path(path).read_bytes()
+    summary_start = struct.unpack("<Q", data[-8 - 20:-8 - 12])[0]
+    return data.index(b"physdbg.Particle", summary_start) + 5

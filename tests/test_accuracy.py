@@ -12,7 +12,9 @@ import pytest
 from typer.testing import CliRunner
 
 from physdbg.analysis import accuracy as acc
+from physdbg import api
 from physdbg.cli import app
+from physdbg.errors import PhysdbgError
 
 
 # ----------------------------------------------------------------------------- closed forms
@@ -101,7 +103,7 @@ def test_bench_accuracy_writes_the_table_csv_and_chart_and_never_overwrites(tmp_
             "--rrd", str(tmp_path / "acc.rrd")]
     done = runner.invoke(app, args)
     assert done.exit_code == 0, done.output
-    assert "thin-wall" in done.output and "runs failed" in done.output
+    assert "thin-wall" in done.output and "runs broke (tunnelled, overlapped or blew up" in done.output
     rows = list(csv.DictReader((out / "accuracy.csv").open()))
     assert len(rows) == 2 * 12 * len(acc.QUICK_DTS)  # 4 integrators x 3 detections, time ordering only
     assert {r["problem"] for r in rows} == {"bounce", "thin-wall"}
@@ -124,8 +126,12 @@ def test_bench_accuracy_writes_the_table_csv_and_chart_and_never_overwrites(tmp_
     assert "Traceback" not in again.output
 
 
-def test_without_matplotlib_the_chart_says_how_to_get_it_and_no_chart_still_works(tmp_path, monkeypatch):
-    real_import = builtins.__import__
+def test_without_matplotlib_the_csv_and_table_are_written_and_a_note_says_how_to_chart(tmp_path, monkeypatch):
+    """README command 1 installs no matplotlib: `bench accuracy --quick` from the README must
+    still work there (it exited 2), writing the CSV and the table and saying how to chart."""
+    import importlib.util
+
+    real_import, real_find_spec = builtins.__import__, importlib.util.find_spec
 
     def no_matplotlib(name, *args, **kwargs):
         if name == "matplotlib" or name.startswith("matplotlib."):
@@ -133,14 +139,19 @@ def test_without_matplotlib_the_chart_says_how_to_get_it_and_no_chart_still_work
         return real_import(name, *args, **kwargs)
 
     monkeypatch.setattr(builtins, "__import__", no_matplotlib)
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "matplotlib" else real_find_spec(name, *a))
     runner = CliRunner()
-    done = runner.invoke(app, ["bench", "accuracy", "--quick", "--problem", "resting", "-o", str(tmp_path / "a")])
-    assert done.exit_code == 2 and "pip install 'physdbg[charts]'" in done.output and "--no-chart" in done.output
-    assert not (tmp_path / "a" / "accuracy.csv").exists()  # refused before any run
-    done = runner.invoke(app, ["bench", "accuracy", "--quick", "--problem", "resting", "--no-chart", "-j", "2",
+    done = runner.invoke(app, ["bench", "accuracy", "--quick", "--problem", "resting", "-j", "2",
                                "-o", str(tmp_path / "a")])
     assert done.exit_code == 0, done.output
+    assert "note        no chart drawn: matplotlib is not installed (pip install 'physdbg[charts]'" in done.output
     assert (tmp_path / "a" / "accuracy.csv").exists() and not (tmp_path / "a" / "accuracy.png").exists()
+    done = runner.invoke(app, ["bench", "accuracy", "--quick", "--problem", "resting", "--no-chart", "-j", "2",
+                               "-o", str(tmp_path / "b")])
+    assert done.exit_code == 0 and "note" not in done.output, done.output
+    with pytest.raises(PhysdbgError, match="pip install 'physdbg\\[charts\\]'"):  # a chart asked for outright
+        api.bench_accuracy(tmp_path / "c", quick=True, chart=True, problems=["resting"])
 
 
 def test_an_unknown_problem_is_named_with_the_ones_there_are(tmp_path):

@@ -100,7 +100,8 @@ def test_mprgp_finds_the_complementary_solution_of_the_dense_reference(seed, n_s
     big = _dense(end_a, end_b, normal, inverse_mass)
     x = lower.copy()
     grad = big @ x - rhs
-    products, converged = solve_bound_qp(end_a, end_b, normal, inverse_mass, x, lower, grad, 1e-10, 100_000)
+    products, converged = solve_bound_qp(end_a, end_b, normal, inverse_mass, x, lower, grad, 1e-10, 100_000,
+                                         np.zeros(1, np.int64))
     assert converged
     g = big @ x - rhs
     # complementarity, as the Gauss–Seidel measure states it: no update would move any
@@ -118,7 +119,8 @@ def test_mprgp_stops_within_its_product_budget_with_a_feasible_answer():
     end_a, end_b, normal, inverse_mass, lower, rhs = _problem(3, 40, 120, 0.2)
     big = _dense(end_a, end_b, normal, inverse_mass)
     x = lower.copy()
-    products, converged = solve_bound_qp(end_a, end_b, normal, inverse_mass, x, lower, big @ x - rhs, 1e-14, 3)
+    products, converged = solve_bound_qp(end_a, end_b, normal, inverse_mass, x, lower, big @ x - rhs, 1e-14, 3,
+                                         np.zeros(1, np.int64))
     assert not converged and products <= 4 and (x >= lower).all()
 
 

@@ -34,7 +34,7 @@ def test_scenes_lists_every_built_in_with_one_line_each():
 def test_run_prints_the_summary():
     result = invoke("run", "bounce")
     assert result.exit_code == 0
-    for words in ("steps       300", "contacts    37", "drift", "ms/step", "state hash", "brute-force",
+    for words in ("steps       300", "contacts    37", "relative change", "ms/step", "state hash", "brute-force",
                   "warnings    none"):
         assert words in result.output
 
@@ -430,3 +430,36 @@ def test_scenes_as_json_and_the_progress_option_shows_one_default():
         shown = CliRunner().invoke(app, [command, "--help"], terminal_width=200).output
         assert "(default: when stderr is a terminal)" in shown and "[default: no-progress]" not in shown \
             and "[default: progress]" not in shown
+
+
+def test_run_fails_on_findings_only_when_asked():
+    """For CI: a run that finished exits 0 with findings unless --fail-on-findings."""
+    tunnels = ["run", "bullet-wall", "-s", "detection=discrete"]
+    assert runner.invoke(app, tunnels).exit_code == 0
+    done = runner.invoke(app, tunnels + ["--fail-on-findings"])
+    assert done.exit_code == 1 and "1 tunnelling" in done.output
+    assert runner.invoke(app, ["run", "bullet-wall", "--fail-on-findings"]).exit_code == 0
+
+
+@pytest.mark.parametrize("args", [["run", "nosuch", "--json"], ["check", "nosuch", "--json"],
+                                  ["info", "nosuch.mcap", "--json"], ["explain", "nosuch.mcap", "--json"],
+                                  ["diff", "a.mcap", "b.mcap", "--format", "json"]])
+def test_errors_under_json_are_json_with_the_versions(args, tmp_path, monkeypatch):
+    import json
+
+    monkeypatch.chdir(tmp_path)
+    done = runner.invoke(app, args)  # stdout alone (click 8.2): the error line went to stderr
+    assert done.exit_code == 2
+    data = json.loads(done.stdout)
+    assert data["exit_code"] == 2 and data["error"] and data["physdbg_version"] and data["format_version"]
+
+
+def test_json_reports_carry_the_physdbg_and_format_versions():
+    import json
+
+    from physdbg.record.format import FORMAT_VERSION
+    from physdbg.version import __version__
+
+    for args in (["run", "bounce", "-s", "steps=5", "--json"], ["check", "bounce", "--json"]):
+        data = json.loads(runner.invoke(app, args).stdout)
+        assert data["physdbg_version"] == __version__ and data["format_version"] == FORMAT_VERSION

@@ -280,3 +280,20 @@ def test_the_foxglove_layout_names_topics_and_fields_a_recording_has(tmp_path):
             descriptor = descriptor.fields_by_name[field].message_type
     panels = {key.split("!")[0] for key in layout["configById"]}
     assert {"3D", "Plot", "RosOut"} <= panels
+
+
+def test_audit_findings_reach_the_foxglove_log_and_scene_at_their_step(tmp_path):
+    """CI and Foxglove users see what Rerun users see: a tunnelling is a warning on /view/log
+    and a red marker on /view/scene at the step where it happened."""
+    path = tmp_path / "tunnel.mcap"
+    api.record("bullet-wall", ["detection=discrete"], mcap_path=str(path), rrd=False)
+    step_1_ns = [ns for ns, _ in messages(path, fmt.TOPIC_STATE)][1]
+    warnings = [(ns, m) for ns, m in messages(path, fmt.TOPIC_VIEW_LOG) if m.level == 3]
+    assert any(m.message.startswith("step 1: [tunnelling] sphere 0 went through wall 'thin wall'")
+               for _, m in warnings), [m.message for _, m in warnings]
+    markers = [(ns, e) for ns, m in messages(path, fmt.TOPIC_VIEW_SCENE) for e in m.entities
+               if e.id.startswith("finding-")]
+    assert len(markers) == 1
+    ns, entity = markers[0]
+    assert entity.metadata[0].value == "tunnelling" and entity.spheres[0].color.r == 1.0
+    assert ns == step_1_ns and all(ns == step_1_ns for ns, m in warnings if "[tunnelling]" in m.message)

@@ -146,6 +146,36 @@ def test_a_deeply_nested_scene_file_is_refused(tmp_path):
         load_scene(str(path))
 
 
+@pytest.mark.parametrize("key", ["a" + ".a" * 100_000 + " = 1", "[" + ".".join(["a"] * 100_000) + "]",
+                                 '"a".' * 50_000 + "b = 1"])
+def test_a_dotted_key_deeper_than_any_field_is_refused_before_parsing(tmp_path, key):
+    """Python's TOML parser keeps every prefix of a dotted key: 100,000 parts took 23 GB.
+    The key is refused by a linear scan before the parser sees it, naming file and line."""
+    import time
+
+    path = tmp_path / "deep.toml"
+    path.write_text("dt = 0.01\nsteps = 1\n" + key + "\n")
+    started = time.perf_counter()
+    with pytest.raises(SceneError) as info:
+        load_scene(str(path))
+    assert time.perf_counter() - started < 1.0
+    assert str(info.value) == (f"{path}: a dotted key on line 3 has more parts than any scene field (at most 6): "
+                               f"not read")
+
+
+def test_dots_in_values_strings_and_comments_are_not_keys():
+    text = ('description = "a.b.c.d.e.f.g.h.i.j"  # and.so.on.and.so.on.and.so.on\n'
+            "dt = 0.01\nsteps = 1\nrestitution_rule = '''m.i.n.\n.a.b.c.d.e.f.g.h'''\n")
+    with pytest.raises(SceneError) as info:
+        parse_scene(text, "dots.toml")
+    assert "field 'restitution_rule'" in str(info.value)  # refused for its value, not as a deep key
+
+
+def test_a_number_longer_than_python_reads_is_a_scene_error():
+    with pytest.raises(SceneError, match="a number of more than 4300 digits: not read"):
+        parse_scene("dt = 0.01\nsteps = " + "1" * 5000 + "\n", "long.toml")
+
+
 def test_a_tiny_plane_normal_is_normalised_not_zeroed():
     scene = load_scene("bounce", ["planes.0.normal=[0, 1e-200, 0]"])
     assert scene.walls.normals[0].tolist() == [0.0, 1.0, 0.0]
@@ -378,3 +408,11 @@ def test_warnings_are_totalled_per_kind_with_one_step_number_each():
     assert total >= 4
     examples = [line for line in result.output.splitlines() if line.startswith("  step ")]
     assert examples and all(len(re.findall(r"step \d+", line)) == 1 for line in examples)
+
+
+@pytest.mark.parametrize("phi", ["5e-324", "1e-40"])
+def test_a_packing_fraction_that_makes_the_box_too_big_is_refused_with_the_least(phi):
+    """5e-324 made the box's side infinite and ended in an internal error (exit 70)."""
+    with pytest.raises(SceneError) as info:
+        load_scene("gas", [f"generate.packing_fraction={phi}"])
+    assert "field 'generate.packing_fraction'" in str(info.value) and "give at least 3.35e-38" in str(info.value)

@@ -17,7 +17,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
+from typer.testing import CliRunner
+
 from physdbg import api, open_recording
+from physdbg.cli import app
 from physdbg.engine import state_hash
 from physdbg.engine.state import Walls
 from physdbg.events import BroadPhaseInfo, Contacts, StepEnd, SweptTests
@@ -426,6 +429,99 @@ def test_record_never_overwrites_without_force(tmp_path, monkeypatch):
     assert again.frames == 21
 
 
+@pytest.mark.parametrize("force", [False, True])
+def test_two_writers_racing_on_one_path_leave_one_whole_recording(tmp_path, force):
+    """Two `physdbg record` started together on one output: without --force one wins and
+    the other exits 2 (the file is claimed exclusively before the run); with --force both
+    finish and the file is the whole recording of one of them (written aside, renamed)."""
+    out = tmp_path / "race.mcap"
+    command = [sys.executable, "-m", "physdbg", "record", "bounce", "-s", "steps=2000", "-o", str(out), "--no-rrd"]
+    procs = [subprocess.Popen(command + (["--force"] if force else []), cwd=tmp_path, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    results = [(p.wait(timeout=120), p.stderr.read()) for p in procs]
+    codes = sorted(code for code, _ in results)
+    if force:
+        assert codes == [0, 0]
+    else:
+        assert codes == [0, 2], results
+        loser = next(err for code, err in results if code == 2)
+        assert f"{out} already exists" in loser and "Traceback" not in loser
+    assert api.verify(out).ok
+    with open_recording(out) as rec:
+        assert rec.steps == 2000 and not rec.truncated
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["race.mcap"]  # no partial file left behind
+
+
+def test_ctrl_c_before_the_first_step_leaves_no_file_to_block_the_next_run(tmp_path, monkeypatch):
+    """An interrupt while the recorders start (rerun's import takes a second) used to leave a
+    0-byte .mcap that refused the next run without --force."""
+    from physdbg.record import mcap_sink
+
+    monkeypatch.chdir(tmp_path)
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(mcap_sink.McapRecorder, "__init__", interrupted)
+    with pytest.raises(api.RecordingInterrupted, match="nothing was written"):
+        api.record("bounce", ["steps=10"])
+    assert not Path("recordings/bounce.mcap").exists() and not Path("recordings/bounce.rrd").exists()
+    monkeypatch.undo()
+    monkeypatch.chdir(tmp_path)
+    assert api.record("bounce", ["steps=10"], rrd=False).frames == 11
+
+
+@pytest.fixture(scope="module")
+def full_recording(tmp_path_factory):
+    """billiards at detail full with the view channels: every channel kind a recording has."""
+    folder = tmp_path_factory.mktemp("full")
+    path = folder / "billiards.mcap"
+    # a BVH broad phase (its nodes are a channel) and a contact budget it hits (warnings)
+    api.record("billiards", ["steps=60", "broad_phase=bvh-sah", "max_events_per_step=1"], mcap_path=str(path),
+               rrd=False, detail="full", view=True)
+    return path
+
+
+def _every_reader_refuses(path, good, words):
+    for read in (api.info, api.verify, api.explain, lambda p: api.diff(good, p), lambda p: api.diff(p, good)):
+        with pytest.raises(RecordingIntegrityError) as info:
+            read(path)
+        assert words in str(info.value) and str(path) in str(info.value)
+
+
+def test_a_damaged_chunk_of_every_channel_is_found_by_info_verify_explain_and_diff(full_recording, tmp_path):
+    """One flipped bit in any chunk, the swept tests' that info never decodes as well as the
+    states': every reader checks the data section's CRC on opening and names the damaged
+    chunk and its channels."""
+    places = tamper.chunk_places(full_recording)
+    covered = set().union(*(topics for _, topics in places))
+    with open_recording(full_recording) as rec:
+        assert covered == {c.topic for c in rec.channels()}  # every channel lies in some chunk damaged below
+    for k, (offset, topics) in enumerate(places):
+        damaged = tamper.damage_byte(full_recording, tmp_path / f"chunk{k}.mcap", offset)
+        _every_reader_refuses(damaged, full_recording, "damaged: its chunk at byte")
+        with pytest.raises(RecordingIntegrityError) as info:
+            open_recording(damaged)
+        assert all(topic in str(info.value) for topic in topics) and "its CRC does not match" in str(info.value)
+
+
+def test_a_damaged_summary_and_a_damaged_record_between_chunks_are_found(full_recording, tmp_path):
+    summary = tamper.damage_byte(full_recording, tmp_path / "summary.mcap", tamper.summary_schema_byte(full_recording))
+    _every_reader_refuses(summary, full_recording, "its summary section does not match its CRC")
+    header = tamper.damage_byte(full_recording, tmp_path / "header.mcap", 20)  # the MCAP header record
+    _every_reader_refuses(header, full_recording, "damaged: its data section does not match its CRC")
+
+
+def test_a_damaged_chunk_is_found_by_the_command_line_with_exit_2(full_recording, tmp_path):
+    offset, _ = tamper.chunk_places(full_recording)[-1]
+    damaged = tamper.damage_byte(full_recording, tmp_path / "damaged.mcap", offset)
+    for args in (["info", str(damaged)], ["replay", str(damaged), "--verify"], ["explain", str(damaged)],
+                 ["diff", str(full_recording), str(damaged)]):
+        result = CliRunner().invoke(app, args)
+        assert result.exit_code == 2, (args, result.output)
+        assert "damaged: its chunk at byte" in result.output and "Traceback" not in result.output
+
+
 def test_verify_passes_on_a_good_file_and_names_the_first_bad_step_of_a_tampered_one(tmp_path):
     path, live = record_with_events(tmp_path, "billiards")
     assert api.verify(path).ok
@@ -529,3 +625,14 @@ def test_the_contact_log_names_each_partner_and_how_it_was_met():
     (first, level_1), (second, level_2) = describe_contacts(3, c, 0.01, names)
     assert first.startswith("step 3: sphere 0 hit sphere 1 at 0.500·dt") and level_1 == "INFO"
     assert second.startswith("step 3: sphere 2 rests on wall 'floor' at 0.000·dt") and level_2 == "DEBUG"
+
+
+def test_verify_of_a_file_without_its_summary_says_it_is_incomplete(full_recording, tmp_path):
+    """A file still being written (or whose writer was killed) has no summary: verify checks
+    the whole steps it holds and says the file is incomplete."""
+    data = full_recording.read_bytes()
+    cut = tmp_path / "being-written.mcap"
+    cut.write_bytes(data[: len(data) * 3 // 4])
+    result = CliRunner().invoke(app, ["replay", str(cut), "--verify"])
+    assert result.exit_code == 0, result.output
+    assert f"INCOMPLETE: {cut} has no summary" in result.output

@@ -164,7 +164,7 @@ def test_unknown_fields_list_what_is_allowed(tmp_path):
     with pytest.raises(SceneError) as info:
         load_scene(path)
     assert "particles.0.raduis" in str(info.value)
-    assert "did you mean 'radius'" in str(info.value)
+    assert "did you mean 'particles.0.radius'" in str(info.value)
 
 
 def test_invalid_toml_is_reported_with_the_file(tmp_path):
@@ -212,3 +212,16 @@ def test_every_field_has_a_description():
     for table, fields in FIELDS.items():
         for name, text in fields.items():
             assert text, f"{table}.{name}"
+
+
+def test_a_misspelt_field_gets_the_likely_fix_not_every_field():
+    """A misspelt field listed all 33 top-level fields; now the close match, or where they are."""
+    with pytest.raises(SceneError) as info:
+        load_scene("bounce", ["restitutoin_rule=min"])
+    assert "did you mean 'restitution_rule'? (every field: docs/scenes.md)" in str(info.value)
+    assert "allowed:" not in str(info.value)
+    with pytest.raises(SceneError) as info:
+        load_scene("bounce", ["zzz=1"])
+    assert "fields allowed here are listed in docs/scenes.md (tables among them: particles, planes" in str(info.value)
+    with pytest.raises(SceneError, match="unknown field; allowed: name, normal, offset, restitution"):
+        load_scene("bounce", ["planes.0.zzz=1"])

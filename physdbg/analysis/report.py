@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 from typing import TYPE_CHECKING
 
@@ -40,12 +41,21 @@ def _clean(obj):
     return obj
 
 
+def versioned(data: dict) -> dict:
+    """A JSON report with the physdbg and recording-format versions that made it first, so
+    a script can tell which build's words and fields it reads."""
+    from ..record.format import FORMAT_VERSION
+    from ..version import __version__
+
+    return {"physdbg_version": __version__, "format_version": FORMAT_VERSION, **data}
+
+
 def diff_json(report: DiffReport) -> str:
-    return json.dumps(_clean(report.as_dict()), indent=2, default=_plain)
+    return json.dumps(versioned(_clean(report.as_dict())), indent=2, default=_plain)
 
 
 def explain_json(report: AuditReport) -> str:
-    return json.dumps(_clean(report.as_dict()), indent=2, default=_plain)
+    return json.dumps(versioned(_clean(report.as_dict())), indent=2, default=_plain)
 
 
 def _tolerance(r: DiffReport) -> str:
@@ -87,8 +97,15 @@ def diff_text(r: DiffReport) -> str:
         lines.append("afterwards: " + r.growth.sentence())
     if r.causes:
         lines.append("why:")
-        lines.extend(f"  - [{c.kind}] {c.text}" for c in r.causes)
+        lines.extend(f"  - [{c.kind}] {_cause_text(c, r)}" for c in r.causes)
     return "\n".join(lines)
+
+
+def _cause_text(cause, r: DiffReport) -> str:
+    """A cause's sentence, or a pointer to the result line when that already says it whole
+    (the main cause's 80 words were printed twice)."""
+    said = re.sub(r"^step \d+: ", "", cause.text, flags=re.IGNORECASE)
+    return "the main cause, said on the result line" if said and said in r.headline else cause.text
 
 
 def diff_markdown(r: DiffReport) -> str:
@@ -116,7 +133,7 @@ def diff_markdown(r: DiffReport) -> str:
             lines.append(f"- afterwards: {r.growth.sentence()}")
         lines.append("")
     if r.causes:
-        lines += ["**Why**", ""] + [f"- *{c.kind}*: {c.text}" for c in r.causes]
+        lines += ["**Why**", ""] + [f"- *{c.kind}*: {_cause_text(c, r)}" for c in r.causes]
     return "\n".join(lines) + "\n"
 
 
@@ -150,7 +167,7 @@ def explain_markdown(r: AuditReport) -> str:
 
 
 def check_run_json(report: CheckRunReport) -> str:
-    return json.dumps(_clean(report.as_dict()), indent=2, default=_plain)
+    return json.dumps(versioned(_clean(report.as_dict())), indent=2, default=_plain)
 
 
 def _first(r: CheckRunReport) -> str:
@@ -252,8 +269,10 @@ def summary_text(s, observers: str = "the audit") -> str:
         f"{s.rapid} rapid, {s.released} released; {s.held_at_end} held at the end)",
         *([f"sleep       {s.asleep_at_end} of {s.particles} spheres asleep at the end  ({s.slept} fell asleep, "
            f"{s.woken} woke)"] if s.slept else []),
-        f"energy      {s.energy_start:.6g} J -> {s.energy_end:.6g} J  (drift {s.energy_drift:+.3e})",
-        f"momentum    {_vec(s.momentum_start)} -> {_vec(s.momentum_end)} kg·m/s  (drift {s.momentum_drift:.3e})",
+        # "change", not "drift": restitution, drag and held contacts take energy out and walls
+        # and gravity change momentum by design; the audit line judges whether any was wrong
+        f"energy      {s.energy_start:.6g} J -> {s.energy_end:.6g} J  (relative change {s.energy_drift:+.3e})",
+        f"momentum    {_vec(s.momentum_start)} -> {_vec(s.momentum_end)} kg·m/s  (|change| {s.momentum_drift:.3e})",
         f"overlap     max {s.max_overlap:.3g} m",
         f"speed       {s.engine_ms_per_step:.3f} ms/step in the engine ({phases}); "
         f"{s.ms_per_step:.3f} ms/step with {observers}"
@@ -365,9 +384,17 @@ def check_text(result) -> str:
     lines.append("recommended " + " ".join(f"{k}={v}" for k, v in advice.recommended.items()))
     lines += [f"  {k:<12}{advice.reasons[k]}" for k in advice.recommended]
     settings = " ".join(f"{k}={v}" for k, v in result.current.items())
+    pile = None
+    if f["pile"] is not None:  # the pile's outcome under the scene's own rules, said beside the verdict
+        from ..advisor import pile_choice
+
+        chosen = pile_choice(result.scene.settings)
+        pile = next((p for p in advice.predictions if p.setting == "pile" and p.value == chosen), None)
     if result.ok:
-        lines.append(f"this scene  {settings} (*): predicted safe"
-                     + (f"; {', '.join(p.value for p in result.warnings)} inexact" if result.warnings else ""))
+        lines.append(f"this scene  {settings} (*): predicted safe (no tunnelling or overlap left)"
+                     + (f"; {', '.join(p.value for p in result.warnings)} inexact" if result.warnings else "")
+                     + (f"; but its pile {pile.outcome} under {pile.value} (slow or stopped by a budget, not wrong)"
+                        if pile is not None and pile.outcome != "settles" else ""))
     else:
         lines.append(f"this scene  {settings} (*): predicted to fail: "
                      + "; ".join(f"{p.setting}={p.value} {p.outcome}" for p in result.problems))

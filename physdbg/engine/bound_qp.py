@@ -105,7 +105,7 @@ def _worst_violation(y, lower, grad, scale) -> float:
 
 
 @kernel
-def solve_bound_qp(end_a, end_b, normal, inverse_mass, x, lower, grad, tolerance, max_products):
+def solve_bound_qp(end_a, end_b, normal, inverse_mass, x, lower, grad, tolerance, max_products, stop):
     """Minimise ½ xᵀKx - bᵀx over x >= lower by MPRGP, from a feasible x.
 
     end_a, end_b: (m,) int64 the contact's two spheres as indices into ``inverse_mass``
@@ -115,7 +115,8 @@ def solve_bound_qp(end_a, end_b, normal, inverse_mass, x, lower, grad, tolerance
     start (units of the relative values: m/s for impulses, m/s² for multipliers);
     tolerance: the answer is accepted when no Gauss–Seidel update of any contact would
     move its relative value by more than half of it; max_products: the most products K·d
-    to spend. Every contact must have K_rr > 0.
+    to spend; stop: (1,) int64, read at every iteration: nonzero ends the solve at once
+    (the world was asked to stop, World.request_stop). Every contact must have K_rr > 0.
 
     Returns (products used, whether it converged). x is feasible either way.
     """
@@ -197,7 +198,7 @@ def solve_bound_qp(end_a, end_b, normal, inverse_mass, x, lower, grad, tolerance
             since_refresh = 0
             bb, pf = split(y, g)
             continue
-        if products >= max_products:
+        if products >= max_products or stop[0] != 0:
             break
         if bb <= pf:
             # conjugate gradient step on the free contacts, or an expansion step

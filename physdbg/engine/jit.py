@@ -68,8 +68,11 @@ def _compiled(**options):
     def decorate(function):
         if config.DISABLE_JIT:
             return function
+        # nogil: a kernel called from Python lets other threads run, so a Ctrl-C can reach
+        # World.request_stop within a second while a step is in compiled code (api.py)
         dispatcher = _OneVersionPerType(py_func=function, locals={},
-                                        targetoptions={"nopython": True, "boundscheck": None, **options})
+                                        targetoptions={"nopython": True, "nogil": True, "boundscheck": None,
+                                                       **options})
         dispatcher.enable_caching()
         return dispatcher
     return decorate

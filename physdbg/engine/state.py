@@ -38,8 +38,18 @@ SWEPT_TESTS_PER_SPHERE = 2_000
 BYTES_PER_PARTICLE = 4096
 DEFAULT_MAX_MEMORY = 4e9
 
+# The held-contact solve's budget of a step (Settings.max_resting_work_per_step = 0, sized):
+# with rapid_contact_rule = "hold" the jammed steps of `physdbg run rain -s
+# generate.count=500 -s rapid_contact_rule=hold -s sleep_speed=0` need up to 2.5·10⁸
+# updates (5·10⁵ a sphere); with today's defaults (TC rule and sleeping in a pile) 23,000.
+# A fixed 10⁹ let 20 spheres at 10⁶ m/s spend 10 s a step in hopeless solves (~10 ns an
+# update); sized, they get 2·10⁷ (0.2 s), and no scene more than 10⁹ (docs/benchmarks.md, "Budgets").
+MIN_RESTING_WORK = 10_000_000
+RESTING_WORK_PER_SPHERE = 1_000_000
+MAX_RESTING_WORK = 1_000_000_000
+
 # The budgets whose 0 (their default) means "sized to the scene's sphere count" (budget_value).
-SIZED_BUDGETS = ("max_events_per_step", "max_swept_tests_per_step")
+SIZED_BUDGETS = ("max_events_per_step", "max_swept_tests_per_step", "max_resting_work_per_step")
 
 # The work budgets of one step (Settings fields), each with what it counts and what
 # happens to the rest of the step when it is reached.
@@ -104,10 +114,7 @@ class Settings:
     max_events_per_step: int = 0
     max_pairs_per_step: int = 10_000_000
     max_swept_tests_per_step: int = 0
-    # 10⁹ held-contact updates (tens of seconds of one step at worst): the jammed steps of
-    # `physdbg run rain -s generate.count=500` need up to 2.5·10⁸, and 10⁸ left 24 of
-    # them unfinished (docs/benchmarks.md, "Budgets")
-    max_resting_work_per_step: int = 1_000_000_000
+    max_resting_work_per_step: int = 0  # sized: MIN_RESTING_WORK .. MAX_RESTING_WORK, per sphere
     max_memory: float = DEFAULT_MAX_MEMORY
     space_order: str = "auto"
 
@@ -440,9 +447,12 @@ def _energy_sums(x, v, inverse_mass, gravity_scale, g0, g1, g2):
 def budget_value(name: str, value: int | None, spheres: int) -> int:
     """What budget ``name`` (a BUDGETS key) set to ``value`` is for this many spheres: the
     value, or for a budget of SIZED_BUDGETS set to 0 (or None), max(at least, per sphere ×
-    spheres). What a world spends and what the audit reports."""
+    spheres) (the resting work also at most MAX_RESTING_WORK). What a world spends and
+    what the audit reports."""
     if value or name not in SIZED_BUDGETS:
         return int(value or 0)
+    if name == "max_resting_work_per_step":
+        return min(MAX_RESTING_WORK, max(MIN_RESTING_WORK, RESTING_WORK_PER_SPHERE * spheres))
     least, per_sphere = ((MIN_EVENT_CAP, EVENTS_PER_SPHERE) if name == "max_events_per_step"
                          else (MIN_SWEPT_TESTS, SWEPT_TESTS_PER_SPHERE))
     return max(least, per_sphere * spheres)

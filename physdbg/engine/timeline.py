@@ -23,7 +23,8 @@ to Python for:
 
 It stops for good with CAPPED (the contact budget, max_events_per_step), TEST_BUDGET
 (max_swept_tests_per_step) or RESTING_BUDGET (max_resting_work_per_step): the step's
-remaining predictions are marked capped.
+remaining predictions are marked capped; and with STOPPED at once, leaving the step
+half done, when the world's stop switch is set (World.request_stop: Ctrl-C).
 
 Python handles it and calls ``run_time_order`` again, which carries on where it stopped.
 """
@@ -41,6 +42,7 @@ from .kernel_args import B_BATCH_MARK, B_COUNTERS, LoopBuffers, boxes, partner_l
 from .motion import particle_box
 from .resolve import NEEDS_HELD, OUT_OF_WORK, SKIPPED, finish_with_held, judge_contact
 from .resting import held_find, held_room
+from .resting.store import STOP
 
 # statuses
 DONE = 0
@@ -50,6 +52,7 @@ CAPPED = 4
 TEST_BUDGET = 5
 GROW_HELD = 6
 RESTING_BUDGET = 7
+STOPPED = 8
 
 # counters
 HEAP_SIZE = 0
@@ -462,6 +465,8 @@ def _run_events(particles, method, geometry, held, candidates, budgets, buffers,
         if counters[TESTS] >= max_tests:
             mark_capped(heap_data, test_outcome, counters)
             return TEST_BUDGET
+        if held.count[STOP] != 0:
+            return STOPPED
         slot = heap_pop(heap_toi, heap_data, counters)
         counters[EVENTS] += 1
         toi = heap_toi[slot]

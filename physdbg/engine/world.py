@@ -74,6 +74,8 @@ from .resolve import (
     settle_held,
 )
 from .resting import HELD, RAPID_RULES, STEP_RELEASED, STEP_WORK, grow_held, held_room, new_held, renumber_held
+from .resting.store import STOP
+from ..errors import StepStopped
 from .sleep import SUPPORT_GAP, Sleepers, release_static, split_sleeping
 from .space_order import RENUMBER_EVERY, Numbering, chosen_order, inverse_permutation, morton_order
 from .state import (BUDGETS, STATE_FIELDS, NonFiniteState, Settings, State, Walls, energies, first_non_finite,
@@ -89,6 +91,7 @@ from .timeline import (
     RAPID,
     REQUERY,
     RESTING_BUDGET,
+    STOPPED,
     TEST_BUDGET,
     ROWS,
     TESTS,
@@ -198,6 +201,8 @@ class World:
         if self.sleepers is not None and st.count:
             self._box_margin += SUPPORT_GAP * float(st.radius.max())
         self.event_cap = settings.event_cap(state.count)
+        self.resting_budget = settings.budget("max_resting_work_per_step", state.count)
+        self._stop_asked = False  # request_stop
         self.last_step: StepContext | None = None  # the context of the latest step (for inspection)
 
     def asleep(self) -> np.ndarray | None:
@@ -226,12 +231,27 @@ class World:
         Raises NonFiniteState (after reporting the step) when a position or velocity
         became NaN or infinite: the world cannot go on from there.
         """
+        self._stop_if_asked()
         ctx = self._begin(_checked_step_length(dt))
         for name in STEP_PHASES:  # each phase is the method of its name
             self._timed(ctx, name, getattr(self, f"_{name}"))
+            self._stop_if_asked()
             if name == "broad_phase" and ctx.observer is not None:  # reported outside its timing
                 ctx.observer.on_event(self._broad_phase_event(ctx))
         return self._end(ctx)
+
+    def request_stop(self) -> None:
+        """Ask the world to stop: the step under way ends at once, half done and
+        unreported, with StepStopped (so does every later step). Safe from any thread and
+        from a signal handler: it sets one integer that the compiled event loop and the
+        held-contact solves read as they go (kernels release the GIL: jit.py), and Python
+        checks between phases."""
+        self._stop_asked = True
+        self.held.count[STOP] = 1
+
+    def _stop_if_asked(self) -> None:
+        if self._stop_asked:
+            raise StepStopped(self.step_index)
 
     def _begin(self, dt: float) -> StepContext:
         # a velocity residue of vtol moves a sphere vtol·dt in a step: SOLVE_TOLERANCE·a·dt²
@@ -267,9 +287,8 @@ class World:
         ctx.sigma = np.zeros(n)
         particles, method, geometry = self._kernel_groups(ctx)
         if not settle_held(self.held, particles, method, geometry, self._free_accel, s.contact_tolerance,
-                           s.max_resting_work_per_step):
-            ctx.warn("max_resting_work_per_step", _budget_message("max_resting_work_per_step",
-                                                                  s.max_resting_work_per_step))
+                           self.resting_budget):
+            ctx.warn("max_resting_work_per_step", _budget_message("max_resting_work_per_step", self.resting_budget))
 
     def _broad_phase(self, ctx: StepContext) -> None:
         """Each path's swept box over the step, grown to its reach -> candidate pairs."""
@@ -505,7 +524,7 @@ class World:
         buf = self._buf
         particles, method, geometry = self._kernel_groups(ctx)
         budgets = tuple(LoopBudgets(self.event_cap, s.swept_test_budget(self._st.count),
-                                    s.max_resting_work_per_step))
+                                    self.resting_budget))
         while True:
             if ctx.out_of_memory:  # the narrow phase, or a re-query's predictions, did not fit
                 mark_capped(buf.heap_data, buf.test_outcome, buf.counters)
@@ -522,6 +541,8 @@ class World:
                 return "max_swept_tests_per_step"
             if status == RESTING_BUDGET:
                 return "max_resting_work_per_step"
+            if status == STOPPED:
+                return None  # World.step raises StepStopped after this phase
             if status == GROW:
                 room = prediction_room(geometry, ctx.max_degree)
                 self._ensure(ctx, room, room, 2)
@@ -571,6 +592,8 @@ class World:
         if grown is None:
             return False
         self.held = grown
+        if self._stop_asked:  # asked while the store was being copied
+            self.held.count[STOP] = 1
         return True
 
     def _held_room(self, ctx: StepContext, a: int, b: int) -> bool:
@@ -591,7 +614,7 @@ class World:
             self.held = grow_held(self.held)
         particles, method, geometry = self._kernel_groups(ctx)
         return resolve_contact(kind, a, other, when, particles, method, geometry, self.held, records(buf.contacts),
-                               buf.counters, CONTACTS, RAPID, buf.changed, self.settings.max_resting_work_per_step)
+                               buf.counters, CONTACTS, RAPID, buf.changed, self.resting_budget)
 
     def _kernel_groups(self, ctx: StepContext) -> tuple[tuple, tuple, tuple]:
         """The step's arrays and settings as the compiled loop and resolver take them:

@@ -60,6 +60,7 @@ class FoxgloveView:
         self._scene_entity = SceneEntity
         self._template_by_color: dict[tuple, SceneEntity] = {}  # a sphere's entity is a copy of its colour's
         self._asleep: np.ndarray | None = None
+        self._findings = 0  # audit findings marked so far (each its own entity)
         self._color_spheres(None)
         self._points = np.zeros(header.count, dtype=POINT_DTYPE)
         self._points["radius"] = header.radius
@@ -112,6 +113,27 @@ class FoxgloveView:
             lines += view.describe_contacts(frame, contacts, end.dt, self.header.walls.partner_names())
         lines += sleep_lines
         out += self._log(ns, lines)
+        return out
+
+    def finding(self, ns: int, finding) -> list[tuple[str, bytes]]:
+        """An audit finding: its warning line, and a red translucent sphere where it happened
+        (entity finding-<n>, kept from then on) when it has one place."""
+        out = self._log(ns, [(f"step {finding.step}: [{finding.kind}] {finding.message}", "WARN")])
+        if finding.position is not None:
+            self._findings += 1
+            update = self.classes[fmt.TOPIC_VIEW_SCENE]()
+            entity = update.entities.add(id=f"finding-{self._findings}", frame_id=fmt.VIEW_SCENE_FRAME)
+            entity.timestamp.FromNanoseconds(ns)
+            entity.metadata.add(key="kind", value=finding.kind)
+            size = 2 * 1.6 * float(self.header.radius[list(finding.particles)].max() if finding.particles
+                                   else self.header.radius.max())
+            sphere = entity.spheres.add()
+            sphere.pose.position.x, sphere.pose.position.y, sphere.pose.position.z = (float(c) for c in
+                                                                                        finding.position)
+            sphere.pose.orientation.w = 1.0
+            sphere.size.x = sphere.size.y = sphere.size.z = size
+            sphere.color.r, sphere.color.g, sphere.color.b, sphere.color.a = 1.0, 0.16, 0.16, 0.6
+            out.append((fmt.TOPIC_VIEW_SCENE, update.SerializeToString()))
         return out
 
     # ------------------------------------------------------------------ messages

@@ -59,7 +59,9 @@ class McapRecorder:
         self.bvh_max_nodes = header.meta.get("bvh_max_nodes")
         self._file = open(self.path, "wb")
         self._good_size = 0  # file size after the last successful flush: whole records only
-        self._writer = Writer(self._file, chunk_size=chunk_bytes, compression=CompressionType.ZSTD)
+        # data CRCs: every reader checks the whole data section against it on opening (reader.py)
+        self._writer = Writer(self._file, chunk_size=chunk_bytes, compression=CompressionType.ZSTD,
+                              enable_data_crcs=True)
         self._writer.start(profile=fmt.PROFILE, library=f"physdbg {header.meta['physdbg_version']}")
         self._channels: dict[str, int] = {}
         self.view = None
@@ -156,6 +158,19 @@ class McapRecorder:
         self._contacts, self._warnings = None, []
         # The state goes last: a frame whose state is in the file is a complete step.
         self._write_state(frame, end.time, end.dt, end.state_hash, end.positions, end.velocities, ns, end.asleep)
+        self._send()
+
+    def mark_finding(self, finding) -> None:
+        """An audit finding (analysis.audit.Finding) into the view channels at its step: a
+        warning on /view/log and a red marker on /view/scene where it happened, so Foxglove
+        and `rerun mcap convert` users see what Rerun users see. Written when it is made
+        (just after its step, or at the end for what the audit judges then)."""
+        if self.view is None or self.closed or not self._index_rows:
+            return
+        frame = min(finding.step, len(self._index_rows) - 1)
+        ns = int(self._index_rows[frame][1])
+        for topic, data in self.view.finding(ns, finding):
+            self._write(topic, frame, ns, data)
         self._send()
 
     def _frame_time(self, seconds: float) -> int:

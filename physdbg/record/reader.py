@@ -22,6 +22,7 @@ them, that hash must be the frame index's for the frame, and frames must arrive 
 from __future__ import annotations
 
 import json
+import sys
 from contextlib import ExitStack, contextmanager
 from collections import defaultdict
 from collections.abc import Iterator
@@ -41,6 +42,9 @@ from .header import RecordingHeader
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 FOOTER_BYTES = 1 + 8 + 8 + 8 + 4  # opcode, record length, summary_start, summary_offset_start, summary_crc
 OPCODE_FOOTER = 0x02
+OPCODE_DATA_END = 0x0F
+OPCODE_CHUNK = 0x06
+DATA_END_BYTES = 1 + 8 + 4  # opcode, record length, data_section_crc
 
 @dataclass(frozen=True)
 class FrameState:
@@ -181,7 +185,7 @@ class Recording:
             raise RecordingError(f"{self.path}: not an MCAP file (a physdbg recording starts with the MCAP magic bytes)")
         self._file.seek(0)
         self._reader = SeekingReader(self._file, validate_crcs=True)
-        self._memory: dict[str, list[tuple[int, bytes]]] | None = None
+        self._recovered: list[tuple[int, dict[str, list[int]]]] | None = None  # a file without summary
         self._frame_table: FrameTable | None = None
         self._index_checked = False  # the frame index's hashes are the states' (set as states are read)
         self.truncated = False
@@ -201,6 +205,7 @@ class Recording:
             if fmt.TOPIC_STATE not in self._channels:
                 raise RecordingError(f"{self.path}: an MCAP file, but not a physdbg recording (no {fmt.TOPIC_STATE} channel)")
             self.frames = self._counts[fmt.TOPIC_STATE]
+            self._check_data_section(summary)
             self._check_one_recording()
             self._check_version(self._first(fmt.TOPIC_SCENE))
             self._read_log_times()
@@ -228,8 +233,9 @@ class Recording:
         footer_at = size - len(MCAP_MAGIC) - FOOTER_BYTES
         if length != FOOTER_BYTES - 9 or summary_start > footer_at:
             raise RecordingIntegrityError(f"{self.path}: its MCAP footer is damaged (it points past itself)")
+        self._summary_start = summary_start or footer_at
         if summary_crc != 0:  # 0: the writer did not compute one
-            start = summary_start or footer_at
+            start = self._summary_start
             self._file.seek(start)
             crc = zlib.crc32(self._file.read(size - len(MCAP_MAGIC) - 4 - start))
             if crc != summary_crc:
@@ -238,6 +244,65 @@ class Recording:
                     f"two or more files joined together (a recording is one MCAP file)")
         self._file.seek(0)
         return True
+
+    def _check_data_section(self, summary) -> None:
+        """Every byte before the summary against the data section's CRC (the DataEnd
+        record's, which physdbg writes), in one streaming pass: a flipped byte in any
+        chunk of any channel is found when the file is opened, not only when (or if) that
+        chunk is read. On a mismatch, or in a file written without a data CRC, each chunk
+        is checked against its own CRC to name the damaged one."""
+        import struct
+        import zlib
+
+        end = self._summary_start - DATA_END_BYTES
+        self._file.seek(end)
+        data_end = self._file.read(DATA_END_BYTES)
+        expected = None
+        if len(data_end) == DATA_END_BYTES and data_end[0] == OPCODE_DATA_END:
+            length, expected = struct.unpack("<QI", data_end[1:])
+            expected = expected if length == 4 and expected != 0 else None
+        if expected is not None:
+            self._file.seek(0)
+            crc, left = 0, end
+            while left > 0:
+                block = self._file.read(min(left, 1 << 22))
+                if not block:
+                    break
+                crc = zlib.crc32(block, crc)
+                left -= len(block)
+            if crc == expected and left == 0:
+                return
+        damaged = self._damaged_chunk(summary)
+        if damaged is not None:
+            raise RecordingIntegrityError(f"{self.path}: damaged: {damaged}")
+        if expected is not None:
+            raise RecordingIntegrityError(
+                f"{self.path}: damaged: its data section does not match its CRC (the damage is outside the "
+                f"chunks of messages); the file was changed after it was written: record the run again")
+
+    def _damaged_chunk(self, summary) -> str | None:
+        """The first chunk whose records do not match its CRC, described; None if all match."""
+        from mcap.data_stream import ReadDataStream
+        from mcap.records import Chunk
+        from mcap.reader import breakup_chunk
+
+        topics = {cid: c.topic for cid, c in summary.channels.items()}
+        for index in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
+            try:
+                self._file.seek(index.chunk_start_offset)
+                if self._file.read(1) != bytes([OPCODE_CHUNK]):
+                    raise ValueError("no chunk where the summary puts one")
+                self._file.seek(8, 1)  # the record's length
+                breakup_chunk(Chunk.read(ReadDataStream(self._file)), validate_crc=True)
+            except Exception as err:
+                held = sorted({topics.get(cid, f"channel {cid}") for cid in index.message_index_offsets})
+                why = "its CRC does not match" if type(err).__name__ == "CRCValidationError" else \
+                    f"{type(err).__name__}: {err}"
+                return (f"its chunk at byte {index.chunk_start_offset} ({', '.join(held)}; messages of simulated "
+                        f"time {index.message_start_time / 1e9:g} s to {index.message_end_time / 1e9:g} s) does not "
+                        f"read back as written ({why}); the file was changed after it was written: record the run "
+                        f"again")
+        return None
 
     def _check_one_recording(self) -> None:
         """A file holds one run: one scene, one set of particles and walls, one index."""
@@ -249,9 +314,9 @@ class Recording:
 
     def _first(self, topic: str) -> bytes | None:
         """The first message of a topic, found by the summary's index (no time range)."""
-        if self._memory is not None:
-            rows = self._memory.get(topic)
-            return rows[0][1] if rows else None
+        if self._recovered is not None:
+            rows = self._recovered_messages([topic], 0, sys.maxsize)
+            return rows[0][3] if rows else None
         if topic not in self._channels:
             return None
         for _, _, message in self._reader.iter_messages(topics=[topic]):
@@ -295,49 +360,91 @@ class Recording:
         self._log_ns = log_ns
 
     def _recover(self) -> None:
-        """Read a file with no summary (its writer was killed) as far as it is whole."""
-        from mcap.records import Channel, Message, Schema
-        from mcap.stream_reader import StreamReader
+        """Read a file with no summary (its writer was killed, or is still writing) as far
+        as it is whole: its records are walked one by one, each whole chunk decompressed
+        once (its CRC checked) to list which frames of which topics it holds, and only that
+        list is kept (a killed 543 MB recording took 1.75 GB to open when every message was
+        held in memory). Messages are read again from their chunks when asked for."""
+        import os
+        import struct
+
+        from mcap.data_stream import ReadDataStream
+        from mcap.reader import breakup_chunk
+        from mcap.records import Channel, Chunk, Message, Schema
 
         self.truncated = True
-        self._file.seek(0)
-        from mcap.records import Footer
-
+        size = os.fstat(self._file.fileno()).st_size
         channels: dict[int, Channel] = {}
         self._schemas: dict[int, Schema] = {}
-        memory: dict[str, list[tuple[int, bytes]]] = defaultdict(list)
-        ended = False
-        try:
-            for record in StreamReader(self._file, validate_crcs=True).records:
-                if isinstance(record, Schema):
-                    self._schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    channels[record.id] = record
-                elif isinstance(record, Message) and record.channel_id in channels:
-                    memory[channels[record.channel_id].topic].append((record.sequence, record.data))
-                elif isinstance(record, Footer):
-                    ended = True
-        except Exception:  # the torn end of the file: keep what came before it
-            pass
-        if ended:  # a whole MCAP file, and yet its footer is not the file's end: more follows it
-            raise RecordingIntegrityError(f"{self.path}: more data follows the end of its MCAP file: two or more "
-                                          f"files joined together (a recording is one MCAP file)")
+        chunks: list[tuple[int, dict[str, list[int]]]] = []
+        position = len(MCAP_MAGIC)
+        while position + 9 <= size:
+            self._file.seek(position)
+            opcode, length = struct.unpack("<BQ", self._file.read(9))
+            end = position + 9 + length
+            if end > size:
+                break  # the torn end of the file: keep what came before it
+            if opcode == OPCODE_FOOTER:  # a whole MCAP file, and yet its footer is not the file's end
+                raise RecordingIntegrityError(f"{self.path}: more data follows the end of its MCAP file: two or "
+                                              f"more files joined together (a recording is one MCAP file)")
+            if opcode == OPCODE_CHUNK:
+                try:
+                    records = breakup_chunk(Chunk.read(ReadDataStream(self._file)), validate_crc=True)
+                except Exception as err:  # a whole chunk that does not read back: damage, not a torn end
+                    raise RecordingIntegrityError(
+                        f"{self.path}: damaged: its chunk at byte {position} does not read back as written "
+                        f"({type(err).__name__}); the file was changed after it was written") from None
+                held: dict[str, list[int]] = defaultdict(list)
+                for record in records:
+                    if isinstance(record, Schema):
+                        self._schemas[record.id] = record
+                    elif isinstance(record, Channel):
+                        channels[record.id] = record
+                    elif isinstance(record, Message) and record.channel_id in channels:
+                        held[channels[record.channel_id].topic].append(record.sequence)
+                chunks.append((position, dict(held)))
+            position = end
         self._channels = {c.topic: c for c in channels.values()}
-        if fmt.TOPIC_STATE not in self._channels or not memory.get(fmt.TOPIC_STATE):
+        states = [f for _, held in chunks for f in held.get(fmt.TOPIC_STATE, ())]
+        if fmt.TOPIC_STATE not in self._channels or not states:
             raise RecordingError(f"{self.path}: truncated before its first complete chunk; no steps can be read")
-        self._counts = {topic: len(rows) for topic, rows in memory.items()}
-        self._check_one_recording()
-        sequence = [f for f, _ in memory[fmt.TOPIC_STATE]]
-        if sequence != list(range(len(sequence))):
-            k = next(i for i, f in enumerate(sequence) if f != i)
+        if states != list(range(len(states))):
+            k = next(i for i, f in enumerate(states) if f != i)
             raise RecordingIntegrityError(f"{self.path}: frames out of order: state {k} of the file is frame "
-                                          f"{sequence[k]}")
-        last = memory[fmt.TOPIC_STATE][-1][0]
+                                          f"{states[k]}")
+        last = states[-1]
         # A frame is complete when its state arrived (the writer puts the state last).
-        self._memory = {topic: [(f, d) for f, d in rows if f <= last] for topic, rows in memory.items()}
-        self._counts = {topic: len(rows) for topic, rows in self._memory.items()}
+        self._recovered = [(offset, {t: [f for f in frames if f <= last] for t, frames in held.items()})
+                           for offset, held in chunks]
+        counts: dict[str, int] = defaultdict(int)
+        for _, held in self._recovered:
+            for topic, frames in held.items():
+                counts[topic] += len(frames)
+        self._counts = dict(counts)
+        self._check_one_recording()
         self.frames = last + 1
         self._check_version(self._first(fmt.TOPIC_SCENE))
+
+    def _recovered_messages(self, topics: list[str], first: int, last: int) -> list[tuple[int, int, str, bytes]]:
+        """(frame, topic's place in topics, topic, data) of a recovered file's messages of
+        ``topics`` for frames first..last, in frame order: their chunks read again."""
+        from mcap.data_stream import ReadDataStream
+        from mcap.reader import breakup_chunk
+        from mcap.records import Channel, Chunk, Message
+
+        place = {t: i for i, t in enumerate(topics)}
+        ids = {c.id: c.topic for c in self._channels.values() if c.topic in place}
+        merged = []
+        for offset, held in self._recovered:
+            if not any(held.get(t) and held[t][0] <= last and held[t][-1] >= first for t in topics):
+                continue  # the chunk holds none of these frames (frames come in order in a chunk)
+            self._file.seek(offset + 9)
+            for record in breakup_chunk(Chunk.read(ReadDataStream(self._file)), validate_crc=True):
+                if isinstance(record, Message) and record.channel_id in ids and first <= record.sequence <= last:
+                    topic = ids[record.channel_id]
+                    merged.append((record.sequence, place[topic], topic, record.data))
+        merged.sort(key=lambda row: (row[0], row[1]))
+        return merged
 
     def _read_header(self) -> None:
         scene = self._one(fmt.TOPIC_SCENE)
@@ -362,10 +469,8 @@ class Recording:
         topics = [t for t in topics if t in self._channels]
         if not topics:
             return
-        if self._memory is not None:
-            merged = [(f, i, t, d) for i, t in enumerate(topics) for f, d in self._memory.get(t, ()) if first <= f <= last]
-            merged.sort(key=lambda row: (row[0], row[1]))
-            for f, _, t, d in merged:
+        if self._recovered is not None:
+            for f, _, t, d in self._recovered_messages(topics, first, last):
                 yield t, f, d
             return
         end = int(self._log_ns[last + 1]) if last + 1 < self.frames else int(self._log_ns[last]) + 1

@@ -13,7 +13,7 @@ from ..bound_qp import solve_bound_qp
 from ..colliders.kinds import partner_sphere
 from ..jit import borrowing, kernel
 from ..motion import advance_particle
-from .store import HELD, SOLVE_ID, STEP_RELEASED, STEP_WHOLE_SOLVES, STEP_WORK, held_remove, contacts_of
+from .store import HELD, SOLVE_ID, STEP_RELEASED, STEP_WHOLE_SOLVES, STEP_WORK, STOP, held_remove, contacts_of
 
 
 # ----------------------------------------------------------------------------- solves
@@ -113,7 +113,7 @@ def solve_contacts(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
     if _gauss_seidel(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator, drag,
                      k, tolerance, local, stick):
         return True
-    if h.count[STEP_WORK] >= budget:
+    if h.count[STEP_WORK] >= budget or h.count[STOP] != 0:
         return False
     m = _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inverse_mass, when, integrator,
                          drag, k, tolerance, budget, stick)
@@ -209,7 +209,8 @@ def _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inv
             normal[q, d] = h.normal[c, d]
     room = max((budget - h.count[STEP_WORK]) // max(n, 1), 0)
     answer = start.copy()
-    used, _ = solve_bound_qp(end_a, end_b, normal, weight, answer, lower, grad, tolerance, room)
+    used, _ = solve_bound_qp(end_a, end_b, normal, weight, answer, lower, grad, tolerance, room,
+                             h.count[STOP:STOP + 1])
     h.count[STEP_WHOLE_SOLVES] += 1
     h.count[STEP_WORK] += used * n
     # a contact takes its new multiplier only where the change moves its relative value by
@@ -304,7 +305,7 @@ def _solve_cluster(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inver
         grown, fits = _add_neighbours(h, values, members, first, m, False, is_velocity, x, v, a, sigma,
                                       inverse_mass, when, integrator, drag, k, tolerance, stick, solve)
         m = grown
-        if not fits or h.count[STEP_WORK] + m >= budget:
+        if not fits or h.count[STEP_WORK] + m >= budget or h.count[STOP] != 0:
             return _give_up(h, values, members, m, saved, undo_x, undo_p, undo_v, is_velocity, solve)
         for r in range(first, m):
             c = members[r]
@@ -719,7 +720,7 @@ def _gauss_seidel(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, invers
         c = h.queue[head % size]
         head += 1
         h.seen[c] = solve
-        if h.count[STEP_WORK] >= budget:
+        if h.count[STEP_WORK] >= budget or h.count[STOP] != 0:
             return False
         h.count[STEP_WORK] += 1
         i = h.a[c]

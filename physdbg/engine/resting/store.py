@@ -16,12 +16,15 @@ from ..jit import borrowing
 # ----------------------------------------------------------------------------- the store
 # HeldContacts.count's slots: the contacts held now, the last solve's id, then those that
 # count one step's work (World zeroes them as a step begins): held-solve updates, whole
-# clusters solved, held contacts released
+# clusters solved, held contacts released; then the stop switch (World.request_stop sets
+# it, from any thread: the solves and the event loop end at once when it is set)
 HELD = 0
 SOLVE_ID = 1
 STEP_WORK = 2
 STEP_WHOLE_SOLVES = 3
 STEP_RELEASED = 4
+STOP = 5
+COUNT_SLOTS = 6
 
 
 class HeldContacts(NamedTuple):
@@ -33,9 +36,10 @@ class HeldContacts(NamedTuple):
     multiplier (N: the contact force; kept between steps as the warm start);
     jv: (C,) impulse of the current velocity solve (N·s); target: (C,) separation speed the
     velocity solve must reach (m/s; 0 for held contacts); seen: (C,) int64 id of the last
-    solve that used jv; count: (5,) int64 — contacts held, solve id, then this step's
-    counts: work done (updates, STEP_WORK), clusters solved whole (_solve_connected,
-    STEP_WHOLE_SOLVES), contacts released (STEP_RELEASED); slots: (N, K) each
+    solve that used jv; count: (COUNT_SLOTS,) int64 — contacts held, solve id, then this
+    step's counts: work done (updates, STEP_WORK), clusters solved whole (_solve_connected,
+    STEP_WHOLE_SOLVES), contacts released (STEP_RELEASED), then the stop switch (STOP);
+    slots: (N, K) each
     sphere's contact ids; deg: (N,) how many; queue: (C,) the
     worklist; mark: (N,) int64 solve id of the last visit; touched: (N + 1,) spheres visited
     by the current solve, count first; before: (N, 3) each visited sphere's velocity when
@@ -70,7 +74,7 @@ def new_held(n: int, capacity: int = 64, per_particle: int = 16) -> HeldContacts
     """An empty store for ``n`` spheres."""
     return HeldContacts(np.zeros(capacity, np.int64), np.zeros(capacity, np.int64), np.zeros(capacity, np.int64),
                         np.zeros((capacity, 3)), np.zeros(capacity), np.zeros(capacity), np.zeros(capacity),
-                        np.full(capacity, -1, np.int64), np.zeros(5, np.int64),
+                        np.full(capacity, -1, np.int64), np.zeros(COUNT_SLOTS, np.int64),
                         np.zeros((n, per_particle), np.int64), np.zeros(n, np.int64), np.zeros(capacity, np.int64),
                         np.full(n, -1, np.int64), np.zeros(n + 1, np.int64), np.zeros((n, 3)),
                         np.full(n, -1, np.int64), np.full(n, -1, np.int64))
