@@ -154,17 +154,43 @@ def _after_interpreted(chosen, quiet: bool = False) -> None:
                           else "(it could not start: the next large run compiles them)"), err=True)
 
 
+def _complete_scene(incomplete: str) -> list[str]:
+    """Shell completion of a scene: the built-in names, then .toml files (`physdbg
+    --install-completion` once, then TAB)."""
+    from .scenes import builtin_names
+
+    names = [name for name in builtin_names() if name.startswith(incomplete)]
+    folder = Path(incomplete).parent if incomplete else Path(".")
+    try:
+        files = sorted(str(f) for f in folder.glob("*.toml") if str(f).startswith(incomplete))
+    except OSError:
+        files = []
+    return names + files
+
+
+def _complete_set(incomplete: str) -> list[str]:
+    """Shell completion of --set: the scene's top-level fields and the tables' fields, as KEY=."""
+    from .scene import FIELDS
+
+    lists = ("particles", "planes", "meshes")  # arrays of tables: the first one's fields
+    keys = [name if table == "scene" else f"{table}.0.{name}" if table in lists else f"{table}.{name}"
+            for table, fields in FIELDS.items() for name in fields if name not in FIELDS]  # not tables alone
+    return [f"{key}=" for key in keys if key.startswith(incomplete)]
+
+
 SetOption = Annotated[
     Optional[list[str]],
-    typer.Option("--set", "-s", metavar="KEY=VALUE",
+    typer.Option("--set", "-s", metavar="KEY=VALUE", autocompletion=_complete_set,
                  help="Override a scene field, e.g. --set integrator=verlet --set generate.count=500. "
                       "Repeatable."),
 ]
+SceneArgument = Annotated[str, typer.Argument(help="Built-in scene name (see `physdbg scenes`) or a .toml file.",
+                                              autocompletion=_complete_scene)]
 
 
 @app.command()
 def run(
-    scene: Annotated[str, typer.Argument(help="Built-in scene name (see `physdbg scenes`) or a .toml file.")],
+    scene: SceneArgument,
     set_: SetOption = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON (for scripts).")] = False,
     dts: Annotated[Optional[Path], typer.Option(
@@ -217,7 +243,7 @@ def run(
 
 @app.command()
 def record(
-    scene: Annotated[str, typer.Argument(help="Built-in scene name (see `physdbg scenes`) or a .toml file.")],
+    scene: SceneArgument,
     set_: SetOption = None,
     output: Annotated[Optional[Path], typer.Option(
         "--output", "-o", help="The MCAP file to write (default recordings/<scene>.mcap).")] = None,
@@ -561,7 +587,7 @@ def check_run(
 @app.command("record-peer")
 def record_peer(
     peer: Annotated[str, typer.Argument(help="The peer engine: pybullet or mujoco (pip install 'physdbg[peers]').")],
-    scene: Annotated[str, typer.Argument(help="Built-in scene name or a .toml file.")],
+    scene: SceneArgument,
     set_: SetOption = None,
     output: Annotated[Optional[Path], typer.Option(
         "--output", "-o", help="The recording to write (default: SCENE-PEER.mcap).")] = None,
@@ -587,7 +613,7 @@ def record_peer(
 
 @app.command()
 def check(
-    scene: Annotated[str, typer.Argument(help="Built-in scene name or a .toml file.")],
+    scene: SceneArgument,
     set_: SetOption = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print as JSON.")] = False,
 ) -> None:
@@ -895,15 +921,24 @@ class _progress_bar:
         import threading
 
         if what == "compiling":
+            self._compiling_since = self._time()
+            self._said_compiling = False
             self._timer = threading.Timer(self.AFTER_SECONDS, self._say_compiling)
             self._timer.daemon = True
             self._timer.start()
         else:
             self._cancel()
+            if getattr(self, "_said_compiling", False):
+                sys.stderr.write(f"compiled in {self._time() - self._compiling_since:.0f} s\n")
+                sys.stderr.flush()
             self._started = self._time()
 
     def _say_compiling(self) -> None:
-        sys.stderr.write("compiling the engine's kernels (the first run only: 40 s to a minute and more; cached afterwards)...\n")
+        # every compile is announced: the first, and a later one for a feature no run has
+        # used yet (another broad phase, sleeping, meshes), each cached once compiled
+        self._said_compiling = True
+        sys.stderr.write("compiling the engine's kernels this run needs (once per engine version and feature: "
+                         "30 s to a minute and more the first time; cached afterwards)...\n")
         sys.stderr.flush()
 
     def _cancel(self) -> None:

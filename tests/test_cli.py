@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -463,3 +464,18 @@ def test_json_reports_carry_the_physdbg_and_format_versions():
     for args in (["run", "bounce", "-s", "steps=5", "--json"], ["check", "bounce", "--json"]):
         data = json.loads(runner.invoke(app, args).stdout)
         assert data["physdbg_version"] == __version__ and data["format_version"] == FORMAT_VERSION
+
+
+def test_shell_completion_offers_scene_names_files_and_set_keys(tmp_path, monkeypatch):
+    from physdbg.cli import _complete_scene, _complete_set
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "mine.toml").write_text("dt = 0.01\n")
+    assert _complete_scene("bo") == ["bounce"]
+    assert "mine.toml" in _complete_scene("")
+    assert _complete_set("generate.co") == ["generate.count="]
+    assert "particles.0.radius=" in _complete_set("particles.0.r") and "generate=" not in _complete_set("gen")
+    done = subprocess.run([sys.executable, "-m", "physdbg"], env={**os.environ, "_PHYSDBG_COMPLETE": "complete_bash",
+                                                                  "COMP_WORDS": "physdbg run bo", "COMP_CWORD": "2"},
+                          capture_output=True, text=True, cwd=tmp_path)
+    assert done.stdout.split() == ["bounce"], done.stdout + done.stderr

@@ -416,3 +416,25 @@ def test_a_packing_fraction_that_makes_the_box_too_big_is_refused_with_the_least
     with pytest.raises(SceneError) as info:
         load_scene("gas", [f"generate.packing_fraction={phi}"])
     assert "field 'generate.packing_fraction'" in str(info.value) and "give at least 3.35e-38" in str(info.value)
+
+
+def test_a_full_disk_under_the_rerun_file_is_said_and_never_hangs(tmp_path):
+    """The .rrd fills the disk first (it is larger than a --detail state MCAP): rerun's own
+    file writer only logs the failure, and its flush (and its exit hook) then waited
+    forever. The flush is bounded by the file's growth, and the dead stream abandoned."""
+    import subprocess
+    import sys
+
+    script = ("import resource, signal, sys\n"
+              "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # past the limit writes fail, as on a full disk\n"
+              "resource.setrlimit(resource.RLIMIT_FSIZE, (500000, 500000))\n"
+              "from physdbg.cli import app\n"
+              "app(sys.argv[1:])\n")
+    out = tmp_path / "full.mcap"
+    done = subprocess.run([sys.executable, "-c", script, "record", "rain", "-s", "steps=100", "-o", str(out),
+                           "--detail", "state", "--no-view", "--no-progress"],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert f"the Rerun file {tmp_path / 'full.rrd'} could not be written (" in done.stderr
+    assert "is the disk full? It holds only what was written before" in done.stderr
+    assert "full.mcap is readable and holds steps 1.." in done.stderr

@@ -234,6 +234,7 @@ def test_a_mesh_scene_draws_its_bvh_moves_its_kinematic_mesh_and_opens_on_the_se
     static = {chunk.entity_path for chunk in reader.stream() if chunk.is_static}
     for volume in ("aabb", "obb", "sphere"):
         assert {f"/world/meshes/paddle/bvh/{volume}/level_{d}" for d in range(8)} <= static
+    assert "/legend" in static  # what the 3D view's colours mean, in a text panel beside it
     rows = read_rrd(rrd)
     turned = [k for (entity, k), comps in rows.items() if entity == "/world/meshes/paddle"
               and any(name.startswith("Transform3D") for name in comps)]

@@ -44,6 +44,12 @@ EXAMPLES_PER_KIND = 5
 # a step among ~500 spheres, but only ~6 bounces a sphere, spread evenly
 COLLAPSE_CONTACTS_PER_SPHERE = 10
 COLLAPSE_MIN_CONTACTS = 200
+# with sleeping on, a bed still rattling when the run ends is a collapse, unless it was
+# falling asleep: at most this fraction of its spheres awake, and no step rattled in the
+# last SETTLED_QUIET_STEPS (rain 500 under the pile rules: the 2-second run ends with 2 of
+# a rattling step's 220 spheres awake and 22 quiet steps; it was reported as a collapse)
+SETTLING_AWAKE_FRACTION = 0.02
+SETTLED_QUIET_STEPS = 10
 ENERGY_GAIN_RELATIVE = 1e-9  # rounding in one impulse is ~1e-16 relative; this is a real gain
 FOREIGN_ENERGY_GAIN = 1e-3  # a run without contact records: a step's gain beyond this is a contact's doing
 
@@ -148,6 +154,8 @@ class Auditor:
         # meshes whose prescribed motions pass through each other (mesh_overlap.py)
         self._mesh_overlaps = MeshOverlaps(header.walls.meshes) if header.walls.meshes.moving.any() else None
         self._rattled: list[tuple[int, int]] = []  # (step of the rattle, step all were asleep)
+        self._settling: list[tuple[int, int, int]] = []  # (step of the rattle, awake at the end, its spheres)
+        self._last_rattle = 0  # the last step whose bed rattled (with sleeping on)
         self._asleep: np.ndarray | None = None  # the last step's asleep mask
 
     # ------------------------------------------------------------------ observer
@@ -503,14 +511,26 @@ class Auditor:
                              "ones stay elastic, so a dense pile keeps rattling; or let the slow spheres of the "
                              "pile sleep (sleep_speed, e.g. 0.1 m/s, with sleep_time=0.1): it freezes the bed as "
                              "it cools")
-        advice = "; ".join(rules) or "lower the restitution, or use a shorter dt"
+        # every sphere, wall and mesh of restitution 1 (not the contacts': the tc rule makes
+        # a dense bed's fast contacts elastic): no energy is lost, so no gap shrinks
+        # geometrically, and a blown-up rate means a step long for the motion
+        walls = self.header.walls
+        elastic = bool(np.all(self.header.restitution >= 1.0) and np.all(walls.restitution >= 1.0)
+                       and np.all(walls.meshes.restitution >= 1.0))
+        if elastic:
+            why = ("with restitution 1 this is not inelastic collapse: the spheres meet this often within one step "
+                   "because the step is long for their speeds and the gaps between them")
+            advice = "use a shorter dt (each step's contacts are bounded by max_events_per_step)"
+        else:
+            why = ("inelastic collapse: with restitution below 1 the gaps between a few spheres shrink geometrically "
+                   "and they collide ever more often")
+            advice = "; ".join(rules) or "lower the restitution, or use a shorter dt"
         finding = Finding("collapse", step, involved[:10].tolist(),
-                          f"{bounces} bounces among {spheres} in one step: the collision rate has blown up "
-                          f"(inelastic collapse: with restitution below 1 the gaps between a few spheres shrink "
-                          f"geometrically and they collide ever more often)", advice,
-                          evidence={"contacts": len(c), "bounces": bounces, "spheres": len(involved)})
+                          f"{bounces} bounces among {spheres} in one step: the collision rate has blown up ({why})",
+                          advice, evidence={"contacts": len(c), "bounces": bounces, "spheres": len(involved)})
         if self.settings.get("sleep_speed"):
             self._rattling.append((finding, involved))
+            self._last_rattle = step
         else:
             self._add(finding)
 
@@ -518,9 +538,13 @@ class Auditor:
         """The run has ended: a rattling bed not yet all asleep is a collapse finding after
         all (its listeners hear of it now). report() calls it; call it yourself before
         closing what the listeners write to."""
+        quiet = self.steps - self._last_rattle
         for finding, involved in self._rattling:
             if self._asleep is not None:
                 awake = int(np.count_nonzero(~self._asleep[involved]))
+                if awake <= SETTLING_AWAKE_FRACTION * len(involved) and quiet >= SETTLED_QUIET_STEPS:
+                    self._settling.append((finding.step, awake, len(involved)))
+                    continue
                 finding.message += (f"; {awake} of the {len(involved)} spheres were still awake when the run "
                                     f"ended (step {self.steps})")
                 finding.evidence["awake_at_end"] = awake
@@ -537,6 +561,15 @@ class Auditor:
                          f"{len(self._rattled)} step{'s' if len(self._rattled) != 1 else ''} from step {first}, and "
                          f"every sphere of those steps was asleep by step {last}: sleeping ended it, so it is not "
                          f"reported as a collapse")
+        if self._settling:
+            awake = sum(a for _, a, _ in self._settling)
+            spheres = sum(n for _, _, n in self._settling)
+            notes.append(f"the bed was still falling asleep when the run ended (step {self.steps}): "
+                         f"{len(self._settling)} rattling step{'s' if len(self._settling) != 1 else ''} from step "
+                         f"{self._settling[0][0]} left {awake} of {'its' if len(self._settling) == 1 else 'their'} "
+                         f"{spheres} spheres awake, and no step rattled "
+                         f"in the last {self.steps - self._last_rattle}: not reported as a collapse (a longer "
+                         f"run shows whether it sleeps)")
         foreign = self.header.meta.get("foreign")
         if foreign and self.steps:
             notes.append(f"a run of another engine (from {foreign['source']}, velocities {foreign['velocities']}): "

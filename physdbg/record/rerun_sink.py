@@ -61,10 +61,14 @@ SEARCHED_SPHERES = 12  # the most spheres whose search of the triangles' BVH is 
 FIRST_CONTACT_TIMELINE = "from first contact"  # a file opens here, paused (a scene without meshes)
 MESH_CONTACT_TIMELINE = "from first mesh contact"  # a mesh scene's file opens here (paused)
 LABELLED_SPHERES = 40  # up to this many spheres are drawn with their numbers
-BVH_LEVELS_SHOWN = 3  # levels 0..2 are drawn when the file opens; deeper ones are a click away  # steps of scalar series buffered before one send_columns
-
-
-
+BVH_LEVELS_SHOWN = 3  # levels 0..2 are drawn when the file opens; deeper ones are a click away
+# what the 3D view's colours mean (rerun's 3D view has no legend of its own): a text panel
+LEGEND = (f"**Spheres** orange, numbered (up to {LABELLED_SPHERES}); grey: immovable; grey-blue: asleep. "
+          "**Blue lines**: each sphere's path through the step. **Yellow ghosts**: where each contact happened. "
+          "**Green arrows**: contact normals (a radius long). **Red-orange arrows**: impulses (how far the "
+          f"velocity change moves the sphere in {IMPULSE_ARROW_SECONDS * 1000:.0f} ms). **Red spheres**: audit "
+          f"findings. **Grey lines**: walls; BVH boxes by level under world/bvh (levels 0–{BVH_LEVELS_SHOWN - 1} "
+          "shown).")
 
 
 def viewer_binary() -> str:
@@ -125,6 +129,7 @@ class RerunSink:
             APPLICATION_ID, recording_id=recording_id or header.meta.get("run_id") or uuid.uuid4().hex)
         self.rec.set_log_time_enabled(False)  # wall-clock time would make live and replay files differ
         sinks = []
+        self.path = Path(rrd) if rrd is not None else None
         if rrd is not None:
             sinks.append(file_sink(rrd))
         if spawn:
@@ -190,6 +195,7 @@ class RerunSink:
         rec.log(self.root + "world/spheres", rr.Points3D(np.asarray(h.positions, dtype=np.float32), radii=self.radius,
                                              colors=sphere_colors(h.inverse_mass, moving=self.color),
                                              labels=self._labels, show_labels=self._labels is not None))
+        rec.log(self.root + "legend", rr.TextDocument(LEGEND, media_type=rr.MediaType.MARKDOWN), static=True)
         settings = " ".join(f"{key}={value}" for key, value in h.meta.get("settings", {}).items())
         rec.log(self.root + "log", rr.TextLog(f"{h.name}: {h.count} spheres, {len(h.walls)} walls; {settings}", level="INFO"))
 
@@ -493,14 +499,88 @@ class RerunSink:
         self._series_steps = []
         self._series_times = []
 
+    def _flush_or_give_up(self) -> None:
+        """rerun's flush, bounded: it waits forever once its file writer has died (a full
+        disk: rerun only logs the failed write). Waited for a second at a time while the
+        file still grows; FLUSH_IDLE_SECONDS without growth (or FLUSH_SECONDS in all) and
+        the stream is abandoned with an error."""
+        import time
+
+        started, last_size, grew_at = time.perf_counter(), -1, time.perf_counter()
+        while True:
+            try:
+                self.rec.flush(timeout_sec=1.0)
+                return
+            except Exception as err:  # rerun raises its own error type on the timeout
+                now = time.perf_counter()
+                size = self.path.stat().st_size if self.path is not None and self.path.exists() else -1
+                if size > last_size:
+                    last_size, grew_at = size, now
+                if now - grew_at < FLUSH_IDLE_SECONDS and now - started < FLUSH_SECONDS:
+                    time.sleep(0.5)  # a dead writer makes flush fail at once: no busy loop
+                    continue
+                _abandon(self.rec)
+                raise OSError(f"the Rerun file {self.path or ''} could not be written ({err}; it stopped growing "
+                              f"{now - grew_at:.0f} s ago): is the disk full? It holds only what was written "
+                              f"before") from None
+
     def close(self) -> None:
         self._send_series()
         if self.shared:
             return
         if self._open_at_first_contact and self.opening is not None:
             self.rec.send_blueprint(blueprint(self.header, self.opening), make_active=True, make_default=True)
-        self.rec.flush()
+        self._flush_or_give_up()
         self.rec.disconnect()
+        if self.path is not None and not rrd_is_whole(self.path):
+            # rerun's file writer reports a failed write (a full disk) only in its own log
+            raise OSError(f"the Rerun file {self.path} ends before its footer: a write failed (is the disk full?); "
+                          f"it holds only what was written before")
+
+
+FLUSH_SECONDS = 600.0  # the most closing a Rerun file may wait for its writer, growing or not
+FLUSH_IDLE_SECONDS = 5.0  # ... and without the file growing: then its writer is taken for dead
+_ABANDONED: set[int] = set()  # ids of recording streams whose file writer died (see _abandon)
+
+
+def _abandon(rec) -> None:
+    """Leave a recording stream whose file writer died (rerun 0.41 only logs the failed
+    write): its disconnect, any sink swap and even its ``__del__`` wait forever for that
+    writer, and so does rerun's flush of every stream at exit. Its ``__del__`` is skipped
+    and that exit hook removed (the stream is leaked until the process ends), so physdbg
+    reports the error and exits instead of hanging."""
+    cls = type(rec)
+    if not getattr(cls, "_physdbg_guarded", False):
+        original = cls.__del__
+
+        def __del__(self):  # noqa: N807 - rerun's own hook, wrapped
+            if id(self) not in _ABANDONED:
+                original(self)
+
+        cls.__del__ = __del__
+        cls._physdbg_guarded = True
+    _ABANDONED.add(id(rec))
+    import atexit
+
+    import rerun
+
+    atexit.unregister(rerun.rerun_shutdown)  # it flushes every stream at exit: this one forever
+
+
+RRD_FOOTER = b"RRF2FOOT"  # how an .rrd file rerun finished writing ends (then a 4-byte version)
+
+
+def rrd_is_whole(path: Path) -> bool:
+    """Whether rerun finished writing the .rrd file: it ends in the footer its encoder
+    writes last (a write that failed, on a full disk, leaves the file without it)."""
+    try:
+        with open(path, "rb") as f:
+            f.seek(0, 2)
+            size = f.tell()
+            f.seek(max(size - 64, 0))
+            return RRD_FOOTER in f.read()
+    except OSError:
+        return False
 
 
 # ----------------------------------------------------------------------------- blueprint
@@ -529,7 +609,8 @@ def blueprint(header: RecordingHeader, opening: tuple[str, int] | None = None):
                                    name="contacts per step (all, rapid, released)"
                                         + ("; spheres asleep" if header.sleeping else "")),
                 rrb.TextLogView(origin="/log", name="events"),
-                row_shares=[2, 1, 2],
+                rrb.TextDocumentView(origin="/legend", name="legend"),
+                row_shares=[2, 1, 2, 1],
             ),
             column_shares=[3, 2],
         ),
