@@ -63,6 +63,15 @@ def _commands_and_exits_in(block: str) -> list[tuple[str, int]]:
     return commands
 
 
+def check_shown(block: str, output: str, where: str) -> None:
+    """A ```text block shows what the command before it printed: every line of it is in
+    that output (or the line's start, before a closing "…")."""
+    for line in block.splitlines():
+        shown = line.rstrip().removesuffix("…").rstrip()
+        assert shown in output, f"{where}: this line is not in the output of the command before it:\n" \
+                                f"{line}\n--- the output was:\n{output}"
+
+
 def test_the_docs_show_physdbg_commands_to_run():
     assert len(_physdbg_commands(ROOT / "README.md")) >= 12
 
@@ -83,11 +92,8 @@ def test_every_command_and_python_example_in_the_docs_runs_as_written(path, tmp_
     runner = CliRunner()
     output = ""
     for kind, block in re.findall(r"```(sh|text)\n(.*?)```", path.read_text(), re.S):
-        if kind == "text":  # what the command before printed: every line of it, or its start before "…"
-            for line in block.splitlines():
-                shown = line.rstrip().removesuffix("…").rstrip()
-                assert shown in output, f"{path.name}: this line is not in the output of the command before it:\n" \
-                                        f"{line}\n--- the output was:\n{output}"
+        if kind == "text":
+            check_shown(block, output, path.name)
             continue
         for command, expected in _commands_and_exits_in(block):
             if any(marker in command for marker in OPENS_A_WINDOW):

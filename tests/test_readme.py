@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from .test_docs import OPENS_A_WINDOW, ROOT, _commands_and_exits_in, _readme_commands
+from .test_docs import OPENS_A_WINDOW, ROOT, _commands_and_exits_in, _readme_commands, check_shown
 
 README = ROOT / "README.md"
 
@@ -64,11 +64,8 @@ def test_every_readme_command_runs_in_the_fresh_venv_as_written(newcomer):
     output = ""
     ran = 0
     for kind, block in re.findall(r"```(sh|text|python|toml)\n(.*?)```", README.read_text(), re.S):
-        if kind == "text":  # what the command before printed: every line of it, or its start before "…"
-            for line in block.splitlines():
-                shown = line.rstrip().removesuffix("…").rstrip()
-                assert shown in output, f"README: this line is not in the output of the command before it:\n" \
-                                        f"{line}\n--- the output was:\n{output}"
+        if kind == "text":
+            check_shown(block, output, "README")
             continue
         if kind == "python":
             done = subprocess.run([str(folder / ".venv" / "bin" / "python"), "-c", block], cwd=folder, env=env,

@@ -111,8 +111,10 @@ def test_the_compiled_loop_gives_the_reference_contacts_and_states(scene):
 
 
 def _both_loops_agree(state, walls, method, dt, steps: int) -> None:
-    """Run the compiled and the reference loop side by side: the same contacts and the
-    same state hash every step, and no warning."""
+    """Run the compiled and the reference loop side by side: the same contacts, the same
+    state hash and the same warnings every step. (A budget may stop a step: a few spheres
+    wedged against a mesh's crease can bounce 10,000 times in one, the chatter known from
+    the ramp scene; both loops must then stop it alike.)"""
     fast_obs, slow_obs = _Contacts(), _Contacts()
     fast = World(state.copy(), walls, method, fast_obs)
     slow = ReferenceWorld(state.copy(), walls, method, slow_obs)
@@ -121,7 +123,7 @@ def _both_loops_agree(state, walls, method, dt, steps: int) -> None:
         slow_stats = slow.step(dt)
         assert fast_obs.rows == slow_obs.rows
         assert fast_stats.state_hash == slow_stats.state_hash
-        assert not fast_stats.warnings and not slow_stats.warnings
+        assert [(w.step, w.code) for w in fast_stats.warnings] == [(w.step, w.code) for w in slow_stats.warnings]
 
 
 def test_the_comparison_has_teeth():

@@ -97,8 +97,10 @@ class AuditReport:
                 "notes": self.notes}
 
     def lines(self) -> list[str]:
-        """One line per finding, with a count of the ones not shown."""
-        out = [f"step {f.step}: {f.message}" for f in self.findings]
+        """One line per finding, with a count of the ones not shown; an explanation a
+        finding shares with the first of its kind is said once (the collapse paragraph was
+        printed five times)."""
+        out = [f"step {f.step}: {message}" for f, message, _ in said_once(self.findings)]
         shown = {}
         for f in self.findings:
             shown[f.kind] = shown.get(f.kind, 0) + 1
@@ -106,6 +108,35 @@ class AuditReport:
             if count > shown.get(kind, 0):
                 out.append(f"... and {count - shown.get(kind, 0)} more {kind} findings")
         return out
+
+
+def said_once(findings: list) -> list[tuple]:
+    """(finding, message, advice) of each finding, where what it shares with the first of its
+    kind (a long explanation in parentheses, the same advice) is "as above"."""
+    first: dict[str, Finding] = {}
+    out = []
+    for f in findings:
+        lead = first.setdefault(f.kind, f)
+        advice = f.advice if lead is f or f.advice != lead.advice else "as above"
+        out.append((f, _without_repeat(f.message, lead.message), advice))
+    return out
+
+
+def _without_repeat(message: str, said: str) -> str:
+    """message with a parenthesised tail it shares with ``said`` (the first finding of its
+    kind, printed whole) replaced by "(as above)"."""
+    if message is said:
+        return message
+    start = message.find(" (")
+    while start >= 0:
+        end = message.find(")", start)
+        if end < 0:
+            break
+        aside = message[start:end + 1]
+        if len(aside) > 40 and aside in said:  # a long explanation, not a figure of this finding
+            return message[:start] + " (as above)" + message[end + 1:]
+        start = message.find(" (", start + 2)
+    return message
 
 
 class Auditor:

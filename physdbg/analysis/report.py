@@ -145,10 +145,12 @@ def explain_text(r: AuditReport) -> str:
     else:
         counts = ", ".join(f"{k} {v}" for k, v in r.counts.items())
         lines.append(f"result   FINDINGS: {counts}")
-        for f in r.findings:
-            lines.append(f"  - step {f.step} [{f.kind}] {f.message}")
-            if f.advice:
-                lines.append(f"      what to do: {f.advice}")
+        from .audit import said_once
+
+        for f, message, advice in said_once(r.findings):
+            lines.append(f"  - step {f.step} [{f.kind}] {message}")
+            if advice:
+                lines.append(f"      what to do: {advice}")
         lines.extend("  " + line for line in r.lines() if line.startswith("..."))
     lines.extend(f"note     {n}" for n in r.notes)
     return "\n".join(lines)

@@ -39,6 +39,10 @@ from .header import RecordingHeader
 
 CHUNK_BYTES = 1 << 20  # mcap's default; chunks are the unit that survives a killed process
 QUEUE_STEPS = 8
+# ... and at most this many encoded bytes wait (one step more when a single step is
+# larger): 8 steps of a dense pile's swept tests at --detail full are gigabytes, which
+# max_memory never saw (rain 2000 with its budgets raised peaked at 6.5 GB under 4 GB)
+QUEUE_BYTES = 256 << 20
 
 
 class McapRecorder:
@@ -78,6 +82,8 @@ class McapRecorder:
             "detail": self.detail, "particles": str(header.count), "view": str(view).lower()})
         self._pending: list[tuple[str, bytes]] = []
         self._queue: queue.Queue = queue.Queue(maxsize=QUEUE_STEPS)
+        self._queued_bytes = 0  # encoded bytes handed to the writer and not yet written
+        self._room = threading.Condition()
         self._error: BaseException | None = None
         self._outbox: list[tuple[int, int, int, bytes]] = []
         self._history: list[np.ndarray] = []  # the last two frames' (N, 6) states, for the codec
@@ -206,6 +212,11 @@ class McapRecorder:
         """Hand one whole step to the writer thread."""
         if self._error is not None:
             raise OSError(f"writing {self.path} failed: {self._error}") from self._error
+        size = sum(len(message[3]) for message in self._outbox)
+        with self._room:  # wait while the writer holds QUEUE_BYTES (always let one step through)
+            while self._queued_bytes and self._queued_bytes + size > QUEUE_BYTES and self._error is None:
+                self._room.wait(timeout=0.5)
+            self._queued_bytes += size
         self._queue.put(self._outbox)
         self._outbox = []
         self._sent_frames = self.frames
@@ -240,6 +251,10 @@ class McapRecorder:
                     self._good_size = self._file.tell()
             except BaseException as err:  # reported by the next _send or close
                 self._error = err
+            if step is not None:
+                with self._room:
+                    self._queued_bytes -= sum(len(message[3]) for message in step)
+                    self._room.notify_all()
             if step is None:
                 return
 
@@ -300,6 +315,8 @@ class McapRecorder:
                        "state_hash": np.frombuffer(b"".join(digests), dtype=np.uint8).reshape(-1, 16)}
             last = len(times) - 1
             data = proto.encode_table(fmt.MESSAGE_OF_TOPIC[fmt.TOPIC_FRAME_INDEX], last, columns.__getitem__)
+            with self._room:
+                self._queued_bytes += len(data)
             self._queue.put([(self._channels[fmt.TOPIC_FRAME_INDEX], last, int(log_ns[-1]), data)])
         self._queue.put(None)
         self._thread.join()
