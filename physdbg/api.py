@@ -399,7 +399,8 @@ def _what_is_kept(written: Path, mcap_out: Path) -> str:
         if not written.is_file():
             return f"nothing readable could be written to {mcap_out}"
         written.unlink()
-        return f"nothing readable could be written, so {mcap_out} was {'left as it was' if written != mcap_out else 'removed'}"
+        fate = "left as it was" if written != mcap_out else "removed"  # --force keeps the old file until the end
+        return f"nothing readable could be written, so {mcap_out} was {fate}"
 
 
 @dataclass

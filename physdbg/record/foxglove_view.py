@@ -118,15 +118,14 @@ class FoxgloveView:
     def finding(self, ns: int, finding) -> list[tuple[str, bytes]]:
         """An audit finding: its warning line, and a red translucent sphere where it happened
         (entity finding-<n>, kept from then on) when it has one place."""
-        out = self._log(ns, [(f"step {finding.step}: [{finding.kind}] {finding.message}", "WARN")])
+        out = self._log(ns, [view.finding_line(finding)])
         if finding.position is not None:
             self._findings += 1
             update = self.classes[fmt.TOPIC_VIEW_SCENE]()
             entity = update.entities.add(id=f"finding-{self._findings}", frame_id=fmt.VIEW_SCENE_FRAME)
             entity.timestamp.FromNanoseconds(ns)
             entity.metadata.add(key="kind", value=finding.kind)
-            size = 2 * 1.6 * float(self.header.radius[list(finding.particles)].max() if finding.particles
-                                   else self.header.radius.max())
+            size = 2 * view.finding_marker_radius(self.header, finding)  # a diameter
             sphere = entity.spheres.add()
             sphere.pose.position.x, sphere.pose.position.y, sphere.pose.position.z = (float(c) for c in
                                                                                         finding.position)

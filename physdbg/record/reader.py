@@ -186,6 +186,7 @@ class Recording:
         self._file.seek(0)
         self._reader = SeekingReader(self._file, validate_crcs=True)
         self._recovered: list[tuple[int, dict[str, list[int]]]] | None = None  # a file without summary
+        self._last_chunk: tuple[int, list] = (-1, [])  # _chunk_records' one-chunk cache
         self._frame_table: FrameTable | None = None
         self._index_checked = False  # the frame index's hashes are the states' (set as states are read)
         self.truncated = False
@@ -280,20 +281,30 @@ class Recording:
                 f"{self.path}: damaged: its data section does not match its CRC (the damage is outside the "
                 f"chunks of messages); the file was changed after it was written: record the run again")
 
+    def _chunk_records(self, offset: int) -> list:
+        """The records of the chunk at byte ``offset``, its CRC checked (mcap raises on a
+        mismatch). The last chunk read is kept: a recovered file's batches of 64 frames
+        ask for the same chunk again and again."""
+        from mcap.data_stream import ReadDataStream
+        from mcap.reader import breakup_chunk
+        from mcap.records import Chunk
+
+        if self._last_chunk[0] == offset:
+            return self._last_chunk[1]
+        self._file.seek(offset)
+        if self._file.read(1) != bytes([OPCODE_CHUNK]):
+            raise ValueError(f"no chunk at byte {offset}")
+        self._file.seek(8, 1)  # the record's length
+        records = list(breakup_chunk(Chunk.read(ReadDataStream(self._file)), validate_crc=True))
+        self._last_chunk = (offset, records)
+        return records
+
     def _damaged_chunk(self, summary) -> str | None:
         """The first chunk whose records do not match its CRC, described; None if all match."""
-        from mcap.data_stream import ReadDataStream
-        from mcap.records import Chunk
-        from mcap.reader import breakup_chunk
-
         topics = {cid: c.topic for cid, c in summary.channels.items()}
         for index in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
             try:
-                self._file.seek(index.chunk_start_offset)
-                if self._file.read(1) != bytes([OPCODE_CHUNK]):
-                    raise ValueError("no chunk where the summary puts one")
-                self._file.seek(8, 1)  # the record's length
-                breakup_chunk(Chunk.read(ReadDataStream(self._file)), validate_crc=True)
+                self._chunk_records(index.chunk_start_offset)
             except Exception as err:
                 held = sorted({topics.get(cid, f"channel {cid}") for cid in index.message_index_offsets})
                 why = "its CRC does not match" if type(err).__name__ == "CRCValidationError" else \
@@ -368,9 +379,7 @@ class Recording:
         import os
         import struct
 
-        from mcap.data_stream import ReadDataStream
-        from mcap.reader import breakup_chunk
-        from mcap.records import Channel, Chunk, Message, Schema
+        from mcap.records import Channel, Message, Schema
 
         self.truncated = True
         size = os.fstat(self._file.fileno()).st_size
@@ -389,7 +398,7 @@ class Recording:
                                               f"more files joined together (a recording is one MCAP file)")
             if opcode == OPCODE_CHUNK:
                 try:
-                    records = breakup_chunk(Chunk.read(ReadDataStream(self._file)), validate_crc=True)
+                    records = self._chunk_records(position)
                 except Exception as err:  # a whole chunk that does not read back: damage, not a torn end
                     raise RecordingIntegrityError(
                         f"{self.path}: damaged: its chunk at byte {position} does not read back as written "
@@ -428,9 +437,7 @@ class Recording:
     def _recovered_messages(self, topics: list[str], first: int, last: int) -> list[tuple[int, int, str, bytes]]:
         """(frame, topic's place in topics, topic, data) of a recovered file's messages of
         ``topics`` for frames first..last, in frame order: their chunks read again."""
-        from mcap.data_stream import ReadDataStream
-        from mcap.reader import breakup_chunk
-        from mcap.records import Channel, Chunk, Message
+        from mcap.records import Message
 
         place = {t: i for i, t in enumerate(topics)}
         ids = {c.id: c.topic for c in self._channels.values() if c.topic in place}
@@ -438,8 +445,7 @@ class Recording:
         for offset, held in self._recovered:
             if not any(held.get(t) and held[t][0] <= last and held[t][-1] >= first for t in topics):
                 continue  # the chunk holds none of these frames (frames come in order in a chunk)
-            self._file.seek(offset + 9)
-            for record in breakup_chunk(Chunk.read(ReadDataStream(self._file)), validate_crc=True):
+            for record in self._chunk_records(offset):
                 if isinstance(record, Message) and record.channel_id in ids and first <= record.sequence <= last:
                     topic = ids[record.channel_id]
                     merged.append((record.sequence, place[topic], topic, record.data))

@@ -276,11 +276,10 @@ class RerunSink:
         frame = finding.step
         self._set_time(frame, self._time_of(frame))
         if finding.position is not None:
-            size = float(self.header.radius[finding.particles].max()) if finding.particles else float(
-                self.header.radius.max())
-            rec.log(self.root + "world/findings", rr.Points3D([finding.position], radii=[1.6 * size], colors=[[255, 40, 40, 160]],
-                                                  labels=[finding.kind]))
-        self._log_lines(frame, self._time_of(frame), [(f"step {frame}: [{finding.kind}] {finding.message}", "WARN")])
+            rec.log(self.root + "world/findings", rr.Points3D([finding.position],
+                                                              radii=[view.finding_marker_radius(self.header, finding)],
+                                                              colors=[[255, 40, 40, 160]], labels=[finding.kind]))
+        self._log_lines(frame, self._time_of(frame), [view.finding_line(finding)])
 
     def _time_of(self, frame: int) -> float:
         return self._last_time[1] if self._last_time[0] == frame else 0.0
@@ -540,7 +539,7 @@ class RerunSink:
 
 FLUSH_SECONDS = 600.0  # the most closing a Rerun file may wait for its writer, growing or not
 FLUSH_IDLE_SECONDS = 5.0  # ... and without the file growing: then its writer is taken for dead
-_ABANDONED: set[int] = set()  # ids of recording streams whose file writer died (see _abandon)
+_ABANDONED: list = []  # recording streams whose file writer died, kept alive (see _abandon)
 
 
 def _abandon(rec) -> None:
@@ -554,12 +553,12 @@ def _abandon(rec) -> None:
         original = cls.__del__
 
         def __del__(self):  # noqa: N807 - rerun's own hook, wrapped
-            if id(self) not in _ABANDONED:
+            if not any(self is dead for dead in _ABANDONED):
                 original(self)
 
         cls.__del__ = __del__
         cls._physdbg_guarded = True
-    _ABANDONED.add(id(rec))
+    _ABANDONED.append(rec)  # held, so it is never freed and its id never reused
     import atexit
 
     import rerun

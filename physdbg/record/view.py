@@ -87,6 +87,20 @@ SLEEP_IDS_PER_LINE = 12  # spheres named in a "fell asleep" / "woke" log line; t
 SPHERE_COLOR = (240, 140, 50)  # a moving sphere: warm orange
 
 
+FINDING_MARKER_SCALE = 1.6  # a finding's marker is this many times the largest radius involved
+
+
+def finding_marker_radius(h: RecordingHeader, finding) -> float:
+    """Radius (m) of the marker drawn where an audit finding happened (Rerun and Foxglove)."""
+    involved = h.radius[list(finding.particles)] if finding.particles else h.radius
+    return FINDING_MARKER_SCALE * float(involved.max())
+
+
+def finding_line(finding) -> tuple[str, str]:
+    """An audit finding as a log line (text, level), the same in Rerun and Foxglove."""
+    return f"step {finding.step}: [{finding.kind}] {finding.message}", "WARN"
+
+
 def sphere_colors(inverse_mass: np.ndarray, asleep: np.ndarray | None = None,
                   moving: tuple[int, int, int] = SPHERE_COLOR) -> np.ndarray:
     """(N, 3) uint8: immovable spheres grey, the rest ``moving`` (a warm orange unless a
