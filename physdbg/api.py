@@ -213,7 +213,7 @@ class WarningTally:
             self.counts[w.code] = self.counts.get(w.code, 0) + 1
             kept = self.first.setdefault(w.code, [])
             if len(kept) < self.keep:
-                kept.append(f"step {w.step + 1}: {w.message}")
+                kept.append(f"step {w.step}: {w.message}")
 
     def examples(self) -> list[str]:
         return [line for lines in self.first.values() for line in lines]

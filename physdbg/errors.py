@@ -50,14 +50,15 @@ class NonFiniteRunError(PhysdbgError):
 class NonFiniteState(FloatingPointError):
     """A position or velocity became NaN or infinite in a step; the run cannot go on.
 
-    step: the step (0-based index) at whose end it was found; particle: the first such
+    step: the step (numbered from 1, as recordings and the CLI number it) at whose end it was
+    found; particle: the first such
     particle; field: "position" or "velocity"; count: how many particles are affected.
     """
 
     def __init__(self, step: int, particle: int, field: str, count: int):
         self.step, self.particle, self.field, self.count = step, particle, field, count
         others = f" (and {count - 1} more)" if count > 1 else ""
-        super().__init__(f"the {field} of sphere {particle}{others} became NaN or infinite in step {step + 1}")
+        super().__init__(f"the {field} of sphere {particle}{others} became NaN or infinite in step {step}")
 
 
 class StepStopped(KeyboardInterrupt):
@@ -68,7 +69,7 @@ class StepStopped(KeyboardInterrupt):
 
     def __init__(self, step: int):
         self.step = step
-        super().__init__(f"stopped in step {step + 1}, which was left half done and not reported")
+        super().__init__(f"stopped in step {step}, which was left half done and not reported")
 
 
 class PeerError(PhysdbgError):

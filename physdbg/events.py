@@ -9,7 +9,9 @@ One step produces, in this order::
     SweptTests                 (one batch: every candidate the narrow phase tested)
     StepEnd
 
-Units: metres, seconds, kilograms; impulses in N·s. Arrays are float64 unless stated.
+Every event's ``step`` is the step's number, counted from 1 as the CLI, the recordings
+and the viewer count it: step k moves the state of frame k-1 (frame 0 is the scene's
+initial state) to frame k. Units: metres, seconds, kilograms; impulses in N·s. Arrays are float64 unless stated.
 Events are built only when an observer is attached; arrays in them are copies the
 engine will not mutate afterwards, so an observer may keep them.
 """
@@ -84,7 +86,7 @@ OUTCOME_NAMES = ("miss", "hit", "superseded", "capped")
 class StepBegin:
     """A step is about to run.
 
-    step: index of the step (0-based); time: simulated time at its start (s);
+    step: the step's number (from 1; module doc); time: simulated time at its start (s);
     dt: its length (s), exactly as used (kept so a real-time run can be repeated).
     """
 

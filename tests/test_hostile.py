@@ -238,7 +238,7 @@ def test_nan_is_reported_at_its_step_and_particle_and_stops_the_run():
     world.step(1.0)
     with pytest.raises(NonFiniteState) as info:
         world.step(1e10)
-    assert info.value.particle == 1 and info.value.step == 1 and info.value.field == "position"
+    assert info.value.particle == 1 and info.value.step == 2 and info.value.field == "position"
     assert [w.code for w in obs.warnings] == ["non-finite"]
     assert obs.events[-1].__class__.__name__ == "StepEnd"  # the step was reported first
 

@@ -72,6 +72,9 @@ def test_every_readme_command_runs_in_the_fresh_venv_as_written(newcomer):
                                   capture_output=True, text=True, timeout=600)
             assert done.returncode == 0, f"README's Python example failed:\n{block}\n{done.stderr[-3000:]}"
             output = done.stdout
+            said = re.search(r"# step (\d+) first", block)  # the step the example says it prints first
+            if said:
+                assert output.split()[0] == said.group(1), f"the Python example printed {output[:200]!r}"
             continue
         if kind == "toml":
             from physdbg.scene import parse_scene

@@ -133,7 +133,7 @@ def test_reader_gives_back_every_state_hash_and_event_of_the_live_run(tmp_path):
         assert state.state_hash == ends[k - 1].state_hash and state.time == ends[k - 1].time
     assert rec.state(-1).state_hash == ends[-1].state_hash
     for k, events in enumerate(rec.iter_step_events(), start=1):
-        live_step = [e for e in live.events if e.step == k - 1]
+        live_step = [e for e in live.events if e.step == k]
         assert [type(e) for e in events] == [type(e) for e in live_step]
         for mine, theirs in zip(events, live_step, strict=True):
             if isinstance(mine, Contacts):  # the row the loop wrote, to the bit
@@ -178,7 +178,7 @@ def test_detail_levels_record_only_what_they_say(tmp_path):
         rec.contacts(50)
     path, live = record_with_events(tmp_path, "cradle", detail="contacts")
     rec = open_recording(path)
-    impact = live.contacts[0].step + 1  # the frame after the engine's step
+    impact = live.contacts[0].step  # the frame the step ends in
     assert len(rec.contacts(impact)) == 4
     with pytest.raises(RecordingError, match="--detail full"):
         rec.swept_tests(impact)
@@ -208,7 +208,7 @@ def test_bvh_nodes_are_recorded_and_a_big_tree_is_capped_by_whole_levels(tmp_pat
     path, live = record_with_events(tmp_path, "rain", ["broad_phase=bvh-sah", "steps=3"])
     events = open_recording(path).step_events(2)
     info = [e for e in events if isinstance(e, BroadPhaseInfo)][0]
-    truth = [e for e in live.events if isinstance(e, BroadPhaseInfo) and e.step == 1][0]
+    truth = [e for e in live.events if isinstance(e, BroadPhaseInfo) and e.step == 2][0]
     for name in ("lo", "hi", "left", "right", "depth", "order"):
         np.testing.assert_array_equal(info.nodes[name], truth.nodes[name])
     path, _ = record_with_events(tmp_path, "rain", ["broad_phase=bvh-sah", "steps=3"], bvh_max_nodes=40)
@@ -322,7 +322,7 @@ def test_a_program_with_standard_decoders_only_reads_every_channel(tmp_path):
     assert got["points_at_5"] == live.step_ends[4].positions.astype(np.float32).tolist()
     assert got["kinetic"] == [e.kinetic for e in live.step_ends]
     assert got["energy"] == [e.kinetic + e.potential for e in live.step_ends]
-    want = [[c.step + 1, c.a, c.other, c.time_in_step, c.impulse, c.normal.tolist()] for c in live.contacts]
+    want = [[c.step, c.a, c.other, c.time_in_step, c.impulse, c.normal.tolist()] for c in live.contacts]
     assert got["contacts"] == want and len(want) > 0
     # time is simulated time: log and publish time are the frame's time in ns, increasing
     log_ns = [row[0] for row in got["log_times"]]
@@ -603,7 +603,7 @@ def test_the_contact_row_is_one_schema_from_the_loop_to_the_file():
     held = 0
     for k in range(1, rec.frames):
         world.step(rec.state(k).dt)
-        live = [e for e in obs.of_type(Contacts) if e.step == k - 1]
+        live = [e for e in obs.of_type(Contacts) if e.step == k]
         recorded = rec.contacts(k)
         assert recorded.rows.dtype == CONTACT_ROW
         assert recorded.rows.tobytes() == (live[0].rows.tobytes() if live else b"")

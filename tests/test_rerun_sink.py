@@ -76,7 +76,7 @@ def test_the_rrd_holds_the_engines_positions_at_every_step_and_a_blueprint(billi
     logged = [text for (entity, _), comps in rows.items() if entity == "/log"
               for row in comps.get("TextLog:text", []) for text in row]
     first = live.contacts[0]
-    assert any(f"step {first.step + 1}: sphere {first.a} hit" in text for text in logged)
+    assert any(f"step {first.step}: sphere {first.a} hit" in text for text in logged)
 
 
 def test_replay_from_mcap_alone_draws_the_same_picture_as_the_live_run(billiards_live, tmp_path):
@@ -123,7 +123,7 @@ def test_each_path_runs_from_the_start_of_the_step_through_its_contacts_to_the_e
     rows = read_rrd(rrd)
     ends = live.of_type(StepEnd)
     first = live.contacts[0]
-    frame = first.step + 1
+    frame = first.step
     strips = rows[("/world/paths", frame)]["LineStrips3D:strips"][0]
     assert len(strips) == 12  # every particle of a small scene has a path
     mine = [c for c in live.contacts if c.step == first.step]

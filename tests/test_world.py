@@ -216,8 +216,8 @@ def test_events_arrive_in_pipeline_order_with_everything_a_recording_needs():
     kinds = [type(e) for e in obs.events]
     assert kinds[0] is StepBegin and kinds[-1] is StepEnd
     # per step: StepBegin, BroadPhaseInfo, contacts..., SweptTests, StepEnd
-    step43 = [type(e) for e in obs.events if getattr(e, "step", None) == obs.contacts[0].step]
-    assert step43 == [StepBegin, BroadPhaseInfo, Contacts, SweptTests, StepEnd]
+    step44 = [type(e) for e in obs.events if getattr(e, "step", None) == obs.contacts[0].step]
+    assert step44 == [StepBegin, BroadPhaseInfo, Contacts, SweptTests, StepEnd]
     batch = [b for b in obs.of_type(Contacts) if b.step == obs.contacts[0].step][0]
     assert len(batch) == 4 and list(batch.a) == [0, 1, 2, 3] and batch.velocity_b_before.shape == (4, 3)
     tests = [t for t in obs.swept_tests if t.step == obs.contacts[0].step][0]

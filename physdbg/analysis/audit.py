@@ -201,7 +201,7 @@ class Auditor:
                 self._end_step(event)
 
     def _end_step(self, end: StepEnd) -> None:
-        step = end.step + 1
+        step = end.step
         contacts = self._contacts
         self._check_warnings(step)
         if self._mesh_overlaps is not None and self._mesh_overlaps.pairs:

@@ -97,11 +97,11 @@ def _mark(stream, rr, runs, ends, watched) -> None:
     where the other run has it (and a wireframe of it there) when both are at this step."""
     for root, rec, color, step in runs:
         end = ends.get(root)
-        if end is None or end.step + 1 < step:
+        if end is None or end.step < step:
             continue
         other = next((r for r in runs if r[0] != root), None)
         other_end = ends.get(other[0]) if other else None
-        frame = end.step + 1
+        frame = end.step
         stream.set_time("step", sequence=frame)
         stream.set_time("sim_time", duration=end.time)
         stream.set_time(OPENING_TIMELINE, sequence=frame)

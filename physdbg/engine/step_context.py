@@ -19,7 +19,7 @@ from ..events import EngineWarning
 class StepContext:
     """One step's working set.
 
-    step: index of the step (0-based); dt: its length (s); run_time: the run's time at its
+    step: the step's number, counted from 1 (the recording's frame of its end state); dt: its length (s); run_time: the run's time at its
     start (s); vtol: the velocity tolerance of this step's held-contact solves (m/s);
     observer: where events go (None: nobody listens).
     Set by the phases, in order:

@@ -251,17 +251,17 @@ class World:
 
     def _stop_if_asked(self) -> None:
         if self._stop_asked:
-            raise StepStopped(self.step_index)
+            raise StepStopped(self.step_index + 1)
 
     def _begin(self, dt: float) -> StepContext:
         # a velocity residue of vtol moves a sphere vtol·dt in a step: SOLVE_TOLERANCE·a·dt²
-        ctx = StepContext(self.step_index, dt, self.time, SOLVE_TOLERANCE * self._accel_scale * dt, self.observer)
+        ctx = StepContext(self.step_index + 1, dt, self.time, SOLVE_TOLERANCE * self._accel_scale * dt, self.observer)
         self.last_step = ctx
         self._place_meshes(self.time, dt)
         if self.numbering is not None:  # World.state is the world: what was written to it counts
             self.numbering.inward(self.state.positions, out=self._st.positions)
             self.numbering.inward(self.state.velocities, out=self._st.velocities)
-            if ctx.step and ctx.step % RENUMBER_EVERY == 0:
+            if self.step_index and self.step_index % RENUMBER_EVERY == 0:
                 self._renumber()
         if ctx.observer is not None:
             ctx.observer.on_event(StepBegin(ctx.step, ctx.run_time, dt))

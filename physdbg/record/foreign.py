@@ -323,7 +323,7 @@ def import_run(run: ForeignRun, scene, out: Path, notes: list[str] | None = None
         for k in range(1, len(run.times)):
             state.positions, state.velocities = run.positions[k].copy(), velocities[k].copy()
             kinetic, potential, momentum = energies(state, gravity)
-            recorder.on_event(StepEnd(k - 1, float(run.times[k]), float(run.times[k] - run.times[k - 1]),
+            recorder.on_event(StepEnd(k, float(run.times[k]), float(run.times[k] - run.times[k - 1]),
                                       state.positions, state.velocities, kinetic, potential, momentum, StepCounts(),
                                       _max_overlap(state.positions, st.radius, scene.walls), {},
                                       state_hash(state.positions, state.velocities)))

@@ -120,7 +120,7 @@ class McapRecorder:
         return fmt.TOPIC_SWEPT in self._channels
 
     def on_event(self, event) -> None:
-        frame = event.step + 1
+        frame = event.step
         if isinstance(event, StepEnd):
             self._end_step(event)
         elif isinstance(event, Contacts):
@@ -140,7 +140,7 @@ class McapRecorder:
                 {"step": frame, "code": event.code, "message": event.message})).encode()))
 
     def _end_step(self, end: StepEnd) -> None:
-        frame = end.step + 1
+        frame = end.step
         ns = self._frame_time(end.time)
         for topic, data in self._pending:
             self._write(topic, frame, ns, data)

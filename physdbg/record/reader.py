@@ -647,7 +647,7 @@ class Recording:
                 yield self._events_of(k, per_frame.get(k, {}), states[k - first], states[k - first + 1], topics)
 
     def _events_of(self, k: int, parts: dict, before: FrameState, after: FrameState, topics) -> list:
-        step = k - 1
+        step = k
         events: list = [StepBegin(step, before.time, after.dt)]
         if parts.get(fmt.TOPIC_BROAD_PHASE):
             meta = json.loads(parts[fmt.TOPIC_BROAD_PHASE][0])

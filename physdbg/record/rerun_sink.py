@@ -232,7 +232,7 @@ class RerunSink:
 
     def _end_step(self, end: StepEnd) -> None:
         rr, rec = self.rr, self.rec
-        frame = end.step + 1
+        frame = end.step
         self._last_time = (frame, end.time)
         if self._open_at_first_contact and self.opening is None and self._contacts is not None:
             meshes = len(self.header.walls.meshes) > 0
@@ -413,7 +413,7 @@ class RerunSink:
             albedo_factor=[250, 210, 40, 220]))
         self._search_graph(found, group[5])
         who = ", ".join(str(int(i)) for i in hitters)
-        return [(f"step {end.step + 1}: the first contact on a mesh; the search of the triangles' BVH (its boxes "
+        return [(f"step {end.step}: the first contact on a mesh; the search of the triangles' BVH (its boxes "
                  f"swept over the step) by the boxes of the sphere{'s' if len(hitters) != 1 else ''} that hit a mesh "
                  f"({who}): {found.pairs} sphere-node pairs visited, {len(found.met)} nodes met (green), "
                  f"{len(found.culled)} culled (red), {len(found.triangles)} triangles reached (yellow)", "INFO")]
