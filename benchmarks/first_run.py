@@ -7,7 +7,7 @@ Clones the repository (its committed state) into a temporary folder, points
 own download cache is this machine's, as a developer's would be), and runs, in order and
 each timed as a whole process from the shell:
 
-1. README command 1: ``python3 -m venv .venv && .venv/bin/pip install -e . && .venv/bin/physdbg record bounce``;
+1. README command 1: ``python3 -m venv .venv && .venv/bin/pip install --no-compile -e . && .venv/bin/physdbg record bounce``;
 2. ``physdbg record cradle``, ``physdbg record bullet-wall -s detection=discrete -o discrete.mcap --no-rrd``;
 3. ``physdbg explain discrete.mcap``, ``physdbg diff recordings/ci/cradle.mcap recordings/cradle.mcap``;
 4. ``physdbg check-run docs/examples/student-bounce.csv --scene bounce -s integrator=euler``;
@@ -30,7 +30,7 @@ from pathlib import Path
 
 COMMANDS = [
     ("README command 1 (venv, install, record bounce)",
-     "python3 -m venv .venv && .venv/bin/pip install -q -e . && .venv/bin/physdbg record bounce"),
+     "python3 -m venv .venv && .venv/bin/pip install -q --no-compile -e . && .venv/bin/physdbg record bounce"),
     ("record cradle", ".venv/bin/physdbg record cradle"),
     ("record bullet-wall (discrete)", ".venv/bin/physdbg record bullet-wall -s detection=discrete -o discrete.mcap "
                                       "--no-rrd"),

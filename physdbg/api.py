@@ -783,10 +783,12 @@ def bench_accuracy(out_dir: str | Path = "accuracy", quick: bool = False, force:
                    chart: bool | None = None,
                    rrd_path: str | None = None, problems: Sequence[str] | None = None,
                    on_run: Callable | None = None, command: str = "physdbg bench accuracy",
-                   workers: int | None = None, dask: str | None = None) -> BenchResult:
+                   workers: int | None = None, dask: str | None = None,
+                   on_status: Callable[[str], None] | None = None) -> BenchResult:
     """Every method on the reference problems (analysis.accuracy): accuracy.csv, accuracy.md
     and (chart) accuracy.png / .svg in out_dir; rrd_path: the same chart for Rerun.
-    workers: local processes (None: every core, 1: this process); dask: a scheduler address."""
+    workers: local processes (None: every core, 1: this process); dask: a scheduler address;
+    on_status: as run()'s, around compiling the kernels first (_compile_for_bench)."""
     from .analysis import accuracy
 
     unknown = [p for p in problems or () if p not in accuracy.PROBLEMS]
@@ -797,6 +799,7 @@ def bench_accuracy(out_dir: str | Path = "accuracy", quick: bool = False, force:
     started = time.perf_counter()
     from .precompile import compile_kernels
 
+    _compile_for_bench(on_status)
     runs = accuracy.run_all(list(problems) if problems else None, quick=quick, on_run=on_run, workers=workers,
                             dask=dask, warm=compile_kernels)
     paths[0].write_text(accuracy.to_csv(runs))
@@ -814,15 +817,34 @@ def bench_accuracy(out_dir: str | Path = "accuracy", quick: bool = False, force:
     return BenchResult([str(p) for p in paths], runs, time.perf_counter() - started, note)
 
 
+def _compile_for_bench(on_status: Callable[[str], None] | None) -> None:
+    """Compile (or load) the kernels before a benchmark's runs, said to ``on_status`` as
+    run() says it ("compiling", then "running"), so the CLI can announce a cold compile.
+    A benchmark always runs compiled, whatever the cache (never the interpreted tier of
+    physdbg/tier.py): wall time is one of its measures, and interpreted steps cost 10–100
+    times as much."""
+    from .precompile import compile_kernels
+
+    if on_status is not None:
+        on_status("compiling")
+    try:
+        compile_kernels(None, sleeping=True)
+    finally:
+        if on_status is not None:
+            on_status("running")
+
+
 ENGINES_FILES = ("engines.csv", "engines.md", "engines.png", "engines.svg")
 
 
 def bench_engines(out_dir: str | Path = "engines", quick: bool = False, force: bool = False,
                   chart: bool | None = None,
                   scenes: Sequence[str] | None = None, on_run: Callable | None = None,
-                  command: str = "physdbg bench engines") -> BenchResult:
+                  command: str = "physdbg bench engines",
+                  on_status: Callable[[str], None] | None = None) -> BenchResult:
     """physdbg's methods and the peers on the same scenes (analysis.engines): engines.csv,
-    engines.md and (chart) engines.png / .svg, cost against error, in out_dir."""
+    engines.md and (chart) engines.png / .svg, cost against error, in out_dir; on_status:
+    as bench_accuracy's."""
     from .analysis import engines
 
     unknown = [name for name in scenes or () if name not in engines.SCENES]
@@ -831,6 +853,7 @@ def bench_engines(out_dir: str | Path = "engines", quick: bool = False, force: b
     chart, note = _chart_choice(chart)
     paths = _bench_paths(out_dir, ENGINES_FILES, chart, force)
     started = time.perf_counter()
+    _compile_for_bench(on_status)
     runs = engines.run_all(list(scenes) if scenes else None, quick=quick, on_run=on_run)
     paths[0].write_text(engines.to_csv(runs))
     paths[1].write_text(engines.to_markdown(runs, command))
@@ -848,9 +871,10 @@ STABILITY_FILES = ("stability.csv", "stability.md", "stability-impact.png", "sta
 def bench_stability(out_dir: str | Path = "stability", quick: bool = False, force: bool = False,
                     chart: bool | None = None,
                     on_cell: Callable | None = None, command: str = "physdbg bench stability",
-                    workers: int | None = None, dask: str | None = None) -> BenchResult:
+                    workers: int | None = None, dask: str | None = None,
+                    on_status: Callable[[str], None] | None = None) -> BenchResult:
     """Where each method breaks (analysis.stability): stability.csv, stability.md and (chart)
-    a heatmap per map as PNG and SVG in out_dir. workers, dask: as bench_accuracy."""
+    a heatmap per map as PNG and SVG in out_dir. workers, dask, on_status: as bench_accuracy."""
     from .analysis import stability
 
     chart, note = _chart_choice(chart)
@@ -858,6 +882,7 @@ def bench_stability(out_dir: str | Path = "stability", quick: bool = False, forc
     started = time.perf_counter()
     from .precompile import compile_kernels
 
+    _compile_for_bench(on_status)
     cells = stability.maps(quick=quick, on_cell=on_cell, workers=workers, dask=dask, warm=compile_kernels)
     paths[0].write_text(stability.to_csv(cells))
     paths[1].write_text(stability.to_markdown(cells, command))

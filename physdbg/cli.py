@@ -689,7 +689,7 @@ def bench_accuracy(
         try:
             result = run_accuracy(out, quick=quick, force=force, chart=False if no_chart else None, rrd_path=str(rrd) if rrd else None,
                                   problems=problem, on_run=lambda run, done, total: bar.update(done, total),
-                                  command=command, workers=jobs, dask=dask)
+                                  command=command, workers=jobs, dask=dask, on_status=bar.status)
         finally:
             bar.close()
         from .analysis.accuracy import PROBLEMS, pareto
@@ -735,7 +735,8 @@ def bench_engines(
         command = "physdbg bench engines" + (" --quick" if quick else "")
         try:
             result = run_engines(out, quick=quick, force=force, chart=False if no_chart else None, scenes=scene,
-                                 on_run=lambda run, done, total: bar.update(done, total), command=command)
+                                 on_run=lambda run, done, total: bar.update(done, total), command=command,
+                                 on_status=bar.status)
         finally:
             bar.close()
         typer.echo(f"{len(result.runs)} runs in {result.seconds:.1f} s")
@@ -777,7 +778,7 @@ def bench_stability(
         try:
             result = run_stability(out, quick=quick, force=force, chart=False if no_chart else None,
                                    on_cell=lambda cell, done, total: bar.update(done, total), command=command,
-                                   workers=jobs, dask=dask)
+                                   workers=jobs, dask=dask, on_status=bar.status)
         finally:
             bar.close()
         from .analysis.stability import REACH, first_step

@@ -71,16 +71,20 @@ def compile_kernels(broad_phase: str | None = None, sleeping: bool = False, para
 
 
 def cache_is_cold() -> bool:
-    """Whether numba's cache holds no compiled held solve for these engine sources (then it
-    holds next to nothing): its index lists no version, or the code it names is not there
-    yet (numba writes the index first). Reads numba's cache object, an internal: should
-    that change, the cache counts as warm, and kernels compile in one process as before."""
+    """Whether numba's cache holds no compiled held solve for these engine sources and this
+    CPU (then it holds next to nothing): its index lists no version compiled for this
+    machine's CPU name and features (numba's "magic tuple"; a folder filled on another CPU
+    model is recompiled here, docs/engine.md, "A cache for any CPU"), or the code it names
+    is not there yet (numba writes the index first). Reads numba's cache object, an
+    internal: should that change, the cache counts as warm, and kernels compile in one
+    process as before."""
     from .engine.resolve import settle_held
 
     try:
         cache_file = settle_held._cache._cache_file
-        versions = cache_file._load_index()
-        return not (versions and all(os.path.exists(cache_file._data_path(name)) for name in versions.values()))
+        this_cpu = settle_held.targetctx.codegen().magic_tuple()
+        versions = [name for key, name in cache_file._load_index().items() if key[1] == this_cpu]
+        return not (versions and all(os.path.exists(cache_file._data_path(name)) for name in versions))
     except Exception:  # noqa: BLE001 - numba internals: fall back to the one-process compile
         return False
 

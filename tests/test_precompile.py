@@ -132,6 +132,10 @@ def test_the_helper_fills_an_empty_cache_with_the_held_solve(tmp_path):
     subprocess.run(precompile.helper_command(), env=env, check=True, timeout=600)
     assert subprocess.run([sys.executable, "-c", check], env=env, capture_output=True, text=True,
                           check=True).stdout.strip() == "False True"
+    # filled for this CPU: on another CPU model (as numba names it) the same folder is cold
+    other_cpu = {**env, "NUMBA_CPU_NAME": "k8", "NUMBA_CPU_FEATURES": ""}
+    assert subprocess.run([sys.executable, "-c", check], env=other_cpu, capture_output=True, text=True,
+                          check=True).stdout.strip() == "True True"
 
 
 def test_an_audited_run_loads_no_kernel_after_compile_kernels(monkeypatch):

@@ -1,5 +1,5 @@
 """README.md as a newcomer meets it: a fresh copy of the repository, a fresh venv made by
-README command 1 verbatim (``pip install -e .``: no test extras, no matplotlib, no peers),
+README command 1 verbatim (``pip install --no-compile -e .``: no test extras, no matplotlib, no peers),
 and then every command of the README in order, each as its own process, with the exit
 code its comment gives and every line its ``text`` blocks show. The README's commands
 run here only (tests/test_docs.py runs those of docs/), so they are not paid for twice."""

@@ -118,3 +118,22 @@ def test_quick_commands_in_a_row_start_one_background_compile_not_one_each(tmp_p
     assert tier.running_background_compile() is None
     tier.start_background_compile()
     assert len(started) == 2
+
+
+def test_a_benchmark_compiles_before_its_runs_and_says_so(tmp_path, monkeypatch):
+    """bench never runs interpreted (wall time is what it measures): it compiles first, and
+    the CLI hears "compiling" before and "running" after, as a run's progress does."""
+    from physdbg import precompile
+
+    heard: list[str] = []
+    real = precompile.compile_kernels
+
+    def compile_kernels(*args, **kwargs):
+        heard.append("compile")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(precompile, "compile_kernels", compile_kernels)
+    api.bench_accuracy(tmp_path / "acc", quick=True, chart=False, problems=["head-on"], workers=1,
+                       on_status=heard.append)
+    assert heard[:3] == ["compiling", "compile", "running"]
+    assert not tier.interpreted()
