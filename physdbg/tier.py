@@ -68,18 +68,56 @@ def setting() -> str:
 
 def cache_is_warm() -> bool:
     """Whether numba's cache folder for these engine sources (physdbg/__init__.py names
-    it) holds the compiled step: the held-contact solve and the time-ordered loop, the
-    two trees a cold compile spends its time on. Read from the files alone: the engine is
-    not imported."""
+    it) holds the compiled step for this CPU: the held-contact solve and the time-ordered
+    loop, the two trees a cold compile spends its time on. Read from the files (the engine
+    is not imported): each needs its code (.nbc) and, where its index (.nbi) can be read,
+    an entry for this machine's CPU (numba keys every cached kernel by the CPU's name and
+    features: a folder filled on another CPU model is compiled again; docs/engine.md, "A
+    cache for any CPU")."""
     folder = os.environ.get("NUMBA_CACHE_DIR")
     if not folder or not Path(folder).is_dir():
         return False
-    found = {name: False for name in ("resolve.settle_held-", "timeline.run_time_order-")}
-    for path in Path(folder).rglob("*.nbc"):
-        for name in found:
-            if path.name.startswith(name):
-                found[name] = True
-    return all(found.values())
+    names = ("resolve.settle_held-", "timeline.run_time_order-")
+    code = {name: False for name in names}
+    cpus: dict[str, set | None] = {name: None for name in names}  # None: no index read
+    for path in Path(folder).rglob("*.nb[ci]"):
+        for name in names:
+            if not path.name.startswith(name):
+                continue
+            if path.suffix == ".nbc":
+                code[name] = True
+            elif (listed := _index_cpus(path)) is not None:
+                cpus[name] = (cpus[name] or set()) | listed
+    if not all(code.values()):
+        return False
+    if all(listed is None for listed in cpus.values()):
+        return True  # no index read: the code files decide
+    this_cpu = _this_cpu()
+    return all(listed is None or this_cpu in listed for listed in cpus.values())
+
+
+def _this_cpu() -> tuple:
+    """This machine's CPU as numba keys a cached kernel by it (its "magic tuple": target
+    triple, CPU name, features; NUMBA_CPU_NAME=generic makes it the same on every machine)."""
+    from numba.core.registry import cpu_target
+
+    return cpu_target.target_context.codegen().magic_tuple()
+
+
+def _index_cpus(path: Path) -> set | None:
+    """The CPUs a numba index file (.nbi) lists compiled versions for, or None when it
+    cannot be read (numba's own layout: its version pickled, then (source stamp,
+    {(signature, cpu, code hashes): data file name}) pickled; an internal, so unreadable
+    means "unknown", never cold)."""
+    import pickle
+
+    try:
+        with open(path, "rb") as f:
+            pickle.load(f)
+            _stamp, overloads = pickle.loads(f.read())
+        return {key[1] for key in overloads}
+    except Exception:  # noqa: BLE001 - another numba's layout: the code files decide
+        return None
 
 
 def _number(value) -> float | None:

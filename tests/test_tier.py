@@ -85,6 +85,27 @@ def test_a_warm_cache_and_the_setting_decide(cold, monkeypatch):
         tier.choose(300)
 
 
+def test_a_cache_filled_on_another_cpu_is_cold(cold):
+    """numba keys each cached kernel by the CPU it was compiled for: a folder holding only
+    another CPU's versions (a CI cache restored on another runner model) is cold here."""
+    import pickle
+
+    import numba
+
+    def fill(cpu):
+        for name in ("resolve.settle_held-1.py311", "timeline.run_time_order-2.py311"):
+            (cold / "engine_x").mkdir(parents=True, exist_ok=True)
+            (cold / "engine_x" / f"{name}.1.nbc").write_bytes(b"")
+            index = pickle.dumps((b"stamp", {(("a signature",), cpu, ("hash", "hash")): f"{name}.1.nbc"}))
+            (cold / "engine_x" / f"{name}.nbi").write_bytes(pickle.dumps(numba.__version__) + index)
+
+    fill(("x86_64-unknown-linux-gnu", "k8", ""))
+    assert not tier.cache_is_warm()
+    assert tier.choose(300).interpreted
+    fill(tier._this_cpu())
+    assert tier.cache_is_warm()
+
+
 def test_a_cold_first_run_answers_in_seconds_and_says_why(tmp_path):
     """README's first scene on an empty kernel cache, as a fresh clone meets it (the
     background compile not started: PHYSDBG_COMPILE=never)."""
