@@ -49,7 +49,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3)
     args = parser.parse_args()
-    print(f"| scene | native ms/step | generic ms/step | generic / native | same final hash |\n|---|---:|---:|---:|---|")
+    print("| scene | native ms/step | generic ms/step | generic / native | same final hash |\n"
+          "|---|---:|---:|---:|---|")
     for label, scene in SCENES:
         for generic in (False, True):  # compile both first (or load them), untimed
             run(scene, generic)

@@ -51,8 +51,8 @@ class NonFiniteState(FloatingPointError):
     """A position or velocity became NaN or infinite in a step; the run cannot go on.
 
     step: the step (numbered from 1, as recordings and the CLI number it) at whose end it was
-    found; particle: the first such
-    particle; field: "position" or "velocity"; count: how many particles are affected.
+    found; particle: the first such particle; field: "position" or "velocity"; count: how
+    many particles are affected.
     """
 
     def __init__(self, step: int, particle: int, field: str, count: int):

@@ -11,9 +11,9 @@ One step produces, in this order::
 
 Every event's ``step`` is the step's number, counted from 1 as the CLI, the recordings
 and the viewer count it: step k moves the state of frame k-1 (frame 0 is the scene's
-initial state) to frame k. Units: metres, seconds, kilograms; impulses in N·s. Arrays are float64 unless stated.
-Events are built only when an observer is attached; arrays in them are copies the
-engine will not mutate afterwards, so an observer may keep them.
+initial state) to frame k. Units: metres, seconds, kilograms; impulses in N·s. Arrays
+are float64 unless stated. Events are built only when an observer is attached; arrays in
+them are copies the engine will not mutate afterwards, so an observer may keep them.
 """
 
 from __future__ import annotations

@@ -82,11 +82,19 @@ def cache_is_cold() -> bool:
 
     try:
         cache_file = settle_held._cache._cache_file
-        this_cpu = settle_held.targetctx.codegen().magic_tuple()
-        versions = [name for key, name in cache_file._load_index().items() if key[1] == this_cpu]
+        here = this_cpu()
+        versions = [name for key, name in cache_file._load_index().items() if key[1] == here]
         return not (versions and all(os.path.exists(cache_file._data_path(name)) for name in versions))
     except Exception:  # noqa: BLE001 - numba internals: fall back to the one-process compile
         return False
+
+
+def this_cpu() -> tuple:
+    """This machine's CPU as numba keys a cached kernel by it (its "magic tuple": target
+    triple, CPU name, features; NUMBA_CPU_NAME=generic makes it the same on every machine)."""
+    from numba.core.registry import cpu_target
+
+    return cpu_target.target_context.codegen().magic_tuple()
 
 
 def usable_cpus() -> int:

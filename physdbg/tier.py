@@ -92,16 +92,10 @@ def cache_is_warm() -> bool:
         return False
     if all(listed is None for listed in cpus.values()):
         return True  # no index read: the code files decide
-    this_cpu = _this_cpu()
-    return all(listed is None or this_cpu in listed for listed in cpus.values())
+    from .precompile import this_cpu
 
-
-def _this_cpu() -> tuple:
-    """This machine's CPU as numba keys a cached kernel by it (its "magic tuple": target
-    triple, CPU name, features; NUMBA_CPU_NAME=generic makes it the same on every machine)."""
-    from numba.core.registry import cpu_target
-
-    return cpu_target.target_context.codegen().magic_tuple()
+    here = this_cpu()
+    return all(listed is None or here in listed for listed in cpus.values())
 
 
 def _index_cpus(path: Path) -> set | None:

@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from physdbg import api, tier
+from physdbg import api, precompile, tier
 from physdbg.scenes import builtin_names
 
 # every built-in scene at a size the interpreted tier runs in a few seconds
@@ -102,7 +102,7 @@ def test_a_cache_filled_on_another_cpu_is_cold(cold):
     fill(("x86_64-unknown-linux-gnu", "k8", ""))
     assert not tier.cache_is_warm()
     assert tier.choose(300).interpreted
-    fill(tier._this_cpu())
+    fill(precompile.this_cpu())
     assert tier.cache_is_warm()
 
 
@@ -144,8 +144,6 @@ def test_quick_commands_in_a_row_start_one_background_compile_not_one_each(tmp_p
 def test_a_benchmark_compiles_before_its_runs_and_says_so(tmp_path, monkeypatch):
     """bench never runs interpreted (wall time is what it measures): it compiles first, and
     the CLI hears "compiling" before and "running" after, as a run's progress does."""
-    from physdbg import precompile
-
     heard: list[str] = []
     real = precompile.compile_kernels
 

@@ -19,8 +19,8 @@ from ..events import EngineWarning
 class StepContext:
     """One step's working set.
 
-    step: the step's number, counted from 1 (the recording's frame of its end state); dt: its length (s); run_time: the run's time at its
-    start (s); vtol: the velocity tolerance of this step's held-contact solves (m/s);
+    step: the step's number, counted from 1 (the recording's frame of its end state); dt:
+    its length (s); run_time: the run's time at its start (s); vtol: the velocity tolerance of this step's held-contact solves (m/s);
     observer: where events go (None: nobody listens).
     Set by the phases, in order:
     forces: path_accel (N, 3) m/s², the acceleration each path follows (contact-solved);
