@@ -112,7 +112,8 @@ def advise(scene) -> Advice:
     several = n >= 3 or (n >= 2 and len(walls) > 0)  # a step can hold more than one contact
     facts = {"particles": n, "walls": len(walls), "meshes": mesh_sizes(walls.meshes), "speed_bound": bound, "speed_bound_why": bound_why, "dt": dt, "duration": duration,
              "gravity": gravity, "drag": s.drag, "radius_min": r_min, "radius_max": float(r.max()) if n else 0.0,
-             "contacts_possible": contacts_possible, "samples": s.samples, "periodic": periodic}
+             "contacts_possible": contacts_possible, "samples": s.samples, "periodic": periodic,
+             "mesh_sweeps": mesh_sweeps(walls.meshes, dt, s.budget("max_swept_tests_per_step", n))}
 
     predictions: list[Prediction] = []
     # integrators
@@ -401,6 +402,33 @@ def resolve_pile_rules(scene) -> dict[str, str]:
     # one line says why; the others point to it
     first = next(iter(values))
     return {name: f"{value}: {why}" if name == first else f"{value}: as {first}" for name, value in values.items()}
+
+
+# A kinematic mesh turning more than this in one step sweeps boxes that cover most of its
+# turn: every contact near it is tested against most of its triangles, each test in many
+# short passes (toi._triangle_toi_swept), so the swept-test budget ends such steps early.
+SWEEP_DEGREES_PER_STEP = 90.0
+
+
+def mesh_sweeps(meshes, dt: float, budget: int) -> list[dict]:
+    """The kinematic meshes that turn more than SWEEP_DEGREES_PER_STEP in a step of ``dt``
+    s, each {mesh, degrees, triangles, dt_max, why}: what a step can test (``budget``,
+    max_swept_tests_per_step as sized) and the dt that keeps the turn within the limit."""
+    out = []
+    sizes = mesh_sizes(meshes)
+    for k, name in enumerate(meshes.names):
+        spin = float(np.degrees(np.linalg.norm(meshes.angular_velocity[k])))  # deg/s
+        degrees = spin * dt
+        if degrees <= SWEEP_DEGREES_PER_STEP:
+            continue
+        dt_max = SWEEP_DEGREES_PER_STEP / spin
+        out.append({"mesh": name, "degrees": degrees, "triangles": sizes[name], "dt_max": dt_max,
+                    "why": (f"mesh '{name}' turns {degrees:,.0f}° in a step ({spin:.3g} deg/s, dt {dt:.3g} s): its "
+                            f"triangles' swept boxes cover the turn, so each contact near it tests up to all "
+                            f"{sizes[name]:,} of them, each in many short passes; a step can test {budget:,.0f} "
+                            f"(max_swept_tests_per_step), so its contacts may stop steps early (a warning names the "
+                            f"budget); dt ≤ {dt_max:.3g} s keeps it within {SWEEP_DEGREES_PER_STEP:g}° a step")})
+    return out
 
 
 def mesh_sizes(meshes) -> dict[str, int]:

@@ -359,6 +359,8 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
         raise RecordingInterrupted("interrupted before the recording began; nothing was written")
     if failure is not None or non_finite is not None:
         kept = _what_is_kept(mcap_file, mcap_out)
+        if rrd_file is not None:
+            kept += _what_became_of_the_rrd(rrd_file, rrd_out, mcap_out, outputs)
         if not mcap_file.exists():
             outputs.abandon()
         outputs.publish()
@@ -384,6 +386,20 @@ def _steps_held(steps: int) -> str:
     if steps <= 0:
         return "the initial state only (no step was completed)"
     return f"steps 1..{steps} (every step completed)"
+
+
+def _what_became_of_the_rrd(written: Path, rrd_out: Path, mcap_out: Path, outputs) -> str:
+    """The Rerun file of a recording stopped early, in words: kept when rerun finished it
+    (its footer written), else removed (a torn .rrd is of no use beside the MCAP file,
+    from which ``replay --rrd`` draws it again); under --force the old file stays."""
+    from .record.rerun_sink import rrd_is_whole
+
+    if rrd_is_whole(written):
+        return f"; the Rerun file {rrd_out} was finished and shows the same steps"
+    outputs.abandon(written)
+    fate = "removed" if written == rrd_out else "not replaced (the previous one is left as it was)"
+    return (f"; the Rerun file {rrd_out} could not be finished and was {fate} (`physdbg replay {mcap_out} "
+            f"--rrd {rrd_out}` draws it from the recording)")
 
 
 def _what_is_kept(written: Path, mcap_out: Path) -> str:
@@ -487,16 +503,20 @@ def replay(path: str | Path, rrd_path: str | None = None, force: bool = False, s
         sink = RerunSink(rec.header, outputs.paths[0], spawn=spawn)
         auditor = Auditor(rec.header, sink.mark_finding)  # the findings marked, as in the live picture
         try:
-            for events in rec.iter_step_events():
-                for event in events:
-                    sink.on_event(event)
-                    auditor.on_event(event)
-            auditor.finish()  # a rattling bed that never fell asleep is marked too
-        except BaseException:
-            sink.close()
+            try:
+                for events in rec.iter_step_events():
+                    for event in events:
+                        sink.on_event(event)
+                        auditor.on_event(event)
+                auditor.finish()  # a rattling bed that never fell asleep is marked too
+            finally:
+                sink.close()
+        except OSError as err:  # the .rrd could not be written (a full disk)
             outputs.abandon()  # no half-made picture left behind
+            raise PhysdbgError(f"{err}; it was removed") from None
+        except BaseException:
+            outputs.abandon()
             raise
-        sink.close()
         outputs.publish()
         return {"mcap": str(path), "rrd": str(out) if out else None, "steps": rec.steps,
                 "truncated": rec.truncated}

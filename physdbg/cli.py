@@ -11,6 +11,7 @@ from __future__ import annotations
 import gc
 import json
 import math
+import os
 import sys
 from contextlib import contextmanager
 from pathlib import Path
@@ -18,7 +19,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from .errors import PhysdbgError
+from .errors import PhysdbgError, one_line, os_error_words
 
 app = typer.Typer(
     name="physdbg",
@@ -45,6 +46,9 @@ def main(
                                           help="Print physdbg's version and exit.")] = False,
 ) -> None:
     """A physics engine that shows its work: run or record a sphere scene and see every contact."""
+    # rerun's own log lines for a failed .rrd write (a full disk) would print beside
+    # physdbg's one error line, which says the same; read once, when rerun is first imported
+    os.environ.setdefault("RUST_LOG", "warn,re_log_encoding=off")
 
 
 @contextmanager
@@ -55,9 +59,10 @@ def _user_errors(as_json: bool = False):
     try:
         yield
     except PhysdbgError as err:
-        typer.echo(f"error: {err}", err=True)
+        message = one_line(str(err))
+        typer.echo(f"error: {message}", err=True)
         if as_json:
-            _json_error(str(err), err.exit_code)
+            _json_error(message, err.exit_code)
         raise typer.Exit(err.exit_code) from None
     except KeyboardInterrupt:
         typer.echo("interrupted", err=True)
@@ -70,17 +75,29 @@ def _user_errors(as_json: bool = False):
         raise
     except BrokenPipeError:  # `physdbg ... | head`: the reader has all it wanted. click ends quietly (exit 1)
         raise
-    except Exception as err:  # a bug in physdbg: still one line, with how to see the rest
-        import os
-
-        if os.environ.get("PHYSDBG_TRACEBACK"):
-            raise
-        message = (f"internal error ({type(err).__name__}: {err}); this is a bug in physdbg: please report it "
-                   f"with the command you ran (PHYSDBG_TRACEBACK=1 shows the traceback)")
+    except OSError as err:  # a file the user named that the system refuses (a name too long, ...)
+        message = os_error_words(err)
+        if message is None or os.environ.get("PHYSDBG_TRACEBACK"):
+            _internal_error(err, as_json)
+        message = one_line(message)
         typer.echo(f"error: {message}", err=True)
         if as_json:
-            _json_error(message, 70)
-        raise typer.Exit(70) from None
+            _json_error(message, 2)
+        raise typer.Exit(2) from None
+    except Exception as err:  # a bug in physdbg: still one line, with how to see the rest
+        _internal_error(err, as_json)
+
+
+def _internal_error(err: Exception, as_json: bool) -> None:
+    """A bug in physdbg: one line, with how to see the traceback (PHYSDBG_TRACEBACK=1 raises it)."""
+    if os.environ.get("PHYSDBG_TRACEBACK"):
+        raise err
+    message = one_line(f"internal error ({type(err).__name__}: {err}); this is a bug in physdbg: please report it "
+                       f"with the command you ran (PHYSDBG_TRACEBACK=1 shows the traceback)")
+    typer.echo(f"error: {message}", err=True)
+    if as_json:
+        _json_error(message, 70)
+    raise typer.Exit(70) from None
 
 
 def _json_error(message: str, code: int) -> None:

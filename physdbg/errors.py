@@ -102,3 +102,29 @@ class ChartsMissing(PhysdbgError):
 
 class MeshError(PhysdbgError):
     """A mesh file or shape that cannot be used: the message names the file, the line and the problem."""
+
+
+def one_line(message: str, longest: int = 200) -> str:
+    """A message as a terminal shows it on one line: control characters escaped (a file
+    name holding a newline or an escape sequence prints as ``\\n``, ``\\x1b``) and any word
+    longer than ``longest`` characters (a 5,000-character file name) cut in its middle."""
+    escaped = "".join(ch if ch.isprintable() or ch == " " else repr(ch)[1:-1] for ch in message)
+    words = escaped.split(" ")
+    for k, word in enumerate(words):
+        if len(word) > longest:
+            words[k] = f"{word[:longest - 60]}…({len(word):,} characters)…{word[-40:]}"
+    return " ".join(words)
+
+
+def os_error_words(err: OSError) -> str | None:
+    """A one-line message for an OSError about a file the user named (None when it names
+    none): the file and the system's reason, and a name the system refuses said as such."""
+    import errno
+
+    if err.filename is None:
+        return None
+    reason = err.strerror or str(err)
+    if err.errno == errno.ENAMETOOLONG:
+        reason = ("the system refuses this name: it is too long (most file systems allow 255 bytes a name, "
+                  "4,096 a path)")
+    return f"{err.filename}: {reason}"

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from .limits import MAX_INTEGER, MAX_MAGNITUDE, MIN_SCALE  # the range of every number (limits.py)
 from .engine import (
     BROAD_PHASE_NAMES,
     BUDGETS,
@@ -85,7 +86,8 @@ TOP_FIELDS = {
                             "max(10000, 100 per sphere))"),
     "max_pairs_per_step": "budget: broad-phase candidate pairs in one step, integer >= 1 (default 10000000)",
     "max_swept_tests_per_step": ("budget: swept tests in one step, integer >= 0 (default 0 = sized to the scene: "
-                                 "max(10000000, 2000 per sphere))"),
+                                 "max(10000000, 2000 per sphere)); a test against a moving mesh's triangle counts "
+                                 "each pass of its advancement (up to 500), so a fast spin's step stays bounded"),
     "max_resting_work_per_step": ("budget: held-contact solve updates in one step, integer >= 0 (default 0 = "
                                   "sized to the scene: 1000000 per sphere, from 10000000 to 1000000000)"),
     "max_memory": ("the most memory a run may use, bytes (default 4e9): a scene whose particles need more (about "
@@ -125,7 +127,8 @@ MESH_FIELDS = {
     "file": "an .obj or .stl file, relative to the scene file's folder (or give shape)",
     "position": "[x, y, z] in m: where the mesh's origin goes (default [0, 0, 0])",
     "rotation": "[x, y, z] in degrees: turned about the world's x, then y, then z axis (default [0, 0, 0])",
-    "scale": "multiplies the mesh's size: a number > 0, or [x, y, z] each > 0 along the mesh's own axes (default 1)",
+    "scale": ("multiplies the mesh's size: a number, or [x, y, z] along the mesh's own axes, each from 1e-12 to 1e12 "
+              "(default 1); the scaled mesh must stay within ±1e12 m and keep its triangles whole"),
     "restitution": "0 <= e <= 1 (default 1)",
     "velocity": "[x, y, z] in m/s: a kinematic mesh's constant velocity (default [0, 0, 0]: fixed)",
     "angular_velocity": "[x, y, z] in degrees per second: a kinematic mesh turns at this rate about its pivot "
@@ -159,14 +162,6 @@ RENAMED = {"rest_speed": "rest_speed (an absolute m/s) was replaced by rest_frac
 
 _SETTINGS_DEFAULTS = Settings()
 
-# Every number in a scene is 0 or at most MAX_MAGNITUDE in size, and every length, mass and
-# time that something is divided by is at least MIN_SCALE: then products of a few of them
-# (v·dt, a·dt², |x|², m·v²) stay finite, and no derived quantity (a unit normal, an
-# inverse mass, a step count) can overflow or vanish. SI units: use reduced units for
-# atoms or planets.
-MAX_MAGNITUDE = 1e12
-MIN_SCALE = 1e-12
-MAX_INTEGER = 10**12
 DEFAULT_MAX_PARTICLE_STEPS = 1e10
 MAX_SCENE_BYTES = 64 * 2**20  # a scene file is text: larger ones are made with [generate]
 MAX_NESTING = 6
@@ -553,10 +548,11 @@ def _meshes(c: _Checker, raw: dict, max_memory: float) -> Meshes:
         rotation = c.vector(table, "rotation", p + "rotation", (0.0, 0.0, 0.0))
         if isinstance(table.get("scale"), list):
             scale = c.vector(table, "scale", p + "scale")
-            if not np.all(scale > 0):
-                c.fail(p + "scale", f"got {scale.tolist()}; each of [x, y, z] must be > 0")
+            if not np.all(scale >= MIN_SCALE):
+                c.fail(p + "scale", f"got {scale.tolist()}; each of [x, y, z] must be between {MIN_SCALE:g} and "
+                                    f"{MAX_MAGNITUDE:g}")
         else:
-            scale = c.number(table, "scale", p + "scale", default=1.0, lo=0, lo_open=True)
+            scale = c.number(table, "scale", p + "scale", default=1.0, scale=True)
         restitution.append(c.number(table, "restitution", p + "restitution", default=1.0, lo=0, hi=1))
         velocity.append(c.vector(table, "velocity", p + "velocity", (0.0, 0.0, 0.0)))
         angular_velocity.append(np.radians(c.vector(table, "angular_velocity", p + "angular_velocity",
@@ -568,8 +564,13 @@ def _meshes(c: _Checker, raw: dict, max_memory: float) -> Meshes:
             c.fail(p + ("shape" if "shape" in table else "file"), str(err))
         if mesh.skipped:
             notes.append(mesh.skipped_words())
-        pose = Pose.of(position, rotation)
-        corners.append(pose.apply(mesh.vertices * scale)[mesh.faces])
+        scaled = mesh.vertices * scale
+        _check_scaled_mesh(c, p, mesh, scaled, scale)
+        placed = Pose.of(position, rotation).apply(scaled)
+        if not np.all(np.abs(placed) <= MAX_MAGNITUDE):
+            c.fail(p + "position", f"the mesh reaches {np.abs(placed).max():.3g} m from the origin where it is placed; "
+                                   f"every coordinate must be within ±{MAX_MAGNITUDE:g} m")
+        corners.append(placed[mesh.faces])
         mesh_of.append(np.full(mesh.triangles, k, dtype=np.int64))
         names.append(name)
         sources.append(mesh.source)
@@ -577,6 +578,25 @@ def _meshes(c: _Checker, raw: dict, max_memory: float) -> Meshes:
         return Meshes()
     return Meshes(names, np.array(restitution), np.concatenate(corners), np.concatenate(mesh_of), sources, notes,
                   np.array(velocity), np.array(angular_velocity), np.array(pivot))
+
+
+def _check_scaled_mesh(c: _Checker, p: str, mesh, scaled: np.ndarray, scale) -> None:
+    """A scale that carries a mesh past the range of a coordinate, or flattens a triangle
+    the file gives whole (below limits.MIN_AREA, or the mesh's own degenerate ratio),
+    names the field: the engine would divide by such a triangle's normal."""
+    from .meshes import degenerate
+
+    reach = float(np.abs(scaled).max())
+    if reach > MAX_MAGNITUDE:
+        c.fail(p + "scale", f"scales the mesh to {reach:.3g} m from its origin; every coordinate must be within "
+                            f"±{MAX_MAGNITUDE:g} m")
+    flattened, _ = degenerate(scaled, mesh.faces)
+    if flattened.any():
+        first = int(np.argmax(flattened))
+        c.fail(p + "scale", f"got {np.asarray(scale).tolist()}: it makes {int(flattened.sum()):,} of the mesh's "
+                            f"triangles degenerate (the first is triangle {first} of {mesh.source}), too thin or "
+                            f"smaller than {MIN_SCALE * MIN_SCALE:g} m² for a normal; scale each axis so that the "
+                            f"triangles keep their shape")
 
 
 def _validate(raw: dict, source: str, origins: dict[str, str], meshes: Meshes | None = None) -> Scene:

@@ -30,6 +30,7 @@ starts none.
 
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import sys
@@ -117,14 +118,16 @@ def _index_cpus(path: Path) -> set | None:
 def _number(value) -> float | None:
     if isinstance(value, bool):
         return None
-    if isinstance(value, (int, float)):
-        return float(value)
-    if isinstance(value, str):
-        try:
-            return float(Fraction(value.strip()))
-        except (ValueError, ZeroDivisionError):
+    try:
+        if isinstance(value, (int, float)):
+            number = float(value)
+        elif isinstance(value, str):
+            number = float(Fraction(value.strip()))
+        else:
             return None
-    return None
+    except (ValueError, ZeroDivisionError, OverflowError):  # "1e400", a 400-digit integer
+        return None
+    return number if math.isfinite(number) else None
 
 
 def estimate(spec: str, overrides=()) -> int | None:
@@ -162,13 +165,18 @@ def estimate(spec: str, overrides=()) -> int | None:
         steps = duration / dt
     if steps is None or not spheres:
         return None
-    return int(spheres * max(steps, 1.0))
+    work = spheres * max(steps, 1.0)
+    # the scene is not validated yet: a value out of every range is large work, and the
+    # scene's own checks then say what is wrong with it
+    return int(work) if math.isfinite(work) else None
 
 
 def estimate_recording(path) -> int | None:
     """Sphere-steps of a recording (its particles × its states), read from the MCAP
     summary and metadata with the mcap library (the engine is not imported); None when
     the file does not say (not a physdbg recording, damaged: the reader will say)."""
+    if not Path(path).is_file():  # a FIFO would block the open: the reader refuses it
+        return None
     try:
         from mcap.reader import make_reader
 

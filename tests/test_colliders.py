@@ -77,7 +77,7 @@ def test_each_kind_s_gap_closes_at_its_time_of_impact(kind, integrator, xa, xb, 
     other = 1 if kind == KIND_PAIR else 0
     gap0 = contact_gap(kind, x, v, a, r, 0, other, walls)[0]
     assume(gap0 > 1e-3)
-    start, t = time_of_impact(kind, 0, other, x, v, a, r, sigma, 1.0, integrator, 0.0, SWEPT, 1, 1e-12, walls)
+    start, t, _work = time_of_impact(kind, 0, other, x, v, a, r, sigma, 1.0, integrator, 0.0, SWEPT, 1, 1e-12, walls)
     assert start == 0.0
     assume(t <= 1.0)
     event(f"{KIND_NAMES[kind]} hit")
@@ -164,7 +164,7 @@ def test_a_sphere_meets_a_mesh_at_the_swept_time_with_the_normal_from_the_closes
     found = []
     triangles = len(geometry[KIND_MESH][0])  # 68: the plate's long sides in 8 pieces
     for t in range(triangles):
-        start, when = time_of_impact(KIND_MESH, 0, t, x, v, a, radius, np.zeros(1), 1.0, EULER, 0.0, SWEPT, 4, 1e-12,
+        start, when, _work = time_of_impact(KIND_MESH, 0, t, x, v, a, radius, np.zeros(1), 1.0, EULER, 0.0, SWEPT, 4, 1e-12,
                                      geometry)
         found.append(when)
     first = min(found)

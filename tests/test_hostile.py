@@ -33,7 +33,7 @@ VALUES = st.recursive(SCALARS, lambda inner: st.one_of(st.lists(inner, max_size=
 KEYS = sorted({f"{table}.{name}" if table != "scene" else name for table, fields in FIELDS.items()
                for name in fields} | {"particles.0.radius", "particles.0.mass", "particles.0.velocity",
                                       "planes.0.normal", "dt.x", "dt.1.x", "box.min.0", "generate.count.x"})
-SCENES = ["bounce", "cradle", "gas", "rain", "bullet-wall"]
+SCENES = ["bounce", "cradle", "gas", "rain", "bullet-wall", "ramp"]  # ramp: the [[meshes]] fields too
 # What every generated run may use: small budgets, so that a hostile value is refused or
 # hits a budget in milliseconds instead of running for minutes.
 BOUNDS = ["max_particle_steps=3000", "max_memory=2e7", "max_pairs_per_step=20000",
@@ -295,6 +295,20 @@ def _cli(*args):
     return CliRunner().invoke(app, list(args))
 
 
+def _cli_on_a_full_disk(size: int, *args, timeout: float = 300):
+    """The CLI in a process whose files cannot grow past ``size`` bytes: past it, writes
+    fail as on a full disk (RLIMIT_FSIZE, with SIGXFSZ ignored)."""
+    import subprocess
+    import sys
+
+    script = ("import resource, signal, sys\n"
+              "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
+              f"resource.setrlimit(resource.RLIMIT_FSIZE, ({size}, {size}))\n"
+              "from physdbg.cli import app\n"
+              "app(sys.argv[1:])\n")
+    return subprocess.run([sys.executable, "-c", script, *args], capture_output=True, text=True, timeout=timeout)
+
+
 @pytest.mark.parametrize("args, words", [
     (("record", "bounce", "--bvh-max-nodes", "-5", "--no-rrd"), "--bvh-max-nodes"),
     (("replay", "x.mcap", "--web", "--port", "99999"), "--port"),
@@ -345,18 +359,9 @@ def test_a_run_that_turns_nan_exits_3_and_leaves_a_readable_recording(tmp_path, 
 
 
 def test_a_full_disk_ends_the_recording_readable_with_a_message(tmp_path):
-    import subprocess
-    import sys
-
-    script = ("import resource, signal, sys\n"
-              "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # past the limit writes fail, as on a full disk\n"
-              "resource.setrlimit(resource.RLIMIT_FSIZE, (1500000, 1500000))\n"
-              "from physdbg.cli import app\n"
-              "app(sys.argv[1:])\n")
     out = tmp_path / "full.mcap"
-    done = subprocess.run([sys.executable, "-c", script, "record", "rain", "-s", "generate.count=300",
-                           "-s", "steps=400", "-o", str(out), "--no-rrd", "--no-progress"],
-                          capture_output=True, text=True, timeout=300)
+    done = _cli_on_a_full_disk(1500000, "record", "rain", "-s", "generate.count=300", "-s", "steps=400", "-o", str(out),
+                               "--no-rrd", "--no-progress")
     assert done.returncode == 2, done.stderr
     assert "Traceback" not in done.stderr
     assert "writing the recording failed" in done.stderr and "is readable and holds steps 1.." in done.stderr
@@ -422,19 +427,227 @@ def test_a_full_disk_under_the_rerun_file_is_said_and_never_hangs(tmp_path):
     """The .rrd fills the disk first (it is larger than a --detail state MCAP): rerun's own
     file writer only logs the failure, and its flush (and its exit hook) then waited
     forever. The flush is bounded by the file's growth, and the dead stream abandoned."""
+    out = tmp_path / "full.mcap"
+    done = _cli_on_a_full_disk(500000, "record", "rain", "-s", "steps=100", "-o", str(out), "--detail", "state",
+                               "--no-view", "--no-progress", timeout=120)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert f"the Rerun file {tmp_path / 'full.rrd'} could not be written (" in done.stderr
+    assert "is the disk full?" in done.stderr
+    assert "full.mcap is readable and holds steps 1.." in done.stderr
+    # one line: no library log lines, and what became of the torn .rrd is said and true
+    assert done.stderr.count("\n") == 1 and "re_log_encoding" not in done.stderr, done.stderr
+    assert f"the Rerun file {tmp_path / 'full.rrd'} could not be finished and was removed" in done.stderr
+    assert not (tmp_path / "full.rrd").exists()
+
+
+def test_a_full_disk_under_the_recording_says_what_became_of_the_rerun_file(tmp_path):
+    """The MCAP file fails first (a --detail full recording outgrows the .rrd): one line, no
+    traceback from the abandoned Rerun stream at exit, and the .rrd is removed or whole."""
+    from physdbg.record.rerun_sink import rrd_is_whole
+
+    out = tmp_path / "rain.mcap"
+    done = _cli_on_a_full_disk(200000, "record", "rain", "-s", "generate.count=500", "-o", str(out), "--no-progress")
+    assert done.returncode == 2 and done.stderr.startswith("error: writing the recording failed"), done.stderr
+    assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr, done.stderr
+    rrd = tmp_path / "rain.rrd"
+    if rrd.exists():
+        assert rrd_is_whole(rrd) and "was finished and shows the same steps" in done.stderr
+    else:
+        assert "could not be finished and was removed" in done.stderr
+
+
+# ----------------------------------------------------------------------------- meshes
+CUBE_CORNERS = [[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)]
+CUBE_FACES = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1), (2, 3, 7), (2, 7, 6), (0, 2, 6),
+              (0, 6, 4), (1, 5, 7), (1, 7, 3)]
+
+
+def _obj(path, corners=CUBE_CORNERS, faces=CUBE_FACES, sep=" ", number=repr):
+    lines = ["v" + sep + sep.join(number(float(c)) for c in v) for v in corners]
+    lines += ["f" + sep + sep.join(str(i + 1) for i in f) for f in faces]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _binary_stl(path, triangles):
+    import struct
+
+    with open(path, "wb") as f:
+        f.write(b"\0" * 80 + struct.pack("<I", len(triangles)))
+        for triangle in triangles:
+            f.write(struct.pack("<3f", 0, 0, 0) + b"".join(struct.pack("<3f", *c) for c in triangle) + b"\0\0")
+    return path
+
+
+def _mesh_scene(folder, mesh_lines: str, steps: int = 3):
+    scene = folder / "scene.toml"
+    scene.write_text(f'dt = "1/60"\nsteps = {steps}\n[[particles]]\nposition = [0.5, 2.0, 0.5]\nradius = 0.1\n'
+                     f"[[meshes]]\n{mesh_lines}\n")
+    return scene
+
+
+def _refused_in_one_line(result, *words):
+    assert result.exit_code == 2, result.output
+    assert result.output.startswith("error: ") and result.output.count("\n") == 1, result.output
+    for word in words:
+        assert word in result.output, result.output
+
+
+def _cube_triangles(scale=1.0):
+    corners = np.array(CUBE_CORNERS, dtype=float) * scale
+    return corners[np.array(CUBE_FACES)]
+
+
+@pytest.mark.parametrize("make, words", [
+    (lambda d: _obj(d / "big.obj", np.array(CUBE_CORNERS) * 1e154), ["big.obj: line 2", "beyond ±1e+12 m"]),
+    (lambda d: _obj(d / "huge.obj", np.array(CUBE_CORNERS) * 1e200), ["huge.obj: line 2", "beyond ±1e+12 m"]),
+    (lambda d: _binary_stl(d / "nan.stl", np.where(np.arange(108).reshape(12, 3, 3) == 41, np.nan, _cube_triangles())),
+     ["nan.stl: triangle 5 (of 12)", "not finite"]),
+    (lambda d: _binary_stl(d / "inf.stl", np.where(np.arange(108).reshape(12, 3, 3) == 0, np.inf, _cube_triangles())),
+     ["inf.stl: triangle 1 (of 12)", "not finite"]),
+    (lambda d: _binary_stl(d / "far.stl", _cube_triangles(1e30)), ["far.stl: triangle 1 (of 12)", "beyond ±1e+12"]),
+    (lambda d: (d / "commas.obj").write_text("v 0,0,0\n") and d / "commas.obj", ["commas.obj: line 1", "not commas"]),
+    (lambda d: (d / "zero.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n") and d / "zero.obj",
+     ["zero.obj: line 4", "OBJ counts vertices from 1"]),
+])
+def test_a_mesh_file_out_of_range_is_refused_by_its_line_or_triangle_in_a_run_and_in_overlap(tmp_path, make, words):
+    """Corners near 1e154 ended in LinAlgError or ZeroDivisionError, a NaN corner of a binary
+    STL ran with NaN in the mesh, and overlap blamed --builder (exit 70 or worse, exit 0)."""
+    path = make(tmp_path)
+    _refused_in_one_line(_cli("run", str(_mesh_scene(tmp_path, f'file = "{path.name}"'))),
+                         "field 'meshes.0.file'", *words)
+    _refused_in_one_line(_cli("overlap", str(path), "box"), *words)
+
+
+def test_an_obj_with_tabs_and_runs_of_spaces_reads_as_the_same_mesh(tmp_path):
+    """Valid OBJ that trimesh read as 0 triangles ("trimesh read 0 triangles where the file has 12")."""
+    from physdbg.meshes import load_mesh
+
+    plain = load_mesh(_obj(tmp_path / "plain.obj"))
+    tabs = load_mesh(_obj(tmp_path / "tabs.obj", sep="\t"))
+    spaces = load_mesh(_obj(tmp_path / "spaces.obj", sep="  \t "))
+    assert tabs.triangles == spaces.triangles == plain.triangles == 12
+    assert np.array_equal(tabs.vertices, plain.vertices) and np.array_equal(spaces.faces, plain.faces)
+    ran = [_cli("run", str(_mesh_scene(tmp_path, f'file = "{name}"')), "--json") for name in ("plain.obj", "tabs.obj")]
+    assert all(r.exit_code == 0 for r in ran), ran[1].output
+    import json
+
+    assert json.loads(ran[0].output)["final_hash"] == json.loads(ran[1].output)["final_hash"]
+
+
+@pytest.mark.parametrize("mesh_lines, field, words", [
+    ('shape = "box"\nscale = [5e-324, 5e-324, 5e-324]', "meshes.0.scale", "between 1e-12 and 1e+12"),
+    ('shape = "box"\nscale = 5e-324', "meshes.0.scale", ">= 1e-12"),
+    ('shape = "box"\nscale = 1e-12', "meshes.0.scale", "makes 12 of the mesh's triangles degenerate"),
+    ('shape = "box"\nscale = 1e12\nposition = [6e11, 0, 0]', "meshes.0.position", "the mesh reaches 1.1e+12 m"),
+    ('shape = "box"\nposition = [1e12, 0, 0]', "meshes.0.position", "within ±1e+12 m"),
+    ('shape = "box"\nangular_velocity = [0, 1e13, 0]', "meshes.0.angular_velocity", "between -1e+12 and 1e+12"),
+    ('shape = "box"\npivot = [0, inf, 0]', "meshes.0.pivot", "three numbers"),
+    ('shape = "box"\nrotation = [nan, 0, 0]', "meshes.0.rotation", "three numbers"),
+])
+def test_a_mesh_field_out_of_range_is_refused_with_the_field(tmp_path, mesh_lines, field, words):
+    """scale = 5e-324 ended in ZeroDivisionError in the contact loop (exit 70)."""
+    _refused_in_one_line(_cli("run", str(_mesh_scene(tmp_path, mesh_lines))), f"field '{field}'", words)
+
+
+def test_a_mesh_override_out_of_range_names_the_field_and_the_override():
+    _refused_in_one_line(_cli("run", "ramp", "-s", "meshes.0.scale=5e-324"), "field 'meshes.0.scale'",
+                         "--set meshes.0.scale=5e-324")
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--pose", "1e300,0,0"], "each within ±1e+12"),
+    (["--pose", "0,0,0,1e300,0,0"], "each within ±1e+12"),
+    (["--pose", "1e12,0,0"], "places shape box 1e+12 m from the origin"),
+    (["--builder", "nope"], "--builder 'nope': one of"),
+])
+def test_overlap_poses_out_of_range_are_refused_with_the_option(args, words):
+    _refused_in_one_line(_cli("overlap", "box", "box", *args), words)
+
+
+def test_a_file_name_the_system_refuses_is_said_as_such_on_one_short_line(tmp_path, monkeypatch):
+    """A 5,000-character mesh file name was an internal error (OSError: File name too long);
+    a name holding a newline printed the error on two lines."""
+    monkeypatch.chdir(tmp_path)
+    long = "a" * 5000
+    for result in (_cli("run", str(_mesh_scene(tmp_path, f'file = "{long}.obj"'))), _cli("overlap", long + ".obj", "box"),
+                   _cli("run", long + ".toml"), _cli("info", long + ".mcap"), _cli("record", "bounce", "-o", long + ".mcap")):
+        _refused_in_one_line(result, "too long")
+        assert len(result.output) < 600 and "characters)" in result.output
+    _refused_in_one_line(_cli("run", str(_mesh_scene(tmp_path, 'file = "a\\nb.obj"'))), "a\\nb.obj: no such file")
+
+
+@pytest.mark.parametrize("command", [["replay", "{fifo}", "--verify"], ["replay", "{fifo}", "--rrd", "x.rrd"],
+                                     ["explain", "{fifo}"], ["diff", "{fifo}", "{fifo}"], ["info", "{fifo}"],
+                                     ["overlap", "{obj}", "box"]])
+def test_a_fifo_is_refused_by_every_command_that_reads_a_file_never_waited_on(tmp_path, command):
+    """replay --verify and --rrd of a FIFO hung: the tier's estimate opened it before the reader refused it."""
+    import os
     import subprocess
     import sys
 
-    script = ("import resource, signal, sys\n"
-              "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # past the limit writes fail, as on a full disk\n"
-              "resource.setrlimit(resource.RLIMIT_FSIZE, (500000, 500000))\n"
-              "from physdbg.cli import app\n"
-              "app(sys.argv[1:])\n")
-    out = tmp_path / "full.mcap"
-    done = subprocess.run([sys.executable, "-c", script, "record", "rain", "-s", "steps=100", "-o", str(out),
-                           "--detail", "state", "--no-view", "--no-progress"],
-                          capture_output=True, text=True, timeout=120)
-    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
-    assert f"the Rerun file {tmp_path / 'full.rrd'} could not be written (" in done.stderr
-    assert "is the disk full? It holds only what was written before" in done.stderr
-    assert "full.mcap is readable and holds steps 1.." in done.stderr
+    os.mkfifo(tmp_path / "pipe.mcap")
+    os.mkfifo(tmp_path / "pipe.obj")
+    args = [a.format(fifo=tmp_path / "pipe.mcap", obj=tmp_path / "pipe.obj") for a in command]
+    done = subprocess.run([sys.executable, "-m", "physdbg", *args], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 2 and "not a regular file" in done.stderr, done.stderr
+
+
+def test_a_mesh_spinning_a_million_degrees_a_second_ends_its_step_within_the_budget():
+    """An 800-triangle plate turning at 1e6 deg/s under a resting ball took 2.5 s a step
+    (10,000 contacts × 800 swept tests of hundreds of passes each); a test against a moving
+    triangle now counts its passes, so the swept-test budget ends the step."""
+    import tempfile
+    from pathlib import Path
+
+    n = 20
+    xs = np.linspace(-1, 1, n + 1)
+    corners = [[x, 0.0, z] for x in xs for z in xs]
+    faces = []
+    for i in range(n):
+        for j in range(n):
+            a = i * (n + 1) + j
+            faces += [(a, a + 1, a + n + 2), (a, a + n + 2, a + n + 1)]
+    with tempfile.TemporaryDirectory() as folder:
+        _obj(Path(folder) / "plate.obj", corners, faces)
+        scene = Path(folder) / "turntable.toml"
+        scene.write_text('dt = 0.001\nsteps = 1\n[[particles]]\nposition = [0.3, 0.1, 0.2]\nradius = 0.1\n'
+                         'restitution = 0.5\n[[meshes]]\nfile = "plate.obj"\nangular_velocity = [0, 1e6, 0]\n'
+                         'restitution = 0.5\n')
+        loaded = load_scene(str(scene))
+        budget = loaded.settings.swept_test_budget(1)
+        summary = run(loaded)
+        checked = _cli("check", str(scene))
+    from physdbg.engine.toi import MAX_PASSES
+
+    # past the budget by at most one re-prediction: 800 triangles of at most MAX_PASSES each
+    assert budget <= summary.swept_tests < budget + 800 * MAX_PASSES
+    assert summary.contacts < 5000  # the contact budget (10,000) is no longer what stops it
+    assert summary.warning_counts.get("max_swept_tests_per_step") == 1, summary.warnings
+    assert "sweep       mesh 'mesh0' turns 1,000° in a step" in checked.output
+    assert "dt ≤ 9e-05 s keeps it within 90° a step" in checked.output
+
+
+MESH_NUMBERS = st.one_of(st.sampled_from([0.0, 1.0, -1.0, 1e12, -1e12, 1e-12, 5e-324, 1e-300, 1e11, 0.5]),
+                         st.floats(-1e12, 1e12, allow_nan=False))
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(corners=st.lists(st.tuples(MESH_NUMBERS, MESH_NUMBERS, MESH_NUMBERS), min_size=3, max_size=8),
+       faces=st.lists(st.tuples(st.integers(0, 7), st.integers(0, 7), st.integers(0, 7)), min_size=1, max_size=8),
+       scale=st.sampled_from([1.0, 1e-6, 1e6, 1e-12]))
+def test_any_mesh_file_the_reader_accepts_runs_or_is_refused_clearly(tmp_path, corners, faces, scale):
+    from physdbg.errors import MeshError
+    from physdbg.meshes import load_mesh
+
+    path = _obj(tmp_path / "any.obj", corners, [f for f in faces if max(f) < len(corners)] or [(0, 1, 2)])
+    try:
+        load_mesh(path)
+    except MeshError as err:
+        assert "any.obj" in str(err) and "\n" not in str(err)
+        return
+    scene = _mesh_scene(tmp_path, f'file = "any.obj"\nscale = {scale!r}', steps=2)
+    outcome = _outcome(str(scene), [])
+    if isinstance(outcome, PhysdbgError):
+        assert "\n" not in str(outcome) and str(outcome), outcome

@@ -109,13 +109,16 @@ def test_degenerate_triangles_are_reported_by_line_and_skipped(tmp_path):
         load_mesh(_write(tmp_path, "none.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n"))
 
 
-def test_a_mesh_too_big_for_the_memory_budget_is_refused_before_it_is_loaded(tmp_path, monkeypatch):
-    import physdbg.meshes.files as files
-
-    monkeypatch.setattr(files, "read", lambda *a: pytest.fail("loaded a mesh over the budget"))
-    path = _write(tmp_path, "cube.obj", CUBE_OBJ)
-    with pytest.raises(MeshError, match=r"12 triangles need about .* GB with their BVH, over the memory budget"):
-        load_mesh(path, max_memory=1000)
+def test_a_mesh_too_big_for_the_memory_budget_is_refused_before_it_is_loaded(tmp_path):
+    # 30,000 triangles (about 43 MB with their BVH) against a 1 MB budget, then a line the
+    # reader would refuse: the budget stops the read long before that line is reached
+    faces = "".join(f"f 1 2 {3 + k % 2}\n" for k in range(30_000))
+    path = _write(tmp_path, "many.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n" + faces + "what is this\n")
+    with pytest.raises(MeshError, match=r"many.obj: [\d,]+ triangles and 4 vertices \(and counting\) need about "
+                                        r".* GB with their BVH, over the memory budget"):
+        load_mesh(path, max_memory=1e6)
+    with pytest.raises(MeshError, match="unknown OBJ statement 'what'"):
+        load_mesh(path)  # within the default budget the whole file is read
 
 
 def test_a_flat_mesh_has_no_hull_and_is_still_searched(tmp_path):
@@ -157,7 +160,7 @@ def test_cli_overlap_exits_0_when_apart_and_the_json_holds_the_whole_tree():
     (["teapot", "paddle"], "error: teapot: neither a mesh file (.obj, .stl) nor a built-in shape"),
     (["funnel", "paddle", "--pose", "1,2"], "error: --pose '1,2': give 3 or 6 finite numbers"),
     (["funnel", "paddle", "--volume", "kdop"], "error: --volume 'kdop': one of auto, sphere, aabb, obb"),
-    (["funnel", "paddle", "--builder", "octree"], "error: --builder: builder 'octree': one of median, mean, sah, lbvh"),
+    (["funnel", "paddle", "--builder", "octree"], "error: --builder 'octree': one of median, mean, sah, lbvh"),
 ])
 def test_cli_overlap_bad_input_is_one_line_and_exit_2(args, message):
     result = runner.invoke(app, ["overlap", *args])

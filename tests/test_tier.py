@@ -156,3 +156,54 @@ def test_a_benchmark_compiles_before_its_runs_and_says_so(tmp_path, monkeypatch)
                        on_status=heard.append)
     assert heard[:3] == ["compiling", "compile", "running"]
     assert not tier.interpreted()
+
+
+def test_the_work_estimate_is_total_for_numbers_past_any_range():
+    """dt = "1e400" and a 400-digit step count overflowed the estimate before the scene's
+    own checks could name the field (an internal error, exit 70)."""
+    assert tier.estimate("rest", ['dt="1e400"']) is None
+    assert tier.estimate("rest", ["steps=1e300", "generate.count=1e300"]) is None
+    # a count past a float is no count: the estimate falls back to the file's own duration
+    assert tier.estimate("rest", ["steps=" + "9" * 400]) == tier.estimate("rest")
+    from typer.testing import CliRunner
+
+    from physdbg.cli import app
+
+    for override, field in (('dt="1e400"', "'dt'"), ("steps=" + "9" * 400, "'steps'")):
+        result = CliRunner().invoke(app, ["run", "rest", "-s", override])
+        assert result.exit_code == 2 and f"field {field}" in result.output, result.output
+
+
+_CLONE_PROGRAM = """
+import json, sys
+from physdbg.engine.toi import pair_toi_swept_scalar as kernel
+kernel(1.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.5, 0, 0.0, 1.0, 1e-12)
+import physdbg.tier as tier
+print(json.dumps({"hits": sum(kernel.stats.cache_hits.values()), "misses": sum(kernel.stats.cache_misses.values()),
+                  "path": kernel._cache._cache_path, "warm": tier.cache_is_warm()}))
+"""
+
+
+def test_a_second_clone_of_the_same_version_loads_the_first_clone_s_kernels(tmp_path):
+    """numba filed cached kernels under a hash of the checkout's absolute folder, so a second
+    clone of one version found nothing to load and compiled for 40 s in the foreground; the
+    kernels are now filed by their path inside the package (engine/jit.py)."""
+    import shutil
+    from pathlib import Path
+
+    import physdbg
+
+    source = Path(physdbg.__file__).parent
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "NUMBA_DISABLE_JIT")}
+    env["XDG_CACHE_HOME"] = str(tmp_path / "cache")
+    found = []
+    for clone in ("first", "second"):
+        shutil.copytree(source, tmp_path / clone / "physdbg", ignore=shutil.ignore_patterns("__pycache__"))
+        done = subprocess.run([sys.executable, "-c", _CLONE_PROGRAM], cwd=tmp_path / clone, env=env,
+                              capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        found.append(json.loads(done.stdout.strip().splitlines()[-1]))
+    first, second = found
+    assert first["misses"] == 1 and first["hits"] == 0  # compiled, and cached
+    assert second["misses"] == 0 and second["hits"] == 1, second  # loaded, not compiled again
+    assert first["path"] == second["path"] and first["path"].endswith("physdbg_engine")

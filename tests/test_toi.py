@@ -246,7 +246,7 @@ def test_sphere_triangle_time_of_impact_against_fine_sampling(seed, integrator, 
     v = (target - x) / np.linalg.norm(target - x) * speed
     a = np.array([0.0, 0.0, -9.81])
     horizon = 0.4
-    t, feature = triangle_toi_swept(*x, *v, *a, radius, tri, integrator, 0.0, horizon, 1e-10)
+    t, feature, _passes = triangle_toi_swept(*x, *v, *a, radius, tri, integrator, 0.0, horizon, 1e-10)
     times = np.linspace(0.0, horizon, 10_001)
     centers = np.array([_center_at(x, v, a, integrator, s) for s in times])
     gaps = _closest_distances(centers, tri) - radius
@@ -301,7 +301,7 @@ def test_sphere_against_a_rotating_triangle_against_fine_sampling(seed, integrat
     assume(_closest_distances(x[None], _moving_corners(tri, motion, tau0))[0] > radius + 1e-6)
     v = (target - x) / meet * (0.7 + 0.3 * pace)
     a = np.array([0.0, 0.0, -9.81])
-    t, feature = moving_triangle_toi_swept(*x, *v, *a, radius, tri, motion, tau0, integrator, 0.0, horizon, 1e-10)
+    t, feature, _passes = moving_triangle_toi_swept(*x, *v, *a, radius, tri, motion, tau0, integrator, 0.0, horizon, 1e-10)
     times = np.linspace(0.0, horizon, 10_001)
     gaps = np.array([_closest_distances(_center_at(x, v, a, integrator, s)[None],
                                         _moving_corners(tri, motion, tau0 + s))[0] for s in times]) - radius
@@ -330,7 +330,7 @@ def test_a_paddle_sweeping_a_resting_ball_is_caught_by_the_swept_test_and_missed
     motion = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 30.0, 0.0])
     ball = np.array([1.0, 0.1, -0.15])  # in the plate's way: R_y turns +x towards -z
     radius = 0.05
-    t, _ = moving_triangle_toi_swept(*ball, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, radius, tri, motion, 0.0, EULER, 0.0,
+    t, _, _ = moving_triangle_toi_swept(*ball, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, radius, tri, motion, 0.0, EULER, 0.0,
                                      0.01, 1e-12)
     # the face (z = 0 in the plate) reaches the ball's near side when its angle is asin(0.05 / |arm|)
     # short of the ball's own angle atan2(0.15, 1.0), the arm being the ball's distance from the axis
@@ -350,12 +350,12 @@ def test_a_sphere_falling_on_a_triangle_touches_its_face_edge_or_corner_as_aimed
     down = (0.0, 0.0, -2.0)
     for start, expected, feature in (((0.25, 0.25, 1.0), 0.45, FACE), ((0.5, -0.05, 1.0), None, EDGE_0),
                                      ((-0.05, -0.05, 1.0), None, CORNER_0)):
-        t, found = triangle_toi_swept(*start, *down, 0.0, 0.0, 0.0, 0.1, tri, EULER, 0.0, 1.0, 1e-12)
+        t, found, _ = triangle_toi_swept(*start, *down, 0.0, 0.0, 0.0, 0.1, tri, EULER, 0.0, 1.0, 1e-12)
         assert found == feature
         if expected is not None:
             assert t == pytest.approx(expected, abs=1e-12)  # (1 − 0.1) / 2 m/s
     # discrete: one sample at the end of the step; a fast sphere passes through unseen
     t, found = triangle_toi_sampled(0.25, 0.25, 1.0, 0.0, 0.0, -20.0, 0.0, 0.0, 0.0, 0.1, tri, EULER, 0.0, 0.1, 1)
     assert t == math.inf and found == -1
-    t, found = triangle_toi_swept(0.25, 0.25, 1.0, 0.0, 0.0, -20.0, 0.0, 0.0, 0.0, 0.1, tri, EULER, 0.0, 0.1, 1e-12)
+    t, found, _ = triangle_toi_swept(0.25, 0.25, 1.0, 0.0, 0.0, -20.0, 0.0, 0.0, 0.0, 0.1, tri, EULER, 0.0, 0.1, 1e-12)
     assert t == pytest.approx(0.045, abs=1e-12) and found == FACE

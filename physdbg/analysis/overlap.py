@@ -13,7 +13,9 @@ import numpy as np
 
 from ..engine.mesh import OUTCOME_NAMES, VOLUME_NAMES, Descent, MeshTree, Pose, descend
 from ..engine.mesh.descent import APART, LEAVES_MEET, LEAVES_MISS, MEET
+from ..engine.broadphase.bvh import BUILD_NAMES
 from ..errors import PhysdbgError
+from ..limits import MAX_MAGNITUDE
 from ..meshes import Mesh, load_mesh, mesh_tree
 
 AUTO_RULE = ("obb where either mesh is turned (its AABBs would have to be refitted from its moved corners; "
@@ -29,9 +31,9 @@ def parse_pose(text: str | None, option: str) -> tuple[Pose, tuple[float, ...]]:
         numbers = tuple(float(p) for p in parts)
     except ValueError:
         raise PhysdbgError(f"{option} {text!r}: give x,y,z or x,y,z,rx,ry,rz (metres, then degrees)") from None
-    if len(numbers) not in (3, 6) or not all(np.isfinite(numbers)):
-        raise PhysdbgError(f"{option} {text!r}: give 3 or 6 finite numbers: x,y,z or x,y,z,rx,ry,rz "
-                           f"(metres, then degrees about x, y and z)")
+    if len(numbers) not in (3, 6) or not all(np.isfinite(numbers)) or max(map(abs, numbers)) > MAX_MAGNITUDE:
+        raise PhysdbgError(f"{option} {text!r}: give 3 or 6 finite numbers, each within ±{MAX_MAGNITUDE:g}: x,y,z "
+                           f"or x,y,z,rx,ry,rz (metres, then degrees about x, y and z)")
     numbers = numbers + (0.0,) * (6 - len(numbers))
     return Pose.of(numbers[:3], numbers[3:]), numbers
 
@@ -76,13 +78,17 @@ def overlap(a: str, b: str, pose_a: str | None = None, pose_b: str | None = None
     """Load meshes ``a`` and ``b`` (file or shape), pose them and search for meeting triangles."""
     if volume != "auto" and volume not in VOLUME_NAMES:
         raise PhysdbgError(f"--volume {volume!r}: one of auto, {', '.join(VOLUME_NAMES)}")
+    if builder not in BUILD_NAMES:
+        raise PhysdbgError(f"--builder {builder!r}: one of {', '.join(BUILD_NAMES)}")
     place_a, numbers_a = parse_pose(pose_a, "--pose-a")
     place_b, numbers_b = parse_pose(pose_b, "--pose")
     meshes = (load_mesh(a, hull=hull), load_mesh(b, hull=hull))
-    try:
-        trees = (mesh_tree(meshes[0], builder), mesh_tree(meshes[1], builder))
-    except ValueError as err:
-        raise PhysdbgError(f"--builder: {err}") from None
+    for mesh, place, option in zip(meshes, (place_a, place_b), ("--pose-a", "--pose")):
+        reach = float(np.abs(place.apply(mesh.vertices)).max())
+        if reach > MAX_MAGNITUDE:  # the file's corners are within range; the pose may carry them out
+            raise PhysdbgError(f"{option}: places {mesh.source} {reach:.3g} m from the origin; every coordinate "
+                               f"must be within ±{MAX_MAGNITUDE:g} m")
+    trees = (mesh_tree(meshes[0], builder), mesh_tree(meshes[1], builder))
     if volume == "auto":
         turned = [name for name, numbers in (("A", numbers_a), ("B", numbers_b)) if any(numbers[3:])]
         volume = "obb" if turned else "aabb"

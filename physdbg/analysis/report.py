@@ -368,6 +368,7 @@ def check_text(result) -> str:
              + ("contacts can happen" if f["contacts_possible"] else "no contact can happen")]
     if f["periodic"] is not None:
         lines.append(f"periodic    {f['periodic']['why']}")
+    lines += [f"{'sweep' if k == 0 else '':<11} {sweep['why']}" for k, sweep in enumerate(f.get("mesh_sweeps") or [])]
     for setting in ("integrator", "detection", "ordering"):
         for k, p in enumerate(x for x in advice.predictions if x.setting == setting):
             mark = "*" if result.current[setting] == p.value else " "
@@ -396,7 +397,9 @@ def check_text(result) -> str:
         lines.append(f"this scene  {settings} (*): predicted safe (no tunnelling or overlap left)"
                      + (f"; {', '.join(p.value for p in result.warnings)} inexact" if result.warnings else "")
                      + (f"; but its pile {pile.outcome} under {pile.value} (slow or stopped by a budget, not wrong)"
-                        if pile is not None and pile.outcome != "settles" else ""))
+                        if pile is not None and pile.outcome != "settles" else "")
+                     + ("; but a mesh turns so far in a step that its contacts may hit the swept-test budget (sweep)"
+                        if f.get("mesh_sweeps") else ""))
     else:
         lines.append(f"this scene  {settings} (*): predicted to fail: "
                      + "; ".join(f"{p.setting}={p.value} {p.outcome}" for p in result.problems))

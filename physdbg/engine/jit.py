@@ -41,7 +41,44 @@ the same arithmetic in the same order, so no result changes by a bit (the golden
 from __future__ import annotations
 
 from numba.core import config, types
+from numba.core.caching import CompileResultCacheImpl, UserProvidedCacheLocator
 from numba.core.registry import CPUDispatcher
+
+# the folder holding physdbg/, as the import system spells this file's path (so does numba
+# for every function it caches: both come from the module's __file__)
+_HERE = __file__.replace("\\", "/")
+PACKAGE_ROOT = _HERE[: _HERE.rindex("/physdbg/engine/")]
+
+
+class _CheckoutFreeLocator(UserProvidedCacheLocator):
+    """numba's locator for a cache folder of the user's choice (physdbg/__init__.py names
+    one per version of the engine's sources), for physdbg's own files only, filing each
+    file's kernels by its folder inside the package (``physdbg_engine_resting``) instead
+    of a hash of its absolute folder.
+
+    Why: numba's own locator keys the files by where the checkout lives, so a second clone
+    of the same version (a student's next assignment, a CI runner with a restored cache)
+    found nothing to load and compiled every kernel again (40 s), though the folder was
+    warm for its sources. The folder is already keyed by a hash of the sources, and numba
+    checks each file's own source stamp (a hash of its contents) before it loads a
+    kernel, so two clones of one version share kernels safely. (Paths as text: the core
+    imports numpy and numba only.)"""
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        if not py_file.replace("\\", "/").startswith(PACKAGE_ROOT + "/physdbg/"):
+            return None  # not physdbg's: numba's own locators decide
+        return super().from_function(py_func, py_file)
+
+    @classmethod
+    def get_suitable_cache_subpath(cls, py_file):
+        inside = py_file.replace("\\", "/")[len(PACKAGE_ROOT) + 1:]  # physdbg/engine/resting/store.py
+        return inside.rsplit("/", 1)[0].replace("/", "_")
+
+
+# numba asks each locator in turn; this one answers first, for physdbg's files alone
+if _CheckoutFreeLocator not in CompileResultCacheImpl._locator_classes:
+    CompileResultCacheImpl._locator_classes.insert(0, _CheckoutFreeLocator)
 
 
 class _OneVersionPerType(CPUDispatcher):

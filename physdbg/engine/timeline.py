@@ -221,12 +221,13 @@ def heap_pop(toi, data, counters):
 
 # ------------------------------------------------------------------------------ predict
 @njit(cache=True, inline="always")
-def _record(kind, i, j, start, t, step_end, buffers, push):
-    """Count a swept test, log it (every test, or only a hit: counters[KEEP_MISSES]) and
-    push a hit onto the heap if ``push``. Rows keep the order of the tests, so the heap's
-    tie-break by row is the same either way."""
+def _record(kind, i, j, start, t, work, step_end, buffers, push):
+    """Count a swept test (``work`` against the budget: colliders.time_of_impact), log it
+    (every test, or only a hit: counters[KEEP_MISSES]) and push a hit onto the heap if
+    ``push``. Rows keep the order of the tests, so the heap's tie-break by row is the same
+    either way."""
     test_int, test_float, test_outcome, heap_toi, heap_data, counters = test_log(buffers)
-    counters[TESTS] += 1
+    counters[TESTS] += work
     hit = start + t <= step_end
     if not hit and counters[KEEP_MISSES] == 0:
         return
@@ -251,9 +252,9 @@ def _predict(kind, ia, other, particles, method, geometry, held, buffers, push):
         return
     x, v, a, radius, sigma = paths(particles)
     step_end, integrator, k, detection, samples, tolerance = sweep(method)
-    start, t = time_of_impact(kind, ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
-                              tolerance, geometry)
-    _record(kind, ia, other, start, t, step_end, buffers, push)
+    start, t, work = time_of_impact(kind, ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection,
+                                    samples, tolerance, geometry)
+    _record(kind, ia, other, start, t, work, step_end, buffers, push)
 
 
 @borrowing

@@ -41,6 +41,9 @@ SWEPT = 0
 SAMPLED = 1
 DISCRETE = 2
 DETECTION_NAMES = ("swept", "sampled", "discrete")
+# the most steps conservative advancement takes in one swept test against a triangle (a
+# moving frame's spin shortens each step: its passes are what such a test costs)
+MAX_PASSES = 500
 
 
 @borrowing
@@ -319,10 +322,11 @@ def _from_triangle(p0, p1, p2, tri):
 
 @borrowing
 def triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, integrator, k, horizon, tolerance):
-    """(t, feature): the first local time in [0, horizon] a sphere (centre x + v·P1 + a·P2,
-    ``radius`` m) touches the fixed triangle ``tri`` (3, 3: corners as rows, m) while
-    approaching it, and the feature touched (closest.FACE, an edge or a corner); (INF, -1)
-    when it does not. ``tolerance`` (m): the gap below which it counts as touching."""
+    """(t, feature, passes): the first local time in [0, horizon] a sphere (centre x + v·P1
+    + a·P2, ``radius`` m) touches the fixed triangle ``tri`` (3, 3: corners as rows, m)
+    while approaching it, and the feature touched (closest.FACE, an edge or a corner);
+    (INF, -1) when it does not; passes: the advancement's steps taken (its cost).
+    ``tolerance`` (m): the gap below which it counts as touching."""
     return _triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, False, tri[0], 0.0, integrator, k,
                                horizon, tolerance)
 
@@ -411,7 +415,7 @@ def surface_velocity(q0, q1, q2, motion, tau):
 @borrowing
 def moving_triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, motion, tau0, integrator, k,
                               horizon, tolerance):
-    """(t, feature): triangle_toi_swept for a triangle of a moving mesh: ``tri`` (3, 3) its
+    """(t, feature, passes): triangle_toi_swept for a triangle of a moving mesh: ``tri`` (3, 3) its
     corners at the step's start, ``motion`` (9,) as in_body_frame's, ``tau0`` (s) the
     sphere's anchor time in the step (the test's local time t is at tau0 + t)."""
     return _triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, True, motion, tau0, integrator, k,
@@ -441,7 +445,9 @@ def _triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, moving,
                         horizon, tolerance):
     """The swept test against a fixed or (``moving``) a moving triangle: conservative
     advancement (_advance) on the gap seen from the triangle, with the path's curvature
-    bound, plus the frame's Coriolis and centripetal terms when it moves (section doc)."""
+    bound, plus the frame's Coriolis and centripetal terms when it moves (section doc).
+    Returns (t, feature, passes): passes, how many steps of the advancement it took (at
+    most MAX_PASSES), is its cost, which grows with a moving frame's spin."""
     if STRAIGHT_PATH[integrator]:
         a0 = 0.0
         a1 = 0.0
@@ -457,9 +463,9 @@ def _triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, moving,
         m = m + 2.0 * spin * rate_bound + spin * spin * z_bound
     t = 0.0
     feature = -1
-    for _ in range(500):
+    for passes in range(1, MAX_PASSES + 1):
         if t > horizon:
-            return INF, -1
+            return INF, -1, passes
         p0, p1, p2, e0, e1, e2 = _center_path(x0, x1, x2, v0, v1, v2, a0, a1, a2, integrator, k, t)
         y0, y1, y2, r0, r1, r2 = _seen_from_triangle(p0, p1, p2, e0, e1, e2, moving, motion, tau0 + t)
         d0, d1, d2, feature = _from_triangle(y0, y1, y2, tri)
@@ -468,13 +474,13 @@ def _triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, moving,
         # pulled in: the path's own acceleration towards the triangle (a moving frame's is in m)
         step = _advance(dist - radius, rate, (d0 * a0 + d1 * a1 + d2 * a2) < 0.0, m, tolerance, horizon)
         if step == 0.0:
-            return t, feature
+            return t, feature, passes
         if step == INF:
-            return INF, -1
+            return INF, -1, passes
         t += step
     if t <= horizon:
-        return t, feature
-    return INF, -1
+        return t, feature, MAX_PASSES
+    return INF, -1, MAX_PASSES
 
 
 @borrowing

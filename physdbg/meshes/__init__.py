@@ -15,6 +15,7 @@ import numpy as np
 
 from ..engine.mesh import MeshTree, build_mesh_tree
 from ..errors import MeshError
+from ..limits import MIN_AREA
 from . import files
 from .shapes import SHAPES
 
@@ -40,6 +41,7 @@ class Mesh:
     faces: np.ndarray
     skipped: list[tuple[int, str]] = field(default_factory=list)
     hull: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    numbered_by: str = "line"  # what a skipped triangle's number is: its "line" or its "triangle" number
 
     @property
     def triangles(self) -> int:
@@ -49,8 +51,7 @@ class Mesh:
         """The skipped triangles in a sentence ("" when none)."""
         if not self.skipped:
             return ""
-        where = "line" if not self.source.startswith("shape ") else "triangle"
-        shown = ", ".join(f"{where} {at} ({why})" for at, why in self.skipped[:5])
+        shown = ", ".join(f"{self.numbered_by} {at} ({why})" for at, why in self.skipped[:5])
         more = f" and {len(self.skipped) - 5} more" if len(self.skipped) > 5 else ""
         return f"{self.source}: skipped {len(self.skipped)} degenerate triangle(s): {shown}{more}"
 
@@ -62,14 +63,18 @@ def _check_memory(source: str, triangles: int, max_memory: float) -> None:
                         f"memory budget of {max_memory / 1e9:.2g} GB (max_memory): simplify the mesh or raise it")
 
 
-def _degenerate(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, list[str]]:
-    """(F,) bool: which triangles are degenerate, and why, in the order found."""
+def degenerate(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """(F,) bool: which triangles are degenerate, and why, in the order found: a corner
+    repeated, an area below DEGENERATE_AREA of the mesh's size squared, or below
+    limits.MIN_AREA (1e-24 m²: too small for a normal, whatever the mesh's size).
+    vertices (V, 3) m, coordinates within limits.MAX_MAGNITUDE (so no square overflows)."""
     corners = vertices[faces]
     size = float(np.ptp(vertices, axis=0).max()) if len(vertices) else 0.0
     area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
     repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
-    flat = area <= DEGENERATE_AREA * size * size
-    why = ["a corner repeated" if r else "zero area" for r in repeated[repeated | flat]]
+    flat = (area <= DEGENERATE_AREA * size * size) | (area < MIN_AREA)
+    why = ["a corner repeated" if r else "zero area" if a == 0 else f"area {a:.3g} m²"
+           for r, a in zip(repeated[repeated | flat], area[repeated | flat])]
     return repeated | flat, why
 
 
@@ -86,6 +91,13 @@ def convex_hull(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
             np.ascontiguousarray(vertices[hull.vertices]))
 
 
+def _exists(path: Path) -> bool:
+    try:
+        return path.exists()
+    except OSError:  # a name the system refuses: the reader says so
+        return True
+
+
 def load_mesh(spec: str | Path, name: str | None = None, max_memory: float = DEFAULT_MAX_MEMORY,
               hull: bool = True) -> Mesh:
     """A mesh from a file path (.obj, .stl) or a built-in shape name (``SHAPES``): checked,
@@ -94,25 +106,24 @@ def load_mesh(spec: str | Path, name: str | None = None, max_memory: float = DEF
     text = str(spec)
     if text in SHAPES and not Path(text).exists():
         vertices, faces = SHAPES[text]()
-        source, lines = f"shape {text}", list(range(len(faces)))
+        source, lines, numbered_by = f"shape {text}", list(range(len(faces))), "triangle"
         _check_memory(source, len(faces), max_memory)
     else:
         path = Path(text)
-        if path.suffix.lower().lstrip(".") not in files.FORMATS and not path.exists():
+        if path.suffix.lower().lstrip(".") not in files.FORMATS and not _exists(path):
             raise MeshError(f"{text}: neither a mesh file (.obj, .stl) nor a built-in shape "
                             f"({', '.join(SHAPES)})")
-        scanned = files.scan(path)
-        if scanned.triangles == 0:
+        read = files.read(path, max_memory, BYTES_PER_TRIANGLE)
+        if read.triangles == 0:
             raise MeshError(f"{path}: holds no triangles")
-        _check_memory(str(path), scanned.triangles, max_memory)
-        vertices, faces = files.read(path, scanned)
-        source, lines = str(path), scanned.lines
-    bad, why = _degenerate(vertices, faces)
+        vertices, faces = read.vertices, read.faces
+        source, lines, numbered_by = str(path), read.lines, "triangle" if read.binary else "line"
+    bad, why = degenerate(vertices, faces)
     skipped = [(lines[k], reason) for k, reason in zip(np.nonzero(bad)[0].tolist(), why)]
     faces = np.ascontiguousarray(faces[~bad])
     if len(faces) == 0:
         raise MeshError(f"{source}: every triangle is degenerate ({len(skipped)} skipped)")
-    mesh = Mesh(name or Path(text).stem, source, vertices, faces, skipped)
+    mesh = Mesh(name or Path(text).stem, source, vertices, faces, skipped, numbered_by=numbered_by)
     if hull:
         mesh.hull = convex_hull(vertices[np.unique(faces)])
     return mesh

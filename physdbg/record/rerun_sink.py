@@ -520,8 +520,7 @@ class RerunSink:
                     continue
                 _abandon(self.rec)
                 raise OSError(f"the Rerun file {self.path or ''} could not be written ({err}; it stopped growing "
-                              f"{now - grew_at:.0f} s ago): is the disk full? It holds only what was written "
-                              f"before") from None
+                              f"{now - grew_at:.0f} s ago): is the disk full?") from None
 
     def close(self) -> None:
         self._send_series()
@@ -533,8 +532,7 @@ class RerunSink:
         self.rec.disconnect()
         if self.path is not None and not rrd_is_whole(self.path):
             # rerun's file writer reports a failed write (a full disk) only in its own log
-            raise OSError(f"the Rerun file {self.path} ends before its footer: a write failed (is the disk full?); "
-                          f"it holds only what was written before")
+            raise OSError(f"the Rerun file {self.path} ends before its footer: a write failed (is the disk full?)")
 
 
 FLUSH_SECONDS = 600.0  # the most closing a Rerun file may wait for its writer, growing or not
@@ -552,8 +550,9 @@ def _abandon(rec) -> None:
     if not getattr(cls, "_physdbg_guarded", False):
         original = cls.__del__
 
-        def __del__(self):  # noqa: N807 - rerun's own hook, wrapped
-            if not any(self is dead for dead in _ABANDONED):
+        def __del__(self, abandoned=_ABANDONED):  # noqa: N807 - rerun's own hook, wrapped
+            # the list is bound here: at interpreter exit the module's globals may be None
+            if not any(self is dead for dead in abandoned):
                 original(self)
 
         cls.__del__ = __del__

@@ -61,8 +61,10 @@ def geometry_of(walls) -> tuple:
 def time_of_impact(kind, ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples, tolerance,
                    geometry):
     """Swept test of (kind, ia, other) on the paths (x, v, a: (N, 3)) from their anchors
-    sigma (s): (start, t), the test's start in the step and the time of impact after it
-    (s; inf or beyond step_end: none). tolerance (m): the sphere pairs' root tolerance."""
+    sigma (s): (start, t, work), the test's start in the step, the time of impact after it
+    (s; inf or beyond step_end: none) and the work it counts against the swept-test budget
+    (1, or a moving triangle's passes: mesh.time_of_impact). tolerance (m): the sphere
+    pairs' root tolerance."""
     if kind == KIND_PAIR:
         return sphere.time_of_impact(ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
                                      tolerance, geometry[KIND_PAIR])

@@ -186,31 +186,35 @@ def _closest(x, i, corners, t):
 
 @njit(cache=True, inline="always")
 def time_of_impact(i, t, x, v, a, radius, sigma, step_end, integrator, k, detection, samples, tolerance, meshes):
-    """Swept test of sphere i against triangle t from i's anchor: (start, time), the test's
-    start in the step (s) and the time of impact after it (s; inf or beyond the step: none)."""
+    """Swept test of sphere i against triangle t from i's anchor: (start, time, work), the
+    test's start in the step (s), the time of impact after it (s; inf or beyond the step:
+    none) and its work for the swept-test budget: the passes of the advancement against
+    a moving triangle (a fast spin makes each pass short, and a test can take hundreds:
+    counted, a step's time stays bounded by the budget), 1 otherwise."""
     corners = meshes[0]
     start = sigma[i]
     horizon = step_end - start
     moving, motion = _motion_of(t, meshes)
     if moving:
         if detection == SWEPT:
-            found, _feature = moving_triangle_toi_swept(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2], a[i, 0],
-                                                        a[i, 1], a[i, 2], radius[i], corners[t], motion, start,
-                                                        integrator, k, horizon, tolerance)
-        else:
-            found, _feature = moving_triangle_toi_sampled(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2],
-                                                          a[i, 0], a[i, 1], a[i, 2], radius[i], corners[t], motion,
-                                                          start, integrator, k, horizon,
-                                                          1 if detection == DISCRETE else samples)
-        return start, found
+            found, _feature, passes = moving_triangle_toi_swept(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2],
+                                                                a[i, 0], a[i, 1], a[i, 2], radius[i], corners[t],
+                                                                motion, start, integrator, k, horizon, tolerance)
+            return start, found, passes
+        found, _feature = moving_triangle_toi_sampled(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2],
+                                                      a[i, 0], a[i, 1], a[i, 2], radius[i], corners[t], motion,
+                                                      start, integrator, k, horizon,
+                                                      1 if detection == DISCRETE else samples)
+        return start, found, 1
     if detection == SWEPT:
-        found, _feature = triangle_toi_swept(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2], a[i, 0], a[i, 1],
-                                             a[i, 2], radius[i], corners[t], integrator, k, horizon, tolerance)
+        found, _feature, _passes = triangle_toi_swept(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2], a[i, 0],
+                                                      a[i, 1], a[i, 2], radius[i], corners[t], integrator, k, horizon,
+                                                      tolerance)
     else:
         found, _feature = triangle_toi_sampled(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2], a[i, 0],
                                                a[i, 1], a[i, 2], radius[i], corners[t], integrator, k, horizon,
                                                1 if detection == DISCRETE else samples)
-    return start, found
+    return start, found, 1
 
 
 @borrowing

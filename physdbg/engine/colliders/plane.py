@@ -103,7 +103,7 @@ def time_of_impact(i, w, x, v, a, radius, sigma, step_end, integrator, k, detect
     else:
         depth = 2.0 * (radius[i] + half_thickness[w]) if two_sided[w] else math.inf
         t = wall_toi_sampled(g0, p, q, integrator, k, horizon, 1 if detection == DISCRETE else samples, depth)
-    return start, t
+    return start, t, 1
 
 
 @njit(cache=True, inline="always")

@@ -79,7 +79,7 @@ def time_of_impact(i, j, x, v, a, radius, sigma, step_end, integrator, k, detect
         t = pair_toi_sampled_scalar(dx0, dx1, dx2, dv0, dv1, dv2, a[i, 0] - a[j, 0], a[i, 1] - a[j, 1],
                                     a[i, 2] - a[j, 2], radius[i] + radius[j], integrator, k, horizon,
                                     1 if detection == DISCRETE else samples)
-    return start, t
+    return start, t, 1
 
 
 @njit(cache=True, inline="always")
