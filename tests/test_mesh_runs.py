@@ -334,29 +334,64 @@ def test_a_kinematic_mesh_recording_keeps_its_motion_and_replays_bit_for_bit(tmp
     assert turn[0] == 0.0 and turn[1] == pytest.approx(18.0)
 
 
-def test_a_moving_mesh_s_swept_boxes_hold_its_triangles_through_the_step():
-    """colliders/mesh.place: every node box of the refitted tree holds its triangles at
-    every instant of the step (sampled), for a paddle turning 18 degrees a step."""
-    from physdbg.engine.colliders.mesh import MeshGeometry, place
+def test_a_box_carried_into_a_moving_mesh_s_frame_finds_every_triangle_it_meets_in_the_step():
+    """colliders/mesh.frame_box: a mesh's tree is never refitted; a world box asked of it is
+    carried into its run-time-0 frame and grown by the motion over the step. Every triangle
+    that meets the world box at any sampled instant of the step is found, for the
+    paddle turning 18 degrees a step, a faster drifting one, and one past a half turn a step."""
+    from physdbg.engine.colliders.mesh import MeshGeometry, place, reachable
+    from physdbg.engine.state import Meshes, Walls
 
     scene = api.load_scene("paddle")
-    meshes = scene.walls.meshes
-    group = tuple(MeshGeometry.of(scene.walls))
-    dt = 1 / 60
-    assert place(group, meshes, 0.3, dt) == len(group[5])
-    box_lo, box_hi, leaf = group[3], group[4], group[5]
-    for tau in np.linspace(0.0, dt, 13):
-        corners = meshes.placed(0.3 + tau)[0]
-        for q in np.flatnonzero(leaf >= 0):
-            t = leaf[q]
-            assert np.all(corners[t] >= box_lo[q] - 1e-12) and np.all(corners[t] <= box_hi[q] + 1e-12)
-    root_lo, root_hi = box_lo[0], box_hi[0]
-    assert np.all(box_lo[leaf >= 0] >= root_lo) and np.all(box_hi[leaf >= 0] <= root_hi)
+    paddle = scene.walls.meshes
+    fast = Meshes(paddle.names, paddle.restitution, paddle.corners, paddle.mesh_of, paddle.sources, [],
+                  np.array([[0.7, 0.0, -0.4]]), paddle.angular_velocity * 4, paddle.pivot)
+    spinning = Meshes(paddle.names, paddle.restitution, paddle.corners, paddle.mesh_of, paddle.sources, [],
+                      None, paddle.angular_velocity * 12, paddle.pivot)  # 216 degrees a step: past a half turn
+    rng = np.random.default_rng(11)
+    for meshes in (paddle, fast, spinning):
+        group = tuple(MeshGeometry.of(Walls(meshes=meshes)))
+        dt, start = 1 / 60, 0.3
+        assert place(group, meshes, start, dt) == 1
+        centre = rng.uniform(-1.6, 1.6, (300, 3)) * [1, 0.1, 1] + [0, 0.12, 0]
+        size = rng.uniform(0.0, 0.1, (300, 3))
+        lo, hi = centre - size, centre + size
+        sphere, triangle = reachable(lo, hi, group)
+        found = set(zip(sphere.tolist(), triangle.tolist()))
+        # points of each triangle (corners, edges, inside): one in a box means the triangle meets it
+        weights = np.array([(a, b, 6 - a - b) for a in range(7) for b in range(7 - a)]) / 6.0
+        for tau in np.linspace(0.0, dt, 13):
+            points = np.einsum("pc,tcx->tpx", weights, meshes.placed(start + tau)[0])  # (T, P, 3)
+            inside = np.all((points[None] >= lo[:, None, None]) & (points[None] <= hi[:, None, None]), axis=3)
+            assert set(zip(*np.nonzero(inside.any(axis=2)))) <= found, tau
+
+
+def test_the_tree_the_views_draw_is_the_tree_the_engine_walks():
+    """Each mesh's tree in the engine (colliders/mesh.py, pre-order) is the tree the Rerun
+    view draws by level and volume (mesh_view.mesh_trees): the same nodes in pre-order, the
+    same boxes, the same triangle at each leaf."""
+    from physdbg.record import mesh_view
+
+    for name in ("funnel", "paddle", "ramp"):
+        meshes = api.load_scene(name).walls.meshes
+        group = mesh_view.engine_tree(meshes)
+        box_lo, box_hi, leaf, tree_first = group[3], group[4], group[5], group[7]
+        for k, tree in enumerate(mesh_view.mesh_trees(meshes)):
+            nodes, order, stack = tree.nodes, [], [int(tree.nodes.root)]
+            while stack:
+                q = stack.pop()
+                order.append(q)
+                if nodes.left[q] >= 0:
+                    stack += [int(nodes.right[q]), int(nodes.left[q])]
+            mine = slice(tree_first[k], tree_first[k + 1])
+            assert np.array_equal(box_lo[mine], nodes.lo[order]) and np.array_equal(box_hi[mine], nodes.hi[order])
+            drawn = [tree.leaf_triangle(q) + int(meshes.first[k]) if nodes.left[q] < 0 else -1 for q in order]
+            assert leaf[mine].tolist() == drawn
 
 
 def test_the_rerun_view_draws_a_mesh_s_bvh_and_the_search_at_its_first_contact():
-    """mesh_view.search on the engine's own tree finds exactly the triangles whose swept
-    boxes meet a sphere's box (brute force), and its search tree links every visited pair
+    """mesh_view.search on the engine's own tree finds exactly the triangles whose boxes meet
+    a sphere's box carried into the mesh's frame (brute force), and its search tree links every visited pair
     to the pair it descended from."""
     from physdbg.record import mesh_view
 
@@ -369,8 +404,12 @@ def test_the_rerun_view_draws_a_mesh_s_bvh_and_the_search_at_its_first_contact()
     lo, hi = mesh_view.path_boxes(x0, x1, radius)
     group = mesh_view.engine_tree(meshes)
     found = mesh_view.search(group, meshes, lo, hi, 0.1, 1 / 60)
+    from physdbg.engine.colliders.mesh import frame_box
+
     box_lo, box_hi, leaf = group[3], group[4], group[5]
     leaves = np.flatnonzero(leaf >= 0)
+    carried = np.array([frame_box(0, *lo[k], *hi[k], group) for k in range(len(lo))])  # the paddle's frame
+    lo, hi = carried[:, :3], carried[:, 3:]
     meets = np.all((lo[:, None] <= box_hi[leaves][None]) & (box_lo[leaves][None] <= hi[:, None]), axis=2)
     assert found.triangles.tolist() == sorted(set(leaf[leaves][np.any(meets, axis=0)].tolist()))
     assert found.spheres.tolist() == np.flatnonzero(meets.any(axis=1)).tolist()

@@ -6,14 +6,15 @@ per node an AABB, an OBB and a bounding sphere, in the mesh's own frame (the fra
 mesh had at run time 0; a view turns them with the mesh).
 
 The search drawn for a step is the seed's "search tree … that records descent into each
-BVH", for spheres against the triangles, walked on the engine's own tree
-(colliders/mesh.py: one SAH tree over every triangle of the scene, in pre-order, its boxes
-in the world frame, a kinematic mesh's swept over the step by the same ``place``): every
-sphere's box for the step (its centres at the step's start and end, grown by its radius)
-walks down from the root; a node whose box meets it is descended into (met), one whose
-box does not ends that branch (culled), and the leaves met are the triangles the narrow
-phase tests. The engine's walk is the same but for its boxes, which follow each sphere's
-path through the step and add the contact tolerance.
+BVH", for spheres against the triangles, walked on the engine's own trees
+(colliders/mesh.py: each mesh's SAH tree, in pre-order, in the mesh's run-time-0 frame:
+the same trees ``mesh_trees`` builds, node for node): every sphere's box for the step
+(its centres at the step's start and end, grown by its radius), carried into each mesh's
+frame as the engine carries it (``colliders.mesh.frame_box``, for a kinematic mesh grown
+by its motion over the step), walks down from that tree's root; a node whose box meets it
+is descended into (met), one whose box does not ends that branch (culled), and the leaves
+met are the triangles the narrow phase tests. The engine's walk is the same but for its
+boxes, which follow each sphere's path through the step and add the contact tolerance.
 """
 
 from __future__ import annotations
@@ -72,7 +73,7 @@ def node_depths(tree) -> np.ndarray:
 
 
 def engine_tree(meshes):
-    """The engine's triangle tree for a recording's meshes (state.Meshes): a MeshGeometry
+    """The engine's triangle trees for a recording's meshes (state.Meshes): a MeshGeometry
     as a tuple (colliders/mesh.py), at run time 0; ``search`` places it for a step."""
     from ..engine.colliders.mesh import MeshGeometry
     from ..engine.state import Walls
@@ -81,39 +82,48 @@ def engine_tree(meshes):
 
 
 def search(group, meshes, lo: np.ndarray, hi: np.ndarray, time: float, dt: float) -> MeshSearch:
-    """Walk the engine's triangle tree ``group`` (engine_tree; its boxes rewritten for the
-    step that begins at run time ``time`` and lasts ``dt`` s) with each box lo, hi (K, 3)
-    (world frame), from the root. Nodes are the tree's pre-order positions; a triangle is
+    """Walk the engine's triangle trees ``group`` (engine_tree; placed here for the step
+    that begins at run time ``time`` and lasts ``dt`` s) with each box lo, hi (K, 3)
+    (world frame), each mesh's tree from its root with the box carried into its frame.
+    Nodes are positions in the group's pre-order (``tree_first`` says whose); a triangle is
     its number in the scene (state.Meshes.triangle_words names it)."""
-    from ..engine.colliders.mesh import place
+    from ..engine.colliders.mesh import frame_box, place
 
     place(group, meshes, time, dt)
-    box_lo, box_hi, leaf, skip = group[3], group[4], group[5], group[6]
+    box_lo, box_hi, leaf, skip, tree_first = group[3], group[4], group[5], group[6], group[7]
     size = len(leaf)
     met = np.zeros(size, dtype=bool)
     visited = np.zeros(size, dtype=bool)
     reached, who = set(), set()
     visits = []
     for k in range(len(lo) if size else 0):
-        stack = [(0, -1)]
-        while stack:
-            q, parent = stack.pop()
-            row = len(visits)
-            visited[q] = True
-            if np.any(lo[k] > box_hi[q]) or np.any(box_lo[q] > hi[k]):
-                visits.append((k, q, CULLED, parent))
-                continue
-            met[q] = True
-            if leaf[q] >= 0:
-                visits.append((k, q, REACHED, parent))
-                reached.add(int(leaf[q]))
-                who.add(k)
-            else:
-                visits.append((k, q, MET, parent))
-                stack += [(int(skip[q + 1]), row), (q + 1, row)]
+        for mesh in range(len(tree_first) - 1):
+            low = np.array(frame_box(mesh, *lo[k], *hi[k], group))
+            high, low = low[3:], low[:3]
+            stack = [(int(tree_first[mesh]), -1)]
+            while stack:
+                q, parent = stack.pop()
+                row = len(visits)
+                visited[q] = True
+                if np.any(low > box_hi[q]) or np.any(box_lo[q] > high):
+                    visits.append((k, q, CULLED, parent))
+                    continue
+                met[q] = True
+                if leaf[q] >= 0:
+                    visits.append((k, q, REACHED, parent))
+                    reached.add(int(leaf[q]))
+                    who.add(k)
+                else:
+                    visits.append((k, q, MET, parent))
+                    stack += [(int(skip[q + 1]), row), (q + 1, row)]
     return MeshSearch(np.flatnonzero(met), np.flatnonzero(visited & ~met), len(visits),
                       np.array(sorted(reached), dtype=np.int64), np.array(sorted(who), dtype=np.int64),
                       np.array(visits, dtype=np.int64).reshape(-1, 4))
+
+
+def node_mesh(group, nodes: np.ndarray) -> np.ndarray:
+    """(K,) int64: the mesh whose tree holds each of ``nodes`` (positions in engine_tree's group)."""
+    return np.searchsorted(group[7], nodes, side="right") - 1
 
 
 def tree_layout(visits: np.ndarray) -> np.ndarray:

@@ -400,12 +400,11 @@ class RerunSink:
         found = mesh_view.search(group, meshes, lo, hi, end.time - end.dt, end.dt)
         found.spheres = hitters[found.spheres]
         found.visits[:, 0] = hitters[found.visits[:, 0]]
-        box_lo, box_hi = group[3], group[4]
         path = self.root + "world/mesh_search"
         for part, which, color in (("met", found.met, [60, 220, 90]), ("culled", found.culled, [230, 70, 60])):
+            centers, half_sizes, quaternions = _posed_nodes(group, meshes, which, end.time)
             rec.log(path + f"/{part}", rr.Boxes3D(
-                centers=(0.5 * (box_lo[which] + box_hi[which])).astype(np.float32),
-                half_sizes=(0.5 * (box_hi[which] - box_lo[which])).astype(np.float32),
+                centers=centers, half_sizes=half_sizes, quaternions=quaternions,
                 colors=[color], radii=[-1.5 if part == "met" else -0.75], fill_mode="majorwireframe"))
         corners = meshes.placed(end.time)[0][found.triangles].reshape(-1, 3).astype(np.float32)
         rec.log(path + "/triangles", rr.Mesh3D(
@@ -413,8 +412,8 @@ class RerunSink:
             albedo_factor=[250, 210, 40, 220]))
         self._search_graph(found, group[5])
         who = ", ".join(str(int(i)) for i in hitters)
-        return [(f"step {end.step}: the first contact on a mesh; the search of the triangles' BVH (its boxes "
-                 f"swept over the step) by the boxes of the sphere{'s' if len(hitters) != 1 else ''} that hit a mesh "
+        return [(f"step {end.step}: the first contact on a mesh; the search of each mesh's BVH (in its own frame) "
+                 f"by the boxes of the sphere{'s' if len(hitters) != 1 else ''} that hit a mesh "
                  f"({who}): {found.pairs} sphere-node pairs visited, {len(found.met)} nodes met (green), "
                  f"{len(found.culled)} culled (red), {len(found.triangles)} triangles reached (yellow)", "INFO")]
 
@@ -533,6 +532,24 @@ class RerunSink:
         if self.path is not None and not rrd_is_whole(self.path):
             # rerun's file writer reports a failed write (a full disk) only in its own log
             raise OSError(f"the Rerun file {self.path} ends before its footer: a write failed (is the disk full?)")
+
+
+def _posed_nodes(group, meshes, nodes: np.ndarray, time: float):
+    """World centres (K, 3), half sizes (K, 3) and rotations (K, 4 quaternions, x y z w) of
+    ``nodes`` of the engine's trees (mesh_view.engine_tree), each box in its mesh's frame
+    posed where the mesh is at run time ``time`` (a fixed mesh's frame is the world)."""
+    from scipy.spatial.transform import Rotation
+
+    lo, hi = group[3][nodes], group[4][nodes]
+    centers, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    quaternions = np.tile([0.0, 0.0, 0.0, 1.0], (len(nodes), 1))
+    owner = mesh_view.node_mesh(group, nodes)
+    for k in np.unique(owner[meshes.moving[owner]]) if len(nodes) else []:
+        rows = owner == k
+        turn, shift = meshes.transform(int(k), time)
+        centers[rows] = centers[rows] @ turn.T + shift
+        quaternions[rows] = Rotation.from_matrix(turn).as_quat()
+    return centers.astype(np.float32), half.astype(np.float32), quaternions.astype(np.float32)
 
 
 FLUSH_SECONDS = 600.0  # the most closing a Rerun file may wait for its writer, growing or not

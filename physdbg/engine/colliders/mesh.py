@@ -9,17 +9,20 @@ about sphere i against triangle t, each function reached through the switch in
 own path), its contact normal and gap (from the closest point, so the normal turns as a
 sphere rolls over an edge), which triangles a sphere's box reaches, and the deepest overlap.
 
-Which triangles a box reaches is asked of a BVH over every triangle's box (world frame,
-built once), walked without a stack in pre-order with skip links (``preorder``, ``skip``),
-so that the contact loop, which allocates nothing, can ask it. What a triangle reads is
-this kind's group, ``MeshGeometry``, unpacked by ``_unpack`` alone.
+Which triangles a box reaches is asked of each mesh's own BVH (SAH, built once over its
+triangles' boxes in the frame the mesh has at run time 0: the tree the views draw,
+``record/mesh_view.mesh_trees``), walked without a stack in pre-order with skip links
+(``preorder``, ``skip``), so that the contact loop, which allocates nothing, can ask it.
+What a triangle reads is this kind's group, ``MeshGeometry``, unpacked by ``_unpack``
+alone.
 
 A kinematic mesh (state.Meshes: a prescribed velocity and angular velocity about a pivot)
 is placed by the world at each step's start (``place``: its corners then, its pivot then,
-and each triangle's box swept over the step, refitted up the same tree): its triangles'
-tests run in the mesh's own frame (toi.moving_triangle_toi_swept), its contact normal is
-turned with it, and its surface velocity at the contact point enters the impulse
-(``surface``). A moving triangle never holds a sphere: every contact with it is the seed's
+and the frame change from the world to its run-time-0 frame). Its tree is never refitted:
+a box asked of it is carried into its frame instead (``frame_box``: grown by the most the
+mesh's motion over the step moves a point relative to it). Its triangles' tests run in the
+mesh's own frame (toi.moving_triangle_toi_swept), its contact normal is turned with it,
+and its surface velocity at the contact point enters the impulse (``surface``). A moving triangle never holds a sphere: every contact with it is the seed's
 impulse alone (a resting contact on a moving mesh is not modelled).
 """
 
@@ -41,11 +44,17 @@ from ..toi import (DISCRETE, SWEPT, in_body_frame, moving_triangle_toi_sampled, 
 class MeshGeometry(NamedTuple):
     """This kind's group of the geometry (colliders.geometry_of): corners (T, 3, 3) m (world
     frame, a triangle's corners as rows), mesh_of (T,) int64, restitution (M,) per mesh, and
-    the triangles' BVH in pre-order: box_lo, box_hi (Q, 3) m, leaf_triangle (Q,) int64 (-1
-    inside the tree), skip (Q,) int64 (the position after a node's subtree); motion (M, 9)
-    per mesh: its pivot at the step's start (m), velocity (m/s), angular velocity (rad/s);
-    moving (M,) bool. A kinematic mesh's corners, pivot and boxes are rewritten in place
-    at each step's start (``place``); a fixed mesh's never change."""
+    every mesh's BVH in pre-order, one after another, each in the mesh's run-time-0 frame:
+    box_lo, box_hi (Q, 3) m, leaf_triangle (Q,) int64 (the scene's triangle number; -1
+    inside a tree), skip (Q,) int64 (the position after a node's subtree), tree_first
+    (M + 1,) int64 (where each mesh's tree starts; it ends at the next one's start);
+    motion (M, 9) per mesh: its pivot at the step's start (m), velocity (m/s), angular
+    velocity (rad/s); moving (M,) bool; frame (M, 22) per mesh for the step: the mesh's
+    turn since run time 0 transposed, Rᵀ, at the step's start and at its end (row-major,
+    9 + 9), its pivot at run time 0 P₀ (3) and the step's length (s): a world point x at
+    run time t is Rᵀ(t)·(x - P(t)) + P₀ in the mesh's run-time-0 frame. A kinematic mesh's corners,
+    pivot and frame are rewritten in place at each step's start (``place``); its tree and a
+    fixed mesh's whole group never change."""
 
     corners: np.ndarray
     mesh_of: np.ndarray
@@ -54,79 +63,109 @@ class MeshGeometry(NamedTuple):
     box_hi: np.ndarray
     leaf_triangle: np.ndarray
     skip: np.ndarray
+    tree_first: np.ndarray
     motion: np.ndarray
     moving: np.ndarray
+    frame: np.ndarray
 
     @classmethod
     def of(cls, walls) -> MeshGeometry:
         """The group of a scene's meshes (state.Walls.meshes, a state.Meshes) at run time 0."""
         meshes = walls.meshes
         corners = np.ascontiguousarray(meshes.corners, dtype=np.float64).reshape(-1, 3, 3)
-        lo = np.ascontiguousarray(corners.min(axis=1)) if len(corners) else np.zeros((0, 3))
-        hi = np.ascontiguousarray(corners.max(axis=1)) if len(corners) else np.zeros((0, 3))
-        box_lo, box_hi, leaf, skip = preorder(lo, hi)
+        trees = [preorder(*triangle_boxes(corners[meshes.mesh_of == k])) for k in range(len(meshes))]
+        sizes = [len(tree[2]) for tree in trees]
+        tree_first = np.concatenate([[0], np.cumsum(sizes, dtype=np.int64)]).astype(np.int64)
+        first = meshes.first
+        box_lo = np.concatenate([t[0] for t in trees]) if trees else np.zeros((0, 3))
+        box_hi = np.concatenate([t[1] for t in trees]) if trees else np.zeros((0, 3))
+        # each tree's triangles and skip positions, numbered in the scene
+        leaf = np.concatenate([np.where(t[2] >= 0, t[2] + first[k], -1) for k, t in enumerate(trees)]) if trees \
+            else np.zeros(0, dtype=np.int64)
+        skip = np.concatenate([t[3] + tree_first[k] for k, t in enumerate(trees)]) if trees \
+            else np.zeros(0, dtype=np.int64)
         motion = np.ascontiguousarray(np.hstack([meshes.pivot, meshes.velocity, meshes.angular_velocity])
                                       if len(meshes) else np.zeros((0, 9)))
+        frame = np.zeros((len(meshes), 22))
+        frame[:, [0, 4, 8, 9, 13, 17]] = 1.0  # at run time 0 the world is every mesh's frame
+        frame[:, 18:21] = meshes.pivot
         return cls(corners.copy(), np.ascontiguousarray(meshes.mesh_of, dtype=np.int64),
-                   np.ascontiguousarray(meshes.restitution, dtype=np.float64), box_lo, box_hi, leaf, skip,
-                   motion, np.ascontiguousarray(meshes.moving, dtype=np.bool_))
+                   np.ascontiguousarray(meshes.restitution, dtype=np.float64), np.ascontiguousarray(box_lo),
+                   np.ascontiguousarray(box_hi), np.ascontiguousarray(leaf, dtype=np.int64),
+                   np.ascontiguousarray(skip, dtype=np.int64), tree_first, motion,
+                   np.ascontiguousarray(meshes.moving, dtype=np.bool_), frame)
 
 
 def place(group: tuple, meshes, time: float, span: float) -> int:
     """Put the kinematic meshes of ``group`` (a MeshGeometry as a tuple, rewritten in place)
-    where they are at run time ``time`` s: corners and pivots (state.Meshes.placed), and
-    each triangle's box swept over the next ``span`` s (its corners then and at the span's
-    end, grown by the most a turning corner leaves the chord between them), refitted up
-    the tree. Returns how many tree nodes were refitted (0 when no mesh moves)."""
+    where they are at run time ``time`` s for a step of ``span`` s: corners and pivots
+    (state.Meshes.placed) and each one's frame change (MeshGeometry.frame). Returns how
+    many meshes were placed (0 when none moves); no tree is refitted."""
     moving = meshes.moving
     if not moving.any():
         return 0
-    corners, _mesh_of, _restitution, box_lo, box_hi, leaf, skip, motion, _moving = group
+    corners, motion, frame = group[0], group[8], group[10]
     now, pivots = meshes.placed(time)
     corners[...] = now
     motion[:, 0:3] = pivots
-    later = meshes.placed(time + span)[0] if span > 0 else now
-    lo = np.minimum(now.min(axis=1), later.min(axis=1))
-    hi = np.maximum(now.max(axis=1), later.max(axis=1))
-    # a corner at distance ρ from the turning axis sweeps an arc of angle θ = |ω|·span; the
-    # arc leaves its chord by at most ρ(1 - cos(θ/2)) (θ <= π), by ρ past a half turn
-    spin = np.linalg.norm(meshes.angular_velocity, axis=1)
-    angle = spin * span
-    rho = np.zeros(len(meshes))
-    for k in np.nonzero(moving & (spin > 0))[0]:
-        rho[k] = float(np.linalg.norm(now[meshes.mesh_of == k] - pivots[k], axis=2).max())
-    grow = np.where(angle >= np.pi, rho, rho * (1.0 - np.cos(0.5 * np.minimum(angle, np.pi))))
-    grow = grow[meshes.mesh_of][:, None]
-    return int(_refit(box_lo, box_hi, leaf, skip, np.ascontiguousarray(lo - grow), np.ascontiguousarray(hi + grow)))
+    start, end = meshes.rotations(time), meshes.rotations(time + span)
+    for k in np.nonzero(moving)[0]:
+        frame[k, 0:9] = start[k].T.reshape(9)
+        frame[k, 9:18] = end[k].T.reshape(9)
+    frame[:, 21] = span
+    return int(np.count_nonzero(moving))
 
 
-@kernel
-def _refit(box_lo, box_hi, leaf, skip, lo, hi) -> int:
-    """Refit the pre-order tree's boxes bottom-up to the triangles' boxes lo, hi (T, 3): a
-    leaf takes its triangle's, an inner node the union of its children (q + 1 and the
-    node after that child's subtree). Returns the nodes refitted."""
-    n = box_lo.shape[0]
-    for q in range(n - 1, -1, -1):
-        t = leaf[q]
-        if t >= 0:
-            for c in range(3):
-                box_lo[q, c] = lo[t, c]
-                box_hi[q, c] = hi[t, c]
-        else:
-            left = q + 1
-            right = skip[left]
-            for c in range(3):
-                box_lo[q, c] = min(box_lo[left, c], box_lo[right, c])
-                box_hi[q, c] = max(box_hi[left, c], box_hi[right, c])
-    return n
+@njit(cache=True, inline="always")
+def frame_box(k, l0, l1, l2, h0, h1, h2, meshes):
+    """The box (lo0, lo1, lo2, hi0, hi1, hi2) that holds, in mesh k's run-time-0 frame
+    (its tree's), every point of the world box (l0, l1, l2)–(h0, h1, h2) as the mesh moves
+    through the step: the box itself for a fixed mesh. For a moving one, a point x is at
+    Rᵀ(t)(x - P(t)) + P₀ = Rᵀ(t)(x - P_s) + P₀ - Rᵀ(t)·v·(t - s) (P_s: the pivot at the
+    step's start s): the first part runs on an arc about the turning axis, inside the box
+    of its two ends grown by the arc's sagitta ρ(1 - cos(θ/2)) (2ρ past a half turn), and
+    the second is at most |v|·span long. The box's centre is carried so, and the box grown
+    by its half diagonal too."""
+    moving, motion = meshes[9][k], meshes[8][k]
+    if not moving:
+        return l0, l1, l2, h0, h1, h2
+    f = meshes[10][k]
+    z0 = 0.5 * (l0 + h0) - motion[0]
+    z1 = 0.5 * (l1 + h1) - motion[1]
+    z2 = 0.5 * (l2 + h2) - motion[2]
+    e0 = 0.5 * (h0 - l0)
+    e1 = 0.5 * (h1 - l1)
+    e2 = 0.5 * (h2 - l2)
+    span = f[21]
+    rho = math.sqrt(z0 * z0 + z1 * z1 + z2 * z2)
+    angle = math.sqrt(motion[6] * motion[6] + motion[7] * motion[7] + motion[8] * motion[8]) * span
+    sagitta = rho * (1.0 - math.cos(0.5 * angle)) if angle < math.pi else 2.0 * rho
+    grow = (math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) + sagitta
+            + math.sqrt(motion[3] * motion[3] + motion[4] * motion[4] + motion[5] * motion[5]) * span)
+    a0 = f[0] * z0 + f[1] * z1 + f[2] * z2
+    a1 = f[3] * z0 + f[4] * z1 + f[5] * z2
+    a2 = f[6] * z0 + f[7] * z1 + f[8] * z2
+    b0 = f[9] * z0 + f[10] * z1 + f[11] * z2
+    b1 = f[12] * z0 + f[13] * z1 + f[14] * z2
+    b2 = f[15] * z0 + f[16] * z1 + f[17] * z2
+    return (min(a0, b0) + f[18] - grow, min(a1, b1) + f[19] - grow, min(a2, b2) + f[20] - grow,
+            max(a0, b0) + f[18] + grow, max(a1, b1) + f[19] + grow, max(a2, b2) + f[20] + grow)
 
 
 GEOMETRY = MeshGeometry  # this kind's group (colliders.geometry_of)
 
 
+def triangle_boxes(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each triangle's box (lo, hi (T, 3)) from its corners (T, 3, 3)."""
+    if len(corners) == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    return np.ascontiguousarray(corners.min(axis=1)), np.ascontiguousarray(corners.max(axis=1))
+
+
 def preorder(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """A BVH (SAH) over boxes lo, hi (T, 3) laid out in pre-order: (box_lo, box_hi (Q, 3),
-    leaf_triangle (Q,) (-1 inside), skip (Q,): where the walk goes when a node's box is missed)."""
+    """A BVH (SAH, the scene BVH's builder, as engine.mesh.tree builds a mesh's) over boxes
+    lo, hi (T, 3) laid out in pre-order: (box_lo, box_hi (Q, 3), leaf_triangle (Q,) (the
+    box's number; -1 inside), skip (Q,): where the walk goes when a node's box is missed)."""
     if lo.shape[0] == 0:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     tree = build(lo, hi, "sah", 1)
@@ -153,15 +192,15 @@ def preorder(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
 
 @njit(cache=True, inline="always")
 def _unpack(meshes):
-    """The group's first seven fields (MeshGeometry's order; _motion_of reads the rest)."""
-    return meshes[0], meshes[1], meshes[2], meshes[3], meshes[4], meshes[5], meshes[6]
+    """The group's first eight fields (MeshGeometry's order; _motion_of and frame_box read the rest)."""
+    return meshes[0], meshes[1], meshes[2], meshes[3], meshes[4], meshes[5], meshes[6], meshes[7]
 
 
 @njit(cache=True, inline="always")
 def _motion_of(t, meshes):
     """(moving, motion (9,)) of triangle t's mesh."""
     k = meshes[1][t]
-    return meshes[8][k], meshes[7][k]
+    return meshes[9][k], meshes[8][k]
 
 
 @njit(cache=True, inline="always")
@@ -316,9 +355,9 @@ def gap(x, radius, i, t, meshes):
 
 
 @njit(cache=True, inline="always")
-def _box_meets(lo, hi, p, box_lo, box_hi, q) -> bool:
-    return (lo[p, 0] <= box_hi[q, 0] and box_lo[q, 0] <= hi[p, 0] and lo[p, 1] <= box_hi[q, 1]
-            and box_lo[q, 1] <= hi[p, 1] and lo[p, 2] <= box_hi[q, 2] and box_lo[q, 2] <= hi[p, 2])
+def _box_meets(l0, l1, l2, h0, h1, h2, box_lo, box_hi, q) -> bool:
+    return (l0 <= box_hi[q, 0] and box_lo[q, 0] <= h0 and l1 <= box_hi[q, 1] and box_lo[q, 1] <= h1
+            and l2 <= box_hi[q, 2] and box_lo[q, 2] <= h2)
 
 
 @borrowing
@@ -348,22 +387,26 @@ def _sort_triangles(out, m):
 def partners_of(p, path_lo, path_hi, meshes, out) -> int:
     """The triangles (rows (p, t) of out (K, 2)) sphere p's new path must be tested against,
     in the order of their numbers; returns how many: those whose boxes the box of that path
-    (row p of path_lo, path_hi) meets, found by the stackless walk. In number order because
+    (row p of path_lo, path_hi) meets, found by the stackless walk of each mesh's tree with
+    that box carried into the mesh's frame (``frame_box``). In number order because
     a sphere meets the triangles that share an edge or a corner at one instant, and a tie
     in the contact loop goes to the test made first: the triangle with the lower number,
     however the tree is laid out (as in the reference loop)."""
-    _corners, _mesh_of, _restitution, box_lo, box_hi, leaf, skip = _unpack(meshes)
+    _corners, _mesh_of, _restitution, box_lo, box_hi, leaf, skip, tree_first = _unpack(meshes)
     m = 0
-    q = 0
-    while q < box_lo.shape[0]:
-        if _box_meets(path_lo, path_hi, p, box_lo, box_hi, q):
-            if leaf[q] >= 0:
-                out[m, 0] = p
-                out[m, 1] = leaf[q]
-                m += 1
-            q += 1
-        else:
-            q = skip[q]
+    for k in range(tree_first.shape[0] - 1):
+        l0, l1, l2, h0, h1, h2 = frame_box(k, path_lo[p, 0], path_lo[p, 1], path_lo[p, 2], path_hi[p, 0],
+                                           path_hi[p, 1], path_hi[p, 2], meshes)
+        q = tree_first[k]
+        while q < tree_first[k + 1]:
+            if _box_meets(l0, l1, l2, h0, h1, h2, box_lo, box_hi, q):
+                if leaf[q] >= 0:
+                    out[m, 0] = p
+                    out[m, 1] = leaf[q]
+                    m += 1
+                q += 1
+            else:
+                q = skip[q]
     _sort_triangles(out, m)
     return m
 
@@ -408,24 +451,27 @@ def deepest(x, radius, meshes, ignore_tunnelled):
 def deepest_where(x, radius, meshes, ignore_tunnelled):
     """(depth m >= 0, sphere, triangle) of the deepest overlap of a sphere with a
     triangle ((0, -1, -1) when none); ignore_tunnelled as in ``deepest``."""
-    corners, _mesh_of, _restitution, box_lo, box_hi, leaf, skip = _unpack(meshes)
+    corners, _mesh_of, _restitution, box_lo, box_hi, leaf, skip, tree_first = _unpack(meshes)
     worst = 0.0
     who = -1
     which = -1
     for i in range(x.shape[0]):
         r = radius[i]
-        q = 0
-        while q < box_lo.shape[0]:
-            if (x[i, 0] - r <= box_hi[q, 0] and box_lo[q, 0] <= x[i, 0] + r and x[i, 1] - r <= box_hi[q, 1]
-                    and box_lo[q, 1] <= x[i, 1] + r and x[i, 2] - r <= box_hi[q, 2] and box_lo[q, 2] <= x[i, 2] + r):
-                t = leaf[q]
-                if t >= 0:
-                    pen = r - _away(x, i, corners, t)[3]
-                    if not (ignore_tunnelled and pen >= r) and pen > worst:
-                        worst = pen
-                        who = i
-                        which = t
-                q += 1
-            else:
-                q = skip[q]
+        for k in range(tree_first.shape[0] - 1):
+            l0, l1, l2, h0, h1, h2 = frame_box(k, x[i, 0] - r, x[i, 1] - r, x[i, 2] - r, x[i, 0] + r, x[i, 1] + r,
+                                               x[i, 2] + r, meshes)
+            q = tree_first[k]
+            while q < tree_first[k + 1]:
+                if _box_meets(l0, l1, l2, h0, h1, h2, box_lo, box_hi, q):
+                    t = leaf[q]
+                    if t >= 0:
+                        pen = r - _away(x, i, corners, t)[3]
+                        if not (ignore_tunnelled and pen >= r) and pen > worst:
+                            worst = pen
+                            who = i
+                            which = t
+                    q += 1
+                else:
+                    q = skip[q]
     return worst, who, which
+
