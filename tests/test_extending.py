@@ -150,3 +150,25 @@ def test_a_new_kind_in_the_table_is_handled_by_every_reader(contact_of_kind_3, t
     # the diff sees the contacts differ and names the new partner by its row
     done = runner.invoke(app, ["diff", str(recorded), str(changed)])
     assert done.exit_code == 1 and "dummy #0" in done.output, done.output
+
+
+def test_a_kind_with_no_branch_in_the_switch_is_refused_at_its_first_use_never_run_as_another():
+    """Every function of the collider switch names each kind it handles; a fourth kind (in
+    the table, say, but not yet in the switch) raises UNKNOWN_KIND instead of running the
+    mesh's code, as the last branch of each function once did."""
+    from physdbg.engine.colliders import UNKNOWN_KIND
+    from physdbg.engine.state import Walls
+
+    geometry = colliders.geometry_of(Walls())
+    x = np.zeros((2, 3))
+    sigma = np.zeros(2)
+    calls = [lambda kind: colliders.contact_normal(kind, x, sigma, 0, 1, geometry),
+             lambda kind: colliders.contact_feature(kind, x, sigma, 0, 1, geometry),
+             lambda kind: colliders.partner_restitution(kind, 1, np.ones(2), geometry),
+             lambda kind: colliders.narrow_candidates(kind, np.zeros((0, 2), dtype=np.int64), x, x, geometry),
+             lambda kind: colliders.every_candidate(kind, 2, geometry)]
+    for call in calls:
+        call(events.KIND_PAIR)  # a kind it knows
+        with pytest.raises(ValueError, match="a collider kind with no branch in this function of the switch"):
+            call(3)
+    assert "docs/engine.md" in UNKNOWN_KIND

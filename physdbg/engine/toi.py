@@ -386,22 +386,6 @@ def in_body_frame(p0, p1, p2, e0, e1, e2, motion, tau):
 
 
 @borrowing
-def to_world(y0, y1, y2, motion, tau):
-    """The world point (3 floats) at time ``tau`` of a point y fixed in a moving mesh's
-    frame at the step's start (the inverse of in_body_frame's position)."""
-    z0 = y0 - motion[0]
-    z1 = y1 - motion[1]
-    z2 = y2 - motion[2]
-    w0, w1, w2 = motion[6], motion[7], motion[8]
-    speed = _norm(w0, w1, w2)
-    if speed != 0.0:
-        z0, z1, z2 = turned(z0, z1, z2, w0 / speed, w1 / speed, w2 / speed, math.cos(speed * tau),
-                             math.sin(speed * tau))
-    return (z0 + motion[0] + motion[3] * tau, z1 + motion[1] + motion[4] * tau,
-            z2 + motion[2] + motion[5] * tau)
-
-
-@borrowing
 def surface_velocity(q0, q1, q2, motion, tau):
     """(u0, u1, u2) m/s: the velocity at time ``tau`` of the moving mesh's surface point at
     world point q: v_m + ω × (q - pivot(τ))."""

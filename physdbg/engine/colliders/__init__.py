@@ -16,7 +16,8 @@ each built and unpacked by its own module and handed down whole to every kernel 
 reaches a kind. Adding a kind is one module beside sphere.py, plane.py and mesh.py (its
 functions and its group), its row
 in the table (events.KIND_NAMES, PARTNER_IS_SPHERE), its module in KIND_MODULES, and one
-branch in each function of the switch (docs/engine.md, "Adding an integrator or a collider kind").
+branch in each function of the switch (docs/engine.md, "Adding an integrator or a collider kind"):
+every function names each kind it handles and raises UNKNOWN_KIND for any other.
 """
 
 from __future__ import annotations
@@ -35,6 +36,10 @@ __all__ = ["KIND_NAMES", "KINDS", "KIND_MODULES", "PARTNER_IS_SPHERE", "partner_
 
 # each kind's module, in the order of the kinds' codes: its geometry group is ``module.GEOMETRY``
 KIND_MODULES = (sphere, plane, mesh)
+# what every function of the switch raises for a kind it has no branch for (a kind added to
+# the table but not to the switch fails at its first use, never runs another kind's code)
+UNKNOWN_KIND = ("engine/colliders: a collider kind with no branch in this function of the switch (docs/engine.md, "
+                "\"Adding an integrator or a collider kind\")")
 
 
 def check_kind_modules(names=KIND_NAMES, modules=KIND_MODULES) -> None:
@@ -71,8 +76,10 @@ def time_of_impact(kind, ia, other, x, v, a, radius, sigma, step_end, integrator
     if kind == KIND_WALL:
         return plane.time_of_impact(ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
                                     geometry[KIND_WALL])
-    return mesh.time_of_impact(ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
-                               tolerance, geometry[KIND_MESH])
+    if kind == KIND_MESH:
+        return mesh.time_of_impact(ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples,
+                                   tolerance, geometry[KIND_MESH])
+    raise ValueError(UNKNOWN_KIND)
 
 
 @njit(cache=True, inline="always")
@@ -83,16 +90,20 @@ def contact_normal(kind, x, sigma, ia, other, geometry):
         return sphere.normal(x, ia, other, geometry[KIND_PAIR])
     if kind == KIND_WALL:
         return plane.normal(x, ia, other, geometry[KIND_WALL])
-    return mesh.normal(x, sigma, ia, other, geometry[KIND_MESH])
+    if kind == KIND_MESH:
+        return mesh.normal(x, sigma, ia, other, geometry[KIND_MESH])
+    raise ValueError(UNKNOWN_KIND)
 
 
 @njit(cache=True, inline="always")
 def contact_feature(kind, x, sigma, ia, other, geometry) -> int:
     """Where sphere ia touches the partner, for the contact's row: 1 + the feature of a
     mesh's triangle (events.FEATURE_NAMES: face, edge, corner), 0 for other kinds."""
+    if kind == KIND_PAIR or kind == KIND_WALL:
+        return 0
     if kind == KIND_MESH:
         return 1 + mesh.feature(x, sigma, ia, other, geometry[KIND_MESH])
-    return 0
+    raise ValueError(UNKNOWN_KIND)
 
 
 @njit(cache=True, inline="always")
@@ -100,9 +111,11 @@ def partner_surface(kind, x, sigma, radius, ia, other, n0, n1, n2, geometry):
     """(u0, u1, u2, moving): the velocity (m/s) of an immovable partner's surface where
     sphere ia touches it along the normal n (a kinematic mesh's); (0, 0, 0, False) for a
     partner that stands still (and for a sphere, whose velocity the resolver reads itself)."""
+    if kind == KIND_PAIR or kind == KIND_WALL:
+        return 0.0, 0.0, 0.0, False
     if kind == KIND_MESH:
         return mesh.surface(x, sigma, radius, ia, other, n0, n1, n2, geometry[KIND_MESH])
-    return 0.0, 0.0, 0.0, False
+    raise ValueError(UNKNOWN_KIND)
 
 
 @borrowing
@@ -113,7 +126,9 @@ def contact_gap(kind, x, v, a, radius, ia, other, geometry):
         return sphere.gap(x, radius, ia, other, geometry[KIND_PAIR])
     if kind == KIND_WALL:
         return plane.gap(x, v, a, radius, ia, other, geometry[KIND_WALL])
-    return mesh.gap(x, radius, ia, other, geometry[KIND_MESH])
+    if kind == KIND_MESH:
+        return mesh.gap(x, radius, ia, other, geometry[KIND_MESH])
+    raise ValueError(UNKNOWN_KIND)
 
 
 @njit(cache=True, inline="always")
@@ -123,7 +138,9 @@ def partner_restitution(kind, other, restitution, geometry):
         return restitution[other]
     if kind == KIND_WALL:
         return plane.restitution(other, geometry[KIND_WALL])
-    return mesh.restitution(other, geometry[KIND_MESH])
+    if kind == KIND_MESH:
+        return mesh.restitution(other, geometry[KIND_MESH])
+    raise ValueError(UNKNOWN_KIND)
 
 
 @njit(cache=True, inline="always")
@@ -138,7 +155,9 @@ def partners_of(kind, p, box, adj_start, adj, path_lo, path_hi, batch_mark, batc
                                   out)
     if kind == KIND_WALL:
         return plane.partners_of(p, path_lo, path_hi, geometry[KIND_WALL], out)
-    return mesh.partners_of(p, path_lo, path_hi, geometry[KIND_MESH], out)
+    if kind == KIND_MESH:
+        return mesh.partners_of(p, path_lo, path_hi, geometry[KIND_MESH], out)
+    raise ValueError(UNKNOWN_KIND)
 
 
 @njit(cache=True, inline="always")
@@ -173,7 +192,9 @@ def narrow_candidates(kind: int, pairs: np.ndarray, lo: np.ndarray, hi: np.ndarr
         return sphere.candidates(pairs, lo, hi, geometry[KIND_PAIR])
     if kind == KIND_WALL:
         return plane.reachable(lo, hi, geometry[KIND_WALL])
-    return mesh.reachable(lo, hi, geometry[KIND_MESH])
+    if kind == KIND_MESH:
+        return mesh.reachable(lo, hi, geometry[KIND_MESH])
+    raise ValueError(f"{UNKNOWN_KIND}: {kind}")
 
 
 def every_candidate(kind: int, count: int, geometry: tuple) -> tuple[np.ndarray, np.ndarray]:
@@ -182,6 +203,11 @@ def every_candidate(kind: int, count: int, geometry: tuple) -> tuple[np.ndarray,
     if kind == KIND_PAIR:
         a, other = np.triu_indices(count, 1)
         return a.astype(np.int64), other.astype(np.int64)
-    partners = plane.count(geometry[KIND_WALL]) if kind == KIND_WALL else mesh.count(geometry[KIND_MESH])
+    if kind == KIND_WALL:
+        partners = plane.count(geometry[KIND_WALL])
+    elif kind == KIND_MESH:
+        partners = mesh.count(geometry[KIND_MESH])
+    else:
+        raise ValueError(f"{UNKNOWN_KIND}: {kind}")
     return (np.repeat(np.arange(count, dtype=np.int64), partners),
             np.tile(np.arange(partners, dtype=np.int64), count))
