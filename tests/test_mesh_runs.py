@@ -485,3 +485,17 @@ def test_a_contact_with_a_mesh_records_the_face_edge_or_corner_it_touched(tmp_pa
     assert feature_words(int(first.feature[0])).startswith(part)
     line = describe_contacts(1, first, 0.01, loaded.walls.partner_names())[0][0]
     assert f"hit mesh 'plate' triangle {int(first.other[0])} ({feature_words(int(first.feature[0]))})" in line
+
+
+def test_a_moving_mesh_s_surface_velocity_is_one_rule_in_the_loop_and_in_the_analysis():
+    """state.Meshes.surface_velocity (numpy: the audit's words) and toi.surface_velocity
+    (the compiled loop's impulse) give the same velocity, to rounding, at random points and times."""
+    from physdbg.engine.toi import surface_velocity
+
+    meshes = api.load_scene("paddle").walls.meshes
+    rng = np.random.default_rng(3)
+    motion = np.concatenate([meshes.pivot[0], [0.4, 0.0, -0.3], meshes.angular_velocity[0] + [0.5, 0.0, 0.2]])
+    meshes.velocity[0], meshes.angular_velocity[0] = motion[3:6], motion[6:9]
+    for point, time in zip(rng.normal(0, 1, (50, 3)), rng.uniform(0, 2, 50)):
+        compiled = np.array(surface_velocity(*point, motion, time))
+        assert np.allclose(meshes.surface_velocity(0, point, time), compiled, rtol=1e-14, atol=1e-14)

@@ -356,9 +356,7 @@ class Auditor:
                 mesh = int(meshes.mesh_of[c.other])
                 part = FEATURE_NAMES[c.feature] if c.feature >= 0 else "face"
                 if meshes.moving[mesh]:  # the mesh swept through the sphere, more than the other way round
-                    arm = np.asarray(c.where) - (meshes.pivot[mesh] + meshes.velocity[mesh] * end.time)
-                    surface = float(np.linalg.norm(meshes.velocity[mesh]
-                                                   + np.cross(meshes.angular_velocity[mesh], arm)))
+                    surface = float(np.linalg.norm(meshes.surface_velocity(mesh, c.where, end.time)))
                     message = (f"{partner} ({meshes.motion_words(mesh)}) swept through sphere {c.a} with no contact "
                                f"(across its {part}; its surface there moved {surface * end.dt:.3g} m in the step "
                                f"at {surface:.3g} m/s, the sphere {speed:.3g} m/s; the sphere ended "

@@ -207,6 +207,13 @@ class Meshes:
             corners[rows] = (self.corners[rows] - self.pivot[k]) @ turn.T + pivots[k]
         return corners, pivots
 
+    def surface_velocity(self, k: int, point, time: float) -> np.ndarray:
+        """(3,) m/s: the velocity at run time ``time`` of mesh k's surface at world
+        ``point`` (3,): v + ω × (point - pivot(time)); toi.surface_velocity is the same rule
+        for the compiled loop (a test holds the two to each other)."""
+        arm = np.asarray(point, dtype=np.float64) - (self.pivot[k] + self.velocity[k] * time)
+        return self.velocity[k] + np.cross(self.angular_velocity[k], arm)
+
     def transform(self, k: int, time: float) -> tuple[np.ndarray, np.ndarray]:
         """(rotation (3, 3), translation (3,)) that carries mesh k's run-time-0 corners c
         to where they are at ``time``: R·c + translation (the views' per-step transform)."""
