@@ -655,7 +655,7 @@ def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls):
     overlap) and with every mesh triangle. Depth 0 when none."""
     from ..engine.broadphase.boxes import NO_LIMIT
     from ..engine.broadphase.grid import grid_pairs
-    from ..engine.colliders.plane import sides
+    from ..engine.colliders.plane import gaps
 
     r = radius
     best = (0.0, [], None, None)
@@ -670,9 +670,7 @@ def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls):
                 i, j = int(a[k]), int(b[k])
                 best = (float(pen[k]), [i, j], None, x[i] + (x[j] - x[i]) * (r[i] / (r[i] + r[j])))
     if len(walls.names) and finite.any():
-        h = x @ walls.normals.T - walls.offsets[None, :]
-        h = h * sides(h, walls.two_sided[None, :])  # on the side each centre is pushed back to
-        pen = 0.5 * walls.thickness[None, :] * walls.two_sided[None, :] + r[:, None] - h
+        pen = -gaps(x, r, walls)  # on the side each centre is pushed back to
         pen = np.where(walls.two_sided[None, :] & (pen > r[:, None]), 0.0, pen)  # went through: tunnelling
         pen = np.where(finite[:, None], pen, -np.inf)
         i, w = np.unravel_index(int(np.argmax(pen)), pen.shape)

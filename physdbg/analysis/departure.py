@@ -1012,12 +1012,9 @@ class _Comparison:
         the foreign run had it at that instant."""
         r = self.runs
         if c["kind"] == KIND_WALL:
-            from ..engine.colliders.plane import sides
+            from ..engine.colliders.plane import gaps
 
-            w = c["other"]
-            h = float(x @ self.walls.normals[w] - self.walls.offsets[w])
-            h *= float(sides(h, self.walls.two_sided[w]))  # on the side the centre is pushed back to
-            return h - 0.5 * float(self.walls.thickness[w]) * bool(self.walls.two_sided[w]) - float(self.radius[a])
+            return float(gaps(np.asarray(x, dtype=np.float64).reshape(1, 3), self.radius[a:a + 1], self.walls)[0, c["other"]])
         if c["kind"] == KIND_MESH:
             from ..engine.mesh.closest import closest_on_triangle
 

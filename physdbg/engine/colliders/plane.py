@@ -65,6 +65,16 @@ def sides(h: np.ndarray, two_sided: np.ndarray) -> np.ndarray:
     return np.where(np.asarray(two_sided, dtype=bool) & (np.asarray(h) < 0.0), -1.0, 1.0)
 
 
+def gaps(x: np.ndarray, radius: np.ndarray, walls) -> np.ndarray:
+    """(N, W) m: the gap between each sphere (centres x (N, 3), radius (N,)) and each wall
+    of ``walls`` (state.Walls), on the side its centre is on (< 0: overlap), as the
+    engine's wall_gap_terms measures it: for the readers of recordings (the audit,
+    check-run), so that the rule is written once."""
+    h = x @ walls.normals.T - walls.offsets[None, :]
+    two_sided = np.asarray(walls.two_sided, dtype=bool)[None, :]
+    return h * sides(h, two_sided) - 0.5 * walls.thickness[None, :] * two_sided - radius[:, None]
+
+
 @borrowing
 def wall_gap_terms(x, v, a, radius, i, normal, offset, half_thickness, two_sided):
     """(g0, p, q, side) of particle i's anchor against a wall n·x = d: the gap between the
