@@ -47,7 +47,8 @@ class PeerSetup:
     CG or Newton), iterations, speculative (MuJoCo 4's speculative contacts, its continuous
     collision), sleep (MuJoCo 4's sleeping islands), midphase (its BVH midphase, on by
     default). pybullet keeps its own defaults (its solver, its sleeping); ccd turns on its
-    continuous collision for the spheres (a swept sphere of 0.9 of each radius)."""
+    continuous collision for the spheres (a swept sphere of 0.9 of each radius), each
+    sphere then a rigid body (useMaximalCoordinates), the only kind Bullet's CCD acts on."""
 
     engine: str
     solver: str = "Newton"
@@ -245,8 +246,11 @@ class _Pybullet(PeerWorld):
         for x, v, inv, r, e in zip(st.positions, st.velocities, st.inverse_mass, st.radius, e_spheres, strict=True):
             if float(r) not in shapes:
                 shapes[float(r)] = pb.createCollisionShape(pb.GEOM_SPHERE, radius=float(r), physicsClientId=client)
+            # with CCD each sphere is a rigid body (maximal coordinates): Bullet's continuous
+            # collision acts on a btRigidBody only; createMultiBody's default, a btMultiBody,
+            # ignores ccdSweptSphereRadius (and clamps its speed to 100 m/s)
             body = pb.createMultiBody(1.0 / inv if inv > 0 else 0.0, shapes[float(r)], basePosition=x.tolist(),
-                                      physicsClientId=client)
+                                      useMaximalCoordinates=setup.ccd, physicsClientId=client)
             pb.resetBaseVelocity(body, v.tolist(), [0.0, 0.0, 0.0], physicsClientId=client)
             # linear damping multiplies v by (1 − damping)^dt each step: physdbg's drag d^t
             pb.changeDynamics(body, -1, restitution=float(e), lateralFriction=0.0, rollingFriction=0.0,
@@ -258,7 +262,8 @@ class _Pybullet(PeerWorld):
         version = pb.getAPIVersion(physicsClientId=client)
         self.notes = [f"pybullet (API {version}): one stepSimulation per step of {scene.dt:g} s, its default solver "
                       f"and sleeping; restitution {restitution_words}; friction off; linearDamping = 1 − drag, "
-                      f"angularDamping 0" + ("; continuous collision on (ccdSweptSphereRadius 0.9 r)" if setup.ccd
+                      f"angularDamping 0" + ("; continuous collision on (each sphere a rigid body, useMaximalCoordinates, "
+                                               "ccdSweptSphereRadius 0.9 r)" if setup.ccd
                                              else "") + ("; each mesh a static triangle mesh" if len(meshes) else "")]
 
     def step(self) -> None:
