@@ -7,12 +7,13 @@ are 0.2 m thick slabs of triangles; a step of 1/60 s carries a sphere 4.2 m, 21 
 thicknesses. Each engine steps the same initial state the same number of steps, one after
 another in this one run (these machines are noisy: compare the ratios): physdbg with the
 scene's settings (swept detection), pybullet with each wall a static triangle mesh and its
-continuous collision on (ccdSweptSphereRadius 0.9 r) and without it, MuJoCo with PGS and
+continuous collision on (each sphere a rigid body, ccdSweptSphereRadius 0.9 r) and without
+it (each sphere a multibody, pybullet's default), MuJoCo with PGS and
 10 iterations (its fastest honest setting in box_rain.py) and each wall as its mesh's convex
 hull (exact for a slab). All frictionless, set up by physdbg/peers.py. Prints ms/step and
 escapes (spheres whose centre got past a wall's outer face, |x| > 50.2 m on an axis, at the
-end of any step) and the fastest sphere at the end (pybullet moves none faster than 100 m/s:
-a clamp of its own, so its run is not the same physics) per engine.
+end of any step) and the fastest sphere at the end (a pybullet multibody moves no faster
+than 100 m/s: a clamp of its own, so that run is not the same physics) per engine.
 """
 
 from __future__ import annotations
