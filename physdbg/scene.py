@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from .limits import MAX_INTEGER, MAX_MAGNITUDE, MIN_SCALE  # the range of every number (limits.py)
+from .limits import MAX_INTEGER, MAX_MAGNITUDE, MIN_AREA, MIN_SCALE  # the range of every number (limits.py)
 from .engine import (
     BROAD_PHASE_NAMES,
     BUDGETS,
@@ -595,7 +595,7 @@ def _check_scaled_mesh(c: _Checker, p: str, mesh, scaled: np.ndarray, scale) -> 
         first = int(np.argmax(flattened))
         c.fail(p + "scale", f"got {np.asarray(scale).tolist()}: it makes {int(flattened.sum()):,} of the mesh's "
                             f"triangles degenerate (the first is triangle {first} of {mesh.source}), too thin or "
-                            f"smaller than {MIN_SCALE * MIN_SCALE:g} m² for a normal; scale each axis so that the "
+                            f"smaller than {MIN_AREA:g} m² for a normal; scale each axis so that the "
                             f"triangles keep their shape")
 
 

@@ -268,8 +268,8 @@ class World:
         return ctx
 
     def _place_meshes(self, time: float, span: float) -> None:
-        """Kinematic meshes where they are at run time ``time``, their triangles' boxes
-        swept over the next ``span`` s (colliders/mesh.place); nothing when none moves."""
+        """Kinematic meshes where they are at run time ``time``, and their frames for the
+        next ``span`` s (colliders/mesh.place); nothing when none moves."""
         if self._meshes_move:
             place(self._geometry[KIND_MESH], self.walls.meshes, time, span)
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import MeshError
+from ..errors import MeshError, os_error_words
 from ..limits import MAX_MAGNITUDE
 
 FORMATS = ("obj", "stl")
@@ -233,6 +233,4 @@ def read(path: Path, max_memory: float, bytes_per_triangle: float) -> MeshFile:
         budget = _Budget(path, max_memory, bytes_per_triangle)
         return _read_obj(path, budget) if kind == "obj" else _read_stl(path, budget)
     except OSError as err:  # a name the system refuses (too long), a folder without read access, ...
-        from ..errors import os_error_words
-
         raise MeshError(os_error_words(err) or f"{path}: cannot read it ({err})") from None

@@ -98,8 +98,8 @@ def search(group, meshes, lo: np.ndarray, hi: np.ndarray, time: float, dt: float
     visits = []
     for k in range(len(lo) if size else 0):
         for mesh in range(len(tree_first) - 1):
-            low = np.array(frame_box(mesh, *lo[k], *hi[k], group))
-            high, low = low[3:], low[:3]
+            carried = np.array(frame_box(mesh, *lo[k], *hi[k], group))  # lo then hi, in the mesh's frame
+            low, high = carried[:3], carried[3:]
             stack = [(int(tree_first[mesh]), -1)]
             while stack:
                 q, parent = stack.pop()
