@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import NonFiniteRunError, PhysdbgError, RecordingInterrupted
+from .errors import NonFiniteRunError, PhysdbgError, RecordingInterrupted, StuckRunError
 from .advisor import decide, mesh_sizes
 from .scene import Scene, read_scene
 
@@ -119,12 +119,15 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     scene's dt. on_step(done, total): called after each step (for progress bars).
     on_status(what): "compiling" before the kernels are compiled or loaded, "running"
     when the first step starts. Raises NonFiniteRunError (exit code 3) when a position or
-    velocity becomes NaN or infinite; the observer has seen every step up to that one.
+    velocity becomes NaN or infinite, StuckRunError (its base, exit code 3) when the world
+    cannot go on otherwise (a sphere pinned by a moving mesh: errors.PinnedSphere); the
+    observer has seen every step up to that one.
     audit: check every step as it runs (physdbg.analysis.audit); on_finding(finding):
     called with each finding as it is made.
     """
     scene = ready_scene(scene, overrides)
     from .engine import NonFiniteState, energies, state_hash
+    from .errors import WorldStuck
     from .events import RunTally
     from .interrupt import StopOnCtrlC
     from .observe import FanOut
@@ -162,6 +165,8 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
             except NonFiniteState as err:
                 raise NonFiniteRunError(f"{err}: the run stopped there (a NaN or infinity cannot be stepped on); "
                                         f"look at the contacts of that step") from None
+            except WorldStuck as err:
+                raise StuckRunError(f"{err}; the run stopped after that step") from None
             used.append(dt)
             tally.add(end)
             warnings.add(end.warnings)
@@ -322,7 +327,7 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
     mcap_sink = None
     interrupted = False
     failure: str | None = None  # why writing failed, if it did
-    non_finite: NonFiniteRunError | None = None
+    non_finite: StuckRunError | None = None
     try:
         if rrd_out is not None or spawn:  # first: if the viewer cannot start, no file is left behind
             from .record.rerun_sink import RerunSink
@@ -341,7 +346,7 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
                       on_finding=lambda finding: [mark(finding) for mark in markers])
     except KeyboardInterrupt:
         interrupted = True
-    except NonFiniteRunError as err:
+    except StuckRunError as err:
         non_finite = err
     except (OSError, RuntimeError) as err:
         failure = str(err)
@@ -366,7 +371,7 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
         outputs.publish()
         if failure is not None:
             raise PhysdbgError(f"writing the recording failed ({failure}); {kept}")
-        raise NonFiniteRunError(f"{non_finite}; {kept}")
+        raise type(non_finite)(f"{non_finite}; {kept}")
     outputs.publish()
     note = ""
     if mcap_sink.bvh_capped_steps:

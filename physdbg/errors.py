@@ -41,13 +41,34 @@ class RecordingIntegrityError(RecordingError):
     damaged summary, or more than one recording in one file. Names the file and the frame."""
 
 
-class NonFiniteRunError(PhysdbgError):
-    """A position or velocity became NaN or infinite while running: the run stopped there."""
+class StuckRunError(PhysdbgError):
+    """The world reached a state it cannot be stepped on from (WorldStuck): the run stopped
+    there, every step up to it reported."""
 
     exit_code = 3
 
 
-class NonFiniteState(FloatingPointError):
+class NonFiniteRunError(StuckRunError):
+    """A position or velocity became NaN or infinite while running: the run stopped there."""
+
+
+class WorldStuck(Exception):
+    """The engine's: a step ended in a state the world cannot be stepped on from. Raised
+    after the step is reported (its StepEnd carries the warning that says why)."""
+
+
+class PinnedSphere(WorldStuck):
+    """A sphere pinned between a prescribed motion and something immovable (a kinematic
+    mesh pressing it against a wall): no impulse can stop the motion, so the scene has no
+    next state. step: the step (numbered from 1) in which it was found; words: the
+    sentence that names the sphere and both partners."""
+
+    def __init__(self, step: int, words: str):
+        self.step, self.words = step, words
+        super().__init__(f"{words}, in step {step}: a prescribed motion cannot be stopped, so the run cannot go on")
+
+
+class NonFiniteState(WorldStuck, FloatingPointError):
     """A position or velocity became NaN or infinite in a step; the run cannot go on.
 
     step: the step (numbered from 1, as recordings and the CLI number it) at whose end it was

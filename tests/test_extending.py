@@ -165,6 +165,9 @@ def test_a_kind_with_no_branch_in_the_switch_is_refused_at_its_first_use_never_r
     calls = [lambda kind: colliders.contact_normal(kind, x, sigma, 0, 1, geometry),
              lambda kind: colliders.contact_feature(kind, x, sigma, 0, 1, geometry),
              lambda kind: colliders.partner_restitution(kind, 1, np.ones(2), geometry),
+             lambda kind: colliders.partner_normal_motion(kind, x, x, sigma, np.ones(2), 0, 1, 0.0, 1.0, 0.0,
+                                                          geometry),
+             lambda kind: colliders.partner_moves(kind, 1, geometry),
              lambda kind: colliders.narrow_candidates(kind, np.zeros((0, 2), dtype=np.int64), x, x, geometry),
              lambda kind: colliders.every_candidate(kind, 2, geometry)]
     for call in calls:

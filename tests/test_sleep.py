@@ -257,9 +257,11 @@ def test_the_compiled_rules_match_the_plain_ones_on_a_pile_falling_asleep_and_wa
     compiled = Sleepers.end_of_step
     seen = {"fell": 0, "woke": 0, "steps": 0}
 
-    def checked(self, dt, x, velocities, radius, pair_lists, rows):
+    def checked(self, dt, x, velocities, radius, pair_lists, rows, carried=None):
         twin, v = copy.deepcopy(self), velocities.copy()
-        fell, woke = compiled(self, dt, x, velocities, radius, pair_lists, rows)
+        fell, woke = compiled(self, dt, x, velocities, radius, pair_lists, rows, carried)
+        if carried is not None:  # a carried sphere may not sleep: the plain rules see it as not allowed
+            twin.allowed = twin.allowed & ~carried
         want = _reference_rules(twin, dt, x, v, radius, pair_lists, rows)
         assert fell.tolist() == want[0].tolist() and woke.tolist() == want[1].tolist()
         assert np.array_equal(self.asleep, twin.asleep) and np.array_equal(self.still, twin.still)

@@ -19,11 +19,15 @@ Checks (kind: what it means):
   bed that rattles like that is judged when its spheres are asleep: if every sphere of
   the step is asleep by the end of the run, sleeping ended it, and a note says so instead;
 * ``mesh-overlap``: two meshes, at least one of them kinematic, pass into each other (their
-  prescribed motions are a scene bug: :mod:`.mesh_overlap`).
+  prescribed motions are a scene bug: :mod:`.mesh_overlap`);
+* ``pinned``: a kinematic mesh pressed a sphere against something immovable from the
+  opposite side (the engine's ``pinned`` warning, resting.pinned_by): no impulse can stop
+  a prescribed motion, so the run ended there.
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 
@@ -35,7 +39,8 @@ from .mesh_overlap import MeshOverlaps
 from .quiet import quiet_numerics
 from .tunnel import StepChecker
 
-FINDING_KINDS = ("tunnelling", "overlap", "order", "energy-gain", "non-finite", "budget", "collapse", "mesh-overlap")
+FINDING_KINDS = ("tunnelling", "overlap", "order", "energy-gain", "non-finite", "budget", "collapse", "mesh-overlap",
+                 "pinned")
 EXAMPLES_PER_KIND = 5
 # a step with more bounces (contacts resolved by an impulse with restitution above 0) than
 # this many per sphere they involve (and at least COLLAPSE_MIN_CONTACTS) is a collision
@@ -268,6 +273,13 @@ class Auditor:
                 self._add(Finding("non-finite", step, [], w.message[0].upper() + w.message[1:] + ".",
                                   "look at the contacts of this step; a restitution, mass or speed out of "
                                   "proportion usually starts it", evidence={"warning": w.message}))
+            elif w.code == "pinned":
+                sphere = re.match(r"sphere (\d+) ", w.message)
+                self._add(Finding("pinned", step, [int(sphere.group(1))] if sphere else [],
+                                  w.message[0].upper() + w.message[1:] + ": a prescribed motion cannot be stopped, "
+                                  "so the run ended with this step.",
+                                  "a kinematic mesh moves whatever it meets: leave the sphere a way out (move the "
+                                  "mesh or the wall, or stop the motion short of it)", evidence={"warning": w.message}))
             elif w.code in BUDGETS:
                 what, consequence = BUDGETS[w.code]
                 value = budget_value(w.code, self.settings.get(w.code), self.header.count)  # 0: sized

@@ -470,7 +470,8 @@ class _Comparison:
         dicts), with the scene's settings or, given, some of them replaced (ordering="index")."""
         import dataclasses
 
-        from ..engine import NonFiniteState, World
+        from ..engine import World
+        from ..errors import WorldStuck
         from ..engine.state import State
         from ..events import Contacts
         from ..observe import ListObserver
@@ -486,7 +487,7 @@ class _Comparison:
         world.time = float(r.t[s - 1])
         try:
             world.step(float(r.dt[s]))
-        except NonFiniteState:
+        except WorldStuck:
             return None
         out = []
         batches = seen.of_type(Contacts)

@@ -285,7 +285,8 @@ def summary_text(s, observers: str = "the audit") -> str:
     ]
     lines += [f"  {line}" for line in s.warnings]
     lines.append("audit       " + ("clean (no tunnelling, overlap, out-of-order contact, energy gain or collapse"
-                                   + (", and no meshes passing into each other)" if getattr(s, "meshes_move", False)
+                                   + (", and no meshes passing into each other or pinning a sphere)"
+                                      if getattr(s, "meshes_move", False)
                                       else ")")
                                    if not s.finding_counts else
                                    ", ".join(f"{n} {kind}" for kind, n in s.finding_counts.items())

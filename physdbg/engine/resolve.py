@@ -30,8 +30,8 @@ import math
 import numpy as np
 
 from ..events import HOW_IMPULSE, HOW_RAPID, HOW_RESTING, HOW_WITH_HELD
-from .colliders import (contact_feature, contact_gap, contact_normal, partner_restitution, partner_sphere,
-                        partner_surface)
+from .colliders import (contact_feature, contact_gap, contact_normal, partner_moves, partner_normal_motion,
+                        partner_restitution, partner_sphere, partner_surface, surface_gap)
 from .jit import borrowing, kernel
 from .kernel_args import (
     M_ANCHOR_IS_FLOW,
@@ -53,6 +53,7 @@ from .resting import (
     held_add,
     held_find,
     held_remove,
+    pinned_by,
     pressed_closing,
     push_along,
     rapid,
@@ -123,8 +124,8 @@ def resolve_contact(kind, ia, other, toi, particles, method, geometry, h, contac
                                                          contacts, counters, contacts_slot, rapid_slot, changed)
     if status != NEEDS_HELD:
         return status
-    return finish_with_held(kind, ia, other, toi, particles, method, h, contacts, counters, contacts_slot, rapid_slot,
-                            changed, work_budget, closing, used, how, is_rapid)
+    return finish_with_held(kind, ia, other, toi, particles, method, geometry, h, contacts, counters, contacts_slot,
+                            rapid_slot, changed, work_budget, closing, used, how, is_rapid)
 
 
 @borrowing
@@ -147,12 +148,13 @@ def judge_contact(kind, ia, other, toi, particles, method, geometry, h, contacts
         advance_particle(x, v, a, sigma, ib, toi, integrator, drag, k)
     nx, ny, nz = contact_normal(kind, x, sigma, ia, other, geometry)
     closing = -relative_normal(v, ia, ib, nx, ny, nz)
-    # a kinematic mesh's surface moves: the closing speed is relative to it, and the
-    # contact is the seed's impulse alone (a moving partner holds no sphere: colliders/mesh.py)
+    # a kinematic mesh's surface moves: the closing speed and the press are relative to it
     u0, u1, u2, driven = partner_surface(kind, x, sigma, radius, ia, other, nx, ny, nz, geometry)
-    if driven:
-        closing += u0 * nx + u1 * ny + u2 * nz
+    surface_speed, surface_acc = partner_normal_motion(kind, x, v, sigma, radius, ia, other, nx, ny, nz, geometry)
     rel_acc = relative_normal(acc, ia, ib, nx, ny, nz)
+    if driven:
+        closing += surface_speed
+        rel_acc -= surface_acc
     e = combine(rule, restitution[ia], partner_restitution(kind, other, restitution, geometry))
     wsum = inverse_mass[ia] + inverse_mass[ib] if ib >= 0 else inverse_mass[ia]
     # (the velocities' rounding counts only on paths that are the flow: there a contact
@@ -166,8 +168,8 @@ def judge_contact(kind, ia, other, toi, particles, method, geometry, h, contacts
             changed[2] = ib
         return SKIPPED, closing, 0.0, HOW_IMPULSE, False
     now = run_time + toi
-    resting = not driven and rests(closing, rel_acc, step_end, rest_step_factor, rest_fraction)
-    is_rapid = not resting and not driven and rapid(now, last_contact[ia], last_contact[ib] if ib >= 0 else -math.inf, e,
+    resting = rests(closing, rel_acc, step_end, rest_step_factor, rest_fraction)
+    is_rapid = not resting and rapid(now, last_contact[ia], last_contact[ib] if ib >= 0 else -math.inf, e,
                                      rapid_time)
     # a rapid contact that something presses is held like a resting one (under the "tc"
     # rule only a slow one); one that is not held is elastic (the original TC model): a
@@ -193,7 +195,7 @@ def judge_contact(kind, ia, other, toi, particles, method, geometry, h, contacts
     last_contact[ia] = now
     if ib >= 0:
         last_contact[ib] = now
-    if not driven and (held != HOW_IMPULSE or h.deg[ia] != 0 or (ib >= 0 and h.deg[ib] != 0)):
+    if held != HOW_IMPULSE or h.deg[ia] != 0 or (ib >= 0 and h.deg[ib] != 0):
         return NEEDS_HELD, closing, used, held, is_rapid
     # the seed's impulse, alone
     j = seed_impulse(closing, used, wsum)
@@ -210,8 +212,8 @@ def judge_contact(kind, ia, other, toi, particles, method, geometry, h, contacts
 
 
 @kernel
-def finish_with_held(kind, ia, other, toi, particles, method, h, contacts, counters, contacts_slot, rapid_slot,
-                     changed, work_budget, closing, used, how, is_rapid):
+def finish_with_held(kind, ia, other, toi, particles, method, geometry, h, contacts, counters, contacts_slot,
+                     rapid_slot, changed, work_budget, closing, used, how, is_rapid):
     """The second stage of :func:`resolve_contact`, for a contact judge_contact found
     involves held contacts (its status NEEDS_HELD, and closing, used, how, is_rapid as it
     returned them): solve it with the held contacts it reaches and finish its row.
@@ -220,9 +222,12 @@ def finish_with_held(kind, ia, other, toi, particles, method, h, contacts, count
     ib = partner_sphere(kind, other)
     row = contacts[counters[contacts_slot]]
     j, ok = _solve_with_held(kind, ia, ib, other, toi, row.normal[0], row.normal[1], row.normal[2], used * closing,
-                             how != HOW_IMPULSE, particles, method, h, changed, work_budget)
+                             how != HOW_IMPULSE, particles, method, geometry, h, changed, work_budget)
     _finish_row(kind, ia, other, ib, v, j, used, closing, how if how != HOW_IMPULSE else HOW_WITH_HELD, is_rapid,
                 contacts, counters, contacts_slot, rapid_slot)
+    if ib < 0 and not math.isnan(row.velocity_b_before[0]):  # a moving surface keeps its velocity
+        for c in range(3):
+            row.velocity_b_after[c] = row.velocity_b_before[c]
     return RESOLVED if ok else OUT_OF_WORK
 
 
@@ -249,11 +254,11 @@ def _finish_row(kind, ia, other, ib, v, j, used, closing, how, is_rapid, contact
 
 
 @kernel
-def _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, target, hold, particles, method, h, changed,
+def _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, target, hold, particles, method, geometry, h, changed,
                      work_budget):
     """The contact solved together with the held contacts it reaches (resting/); returns
     (its impulse, whether the work budget sufficed) and lists the changed spheres."""
-    x, v, a, _radius, sigma = paths(particles)
+    x, v, a, radius, sigma = paths(particles)
     acc, inverse_mass = forces(particles)
     step_end, integrator, drag, k = motion_of(method)
     vtol, atol = solve_tolerances(method)
@@ -271,6 +276,10 @@ def _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, target, hold, particl
         h.normal[c0, 1] = ny
         h.normal[c0, 2] = nz
     h.target[c0] = target
+    h.surface[c0, 0], h.surface[c0, 1] = partner_normal_motion(kind, x, v, sigma, radius, ia, other, nx, ny, nz,
+                                                               geometry)
+    if h.deg[ia] > 1 and pinned_by(h, ia):  # a motion no impulse can stop: the step ends here
+        return 0.0, False
     seeds = np.full(1, c0, np.int64)
     ok = solve_contacts(h, v, True, seeds, 1, x, v, a, sigma, inverse_mass, toi, integrator, drag, k, vtol,
                         work_budget, stick)
@@ -367,7 +376,13 @@ def settle_held(h, particles, method, geometry, free_accel, contact_tolerance, w
             held_remove(h, c)
             h.count[STEP_RELEASED] += 1
         else:
+            h.surface[c, 0], h.surface[c, 1] = partner_normal_motion(h.kind[c], x, v, sigma, radius, h.a[c],
+                                                                     h.other[c], h.normal[c, 0], h.normal[c, 1],
+                                                                     h.normal[c, 2], geometry)
             c += 1
+    for c in range(h.count[HELD]):  # a motion no impulse can stop: the step ends here
+        if h.surface[c, 0] != 0.0 and pinned_by(h, h.a[c]):
+            return False
     for i in range(n):
         for d in range(3):
             acc[i, d] = free_accel[i, d]
@@ -395,3 +410,49 @@ def settle_held(h, particles, method, geometry, free_accel, contact_tolerance, w
         for d in range(3):
             a[i, d] = 0.0 if semi_implicit else acc[i, d]
     return ok
+
+
+@kernel
+def keep_on_moving_partners(h, x, v, a, radius, sigma, inverse_mass, geometry, contact_tolerance) -> float:
+    """The step's end, for spheres held on a moving surface (a kinematic mesh's): each is
+    put back on it, moved along the contact's normal by its gap. Returns the largest
+    distance moved (m).
+
+    Why: a held sphere's path over the step is its integrator's (straight, or a parabola),
+    while a turning surface under it curves away or into it; the velocity and
+    acceleration solves match the surface's motion along the normal at the step's start
+    (HeldContacts.surface), so the gap drifts by about |ω|·|v|·dt² a step (dt³ terms for
+    a surface that only translates, which rounding alone leaves at ~1e-16 m). Left, the
+    drift releases the contact once it passes the contact tolerance (or sinks the sphere
+    into the surface). Moved back, the sphere ends every step on the surface. Only a
+    contact the surface presses (lam > 0) on its face or one found overlapping is moved
+    (sigma (N,): the anchors, all at the step's end, 0), and never by
+    more than the contact tolerance plus what one step of drift can explain (a larger gap
+    is no drift: the contact is left to be released at the next step's start)."""
+    worst = 0.0
+    for c in range(h.count[HELD]):
+        i = h.a[c]
+        if partner_sphere(h.kind[c], h.other[c]) >= 0 or inverse_mass[i] == 0.0:
+            continue
+        if not partner_moves(h.kind[c], h.other[c], geometry):
+            continue
+        # the partner's whole surface (a mesh's nearest triangle): a sphere held on one
+        # triangle that has crossed onto the next is put on the next, never drawn back
+        # towards the edge between them (which would sink it into the next one's face)
+        gap, n0, n1, n2, on_face = surface_gap(h.kind[c], x, v, a, radius, i, h.other[c], geometry)
+        if gap == 0.0 or gap == math.inf:
+            continue
+        if gap > 0.0 and (h.lam[c] == 0.0 or not on_face):  # drawn back only onto a face that presses it
+            continue
+        if abs(gap) > contact_tolerance + DRIFT_FRACTION * radius[i]:
+            continue
+        x[i, 0] -= gap * n0
+        x[i, 1] -= gap * n1
+        x[i, 2] -= gap * n2
+        worst = max(worst, abs(gap))
+    return worst
+
+
+# The most a held sphere's gap to a moving surface may have drifted in one step, as a
+# fraction of its radius (keep_on_moving_partners): a gap beyond it is not drift.
+DRIFT_FRACTION = 0.01

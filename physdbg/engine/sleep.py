@@ -276,14 +276,17 @@ class Sleepers:
             setattr(self, name, np.take(getattr(self, name), old_of_new, axis=0))
 
     def end_of_step(self, dt: float, x: np.ndarray, velocities: np.ndarray, radius: np.ndarray,
-                    pair_lists: tuple[np.ndarray, ...], rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                    pair_lists: tuple[np.ndarray, ...], rows: np.ndarray,
+                    carried: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The rules at the end of a step of dt seconds (sleep_rules): x, velocities (N, 3)
         m, m/s at the step's end (the new sleepers' velocities are zeroed in place);
         radius (N,) m; pair_lists: the step's candidate pairs, (P, 2) arrays (awake and
-        sleeping); rows: the step's contact rows (events.CONTACT_ROW). Returns (fell
-        asleep, woke), int64 indices, sorted."""
+        sleeping); rows: the step's contact rows (events.CONTACT_ROW); carried: (N,) bool,
+        the spheres a moving mesh carries, which may not sleep this step (None: none).
+        Returns (fell asleep, woke), int64 indices, sorted."""
         # contiguous columns: a field of two or more rows is a strided view, of none or one
         # a contiguous one, and each layout would be a version of its own to compile and load
         kind, a, other, closing = (np.ascontiguousarray(rows[name]) for name in ("kind", "a", "other", "closing_speed"))
-        return sleep_rules(self.asleep, self.still, self.allowed, self.down, dt, x, velocities, radius, pair_lists,
+        allowed = self.allowed if carried is None else self.allowed & ~carried
+        return sleep_rules(self.asleep, self.still, allowed, self.down, dt, x, velocities, radius, pair_lists,
                            kind, a, other, closing, self.sleep_speed, self.sleep_time)

@@ -400,8 +400,9 @@ def run_time_order(particles, method, geometry, held, candidates, budgets, buffe
         if status != _HELD_SOLVE:
             return status
         rid, kind, ia, other, how = judged[0], judged[1], judged[2], judged[3], judged[4]
-        solved = finish_with_held(kind, ia, other, judged_f[0], particles, method, held, contacts, counters, CONTACTS,
-                                  RAPID, changed, work_budget, judged_f[1], judged_f[2], how, judged_f[3] != 0.0)
+        solved = finish_with_held(kind, ia, other, judged_f[0], particles, method, geometry, held, contacts, counters,
+                                  CONTACTS, RAPID, changed, work_budget, judged_f[1], judged_f[2], how,
+                                  judged_f[3] != 0.0)
         _after_contact(solved, rid, batch_mark, pending, changed, test_outcome, counters, requery_count)
         if solved == OUT_OF_WORK:
             mark_capped(heap_data, test_outcome, counters)

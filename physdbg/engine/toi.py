@@ -397,6 +397,18 @@ def surface_velocity(q0, q1, q2, motion, tau):
 
 
 @borrowing
+def surface_acceleration(q0, q1, q2, motion, tau):
+    """(a0, a1, a2) m/s²: the acceleration at time ``tau`` of the moving mesh's surface
+    point at world point q: ω × (ω × (q - pivot(τ))) (the velocity and ω are constant)."""
+    r0 = q0 - motion[0] - motion[3] * tau
+    r1 = q1 - motion[1] - motion[4] * tau
+    r2 = q2 - motion[2] - motion[5] * tau
+    w0, w1, w2 = motion[6], motion[7], motion[8]
+    c0, c1, c2 = w1 * r2 - w2 * r1, w2 * r0 - w0 * r2, w0 * r1 - w1 * r0
+    return w1 * c2 - w2 * c1, w2 * c0 - w0 * c2, w0 * c1 - w1 * c0
+
+
+@borrowing
 def moving_triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, motion, tau0, integrator, k,
                               horizon, tolerance):
     """(t, feature, passes): triangle_toi_swept for a triangle of a moving mesh: ``tri`` (3, 3) its

@@ -47,6 +47,7 @@ from ..events import (
     StepCounts,
     StepEnd,
     SweptTests,
+    partner_words,
 )
 from .broadphase import choose_broad_phase, make_broad_phase
 from .broadphase.boxes import boxes_meet
@@ -70,12 +71,14 @@ from .resolve import (
     OUT_OF_WORK,
     RESTITUTION_RULES,
     SKIPPED,
+    keep_on_moving_partners,
     resolve_contact,
     settle_held,
 )
-from .resting import HELD, RAPID_RULES, STEP_RELEASED, STEP_WORK, grow_held, held_room, new_held, renumber_held
+from .resting import (HELD, PINNED, PINNED_CONTACTS, RAPID_RULES, STEP_RELEASED, STEP_WORK, grow_held, held_room,
+                      new_held, renumber_held)
 from .resting.store import STOP
-from ..errors import StepStopped
+from ..errors import PinnedSphere, StepStopped
 from .sleep import SUPPORT_GAP, Sleepers, release_static, split_sleeping
 from .space_order import RENUMBER_EVERY, Numbering, chosen_order, inverse_permutation, morton_order
 from .state import (BUDGETS, STATE_FIELDS, NonFiniteState, Settings, State, Walls, energies, first_non_finite,
@@ -229,7 +232,8 @@ class World:
         observer also gets).
 
         Raises NonFiniteState (after reporting the step) when a position or velocity
-        became NaN or infinite: the world cannot go on from there.
+        became NaN or infinite, PinnedSphere when a moving mesh pins a sphere against
+        something immovable (resting.pinned_by): the world cannot go on from there.
         """
         self._stop_if_asked()
         ctx = self._begin(_checked_step_length(dt))
@@ -288,7 +292,11 @@ class World:
         particles, method, geometry = self._kernel_groups(ctx)
         if not settle_held(self.held, particles, method, geometry, self._free_accel, s.contact_tolerance,
                            self.resting_budget):
-            ctx.warn("max_resting_work_per_step", _budget_message("max_resting_work_per_step", self.resting_budget))
+            if self.held.count[PINNED]:
+                ctx.warn("pinned", self._pinned_words())
+            else:
+                ctx.warn("max_resting_work_per_step",
+                         _budget_message("max_resting_work_per_step", self.resting_budget))
 
     def _broad_phase(self, ctx: StepContext) -> None:
         """Each path's swept box over the step, grown to its reach -> candidate pairs."""
@@ -332,7 +340,10 @@ class World:
         budget = self._resolve_in_time_order(ctx) if s.ordering == "time" else self._resolve_in_index_order(ctx)
         if ctx.too_wide_mid_step and not ctx.warned("periodic"):
             ctx.warn("periodic", ctx.too_wide_mid_step)
-        if budget == "max_memory" and not ctx.warned(budget):
+        if budget == "max_resting_work_per_step" and self.held.count[PINNED]:
+            if not ctx.warned("pinned"):
+                ctx.warn("pinned", self._pinned_words())
+        elif budget == "max_memory" and not ctx.warned(budget):
             ctx.warn(budget, self._memory.message(ctx))
         elif budget is not None and not ctx.warned(budget):
             ctx.warn(budget, _budget_message(budget, s.budget(budget, self._st.count)))
@@ -347,6 +358,9 @@ class World:
         if self._periodic:  # the paths were continuous through the step; the state is in the box
             wrap_positions(x, self._period_origin, self._period)
         self._place_meshes(self.time + ctx.dt, 0.0)  # the audit sees the meshes where the spheres are
+        if self._meshes_move and self.held.count[HELD]:  # held spheres end the step on a moving surface
+            keep_on_moving_partners(self.held, x, v, ctx.path_accel, st.radius, ctx.sigma, self._inverse_mass, self._geometry,
+                                    s.contact_tolerance)
         ctx.max_overlap = self._max_overlap(ctx)
         if s.detection == "swept" and ctx.max_overlap > s.contact_tolerance and not ctx.warnings:
             ctx.warn("overlap", f"spheres overlap by {ctx.max_overlap:.3g} m, more than the contact tolerance "
@@ -371,7 +385,8 @@ class World:
         rows = self._buf.contacts[:int(self._buf.counters[CONTACTS])]
         pair_lists = (np.ascontiguousarray(ctx.pairs, dtype=np.int64),
                       np.ascontiguousarray(ctx.sleeping_pairs, dtype=np.int64))
-        fell, woke = sleepers.end_of_step(ctx.dt, st.positions, st.velocities, st.radius, pair_lists, rows)
+        fell, woke = sleepers.end_of_step(ctx.dt, st.positions, st.velocities, st.radius, pair_lists, rows,
+                                          self._carried())
         self._inverse_mass[woke] = st.inverse_mass[woke]
         self._free_accel[woke] = self._free_accel_awake[woke]
         self._inverse_mass[fell] = 0.0
@@ -380,8 +395,24 @@ class World:
             release_static(self.held, self._inverse_mass)
         ctx.slept, ctx.woken = int(fell.size), int(woke.size)
 
+    def _carried(self) -> np.ndarray | None:
+        """(N,) bool: the spheres held on a kinematic mesh (a moving surface carries them,
+        so they may not sleep: asleep, a sphere is immovable and the mesh would pass
+        through it); None when no mesh moves."""
+        if not self._meshes_move:
+            return None
+        held = int(self.held.count[HELD])
+        kind, a, other = self.held.kind[:held], self.held.a[:held], self.held.other[:held]
+        group = self._geometry[KIND_MESH]  # colliders/mesh.MeshGeometry: mesh_of, moving
+        on_mesh = kind == KIND_MESH
+        moving = np.zeros(held, dtype=bool)
+        moving[on_mesh] = group[9][group[1][other[on_mesh]]]
+        carried = np.zeros(self._st.count, dtype=bool)
+        carried[a[moving]] = True
+        return carried
+
     def _end(self, ctx: StepContext) -> StepEnd:
-        """The step's record, after its closing events; raises NonFiniteState after reporting."""
+        """The step's record, after its closing events; raises NonFiniteState or PinnedSphere after reporting."""
         buf = self._buf
         counts = StepCounts(contacts=int(buf.counters[CONTACTS]), swept_tests=int(buf.counters[TESTS]),
                             events=int(buf.counters[EVENTS]), held=self.held_count, rapid=int(buf.counters[RAPID]),
@@ -399,7 +430,18 @@ class World:
             obs.on_event(end)
         if ctx.non_finite is not None:
             raise NonFiniteState(ctx.step, *ctx.non_finite)
+        if self.held.count[PINNED]:
+            raise PinnedSphere(ctx.step, self._pinned_words())
         return end
+
+    def _pinned_words(self) -> str:
+        """The pinned sphere and its two partners (resting.pinned_by), as reports name them."""
+        count = self.held.count
+        names = self.walls.partner_names()
+        sphere = self.scene_sphere(int(count[PINNED]) - 1)
+        first, second = (partner_words(int(count[PINNED_CONTACTS + 2 * e]), int(count[PINNED_CONTACTS + 2 * e + 1]),
+                                       names) for e in range(2))
+        return f"sphere {sphere} is pinned between {first} and {second}, which close on it from opposite sides"
 
     def _renumber(self) -> None:
         """Number the spheres in Morton order of where they are now (space_order.py): every

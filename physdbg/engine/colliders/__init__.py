@@ -31,7 +31,8 @@ from . import mesh, plane, sphere
 from .kinds import KIND_NAMES, KINDS, PARTNER_IS_SPHERE, partner_sphere
 
 __all__ = ["KIND_NAMES", "KINDS", "KIND_MODULES", "PARTNER_IS_SPHERE", "partner_sphere", "geometry_of",
-           "check_kind_modules", "time_of_impact", "contact_normal", "contact_feature", "partner_surface", "contact_gap", "partner_restitution",
+           "check_kind_modules", "time_of_impact", "contact_normal", "contact_feature", "partner_surface",
+           "partner_normal_motion", "partner_moves", "surface_gap", "contact_gap", "partner_restitution",
            "partners_of", "max_overlap", "narrow_candidates", "every_candidate", "most_partners", "partners_bound"]
 
 # each kind's module, in the order of the kinds' codes: its geometry group is ``module.GEOMETRY``
@@ -115,6 +116,47 @@ def partner_surface(kind, x, sigma, radius, ia, other, n0, n1, n2, geometry):
         return 0.0, 0.0, 0.0, False
     if kind == KIND_MESH:
         return mesh.surface(x, sigma, radius, ia, other, n0, n1, n2, geometry[KIND_MESH])
+    raise ValueError(UNKNOWN_KIND)
+
+
+@njit(cache=True, inline="always")
+def partner_normal_motion(kind, x, v, sigma, radius, ia, other, n0, n1, n2, geometry):
+    """(velocity m/s, acceleration m/s²) of the partner's surface along the normal n where
+    sphere ia touches it, at ia's anchor time: what a held contact's relative normal
+    velocity and acceleration are measured from (resting.HeldContacts.surface). (0, 0)
+    for a partner that stands still; a sphere's own motion is the solve's, not this."""
+    if kind == KIND_PAIR or kind == KIND_WALL:
+        return 0.0, 0.0
+    if kind == KIND_MESH:
+        return mesh.normal_motion(x, v, sigma, radius, ia, other, n0, n1, n2, geometry[KIND_MESH])
+    raise ValueError(UNKNOWN_KIND)
+
+
+@njit(cache=True, inline="always")
+def partner_moves(kind, other, geometry) -> bool:
+    """Whether the immovable partner ``other`` moves by a prescribed motion (a kinematic
+    mesh's triangle); False for a partner that stands still and for a sphere."""
+    if kind == KIND_PAIR or kind == KIND_WALL:
+        return False
+    if kind == KIND_MESH:
+        return mesh.moves(other, geometry[KIND_MESH])
+    raise ValueError(UNKNOWN_KIND)
+
+
+@borrowing
+def surface_gap(kind, x, v, a, radius, ia, other, geometry):
+    """(gap m, n0, n1, n2, on_face): sphere ia's gap to the partner's whole surface where it is
+    nearest, the normal there and whether that point is inside a face (a mesh: any
+    triangle of ``other``'s mesh, ``mesh.surface_gap``; a wall is one face; a sphere has
+    no face)."""
+    if kind == KIND_PAIR:
+        gap, n0, n1, n2, _renewed = sphere.gap(x, radius, ia, other, geometry[KIND_PAIR])
+        return gap, n0, n1, n2, False
+    if kind == KIND_WALL:
+        gap, n0, n1, n2, renewed = plane.gap(x, v, a, radius, ia, other, geometry[KIND_WALL])
+        return gap, n0, n1, n2, renewed
+    if kind == KIND_MESH:
+        return mesh.surface_gap(x, radius, ia, other, geometry[KIND_MESH])
     raise ValueError(UNKNOWN_KIND)
 
 

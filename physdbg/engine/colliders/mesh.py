@@ -22,8 +22,10 @@ and the frame change from the world to its run-time-0 frame). Its tree is never 
 a box asked of it is carried into its frame instead (``frame_box``: grown by the most the
 mesh's motion over the step moves a point relative to it). Its triangles' tests run in the
 mesh's own frame (toi.moving_triangle_toi_swept), its contact normal is turned with it,
-and its surface velocity at the contact point enters the impulse (``surface``). A moving triangle never holds a sphere: every contact with it is the seed's
-impulse alone (a resting contact on a moving mesh is not modelled).
+its surface velocity at the contact point enters the impulse (``surface``), and a held
+contact with it is measured from its surface's motion along the normal (``normal_motion``):
+a sphere rests on a moving mesh as on a fixed one, and the world keeps it on the surface
+at each step's end (resolve.keep_on_moving_partners).
 """
 
 from __future__ import annotations
@@ -36,9 +38,9 @@ from numba import njit
 
 from ..broadphase.bvh import build
 from ..jit import borrowing, kernel
-from ..mesh.closest import closest_on_triangle
+from ..mesh.closest import FACE, closest_on_triangle
 from ..toi import (DISCRETE, SWEPT, in_body_frame, moving_triangle_toi_sampled, moving_triangle_toi_swept,
-                   surface_velocity, triangle_toi_sampled, triangle_toi_swept, turned)
+                   surface_acceleration, surface_velocity, triangle_toi_sampled, triangle_toi_swept, turned)
 
 
 class MeshGeometry(NamedTuple):
@@ -204,6 +206,12 @@ def _motion_of(t, meshes):
 
 
 @njit(cache=True, inline="always")
+def moves(t, meshes) -> bool:
+    """Whether triangle t's mesh is kinematic (moves by its prescribed motion)."""
+    return meshes[9][meshes[1][t]]
+
+
+@njit(cache=True, inline="always")
 def count(meshes) -> int:
     """How many triangles."""
     return meshes[0].shape[0]
@@ -328,6 +336,31 @@ def surface(x, sigma, radius, ia, t, n0, n1, n2, meshes):
 
 
 @njit(cache=True, inline="always")
+def normal_motion(x, v, sigma, radius, ia, t, n0, n1, n2, meshes):
+    """(velocity m/s, acceleration m/s²) along the normal n of triangle t's surface where
+    sphere ia touches it, at ia's anchor time: what a held contact's relative normal
+    velocity and acceleration are measured from. (0, 0) for a fixed mesh.
+
+    The gap g = (x - p)·n - r to a plane through a surface point p turning with the mesh
+    (ṅ = ω×n) has g' = (v - u)·n and g'' = (a - a_q)·n + 2(v - u)·(ω×n) - r|ω×n|² (u,
+    a_q: the velocity and acceleration of the surface point q under the centre): the
+    acceleration returned is what a·n must reach for g'' = 0."""
+    moving, motion = _motion_of(t, meshes)
+    if not moving:
+        return 0.0, 0.0
+    tau = sigma[ia]
+    r = radius[ia]
+    q0, q1, q2 = x[ia, 0] - n0 * r, x[ia, 1] - n1 * r, x[ia, 2] - n2 * r
+    u0, u1, u2 = surface_velocity(q0, q1, q2, motion, tau)
+    b0, b1, b2 = surface_acceleration(q0, q1, q2, motion, tau)
+    w0, w1, w2 = motion[6], motion[7], motion[8]
+    m0, m1, m2 = w1 * n2 - w2 * n1, w2 * n0 - w0 * n2, w0 * n1 - w1 * n0  # ω×n
+    coriolis = 2.0 * ((v[ia, 0] - u0) * m0 + (v[ia, 1] - u1) * m1 + (v[ia, 2] - u2) * m2)
+    turning = r * (m0 * m0 + m1 * m1 + m2 * m2)
+    return u0 * n0 + u1 * n1 + u2 * n2, b0 * n0 + b1 * n1 + b2 * n2 - coriolis + turning
+
+
+@njit(cache=True, inline="always")
 def _face_normal(corners, t):
     """Triangle t's unit face normal (3 floats), from its corners' order."""
     e0 = corners[t, 1, 0] - corners[t, 0, 0]
@@ -352,6 +385,39 @@ def gap(x, radius, i, t, meshes):
     if length == 0.0:
         return -radius[i], 0.0, 0.0, 0.0, False
     return length - radius[i], d0 / length, d1 / length, d2 / length, True
+
+
+@borrowing
+def surface_gap(x, radius, i, t, meshes):
+    """(gap m, n0, n1, n2, on_face) of sphere i to the surface of triangle t's mesh where it
+    is nearest (the triangle of that mesh with the least gap, found by a walk of the
+    mesh's tree with the sphere's box grown by its radius): the gap, the unit normal from
+    there to the centre, and whether the nearest point is inside a triangle's face.
+    (inf, 0, 0, 0, False) when no triangle is within a radius of the sphere's surface."""
+    corners, _mesh_of, _restitution, box_lo, box_hi, leaf, skip, tree_first = _unpack(meshes)
+    k = meshes[1][t]
+    reach = 2.0 * radius[i]
+    l0, l1, l2, h0, h1, h2 = frame_box(k, x[i, 0] - reach, x[i, 1] - reach, x[i, 2] - reach, x[i, 0] + reach,
+                                       x[i, 1] + reach, x[i, 2] + reach, meshes)
+    best = math.inf
+    n0 = n1 = n2 = 0.0
+    on_face = False
+    q = tree_first[k]
+    while q < tree_first[k + 1]:
+        if _box_meets(l0, l1, l2, h0, h1, h2, box_lo, box_hi, q):
+            u = leaf[q]
+            if u >= 0:
+                q0, q1, q2, where = _closest(x, i, corners, u)
+                d0, d1, d2 = x[i, 0] - q0, x[i, 1] - q1, x[i, 2] - q2
+                length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                if length > 0.0 and length - radius[i] < best:
+                    best = length - radius[i]
+                    n0, n1, n2 = d0 / length, d1 / length, d2 / length
+                    on_face = where == FACE
+            q += 1
+        else:
+            q = skip[q]
+    return best, n0, n1, n2, on_face
 
 
 @njit(cache=True, inline="always")

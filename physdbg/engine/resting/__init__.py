@@ -29,6 +29,10 @@ c = 0. Two rules turn such contacts into *held* contacts, solved all at once:
 A resting contact, or a pressed rapid one, is resolved with restitution 0 and *held*:
 
 * held contacts are not swept-tested (they touch by definition);
+* against a moving surface (a kinematic mesh's) every relative normal velocity and
+  acceleration is measured from the surface's own (HeldContacts.surface), so a sphere
+  rests on a moving mesh as on a fixed one; a sphere a moving surface presses against
+  something immovable from the opposite side is pinned (``pinned_by``) and ends the run;
 * every contact that involves a sphere with held contacts is solved *simultaneously*
   with the held contacts it reaches: a projected Gauss–Seidel solve of the velocities
   (each held contact ends with (v_a - v_b)·n >= 0, the new contact with its restitution
@@ -68,6 +72,8 @@ from .rules import (  # noqa: F401
 )
 from .store import (  # noqa: F401
     HELD,
+    PINNED,
+    PINNED_CONTACTS,
     SOLVE_ID,
     STEP_RELEASED,
     STEP_WHOLE_SOLVES,
@@ -89,6 +95,7 @@ from .solves import (  # noqa: F401
     MAX_PIVOTS,
     SEPARATION_FACTOR,
     begin_solve,
+    pinned_by,
     push_along,
     relative_normal,
     release_loose,

@@ -13,7 +13,8 @@ from ..bound_qp import solve_bound_qp
 from ..colliders.kinds import partner_sphere
 from ..jit import borrowing, kernel
 from ..motion import advance_particle
-from .store import HELD, SOLVE_ID, STEP_RELEASED, STEP_WHOLE_SOLVES, STEP_WORK, STOP, held_remove, contacts_of
+from .store import (HELD, PINNED, PINNED_CONTACTS, SOLVE_ID, STEP_RELEASED, STEP_WHOLE_SOLVES, STEP_WORK, STOP,
+                    contacts_of, held_remove)
 
 
 # ----------------------------------------------------------------------------- solves
@@ -57,9 +58,11 @@ def relative_normal(values, i, j, nx, ny, nz) -> float:
 
 
 @borrowing
-def _relative(values, h, c) -> float:
+def _relative(values, h, c, is_velocity) -> float:
+    """Held contact c's relative normal velocity (is_velocity) or acceleration, measured
+    from its partner's surface (HeldContacts.surface: 0 but for a moving mesh's)."""
     return relative_normal(values, h.a[c], partner_sphere(h.kind[c], h.other[c]), h.normal[c, 0],
-                           h.normal[c, 1], h.normal[c, 2])
+                           h.normal[c, 1], h.normal[c, 2]) - h.surface[c, 0 if is_velocity else 1]
 
 
 @borrowing
@@ -204,7 +207,7 @@ def _solve_connected(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, inv
         current, low, target = _bounds(h, c, is_velocity, stick, solve, True)
         start[q] = current
         lower[q] = low
-        grad[q] = _relative(values, h, c) - target
+        grad[q] = _relative(values, h, c, is_velocity) - target
         for d in range(3):
             normal[q, d] = h.normal[c, d]
     room = max((budget - h.count[STEP_WORK]) // max(n, 1), 0)
@@ -422,7 +425,7 @@ def _violated(h, values, c, is_velocity, x, v, a, sigma, inverse_mass, when, int
     if j >= 0:
         touch(h, j, x, v, a, sigma, when, integrator, drag, k, solve)
     current, lower, target = _bounds(h, c, is_velocity, stick, solve, False)
-    new = max(current + (target - _relative(values, h, c)) / wsum, lower)
+    new = max(current + (target - _relative(values, h, c, is_velocity)) / wsum, lower)
     return abs(new - current) * wsum > tolerance
 
 
@@ -456,7 +459,7 @@ def _direct(h, values, is_velocity, members, m, inverse_mass, stick, solve, tole
         x0[r] = cur
         lower[r] = lo
         # rel(x) = target  <=>  K x = target - rel0 + K x0
-        rhs[r] = tgt - _relative(values, h, c)
+        rhs[r] = tgt - _relative(values, h, c, is_velocity)
         i = h.a[c]
         j = partner_sphere(h.kind[c], h.other[c])
         wsum[r] = inverse_mass[i] + (inverse_mass[j] if j >= 0 else 0.0)
@@ -731,7 +734,7 @@ def _gauss_seidel(h, values, is_velocity, seeds, n_seeds, x, v, a, sigma, invers
         touch(h, i, x, v, a, sigma, when, integrator, drag, k, solve)
         if j >= 0:
             touch(h, j, x, v, a, sigma, when, integrator, drag, k, solve)
-        rel = _relative(values, h, c)
+        rel = _relative(values, h, c, is_velocity)
         if is_velocity:
             new = max(h.jv[c] + (h.target[c] - rel) / wsum, -h.lam[c] * stick)
             delta = new - h.jv[c]
@@ -812,12 +815,12 @@ def _release_if_loose(h, c, v, acc, inverse_mass, x, a, sigma, when, integrator,
     solve = h.count[SOLVE_ID]
     i = h.a[c]
     j = partner_sphere(h.kind[c], h.other[c])
-    rel_v = _relative(v, h, c)
+    rel_v = _relative(v, h, c, True)
     wsum = inverse_mass[i] + (inverse_mass[j] if j >= 0 else 0.0)
     separating = rel_v > SEPARATION_FACTOR * vtol + h.lam[c] * wsum * stick
     # pulled apart, and not approaching by even a rounding error (released, such a
     # contact would be found again at once)
-    pulled = h.lam[c] == 0.0 and rel_v >= 0.0 and _relative(acc, h, c) > atol
+    pulled = h.lam[c] == 0.0 and rel_v >= 0.0 and _relative(acc, h, c, False) > atol
     if not (separating or pulled):
         return False
     # a released contact was never swept-tested while held: its spheres must be
@@ -832,3 +835,41 @@ def _release_if_loose(h, c, v, acc, inverse_mass, x, a, sigma, when, integrator,
     held_remove(h, c)
     h.count[STEP_RELEASED] += 1
     return True
+
+
+# Two contacts of one sphere whose normals are within this of opposite (1 + n_a·n_b) leave
+# it no way out sideways (pinned_by).
+OPPOSED = 1e-9
+
+
+@borrowing
+def pinned_by(h, p) -> bool:
+    """Whether sphere p is pinned: held against two immovable partners (walls, meshes) from
+    opposite sides (normals within OPPOSED of opposite) whose surfaces close on it, one of
+    them by a prescribed motion (HeldContacts.surface), so that no velocity meets both
+    contacts and no impulse can stop the motion. Records the sphere and the two contacts
+    in h.count[PINNED:] (store.py) when it is.
+
+    Why the engine looks: the velocity solve would raise the two impulses against each
+    other for ever (each update undoes the last), until the step's work budget ran out,
+    step after step. A moving mesh pressing a ball against a fixed ceiling is that: the
+    motion is prescribed, the ceiling immovable, and the scene has no answer."""
+    for s in range(h.deg[p]):
+        c = h.slots[p, s]
+        if h.surface[c, 0] == 0.0 or h.a[c] != p or partner_sphere(h.kind[c], h.other[c]) >= 0:
+            continue
+        for t in range(h.deg[p]):
+            d = h.slots[p, t]
+            if d == c or h.a[d] != p or partner_sphere(h.kind[d], h.other[d]) >= 0:
+                continue
+            facing = (h.normal[c, 0] * h.normal[d, 0] + h.normal[c, 1] * h.normal[d, 1]
+                      + h.normal[c, 2] * h.normal[d, 2])
+            closing = h.surface[c, 0] + h.target[c] + h.surface[d, 0] + h.target[d]
+            if 1.0 + facing <= OPPOSED and closing > 0.0:
+                h.count[PINNED] = p + 1
+                h.count[PINNED_CONTACTS] = h.kind[c]
+                h.count[PINNED_CONTACTS + 1] = h.other[c]
+                h.count[PINNED_CONTACTS + 2] = h.kind[d]
+                h.count[PINNED_CONTACTS + 3] = h.other[d]
+                return True
+    return False

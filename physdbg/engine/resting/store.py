@@ -17,14 +17,19 @@ from ..jit import borrowing
 # HeldContacts.count's slots: the contacts held now, the last solve's id, then those that
 # count one step's work (World zeroes them as a step begins): held-solve updates, whole
 # clusters solved, held contacts released; then the stop switch (World.request_stop sets
-# it, from any thread: the solves and the event loop end at once when it is set)
+# it, from any thread: the solves and the event loop end at once when it is set), then a
+# pinned sphere and its two contacts (PINNED: the run cannot go on past that step)
 HELD = 0
 SOLVE_ID = 1
 STEP_WORK = 2
 STEP_WHOLE_SOLVES = 3
 STEP_RELEASED = 4
 STOP = 5
-COUNT_SLOTS = 6
+# a sphere pinned by a prescribed motion against something immovable (solves.pinned_by):
+# 1 + the sphere (0: none), then the kind and partner of each of the two contacts
+PINNED = 6
+PINNED_CONTACTS = 7  # kind, other, kind, other in slots 7..10
+COUNT_SLOTS = 11
 
 
 class HeldContacts(NamedTuple):
@@ -35,7 +40,10 @@ class HeldContacts(NamedTuple):
     (walls: towards a's side); lam: (C,) acceleration
     multiplier (N: the contact force; kept between steps as the warm start);
     jv: (C,) impulse of the current velocity solve (N·s); target: (C,) separation speed the
-    velocity solve must reach (m/s; 0 for held contacts); seen: (C,) int64 id of the last
+    velocity solve must reach (m/s; 0 for held contacts); surface: (C, 2) the partner's
+    surface along the normal, its velocity (m/s) and acceleration (m/s²): what the
+    contact's relative normal velocity and acceleration are measured from (0 but for a
+    moving mesh's triangle, whose surface moves: ``partner_normal_motion``); seen: (C,) int64 id of the last
     solve that used jv; count: (COUNT_SLOTS,) int64 — contacts held, solve id, then this
     step's counts: work done (updates, STEP_WORK), clusters solved whole (_solve_connected,
     STEP_WHOLE_SOLVES), contacts released (STEP_RELEASED), then the stop switch (STOP);
@@ -58,6 +66,7 @@ class HeldContacts(NamedTuple):
     lam: np.ndarray
     jv: np.ndarray
     target: np.ndarray
+    surface: np.ndarray
     seen: np.ndarray
     count: np.ndarray
     slots: np.ndarray
@@ -74,7 +83,7 @@ def new_held(n: int, capacity: int = 64, per_particle: int = 16) -> HeldContacts
     """An empty store for ``n`` spheres."""
     return HeldContacts(np.zeros(capacity, np.int64), np.zeros(capacity, np.int64), np.zeros(capacity, np.int64),
                         np.zeros((capacity, 3)), np.zeros(capacity), np.zeros(capacity), np.zeros(capacity),
-                        np.full(capacity, -1, np.int64), np.zeros(COUNT_SLOTS, np.int64),
+                        np.zeros((capacity, 2)), np.full(capacity, -1, np.int64), np.zeros(COUNT_SLOTS, np.int64),
                         np.zeros((n, per_particle), np.int64), np.zeros(n, np.int64), np.zeros(capacity, np.int64),
                         np.full(n, -1, np.int64), np.zeros(n + 1, np.int64), np.zeros((n, 3)),
                         np.full(n, -1, np.int64), np.full(n, -1, np.int64))
@@ -118,7 +127,7 @@ def grow_held(h: HeldContacts) -> HeldContacts:
     if capacity == c and per_sphere == k:  # asked to grow with room left: grow the store anyway
         capacity = 2 * c
     big = new_held(h.deg.shape[0], capacity, per_sphere)
-    for name in ("kind", "a", "other", "normal", "lam", "jv", "target", "seen"):
+    for name in ("kind", "a", "other", "normal", "lam", "jv", "target", "surface", "seen"):
         getattr(big, name)[:c] = getattr(h, name)
     big.count[:] = h.count
     big.slots[:, :h.slots.shape[1]] = h.slots
@@ -158,6 +167,8 @@ def held_add(h, kind, a, other, nx, ny, nz) -> int:
     h.lam[c] = 0.0
     h.jv[c] = 0.0
     h.target[c] = 0.0
+    h.surface[c, 0] = 0.0
+    h.surface[c, 1] = 0.0
     h.seen[c] = -1
     h.count[HELD] = c + 1
     h.slots[a, h.deg[a]] = c
@@ -204,6 +215,8 @@ def held_remove(h, c) -> None:
         h.lam[c] = h.lam[last]
         h.jv[c] = h.jv[last]
         h.target[c] = h.target[last]
+        h.surface[c, 0] = h.surface[last, 0]
+        h.surface[c, 1] = h.surface[last, 1]
         h.seen[c] = h.seen[last]
     h.count[HELD] = last
 
