@@ -207,3 +207,41 @@ def test_an_overlap_names_its_spheres_and_place_and_blames_the_method_that_left_
     floor = next(f for f in explain(discrete).findings if f.kind == "overlap")
     assert floor.particles == [0] and floor.evidence["wall"] == "floor"
     assert floor.message.startswith("sphere 0 and wall 'floor' overlap by") and "detection = discrete" in floor.advice
+
+
+V_MESH = ("v -1 1 -1\nv 0 0 -1\nv 0 0 1\nv -1 1 1\nv 1 1 -1\nv 1 1 1\n"
+          "f 1 2 3\nf 1 3 4\nf 2 5 6\nf 2 6 3\n")  # a symmetric 90° V, its crease along z at the origin
+
+
+def test_a_drop_onto_the_crease_of_a_symmetric_v_is_a_simultaneous_finding(tmp_path):
+    """A ball (e = 0.6) dropped exactly onto the crease meets both slopes at one instant; they
+    are resolved in turn and the second is held by the rapid-contact rule, so the ball leaves
+    sideways. The audit names the pair and says the order decided it; the same ball dropped
+    beside the crease meets one slope at a time and is clean."""
+    (tmp_path / "v.obj").write_text(V_MESH)
+    scene = tmp_path / "vdrop.toml"
+    scene.write_text('name = "vdrop"\ndt = "1/60"\nduration = 0.5\ngravity = [0.0, -9.81, 0.0]\n'
+                     '[[meshes]]\nname = "v"\nfile = "v.obj"\nrestitution = 0.6\n'
+                     '[[particles]]\nposition = [0.0, 1.0, 0.0]\nradius = 0.1\nrestitution = 0.6\n')
+    recording = tmp_path / "vdrop.mcap"
+    api.record(str(scene), mcap_path=str(recording), rrd=False)
+    report = explain(str(recording))
+    found = [f for f in report.findings if f.kind == "simultaneous"]
+    assert len(found) == 1 and report.counts == {"simultaneous": 1}, report.counts
+    finding = found[0]
+    first = next(s for s in range(1, report.steps + 1) if len(explain_contacts(recording, s)))
+    assert finding.step == first and finding.particles == [0]
+    assert "mesh 'v' triangle" in finding.message and "the order decided how it left" in finding.message
+    rows = explain_contacts(recording, first)
+    assert rows.time_in_step[0] == rows.time_in_step[1]  # one instant, to the bit
+    assert abs(rows.velocity_a_after[1][0]) > 1.0  # and it left sideways
+    beside = tmp_path / "beside.mcap"
+    api.record(str(scene), ["particles.0.position=[0.3, 1.0, 0.0]"], mcap_path=str(beside), rrd=False)
+    assert not [f for f in explain(str(beside)).findings if f.kind == "simultaneous"]
+
+
+def explain_contacts(path, step):
+    from physdbg import open_recording
+
+    with open_recording(path) as rec:
+        return rec.contacts(step)

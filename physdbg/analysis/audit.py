@@ -22,7 +22,10 @@ Checks (kind: what it means):
   prescribed motions are a scene bug: :mod:`.mesh_overlap`);
 * ``pinned``: a kinematic mesh pressed a sphere against something immovable from the
   opposite side (the engine's ``pinned`` warning, resting.pinned_by): no impulse can stop
-  a prescribed motion, so the run ended there.
+  a prescribed motion, so the run ended there;
+* ``simultaneous``: a sphere met two immovable partners at one instant whose normals are
+  neither parallel nor at right angles, and the two were resolved one after the other:
+  the first impulse changed the second's closing speed, so the order decided the outcome.
 """
 
 from __future__ import annotations
@@ -33,14 +36,14 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..events import (FEATURE_NAMES, HOW_IMPULSE, KIND_MESH, KIND_WALL, PARTNER_IS_SPHERE, Contacts, EngineWarning, StepEnd, contact_words,
+from ..events import (FEATURE_NAMES, HOW_IMPULSE, HOW_RAPID, KIND_MESH, KIND_WALL, PARTNER_IS_SPHERE, Contacts, EngineWarning, StepEnd, contact_words,
                       partner_is_sphere, partner_words)
 from .mesh_overlap import MeshOverlaps
 from .quiet import quiet_numerics
 from .tunnel import StepChecker
 
 FINDING_KINDS = ("tunnelling", "overlap", "order", "energy-gain", "non-finite", "budget", "collapse", "mesh-overlap",
-                 "pinned")
+                 "pinned", "simultaneous")
 EXAMPLES_PER_KIND = 5
 # a step with more bounces (contacts resolved by an impulse with restitution above 0) than
 # this many per sphere they involve (and at least COLLAPSE_MIN_CONTACTS) is a collision
@@ -220,6 +223,7 @@ class Auditor:
             self._check_overlap(step, end)
             if contacts is not None and len(contacts):
                 self._check_order(step, end.dt, contacts)
+                self._check_simultaneous(step, end.dt, contacts)
                 self._check_energy(step, contacts)
                 self._check_collapse(step, contacts)
             elif self.header.meta.get("foreign"):
@@ -448,6 +452,43 @@ class Auditor:
                           "use ordering = time: a contact is resolved before the later ones it changes",
                           evidence={"first": [i, float(t[i])], "second": [i + 1, float(t[i + 1])],
                                     "ordering": ordering}))
+
+    def _check_simultaneous(self, step: int, dt: float, c: Contacts) -> None:
+        """Two contacts of one sphere with immovable partners at the same instant (the same
+        time_in_step, to the bit), both with an impulse, whose normals are neither parallel
+        nor perpendicular (|n_1·n_2| between 1e-9 and 1 - 1e-9): resolved in turn, the first
+        impulse changed the second's closing speed, so the order decided how the sphere
+        left (a ball dropped onto the crease of a symmetric V leaves it sideways). Named once
+        per step, the first such pair."""
+        immovable = ~partner_is_sphere(c.kind)
+        for i in range(len(c) - 1):
+            if not immovable[i] or not c.impulse[i] > 0.0:
+                continue
+            for j in range(i + 1, len(c)):
+                if c.time_in_step[j] != c.time_in_step[i]:
+                    break
+                if c.a[j] != c.a[i] or not immovable[j] or not c.impulse[j] > 0.0:
+                    continue
+                facing = abs(float(np.dot(c.normal[i], c.normal[j])))
+                coupled = 1e-9 < facing < 1.0 - 1e-9
+                by_rule = int(c.how[j]) == HOW_RAPID and int(c.how[i]) != HOW_RAPID
+                if not (coupled or by_rule):
+                    continue
+                a = int(c.a[i])
+                first, second = (partner_words(int(c.kind[k]), int(c.other[k]), self.names) for k in (i, j))
+                leaving = ", ".join(f"{q:.3g}" for q in np.asarray(c.velocity_a_after[j], dtype=np.float64))
+                why = ("the rapid-contact rule held the second, with restitution 0, only because it came right "
+                       "after the first" if by_rule else "the first impulse changed the second's closing speed")
+                self._add(Finding("simultaneous", step, [a],
+                                  f"sphere {a} met {first} and {second} at one instant ({c.time_in_step[i] / dt:.3f}·dt "
+                                  f"into the step), and they were resolved one after the other: {first} first, with "
+                                  f"restitution {c.restitution[i]:.3g}, then {second}, with {c.restitution[j]:.3g}; "
+                                  f"{why}, so the order decided how it left (at ({leaving}) m/s)",
+                                  "contacts at one instant are resolved in turn, in the order their swept tests came "
+                                  "out (docs/meshes.md, \"Contacts at one instant\"); move the sphere off the "
+                                  "crease, or read the outcome as one of the orders, not the answer",
+                                  evidence={"rows": [i, j], "time": float(c.time_in_step[i])}))
+                return
 
     def _who(self, c: Contacts, i: int) -> str:
         return contact_words(int(c.kind[i]), int(c.a[i]), int(c.other[i]), self.names)
