@@ -456,39 +456,42 @@ class Auditor:
     def _check_simultaneous(self, step: int, dt: float, c: Contacts) -> None:
         """Two contacts of one sphere with immovable partners at the same instant (the same
         time_in_step, to the bit), both with an impulse, whose normals are neither parallel
-        nor perpendicular (|n_1·n_2| between 1e-9 and 1 - 1e-9): resolved in turn, the first
-        impulse changed the second's closing speed, so the order decided how the sphere
-        left (a ball dropped onto the crease of a symmetric V leaves it sideways). Named once
-        per step, the first such pair."""
-        immovable = ~partner_is_sphere(c.kind)
-        for i in range(len(c) - 1):
-            if not immovable[i] or not c.impulse[i] > 0.0:
+        nor perpendicular (|n_1·n_2| between 1e-9 and 1 - 1e-9), or the second held by the
+        rapid-contact rule right after the first: resolved in turn, the order decided how the
+        sphere left (a ball dropped onto the crease of a symmetric V leaves it sideways).
+        Named once per step, the first such pair; swept runs only (another detection's, or
+        another engine's, times are not instants)."""
+        if self.settings.get("detection", "swept") != "swept" or self.header.meta.get("foreign"):
+            return  # only a swept test's times are instants (a discrete run's contacts share the step's end)
+        # the candidates, grouped by sphere and instant, in numpy (a step holds hundreds of
+        # contacts, and a loop over every pair of them would be quadratic)
+        rows = np.flatnonzero(~partner_is_sphere(c.kind) & (c.impulse > 0.0))
+        if len(rows) < 2:
+            return
+        rows = rows[np.lexsort((rows, c.time_in_step[rows], c.a[rows]))]
+        same = (c.a[rows[1:]] == c.a[rows[:-1]]) & (c.time_in_step[rows[1:]] == c.time_in_step[rows[:-1]])
+        for k in np.flatnonzero(same):
+            i, j = int(rows[k]), int(rows[k + 1])  # in the order they were resolved
+            facing = abs(float(np.dot(c.normal[i], c.normal[j])))
+            coupled = 1e-9 < facing < 1.0 - 1e-9
+            by_rule = int(c.how[j]) == HOW_RAPID and int(c.how[i]) != HOW_RAPID
+            if not (coupled or by_rule):
                 continue
-            for j in range(i + 1, len(c)):
-                if c.time_in_step[j] != c.time_in_step[i]:
-                    break
-                if c.a[j] != c.a[i] or not immovable[j] or not c.impulse[j] > 0.0:
-                    continue
-                facing = abs(float(np.dot(c.normal[i], c.normal[j])))
-                coupled = 1e-9 < facing < 1.0 - 1e-9
-                by_rule = int(c.how[j]) == HOW_RAPID and int(c.how[i]) != HOW_RAPID
-                if not (coupled or by_rule):
-                    continue
-                a = int(c.a[i])
-                first, second = (partner_words(int(c.kind[k]), int(c.other[k]), self.names) for k in (i, j))
-                leaving = ", ".join(f"{q:.3g}" for q in np.asarray(c.velocity_a_after[j], dtype=np.float64))
-                why = ("the rapid-contact rule held the second, with restitution 0, only because it came right "
-                       "after the first" if by_rule else "the first impulse changed the second's closing speed")
-                self._add(Finding("simultaneous", step, [a],
-                                  f"sphere {a} met {first} and {second} at one instant ({c.time_in_step[i] / dt:.3f}·dt "
-                                  f"into the step), and they were resolved one after the other: {first} first, with "
-                                  f"restitution {c.restitution[i]:.3g}, then {second}, with {c.restitution[j]:.3g}; "
-                                  f"{why}, so the order decided how it left (at ({leaving}) m/s)",
-                                  "contacts at one instant are resolved in turn, in the order their swept tests came "
-                                  "out (docs/meshes.md, \"Contacts at one instant\"); move the sphere off the "
-                                  "crease, or read the outcome as one of the orders, not the answer",
-                                  evidence={"rows": [i, j], "time": float(c.time_in_step[i])}))
-                return
+            a = int(c.a[i])
+            first, second = (partner_words(int(c.kind[r]), int(c.other[r]), self.names) for r in (i, j))
+            leaving = ", ".join(f"{q:.3g}" for q in np.asarray(c.velocity_a_after[j], dtype=np.float64))
+            why = ("the rapid-contact rule held the second, with restitution 0, only because it came right "
+                   "after the first" if by_rule else "the first impulse changed the second's closing speed")
+            self._add(Finding("simultaneous", step, [a],
+                              f"sphere {a} met {first} and {second} at one instant ({c.time_in_step[i] / dt:.3f}·dt "
+                              f"into the step), and they were resolved one after the other: {first} first, with "
+                              f"restitution {c.restitution[i]:.3g}, then {second}, with {c.restitution[j]:.3g}; "
+                              f"{why}, so the order decided how it left (at ({leaving}) m/s)",
+                              "contacts at one instant are resolved in turn, in the order their swept tests came "
+                              "out (docs/meshes.md, \"Contacts at one instant\"); move the sphere off the "
+                              "crease, or read the outcome as one of the orders, not the answer",
+                              evidence={"rows": [i, j], "time": float(c.time_in_step[i])}))
+            return
 
     def _who(self, c: Contacts, i: int) -> str:
         return contact_words(int(c.kind[i]), int(c.a[i]), int(c.other[i]), self.names)
