@@ -335,7 +335,10 @@ class World:
             self._predict(ctx, kind, ia, other, push)
 
     def _resolve(self, ctx: StepContext) -> None:
-        """The contacts, in the order of the policy (``settings.ordering``)."""
+        """The contacts, in the order of the policy (``settings.ordering``); none once a
+        sphere is pinned (the forces phase found it: the step ends as it stands)."""
+        if self.held.count[PINNED]:
+            return
         s = self.settings
         budget = self._resolve_in_time_order(ctx) if s.ordering == "time" else self._resolve_in_index_order(ctx)
         if ctx.too_wide_mid_step and not ctx.warned("periodic"):
