@@ -3,6 +3,7 @@
     .venv/bin/python benchmarks/recording.py            # box-rain 1k (240 steps) and 10k (120 steps)
     .venv/bin/python benchmarks/recording.py --quick    # 1k, 60 steps, and 10k, 24 steps
     .venv/bin/python benchmarks/recording.py --size 10000 240   # bytes only, one whole second
+    .venv/bin/python benchmarks/recording.py --meshes    # what the search of the meshes' trees adds
 
 Prints markdown tables (docs/recording.md comes from this command):
 
@@ -34,8 +35,6 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from broadphase import box_rain_toml  # noqa: E402
-
 CONFIGS = [  # (label, detail or None for off, Rerun too, view channels)
     ("off", None, False, False),
     ("mcap state --no-view", "state", False, False),
@@ -49,14 +48,13 @@ CONFIGS = [  # (label, detail or None for off, Rerun too, view channels)
 
 def worker(n: int, steps: int, detail: str | None, rerun: bool, folder: str, view: bool = True) -> dict:
     """One configuration, in its own process: ms/step and file sizes."""
+    from physdbg.analysis.engines import box_rain_scene
     from physdbg.engine import warm_up
     from physdbg.observe import FanOut
     from physdbg.record.header import RecordingHeader
     from physdbg.record.mcap_sink import McapRecorder
-    from physdbg.advisor import decide
-    from physdbg.scene import parse_scene
 
-    scene = decide(parse_scene(box_rain_toml(n, steps), "bench"))
+    scene = box_rain_scene(n, steps)
     sinks = []
     mcap = Path(folder) / f"rain-{n}-{detail}-{view}.mcap"
     rrd = Path(folder) / f"rain-{n}.rrd"
@@ -84,6 +82,68 @@ def worker(n: int, steps: int, detail: str | None, rerun: bool, folder: str, vie
     return out
 
 
+MESH_CONFIGS = [  # (label, detail, the search recorded); the view channels written (the default)
+    ("mcap full, no search", "full", False), ("mcap full", "full", True),
+    ("mcap contacts, no search", "contacts", False), ("mcap contacts", "contacts", True),
+]
+
+
+def mesh_worker(name: str, detail: str, search: bool, folder: str) -> dict:
+    """A built-in mesh scene recorded whole, with or without the search of the meshes'
+    trees (a recorder that does not read MeshSearch: the file is what it was before the
+    search was recorded), in its own process: ms/step, bytes, and the search channels'
+    message bytes (protobuf, before compression)."""
+    from physdbg import api
+    from physdbg.engine import warm_up
+    from physdbg.record import format as fmt
+    from physdbg.record.header import RecordingHeader
+    from physdbg.record.mcap_sink import McapRecorder
+    from physdbg.record.reader import open_recording
+
+    class Recorder(McapRecorder):
+        wants_mesh_search = search
+
+    scene = api.load_scene(name)
+    mcap = Path(folder) / f"{name}-{detail}-{search}.mcap"
+    recorder = Recorder(mcap, RecordingHeader.from_scene(scene, detail))
+    world = scene.build_world(recorder)
+    warm_up(world.broad_phase.name, sleeping=world.sleepers is not None)
+    lengths = list(scene.step_lengths())
+    started = time.perf_counter()
+    for dt in lengths:
+        world.step(dt)
+    recorder.close()
+    wall = time.perf_counter() - started
+    with open_recording(mcap) as rec:
+        channel = sum(len(data) for topic in (fmt.TOPIC_MESH_QUERIES, fmt.TOPIC_MESH_SEARCH)
+                      for _, data in rec.raw_messages(topic))
+    return {"ms_per_step": 1e3 * wall / len(lengths), "mcap_bytes": mcap.stat().st_size, "search_bytes": channel,
+            "steps": len(lengths)}
+
+
+def mesh_search_cost(rounds: int = 3) -> None:
+    """The time and bytes the search channels add to `physdbg record` of funnel and paddle."""
+    print("| scene | steps | recording | ms/step | MCAP KB | search messages KB |")
+    print("|---|---|---|---|---|---|")
+    with tempfile.TemporaryDirectory() as folder:
+        for name in ("funnel", "paddle"):
+            best: dict[str, dict] = {}
+            for _ in range(rounds):
+                for label, detail, search in MESH_CONFIGS:
+                    code = (f"import sys, json; sys.path.insert(0, {str(ROOT / 'benchmarks')!r}); import recording; "
+                            f"print(json.dumps(recording.mesh_worker({name!r}, {detail!r}, {search}, {folder!r})))")
+                    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+                    if done.returncode != 0:
+                        raise SystemExit(done.stderr)
+                    r = json.loads(done.stdout.strip().splitlines()[-1])
+                    if label not in best or r["ms_per_step"] < best[label]["ms_per_step"]:
+                        best[label] = r
+            for label, _, _ in MESH_CONFIGS:
+                r = best[label]
+                print(f"| {name} | {r['steps']} | {label} | {r['ms_per_step']:.2f} | {r['mcap_bytes'] / 1e3:.0f} "
+                      f"| {r['search_bytes'] / 1e3:.0f} |", flush=True)
+
+
 def _in_subprocess(n: int, steps: int, detail: str | None, rerun: bool, folder: str, view: bool = True) -> dict:
     code = (f"import sys, json; sys.path.insert(0, {str(ROOT / 'benchmarks')!r}); import recording; "
             f"print(json.dumps(recording.worker({n}, {steps}, {detail!r}, {rerun}, {folder!r}, {view})))")
@@ -108,7 +168,12 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="fewer steps")
     parser.add_argument("--size", nargs=2, type=int, metavar=("N", "STEPS"),
                         help="only the size of a --detail state recording of box-rain N for STEPS steps")
+    parser.add_argument("--meshes", action="store_true",
+                        help="only what recording the search of the meshes' trees adds (funnel, paddle)")
     args = parser.parse_args()
+    if args.meshes:
+        mesh_search_cost(2 if args.quick else 3)
+        return
     if args.size:
         n, steps = args.size
         with tempfile.TemporaryDirectory() as folder:

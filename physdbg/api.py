@@ -490,9 +490,11 @@ def _verify_steps(rec, world, on_step) -> VerifyResult:
 
 
 def replay(path: str | Path, rrd_path: str | None = None, force: bool = False, spawn: bool = False,
-           verify: bool = True) -> dict:
+           verify: bool = True, at: int | None = None) -> dict:
     """Rebuild the Rerun view of a recording from the MCAP file alone; returns what was written.
-    verify: check every state against its stored hash and the frame index as it is read."""
+    verify: check every state against its stored hash and the frame index as it is read;
+    at: the step the view opens on, paused (default: its first contact, on a mesh where
+    the scene has meshes)."""
     from .record import open_recording
     from .record.rerun_sink import RerunSink
 
@@ -504,8 +506,10 @@ def replay(path: str | Path, rrd_path: str | None = None, force: bool = False, s
     from .analysis.audit import Auditor
 
     with open_recording(path, verify=verify) as rec:
+        if at is not None and not 1 <= at <= rec.steps:
+            raise PhysdbgError(f"--at {at}: {path} holds steps 1..{rec.steps}")
         outputs = claim([out], force)
-        sink = RerunSink(rec.header, outputs.paths[0], spawn=spawn)
+        sink = RerunSink(rec.header, outputs.paths[0], spawn=spawn, open_at=at)
         auditor = Auditor(rec.header, sink.mark_finding)  # the findings marked, as in the live picture
         try:
             try:

@@ -429,6 +429,10 @@ def replay(
         "--verify", help="Re-simulate from the embedded scene and check every step's hash; "
                          "exit 1 at the first mismatch.")] = False,
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing --rrd file.")] = False,
+    at: Annotated[Optional[int], typer.Option(
+        "--at", metavar="STEP", min=1,
+        help="Open the view paused at this step (default: the first contact; in a scene with meshes the first on "
+             "a mesh).")] = None,
     no_verify: NoVerifyOption = False,
 ) -> None:
     """Rebuild the Rerun view of a recording from the MCAP file alone, or verify it.
@@ -443,6 +447,8 @@ def replay(
 
         if not (rrd or spawn or web or verify):
             raise PhysdbgError("say what to do: --rrd FILE, --spawn, --web and/or --verify")
+        if at is not None and not (rrd or spawn or web):
+            raise PhysdbgError("--at opens the view at a step: give it with --rrd FILE, --spawn or --web")
         if verify and no_verify:
             raise PhysdbgError("--verify checks the file and re-simulates it; --no-verify skips the checks: give one")
         if verify:
@@ -463,7 +469,7 @@ def replay(
             scratch = None if rrd else Path(tempfile.mkdtemp(prefix="physdbg-"))
             target = rrd or scratch / (recording.stem + ".rrd")
             try:
-                done = api.replay(recording, str(target), force=force, verify=not no_verify)
+                done = api.replay(recording, str(target), force=force, verify=not no_verify, at=at)
                 typer.echo(f"replayed    {done['steps']} steps"
                            + (" (truncated recording)" if done["truncated"] else "") + f" -> {target}")
                 if web:

@@ -7,6 +7,7 @@ One step produces, in this order::
     EngineWarning ...          (zero or more, as they arise)
     Contacts                   (one batch: every contact, in the order they were resolved)
     SweptTests                 (one batch: every candidate the narrow phase tested)
+    MeshSearch                 (a scene with meshes: every node of their trees the step's walks visited)
     StepEnd
 
 Every event's ``step`` is the step's number, counted from 1 as the CLI, the recordings
@@ -302,6 +303,47 @@ class SweptTests:
         return len(self.kind)
 
 
+# outcome of a node visited by a walk of a mesh's tree (MeshSearch.outcome)
+SEARCH_MET = 0  # the box met the node's box: the walk went down into it
+SEARCH_CULLED = 1  # it did not: the branch ended there
+SEARCH_REACHED = 2  # it met a leaf's box: that triangle was tested (unless a held contact)
+SEARCH_OUTCOME_NAMES = ("met", "culled", "reached")
+
+
+@dataclass(frozen=True)
+class MeshSearch:
+    """Every walk of the meshes' trees (the seed's "search tree that records descent into
+    each BVH") in one step of a scene with meshes, as the engine made them.
+
+    A *query* is a box the engine asked every mesh's tree with: each sphere's path box at
+    the step's start (``after`` -1), and again each time a contact changed a sphere's path
+    (``after``: the row in the step's Contacts of the contact after which it asked).
+    query_sphere (J,) int32, query_after (J,) int32, query_lo, query_hi (J, 3) m: the box
+    in the world frame (each mesh's walk carries it into the mesh's frame, grown by the
+    mesh's motion over the step: engine/colliders/mesh.frame_box).
+
+    A *visit* is one node of one tree visited by one query's walk, in the order walked:
+    visit_query (V,) int32 (the query's row), visit_node (V,) int32 (the node: a position in
+    the meshes' trees laid out in pre-order one after another, as the recording's mesh-tree
+    channel numbers them), visit_outcome (V,) int8 (SEARCH_MET, SEARCH_CULLED,
+    SEARCH_REACHED), visit_parent (V,) int32 (the row of the visit it was reached from;
+    -1 for a tree's root). Built only for an observer that reads it (``wants_mesh_search``).
+    """
+
+    step: int
+    query_sphere: np.ndarray
+    query_after: np.ndarray
+    query_lo: np.ndarray
+    query_hi: np.ndarray
+    visit_query: np.ndarray
+    visit_node: np.ndarray
+    visit_outcome: np.ndarray
+    visit_parent: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.visit_node)
+
+
 @dataclass(frozen=True)
 class EngineWarning:
     """Something the user should know about a step (code is a stable identifier)."""
@@ -397,4 +439,4 @@ class RunTally:
         self.max_overlap = max(self.max_overlap, end.max_overlap)
 
 
-Event = StepBegin | BroadPhaseInfo | Contacts | SweptTests | EngineWarning | StepEnd
+Event = StepBegin | BroadPhaseInfo | Contacts | SweptTests | MeshSearch | EngineWarning | StepEnd

@@ -6,8 +6,9 @@ typed event of :mod:`physdbg.events`. Recorders, summaries and tests are observe
 
 An observer that does not read ``SweptTests`` (every swept test of a step, misses
 included: tens of millions in a dense step) says so with ``wants_swept_tests = False``;
-the world then neither logs the misses nor sends the event (engine.world.wants_swept_tests).
-One that does not say gets every event.
+the world then neither logs the misses nor sends the event (engine.world.wants_swept_tests);
+so does one that does not read ``MeshSearch`` (every walk of the meshes' trees) with
+``wants_mesh_search = False``. One that does not say gets every event.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from .events import ContactResolved, Contacts, EngineWarning, Event, StepBegin, 
 
 class Observer(Protocol):
     def on_event(self, event: Event) -> None: ...
-    # optional: wants_swept_tests: bool (True when absent)
+    # optional: wants_swept_tests, wants_mesh_search: bool (True when absent)
 
 
 class FanOut:
@@ -32,6 +33,11 @@ class FanOut:
     def wants_swept_tests(self) -> bool:
         """Whether any of the observers reads SweptTests (True for one that does not say)."""
         return any(getattr(o, "wants_swept_tests", True) for o in self.observers)
+
+    @property
+    def wants_mesh_search(self) -> bool:
+        """Whether any of the observers reads MeshSearch (True for one that does not say)."""
+        return any(getattr(o, "wants_mesh_search", True) for o in self.observers)
 
     def on_event(self, event: Event) -> None:
         for observer in self.observers:

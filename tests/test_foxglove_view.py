@@ -102,6 +102,40 @@ def _rotate_x(x, y, z, w):
     return np.array([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)])
 
 
+def test_the_3d_scene_carries_every_step_s_recorded_search_of_the_meshes_trees(tmp_path):
+    """A scene with a mesh: entity "mesh search" each step, drawing the walks of the spheres
+    the step is about (those that hit the mesh first, as the Rerun view): the edges of the
+    nodes met (8 corners and 12 edges of index pairs a box), the triangles reached; its metadata the spheres
+    drawn and the counts of the whole search the file records (/physdbg/mesh_search)."""
+    from physdbg.record import mesh_view
+
+    done = api.record("paddle", ["duration=0.1"], mcap_path=str(tmp_path / "p.mcap"), rrd=False)
+    recording = open_recording(done.mcap)
+    searches = [entity for _, update in messages(done.mcap, fmt.TOPIC_VIEW_SCENE) for entity in update.entities
+                if entity.id == "mesh search"]
+    assert len(searches) == recording.steps
+    hits = 0
+    for k, entity in enumerate(searches, start=1):
+        search, contacts = recording.mesh_search(k), recording.contacts(k)
+        meta = {m.key: m.value for m in entity.metadata}
+        shown = mesh_view.searched_spheres(search, contacts, 12)
+        assert meta["spheres drawn"] == " ".join(str(i) for i in shown)
+        hit = contacts.a[contacts.kind == 2]
+        hits += len(hit)
+        assert set(hit.tolist()) <= set(shown)
+        assert int(meta["boxes asked"]) == len(search.query_sphere)
+        assert int(meta["node visits"]) == len(search.visit_node)
+        mine = np.isin(search.query_sphere[search.visit_query], shown)
+        met = np.unique(search.visit_node[mine & (search.visit_outcome != 1)])
+        green = [line for line in entity.lines if line.color.g > 0.8]
+        assert sum(len(line.points) for line in green) == 8 * len(met)
+        assert sum(len(line.indices) for line in green) == 24 * len(met)
+        assert all(max(line.indices) < len(line.points) for line in green)
+        reached = len(np.unique(search.visit_node[mine & (search.visit_outcome == 2)]))
+        assert sum(len(face.points) for face in entity.triangles) == 3 * reached
+    assert hits > 0
+
+
 def test_arrow_rotations_turn_x_onto_any_direction_including_minus_x():
     rng = np.random.default_rng(3)
     d = rng.normal(size=(200, 3))

@@ -389,8 +389,9 @@ def test_the_tree_the_views_draw_is_the_tree_the_engine_walks():
             assert leaf[mine].tolist() == drawn
 
 
-def test_the_rerun_view_draws_a_mesh_s_bvh_and_the_search_at_its_first_contact():
-    """mesh_view.search on the engine's own tree finds exactly the triangles whose boxes meet
+def test_the_reference_descent_reaches_exactly_the_triangles_whose_boxes_meet():
+    """mesh_view.search (the reference walk, a stack in Python, that the recorded search is
+    checked against) on the engine's own tree finds exactly the triangles whose boxes meet
     a sphere's box carried into the mesh's frame (brute force), and its search tree links every visited pair
     to the pair it descended from."""
     from physdbg.record import mesh_view
@@ -417,6 +418,89 @@ def test_the_rerun_view_draws_a_mesh_s_bvh_and_the_search_at_its_first_contact()
     assert np.all(visits[visits[:, 3] >= 0, 3] < np.flatnonzero(visits[:, 3] >= 0))  # parents come first
     assert np.all(visits[visits[:, 3] >= 0][:, 0] == visits[visits[visits[:, 3] >= 0, 3], 0])  # same sphere
     assert len(mesh_view.tree_layout(visits)) == len(visits)
+
+
+def _record(tmp_path, name, detail, *overrides):
+    path = tmp_path / f"{name}-{detail}.mcap"
+    done = runner.invoke(app, ["record", name, "-o", str(path), "--no-rrd", "--detail", detail,
+                               *[part for o in overrides for part in ("-s", o)]])
+    assert done.exit_code == 0, done.output
+    return path
+
+
+@pytest.mark.parametrize("name", ["paddle", "funnel"])
+def test_every_step_s_search_of_the_meshes_trees_is_recorded_as_the_engine_walked_it(tmp_path, name):
+    """At --detail full every step's walks of the meshes' BVHs are in the file: the trees
+    are the engine's (node for node), each recorded walk is the reference walk of its box
+    (mesh_view.search, a Python stack walk) visit for visit, and every triangle the engine
+    swept-tested was reached by a walk of that sphere: the search drawn is the one made."""
+    from physdbg.record import mesh_view
+    from physdbg.record.reader import open_recording
+
+    recording = open_recording(_record(tmp_path, name, "full", "duration=0.25"))
+    meshes = recording.header.walls.meshes
+    group = mesh_view.engine_tree(meshes)
+    tree = recording.mesh_tree()
+    for column, values in mesh_view.tree_table(group).items():
+        assert np.array_equal(tree[column], values), column
+    leaf = group[5]
+    walks = later = 0
+    for events in recording.iter_step_events():
+        begin, search = events[0], next(e for e in events if e.__class__.__name__ == "MeshSearch")
+        tests = next(e for e in events if e.__class__.__name__ == "SweptTests")
+        assert len(search.query_sphere) >= recording.header.count  # every sphere's path box, then re-asks
+        assert np.all(search.query_after[:recording.header.count] == -1)
+        later += int(np.count_nonzero(search.query_after >= 0))
+        reference = mesh_view.search(mesh_view.engine_tree(meshes), meshes, search.query_lo, search.query_hi,
+                                     begin.time, begin.dt)
+        recorded = np.stack([search.visit_query, search.visit_node, search.visit_outcome, search.visit_parent], 1)
+        assert np.array_equal(recorded, reference.visits)
+        reached = set(zip(search.query_sphere[search.visit_query[search.visit_outcome == 2]].tolist(),
+                          leaf[search.visit_node[search.visit_outcome == 2]].tolist()))
+        mine = tests.kind == KIND_MESH
+        assert set(zip(tests.a[mine].tolist(), tests.other[mine].tolist())) <= reached
+        walks += len(search.query_sphere)
+    assert walks > 0 and later > 0  # some paths a contact changed asked again
+
+
+def test_detail_contacts_keeps_the_walks_that_led_to_a_contact(tmp_path):
+    """--detail contacts keeps, of each step's search, the visits from a root down to each
+    triangle the step had a contact with: a subset of the whole search, every kept visit's
+    parent kept, and a reached triangle for every contact on a mesh."""
+    from physdbg.record.reader import open_recording
+
+    full = open_recording(_record(tmp_path, "paddle", "full", "duration=0.25"))
+    kept = open_recording(_record(tmp_path, "paddle", "contacts", "duration=0.25"))
+    leaf = full.mesh_tree()["triangle"]
+    contacts_on_mesh = 0
+    for k in range(1, full.steps + 1):
+        whole, part, contacts = full.mesh_search(k), kept.mesh_search(k), kept.contacts(k)
+        whole_rows = set(zip(whole.query_sphere[whole.visit_query].tolist(), whole.query_after[whole.visit_query].tolist(),
+                             whole.visit_node.tolist(), whole.visit_outcome.tolist()))
+        part_rows = set(zip(part.query_sphere[part.visit_query].tolist(), part.query_after[part.visit_query].tolist(),
+                            part.visit_node.tolist(), part.visit_outcome.tolist()))
+        assert part_rows <= whole_rows
+        assert np.all((part.visit_parent == -1) | (part.visit_parent < np.arange(len(part))))
+        assert not np.any(part.visit_outcome == 1)  # a culled node leads nowhere
+        reached = set(zip(part.query_sphere[part.visit_query[part.visit_outcome == 2]].tolist(),
+                          leaf[part.visit_node[part.visit_outcome == 2]].tolist()))
+        on_mesh = contacts.kind == KIND_MESH
+        contacts_on_mesh += int(np.count_nonzero(on_mesh))
+        assert set(zip(contacts.a[on_mesh].tolist(), contacts.other[on_mesh].tolist())) == reached
+    assert contacts_on_mesh > 0
+
+
+def test_a_recording_without_a_search_says_why(tmp_path):
+    from physdbg.errors import RecordingError
+    from physdbg.record.reader import open_recording
+
+    state = open_recording(_record(tmp_path, "paddle", "state", "duration=0.05"))
+    with pytest.raises(RecordingError, match="recorded with --detail state; it needs --detail contacts or full"):
+        state.mesh_search(1)
+    assert state.mesh_tree() is None
+    spheres = open_recording(_record(tmp_path, "billiards", "full", "steps=2"))
+    with pytest.raises(RecordingError, match="no mesh search recorded \\(the scene has no meshes\\)"):
+        spheres.mesh_search(1)
 
 
 def test_a_peer_run_of_a_kinematic_mesh_is_refused_by_name_not_run_with_the_mesh_fixed():

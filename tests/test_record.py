@@ -312,7 +312,7 @@ def test_a_program_with_standard_decoders_only_reads_every_channel(tmp_path):
                           cwd=tmp_path, check=True)
     got = json.loads(done.stdout)
     assert set(got["encodings"]) == set(fmt.topics_for("full", view=True)) - {
-        fmt.TOPIC_BVH, fmt.TOPIC_BVH_ORDER, fmt.TOPIC_WARNINGS}  # billiards uses a grid and warns of nothing
+        fmt.TOPIC_BVH, fmt.TOPIC_BVH_ORDER, fmt.TOPIC_WARNINGS, *fmt.MESH_TOPICS}  # a grid, no warning, no mesh
     assert all(enc in (["protobuf", "protobuf"], ["json", "jsonschema"]) for enc in got["encodings"].values())
     assert got["undescribed"] == [] and got["steps_match"]
     initial = load_scene("billiards").state
@@ -333,7 +333,14 @@ def test_a_program_with_standard_decoders_only_reads_every_channel(tmp_path):
     done = subprocess.run([sys.executable, str(script), str(path)], capture_output=True, text=True,
                           cwd=tmp_path, check=True)
     got = json.loads(done.stdout)
-    assert set(got["encodings"]) == set(fmt.topics_for("full", view=True))
+    assert set(got["encodings"]) == set(fmt.topics_for("full", view=True)) - set(fmt.MESH_TOPICS)
+    assert got["undescribed"] == [] and got["steps_match"]
+    # and a scene with a mesh: its trees and every step's search of them
+    path, _ = record_with_events(tmp_path, "paddle", ["duration=0.1"])
+    done = subprocess.run([sys.executable, str(script), str(path)], capture_output=True, text=True,
+                          cwd=tmp_path, check=True)
+    got = json.loads(done.stdout)
+    assert set(fmt.MESH_TOPICS) <= set(got["encodings"])
     assert got["undescribed"] == [] and got["steps_match"]
 
 

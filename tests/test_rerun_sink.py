@@ -88,6 +88,31 @@ def test_replay_from_mcap_alone_draws_the_same_picture_as_the_live_run(billiards
     assert live_rows == replay_rows
 
 
+def test_replay_at_a_step_opens_the_file_paused_there(billiards_live, tmp_path):
+    """`physdbg replay FILE --rrd OUT --at 40`: the final blueprint opens the timeline "from
+    step 40", which begins at step 40; a step the file does not hold, or --at with nothing
+    to draw, is one clear line."""
+    from typer.testing import CliRunner
+
+    from physdbg.cli import app
+
+    mcap, _, _ = billiards_live
+    out = tmp_path / "at40.rrd"
+    done = CliRunner().invoke(app, ["replay", str(mcap), "--rrd", str(out), "--at", "40"])
+    assert done.exit_code == 0, done.output
+    reader = rerun_chunk.RrdReader(out)
+    assert len(reader.blueprints()) == 2
+    opening = [value for chunk in reader.stream() if not chunk.is_static
+               and "from step 40" in chunk.to_record_batch().schema.names
+               for value in chunk.to_record_batch().column("from step 40").to_pylist()]
+    assert min(opening) == 40 and max(opening) == 120
+    done = CliRunner().invoke(app, ["replay", str(mcap), "--rrd", str(tmp_path / "x.rrd"), "--at", "500"])
+    assert done.exit_code == 2 and "--at 500: " in done.output and "holds steps 1..120" in done.output
+    assert not (tmp_path / "x.rrd").exists()
+    done = CliRunner().invoke(app, ["replay", str(mcap), "--verify", "--at", "5"])
+    assert done.exit_code == 2 and "--at opens the view at a step: give it with --rrd FILE" in done.output
+
+
 def test_replay_never_overwrites_without_force(billiards_live, tmp_path):
     mcap, _, _ = billiards_live
     out = tmp_path / "x.rrd"
@@ -218,10 +243,11 @@ def test_a_pile_falling_asleep_turns_grey_blue_live_and_replayed(tmp_path):
 
 
 
-def test_a_mesh_scene_draws_its_bvh_moves_its_kinematic_mesh_and_opens_on_the_search_at_its_first_contact(tmp_path):
+def test_a_mesh_scene_draws_its_bvh_moves_its_kinematic_mesh_and_draws_every_step_s_recorded_search(tmp_path):
     """paddle: the mesh's BVH by volume and level (static), the paddle's transform every
-    step, and at the first step with a contact on it the search of the triangles' BVH, in
-    3D and as a tree, where the file opens (a second, final blueprint)."""
+    step, and every step's recorded search of the triangles' BVH, in 3D and as a tree; the
+    file opens (a second, final blueprint) at the first contact on the mesh, whose log line
+    says what the search found."""
     from typer.testing import CliRunner
 
     from physdbg.cli import app
@@ -240,10 +266,12 @@ def test_a_mesh_scene_draws_its_bvh_moves_its_kinematic_mesh_and_opens_on_the_se
               and any(name.startswith("Transform3D") for name in comps)]
     assert sorted(turned) == list(range(1, 13))
     searched = sorted(k for entity, k in rows if entity == "/search/triangles")
-    assert len(searched) == 1
-    assert any(entity == "/world/mesh_search/met" and k == searched[0] for entity, k in rows)
-    logged = [text for (entity, k), comps in rows.items() if entity == "/log" and k == searched[0]
+    assert searched == list(range(1, 13))  # every step: each sphere's path box asks the tree
+    assert all(("/world/mesh_search/met", k) in rows and ("/world/mesh_search/queries", k) in rows for k in searched)
+    first = min(k for (entity, k), comps in rows.items() if entity == "/log" and any(
+        "hit mesh 'paddle' triangle" in text for row in comps.get("TextLog:text", []) for text in row))
+    logged = [text for (entity, k), comps in rows.items() if entity == "/log" and k == first
               for row in comps.get("TextLog:text", []) for text in row]
-    assert any(text.startswith(f"step {searched[0]}: the first contact on a mesh; the search") for text in logged)
-    assert any(f"step {searched[0]}: sphere" in text and "hit mesh 'paddle' triangle" in text for text in logged)
+    assert any(text.startswith(f"step {first}: the search of the meshes' BVHs") and "as recorded" in text
+               for text in logged)
     assert len(reader.blueprints()) == 2

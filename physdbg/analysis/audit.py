@@ -155,6 +155,7 @@ class Auditor:
     """
 
     wants_swept_tests = False  # it judges contacts and states, not the test log (observe.py)
+    wants_mesh_search = False  # nor the walks of the meshes' trees
 
     def __init__(self, header, on_finding: Callable[[Finding], None] | None = None,
                  examples_per_kind: int | None = EXAMPLES_PER_KIND):

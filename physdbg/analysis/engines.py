@@ -197,6 +197,7 @@ def _measure_physdbg(scene, overrides, small: bool) -> dict:
         """The time of the run's first contact (the step's start plus the contact's time in it)."""
 
         wants_swept_tests = False
+        wants_mesh_search = False
         time = 0.0
 
         def on_event(self, event):

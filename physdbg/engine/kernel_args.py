@@ -107,6 +107,7 @@ class LoopBuffers(NamedTuple):
     batch_mark: np.ndarray
     requery: np.ndarray
     requery_count: np.ndarray
+    mesh_queries: np.ndarray
 
 
 # ----------------------------------------------------------------------------- unpack helpers
@@ -124,8 +125,9 @@ M_REST_FRACTION, M_REST_STEP_FACTOR, M_ANCHOR_IS_FLOW, M_PATH_FOLLOWS_ACC, M_VTO
     _M[n] for n in ("rest_fraction", "rest_step_factor", "anchor_is_flow", "path_follows_acc", "vtol", "atol"))
 C_ADJ_START, C_ADJ, C_BOX_LO, C_BOX_HI, C_BOX_MARGIN, C_MAX_DEGREE, C_PATH_LO, C_PATH_HI = (
     _C[n] for n in ("adj_start", "adj", "box_lo", "box_hi", "box_margin", "max_degree", "path_lo", "path_hi"))
-B_HEAP_TOI, B_HEAP_DATA, B_TEST_INT, B_TEST_FLOAT, B_TEST_OUTCOME, B_COUNTERS, B_BATCH_MARK = (
-    _B[n] for n in ("heap_toi", "heap_data", "test_int", "test_float", "test_outcome", "counters", "batch_mark"))
+B_HEAP_TOI, B_HEAP_DATA, B_TEST_INT, B_TEST_FLOAT, B_TEST_OUTCOME, B_COUNTERS, B_BATCH_MARK, B_MESH_QUERIES = (
+    _B[n] for n in ("heap_toi", "heap_data", "test_int", "test_float", "test_outcome", "counters", "batch_mark",
+                    "mesh_queries"))
 
 
 @njit(cache=True, inline="always")

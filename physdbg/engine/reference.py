@@ -28,6 +28,10 @@ from .world import World
 class ReferenceWorld(World):
     """A World whose time-ordered resolve phase is the O(N²) reference loop (module doc)."""
 
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._walks_mesh_trees = False  # it tests every triangle: no tree is walked, none reported
+
     def _resolve_in_time_order(self, ctx: StepContext) -> str | None:
         st = self._st
         every = [(kind, *every_candidate(kind, st.count, self._geometry)) for kind in range(KINDS)]

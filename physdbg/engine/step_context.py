@@ -57,6 +57,10 @@ class StepContext:
     too_wide_mid_step: str | None = None
     kernel_groups: tuple | None = None
     out_of_memory: int = 0  # bytes the buffers would have needed, when max_memory stopped growing them
+    # the step's walks of the meshes' trees, for an observer that reads them (World._mesh_search):
+    # the path boxes asked at step start (lo, hi (N, 3) m), then the MeshSearch event
+    search_start: tuple | None = None
+    mesh_search: object | None = None
     max_overlap: float = 0.0
     sleeping_pairs: np.ndarray = field(default_factory=lambda: np.empty((0, 2), np.int64))
     slept: int = 0
@@ -81,6 +85,14 @@ class StepContext:
     def partners(self, i: int) -> np.ndarray:
         """Sphere i's broad-phase partners (int64 indices)."""
         return self.adj[self.adj_start[i]:self.adj_start[i + 1]]
+
+
+def wants_mesh_search(observer) -> bool:
+    """Whether the step keeps the boxes it asks the meshes' trees with and sends the
+    ``MeshSearch`` event (a scene with meshes): for an observer that reads it, which says
+    so with a ``wants_mesh_search`` attribute (one without it gets every event). The
+    audit and the run summary read none of it."""
+    return observer is not None and bool(getattr(observer, "wants_mesh_search", True))
 
 
 def wants_swept_tests(observer) -> bool:

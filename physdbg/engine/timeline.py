@@ -36,9 +36,9 @@ from numba import njit
 
 from ..events import CONTACT_ROW, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_SUPERSEDED
 from .broadphase.boxes import box_meets
-from .colliders import KINDS, most_partners, partner_sphere, partners_bound, partners_of, time_of_impact
+from .colliders import KINDS, most_partners, partner_sphere, partners_bound, partners_of, searches_meshes, time_of_impact
 from .jit import borrowing, kernel, records
-from .kernel_args import B_BATCH_MARK, B_COUNTERS, LoopBuffers, boxes, partner_lists, paths, sweep, test_log
+from .kernel_args import B_BATCH_MARK, B_COUNTERS, B_MESH_QUERIES, LoopBuffers, boxes, partner_lists, paths, sweep, test_log
 from .motion import particle_box
 from .resolve import NEEDS_HELD, OUT_OF_WORK, SKIPPED, finish_with_held, judge_contact
 from .resting import held_find, held_room
@@ -65,7 +65,9 @@ PENDING_AT = 6  # ... and how many of them are done
 BATCH = 7  # id of the current batch of re-predictions
 ROWS = 8  # rows of the test log written this step (TESTS counts every test)
 KEEP_MISSES = 9  # 1: log every test (the step is observed); 0: only those that hit
-COUNTERS = 10
+MESH_QUERIES = 10  # rows of the mesh-query log written this step ...
+LOG_QUERIES = 11  # ... 1: log the boxes asked of the meshes' trees (the step's search is observed)
+COUNTERS = 12
 
 
 class Buffers:
@@ -86,13 +88,16 @@ class Buffers:
         self.batch_mark = np.full(max(n, 2), -1, dtype=np.int64)  # batch id of each sphere's last change
         self.requery = np.empty(max(n, 2), dtype=np.int64)
         self.requery_count = np.zeros(1, dtype=np.int64)
+        # the boxes the loop asked the meshes' trees with (an observed step of a scene with
+        # meshes): sphere, the contact it came after (its row), the box lo, hi (m)
+        self.mesh_queries = np.empty((64, MESH_QUERY_COLUMNS))
 
     def loop(self) -> tuple:
         """The arrays as run_time_order takes them (kernel_args.LoopBuffers, as a plain
         tuple; again after any growth)."""
         return tuple(LoopBuffers(self.heap_toi, self.heap_data, self.test_int, self.test_float, self.test_outcome,
                                  records(self.contacts), self.counters, self.pending, self.changed, self.batch_mark,
-                                 self.requery, self.requery_count))
+                                 self.requery, self.requery_count, self.mesh_queries))
 
     def renumber(self, old_of_new: np.ndarray) -> None:
         """The spheres renumbered between steps (space_order.py): sphere i is now the one
@@ -101,14 +106,17 @@ class Buffers:
         n = old_of_new.shape[0]
         self.batch_mark[:n] = self.batch_mark[old_of_new]
 
-    def reset(self, keep_misses: bool = True) -> None:
+    def reset(self, keep_misses: bool = True, log_queries: bool = False) -> None:
         """Start a step. keep_misses: log every swept test; False logs only the tests that
         hit within the step (what the loop acts on): an unobserved step of a dense scene
-        runs tens of millions of tests, 95 % of them misses, at 41 bytes a row."""
+        runs tens of millions of tests, 95 % of them misses, at 41 bytes a row.
+        log_queries: log the box of each re-predicted path asked of the meshes' trees
+        (mesh_queries), for the step's recorded search."""
         batch = self.counters[BATCH]  # batch ids stay unique across steps (batch_mark keeps old ones)
         self.counters[:] = 0
         self.counters[BATCH] = batch
         self.counters[KEEP_MISSES] = 1 if keep_misses else 0
+        self.counters[LOG_QUERIES] = 1 if log_queries else 0
         self.requery_count[0] = 0
 
     def ensure(self, heap_room: int, test_room: int, contact_room: int) -> None:
@@ -122,6 +130,9 @@ class Buffers:
         self.test_float = _grown(self.test_float, rows)
         self.test_outcome = _grown(self.test_outcome, rows)
         self.contacts = _grown(self.contacts, _rows_after(self.contacts.shape[0], int(c[CONTACTS]), contact_room))
+        if c[LOG_QUERIES]:  # one row a re-prediction: as much room as the test log keeps
+            self.mesh_queries = _grown(self.mesh_queries,
+                                       _rows_after(self.mesh_queries.shape[0], int(c[MESH_QUERIES]), test_room))
 
     def bytes_after(self, heap_room: int, test_room: int, contact_room: int) -> tuple[int, int, int]:
         """(all the buffers, the test log alone, the contact rows alone) in bytes once
@@ -131,11 +142,13 @@ class Buffers:
         heap = _rows_after(self.heap_toi.shape[0], int(c[HEAP_SIZE]), heap_room) * HEAP_ROW_BYTES
         log = _rows_after(self.test_outcome.shape[0], int(c[ROWS]), test_room) * TEST_ROW_BYTES
         rows = _rows_after(self.contacts.shape[0], int(c[CONTACTS]), contact_room) * self.contacts.dtype.itemsize
-        fixed = sum(a.nbytes for a in (self.counters, self.pending, self.changed, self.batch_mark, self.requery))
+        fixed = sum(a.nbytes for a in (self.counters, self.pending, self.changed, self.batch_mark, self.requery,
+                                        self.mesh_queries))
         return heap + log + rows + fixed, log, rows
 
 
 HEAP_ROW_BYTES = 8 + 2 * 8  # heap_toi, heap_data
+MESH_QUERY_COLUMNS = 8  # sphere, after contact, lo (3), hi (3)
 TEST_ROW_BYTES = 3 * 8 + 2 * 8 + 1  # test_int, test_float, test_outcome
 
 
@@ -293,6 +306,16 @@ def _repredict(p, particles, method, geometry, held, candidates, buffers, scratc
     for c in range(3):
         path_lo[p, c] = scratch[0, c]
         path_hi[p, c] = scratch[1, c]
+    counters = buffers[B_COUNTERS]
+    if counters[LOG_QUERIES] and searches_meshes(geometry):  # an observed step: the query, for the search's record
+        queries = buffers[B_MESH_QUERIES]
+        row = counters[MESH_QUERIES]
+        queries[row, 0] = p
+        queries[row, 1] = counters[CONTACTS] - 1
+        for c in range(3):
+            queries[row, 2 + c] = scratch[0, c]
+            queries[row, 5 + c] = scratch[1, c]
+        counters[MESH_QUERIES] += 1
     for kind in range(KINDS):
         m = partners_of(kind, p, scratch, adj_start, adj, path_lo, path_hi, batch_mark, batch, geometry, found)
         for s in range(m):
@@ -389,7 +412,7 @@ def run_time_order(particles, method, geometry, held, candidates, budgets, buffe
     max_degree = candidates[5]
     work_budget = budgets[2]
     (_heap_toi, heap_data, _test_int, _test_float, test_outcome, contacts, counters, pending, changed, batch_mark,
-     _requery, requery_count) = buffers
+     _requery, requery_count, _mesh_queries) = buffers
     scratch = np.empty((2, 3))  # the lo, hi rows of _inside_box
     found = np.empty((most_partners(geometry, max_degree) + 1, 2), dtype=np.int64)  # one kind's (_repredict)
     judged = np.empty(5, dtype=np.int64)  # a contact _run_events left for the held solve: rid, kind, a, other, how
@@ -434,13 +457,14 @@ def _run_events(particles, method, geometry, held, candidates, budgets, buffers,
     adj_start, adj, box_lo, box_hi, _box_margin, max_degree, _path_lo, _path_hi, scan_boxes = candidates
     cap, max_tests, _work_budget = budgets
     (heap_toi, heap_data, test_int, _test_float, test_outcome, contacts, counters, pending, changed, batch_mark,
-     requery, requery_count) = buffers
+     requery, requery_count, mesh_queries) = buffers
     room = prediction_room(geometry, max_degree)
     while True:
         # re-predict the spheres the last contact changed, pausing if a buffer fills up
         if counters[PENDING_COUNT] > 0:
             while counters[PENDING_AT] < counters[PENDING_COUNT]:
-                if heap_toi.shape[0] - counters[HEAP_SIZE] < room or test_outcome.shape[0] - counters[ROWS] < room:
+                if (heap_toi.shape[0] - counters[HEAP_SIZE] < room or test_outcome.shape[0] - counters[ROWS] < room
+                        or mesh_queries.shape[0] - counters[MESH_QUERIES] < 1):
                     return GROW
                 p = pending[counters[PENDING_AT]]
                 counters[PENDING_AT] += 1

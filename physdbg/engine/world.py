@@ -46,13 +46,14 @@ from ..events import (
     StepBegin,
     StepCounts,
     StepEnd,
+    MeshSearch,
     SweptTests,
     partner_words,
 )
 from .broadphase import choose_broad_phase, make_broad_phase
 from .broadphase.boxes import boxes_meet
 from .broadphase.periodic import PeriodicBroadPhase
-from .colliders import KINDS, PARTNER_IS_SPHERE, geometry_of, max_overlap, narrow_candidates
+from .colliders import KINDS, PARTNER_IS_SPHERE, geometry_of, max_overlap, mesh_search, narrow_candidates
 from .colliders.mesh import place
 from .jit import records
 from .kernel_args import LoopBudgets, LoopCandidates, LoopMethod, LoopParticles
@@ -83,7 +84,7 @@ from .sleep import SUPPORT_GAP, Sleepers, release_static, split_sleeping
 from .space_order import RENUMBER_EVERY, Numbering, chosen_order, inverse_permutation, morton_order
 from .state import (BUDGETS, STATE_FIELDS, NonFiniteState, Settings, State, Walls, energies, first_non_finite,
                     state_hash)
-from .step_context import StepContext, wants_swept_tests
+from .step_context import StepContext, wants_mesh_search, wants_swept_tests
 from .timeline import (
     CAPPED,
     CONTACTS,
@@ -91,6 +92,7 @@ from .timeline import (
     EVENTS,
     GROW,
     GROW_HELD,
+    MESH_QUERIES,
     RAPID,
     REQUERY,
     RESTING_BUDGET,
@@ -148,6 +150,7 @@ class World:
         # rewritten in place, at each step's start (_place_meshes)
         self._geometry = geometry_of(walls)
         self._meshes_move = bool(walls.meshes.moving.any())
+        self._walks_mesh_trees = len(walls.meshes) > 0  # MeshSearch events (the reference loop walks none)
         self._period = np.ascontiguousarray(walls.period, dtype=np.float64).reshape(3)
         self._period_origin = np.ascontiguousarray(walls.period_origin, dtype=np.float64)
         self._periodic = walls.periodic
@@ -242,6 +245,8 @@ class World:
             self._stop_if_asked()
             if name == "broad_phase" and ctx.observer is not None:  # reported outside its timing
                 ctx.observer.on_event(self._broad_phase_event(ctx))
+            if name == "resolve" and ctx.search_start is not None:  # while the meshes are placed for the step
+                ctx.mesh_search = self._mesh_search_event(ctx)
         return self._end(ctx)
 
     def request_stop(self) -> None:
@@ -328,7 +333,10 @@ class World:
         until a contact changes a path, only the path's own box can meet anything, and a
         changed path is tested again against every partner of the grown box (timeline)."""
         # an unobserved step logs only the tests that hit (Buffers.reset)
-        self._buf.reset(keep_misses=wants_swept_tests(ctx.observer))
+        log_queries = self._walks_mesh_trees and wants_mesh_search(ctx.observer)
+        self._buf.reset(keep_misses=wants_swept_tests(ctx.observer), log_queries=log_queries)
+        if log_queries:  # every sphere's path box asks the meshes' trees (colliders.narrow_candidates)
+            ctx.search_start = (ctx.path_lo.copy(), ctx.path_hi.copy())
         push = self.settings.ordering == "time"
         for kind in range(KINDS):  # in the kinds' order: ties in the queue break by test
             ia, other = narrow_candidates(kind, ctx.pairs, ctx.path_lo, ctx.path_hi, self._geometry)
@@ -430,6 +438,8 @@ class World:
             obs.on_event(self._contacts_event(ctx))
             if wants_swept_tests(obs):
                 obs.on_event(self._swept_tests_event(ctx))
+            if ctx.mesh_search is not None:
+                obs.on_event(ctx.mesh_search)
             obs.on_event(end)
         if ctx.non_finite is not None:
             raise NonFiniteState(ctx.step, *ctx.non_finite)
@@ -707,6 +717,24 @@ class World:
             if self.numbering is not None:
                 nodes["order"] = self.numbering.spheres(nodes["order"])
         return BroadPhaseInfo(ctx.step, bp.name, self.broad_phase_reason, stats, nodes)
+
+    def _mesh_search_event(self, ctx: StepContext) -> MeshSearch:
+        """The step's walks of the meshes' trees: the path boxes asked at step start and
+        those the contact loop logged (timeline's mesh_queries), each walked again by the
+        engine's own walk (colliders.mesh_search) with the meshes placed for the step."""
+        buf = self._buf
+        logged = buf.mesh_queries[:int(buf.counters[MESH_QUERIES])]
+        lo0, hi0 = ctx.search_start
+        n = lo0.shape[0]
+        sphere = np.concatenate([np.arange(n, dtype=np.int64), logged[:, 0].astype(np.int64)])
+        after = np.concatenate([np.full(n, -1, dtype=np.int64), logged[:, 1].astype(np.int64)])
+        lo = np.concatenate([lo0, logged[:, 2:5]])
+        hi = np.concatenate([hi0, logged[:, 5:8]])
+        query, node, outcome, parent = mesh_search(lo, hi, self._geometry)
+        if self.numbering is not None:
+            sphere = self.numbering.spheres(sphere)
+        return MeshSearch(ctx.step, sphere.astype(np.int32), after.astype(np.int32), lo, hi, query.astype(np.int32),
+                          node.astype(np.int32), outcome.astype(np.int8), parent.astype(np.int32))
 
     def _swept_tests_event(self, ctx: StepContext) -> SweptTests:
         buf = self._buf

@@ -48,6 +48,13 @@ TOPIC_BROAD_PHASE = "/physdbg/broad_phase"  # detail full: structure, reason, st
 TOPIC_BVH = "/physdbg/bvh"  # detail full, BVH broad phases: node rows (array)
 TOPIC_BVH_ORDER = "/physdbg/bvh_order"  # detail full, uncapped BVH: particle of each leaf slot
 TOPIC_FRAME_INDEX = "/physdbg/frame_index"  # once, at the end: every frame's time, log time, dt and hash
+# a scene with meshes, detail >= contacts: the trees the engine walks (once, frame 0), and every
+# step's walks of them: the boxes asked (queries) and the nodes visited (at detail contacts only
+# the visits on the way to a triangle the step had a contact with)
+TOPIC_MESH_TREE = "/physdbg/mesh_tree"
+TOPIC_MESH_QUERIES = "/physdbg/mesh_queries"
+TOPIC_MESH_SEARCH = "/physdbg/mesh_search"
+MESH_TOPICS = (TOPIC_MESH_TREE, TOPIC_MESH_QUERIES, TOPIC_MESH_SEARCH)
 
 # View channels (Foxglove's published schemas), written unless --no-view: what Foxglove's
 # 3D, Plot and Log panels and rerun's MCAP importer show without knowing physdbg.
@@ -68,12 +75,12 @@ VIEW_SCENE_FRAME = "scene"  # the engine's coordinates (y up unless gravity poin
 # them: the swept tests and the broad phase, and the view channels (a gas of 1 000 spheres
 # holds 3 bytes of /view/scene for every byte of /physdbg/state, and 21 /view/log messages a step).
 HEAVY_TOPICS = frozenset({"/physdbg/swept_tests", "/physdbg/broad_phase", "/physdbg/bvh", "/physdbg/bvh_order",
-                          *VIEW_TOPICS})
+                          "/physdbg/mesh_queries", "/physdbg/mesh_search", *VIEW_TOPICS})
 
 TOPICS_BY_DETAIL = {
     "state": (TOPIC_SCENE, TOPIC_PARTICLES, TOPIC_WALLS, TOPIC_STATE, TOPIC_STATS, TOPIC_WARNINGS,
               TOPIC_FRAME_INDEX),
-    "contacts": (TOPIC_CONTACTS,),
+    "contacts": (TOPIC_CONTACTS, *MESH_TOPICS),
     "full": (TOPIC_SWEPT, TOPIC_BROAD_PHASE, TOPIC_BVH, TOPIC_BVH_ORDER),
 }
 
@@ -130,6 +137,14 @@ BVH_FIELDS = [
     ("start", "<i4", ()), ("count", "<i4", ()), ("lo", "<f8", (3,)), ("hi", "<f8", (3,)),
 ]
 BVH_ORDER_FIELDS = [("particle", "<i4", ())]
+# the meshes' trees as the engine walks them (engine/colliders/mesh.py MeshGeometry): every
+# mesh's tree in pre-order, one after another; a node's box is in its mesh's frame at run time 0
+MESH_TREE_FIELDS = [
+    ("node", "<i4", ()), ("mesh", "<i4", ()), ("parent", "<i4", ()), ("depth", "<i4", ()), ("triangle", "<i4", ()),
+    ("skip", "<i4", ()), ("lo", "<f8", (3,)), ("hi", "<f8", (3,)),
+]
+MESH_QUERY_FIELDS = [("sphere", "<i4", ()), ("after", "<i4", ()), ("lo", "<f8", (3,)), ("hi", "<f8", (3,))]
+MESH_VISIT_FIELDS = [("query", "<i4", ()), ("node", "<i4", ()), ("outcome", "i1", ()), ("parent", "<i4", ())]
 FRAME_INDEX_FIELDS = [("time", "<f8", ()), ("log_time", "<u8", ()), ("dt", "<f8", ()), ("state_hash", "u1", (16,))]
 
 
@@ -139,6 +154,8 @@ MESSAGE_OF_TOPIC = {
     TOPIC_PARTICLES: "physdbg.Particles", TOPIC_STATS: "physdbg.StepStats", TOPIC_CONTACTS: "physdbg.Contacts",
     TOPIC_SWEPT: "physdbg.SweptTests", TOPIC_BVH: "physdbg.BvhNodes", TOPIC_BVH_ORDER: "physdbg.BvhOrder",
     TOPIC_FRAME_INDEX: "physdbg.FrameIndex", TOPIC_STATE: "physdbg.State",
+    TOPIC_MESH_TREE: "physdbg.MeshTree", TOPIC_MESH_QUERIES: "physdbg.MeshQueries",
+    TOPIC_MESH_SEARCH: "physdbg.MeshSearch",
 }
 PROTOBUF_MESSAGES = {
     "physdbg.Particles": (PARTICLE_FIELDS, True),
@@ -148,6 +165,9 @@ PROTOBUF_MESSAGES = {
     "physdbg.BvhNodes": (BVH_FIELDS, True),
     "physdbg.BvhOrder": (BVH_ORDER_FIELDS, True),
     "physdbg.FrameIndex": (FRAME_INDEX_FIELDS, True),
+    "physdbg.MeshTree": (MESH_TREE_FIELDS, True),
+    "physdbg.MeshQueries": (MESH_QUERY_FIELDS, True),
+    "physdbg.MeshSearch": (MESH_VISIT_FIELDS, True),
 }
 STATE_MESSAGE = "physdbg.State"
 # after ``step``: (name, numpy kind or "bytes"); ``words`` is the packed state below;

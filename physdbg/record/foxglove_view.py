@@ -10,7 +10,10 @@ anything of physdbg; docs/foxglove-layout.json arranges them like the Rerun blue
                      entity "mesh <name>"; a kinematic mesh's again each frame, posed); every frame: one entity per sphere ("sphere 17", a
                      SpherePrimitive of its diameter) and, at detail contacts or full,
                      entity "contacts": an arrow along each contact normal at its point
-                     (length = the sphere's radius; the first DRAWN_CONTACTS_PER_STEP)
+                     (length = the sphere's radius; the first DRAWN_CONTACTS_PER_STEP);
+                     a scene with meshes at detail contacts or full, entity "mesh search":
+                     the step's recorded search of the meshes' BVHs by the spheres it is
+                     about (nodes met green, culled red, triangles reached yellow)
     /view/points     foxglove.PointCloud      every frame: the sphere centres, fields x, y,
                      z, radius (float32) and id (uint32)
     /view/log        foxglove.Log             the run in words: the scene, each step's first
@@ -23,7 +26,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..events import Contacts, EngineWarning, StepEnd
+from ..events import SEARCH_CULLED, SEARCH_REACHED, Contacts, EngineWarning, StepEnd
+
+SEARCHED_SPHERES = 12  # the most spheres whose walks the "mesh search" entity draws
 from . import format as fmt
 from . import view
 from .header import RecordingHeader
@@ -58,6 +63,7 @@ class FoxgloveView:
         self.names = [f"sphere {i}" for i in range(header.count)]
         self.diameters = (2.0 * header.radius).tolist()
         self._scene_entity = SceneEntity
+        self._group = None  # the engine's trees of the meshes (mesh_view.engine_tree), when first drawn
         self._template_by_color: dict[tuple, SceneEntity] = {}  # a sphere's entity is a copy of its colour's
         self._asleep: np.ndarray | None = None
         self._findings = 0  # audit findings marked so far (each its own entity)
@@ -94,7 +100,9 @@ class FoxgloveView:
         ]
 
     def step(self, frame: int, ns: int, end: StepEnd, contacts: Contacts | None,
-             warnings: list[EngineWarning]) -> list[tuple[str, bytes]]:
+             warnings: list[EngineWarning], search=None) -> list[tuple[str, bytes]]:
+        """search: the step's recorded search of the meshes' trees (events.MeshSearch, as
+        the file keeps it), or None."""
         sleep_lines = []
         if view.sleep_changed(self._asleep, end.asleep):
             self._color_spheres(end.asleep)
@@ -106,6 +114,10 @@ class FoxgloveView:
             update = self.classes[fmt.TOPIC_VIEW_SCENE]()
             for k in moving.tolist():
                 self._mesh(update, k, ns, end.time)
+            out.append((fmt.TOPIC_VIEW_SCENE, update.SerializeToString()))
+        if len(self.header.walls.meshes) and self.detail != "state":
+            update = self.classes[fmt.TOPIC_VIEW_SCENE]()
+            update.entities.append(self._search(ns, search, end.time, contacts))
             out.append((fmt.TOPIC_VIEW_SCENE, update.SerializeToString()))
         out.append((fmt.TOPIC_VIEW_POINTS, self._point_cloud(ns, end.positions)))
         lines = [(f"step {frame}: {w.message}", "WARN") for w in warnings]
@@ -198,6 +210,64 @@ class FoxgloveView:
             surface.points.add(x=x, y=y, z=z)
         mesh.metadata.add(key="mesh", value=name)
 
+    def _search(self, ns: int, search, time: float, contacts: Contacts | None):
+        """Entity "mesh search": the step's recorded search of the meshes' BVHs by the
+        spheres it is about (mesh_view.searched_spheres, as the Rerun view draws it), each
+        mesh's part posed where the mesh is at ``time``: the edges of the nodes met (green)
+        and culled (red), the triangles reached (yellow); its metadata the spheres drawn and
+        the whole search's counts (the rest is in /physdbg/mesh_search). Empty when nothing
+        was walked (it replaces the last step's)."""
+        from foxglove_schemas_protobuf.LinePrimitive_pb2 import LinePrimitive
+        from foxglove_schemas_protobuf.SceneEntity_pb2 import SceneEntity
+
+        from . import mesh_view
+
+        entity = SceneEntity(id="mesh search", frame_id=fmt.VIEW_SCENE_FRAME)
+        entity.timestamp.FromNanoseconds(ns)
+        if search is None or not len(search.visit_node):
+            return entity
+        if self._group is None:
+            self._group = mesh_view.engine_tree(self.header.walls.meshes)
+        group, meshes = self._group, self.header.walls.meshes
+        shown = mesh_view.searched_spheres(search, contacts, SEARCHED_SPHERES)
+        mine = np.isin(search.query_sphere[search.visit_query], shown)
+        node, outcome = search.visit_node[mine].astype(np.int64), search.visit_outcome[mine]
+        met = np.unique(node[outcome != SEARCH_CULLED])
+        culled = np.setdiff1d(np.unique(node[outcome == SEARCH_CULLED]), met)
+        reached = np.unique(group[5][node[outcome == SEARCH_REACHED]])
+        for k in range(len(meshes)):
+            turn, shift = meshes.transform(k, time)
+            rotation = mesh_view.quaternions(turn.T[None])[0].tolist()
+            for nodes, color in ((met, (0.24, 0.86, 0.35, 1.0)), (culled, (0.9, 0.27, 0.24, 0.8))):
+                mine = nodes[mesh_view.node_mesh(group, nodes) == k]
+                if not len(mine):
+                    continue
+                line = entity.lines.add(type=LinePrimitive.LINE_LIST, thickness=1.5, scale_invariant=True)
+                q = line.pose.orientation
+                q.x, q.y, q.z, q.w = rotation
+                line.pose.position.x, line.pose.position.y, line.pose.position.z = shift.tolist()
+                line.color.r, line.color.g, line.color.b, line.color.a = color
+                corners, edges = _box_edges(group[3][mine], group[4][mine])
+                for x, y, z in corners.tolist():
+                    line.points.add(x=x, y=y, z=z)
+                line.indices.extend(edges.tolist())
+            mine = reached[meshes.mesh_of[reached] == k]
+            if len(mine):
+                face = entity.triangles.add()
+                q = face.pose.orientation
+                q.x, q.y, q.z, q.w = rotation
+                face.pose.position.x, face.pose.position.y, face.pose.position.z = shift.tolist()
+                face.color.r, face.color.g, face.color.b, face.color.a = 0.98, 0.82, 0.16, 0.85
+                for x, y, z in meshes.corners[mine].reshape(-1, 3).tolist():
+                    face.points.add(x=x, y=y, z=z)
+        entity.metadata.add(key="spheres drawn", value=" ".join(str(i) for i in shown))
+        everything = search.visit_outcome
+        for key, value in (("boxes asked", len(search.query_sphere)), ("node visits", len(everything)),
+                           ("nodes met", len(np.unique(search.visit_node[everything != SEARCH_CULLED]))),
+                           ("triangles reached", len(np.unique(search.visit_node[everything == SEARCH_REACHED])))):
+            entity.metadata.add(key=key, value=str(value))
+        return entity
+
     def _spheres(self, ns: int, positions: np.ndarray, contacts: Contacts | None = None) -> bytes:
         """One entity per sphere (a stable id Foxglove shows on a click), copied from a
         template: 2 µs a sphere, where building each from nothing costs 4."""
@@ -262,6 +332,16 @@ class FoxgloveView:
             message.timestamp.FromNanoseconds(ns)
             out.append((fmt.TOPIC_VIEW_LOG, message.SerializeToString()))
         return out
+
+
+def _box_edges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The 8 corners of each box lo, hi (K, 3), as (8 K, 3) points, and its 12 edges as
+    (24 K,) indices into them, pairs of a line list (a third of the points of listing
+    each edge's two ends: Foxglove's points are messages, built one by one)."""
+    corners = np.stack([np.where(np.array(bits, dtype=bool), hi, lo)
+                        for bits in np.ndindex(2, 2, 2)], axis=1)  # (K, 8, 3): corner b = bits (x, y, z)
+    edges = np.array([(a, b) for a in range(8) for b in range(a + 1, 8) if bin(a ^ b).count("1") == 1]).reshape(-1)
+    return corners.reshape(-1, 3), (edges[None, :] + 8 * np.arange(len(lo))[:, None]).reshape(-1)
 
 
 def _rotations_from_x(directions: np.ndarray) -> np.ndarray:

@@ -31,7 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..events import NO_COLLISIONS, BroadPhaseInfo, Contacts, EngineWarning, StepEnd, SweptTests, collision_sums
+from ..events import (NO_COLLISIONS, BroadPhaseInfo, Contacts, EngineWarning, MeshSearch, StepEnd, SweptTests,
+                      collision_sums)
 from . import format as fmt
 from .state_codec import codec_for, encode_state
 from . import proto
@@ -74,8 +75,10 @@ class McapRecorder:
 
             self.view = FoxgloveView(header, self.detail)
         scene_json = fmt.foxglove_json(header.scene_json())
+        meshes = len(header.walls.meshes) > 0
         for topic in fmt.topics_for(self.detail, view=view):
-            self._register(topic, scene_json)
+            if meshes or topic not in fmt.MESH_TOPICS:
+                self._register(topic, scene_json)
         self._writer.add_metadata("physdbg", {
             "format": fmt.FORMAT_NAME, "format_version": str(fmt.FORMAT_VERSION),
             "physdbg_version": header.meta["physdbg_version"], "scene": header.name,
@@ -92,6 +95,7 @@ class McapRecorder:
         self._index_rows: list[tuple[float, int, float, bytes]] = []  # (time, log ns, dt, hash) of every frame
         self._last_ns = -1  # log time of the last frame: the next is later by at least 1 ns
         self._contacts: Contacts | None = None
+        self._search: MeshSearch | None = None  # the step's, as written
         self._warnings: list[EngineWarning] = []
         self._collisions = NO_COLLISIONS  # virial, wall impulse and collisions of the step so far
         movable = int(np.count_nonzero(header.inverse_mass > 0))
@@ -107,6 +111,14 @@ class McapRecorder:
         self._write(fmt.TOPIC_SCENE, 0, ns, json.dumps(scene_json).encode())
         self._write(fmt.TOPIC_PARTICLES, 0, ns, self._table(fmt.TOPIC_PARTICLES, 0, header))
         self._write(fmt.TOPIC_WALLS, 0, ns, json.dumps(fmt.foxglove_json(header.walls_json())).encode())
+        self._leaf_triangle = None
+        if fmt.TOPIC_MESH_TREE in self._channels:  # the trees the engine walks, as it builds them
+            from . import mesh_view
+
+            table = mesh_view.tree_table(mesh_view.engine_tree(header.walls.meshes))
+            self._leaf_triangle = table["triangle"]
+            self._write(fmt.TOPIC_MESH_TREE, 0, ns, proto.encode_table(
+                fmt.MESSAGE_OF_TOPIC[fmt.TOPIC_MESH_TREE], 0, table.__getitem__))
         if self.view is not None:
             for topic, data in self.view.first(ns):
                 self._write(topic, 0, ns, data)
@@ -118,6 +130,11 @@ class McapRecorder:
     def wants_swept_tests(self) -> bool:
         """Only detail "full" records the swept tests (observe.py)."""
         return fmt.TOPIC_SWEPT in self._channels
+
+    @property
+    def wants_mesh_search(self) -> bool:
+        """A scene with meshes at detail contacts or full records the search (observe.py)."""
+        return fmt.TOPIC_MESH_SEARCH in self._channels
 
     def on_event(self, event) -> None:
         frame = event.step
@@ -131,6 +148,9 @@ class McapRecorder:
         elif isinstance(event, SweptTests):
             if fmt.TOPIC_SWEPT in self._channels:
                 self._pending.append((fmt.TOPIC_SWEPT, self._table(fmt.TOPIC_SWEPT, frame, event)))
+        elif isinstance(event, MeshSearch):
+            if fmt.TOPIC_MESH_SEARCH in self._channels:
+                self._mesh_search(event, frame)
         elif isinstance(event, BroadPhaseInfo):
             if fmt.TOPIC_BROAD_PHASE in self._channels:
                 self._broad_phase(event, frame)
@@ -159,9 +179,9 @@ class McapRecorder:
         self._write(fmt.TOPIC_STATS, frame, ns, proto.encode_table(
             fmt.MESSAGE_OF_TOPIC[fmt.TOPIC_STATS], frame, stats.__getitem__))
         if self.view is not None:
-            for topic, data in self.view.step(frame, ns, end, self._contacts, self._warnings):
+            for topic, data in self.view.step(frame, ns, end, self._contacts, self._warnings, self._search):
                 self._write(topic, frame, ns, data)
-        self._contacts, self._warnings = None, []
+        self._contacts, self._warnings, self._search = None, [], None
         # The state goes last: a frame whose state is in the file is a complete step.
         self._write_state(frame, end.time, end.dt, end.state_hash, end.positions, end.velocities, ns, end.asleep)
         self._send()
@@ -274,6 +294,22 @@ class McapRecorder:
     def _table(self, topic: str, frame: int, source) -> bytes:
         """The channel's table message, each column taken from the attribute of that name."""
         return proto.encode_table(fmt.MESSAGE_OF_TOPIC[topic], frame, lambda name: getattr(source, name))
+
+    def _mesh_search(self, search: MeshSearch, frame: int) -> None:
+        """The step's walks of the meshes' trees: all of them at detail full, those that
+        led to a contact at detail contacts (mesh_view.led_to_contacts)."""
+        if self.detail != "full":
+            from . import mesh_view
+
+            search = mesh_view.led_to_contacts(search, self._contacts, self._leaf_triangle)
+        self._search = search
+        columns = {"sphere": search.query_sphere, "after": search.query_after, "lo": search.query_lo,
+                   "hi": search.query_hi}
+        self._pending.append((fmt.TOPIC_MESH_QUERIES, proto.encode_table(
+            fmt.MESSAGE_OF_TOPIC[fmt.TOPIC_MESH_QUERIES], frame, columns.__getitem__)))
+        self._pending.append((fmt.TOPIC_MESH_SEARCH, proto.encode_table(
+            fmt.MESSAGE_OF_TOPIC[fmt.TOPIC_MESH_SEARCH], frame,
+            lambda name: getattr(search, f"visit_{name}"))))
 
     def _broad_phase(self, info: BroadPhaseInfo, frame: int) -> None:
         meta = {"name": info.name, "reason": info.reason, "stats": _plain_stats(info.stats)}

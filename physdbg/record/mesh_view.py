@@ -1,4 +1,4 @@
-"""What the views draw of a mesh: its BVH by level with every volume, and one step's search.
+"""What the views draw of a mesh: its BVH by level with every volume, and each step's search.
 
 A recording keeps each mesh's triangles at run time 0 (and a kinematic mesh's motion), so
 its BVH is rebuilt here the way ``physdbg overlap`` builds it (engine/mesh/tree.py, SAH):
@@ -6,15 +6,16 @@ per node an AABB, an OBB and a bounding sphere, in the mesh's own frame (the fra
 mesh had at run time 0; a view turns them with the mesh).
 
 The search drawn for a step is the seed's "search tree … that records descent into each
-BVH", for spheres against the triangles, walked on the engine's own trees
-(colliders/mesh.py: each mesh's SAH tree, in pre-order, in the mesh's run-time-0 frame:
-the same trees ``mesh_trees`` builds, node for node): every sphere's box for the step
-(its centres at the step's start and end, grown by its radius), carried into each mesh's
-frame as the engine carries it (``colliders.mesh.frame_box``, for a kinematic mesh grown
-by its motion over the step), walks down from that tree's root; a node whose box meets it
-is descended into (met), one whose box does not ends that branch (culled), and the leaves
-met are the triangles the narrow phase tests. The engine's walk is the same but for its
-boxes, which follow each sphere's path through the step and add the contact tolerance.
+BVH", for spheres against the triangles, as the engine made it: the recording's
+events.MeshSearch (the boxes the engine asked each mesh's tree with, and every node its
+walk visited). The trees are the engine's (colliders/mesh.py: each mesh's SAH tree, in
+pre-order, in the mesh's run-time-0 frame: the same trees ``mesh_trees`` builds, node for
+node; ``tree_table`` is the recording's /physdbg/mesh_tree). ``search`` is the reference
+walk the recorded one is tested against: a Python stack walk from each tree's root with a
+box carried into the mesh's frame as the engine carries it (``colliders.mesh.frame_box``,
+for a kinematic mesh grown by its motion over the step); a node whose box meets it is
+descended into (met), one whose box does not ends that branch (culled), and the leaves met
+are the triangles the narrow phase tests.
 """
 
 from __future__ import annotations
@@ -23,13 +24,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-
-MET, CULLED, REACHED = 0, 1, 2  # a visited pair's outcome: descended into, ended, a triangle reached
+from ..events import SEARCH_CULLED as CULLED, SEARCH_MET as MET, SEARCH_REACHED as REACHED  # a visit's outcome
 
 
 @dataclass
-class MeshSearch:
-    """The triangles' search for one step: ``met`` and ``culled`` (nodes of the engine's
+class ReferenceSearch:
+    """The reference walk's search (``search``): ``met`` and ``culled`` (nodes of the engine's
     tree, each visited node once: met when any sphere's box met it), ``pairs`` (how many
     sphere–node pairs were visited), ``triangles`` (the triangles reached, numbered in the
     scene) and ``spheres`` (those whose box reached a triangle).
@@ -81,7 +81,7 @@ def engine_tree(meshes):
     return tuple(MeshGeometry.of(Walls(meshes=meshes)))
 
 
-def search(group, meshes, lo: np.ndarray, hi: np.ndarray, time: float, dt: float) -> MeshSearch:
+def search(group, meshes, lo: np.ndarray, hi: np.ndarray, time: float, dt: float) -> ReferenceSearch:
     """Walk the engine's triangle trees ``group`` (engine_tree; placed here for the step
     that begins at run time ``time`` and lasts ``dt`` s) with each box lo, hi (K, 3)
     (world frame), each mesh's tree from its root with the box carried into its frame.
@@ -116,9 +116,72 @@ def search(group, meshes, lo: np.ndarray, hi: np.ndarray, time: float, dt: float
                 else:
                     visits.append((k, q, MET, parent))
                     stack += [(int(skip[q + 1]), row), (q + 1, row)]
-    return MeshSearch(np.flatnonzero(met), np.flatnonzero(visited & ~met), len(visits),
+    return ReferenceSearch(np.flatnonzero(met), np.flatnonzero(visited & ~met), len(visits),
                       np.array(sorted(reached), dtype=np.int64), np.array(sorted(who), dtype=np.int64),
                       np.array(visits, dtype=np.int64).reshape(-1, 4))
+
+
+def tree_table(group) -> dict[str, np.ndarray]:
+    """The engine's trees (engine_tree's group) as the columns of the recording's mesh-tree
+    channel (format.MESH_TREE_FIELDS): node, mesh, parent, depth, triangle (-1 inside a
+    tree), skip (the position after the node's subtree), lo, hi (Q, 3) m in the mesh's frame."""
+    box_lo, box_hi, leaf, skip, tree_first, parent = group[3], group[4], group[5], group[6], group[7], group[11]
+    count = len(leaf)
+    depth = np.zeros(count, dtype=np.int64)
+    for q in range(count):  # pre-order: a parent comes before its children
+        if parent[q] >= 0:
+            depth[q] = depth[parent[q]] + 1
+    return {"node": np.arange(count), "mesh": node_mesh(group, np.arange(count)), "parent": parent, "depth": depth,
+            "triangle": leaf, "skip": skip, "lo": box_lo, "hi": box_hi}
+
+
+def led_to_contacts(search, contacts, leaf_triangle: np.ndarray):
+    """The part of a step's search (events.MeshSearch) that led to its contacts on meshes
+    (contacts: the step's events.Contacts): for each such contact, the visits from the root
+    down to its triangle in the walk of the query that predicted it (the sphere's last query
+    before the contact); the queries renumbered to those kept. leaf_triangle (Q,): each
+    node's triangle (-1 inside a tree)."""
+    from ..events import KIND_MESH, SEARCH_REACHED, MeshSearch
+
+    keep = np.zeros(len(search.visit_node), dtype=bool)
+    if contacts is not None:
+        reached = np.flatnonzero(search.visit_outcome == SEARCH_REACHED)
+        for row in np.flatnonzero(np.asarray(contacts.kind) == KIND_MESH).tolist():
+            sphere, triangle = int(contacts.a[row]), int(contacts.other[row])
+            asked = np.flatnonzero((search.query_sphere == sphere) & (search.query_after < row))
+            if not len(asked):
+                continue
+            query = asked[-1]
+            hit = reached[(search.visit_query[reached] == query) & (leaf_triangle[search.visit_node[reached]] == triangle)]
+            for visit in hit.tolist():
+                while visit >= 0 and not keep[visit]:
+                    keep[visit] = True
+                    visit = int(search.visit_parent[visit])
+    rows = np.flatnonzero(keep)
+    queries = np.unique(search.visit_query[rows])
+    new_row = np.full(len(search.visit_node), -1, dtype=np.int64)
+    new_row[rows] = np.arange(len(rows))
+    parent = search.visit_parent[rows]
+    return MeshSearch(search.step, search.query_sphere[queries], search.query_after[queries],
+                      search.query_lo[queries], search.query_hi[queries],
+                      np.searchsorted(queries, search.visit_query[rows]).astype(np.int32),
+                      search.visit_node[rows], search.visit_outcome[rows],
+                      np.where(parent >= 0, new_row[np.maximum(parent, 0)], -1).astype(np.int32))
+
+
+def searched_spheres(search, contacts, most: int) -> list[int]:
+    """The spheres whose walks of the meshes' trees the views draw for a step (at most
+    ``most``): those with a contact on a mesh in the step (contacts: its events.Contacts);
+    if none, those whose walk reached a triangle; if none, the first asked."""
+    from ..events import KIND_MESH, SEARCH_REACHED
+
+    spheres = search.query_sphere
+    for chosen in (np.unique(contacts.a[contacts.kind == KIND_MESH]) if contacts is not None else [],
+                   np.unique(spheres[search.visit_query[search.visit_outcome == SEARCH_REACHED]]),
+                   spheres):
+        if len(chosen):
+            return [int(i) for i in dict.fromkeys(np.asarray(chosen).tolist())][:most]
+    return []
 
 
 def node_mesh(group, nodes: np.ndarray) -> np.ndarray:

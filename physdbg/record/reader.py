@@ -33,7 +33,8 @@ import numpy as np
 
 from ..engine.state import state_hash
 from ..errors import RecordingError, RecordingIntegrityError
-from ..events import STEP_COUNTS, BroadPhaseInfo, check_kinds, Contacts, EngineWarning, StepBegin, StepCounts, StepEnd, SweptTests
+from ..events import (STEP_COUNTS, BroadPhaseInfo, check_kinds, Contacts, EngineWarning, MeshSearch, StepBegin,
+                      StepCounts, StepEnd, SweptTests)
 from . import format as fmt
 from . import proto
 from .state_codec import decode_state, decode_state_header
@@ -635,7 +636,8 @@ class Recording:
         stop = self.frames if stop is None else min(stop, self.frames)
         wanted = fmt.topics_for(detail)
         topics = [t for t in (fmt.TOPIC_STATS, fmt.TOPIC_WARNINGS, fmt.TOPIC_CONTACTS, fmt.TOPIC_SWEPT,
-                              fmt.TOPIC_BROAD_PHASE, fmt.TOPIC_BVH, fmt.TOPIC_BVH_ORDER) if t in wanted]
+                              fmt.TOPIC_BROAD_PHASE, fmt.TOPIC_BVH, fmt.TOPIC_BVH_ORDER, fmt.TOPIC_MESH_QUERIES,
+                              fmt.TOPIC_MESH_SEARCH) if t in wanted]
         batch = 64
         for first in range(max(start, 1), stop, batch):
             last = min(first + batch, stop) - 1
@@ -672,6 +674,8 @@ class Recording:
             check_kinds(rows["kind"], str(self.path))
             events.append(SweptTests(step, rows["kind"].copy(), rows["a"].copy(), rows["other"].copy(),
                                      rows["start"].copy(), rows["toi"].copy(), rows["outcome"].copy()))
+        if fmt.TOPIC_MESH_SEARCH in self._channels and fmt.TOPIC_MESH_SEARCH in topics:
+            events.append(self._mesh_search(step, parts))
         stats_data = parts.get(fmt.TOPIC_STATS)
         if not stats_data:
             raise RecordingError(f"{self.path}: step {k} has a state but no stats message")
@@ -683,6 +687,28 @@ class Recording:
                               timings, after.state_hash, tuple(e for e in events if isinstance(e, EngineWarning)),
                               after.asleep))
         return events
+
+    def _mesh_search(self, step: int, parts: dict) -> MeshSearch:
+        queries = self._table(fmt.TOPIC_MESH_QUERIES, parts.get(fmt.TOPIC_MESH_QUERIES, [b""])[0])
+        visits = self._table(fmt.TOPIC_MESH_SEARCH, parts.get(fmt.TOPIC_MESH_SEARCH, [b""])[0])
+        return MeshSearch(step, queries["sphere"].copy(), queries["after"].copy(), queries["lo"].copy(),
+                          queries["hi"].copy(), visits["query"].copy(), visits["node"].copy(),
+                          visits["outcome"].copy(), visits["parent"].copy())
+
+    def mesh_search(self, k: int) -> MeshSearch:
+        """The walks of the meshes' trees in the k-th step (a scene with meshes, detail
+        contacts: those that led to a contact; full: all)."""
+        if fmt.TOPIC_MESH_SEARCH not in self._channels:
+            raise RecordingError(f"{self.path}: no mesh search recorded (" + (
+                "the scene has no meshes" if not len(self.header.walls.meshes) else
+                f"recorded with --detail {self.detail}; it needs --detail contacts or full") + ")")
+        return self._of_type(k, MeshSearch, "contacts")
+
+    def mesh_tree(self) -> np.ndarray | None:
+        """The meshes' trees as the engine walked them (format.MESH_TREE_FIELDS rows), or
+        None when the recording has none (no meshes, or detail state)."""
+        data = self._one(fmt.TOPIC_MESH_TREE) if fmt.TOPIC_MESH_TREE in self._channels else None
+        return None if data is None else self._table(fmt.TOPIC_MESH_TREE, data)
 
     def _contacts(self, step: int, data: bytes) -> Contacts:
         rows = self._table(fmt.TOPIC_CONTACTS, data)

@@ -13,11 +13,14 @@ Entities (timelines ``step`` = frame, steps completed, and ``sim_time`` in secon
     world/meshes/<name>/bvh/<volume>/level_<d>
                              the mesh's BVH (mesh_view.py), one entity per volume (aabb, obb,
                              sphere) and level: AABB levels 0..2 shown, the rest a click away
-    world/mesh_search/{met,culled,triangles}
-                             the first step with a contact on a mesh: the nodes of the triangles'
-                             BVH the spheres' boxes met and culled, and the triangles reached
+    world/mesh_search/{met,culled,triangles,queries}
+                             every step's recorded search of the meshes' BVHs (events.MeshSearch;
+                             detail contacts: the walks that led to a contact) by the spheres it
+                             is about (mesh_view.searched_spheres: those that hit a mesh): the nodes
+                             met and culled, the triangles reached and the boxes the engine asked
+                             with; world/mesh_search/all the same for every sphere (hidden)
     search/triangles         the same search as a tree (GraphNodes, GraphEdges): the seed's
-                             "search tree", a node per sphere–node pair visited, in its own view
+                             "search tree", a node per visit, for those spheres
     world/bvh/level_<d>      Boxes3D wireframes, one entity per BVH level (toggle levels;
                              the blueprint shows the first BVH_LEVELS_SHOWN)
     world/paths              LineStrips3D: each particle's path through the step,
@@ -46,7 +49,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ViewerError
-from ..events import KIND_MESH, BroadPhaseInfo, Contacts, EngineWarning, StepEnd, collision_sums, partner_is_sphere
+from ..events import (KIND_MESH, SEARCH_CULLED, SEARCH_REACHED, BroadPhaseInfo, Contacts, EngineWarning, MeshSearch,
+                      StepEnd, collision_sums, partner_is_sphere)
 from ..engine.periodic import unwrap_near
 from .header import RecordingHeader
 from . import mesh_view, view
@@ -105,14 +109,22 @@ class RerunSink:
     Call close() at the end (it flushes the series and the file).
     """
 
-    wants_swept_tests = False  # the view draws states, contacts and the BVH (observe.py)
+    wants_swept_tests = False  # the view draws states, contacts, the BVH and the meshes' search (observe.py)
+
+    @property
+    def wants_mesh_search(self) -> bool:
+        """The meshes' search is drawn at detail contacts and full, as the MCAP file keeps it."""
+        return self.detail != "state"
 
     def __init__(self, header: RecordingHeader, rrd: str | Path | None = None, spawn: bool = False,
                  detail: str | None = None, recording_id: str | None = None, stream=None, root: str = "",
-                 color: tuple[int, int, int] = view.SPHERE_COLOR, opening: tuple[str, int] | None = None):
+                 color: tuple[int, int, int] = view.SPHERE_COLOR, opening: tuple[str, int] | None = None,
+                 open_at: int | None = None):
         """color: the moving spheres' colour; opening: (timeline, first step) — every row
         from that step on also carries that sequence timeline, whose first time is where
-        a paused viewer opens when the blueprint makes it the active one."""
+        a paused viewer opens when the blueprint makes it the active one; open_at: a file
+        of its own opens paused at this step (the timeline "from step <k>") instead of at
+        its first contact."""
         import rerun as rr
 
         self.rr = rr
@@ -162,10 +174,15 @@ class RerunSink:
         # on a mesh, where the search is drawn): the rows from there on carry the timeline
         # FIRST_CONTACT_TIMELINE (MESH_CONTACT_TIMELINE), and the last blueprint opens it
         self._open_at_first_contact = not self.shared and opening is None
+        if open_at is not None and self._open_at_first_contact:
+            self.opening = (f"from step {open_at}", int(open_at))
         # each sphere's number beside it, where there are few enough to read
         self._labels = [str(i) for i in range(header.count)] if header.count <= LABELLED_SPHERES else None
         self._trees = mesh_view.mesh_trees(header.walls.meshes) if len(header.walls.meshes) else []
-        self._searched = False  # the search at the first mesh contact is drawn
+        # the engine's trees (colliders/mesh.py), which the recorded search's nodes number
+        self._group = mesh_view.engine_tree(header.walls.meshes) if len(header.walls.meshes) else None
+        self._search = None  # the step's MeshSearch, drawn at its end
+        self._search_drawn = False
         self._log_static(header)
 
     # ------------------------------------------------------------------ static
@@ -229,6 +246,8 @@ class RerunSink:
             self._warnings.append(event)
         elif isinstance(event, BroadPhaseInfo) and self.detail == "full":
             self._broad_phase = event
+        elif isinstance(event, MeshSearch) and self.detail != "state":
+            self._search = event
 
     def _end_step(self, end: StepEnd) -> None:
         rr, rec = self.rr, self.rec
@@ -378,9 +397,8 @@ class RerunSink:
                 colors=color, line_radii=[-0.5], fill_mode="majorwireframe"), static=True)
 
     def _meshes_at(self, end: StepEnd, contacts: Contacts | None) -> list[tuple[str, str]]:
-        """Each kinematic mesh's transform at the step's end, and at the first step with a
-        contact on a mesh the search the triangles' BVH answered (mesh_view.search); the
-        log lines."""
+        """Each kinematic mesh's transform at the step's end, and the step's recorded
+        search of the meshes' BVHs (``_draw_search``); the log lines."""
         rr, rec = self.rr, self.rec
         meshes = self.header.walls.meshes
         if not len(meshes):
@@ -390,52 +408,92 @@ class RerunSink:
                 turn, shift = meshes.transform(k, end.time)
                 rec.log(self.root + f"world/meshes/{rr.escape_entity_path_part(name)}",
                         rr.Transform3D(translation=shift.astype(np.float32), mat3x3=turn.astype(np.float32)))
-        if self._searched or contacts is None or not np.any(contacts.kind == KIND_MESH):
+        search, self._search = self._search, None
+        if search is None:
             return []
-        self._searched = True
-        # the spheres that hit a mesh in this step (at most SEARCHED_SPHERES: a tree per sphere)
-        hitters = np.unique(contacts.a[contacts.kind == KIND_MESH])[:SEARCHED_SPHERES]
-        lo, hi = mesh_view.path_boxes(self.previous[hitters], end.positions[hitters], self.header.radius[hitters])
-        group = mesh_view.engine_tree(meshes)
-        found = mesh_view.search(group, meshes, lo, hi, end.time - end.dt, end.dt)
-        found.spheres = hitters[found.spheres]
-        found.visits[:, 0] = hitters[found.visits[:, 0]]
+        if self.detail != "full":  # as the MCAP file keeps it: the walks that led to a contact
+            search = mesh_view.led_to_contacts(search, contacts, self._group[5])
+        return self._draw_search(end, search, contacts)
+
+    def _draw_search(self, end: StepEnd, search, contacts: Contacts | None) -> list[tuple[str, str]]:
+        """The step's recorded walks of the meshes' trees (events.MeshSearch), for the
+        spheres it is about (``searched_spheres``): in 3D the nodes met (green) and culled
+        (red), each posed with its mesh, the triangles reached (yellow) and the boxes asked
+        (grey), and as a tree (search/triangles); the whole step's search under
+        world/mesh_search/all (hidden until clicked: a pile's is a solid block). A step that
+        walked nothing clears them."""
+        rr, rec = self.rr, self.rec
         path = self.root + "world/mesh_search"
-        for part, which, color in (("met", found.met, [60, 220, 90]), ("culled", found.culled, [230, 70, 60])):
+        if not len(search.visit_node):
+            if self._search_drawn:
+                rec.log(path, rr.Clear(recursive=True))
+                rec.log(self.root + "search/triangles", rr.Clear(recursive=True))
+                self._search_drawn = False
+            return []
+        self._search_drawn = True
+        shown = mesh_view.searched_spheres(search, contacts, SEARCHED_SPHERES)
+        rows = np.flatnonzero(np.isin(search.query_sphere[search.visit_query], shown))  # whole walks
+        asked = np.flatnonzero(np.isin(search.query_sphere, shown))
+        met, culled, triangles = self._draw_visits(path, end, search, rows, asked)
+        self._draw_visits(path + "/all", end, search, np.arange(len(search.visit_node)),
+                          np.arange(len(search.query_sphere)))
+        self._search_graph(search, rows)
+        if contacts is None or not np.any(contacts.kind == KIND_MESH):
+            return []
+        return [(f"step {end.step}: the search of the meshes' BVHs (each in its own frame), as recorded: "
+                 f"{len(search.query_sphere)} boxes asked, {len(search.visit_node)} node visits in all; "
+                 f"drawn for sphere{'s' if len(shown) != 1 else ''} {', '.join(str(i) for i in shown)}: "
+                 f"{len(met)} nodes met (green), {len(culled)} culled (red), {len(triangles)} triangles reached "
+                 f"(yellow), the search tree below (the whole step's under world/mesh_search/all)", "INFO")]
+
+    def _draw_visits(self, path: str, end: StepEnd, search, rows: np.ndarray, asked: np.ndarray):
+        """Draw the visits ``rows`` and the boxes ``asked`` of a search under ``path``;
+        returns the nodes met, the nodes culled (met by none) and the triangles reached."""
+        rr, rec = self.rr, self.rec
+        meshes, group = self.header.walls.meshes, self._group
+        outcome, node = search.visit_outcome[rows], search.visit_node[rows].astype(np.int64)
+        met = np.unique(node[outcome != SEARCH_CULLED])
+        culled = np.setdiff1d(np.unique(node[outcome == SEARCH_CULLED]), met)
+        triangles = np.unique(group[5][node[outcome == SEARCH_REACHED]])
+        for part, which, color in (("met", met, [60, 220, 90]), ("culled", culled, [230, 70, 60])):
             centers, half_sizes, quaternions = _posed_nodes(group, meshes, which, end.time)
             rec.log(path + f"/{part}", rr.Boxes3D(
                 centers=centers, half_sizes=half_sizes, quaternions=quaternions,
                 colors=[color], radii=[-1.5 if part == "met" else -0.75], fill_mode="majorwireframe"))
-        corners = meshes.placed(end.time)[0][found.triangles].reshape(-1, 3).astype(np.float32)
+        corners = meshes.placed(end.time)[0][triangles].reshape(-1, 3).astype(np.float32)
         rec.log(path + "/triangles", rr.Mesh3D(
             vertex_positions=corners, triangle_indices=np.arange(len(corners), dtype=np.uint32).reshape(-1, 3),
             albedo_factor=[250, 210, 40, 220]))
-        self._search_graph(found, group[5])
-        who = ", ".join(str(int(i)) for i in hitters)
-        return [(f"step {end.step}: the first contact on a mesh; the search of each mesh's BVH (in its own frame) "
-                 f"by the boxes of the sphere{'s' if len(hitters) != 1 else ''} that hit a mesh "
-                 f"({who}): {found.pairs} sphere-node pairs visited, {len(found.met)} nodes met (green), "
-                 f"{len(found.culled)} culled (red), {len(found.triangles)} triangles reached (yellow)", "INFO")]
+        lo, hi = search.query_lo[asked], search.query_hi[asked]
+        rec.log(path + "/queries", rr.Boxes3D(centers=(0.5 * (lo + hi)).astype(np.float32),
+                                              half_sizes=(0.5 * (hi - lo)).astype(np.float32),
+                                              colors=[[170, 170, 190]], radii=[-0.5], fill_mode="majorwireframe"))
+        return met, culled, triangles
 
-    def _search_graph(self, found, leaf_triangle) -> None:
-        """The search tree as a graph (search/triangles): a node per sphere–node pair
-        visited, green where the boxes met, red where the branch ended, yellow at a triangle
-        reached; an edge from each pair to the pairs descended from it. leaf_triangle: the
-        searched tree's (mesh_view.engine_tree), each node's triangle."""
+    def _search_graph(self, search, rows: np.ndarray) -> None:
+        """The search tree as a graph (search/triangles): a node per visit in ``rows``
+        (whole walks), green where the box met the node, red where the branch ended, yellow
+        at a triangle reached; an edge from each visit to those reached from it."""
         rr = self.rr
-        if not len(found.visits):
-            return
-        meshes = self.header.walls.meshes
-        ids = [f"{k}:{q}" for k, q, _o, _p in found.visits.tolist()]
+        meshes, leaf_triangle = self.header.walls.meshes, self._group[5]
+        spheres = search.query_sphere
+        new_row = np.full(len(search.visit_node), -1, dtype=np.int64)
+        new_row[rows] = np.arange(len(rows))
+        parent = search.visit_parent[rows]
+        visits = np.stack([search.visit_query[rows], search.visit_node[rows], search.visit_outcome[rows],
+                           np.where(parent >= 0, new_row[np.maximum(parent, 0)], -1)], axis=1).astype(np.int64)
+        ids = [f"{j}:{q}" for j, q, _o, _p in visits.tolist()]
         labels = []
-        for k, q, outcome, parent in found.visits.tolist():
-            what = meshes.triangle_words(int(leaf_triangle[q])) if outcome == mesh_view.REACHED else f"node {q}"
-            labels.append(f"sphere {k}: {what}" if parent < 0 else what)
-        colors = [[(60, 200, 90), (230, 70, 60), (250, 210, 40)][o] for o in found.visits[:, 2].tolist()]
-        position = mesh_view.tree_layout(found.visits) * [110.0, 70.0]
+        for j, q, outcome, parent_row in visits.tolist():
+            what = meshes.triangle_words(int(leaf_triangle[q])) if outcome == SEARCH_REACHED else f"node {q}"
+            after = int(search.query_after[j])
+            asked = f"sphere {int(spheres[j])}" + (f" after contact {after}" if after >= 0 else "")
+            labels.append(f"{asked}: {what}" if parent_row < 0 else what)
+        colors = [[(60, 200, 90), (230, 70, 60), (250, 210, 40)][o] for o in visits[:, 2].tolist()]
+        position = mesh_view.tree_layout(visits) * [110.0, 70.0]
         path = self.root + "search/triangles"
         self.rec.log(path, rr.GraphNodes(ids, labels=labels, colors=colors, positions=position.astype(np.float32)))
-        edges = [(ids[p], ids[row]) for row, p in enumerate(found.visits[:, 3].tolist()) if p >= 0]
+        edges = [(ids[p], ids[row]) for row, p in enumerate(visits[:, 3].tolist()) if p >= 0]
         self.rec.log(path, rr.GraphEdges(edges, graph_type="directed"))
 
     def _bvh(self, info: BroadPhaseInfo) -> None:
@@ -609,9 +667,10 @@ def blueprint(header: RecordingHeader, opening: tuple[str, int] | None = None):
     eye = camera(header, distance=1.0 if len(header.walls.meshes) else 1.4)
     scene = rrb.Spatial3DView(origin="/world", name="scene", eye_controls=eye, overrides={
         **{f"/world/bvh/level_{level}": rrb.EntityBehavior(visible=False) for level in range(BVH_LEVELS_SHOWN, 64)},
-        **_hidden_mesh_volumes(header)})
+        **_hidden_mesh_volumes(header),
+        "/world/mesh_search/all": rrb.EntityBehavior(visible=False)})
     if len(header.walls.meshes):  # the search tree under the scene, as wide
-        scene = rrb.Vertical(scene, rrb.GraphView(origin="/search", name="BVH search at the first mesh contact "
+        scene = rrb.Vertical(scene, rrb.GraphView(origin="/search", name="the step's BVH search, as recorded "
                                                                           "(green: met, red: culled, yellow: triangle)"),
                              row_shares=[3, 2])
     return rrb.Blueprint(

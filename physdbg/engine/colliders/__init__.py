@@ -33,7 +33,8 @@ from .kinds import KIND_NAMES, KINDS, PARTNER_IS_SPHERE, partner_sphere
 __all__ = ["KIND_NAMES", "KINDS", "KIND_MODULES", "PARTNER_IS_SPHERE", "partner_sphere", "geometry_of",
            "check_kind_modules", "time_of_impact", "contact_normal", "contact_feature", "partner_surface",
            "partner_normal_motion", "partner_moves", "surface_gap", "contact_gap", "partner_restitution",
-           "partners_of", "max_overlap", "narrow_candidates", "every_candidate", "most_partners", "partners_bound"]
+           "partners_of", "max_overlap", "narrow_candidates", "every_candidate", "most_partners", "partners_bound",
+           "searches_meshes", "mesh_search"]
 
 # each kind's module, in the order of the kinds' codes: its geometry group is ``module.GEOMETRY``
 KIND_MODULES = (sphere, plane, mesh)
@@ -200,6 +201,21 @@ def partners_of(kind, p, box, adj_start, adj, path_lo, path_hi, batch_mark, batc
     if kind == KIND_MESH:
         return mesh.partners_of(p, path_lo, path_hi, geometry[KIND_MESH], out)
     raise ValueError(UNKNOWN_KIND)
+
+
+@njit(cache=True, inline="always")
+def searches_meshes(geometry) -> bool:
+    """Whether a re-predicted sphere's path is asked of any mesh's tree (the scene has
+    triangles): the contact loop then logs the box it asks with, in an observed step."""
+    return mesh.count(geometry[KIND_MESH]) > 0
+
+
+def mesh_search(lo: np.ndarray, hi: np.ndarray, geometry: tuple) -> tuple:
+    """Every node of the meshes' trees the engine's walk visits for the boxes lo, hi (J, 3)
+    (mesh.search_visits; the meshes placed as for the step): (query, node, outcome,
+    parent) (V,) int64 each."""
+    return mesh.search_visits(np.ascontiguousarray(lo, dtype=np.float64), np.ascontiguousarray(hi, dtype=np.float64),
+                              geometry[KIND_MESH])
 
 
 @njit(cache=True, inline="always")

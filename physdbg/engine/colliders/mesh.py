@@ -54,7 +54,9 @@ class MeshGeometry(NamedTuple):
     velocity (rad/s); moving (M,) bool; frame (M, 22) per mesh for the step: the mesh's
     turn since run time 0 transposed, Rᵀ, at the step's start and at its end (row-major,
     9 + 9), its pivot at run time 0 P₀ (3) and the step's length (s): a world point x at
-    run time t is Rᵀ(t)·(x - P(t)) + P₀ in the mesh's run-time-0 frame. A kinematic mesh's corners,
+    run time t is Rᵀ(t)·(x - P(t)) + P₀ in the mesh's run-time-0 frame; parent (Q,) int64:
+    each node's parent (a position in the same pre-order; -1 for a root), for the recorded
+    search (``search_visits``). A kinematic mesh's corners,
     pivot and frame are rewritten in place at each step's start (``place``); its tree and a
     fixed mesh's whole group never change."""
 
@@ -69,6 +71,7 @@ class MeshGeometry(NamedTuple):
     motion: np.ndarray
     moving: np.ndarray
     frame: np.ndarray
+    parent: np.ndarray
 
     @classmethod
     def of(cls, walls) -> MeshGeometry:
@@ -91,11 +94,15 @@ class MeshGeometry(NamedTuple):
         frame = np.zeros((len(meshes), 22))
         frame[:, [0, 4, 8, 9, 13, 17]] = 1.0  # at run time 0 the world is every mesh's frame
         frame[:, 18:21] = meshes.pivot
+        parent = np.full(len(leaf), -1, dtype=np.int64)
+        inner = np.flatnonzero(leaf < 0)  # in pre-order a node's left child follows it; its right starts after that
+        parent[inner + 1] = inner
+        parent[skip[inner + 1]] = inner
         return cls(corners.copy(), np.ascontiguousarray(meshes.mesh_of, dtype=np.int64),
                    np.ascontiguousarray(meshes.restitution, dtype=np.float64), np.ascontiguousarray(box_lo),
                    np.ascontiguousarray(box_hi), np.ascontiguousarray(leaf, dtype=np.int64),
                    np.ascontiguousarray(skip, dtype=np.int64), tree_first, motion,
-                   np.ascontiguousarray(meshes.moving, dtype=np.bool_), frame)
+                   np.ascontiguousarray(meshes.moving, dtype=np.bool_), frame, parent)
 
 
 def place(group: tuple, meshes, time: float, span: float) -> int:
@@ -449,6 +456,39 @@ def _sort_triangles(out, m):
         _sift_down(out, 0, end)
 
 
+# outcomes of a visited node (events.SEARCH_MET, SEARCH_CULLED, SEARCH_REACHED)
+_MET, _CULLED, _REACHED = 0, 1, 2
+
+
+@njit(cache=True, inline="always")
+def walk(k, l0, l1, l2, h0, h1, h2, meshes, p, out, m, log, logged):
+    """The one walk of mesh k's tree (a stackless pre-order walk with skip links) with
+    the box (l0, l1, l2)–(h0, h1, h2) in the mesh's frame: a node whose box meets it is
+    descended into, one that does not ends its branch, and each triangle reached becomes
+    a row (p, triangle) of out from row m on. Every node visited is also a row of ``log``
+    (node, outcome: 0 met, 1 culled, 2 a triangle reached) from row ``logged`` on, when
+    log has rows (``search_visits``; the contact loop passes none, ``out[:0]``). Returns (m,
+    logged) after the walk."""
+    box_lo, box_hi, leaf, skip, tree_first = meshes[3], meshes[4], meshes[5], meshes[6], meshes[7]
+    record = log.shape[0] > 0
+    q = tree_first[k]
+    while q < tree_first[k + 1]:
+        meets = _box_meets(l0, l1, l2, h0, h1, h2, box_lo, box_hi, q)
+        if record:
+            log[logged, 0] = q
+            log[logged, 1] = (_REACHED if leaf[q] >= 0 else _MET) if meets else _CULLED
+            logged += 1
+        if meets:
+            if leaf[q] >= 0:
+                out[m, 0] = p
+                out[m, 1] = leaf[q]
+                m += 1
+            q += 1
+        else:
+            q = skip[q]
+    return m, logged
+
+
 @borrowing
 def partners_of(p, path_lo, path_hi, meshes, out) -> int:
     """The triangles (rows (p, t) of out (K, 2)) sphere p's new path must be tested against,
@@ -458,23 +498,51 @@ def partners_of(p, path_lo, path_hi, meshes, out) -> int:
     a sphere meets the triangles that share an edge or a corner at one instant, and a tie
     in the contact loop goes to the test made first: the triangle with the lower number,
     however the tree is laid out (as in the reference loop)."""
-    _corners, _mesh_of, _restitution, box_lo, box_hi, leaf, skip, tree_first = _unpack(meshes)
+    tree_first = meshes[7]
     m = 0
     for k in range(tree_first.shape[0] - 1):
         l0, l1, l2, h0, h1, h2 = frame_box(k, path_lo[p, 0], path_lo[p, 1], path_lo[p, 2], path_hi[p, 0],
                                            path_hi[p, 1], path_hi[p, 2], meshes)
-        q = tree_first[k]
-        while q < tree_first[k + 1]:
-            if _box_meets(l0, l1, l2, h0, h1, h2, box_lo, box_hi, q):
-                if leaf[q] >= 0:
-                    out[m, 0] = p
-                    out[m, 1] = leaf[q]
-                    m += 1
-                q += 1
-            else:
-                q = skip[q]
+        m, _logged = walk(k, l0, l1, l2, h0, h1, h2, meshes, p, out, m, out[:0], 0)
     _sort_triangles(out, m)
     return m
+
+
+@kernel
+def search_visits(lo, hi, meshes):
+    """Every node the engine's walk (``walk``) visits for each box lo[j], hi[j] (J, 3)
+    (world frame: the boxes the contact loop asked with), each mesh's tree from its root
+    with the box carried into the mesh's frame (``frame_box``) as the meshes are placed
+    for the step: (query (V,), node (V,), outcome (V,), parent (V,)) int64, the visits in
+    the order walked, each with the box's row j, the node (a position in the group's
+    pre-order), its outcome (0 met, 1 culled, 2 a triangle reached) and the row of the
+    visit it was reached from (-1 for a tree's root). The contact loop's walks are the
+    same walks: what it tested is what these reach."""
+    nodes = meshes[5].shape[0]
+    tree_first, parent = meshes[7], meshes[11]
+    log = np.empty((max(nodes, 1), 2), dtype=np.int64)  # one walk of one tree visits a node at most once
+    row_of_node = np.empty(max(nodes, 1), dtype=np.int64)
+    leaves = np.empty((max(nodes, 1), 2), dtype=np.int64)
+    capacity = max(16, 4 * lo.shape[0])
+    rows = np.empty((capacity, 4), dtype=np.int64)
+    v = 0
+    for j in range(lo.shape[0]):
+        for k in range(tree_first.shape[0] - 1):
+            l0, l1, l2, h0, h1, h2 = frame_box(k, lo[j, 0], lo[j, 1], lo[j, 2], hi[j, 0], hi[j, 1], hi[j, 2], meshes)
+            _m, logged = walk(k, l0, l1, l2, h0, h1, h2, meshes, j, leaves, 0, log, 0)
+            if v + logged > rows.shape[0]:
+                grown = np.empty((max(2 * rows.shape[0], v + logged), 4), dtype=np.int64)
+                grown[:v] = rows[:v]
+                rows = grown
+            for r in range(logged):
+                q = log[r, 0]
+                row_of_node[q] = v + r  # a node is visited after its parent
+                rows[v + r, 0] = j
+                rows[v + r, 1] = q
+                rows[v + r, 2] = log[r, 1]
+                rows[v + r, 3] = row_of_node[parent[q]] if parent[q] >= 0 else -1
+            v += logged
+    return rows[:v, 0].copy(), rows[:v, 1].copy(), rows[:v, 2].copy(), rows[:v, 3].copy()
 
 
 @kernel
