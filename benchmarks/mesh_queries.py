@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from physdbg.engine.mesh.pose import Pose
+from physdbg.engine.mesh.rigid_motion import Pose
 from physdbg.engine.mesh.query import query_spheres
 from physdbg.engine.mesh.tree import build_mesh_tree
 from physdbg.meshes import SHAPES

@@ -396,7 +396,7 @@ def resolve_pile_rules(scene) -> dict[str, str]:
                f"(docs/engine.md, \"Sleeping\")")
     else:
         values = {name: {"rapid_contact_rule": "hold", "sleep_speed": 0.0}[name] for name in asked}
-        why = f"{why_not}: contacts are held exactly and nothing sleeps"
+        why = f"{why_not}: contacts are held exactly" + (" and nothing sleeps" if "sleep_speed" in asked else "")
     for name, value in values.items():
         setattr(s, name, value)
     # one line says why; the others point to it

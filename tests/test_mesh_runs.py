@@ -571,20 +571,6 @@ def test_a_contact_with_a_mesh_records_the_face_edge_or_corner_it_touched(tmp_pa
     assert f"hit mesh 'plate' triangle {int(first.other[0])} ({feature_words(int(first.feature[0]))})" in line
 
 
-def test_a_moving_mesh_s_surface_velocity_is_one_rule_in_the_loop_and_in_the_analysis():
-    """state.Meshes.surface_velocity (numpy: the audit's words) and toi.surface_velocity
-    (the compiled loop's impulse) give the same velocity, to rounding, at random points and times."""
-    from physdbg.engine.toi import surface_velocity
-
-    meshes = api.load_scene("paddle").walls.meshes
-    rng = np.random.default_rng(3)
-    motion = np.concatenate([meshes.pivot[0], [0.4, 0.0, -0.3], meshes.angular_velocity[0] + [0.5, 0.0, 0.2]])
-    meshes.velocity[0], meshes.angular_velocity[0] = motion[3:6], motion[6:9]
-    for point, time in zip(rng.normal(0, 1, (50, 3)), rng.uniform(0, 2, 50)):
-        compiled = np.array(surface_velocity(*point, motion, time))
-        assert np.allclose(meshes.surface_velocity(0, point, time), compiled, rtol=1e-14, atol=1e-14)
-
-
 # ------------------------------------------------------------------ resting on moving meshes
 FLOOR = "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nf 1 3 2\nf 1 4 3\n"  # a 2 m square, face up (+y)
 CARRIERS = {
@@ -694,7 +680,7 @@ def test_a_held_contact_s_surface_motion_is_the_second_derivative_of_its_gap():
     from physdbg.engine.colliders import geometry_of, partner_normal_motion
     from physdbg.engine.mesh.closest import closest_on_triangle
     from physdbg.engine.state import Meshes, Walls
-    from physdbg.engine.toi import in_body_frame
+    from physdbg.engine.mesh.rigid_motion import in_body_frame
 
     corners = np.array([[[-1.0, 0.0, -1.0], [1.0, 0.0, 1.0], [1.0, 0.0, -1.0]]])
     meshes = Meshes(["plate"], np.array([0.5]), corners, np.zeros(1, dtype=np.int64), ["test"],

@@ -263,7 +263,7 @@ def test_sphere_triangle_time_of_impact_against_fine_sampling(seed, integrator, 
 
 
 def _rotation(w, t):
-    from physdbg.engine.mesh.pose import rotation_about
+    from physdbg.engine.mesh.rigid_motion import rotation_about
 
     return rotation_about(w, t)
 

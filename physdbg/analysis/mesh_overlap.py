@@ -48,7 +48,7 @@ class MeshOverlaps:
 
     def _search(self, i: int, j: int, time: float):
         from ..engine.mesh.descent import descend
-        from ..engine.mesh.pose import Pose
+        from ..engine.mesh.rigid_motion import Pose
         from ..record.mesh_view import mesh_trees
 
         if self._trees is None:

@@ -191,34 +191,36 @@ class Meshes:
         return np.any(self.velocity != 0.0, axis=1) | np.any(self.angular_velocity != 0.0, axis=1)
 
     def rotations(self, time: float) -> np.ndarray:
-        """(M, 3, 3): each mesh's turn R(ω·time) since run time 0."""
-        from .mesh.pose import rotation_about
+        """(M, 3, 3): each mesh's turn R(ω·time) since run time 0 (mesh.rigid_motion)."""
+        from .mesh.rigid_motion import rotation_about
 
         return np.stack([rotation_about(w, time) for w in self.angular_velocity]) if len(self) else np.zeros((0, 3, 3))
 
     def placed(self, time: float) -> tuple[np.ndarray, np.ndarray]:
         """(corners (T, 3, 3), pivots (M, 3)) m at run time ``time`` s (the closed form of
-        the class doc; a fixed mesh's corners are its own, bit for bit)."""
+        the class doc, mesh.rigid_motion.placed; a fixed mesh's corners are its own, bit for bit)."""
+        from .mesh.rigid_motion import placed
+
         corners = self.corners.copy()
         pivots = self.pivot + self.velocity * time
         for k in np.nonzero(self.moving)[0]:
             rows = self.mesh_of == k
-            turn = self.rotations(time)[k]
-            corners[rows] = (self.corners[rows] - self.pivot[k]) @ turn.T + pivots[k]
+            corners[rows] = placed(self.corners[rows], self.pivot[k], self.velocity[k], self.angular_velocity[k], time)
         return corners, pivots
 
     def surface_velocity(self, k: int, point, time: float) -> np.ndarray:
         """(3,) m/s: the velocity at run time ``time`` of mesh k's surface at world
-        ``point`` (3,): v + ω × (point - pivot(time)); toi.surface_velocity is the same rule
-        for the compiled loop (a test holds the two to each other)."""
-        arm = np.asarray(point, dtype=np.float64) - (self.pivot[k] + self.velocity[k] * time)
-        return self.velocity[k] + np.cross(self.angular_velocity[k], arm)
+        ``point`` (3,): v + ω × (point - pivot(time)) (mesh.rigid_motion)."""
+        from .mesh.rigid_motion import surface_velocity_at
+
+        return surface_velocity_at(point, self.pivot[k], self.velocity[k], self.angular_velocity[k], time)
 
     def transform(self, k: int, time: float) -> tuple[np.ndarray, np.ndarray]:
         """(rotation (3, 3), translation (3,)) that carries mesh k's run-time-0 corners c
         to where they are at ``time``: R·c + translation (the views' per-step transform)."""
-        turn = self.rotations(time)[k]
-        return turn, self.pivot[k] + self.velocity[k] * time - turn @ self.pivot[k]
+        from .mesh.rigid_motion import transform
+
+        return transform(self.pivot[k], self.velocity[k], self.angular_velocity[k], time)
 
     def turn_radii(self) -> np.ndarray:
         """(M,) m: how far each mesh's farthest corner is from its pivot at run time 0."""

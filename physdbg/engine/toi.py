@@ -33,6 +33,7 @@ import math
 
 from .jit import borrowing, kernel
 from .mesh.closest import closest_on_triangle
+from .mesh.rigid_motion import in_body_frame
 from .motion import STRAIGHT_PATH, closed_form_path, curvature_scale, path_coefficients, time_of_p1
 
 INF = math.inf
@@ -349,63 +350,6 @@ def triangle_toi_sampled(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, integr
 # |y''| <= |x''| + 2|ω|·|z'| + |ω|²·|z| bounds the curvature over the test's horizon by
 # the bounds of |z'| and |z| over it: the same conservative advancement (_advance) then
 # never steps over the first touch of a moving triangle either.
-
-
-@borrowing
-def turned(z0, z1, z2, k0, k1, k2, c, s):
-    """z turned by the angle whose cosine and sine are c, s about the unit axis k (Rodrigues)."""
-    kz = k0 * z0 + k1 * z1 + k2 * z2
-    return (z0 * c + (k1 * z2 - k2 * z1) * s + k0 * kz * (1.0 - c),
-            z1 * c + (k2 * z0 - k0 * z2) * s + k1 * kz * (1.0 - c),
-            z2 * c + (k0 * z1 - k1 * z0) * s + k2 * kz * (1.0 - c))
-
-
-@borrowing
-def in_body_frame(p0, p1, p2, e0, e1, e2, motion, tau):
-    """(y0, y1, y2, r0, r1, r2): a point p with rate e (m/s) at time ``tau`` s after the step
-    began, seen from a mesh moving by ``motion`` (9,): its pivot at the step's start (m),
-    its velocity (m/s) and its angular velocity (rad/s); y the point where the mesh was
-    at the step's start, r its rate there."""
-    z0 = p0 - motion[0] - motion[3] * tau
-    z1 = p1 - motion[1] - motion[4] * tau
-    z2 = p2 - motion[2] - motion[5] * tau
-    w0, w1, w2 = motion[6], motion[7], motion[8]
-    # the rate relative to the moving frame, before turning back: z' - ω×z
-    q0 = e0 - motion[3] - (w1 * z2 - w2 * z1)
-    q1 = e1 - motion[4] - (w2 * z0 - w0 * z2)
-    q2 = e2 - motion[5] - (w0 * z1 - w1 * z0)
-    speed = _norm(w0, w1, w2)
-    if speed == 0.0:
-        return z0 + motion[0], z1 + motion[1], z2 + motion[2], q0, q1, q2
-    c = math.cos(speed * tau)
-    s = -math.sin(speed * tau)  # turned back by -|ω|·τ
-    k0, k1, k2 = w0 / speed, w1 / speed, w2 / speed
-    y0, y1, y2 = turned(z0, z1, z2, k0, k1, k2, c, s)
-    r0, r1, r2 = turned(q0, q1, q2, k0, k1, k2, c, s)
-    return y0 + motion[0], y1 + motion[1], y2 + motion[2], r0, r1, r2
-
-
-@borrowing
-def surface_velocity(q0, q1, q2, motion, tau):
-    """(u0, u1, u2) m/s: the velocity at time ``tau`` of the moving mesh's surface point at
-    world point q: v_m + ω × (q - pivot(τ))."""
-    r0 = q0 - motion[0] - motion[3] * tau
-    r1 = q1 - motion[1] - motion[4] * tau
-    r2 = q2 - motion[2] - motion[5] * tau
-    w0, w1, w2 = motion[6], motion[7], motion[8]
-    return (motion[3] + w1 * r2 - w2 * r1, motion[4] + w2 * r0 - w0 * r2, motion[5] + w0 * r1 - w1 * r0)
-
-
-@borrowing
-def surface_acceleration(q0, q1, q2, motion, tau):
-    """(a0, a1, a2) m/s²: the acceleration at time ``tau`` of the moving mesh's surface
-    point at world point q: ω × (ω × (q - pivot(τ))) (the velocity and ω are constant)."""
-    r0 = q0 - motion[0] - motion[3] * tau
-    r1 = q1 - motion[1] - motion[4] * tau
-    r2 = q2 - motion[2] - motion[5] * tau
-    w0, w1, w2 = motion[6], motion[7], motion[8]
-    c0, c1, c2 = w1 * r2 - w2 * r1, w2 * r0 - w0 * r2, w0 * r1 - w1 * r0
-    return w1 * c2 - w2 * c1, w2 * c0 - w0 * c2, w0 * c1 - w1 * c0
 
 
 @borrowing

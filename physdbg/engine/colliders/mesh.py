@@ -39,8 +39,9 @@ from numba import njit
 from ..broadphase.bvh import build
 from ..jit import borrowing, kernel
 from ..mesh.closest import FACE, closest_on_triangle
-from ..toi import (DISCRETE, SWEPT, in_body_frame, moving_triangle_toi_sampled, moving_triangle_toi_swept,
-                   surface_acceleration, surface_velocity, triangle_toi_sampled, triangle_toi_swept, turned)
+from ..mesh.rigid_motion import in_body_frame, surface_acceleration, surface_velocity, turned_with
+from ..toi import (DISCRETE, SWEPT, moving_triangle_toi_sampled, moving_triangle_toi_swept, triangle_toi_sampled,
+                   triangle_toi_swept)
 
 
 class MeshGeometry(NamedTuple):
@@ -294,7 +295,7 @@ def normal(x, sigma, ia, t, meshes):
         q0, q1, q2, _feature = closest_on_triangle(y0, y1, y2, corners[t, 0, 0], corners[t, 0, 1], corners[t, 0, 2],
                                                    corners[t, 1, 0], corners[t, 1, 1], corners[t, 1, 2],
                                                    corners[t, 2, 0], corners[t, 2, 1], corners[t, 2, 2])
-        d0, d1, d2 = _turned_with(y0 - q0, y1 - q1, y2 - q2, motion, tau)
+        d0, d1, d2 = turned_with(y0 - q0, y1 - q1, y2 - q2, motion, tau)
     else:
         d0, d1, d2, _length = _away(x, ia, corners, t)
     length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
@@ -302,7 +303,7 @@ def normal(x, sigma, ia, t, meshes):
         return d0 / length, d1 / length, d2 / length
     f0, f1, f2 = _face_normal(corners, t)
     if moving:
-        return _turned_with(f0, f1, f2, motion, sigma[ia])
+        return turned_with(f0, f1, f2, motion, sigma[ia])
     return f0, f1, f2
 
 
@@ -318,16 +319,6 @@ def feature(x, sigma, ia, t, meshes) -> int:
     return closest_on_triangle(y0, y1, y2, corners[t, 0, 0], corners[t, 0, 1], corners[t, 0, 2], corners[t, 1, 0],
                                corners[t, 1, 1], corners[t, 1, 2], corners[t, 2, 0], corners[t, 2, 1],
                                corners[t, 2, 2])[3]
-
-
-@njit(cache=True, inline="always")
-def _turned_with(d0, d1, d2, motion, tau):
-    """A direction fixed in a moving mesh's frame at the step's start, as it points at tau."""
-    w0, w1, w2 = motion[6], motion[7], motion[8]
-    speed = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-    if speed == 0.0:
-        return d0, d1, d2
-    return turned(d0, d1, d2, w0 / speed, w1 / speed, w2 / speed, math.cos(speed * tau), math.sin(speed * tau))
 
 
 @njit(cache=True, inline="always")

@@ -6,7 +6,7 @@
 """
 
 from .descent import OUTCOME_NAMES, Descent, brute_force, descend
-from .pose import Pose, rotation_from_degrees
+from .rigid_motion import Pose, rotation_from_degrees
 from .tree import VOLUME_NAMES, MeshTree, build_mesh_tree
 
 __all__ = ["OUTCOME_NAMES", "VOLUME_NAMES", "Descent", "MeshTree", "Pose", "brute_force", "build_mesh_tree",

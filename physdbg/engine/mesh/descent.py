@@ -21,7 +21,7 @@ import numpy as np
 
 from ..broadphase.bvh import refit
 from ..jit import kernel
-from .pose import Pose
+from .rigid_motion import Pose
 from .tree import AABB, OBB, SPHERE, VOLUME_NAMES, MeshTree, triangle_boxes
 from .tritri import brute_force_pairs, triangles_meet
 from .volumes import aabbs_meet, hull_test_work, hulls_apart, obbs_meet, spheres_meet

@@ -20,7 +20,7 @@ import numpy as np
 from ..jit import borrowing, kernel
 from .closest import closest_on_triangle
 from .descent import posed
-from .pose import Pose
+from .rigid_motion import Pose
 from .tree import AABB, OBB, SPHERE, VOLUME_NAMES, MeshTree
 
 
