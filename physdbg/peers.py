@@ -115,8 +115,8 @@ def available(engine: str) -> bool:
 
 
 def check_scene(name: str, scene) -> None:
-    """PeerError when the peer cannot run the scene (a real-time dt, a periodic box, a
-    kinematic mesh, too long)."""
+    """PeerError when the peer cannot run the scene (a real-time dt, a periodic box, too
+    long)."""
     if name not in PEERS:
         raise PeerError(f"unknown peer {name!r}; choose one of {', '.join(PEERS)}")
     if scene.dt is None:
@@ -124,10 +124,6 @@ def check_scene(name: str, scene) -> None:
     if scene.walls.periodic:
         raise PeerError(f"scene '{scene.name}' has a periodic box, which {name} has no counterpart for; "
                         f"record-peer translates closed boxes and planes only")
-    moving = [m for m, move in zip(scene.walls.meshes.names, scene.walls.meshes.moving, strict=True) if move]
-    if moving:
-        raise PeerError(f"scene '{scene.name}' has a kinematic mesh ({', '.join(repr(m) for m in moving)}), which "
-                        f"record-peer does not move in {name} yet: the peer would see it fixed")
     if scene.state.count * scene.steps > MAX_PEER_BODY_STEPS:
         bodies = "1 body" if scene.state.count == 1 else f"{scene.state.count} bodies"
         raise PeerError(f"{bodies} × {scene.steps} steps is more than a peer run may take "
@@ -233,14 +229,20 @@ class _Pybullet(PeerWorld):
                                       baseOrientation=_plane_quaternion(normal), physicsClientId=client)
             pb.changeDynamics(wall, -1, restitution=float(e), lateralFriction=0.0, rollingFriction=0.0,
                               spinningFriction=0.0, physicsClientId=client)
-        meshes = walls.meshes
-        for k in range(len(meshes)):  # each fixed mesh: a static triangle mesh (mass 0), in the world frame
-            corners = meshes.corners[meshes.mesh_of == k].reshape(-1, 3)
+        meshes = self.meshes = walls.meshes
+        self.time, self.dt, self.kinematic = 0.0, scene.dt, []
+        for k in range(len(meshes)):  # each mesh a triangle mesh of mass 0 with its base at its pivot
+            corners = meshes.corners[meshes.mesh_of == k].reshape(-1, 3) - meshes.pivot[k]
             shape = pb.createCollisionShape(pb.GEOM_MESH, vertices=corners.tolist(),
                                             indices=list(range(len(corners))), physicsClientId=client)
-            mesh = pb.createMultiBody(0, shape, physicsClientId=client)
+            # a kinematic one a multibody whose base pose and velocity are set before each step
+            # (a fixed base takes no impulse, and its velocity enters the contacts; a rigid
+            # body of mass 0 ignores a velocity set so, and a ball falls through it)
+            mesh = pb.createMultiBody(0, shape, basePosition=meshes.pivot[k].tolist(), physicsClientId=client)
             pb.changeDynamics(mesh, -1, restitution=float(e_meshes[k]), lateralFriction=0.0, rollingFriction=0.0,
                               spinningFriction=0.0, physicsClientId=client)
+            if meshes.moving[k]:
+                self.kinematic.append((k, mesh))
         shapes: dict[float, int] = {}
         self.bodies = []
         for x, v, inv, r, e in zip(st.positions, st.velocities, st.inverse_mass, st.radius, e_spheres, strict=True):
@@ -264,10 +266,24 @@ class _Pybullet(PeerWorld):
                       f"and sleeping; restitution {restitution_words}; friction off; linearDamping = 1 − drag, "
                       f"angularDamping 0" + ("; continuous collision on (each sphere a rigid body, useMaximalCoordinates, "
                                                "ccdSweptSphereRadius 0.9 r)" if setup.ccd
-                                             else "") + ("; each mesh a static triangle mesh" if len(meshes) else "")]
+                                             else "")
+                      + ("; each fixed mesh a static triangle mesh" if len(meshes) > len(self.kinematic) else "")
+                      + ("; each kinematic mesh a fixed-base multibody whose pose (where the mesh is at the step's "
+                         "start) and velocity are set before each step" if self.kinematic else "")]
 
     def step(self) -> None:
+        from .engine.mesh.rigid_motion import turn_quaternion
+
+        meshes = self.meshes
+        for k, mesh in self.kinematic:
+            pivot = meshes.pivot[k] + meshes.velocity[k] * self.time
+            self.pb.resetBasePositionAndOrientation(mesh, pivot.tolist(),
+                                                    turn_quaternion(meshes.angular_velocity[k], self.time).tolist(),
+                                                    physicsClientId=self.client)
+            self.pb.resetBaseVelocity(mesh, meshes.velocity[k].tolist(), meshes.angular_velocity[k].tolist(),
+                                      physicsClientId=self.client)
         self.pb.stepSimulation(physicsClientId=self.client)
+        self.time += self.dt
 
     def positions(self) -> np.ndarray:
         return np.array([self.pb.getBasePositionAndOrientation(b, physicsClientId=self.client)[0]
@@ -310,13 +326,16 @@ class _Mujoco(PeerWorld):
                     if two_sided else 'type="plane" size="0 0 1"')
             geoms.append(f'<geom name="wall{k}" {kind} pos="{fmt(normal * offset)}" zaxis="{fmt(normal)}" condim="1" '
                          f'{solref(float(e))}/>')
-        meshes = walls.meshes
+        meshes = self.meshes = walls.meshes
+        self.time, self.kinematic = 0.0, [k for k in range(len(meshes)) if meshes.moving[k]]
         assets = []
         for k in range(len(meshes)):  # MuJoCo collides with a mesh's convex hull: exact for a box-shaped slab
-            corners = meshes.corners[meshes.mesh_of == k].reshape(-1, 3)
+            corners = meshes.corners[meshes.mesh_of == k].reshape(-1, 3) - meshes.pivot[k]
             assets.append(f'<mesh name="mesh{k}" vertex="{fmt(corners.ravel())}"/>')
-            geoms.append(f'<geom name="meshgeom{k}" type="mesh" mesh="mesh{k}" condim="1" '
-                         f'{solref(float(meshes.restitution[k]))}/>')
+            geom = f'<geom name="meshgeom{k}" type="mesh" mesh="mesh{k}" condim="1" {solref(float(meshes.restitution[k]))}/>'
+            # a kinematic mesh a mocap body (MuJoCo's way to move a body by hand), posed before each step
+            geoms.append(f'<body name="mesh{k}" pos="{fmt(meshes.pivot[k])}"'
+                         f'{" mocap=" + chr(34) + "true" + chr(34) if meshes.moving[k] else ""}>{geom}</body>')
         damping = -math.log(settings.drag) if 0.0 < settings.drag < 1.0 else 0.0
         self.movable = []
         for i, (x, inv, r, e) in enumerate(zip(st.positions, st.inverse_mass, st.radius, st.restitution,
@@ -352,10 +371,21 @@ class _Mujoco(PeerWorld):
                       + f"; soft spring–damper contacts lasting {CONTACT_STEPS} steps, damped to return each geom's "
                         f"restitution (MuJoCo mixes two geoms' solref by averaging); frictionless (condim 1); drag as "
                         f"free-joint damping" + ("; each mesh as its convex hull (MuJoCo's meshes are convex)"
-                                                 if len(meshes) else "")]
+                                                 if len(meshes) else "")
+                      + ("; each kinematic mesh a mocap body posed where the mesh is at the step's start before each "
+                         "step (MuJoCo gives a mocap body no velocity: its contacts push by their depth)"
+                         if self.kinematic else "")]
 
     def step(self) -> None:
+        from .engine.mesh.rigid_motion import turn_quaternion
+
+        meshes = self.meshes
+        for j, k in enumerate(self.kinematic):  # mocap bodies are numbered in the order of the bodies
+            self.data.mocap_pos[j] = meshes.pivot[k] + meshes.velocity[k] * self.time
+            x, y, z, w = turn_quaternion(meshes.angular_velocity[k], self.time)
+            self.data.mocap_quat[j] = (w, x, y, z)  # MuJoCo's quaternions are w first
         self.mujoco.mj_step(self.model, self.data)
+        self.time += self.model.opt.timestep
 
     def positions(self) -> np.ndarray:
         out = self.start.copy()

@@ -503,11 +503,35 @@ def test_a_recording_without_a_search_says_why(tmp_path):
         spheres.mesh_search(1)
 
 
-def test_a_peer_run_of_a_kinematic_mesh_is_refused_by_name_not_run_with_the_mesh_fixed():
-    done = runner.invoke(app, ["record-peer", "pybullet", "paddle"])
-    assert done.exit_code == 2
-    assert ("scene 'paddle' has a kinematic mesh ('paddle'), which record-peer does not move in pybullet yet: the "
-            "peer would see it fixed") in done.output
+@pytest.mark.parametrize("peer", ["pybullet", "mujoco"])
+def test_a_peer_moves_a_kinematic_mesh_as_its_users_would_and_the_ball_rides_the_elevator(tmp_path, peer,
+                                                                                         monkeypatch):
+    """record-peer sets up a kinematic mesh as each peer's users do (pybullet: a fixed-base
+    multibody whose pose and velocity are set before each step; MuJoCo: a mocap body posed
+    before each step) and says so; on the elevator the peer's ball rides the platform up
+    (0.75 m in 1.5 s), within a few millimetres of physdbg's."""
+    from physdbg.peers import DEFAULT_SETUPS, run_peer
+
+    # a slab 2 m square and 0.1 m thick, its top at y = 0 (MuJoCo collides with a mesh's convex
+    # hull and refuses a flat one)
+    monkeypatch.setitem(CARRIERS, "slab-elevator", ('shape = "box"\nscale = [2.0, 0.1, 2.0]\n'
+                                                    'position = [0.0, -0.05, 0.0]\nvelocity = [0.0, 0.5, 0.0]',
+                                                    CARRIERS["elevator"][1]))
+    path = _carrier_scene(tmp_path, "slab-elevator")
+    scene = api.load_scene(path)
+    run, notes = run_peer(peer, scene, DEFAULT_SETUPS[peer])
+    assert ("kinematic mesh a fixed-base multibody" if peer == "pybullet" else "kinematic mesh a mocap body") in notes[0]
+    world = scene.build_world()
+    for dt in scene.step_lengths():
+        world.step(dt)
+    ours = world.state.positions[0]
+    theirs = run.positions[-1, 0]
+    platform = 0.5 * run.times[-1]
+    assert abs(ours[1] - (platform + 0.1)) < 1e-9
+    assert abs(theirs[1] - ours[1]) < 0.02, (theirs, ours)
+    out = tmp_path / f"{peer}.mcap"
+    done = runner.invoke(app, ["record-peer", peer, path, "-o", str(out)])
+    assert done.exit_code == 0, done.output
 
 
 def test_a_kinematic_mesh_passing_into_another_is_a_mesh_overlap_finding_at_the_instant_they_meet(tmp_path):

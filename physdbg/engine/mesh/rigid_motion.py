@@ -51,6 +51,17 @@ def rotation_about(angular_velocity: np.ndarray, time: float) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * cross + (1.0 - np.cos(angle)) * (cross @ cross)
 
 
+def turn_quaternion(angular_velocity: np.ndarray, time: float) -> np.ndarray:
+    """(4,) x, y, z, w: the quaternion of rotation_about(angular_velocity, time), the turn
+    by |ω|·time about ω's direction (what pybullet and MuJoCo take a pose's turn as)."""
+    w = np.asarray(angular_velocity, dtype=np.float64).reshape(3)
+    speed = float(np.sqrt(w @ w))
+    if speed == 0.0 or time == 0.0:
+        return np.array([0.0, 0.0, 0.0, 1.0])
+    half = 0.5 * speed * time
+    return np.concatenate([w / speed * math.sin(half), [math.cos(half)]])
+
+
 def transform(pivot: np.ndarray, velocity: np.ndarray, angular_velocity: np.ndarray,
               time: float) -> tuple[np.ndarray, np.ndarray]:
     """(rotation (3, 3), translation (3,)) carrying a moving body's run-time-0 points c to
