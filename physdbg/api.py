@@ -50,6 +50,7 @@ class RunSummary:
     ordering: str
     broad_phase: str
     broad_phase_reason: str
+    scanned_steps: int
     particles: int
     walls: list[str]
     steps: int
@@ -184,7 +185,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         scene=scene.name, source=scene.source, integrator=scene.settings.integrator,
         detection=scene.settings.detection, ordering=scene.settings.ordering,
         broad_phase=world.broad_phase.name,
-        broad_phase_reason=world.broad_phase_reason,
+        broad_phase_reason=world.broad_phase_reason, scanned_steps=world.scanned_steps,
         particles=st.count, walls=list(scene.walls.names), meshes=mesh_sizes(scene.walls.meshes),
         meshes_move=bool(scene.walls.meshes.moving.any()) and len(scene.walls.meshes) > 1,
         mesh_notes=list(scene.walls.meshes.notes) + [

@@ -593,3 +593,48 @@ def test_after_warm_up_a_run_loads_no_kernel(monkeypatch):
         seen.add(min(world.step(scene.dt).counts.contacts, 2))
         world._refresh_box(world.last_step, 0)
     assert seen == {0, 1, 2} and world.sleepers is not None
+
+
+# ----------------------------------------------------------------------------- partner search
+@pytest.mark.parametrize("name, overrides", [
+    ("billiards", ["steps=120"]), ("gas", ["steps=40"]), ("rain", ["steps=150", "sleep_speed=0"]),
+    ("highspeed", ["steps=40", "generate.count=800"]), ("funnel", ["steps=150"]),
+])
+def test_scanning_every_path_box_gives_the_states_listing_partners_gives(name, overrides, monkeypatch):
+    """World._choose_partner_search picks a scan of every sphere's path box per
+    re-prediction or the partner lists by cost; the states, their hashes and the overlap
+    audit are the same bit for bit either way (forced here: every step that may scan does)."""
+    import physdbg.engine.world as world_module
+    from physdbg.events import BroadPhaseInfo
+
+    runs = {}
+    for factor in (0.0, 1e12):  # lists always; a scan wherever one is allowed
+        monkeypatch.setattr(world_module, "SCAN_PER_LISTED_PAIR", factor)
+        scene = load_scene(name, overrides)
+        seen = ListObserver()
+        world = scene.build_world(seen)
+        ends = [world.step(dt) for dt in scene.step_lengths()]
+        scanned = [info.stats["scanned"] for info in seen.of_type(BroadPhaseInfo)]
+        runs[factor] = ([e.state_hash for e in ends], [e.max_overlap for e in ends], [e.counts.contacts for e in ends],
+                        scanned)
+    lists, scans = runs[0.0], runs[1e12]
+    assert not any(lists[3]) and sum(scans[3]) > len(scans[3]) // 2  # RELIST_EVERY steps list again
+    assert lists[0] == scans[0] and lists[1] == scans[1] and lists[2] == scans[2]
+
+
+def test_highspeed_scans_by_itself_and_lists_again_every_relist_steps():
+    """Among 5,000 fast spheres of spread speeds the lists pair each sphere with dozens
+    (their boxes grown to their reach), and a step has a few hundred contacts: the world
+    scans, from counts alone, and lists again every RELIST_EVERY steps to re-measure."""
+    from physdbg.engine.world import RELIST_EVERY
+    from physdbg.events import BroadPhaseInfo
+
+    scene = load_scene("highspeed", ["steps=70"])
+    seen = ListObserver()
+    world = scene.build_world(seen)
+    for dt in scene.step_lengths():
+        world.step(dt)
+    scanned = [info.stats["scanned"] for info in seen.of_type(BroadPhaseInfo)]
+    listed = [k for k, s in enumerate(scanned) if not s]  # step k + 1 listed (step_index k at its start)
+    assert listed[:1] == [0] and set(range(RELIST_EVERY, 70, RELIST_EVERY)) <= set(listed)
+    assert sum(scanned) >= 70 - 2 * len(listed) and len(listed) <= 6

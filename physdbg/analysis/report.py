@@ -262,7 +262,9 @@ def summary_text(s, observers: str = "the audit") -> str:
         f"scene       {s.scene}  ({s.source})",
         f"methods     integrator={s.integrator} detection={s.detection} ordering={s.ordering}",
         *auto_lines(s.auto),
-        f"broad phase {s.broad_phase}: {s.broad_phase_reason}",
+        f"broad phase {s.broad_phase}: {s.broad_phase_reason}" + (
+            f"; {s.scanned_steps} of {s.steps} steps scanned every path box for a changed path instead of listing "
+            f"partners (fewer box tests: docs/broadphase.md, \"Partner lists or a scan\")" if s.scanned_steps else ""),
         f"bodies      {count_words(s.particles, 'particle')}, {count_words(len(s.walls), 'wall')}"
         + _mesh_words(getattr(s, "meshes", {})),
         *(f"meshes      {note}" for note in getattr(s, "mesh_notes", [])),

@@ -71,7 +71,9 @@ class LoopCandidates(NamedTuple):
     largest partner count, path_lo, path_hi (N, 3) m, the box of each sphere's current
     path over the rest of the step (the loop updates a sphere's when it re-predicts it),
     and scan_boxes: a re-query may be a scan of every swept box, run in the loop
-    (timeline.grow_unpartnered; the broad phase's query is that scan, no axis periodic)."""
+    (timeline.grow_unpartnered; the broad phase's query is that scan, no axis periodic);
+    scan_partners: there are no partner lists to grow: a re-predicted sphere scans every
+    sphere's path box (colliders/sphere.partners_of; World._choose_partner_search)."""
 
     adj_start: np.ndarray
     adj: np.ndarray
@@ -82,6 +84,7 @@ class LoopCandidates(NamedTuple):
     path_lo: np.ndarray
     path_hi: np.ndarray
     scan_boxes: bool
+    scan_partners: bool
 
 
 class LoopBudgets(NamedTuple):
@@ -123,8 +126,9 @@ M_RUN_TIME, M_STEP_END, M_INTEGRATOR, M_DRAG, M_K, M_DETECTION, M_SAMPLES, M_TOL
     _M[n] for n in ("run_time", "step_end", "integrator", "drag", "k", "detection", "samples", "tolerance"))
 M_REST_FRACTION, M_REST_STEP_FACTOR, M_ANCHOR_IS_FLOW, M_PATH_FOLLOWS_ACC, M_VTOL, M_ATOL = (
     _M[n] for n in ("rest_fraction", "rest_step_factor", "anchor_is_flow", "path_follows_acc", "vtol", "atol"))
-C_ADJ_START, C_ADJ, C_BOX_LO, C_BOX_HI, C_BOX_MARGIN, C_MAX_DEGREE, C_PATH_LO, C_PATH_HI = (
-    _C[n] for n in ("adj_start", "adj", "box_lo", "box_hi", "box_margin", "max_degree", "path_lo", "path_hi"))
+C_ADJ_START, C_ADJ, C_BOX_LO, C_BOX_HI, C_BOX_MARGIN, C_MAX_DEGREE, C_PATH_LO, C_PATH_HI, C_SCAN_PARTNERS = (
+    _C[n] for n in ("adj_start", "adj", "box_lo", "box_hi", "box_margin", "max_degree", "path_lo", "path_hi",
+                    "scan_partners"))
 B_HEAP_TOI, B_HEAP_DATA, B_TEST_INT, B_TEST_FLOAT, B_TEST_OUTCOME, B_COUNTERS, B_BATCH_MARK, B_MESH_QUERIES = (
     _B[n] for n in ("heap_toi", "heap_data", "test_int", "test_float", "test_outcome", "counters", "batch_mark",
                     "mesh_queries"))

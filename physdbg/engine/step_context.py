@@ -54,6 +54,7 @@ class StepContext:
     adj: np.ndarray | None = None
     max_degree: int = 0
     grown: set[int] = field(default_factory=set)
+    scan_partners: bool = False  # re-predictions scan every path box: no partner lists (World._choose_partner_search)
     too_wide_mid_step: str | None = None
     kernel_groups: tuple | None = None
     out_of_memory: int = 0  # bytes the buffers would have needed, when max_memory stopped growing them

@@ -38,7 +38,7 @@ from ..events import CONTACT_ROW, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUT
 from .broadphase.boxes import box_meets
 from .colliders import KINDS, most_partners, partner_sphere, partners_bound, partners_of, searches_meshes, time_of_impact
 from .jit import borrowing, kernel, records
-from .kernel_args import B_BATCH_MARK, B_COUNTERS, B_MESH_QUERIES, LoopBuffers, boxes, partner_lists, paths, sweep, test_log
+from .kernel_args import B_BATCH_MARK, B_COUNTERS, B_MESH_QUERIES, C_SCAN_PARTNERS, LoopBuffers, boxes, partner_lists, paths, sweep, test_log
 from .motion import particle_box
 from .resolve import NEEDS_HELD, OUT_OF_WORK, SKIPPED, finish_with_held, judge_contact
 from .resting import held_find, held_room
@@ -316,11 +316,12 @@ def _repredict(p, particles, method, geometry, held, candidates, buffers, scratc
             queries[row, 2 + c] = scratch[0, c]
             queries[row, 5 + c] = scratch[1, c]
         counters[MESH_QUERIES] += 1
+    scan = candidates[C_SCAN_PARTNERS]
     for kind in range(KINDS):
-        m = partners_of(kind, p, scratch, adj_start, adj, path_lo, path_hi, batch_mark, batch, geometry, found)
+        m = partners_of(kind, p, scratch, adj_start, adj, path_lo, path_hi, batch_mark, batch, geometry, found, scan)
         for s in range(m):
             _predict(kind, found[s, 0], found[s, 1], particles, method, geometry, held, buffers, True)
-    return inside
+    return inside or scan  # a scan found every sphere the new path meets: nothing to re-query
 
 
 @njit(cache=True, inline="always")
@@ -454,7 +455,7 @@ def _run_events(particles, method, geometry, held, candidates, budgets, buffers,
     the contact in judged, judged_f: see run_time_order)."""
     # positional, in kernel_args' field order (the groups come as plain tuples, see there);
     # distinct names for what the loop does not read itself: numba types each name once
-    adj_start, adj, box_lo, box_hi, _box_margin, max_degree, _path_lo, _path_hi, scan_boxes = candidates
+    adj_start, adj, box_lo, box_hi, _box_margin, max_degree, _path_lo, _path_hi, scan_boxes, _scan = candidates
     cap, max_tests, _work_budget = budgets
     (heap_toi, heap_data, test_int, _test_float, test_outcome, contacts, counters, pending, changed, batch_mark,
      requery, requery_count, mesh_queries) = buffers

@@ -109,6 +109,13 @@ from .timeline import (
     run_time_order,
 )
 
+# Partner lists against a scan (World._choose_partner_search): a listed pair costs about
+# this many box tests of a scan (measured on highspeed and box-rain: ~70 ns a pair through
+# the grid, the adjacency and the paths' filter, ~2 ns a box scanned); and how often a
+# world that scans lists again, to know what the lists would hold.
+SCAN_PER_LISTED_PAIR = 35.0
+RELIST_EVERY = 32
+
 # Updates of the held-contact solves smaller than this (relative to the largest free
 # acceleration, at least 1 m/s², and for velocities to that acceleration times dt) wake
 # no neighbours: they are rounding.
@@ -189,6 +196,11 @@ class World:
         self._buf = Buffers(state.count)
         # a re-query the loop can answer itself (timeline.grow_unpartnered) without a pause
         self._scan_boxes = bool(self.broad_phase.query_scans_boxes) and not self._periodic
+        # partner lists or a scan per re-prediction (_choose_partner_search): what the last
+        # step with lists paired per sphere, and the re-predictions of the last step
+        self._listed_pairs_per_sphere = 0.0
+        self._last_contacts = 0
+        self.scanned_steps = 0  # steps whose re-predictions scanned every path box
         # sleeping (sleep.py): the step reads these, not state.inverse_mass and the free
         # accelerations, so a sleeping sphere is immovable and feels no gravity
         self._inverse_mass = st.inverse_mass
@@ -304,14 +316,19 @@ class World:
                          _budget_message("max_resting_work_per_step", self.resting_budget))
 
     def _broad_phase(self, ctx: StepContext) -> None:
-        """Each path's swept box over the step, grown to its reach -> candidate pairs."""
+        """Each path's swept box over the step, grown to its reach -> candidate pairs (or,
+        where a scan per re-prediction costs less than the lists, the pairs of the paths'
+        own boxes: _choose_partner_search)."""
         st, s, n = self._st, self.settings, self._st.count
         ctx.lo = np.empty((n, 3))
         ctx.hi = np.empty((n, 3))
         swept_boxes(st.positions, st.velocities, ctx.path_accel, st.radius, ctx.sigma, ctx.dt, self._integrator,
                     self._k, self._box_margin, ctx.lo, ctx.hi)
         ctx.path_lo, ctx.path_hi = ctx.lo.copy(), ctx.hi.copy()
-        self._add_reach(ctx)
+        ctx.scan_partners = self._choose_partner_search()
+        self.scanned_steps += int(ctx.scan_partners)
+        if not ctx.scan_partners:
+            self._add_reach(ctx)
         too_wide = self._too_wide_for_the_period(ctx.lo, ctx.hi)
         if too_wide:
             ctx.warn("periodic", too_wide)
@@ -325,6 +342,30 @@ class World:
             pairs, ctx.sleeping_pairs = split_sleeping(np.ascontiguousarray(pairs, dtype=np.int64),
                                                        self.sleepers.asleep)
         self._build_adjacency(ctx, pairs)
+        if ctx.scan_partners:
+            ctx.max_degree = max(n - 1, 0)  # a scan may find every other sphere
+        elif n:
+            self._listed_pairs_per_sphere = len(pairs) / n
+
+    def _choose_partner_search(self) -> bool:
+        """Whether this step's re-predictions scan every sphere's path box instead of
+        listing each sphere's partners at the step's start (sphere.partners_of): the same
+        contacts and states either way, bit for bit, and the cheaper one is chosen from
+        counts, never from times. The lists cost about SCAN_PER_LISTED_PAIR box tests per
+        pair (grid, adjacency and the paths' filter); a scan costs one per sphere per
+        re-prediction, about two per contact. Lists win in a pile (box-rain: thousands of
+        contacts a step, a few pairs a sphere); a scan among fast spheres whose speeds
+        vary, whose boxes grown to their reach overlap by the dozen (highspeed: 70 pairs a
+        sphere, 350 contacts a step among 5,000). Only with the grid (a stateless broad
+        phase), no periodic axis and no sleeping; every RELIST_EVERY steps lists again, to
+        measure what the lists would hold."""
+        n = self._st.count
+        if not self._scan_boxes or self.sleepers is not None or self.settings.ordering != "time" or n < 2:
+            return False
+        if self.step_index % RELIST_EVERY == 0 or self._listed_pairs_per_sphere == 0.0:
+            return False
+        scan = 2.0 * self._last_contacts * n
+        return scan < SCAN_PER_LISTED_PAIR * self._listed_pairs_per_sphere * n
 
     def _narrow_phase(self, ctx: StepContext) -> None:
         """The swept test of every candidate of every collider kind whose path boxes meet:
@@ -425,6 +466,7 @@ class World:
     def _end(self, ctx: StepContext) -> StepEnd:
         """The step's record, after its closing events; raises NonFiniteState or PinnedSphere after reporting."""
         buf = self._buf
+        self._last_contacts = int(buf.counters[CONTACTS])
         counts = StepCounts(contacts=int(buf.counters[CONTACTS]), swept_tests=int(buf.counters[TESTS]),
                             events=int(buf.counters[EVENTS]), held=self.held_count, rapid=int(buf.counters[RAPID]),
                             released=int(self.held.count[STEP_RELEASED]),
@@ -586,7 +628,8 @@ class World:
                 return "max_memory"
             # the held store, the adjacency and the buffers are replaced when they grow
             candidates = tuple(LoopCandidates(ctx.adj_start, ctx.adj, ctx.lo, ctx.hi, self._box_margin,
-                                              ctx.max_degree, ctx.path_lo, ctx.path_hi, self._scan_boxes))
+                                              ctx.max_degree, ctx.path_lo, ctx.path_hi, self._scan_boxes,
+                                              ctx.scan_partners))
             status = run_time_order(particles, method, geometry, self.held, candidates, budgets, buf.loop())
             if status == DONE:
                 return None
@@ -701,14 +744,21 @@ class World:
         return Contacts(ctx.step, rows)
 
     def _max_overlap(self, ctx: StepContext) -> float:
-        """Deepest penetration (m) among candidate pairs and particle–wall pairs."""
-        return float(max_overlap(self._st.positions, self._st.radius, ctx.pairs, self._geometry,
-                                 self.settings.detection != "swept"))
+        """Deepest penetration (m) among candidate pairs and particle–wall pairs (after a
+        step that scanned, the pairs whose spheres' boxes meet at its end: the step's
+        pairs are those of the paths at its start)."""
+        st = self._st
+        pairs = ctx.pairs
+        if ctx.scan_partners:
+            r = st.radius[:, None]
+            pairs = self.broad_phase.pairs(st.positions - r, st.positions + r)
+        return float(max_overlap(st.positions, st.radius, pairs, self._geometry, self.settings.detection != "swept"))
 
     def _broad_phase_event(self, ctx: StepContext) -> BroadPhaseInfo:
         bp = self.broad_phase
         stats = dict(bp.stats)
         stats.setdefault("pairs", len(ctx.pairs))
+        stats["scanned"] = bool(ctx.scan_partners)
         tree = bp.nodes
         nodes = None
         if tree is not None:

@@ -184,7 +184,7 @@ STATE_MESSAGE_FIELDS = [("time", "<f8"), ("dt", "<f8"), ("state_hash", "bytes"),
 BROAD_PHASE_STATS = {
     "pairs": "number", "cell": "number", "cells_used": "number", "rebuilt": "boolean", "build_seconds": "number",
     "sah_cost": "number", "nodes": "number", "depth": "number", "query_seconds": "number",
-    "nodes_visited": "number", "box_tests": "number", "images": "number",
+    "nodes_visited": "number", "box_tests": "number", "images": "number", "scanned": "boolean",
 }
 JSON_SCHEMAS = {
     TOPIC_WARNINGS: ("physdbg.Warning", {"type": "object", "properties": {

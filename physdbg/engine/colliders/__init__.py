@@ -187,15 +187,16 @@ def partner_restitution(kind, other, restitution, geometry):
 
 
 @njit(cache=True, inline="always")
-def partners_of(kind, p, box, adj_start, adj, path_lo, path_hi, batch_mark, batch, geometry, out) -> int:
+def partners_of(kind, p, box, adj_start, adj, path_lo, path_hi, batch_mark, batch, geometry, out, scan) -> int:
     """The candidates of ``kind`` that sphere p's new path must be swept-tested against, as
     rows (a, other) of out (K, 2); returns how many. box (2, 3): the new path's box, also
     p's row of path_lo, path_hi (N, 3), the boxes of every sphere's current path;
     adj_start, adj: the broad phase's partners (CSR); batch_mark (N,): the batch that last
-    changed each sphere (batch: this one)."""
+    changed each sphere (batch: this one); scan: no lists, every sphere a partner
+    (sphere.partners_of)."""
     if kind == KIND_PAIR:
         return sphere.partners_of(p, box, path_lo, path_hi, adj_start, adj, batch_mark, batch, geometry[KIND_PAIR],
-                                  out)
+                                  out, scan)
     if kind == KIND_WALL:
         return plane.partners_of(p, path_lo, path_hi, geometry[KIND_WALL], out)
     if kind == KIND_MESH:
