@@ -275,6 +275,12 @@ class Sleepers:
         for name in ("asleep", "still", "allowed", "down"):
             setattr(self, name, np.take(getattr(self, name), old_of_new, axis=0))
 
+    def wake(self, spheres: np.ndarray) -> None:
+        """Wake ``spheres`` (int64 indices) before a step: a kinematic mesh is about to
+        reach them (World._wake_where_meshes_move). Their slow time starts again."""
+        self.asleep[spheres] = False
+        self.still[spheres] = 0.0
+
     def end_of_step(self, dt: float, x: np.ndarray, velocities: np.ndarray, radius: np.ndarray,
                     pair_lists: tuple[np.ndarray, ...], rows: np.ndarray,
                     carried: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:

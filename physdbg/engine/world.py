@@ -300,8 +300,31 @@ class World:
         phase(ctx)
         ctx.timings[name] = perf_counter() - started
 
+    def _wake_where_meshes_move(self, ctx: StepContext) -> None:
+        """Wake the sleeping spheres a kinematic mesh may reach in this step, before anything
+        moves: asleep, a sphere is immovable, and a contact between two immovable partners
+        is skipped, so the mesh would pass through it. Which: those whose box (grown by the
+        contact tolerance) a moving mesh's tree reaches with the box carried into its frame
+        over the step (colliders/mesh.frame_box: the candidates its swept tests would get)."""
+        if self.sleepers is None or not self._meshes_move or not self.sleepers.count:
+            return
+        st = self._st
+        asleep = np.flatnonzero(self.sleepers.asleep)
+        reach = (st.radius[asleep] + self.settings.contact_tolerance)[:, None]
+        x = st.positions[asleep]
+        spheres, triangles = narrow_candidates(KIND_MESH, ctx.pairs, x - reach, x + reach, self._geometry)
+        group = self._geometry[KIND_MESH]  # colliders/mesh.MeshGeometry: mesh_of, moving
+        woke = np.unique(asleep[spheres[group[9][group[1][triangles]]]])
+        if woke.size:
+            self.sleepers.wake(woke)
+            self._inverse_mass[woke] = st.inverse_mass[woke]
+            self._free_accel[woke] = self._free_accel_awake[woke]
+            ctx.woken += int(woke.size)
+
     def _forces(self, ctx: StepContext) -> None:
-        """Held contacts -> the accelerations the paths follow (resolve.settle_held)."""
+        """Held contacts -> the accelerations the paths follow (resolve.settle_held), once
+        the sleepers a moving mesh may reach are woken (_wake_where_meshes_move)."""
+        self._wake_where_meshes_move(ctx)
         s, n = self.settings, self._st.count
         self.held.count[STEP_WORK:STEP_RELEASED + 1] = 0  # this step's resting work, whole solves, releases
         ctx.path_accel = np.empty_like(self._acc)
@@ -445,7 +468,8 @@ class World:
         self._free_accel[fell] = 0.0
         if fell.size:
             release_static(self.held, self._inverse_mass)
-        ctx.slept, ctx.woken = int(fell.size), int(woke.size)
+        ctx.slept = int(fell.size)
+        ctx.woken += int(woke.size)
 
     def _carried(self) -> np.ndarray | None:
         """(N,) bool: the spheres held on a kinematic mesh (a moving surface carries them,
