@@ -125,21 +125,12 @@ def partners_of(p, box, path_lo, path_hi, adj_start, adj, batch_mark, batch, sph
     """
     period = _unpack(spheres)
     m = 0
-    if scan:
-        for q in range(path_lo.shape[0]):
-            if q == p:
-                continue
-            if batch_mark[q] == batch:
-                if q < p:
-                    continue
-            elif box_misses(box, path_lo, path_hi, q, period):
-                continue
-            out[m, 0] = min(p, q)
-            out[m, 1] = max(p, q)
-            m += 1
-        return m
-    for s in range(adj_start[p], adj_start[p + 1]):
-        q = adj[s]
+    first = 0 if scan else adj_start[p]
+    end = path_lo.shape[0] if scan else adj_start[p + 1]
+    for s in range(first, end):
+        q = s if scan else adj[s]
+        if q == p:  # only a scan meets p itself: no list holds it
+            continue
         if batch_mark[q] == batch:
             if q < p:
                 continue
