@@ -37,6 +37,9 @@ class ReferenceWorld(World):
         every = [(kind, *every_candidate(kind, st.count, self._geometry)) for kind in range(KINDS)]
         particles, method, geometry = self._kernel_groups(ctx)
         scratch = Buffers(st.count, heap=1, tests=max(sum(len(ia) for _, ia, _ in every), 1))
+        # a skipped contact is not taken again until a path of its spheres changes: the
+        # compiled loop's prediction of it was used up, and only a changed path predicts it anew
+        used_up: set[tuple[int, int, int]] = set()
         while True:
             candidates = []
             for kind, ia, ib in every:
@@ -47,7 +50,8 @@ class ReferenceWorld(World):
                     toi = float(scratch.test_float[row, 1])
                     if toi <= ctx.dt:
                         k, a, other = (int(c) for c in scratch.test_int[row])
-                        candidates.append((toi, PARTNER_IS_SPHERE[k], a, other, k))
+                        if (k, a, other) not in used_up:
+                            candidates.append((toi, PARTNER_IS_SPHERE[k], a, other, k))
             if not candidates:
                 return None
             toi, _, a, other, kind = self._first(candidates)
@@ -55,6 +59,12 @@ class ReferenceWorld(World):
             if self._buf.counters[CONTACTS] >= self.event_cap:
                 return "max_events_per_step"
             status = self._resolve_one(ctx, kind, a, other, toi)
+            changed = {int(c) for c in self._buf.changed[1:1 + int(self._buf.changed[0])]}
+            if changed:
+                used_up = {(k, i, j) for k, i, j in used_up
+                           if i not in changed and not (PARTNER_IS_SPHERE[k] and j in changed)}
+            if status == SKIPPED:
+                used_up.add((kind, a, other))
             self._record_outcome(ctx, kind, a, other, toi, OUTCOME_SUPERSEDED if status == SKIPPED else OUTCOME_HIT)
             if status == OUT_OF_WORK:
                 return "max_resting_work_per_step"

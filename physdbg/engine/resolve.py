@@ -143,6 +143,8 @@ def judge_contact(kind, ia, other, toi, particles, method, geometry, h, contacts
      rapid_time, rapid_rule, anchor_is_flow, path_follows_acc, vtol, atol) = method
     ib = partner_sphere(kind, other)
     changed[0] = 0
+    moved_a = sigma[ia] < toi  # (an anchor already at the contact's time keeps its path)
+    moved_b = ib >= 0 and sigma[ib] < toi
     advance_particle(x, v, a, sigma, ia, toi, integrator, drag, k)
     if ib >= 0:
         advance_particle(x, v, a, sigma, ib, toi, integrator, drag, k)
@@ -162,10 +164,16 @@ def judge_contact(kind, ia, other, toi, particles, method, geometry, h, contacts
     # narrow phase that knows nothing of rounding: see pressed_closing)
     closing = pressed_closing(closing, rel_acc, step_end, velocity_scale(v, ia, ib) if anchor_is_flow else 0.0)
     if closing < 0.0 or (closing == 0.0 and not rel_acc < 0.0) or wsum == 0.0:
-        if not anchor_is_flow:  # Euler (and dragged Verlet) paths change with the anchor
-            changed[0] = 2 if ib >= 0 else 1
-            changed[1] = ia
-            changed[2] = ib
+        # Euler (and dragged Verlet) paths change with the anchor, so a sphere whose anchor
+        # moved is predicted again; one whose anchor was already there keeps its path, and
+        # predicting it again would only find this same contact again, forever
+        if not anchor_is_flow:
+            if moved_a:
+                changed[0] += 1
+                changed[changed[0]] = ia
+            if moved_b:
+                changed[0] += 1
+                changed[changed[0]] = ib
         return SKIPPED, closing, 0.0, HOW_IMPULSE, False
     now = run_time + toi
     resting = rests(closing, rel_acc, step_end, rest_step_factor, rest_fraction)
