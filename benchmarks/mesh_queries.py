@@ -2,6 +2,14 @@
 
     .venv/bin/pip install python-fcl      # only this benchmark uses it
     .venv/bin/python benchmarks/mesh_queries.py [--spheres 20000]
+    .venv/bin/python benchmarks/mesh_queries.py --together
+
+``--together``: the engine's two searches of a step's path boxes against a mesh
+(colliders/mesh.reachable, a walk per box, and reachable_together, the simultaneous
+descent) on random triangles and boxes: milliseconds (best of 5), the node tests of each
+and the time of the descent's LBVH over the boxes, whence the weights of
+engine/world.py's TOGETHER_PAIR_COST and TOGETHER_BOX_COST (docs/meshes.md, "Walks or the
+simultaneous descent"); the candidates are checked equal.
 
 For each built-in shape (an icosphere of 5,120 triangles, the funnel, the paddle turned
 30° about z and x, the box with a hole) the same spheres (random centres in the mesh's
@@ -71,11 +79,44 @@ def fcl_queries(vertices, faces, pose, centers, radii):
     return best_of(run, 3), touching
 
 
+def together(seed: int) -> None:
+    """The walk per box against the simultaneous descent (``--together``), a markdown table."""
+    from physdbg.engine.broadphase.bvh import build_lbvh
+    from physdbg.engine.colliders.mesh import MeshGeometry, reachable, reachable_together, walk_tests
+    from physdbg.engine.state import Meshes, Walls
+
+    rng = np.random.default_rng(seed)
+    print("| triangles | path boxes (half side) | walk: ms, node tests | together: ms (of which the tree), node pairs |")
+    print("|---|---|---|---|")
+    for triangles, half in ((5_000, 0.05), (50_000, 0.05), (50_000, 0.5)):
+        corners = rng.uniform(-10, 10, (triangles, 3, 3))
+        corners[:, 1:] = corners[:, :1] + rng.normal(0, 0.2, (triangles, 2, 3))
+        meshes = Meshes(["m"], np.ones(1), corners, np.zeros(triangles, dtype=np.int64), ["random"],
+                        bounding_volume=["aabb"])
+        group = tuple(MeshGeometry.of(Walls(meshes=meshes)))
+        for boxes in (1_000, 20_000):
+            centres = rng.uniform(-10, 10, (boxes, 3))
+            lo, hi = centres - half, centres + half
+            walked, descended = reachable(lo, hi, group), reachable_together(lo, hi, group)
+            assert np.array_equal(walked[0], descended[0]) and np.array_equal(walked[1], descended[1])
+            walk_ms = 1e3 * best_of(lambda: reachable(lo, hi, group))
+            together_ms = 1e3 * best_of(lambda: reachable_together(lo, hi, group))
+            build_lbvh(lo[:10], hi[:10])
+            tree_ms = 1e3 * best_of(lambda: build_lbvh(lo, hi))
+            print(f"| {triangles:,} | {boxes:,} ({half} m) | {walk_ms:.2f}, {walk_tests(lo, hi, group):,} | "
+                  f"{together_ms:.2f} ({tree_ms:.2f}), {descended[2]:,} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--spheres", type=int, default=20_000)
     parser.add_argument("--seed", type=int, default=3)
+    parser.add_argument("--together", action="store_true",
+                        help="the engine's walk per path box against its simultaneous descent")
     args = parser.parse_args()
+    if args.together:
+        together(args.seed)
+        return
     rng = np.random.default_rng(args.seed)
     try:
         import fcl  # noqa: F401

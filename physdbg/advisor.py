@@ -356,11 +356,67 @@ def _contacts_possible(x, r, movable, reach, walls, duration: float = 0.0) -> bo
 
 
 def decide(scene):
-    """Decide a loaded scene's "auto" settings in place (resolve_auto) and return the
-    scene; scene.auto says each decision and why. Deciding twice changes nothing."""
+    """Decide a loaded scene's "auto" settings in place (resolve_auto) and its meshes'
+    auto bounding volumes (resolve_mesh_volumes), and return the scene; scene.auto says
+    each decision and why. Deciding twice changes nothing."""
     if scene.settings.undecided():
         scene.auto = resolve_auto(scene)
+    if "auto" in scene.walls.meshes.bounding_volume:
+        scene.auto = {**scene.auto, **resolve_mesh_volumes(scene)}
     return scene
+
+
+# What a mesh's walk costs, in node tests of an AABB: a node test with any volume ~10 ns
+# (benchmarks/mesh_queries.py's timings), an OBB's ~25 % dearer; each triangle reached is a
+# swept sphere–triangle test, about 20 node tests.
+VOLUME_NODE_COST = {"aabb": 1.0, "sphere": 1.0, "obb": 1.25}
+TRIANGLE_TEST_COST = 20.0
+VOLUME_SAMPLES = 256  # boxes a mesh's volumes are counted with
+
+
+def resolve_mesh_volumes(scene) -> dict[str, str]:
+    """Each mesh's ``bounding_volume = "auto"``, decided by counted work (never timed, so
+    the same scene decides the same): boxes the size of this scene's sphere paths over a
+    step (the median radius, the median speed plus a step of gravity, times dt; grown by
+    the mesh's own motion over a step, as the engine grows them) placed at points on its
+    triangles (seeded), walked with each volume (colliders/mesh.search_visits): node tests
+    and triangles reached, weighed by VOLUME_NODE_COST and TRIANGLE_TEST_COST; the least
+    wins (AABB on a tie). Returns {"bounding_volume": "why"} when any was auto."""
+    from .engine.colliders.mesh import MeshGeometry, search_visits
+    from .engine.state import Meshes, Walls
+
+    meshes, st = scene.walls.meshes, scene.state
+    dt = scene.dt if scene.dt is not None else 1.0 / 60.0
+    radius = float(np.median(st.radius)) if st.count else 0.1
+    speed = float(np.median(np.linalg.norm(st.velocities, axis=1))) if st.count else 0.0
+    speed += float(np.linalg.norm(scene.settings.gravity)) * dt
+    turn = meshes.turn_radii()
+    words = []
+    for k, name in enumerate(meshes.names):
+        if meshes.bounding_volume[k] != "auto":
+            continue
+        mine = meshes.corners[meshes.mesh_of == k]
+        rng = np.random.default_rng(k)
+        pick = rng.integers(0, len(mine), VOLUME_SAMPLES)
+        weights = rng.dirichlet(np.ones(3), VOLUME_SAMPLES)
+        points = np.einsum("sc,scd->sd", weights, mine[pick])
+        half = (radius + speed * dt + float(np.linalg.norm(meshes.velocity[k])) * dt
+                + float(np.linalg.norm(meshes.angular_velocity[k])) * dt * float(turn[k]))
+        work = {}
+        for volume in ("aabb", "sphere", "obb"):
+            one = Meshes([name], meshes.restitution[k:k + 1], mine, np.zeros(len(mine), dtype=np.int64),
+                         bounding_volume=[volume])
+            group = tuple(MeshGeometry.of(Walls(meshes=one)))
+            _query, node, outcome, _parent = search_visits(points - half, points + half, group)
+            work[volume] = VOLUME_NODE_COST[volume] * len(node) + TRIANGLE_TEST_COST * int(np.sum(outcome == 2))
+        best = min(work, key=lambda v: (work[v], v != "aabb"))
+        meshes.bounding_volume[k] = best
+        words.append(f"mesh '{name}' {best} (counted work per box: " + ", ".join(
+            f"{v} {work[v] / VOLUME_SAMPLES:.0f}" for v in ("aabb", "sphere", "obb")) + ")")
+    if not words:
+        return {}
+    return {"bounding_volume": "; ".join(words) + f" for {VOLUME_SAMPLES} path-sized boxes on its triangles "
+                                                   "(docs/meshes.md, \"Bounding volumes\")"}
 
 
 def resolve_auto(scene) -> dict[str, str]:

@@ -51,6 +51,8 @@ class RunSummary:
     broad_phase: str
     broad_phase_reason: str
     scanned_steps: int
+    together_steps: int
+    mesh_search: str
     particles: int
     walls: list[str]
     steps: int
@@ -186,6 +188,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         detection=scene.settings.detection, ordering=scene.settings.ordering,
         broad_phase=world.broad_phase.name,
         broad_phase_reason=world.broad_phase_reason, scanned_steps=world.scanned_steps,
+        together_steps=world.together_steps, mesh_search=scene.settings.mesh_search,
         particles=st.count, walls=list(scene.walls.names), meshes=mesh_sizes(scene.walls.meshes),
         meshes_move=bool(scene.walls.meshes.moving.any()) and len(scene.walls.meshes) > 1,
         mesh_notes=list(scene.walls.meshes.notes) + [

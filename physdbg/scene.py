@@ -42,6 +42,7 @@ from .engine import (
     World,
 )
 from .engine.periodic import wrap_positions
+from .engine.colliders.mesh import MESH_SEARCH_NAMES
 from .engine.space_order import RENUMBER_EVERY, SPACE_ORDER_MIN, SPACE_ORDER_NAMES
 from .engine.state import BYTES_PER_PARTICLE, DEFAULT_MAX_MEMORY, Meshes
 from .errors import SceneError, UnknownSceneError
@@ -97,6 +98,10 @@ TOP_FIELDS = {
                     f"{SPACE_ORDER_MIN} spheres up under ordering = time), given (the scene's) or morton (along a "
                     f"Z-curve of their places, renewed every {RENUMBER_EVERY} steps); every event, state and "
                     "recording stays in the scene's numbering"),
+    "mesh_search": ("how each step's path boxes are searched against the meshes' trees: auto (the default: the "
+                    "one with less counted work, chosen again every 32 steps), walk (one walk of each mesh's tree per "
+                    "sphere) or together (a tree of the path boxes descended together with each mesh's tree); the "
+                    "same candidates and states either way"),
     "max_particle_steps": "refuse a run of more particle-steps (particles × steps) than this (default 1e10)",
     "particles": "array of [[particles]] tables",
     "planes": "array of [[planes]] tables",
@@ -134,7 +139,10 @@ MESH_FIELDS = {
     "angular_velocity": "[x, y, z] in degrees per second: a kinematic mesh turns at this rate about its pivot "
                         "(default [0, 0, 0])",
     "pivot": "[x, y, z] in m: the point the mesh turns about at time 0 (default: its position)",
+    "bounding_volume": ("the volume its BVH's nodes are tested with: auto (the least counted work for this mesh and "
+                        "this scene's spheres), aabb, sphere or obb (default auto)"),
 }
+BOUNDING_VOLUMES = ("auto", "aabb", "sphere", "obb")
 BOX_FIELDS = {
     "min": "[x, y, z] lower corner (m)",
     "max": "[x, y, z] upper corner (m), larger than min on every axis",
@@ -530,7 +538,7 @@ def _meshes(c: _Checker, raw: dict, max_memory: float) -> Meshes:
     from .meshes import load_mesh
 
     names, restitution, corners, mesh_of, sources, notes = [], [], [], [], [], []
-    velocity, angular_velocity, pivot = [], [], []
+    velocity, angular_velocity, pivot, volumes = [], [], [], []
     folder = Path(c.source).parent if Path(c.source).is_file() else Path.cwd()
     for k, table in enumerate(c.tables(raw, "meshes", "meshes")):
         p = f"meshes.{k}."
@@ -558,6 +566,7 @@ def _meshes(c: _Checker, raw: dict, max_memory: float) -> Meshes:
         angular_velocity.append(np.radians(c.vector(table, "angular_velocity", p + "angular_velocity",
                                                     (0.0, 0.0, 0.0))))
         pivot.append(c.vector(table, "pivot", p + "pivot", tuple(position)))
+        volumes.append(c.choice(table, "bounding_volume", p + "bounding_volume", BOUNDING_VOLUMES, "auto"))
         try:
             mesh = load_mesh(spec, name, max_memory=max_memory, hull=False)
         except MeshError as err:
@@ -577,7 +586,7 @@ def _meshes(c: _Checker, raw: dict, max_memory: float) -> Meshes:
     if not names:
         return Meshes()
     return Meshes(names, np.array(restitution), np.concatenate(corners), np.concatenate(mesh_of), sources, notes,
-                  np.array(velocity), np.array(angular_velocity), np.array(pivot))
+                  np.array(velocity), np.array(angular_velocity), np.array(pivot), volumes)
 
 
 def _check_scaled_mesh(c: _Checker, p: str, mesh, scaled: np.ndarray, scale) -> None:
@@ -649,6 +658,7 @@ def _validate(raw: dict, source: str, origins: dict[str, str], meshes: Meshes | 
            for budget in BUDGETS},
         max_memory=max_memory,
         space_order=c.choice(raw, "space_order", "space_order", SPACE_ORDER_NAMES, d.space_order),
+        mesh_search=c.choice(raw, "mesh_search", "mesh_search", MESH_SEARCH_NAMES, d.mesh_search),
     )
 
     # walls

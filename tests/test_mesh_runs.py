@@ -7,6 +7,8 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from physdbg import api
@@ -116,6 +118,8 @@ def test_a_recording_keeps_its_meshes_and_replays_bit_for_bit(tmp_path):
     ('file = "missing.obj"', "meshes.0.file", "missing.obj: no such file"),
     ('shape = "ramp"\nscale = 0', "meshes.0.scale", "0"),
     ('shape = "ramp"\ncolour = 3', "meshes.0.colour", "unknown field"),
+    ('shape = "ramp"\nbounding_volume = "obbb"', "meshes.0.bounding_volume",
+     "got 'obbb'; did you mean 'obb'? allowed: auto, aabb, sphere, obb"),
 ])
 def test_a_wrong_mesh_field_names_the_file_the_field_and_what_is_allowed(table, field, message):
     with pytest.raises(SceneError) as caught:
@@ -782,3 +786,133 @@ def test_a_moving_mesh_wakes_a_sleeping_sphere_before_it_reaches_it(tmp_path, mo
     for dt in scene.step_lengths():
         world.step(dt)
     assert np.array_equal(world.state.positions[0], [0.0, 0.1, 0.0])  # passed through
+
+
+# ------------------------------------------------------------------ bounding volumes
+def _triangle_meets_box(tri: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
+    """Exact triangle–box overlap by separating axes (Akenine-Möller): the box's 3 axes,
+    the triangle's normal and the 9 crosses of its edges with the box's axes."""
+    centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    v = tri - centre
+    edges = [v[1] - v[0], v[2] - v[1], v[0] - v[2]]
+    axes = [*np.eye(3), np.cross(edges[0], edges[1])] + [np.cross(e, a) for e in edges for a in np.eye(3)]
+    for axis in axes:
+        if not np.any(axis):
+            continue
+        p = v @ axis
+        r = half @ np.abs(axis)
+        if p.min() > r or p.max() < -r:
+            return False
+    return True
+
+
+@settings(max_examples=120, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), count=st.integers(1, 40), builder=st.sampled_from(["median", "mean", "sah", "lbvh"]),
+       volume=st.sampled_from(["aabb", "sphere", "obb"]))
+def test_the_walk_finds_what_a_brute_force_finds_with_every_volume_and_builder(seed, count, builder, volume):
+    """colliders.mesh's walk (search_visits, the walk the contact loop makes) with any
+    volume over a tree by any builder reaches exactly the triangles whose every node on the
+    way down meets the box (the reference test of each, mesh_view._meets), and every
+    triangle that meets the box (exact, by separating axes) is among them."""
+    from physdbg.engine.colliders.mesh import MeshGeometry, search_visits
+    from physdbg.engine.state import Meshes, Walls
+    from physdbg.record.mesh_view import _meets
+
+    rng = np.random.default_rng(seed)
+    corners = rng.uniform(-1, 1, (count, 3, 3))
+    corners[:, 1:] = corners[:, :1] + rng.normal(0, 0.4, (count, 2, 3))  # triangles of various sizes
+    meshes = Meshes(["m"], np.array([1.0]), corners, np.zeros(count, dtype=np.int64), ["test"],
+                    bounding_volume=[volume])
+    group = tuple(MeshGeometry.of(Walls(meshes=meshes), builder))
+    box_lo, box_hi, leaf, parent, node_sphere, node_obb = group[3], group[4], group[5], group[11], group[13], group[14]
+    centres = rng.uniform(-1.5, 1.5, (8, 3))
+    halves = rng.uniform(0.0, 0.8, (8, 3))
+    query, node, outcome, _ = search_visits(centres - halves, centres + halves, group)
+    for j in range(8):
+        lo, hi = centres[j] - halves[j], centres[j] + halves[j]
+        found = set(leaf[node[(query == j) & (outcome == 2)]].tolist())
+        brute = set()
+        for q in np.flatnonzero(leaf >= 0):
+            up, ok = q, True
+            while up >= 0 and ok:
+                ok = _meets(volume, lo, hi, up, box_lo, box_hi, node_sphere, node_obb)
+                up = parent[up]
+            if ok:
+                brute.add(int(leaf[q]))
+        assert found == brute
+        touching = {t for t in range(count) if _triangle_meets_box(corners[t], lo, hi)}
+        assert touching <= found
+
+
+@pytest.mark.parametrize("name", ["funnel", "paddle", "ramp"])
+def test_every_bounding_volume_gives_the_same_run(name):
+    """The walked volume changes which triangles are swept-tested, never a contact: the
+    states are the same bit for bit with AABB, sphere and OBB (and auto's choice is one of
+    them, said in scene.auto)."""
+    hashes = {}
+    for volume in ("aabb", "sphere", "obb"):
+        scene = api.load_scene(name, ["steps=90"])
+        assert "bounding_volume" in scene.auto and all(v in ("aabb", "sphere", "obb")
+                                                       for v in scene.walls.meshes.bounding_volume)
+        scene.walls.meshes.bounding_volume[:] = [volume] * len(scene.walls.meshes.names)
+        world = scene.build_world()
+        hashes[volume] = [world.step(dt).state_hash for dt in scene.step_lengths()]
+    assert hashes["aabb"] == hashes["sphere"] == hashes["obb"]
+
+
+# ------------------------------------------------------------------ the simultaneous descent
+@settings(max_examples=120, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), meshes=st.integers(1, 3), spheres=st.integers(0, 60),
+       builder=st.sampled_from(["median", "mean", "sah", "lbvh"]), volume=st.sampled_from(["aabb", "sphere", "obb"]),
+       moving=st.booleans())
+def test_the_simultaneous_descent_finds_what_a_walk_per_sphere_finds(seed, meshes, spheres, builder, volume, moving):
+    """colliders.mesh.reachable_together (the spheres' tree and each mesh's descended
+    together) gives the candidates of a walk per sphere (reachable: the triangles whose
+    every node on the way down meets the path box), in the same order, for every volume and
+    builder, fixed and moving meshes; and every triangle that meets a box (exact, by
+    separating axes) is among them."""
+    from physdbg.engine.colliders.mesh import MeshGeometry, place, reachable, reachable_together
+    from physdbg.engine.state import Meshes, Walls
+
+    rng = np.random.default_rng(seed)
+    sizes = rng.integers(1, 40, meshes)
+    corners = rng.uniform(-1, 1, (int(sizes.sum()), 3, 3))
+    corners[:, 1:] = corners[:, :1] + rng.normal(0, 0.4, (len(corners), 2, 3))
+    mesh_of = np.repeat(np.arange(meshes), sizes)
+    velocity = rng.normal(0, 1.0, (meshes, 3)) if moving else None
+    spin = rng.normal(0, 3.0, (meshes, 3)) if moving else None
+    group_of = Meshes([f"m{k}" for k in range(meshes)], np.ones(meshes), corners, mesh_of,
+                      [f"test {k}" for k in range(meshes)], velocity=velocity, angular_velocity=spin,
+                      pivot=rng.uniform(-0.5, 0.5, (meshes, 3)), bounding_volume=[volume] * meshes)
+    group = tuple(MeshGeometry.of(Walls(meshes=group_of), builder))
+    if moving:
+        place(group, group_of, 0.3, 1 / 60)  # placed for a step, as a run does
+    centres = rng.uniform(-1.5, 1.5, (spheres, 3))
+    halves = rng.uniform(0.0, 0.5, (spheres, 3))
+    lo, hi = centres - halves, centres + halves
+    walked = reachable(lo, hi, group)
+    together = reachable_together(lo, hi, group)
+    assert np.array_equal(walked[0], together[0]) and np.array_equal(walked[1], together[1])
+    if not moving:
+        found = set(zip(together[0].tolist(), together[1].tolist()))
+        assert {(i, t) for i in range(spheres) for t in range(len(corners))
+                if _triangle_meets_box(corners[t], lo[i], hi[i])} <= found
+
+
+@pytest.mark.parametrize("name", ["funnel", "paddle"])
+def test_each_mesh_search_gives_the_same_run_and_auto_says_which_it_took(name):
+    """mesh_search = walk, together or auto: the same candidates, so the same states bit for
+    bit; the run summary says in how many steps the descent was simultaneous."""
+    hashes, summaries = {}, {}
+    for method in ("walk", "together", "auto"):
+        scene = api.load_scene(name, ["steps=40", f"mesh_search={method}"])
+        world = scene.build_world()
+        hashes[method] = [world.step(dt).state_hash for dt in scene.step_lengths()]
+        summaries[method] = world.together_steps
+    assert hashes["walk"] == hashes["together"] == hashes["auto"]
+    assert summaries["walk"] == 0 and summaries["together"] == 40
+    # auto counted both at steps 0 and 32: here a walk per sphere is less work
+    assert summaries["auto"] == 0
+    result = CliRunner().invoke(app, ["run", name, "--set", "steps=40", "--set", "mesh_search=together"])
+    assert result.exit_code == 0, result.output
+    assert "searched by the simultaneous descent in 40 of 40 steps" in result.output

@@ -124,6 +124,7 @@ def test_fraction_dt_and_duration_give_whole_steps():
     ("rapid_contact_time=-1", "rapid_contact_time", ">= 0"),
     ("rapid_contact_rule=elastic", "rapid_contact_rule", "allowed: hold, tc"),
     ("max_events_per_step=-1", "max_events_per_step", "an integer >= 0"),
+    ("mesh_search=dual", "mesh_search", "allowed: auto, walk, together"),
 ])
 def test_bad_overrides_name_the_field_and_what_is_allowed(override, field, words):
     with pytest.raises(SceneError) as info:

@@ -32,6 +32,13 @@ GROWTH_MAX_SAMPLES = 200
 CANNOT_MATTER = {
     "broad_phase": "every broad phase finds the same candidate pairs, so runs are identical by design",
     "name": "a name", "description": "a description",
+    "mesh_search": ("a walk per sphere and the simultaneous descent find the same triangles in the same order, so "
+                    "runs are identical by design"),
+}
+# fields of each [[meshes]] table that cannot change a run
+CANNOT_MATTER_MESH = {
+    "bounding_volume": ("every volume's walk finds every triangle a path box meets, and a swept test decides the "
+                        "rest, so runs are identical by design"),
 }
 BUDGET_SETTINGS = ("max_events_per_step", "max_pairs_per_step", "max_swept_tests_per_step",
                    "max_resting_work_per_step", "max_memory", "max_particle_steps")
@@ -129,7 +136,8 @@ class DiffReport:
 # ----------------------------------------------------------------------------- settings
 # engine settings added after recordings were made, and what a recording made before
 # each one existed used
-SETTINGS_ADDED = {"rapid_contact_rule": "hold", "sleep_speed": 0.0, "sleep_time": 0.5, "space_order": "given"}
+SETTINGS_ADDED = {"rapid_contact_rule": "hold", "sleep_speed": 0.0, "sleep_time": 0.5, "space_order": "given",
+                  "mesh_search": "walk"}
 
 
 def _flatten(value, prefix: str = "") -> dict:
@@ -169,6 +177,8 @@ def compare_settings(meta_a: dict, meta_b: dict, warned_a: set[str], warned_b: s
         matters, note = True, ""
         if name in CANNOT_MATTER:
             matters, note = False, CANNOT_MATTER[name]
+        elif name.startswith("meshes.") and name.rsplit(".", 1)[-1] in CANNOT_MATTER_MESH:
+            matters, note = False, CANNOT_MATTER_MESH[name.rsplit(".", 1)[-1]]
         elif name in BUDGET_SETTINGS and name not in warned_a | warned_b:
             matters, note = False, "a work limit that neither run reached"
         elif name == "space_order":

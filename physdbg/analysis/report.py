@@ -268,6 +268,9 @@ def summary_text(s, observers: str = "the audit") -> str:
         f"bodies      {count_words(s.particles, 'particle')}, {count_words(len(s.walls), 'wall')}"
         + _mesh_words(getattr(s, "meshes", {})),
         *(f"meshes      {note}" for note in getattr(s, "mesh_notes", [])),
+        *([f"meshes      searched by the simultaneous descent in {s.together_steps} of {s.steps} steps, by a walk "
+           f"per sphere in the rest (mesh_search = {s.mesh_search}: docs/meshes.md, \"Walks or the simultaneous "
+           f"descent\")"] if getattr(s, "meshes", None) else []),
         f"steps       {s.steps}  ({s.sim_time:.6g} s simulated, {dt_text})",
         f"contacts    {s.contacts}  (at most {s.max_contacts_in_a_step} in a step; {s.swept_tests} swept tests; "
         f"{s.rapid} rapid, {s.released} released; {s.held_at_end} held at the end)",

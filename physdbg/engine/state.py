@@ -86,7 +86,10 @@ class Settings:
     0 = off, the default); space_order: the world's own numbering of the spheres,
     "auto", "given" or "morton" (space_order.py: only speed and the order of work that
     is otherwise a tie depend on it; everything the world reports is in the scene's
-    numbering).
+    numbering); mesh_search: how each step's candidates against the meshes are found,
+    "walk" (one walk of each mesh's tree per sphere), "together" (the spheres' tree and
+    each mesh's descended together) or "auto" (the world picks each step by counted work:
+    World._choose_mesh_search); the same candidates, so the same states, either way.
 
     max_memory (bytes): the particles' own memory (BYTES_PER_PARTICLE each) and the step's
     growable buffers (event queue, swept-test log, contact rows, held contacts) may not
@@ -117,6 +120,7 @@ class Settings:
     max_resting_work_per_step: int = 0  # sized: MIN_RESTING_WORK .. MAX_RESTING_WORK, per sphere
     max_memory: float = DEFAULT_MAX_MEMORY
     space_order: str = "auto"
+    mesh_search: str = "auto"
 
     def event_cap(self, spheres: int) -> int:
         """The contact budget of one step for this many spheres: max_events_per_step, or
@@ -163,6 +167,9 @@ class Meshes:
     pivot's, and angular_velocity (M, 3) rad/s about its pivot (M, 3) m (where the pivot
     is at run time 0). At run time t a corner c is at R(ω·t)(c - pivot) + pivot + v·t
     (``placed``): the closed form, so a pose never accumulates rounding.
+
+    bounding_volume (M,): the volume each mesh's tree is walked with ("aabb", "sphere",
+    "obb"; "auto" until the advisor decides: ``volumes``); none: "aabb" for every mesh.
     """
 
     names: list[str] = field(default_factory=list)
@@ -174,6 +181,7 @@ class Meshes:
     velocity: np.ndarray | None = None
     angular_velocity: np.ndarray | None = None
     pivot: np.ndarray | None = None
+    bounding_volume: list[str] | None = None
 
     def __post_init__(self) -> None:
         self.corners = np.ascontiguousarray(self.corners, dtype=np.float64).reshape(-1, 3, 3)
@@ -184,6 +192,16 @@ class Meshes:
             value = getattr(self, name)
             value = np.zeros((m, 3)) if value is None else np.asarray(value, dtype=np.float64).reshape(m, 3)
             setattr(self, name, np.ascontiguousarray(value))
+        if self.bounding_volume is None:
+            self.bounding_volume = ["aabb"] * m
+
+    def volumes(self) -> list[str]:
+        """Each mesh's walked volume; ValueError while one is still "auto" (a World needs
+        the advisor's choice: advisor.decide)."""
+        if "auto" in self.bounding_volume:
+            raise ValueError("a mesh's bounding_volume is still auto: decide it first (physdbg.advisor.decide, "
+                             "which api.load_scene calls)")
+        return list(self.bounding_volume)
 
     @property
     def moving(self) -> np.ndarray:

@@ -61,6 +61,7 @@ class StepContext:
     # the step's walks of the meshes' trees, for an observer that reads them (World._mesh_search):
     # the path boxes asked at step start (lo, hi (N, 3) m), then the MeshSearch event
     search_start: tuple | None = None
+    mesh_search_method: str = ""  # "walk" or "together": how the step's candidates were found (World._mesh_candidates)
     mesh_search: object | None = None
     max_overlap: float = 0.0
     sleeping_pairs: np.ndarray = field(default_factory=lambda: np.empty((0, 2), np.int64))

@@ -54,7 +54,7 @@ from .broadphase import choose_broad_phase, make_broad_phase
 from .broadphase.boxes import boxes_meet
 from .broadphase.periodic import PeriodicBroadPhase
 from .colliders import KINDS, PARTNER_IS_SPHERE, geometry_of, max_overlap, mesh_search, narrow_candidates
-from .colliders.mesh import place
+from .colliders.mesh import place, reachable_together, walk_tests
 from .jit import records
 from .kernel_args import LoopBudgets, LoopCandidates, LoopMethod, LoopParticles
 from .memory import MemoryBudget
@@ -115,6 +115,15 @@ from .timeline import (
 # world that scans lists again, to know what the lists would hold.
 SCAN_PER_LISTED_PAIR = 35.0
 RELIST_EVERY = 32
+
+# A walk per sphere against the simultaneous descent (World._choose_mesh_search), in node
+# tests of a walk (~10 ns each, stackless and in pre-order): a pair of nodes of the descent
+# costs about TOGETHER_PAIR_COST of them (~60 ns: a stack and two trees), and the tree of
+# the path boxes TOGETHER_BOX_COST a box (~350 ns: an LBVH build); measured by
+# benchmarks/mesh_queries.py --together. Both are counted again every RECHOOSE_SEARCH_EVERY steps.
+TOGETHER_PAIR_COST = 6.0
+TOGETHER_BOX_COST = 30.0
+RECHOOSE_SEARCH_EVERY = 32
 
 # Updates of the held-contact solves smaller than this (relative to the largest free
 # acceleration, at least 1 m/s², and for velocities to that acceleration times dt) wake
@@ -201,6 +210,10 @@ class World:
         self._listed_pairs_per_sphere = 0.0
         self._last_contacts = 0
         self.scanned_steps = 0  # steps whose re-predictions scanned every path box
+        # a walk per sphere or the simultaneous descent (_choose_mesh_search): the last
+        # counted work of each (node tests of a walk), and the steps that descended together
+        self._search_work: tuple[float, float] | None = None
+        self.together_steps = 0
         # sleeping (sleep.py): the step reads these, not state.inverse_mass and the free
         # accelerations, so a sleeping sphere is immovable and feels no gravity
         self._inverse_mass = st.inverse_mass
@@ -403,8 +416,46 @@ class World:
             ctx.search_start = (ctx.path_lo.copy(), ctx.path_hi.copy())
         push = self.settings.ordering == "time"
         for kind in range(KINDS):  # in the kinds' order: ties in the queue break by test
-            ia, other = narrow_candidates(kind, ctx.pairs, ctx.path_lo, ctx.path_hi, self._geometry)
+            if kind == KIND_MESH and self._walks_mesh_trees:
+                ia, other = self._mesh_candidates(ctx)
+            else:
+                ia, other = narrow_candidates(kind, ctx.pairs, ctx.path_lo, ctx.path_hi, self._geometry)
             self._predict(ctx, kind, ia, other, push)
+
+    def _mesh_candidates(self, ctx: StepContext) -> tuple[np.ndarray, np.ndarray]:
+        """The step's sphere–triangle candidates, by a walk of each mesh's tree per sphere
+        or by the simultaneous descent (``settings.mesh_search``; auto: _choose_mesh_search).
+        Both give the same candidates in the same order, so the same states bit for bit."""
+        together = self._choose_mesh_search(ctx)
+        chosen = together is not False
+        self.together_steps += int(chosen)
+        ctx.mesh_search_method = "together" if chosen else "walk"
+        if isinstance(together, tuple):  # counted this step: the descent's candidates are at hand
+            return together
+        return narrow_candidates(KIND_MESH, ctx.pairs, ctx.path_lo, ctx.path_hi, self._geometry, chosen)
+
+    def _choose_mesh_search(self, ctx: StepContext):
+        """Whether this step's spheres are searched against the meshes by the simultaneous
+        descent: ``settings.mesh_search``, or under auto the one of less counted work (never
+        timed, so a run chooses the same every time): every RECHOOSE_SEARCH_EVERY steps both
+        are counted (colliders/mesh.walk_tests; reachable_together's tests, weighed by
+        TOGETHER_PAIR_COST, and TOGETHER_BOX_COST a path box), and the steps between keep
+        the choice. On a counting step that chose the descent, its candidates (a tuple)."""
+        method = self.settings.mesh_search
+        if method != "auto":
+            return method == "together"
+        if self._search_work is not None and self.step_index % RECHOOSE_SEARCH_EVERY != 0:
+            walk, together = self._search_work
+            return together < walk
+        group = self._geometry[KIND_MESH]
+        walk = float(walk_tests(ctx.path_lo, ctx.path_hi, group))
+        ia, other, tests = reachable_together(ctx.path_lo, ctx.path_hi, group)
+        moving = int(np.count_nonzero(group[9]))  # a tree for the fixed meshes, and one per moving mesh
+        boxes = self._st.count * (int(moving < len(group[9])) + moving)
+        together = TOGETHER_PAIR_COST * tests + TOGETHER_BOX_COST * boxes
+        self._search_work = (walk, together)
+        return (ia, other) if together < walk else False
+
 
     def _resolve(self, ctx: StepContext) -> None:
         """The contacts, in the order of the policy (``settings.ordering``); none once a
@@ -783,6 +834,8 @@ class World:
         stats = dict(bp.stats)
         stats.setdefault("pairs", len(ctx.pairs))
         stats["scanned"] = bool(ctx.scan_partners)
+        if ctx.mesh_search_method:  # how the triangles were searched (a scene with meshes)
+            stats["mesh_search"] = ctx.mesh_search_method
         tree = bp.nodes
         nodes = None
         if tree is not None:

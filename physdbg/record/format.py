@@ -141,7 +141,9 @@ BVH_ORDER_FIELDS = [("particle", "<i4", ())]
 # mesh's tree in pre-order, one after another; a node's box is in its mesh's frame at run time 0
 MESH_TREE_FIELDS = [
     ("node", "<i4", ()), ("mesh", "<i4", ()), ("parent", "<i4", ()), ("depth", "<i4", ()), ("triangle", "<i4", ()),
-    ("skip", "<i4", ()), ("lo", "<f8", (3,)), ("hi", "<f8", (3,)),
+    ("skip", "<i4", ()), ("lo", "<f8", (3,)), ("hi", "<f8", (3,)), ("volume", "i1", ()),
+    ("sphere_center", "<f8", (3,)), ("sphere_radius", "<f8", ()), ("obb_center", "<f8", (3,)),
+    ("obb_axis_0", "<f8", (3,)), ("obb_axis_1", "<f8", (3,)), ("obb_axis_2", "<f8", (3,)), ("obb_half", "<f8", (3,)),
 ]
 MESH_QUERY_FIELDS = [("sphere", "<i4", ()), ("after", "<i4", ()), ("lo", "<f8", (3,)), ("hi", "<f8", (3,))]
 MESH_VISIT_FIELDS = [("query", "<i4", ()), ("node", "<i4", ()), ("outcome", "i1", ()), ("parent", "<i4", ())]
@@ -185,6 +187,7 @@ BROAD_PHASE_STATS = {
     "pairs": "number", "cell": "number", "cells_used": "number", "rebuilt": "boolean", "build_seconds": "number",
     "sah_cost": "number", "nodes": "number", "depth": "number", "query_seconds": "number",
     "nodes_visited": "number", "box_tests": "number", "images": "number", "scanned": "boolean",
+    "mesh_search": "string",
 }
 JSON_SCHEMAS = {
     TOPIC_WARNINGS: ("physdbg.Warning", {"type": "object", "properties": {
@@ -210,6 +213,7 @@ JSON_SCHEMAS[TOPIC_WALLS] = ("physdbg.Walls", {"type": "object", "properties": {
     # pivot (m, at time 0): at time t a corner c is at R(w t)(c - pivot) + pivot + v t
     "meshes": {"type": "array", "items": {"type": "object", "properties": {
         "name": {"type": "string"}, "source": {"type": "string"}, "restitution": {"type": "number"},
+        "bounding_volume": {"type": "string"},
         "corners": {"type": "array", "items": {"type": "number"}},
         "velocity": {"type": "array", "items": {"type": "number"}},
         "angular_velocity": {"type": "array", "items": {"type": "number"}},

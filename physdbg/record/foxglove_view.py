@@ -242,12 +242,21 @@ class FoxgloveView:
                 mine = nodes[mesh_view.node_mesh(group, nodes) == k]
                 if not len(mine):
                     continue
+                if group[12][k] == 1:  # colliders.mesh.VOLUME_SPHERE: the nodes' spheres
+                    for x, y, z, r in group[13][mine].tolist():
+                        ball = entity.spheres.add()
+                        ball.pose.orientation.w = 1.0
+                        ball.pose.position.x, ball.pose.position.y, ball.pose.position.z = (
+                            (turn @ np.array([x, y, z]) + shift).tolist())
+                        ball.size.x = ball.size.y = ball.size.z = 2.0 * r
+                        ball.color.r, ball.color.g, ball.color.b, ball.color.a = color[:3] + (0.25,)
+                    continue
                 line = entity.lines.add(type=LinePrimitive.LINE_LIST, thickness=1.5, scale_invariant=True)
                 q = line.pose.orientation
                 q.x, q.y, q.z, q.w = rotation
                 line.pose.position.x, line.pose.position.y, line.pose.position.z = shift.tolist()
                 line.color.r, line.color.g, line.color.b, line.color.a = color
-                corners, edges = _box_edges(group[3][mine], group[4][mine])
+                corners, edges = _box_edges(*_node_boxes(group, mine, k))
                 for x, y, z in corners.tolist():
                     line.points.add(x=x, y=y, z=z)
                 line.indices.extend(edges.tolist())
@@ -334,14 +343,25 @@ class FoxgloveView:
         return out
 
 
-def _box_edges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The 8 corners of each box lo, hi (K, 3), as (8 K, 3) points, and its 12 edges as
-    (24 K,) indices into them, pairs of a line list (a third of the points of listing
-    each edge's two ends: Foxglove's points are messages, built one by one)."""
-    corners = np.stack([np.where(np.array(bits, dtype=bool), hi, lo)
-                        for bits in np.ndindex(2, 2, 2)], axis=1)  # (K, 8, 3): corner b = bits (x, y, z)
+def _node_boxes(group, nodes: np.ndarray, mesh: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(centres (K, 3), axes (K, 3, 3) rows, half extents (K, 3)) of ``nodes`` of a mesh
+    walked with an AABB or an OBB (colliders/mesh.MeshGeometry), in the mesh's frame."""
+    if group[12][mesh] == 2:  # colliders.mesh.VOLUME_OBB
+        obb = group[14][nodes]
+        return obb[:, :3], obb[:, 3:12].reshape(-1, 3, 3), obb[:, 12:]
+    lo, hi = group[3][nodes], group[4][nodes]
+    return 0.5 * (lo + hi), np.tile(np.eye(3), (len(nodes), 1, 1)), 0.5 * (hi - lo)
+
+
+def _box_edges(centres: np.ndarray, axes: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The 8 corners of each oriented box (centres (K, 3), axes (K, 3, 3) rows, half extents
+    (K, 3)), as (8 K, 3) points, and its 12 edges as (24 K,) indices into them, pairs of a
+    line list (a third of the points of listing each edge's two ends: Foxglove's points
+    are messages, built one by one)."""
+    signs = np.array(list(np.ndindex(2, 2, 2)), dtype=np.float64) * 2.0 - 1.0  # (8, 3): corner b = bits (x, y, z)
+    corners = centres[:, None, :] + np.einsum("bc,kc,kcd->kbd", signs, half, axes)  # (K, 8, 3)
     edges = np.array([(a, b) for a in range(8) for b in range(a + 1, 8) if bin(a ^ b).count("1") == 1]).reshape(-1)
-    return corners.reshape(-1, 3), (edges[None, :] + 8 * np.arange(len(lo))[:, None]).reshape(-1)
+    return corners.reshape(-1, 3), (edges[None, :] + 8 * np.arange(len(centres))[:, None]).reshape(-1)
 
 
 def _rotations_from_x(directions: np.ndarray) -> np.ndarray:

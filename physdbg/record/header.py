@@ -111,6 +111,7 @@ class RecordingHeader:
             # at run time 0; a kinematic mesh adds its motion (state.Meshes: where it is at
             # any time follows in closed form)
             "meshes": [{"name": name, "source": source, "restitution": float(e),
+                        "bounding_volume": w.meshes.bounding_volume[k],
                         "corners": w.meshes.corners[w.meshes.mesh_of == k].ravel().tolist(),
                         **({"velocity": w.meshes.velocity[k].tolist(),
                             "angular_velocity": w.meshes.angular_velocity[k].tolist(),
@@ -142,7 +143,8 @@ class RecordingHeader:
                       [m.get("source", "") for m in meshes], [],
                       np.array([m.get("velocity", (0.0, 0.0, 0.0)) for m in meshes], dtype=np.float64),
                       np.array([m.get("angular_velocity", (0.0, 0.0, 0.0)) for m in meshes], dtype=np.float64),
-                      np.array([m.get("pivot", (0.0, 0.0, 0.0)) for m in meshes], dtype=np.float64))
+                      np.array([m.get("pivot", (0.0, 0.0, 0.0)) for m in meshes], dtype=np.float64),
+                      [m.get("bounding_volume", "aabb") for m in meshes])
 
     def scene_json(self) -> dict:
         """The /physdbg/scene message: meta with the scene table as a JSON string (a TOML

@@ -85,12 +85,14 @@ def search(group, meshes, lo: np.ndarray, hi: np.ndarray, time: float, dt: float
     """Walk the engine's triangle trees ``group`` (engine_tree; placed here for the step
     that begins at run time ``time`` and lasts ``dt`` s) with each box lo, hi (K, 3)
     (world frame), each mesh's tree from its root with the box carried into its frame.
-    Nodes are positions in the group's pre-order (``tree_first`` says whose); a triangle is
-    its number in the scene (state.Meshes.triangle_words names it)."""
-    from ..engine.colliders.mesh import frame_box, place
+    Nodes are positions in the group's pre-order (``tree_first`` says whose) and tested
+    with the volume each mesh is walked with (``_meets``); a triangle is its number in the
+    scene (state.Meshes.triangle_words names it)."""
+    from ..engine.colliders.mesh import VOLUMES, frame_box, place
 
     place(group, meshes, time, dt)
     box_lo, box_hi, leaf, skip, tree_first = group[3], group[4], group[5], group[6], group[7]
+    volume, node_sphere, node_obb = group[12], group[13], group[14]
     size = len(leaf)
     met = np.zeros(size, dtype=bool)
     visited = np.zeros(size, dtype=bool)
@@ -105,7 +107,7 @@ def search(group, meshes, lo: np.ndarray, hi: np.ndarray, time: float, dt: float
                 q, parent = stack.pop()
                 row = len(visits)
                 visited[q] = True
-                if np.any(low > box_hi[q]) or np.any(box_lo[q] > high):
+                if not _meets(VOLUMES[volume[mesh]], low, high, q, box_lo, box_hi, node_sphere, node_obb):
                     visits.append((k, q, CULLED, parent))
                     continue
                 met[q] = True
@@ -124,15 +126,20 @@ def search(group, meshes, lo: np.ndarray, hi: np.ndarray, time: float, dt: float
 def tree_table(group) -> dict[str, np.ndarray]:
     """The engine's trees (engine_tree's group) as the columns of the recording's mesh-tree
     channel (format.MESH_TREE_FIELDS): node, mesh, parent, depth, triangle (-1 inside a
-    tree), skip (the position after the node's subtree), lo, hi (Q, 3) m in the mesh's frame."""
+    tree), skip (the position after the node's subtree), lo, hi (Q, 3) m in the mesh's frame,
+    volume (the walked one: colliders.mesh.VOLUMES), and every node's sphere and OBB."""
     box_lo, box_hi, leaf, skip, tree_first, parent = group[3], group[4], group[5], group[6], group[7], group[11]
     count = len(leaf)
     depth = np.zeros(count, dtype=np.int64)
     for q in range(count):  # pre-order: a parent comes before its children
         if parent[q] >= 0:
             depth[q] = depth[parent[q]] + 1
-    return {"node": np.arange(count), "mesh": node_mesh(group, np.arange(count)), "parent": parent, "depth": depth,
-            "triangle": leaf, "skip": skip, "lo": box_lo, "hi": box_hi}
+    mesh = node_mesh(group, np.arange(count))
+    obb = group[14]
+    return {"node": np.arange(count), "mesh": mesh, "parent": parent, "depth": depth,
+            "triangle": leaf, "skip": skip, "lo": box_lo, "hi": box_hi, "volume": group[12][mesh],
+            "sphere_center": group[13][:, :3], "sphere_radius": group[13][:, 3], "obb_center": obb[:, :3],
+            "obb_axis_0": obb[:, 3:6], "obb_axis_1": obb[:, 6:9], "obb_axis_2": obb[:, 9:12], "obb_half": obb[:, 12:]}
 
 
 def led_to_contacts(search, contacts, leaf_triangle: np.ndarray):
@@ -182,6 +189,22 @@ def searched_spheres(search, contacts, most: int) -> list[int]:
         if len(chosen):
             return [int(i) for i in dict.fromkeys(np.asarray(chosen).tolist())][:most]
     return []
+
+
+def _meets(volume: str, low: np.ndarray, high: np.ndarray, q: int, box_lo, box_hi, node_sphere, node_obb) -> bool:
+    """The reference's test of the query box low, high (3,) against node q's volume: the
+    AABB's overlap, the sphere's distance to the box, and for the OBB engine/mesh/volumes'
+    own oriented-box test (the box as an oriented box with the world's axes)."""
+    if volume == "sphere":
+        centre, radius = node_sphere[q, :3], node_sphere[q, 3]
+        return float(np.sum((np.clip(centre, low, high) - centre) ** 2)) <= radius * radius
+    if volume == "obb":
+        from ..engine.mesh.volumes import obbs_meet
+
+        box = (np.array([0.5 * (low + high)]), np.eye(3)[None], np.array([0.5 * (high - low)]))
+        obb = node_obb[q]
+        return bool(obbs_meet(*box, 0, obb[None, :3], obb[None, 3:12].reshape(1, 3, 3), obb[None, 12:], 0))
+    return not (np.any(low > box_hi[q]) or np.any(box_lo[q] > high))
 
 
 def node_mesh(group, nodes: np.ndarray) -> np.ndarray:

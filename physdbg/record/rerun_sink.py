@@ -17,8 +17,10 @@ Entities (timelines ``step`` = frame, steps completed, and ``sim_time`` in secon
                              every step's recorded search of the meshes' BVHs (events.MeshSearch;
                              detail contacts: the walks that led to a contact) by the spheres it
                              is about (mesh_view.searched_spheres: those that hit a mesh): the nodes
-                             met and culled, the triangles reached and the boxes the engine asked
-                             with; world/mesh_search/all the same for every sphere (hidden)
+                             met and culled (each drawn as the volume it was walked with: a box
+                             for an AABB or OBB, {met,culled}_spheres for a sphere), the triangles
+                             reached and the boxes the engine asked with; world/mesh_search/all
+                             the same for every sphere (hidden)
     search/triangles         the same search as a tree (GraphNodes, GraphEdges): the seed's
                              "search tree", a node per visit, for those spheres
     world/bvh/level_<d>      Boxes3D wireframes, one entity per BVH level (toggle levels;
@@ -183,6 +185,7 @@ class RerunSink:
         self._group = mesh_view.engine_tree(header.walls.meshes) if len(header.walls.meshes) else None
         self._search = None  # the step's MeshSearch, drawn at its end
         self._search_drawn = False
+        self._sphere_volumes = False  # a node walked with a sphere was drawn (its entity then logged every step)
         self._log_static(header)
 
     # ------------------------------------------------------------------ static
@@ -456,10 +459,16 @@ class RerunSink:
         culled = np.setdiff1d(np.unique(node[outcome == SEARCH_CULLED]), met)
         triangles = np.unique(group[5][node[outcome == SEARCH_REACHED]])
         for part, which, color in (("met", met, [60, 220, 90]), ("culled", culled, [230, 70, 60])):
-            centers, half_sizes, quaternions = _posed_nodes(group, meshes, which, end.time)
+            (centers, half_sizes, quaternions), (sphere_centers, sphere_radii) = _posed_nodes(group, meshes, which,
+                                                                                               end.time)
             rec.log(path + f"/{part}", rr.Boxes3D(
                 centers=centers, half_sizes=half_sizes, quaternions=quaternions,
                 colors=[color], radii=[-1.5 if part == "met" else -0.75], fill_mode="majorwireframe"))
+            if len(sphere_centers) or self._sphere_volumes:  # a mesh walked with spheres: its nodes as spheres
+                self._sphere_volumes = True
+                rec.log(path + f"/{part}_spheres", rr.Ellipsoids3D(
+                    centers=sphere_centers, half_sizes=np.repeat(sphere_radii[:, None], 3, axis=1),
+                    colors=[color], line_radii=[-0.75], fill_mode="majorwireframe"))
         corners = meshes.placed(end.time)[0][triangles].reshape(-1, 3).astype(np.float32)
         rec.log(path + "/triangles", rr.Mesh3D(
             vertex_positions=corners, triangle_indices=np.arange(len(corners), dtype=np.uint32).reshape(-1, 3),
@@ -593,21 +602,33 @@ class RerunSink:
 
 
 def _posed_nodes(group, meshes, nodes: np.ndarray, time: float):
-    """World centres (K, 3), half sizes (K, 3) and rotations (K, 4 quaternions, x y z w) of
-    ``nodes`` of the engine's trees (mesh_view.engine_tree), each box in its mesh's frame
-    posed where the mesh is at run time ``time`` (a fixed mesh's frame is the world)."""
+    """The walked volumes of ``nodes`` of the engine's trees (mesh_view.engine_tree), each in
+    its mesh's frame, posed where the mesh is at run time ``time`` (a fixed mesh's frame is
+    the world): (boxes: centres (K, 3), half sizes (K, 3), rotations (K, 4 quaternions,
+    x y z w), of the nodes walked with an AABB or an OBB; spheres: centres (S, 3), radii
+    (S,), of those walked with a sphere), float32."""
     from scipy.spatial.transform import Rotation
 
-    lo, hi = group[3][nodes], group[4][nodes]
-    centers, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
-    quaternions = np.tile([0.0, 0.0, 0.0, 1.0], (len(nodes), 1))
     owner = mesh_view.node_mesh(group, nodes)
+    volume = group[12][owner] if len(nodes) else np.zeros(0, dtype=np.int64)
+    lo, hi, obb, sphere = group[3][nodes], group[4][nodes], group[14][nodes], group[13][nodes]
+    is_obb, is_sphere = volume == 2, volume == 1  # colliders.mesh.VOLUME_OBB, VOLUME_SPHERE
+    centers = np.where(is_obb[:, None], obb[:, :3], 0.5 * (lo + hi))
+    half = np.where(is_obb[:, None], obb[:, 12:], 0.5 * (hi - lo))
+    turns = np.tile(np.eye(3), (len(nodes), 1, 1))
+    turns[is_obb] = np.transpose(obb[is_obb, 3:12].reshape(-1, 3, 3), (0, 2, 1))  # columns: the axes
+    turns[np.linalg.det(turns) < 0, :, 2] *= -1.0  # a PCA frame may be reflected: the box is the same
+    sphere_centers = sphere[:, :3].copy()
     for k in np.unique(owner[meshes.moving[owner]]) if len(nodes) else []:
         rows = owner == k
         turn, shift = meshes.transform(int(k), time)
         centers[rows] = centers[rows] @ turn.T + shift
-        quaternions[rows] = Rotation.from_matrix(turn).as_quat()
-    return centers.astype(np.float32), half.astype(np.float32), quaternions.astype(np.float32)
+        sphere_centers[rows] = sphere_centers[rows] @ turn.T + shift
+        turns[rows] = turn @ turns[rows]
+    boxes = ~is_sphere
+    quaternions = Rotation.from_matrix(turns[boxes]).as_quat() if boxes.any() else np.zeros((0, 4))
+    return ((centers[boxes].astype(np.float32), half[boxes].astype(np.float32), quaternions.astype(np.float32)),
+            (sphere_centers[is_sphere].astype(np.float32), sphere[is_sphere, 3].astype(np.float32)))
 
 
 FLUSH_SECONDS = 600.0  # the most closing a Rerun file may wait for its writer, growing or not

@@ -243,15 +243,18 @@ def max_overlap(x, radius, pairs, geometry, ignore_tunnelled):
 
 
 def narrow_candidates(kind: int, pairs: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                      geometry: tuple) -> tuple[np.ndarray, np.ndarray]:
+                      geometry: tuple, together: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The narrow phase's candidates of ``kind`` at step start, (a (M,), other (M,)) int64:
     the broad phase's sphere pairs (M, 2) whose path boxes lo, hi (N, 3) meet, or the walls
-    each path box reaches."""
+    and triangles each path box reaches (``together``: the triangles by the simultaneous
+    descent, mesh.reachable_together; the same candidates)."""
     if kind == KIND_PAIR:
         return sphere.candidates(pairs, lo, hi, geometry[KIND_PAIR])
     if kind == KIND_WALL:
         return plane.reachable(lo, hi, geometry[KIND_WALL])
     if kind == KIND_MESH:
+        if together:
+            return mesh.reachable_together(lo, hi, geometry[KIND_MESH])[:2]
         return mesh.reachable(lo, hi, geometry[KIND_MESH])
     raise ValueError(f"{UNKNOWN_KIND}: {kind}")
 

@@ -36,8 +36,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..broadphase.bvh import build
+from ..broadphase.bvh import build, build_lbvh
 from ..jit import borrowing, kernel
+from ..mesh.volumes import PARALLEL_GUARD
 from ..mesh.closest import FACE, closest_on_triangle
 from ..mesh.rigid_motion import in_body_frame, surface_acceleration, surface_velocity, turned_with
 from ..toi import (DISCRETE, SWEPT, moving_triangle_toi_sampled, moving_triangle_toi_swept, triangle_toi_sampled,
@@ -73,13 +74,22 @@ class MeshGeometry(NamedTuple):
     moving: np.ndarray
     frame: np.ndarray
     parent: np.ndarray
+    volume: np.ndarray
+    node_sphere: np.ndarray
+    node_obb: np.ndarray
 
     @classmethod
-    def of(cls, walls) -> MeshGeometry:
-        """The group of a scene's meshes (state.Walls.meshes, a state.Meshes) at run time 0."""
+    def of(cls, walls, builder: str = "sah") -> MeshGeometry:
+        """The group of a scene's meshes (state.Walls.meshes, a state.Meshes) at run time 0;
+        builder: the trees' (broadphase.bvh.BUILD_NAMES; the engine's is SAH)."""
+        from ..mesh.tree import build_mesh_tree
+
         meshes = walls.meshes
         corners = np.ascontiguousarray(meshes.corners, dtype=np.float64).reshape(-1, 3, 3)
-        trees = [preorder(*triangle_boxes(corners[meshes.mesh_of == k])) for k in range(len(meshes))]
+        built = [build_mesh_tree(corners[meshes.mesh_of == k].reshape(-1, 3),
+                                 np.arange(3 * int(np.count_nonzero(meshes.mesh_of == k)), dtype=np.int64).reshape(-1, 3),
+                                 builder) for k in range(len(meshes))]
+        trees = [preorder_nodes(tree.nodes) for tree in built]
         sizes = [len(tree[2]) for tree in trees]
         tree_first = np.concatenate([[0], np.cumsum(sizes, dtype=np.int64)]).astype(np.int64)
         first = meshes.first
@@ -99,11 +109,19 @@ class MeshGeometry(NamedTuple):
         inner = np.flatnonzero(leaf < 0)  # in pre-order a node's left child follows it; its right starts after that
         parent[inner + 1] = inner
         parent[skip[inner + 1]] = inner
+        # each node's other volumes (engine/mesh/tree.py: padded, in the mesh's frame), in pre-order
+        node_sphere = np.concatenate([np.hstack([tree.sphere_center[t[4]], tree.sphere_radius[t[4], None]])
+                                      for tree, t in zip(built, trees, strict=True)]) if trees else np.zeros((0, 4))
+        node_obb = np.concatenate([np.hstack([tree.obb_center[t[4]], tree.obb_axes[t[4]].reshape(-1, 9),
+                                              tree.obb_half[t[4]]])
+                                   for tree, t in zip(built, trees, strict=True)]) if trees else np.zeros((0, 15))
+        volume = np.array([VOLUMES.index(v) for v in meshes.volumes()], dtype=np.int64)
         return cls(corners.copy(), np.ascontiguousarray(meshes.mesh_of, dtype=np.int64),
                    np.ascontiguousarray(meshes.restitution, dtype=np.float64), np.ascontiguousarray(box_lo),
                    np.ascontiguousarray(box_hi), np.ascontiguousarray(leaf, dtype=np.int64),
                    np.ascontiguousarray(skip, dtype=np.int64), tree_first, motion,
-                   np.ascontiguousarray(meshes.moving, dtype=np.bool_), frame, parent)
+                   np.ascontiguousarray(meshes.moving, dtype=np.bool_), frame, parent, volume,
+                   np.ascontiguousarray(node_sphere), np.ascontiguousarray(node_obb))
 
 
 def place(group: tuple, meshes, time: float, span: float) -> int:
@@ -164,6 +182,13 @@ def frame_box(k, l0, l1, l2, h0, h1, h2, meshes):
 
 GEOMETRY = MeshGeometry  # this kind's group (colliders.geometry_of)
 
+# how a step's spheres are searched against the meshes' trees (Settings.mesh_search)
+MESH_SEARCH_NAMES = ("auto", "walk", "together")
+
+# the volume a mesh's tree is walked with (MeshGeometry.volume; scene field bounding_volume)
+VOLUMES = ("aabb", "sphere", "obb")
+VOLUME_AABB, VOLUME_SPHERE, VOLUME_OBB = 0, 1, 2
+
 
 def triangle_boxes(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each triangle's box (lo, hi (T, 3)) from its corners (T, 3, 3)."""
@@ -172,13 +197,18 @@ def triangle_boxes(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.ascontiguousarray(corners.min(axis=1)), np.ascontiguousarray(corners.max(axis=1))
 
 
-def preorder(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """A BVH (SAH, the scene BVH's builder, as engine.mesh.tree builds a mesh's) over boxes
-    lo, hi (T, 3) laid out in pre-order: (box_lo, box_hi (Q, 3), leaf_triangle (Q,) (the
-    box's number; -1 inside), skip (Q,): where the walk goes when a node's box is missed)."""
+def preorder(lo: np.ndarray, hi: np.ndarray, builder: str = "sah") -> tuple:
+    """A BVH (by ``builder``, the scene BVH's: SAH unless asked) over boxes lo, hi (T, 3)
+    laid out in pre-order: (box_lo, box_hi (Q, 3), leaf_triangle (Q,) (the box's number; -1
+    inside), skip (Q,): where the walk goes when a node's box is missed)."""
     if lo.shape[0] == 0:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    tree = build(lo, hi, "sah", 1)
+    return preorder_nodes(build(lo, hi, builder, 1))[:4]
+
+
+def preorder_nodes(tree) -> tuple:
+    """A built BVH (broadphase.bvh.BVHNodes) laid out in pre-order: (box_lo, box_hi (Q, 3),
+    leaf_triangle (Q,), skip (Q,), nodes (Q,): the tree's node at each position)."""
     order: list[int] = []
     stack = [tree.root]
     while stack:
@@ -197,7 +227,7 @@ def preorder(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
     leaf = np.where(tree.left[nodes] < 0, tree.order[np.minimum(tree.start[nodes], len(tree.order) - 1)], -1)
     skip = np.arange(len(order), dtype=np.int64) + size[nodes]
     return (np.ascontiguousarray(tree.lo[nodes]), np.ascontiguousarray(tree.hi[nodes]),
-            np.ascontiguousarray(leaf, dtype=np.int64), skip)
+            np.ascontiguousarray(leaf, dtype=np.int64), skip, nodes)
 
 
 @njit(cache=True, inline="always")
@@ -424,6 +454,85 @@ def _box_meets(l0, l1, l2, h0, h1, h2, box_lo, box_hi, q) -> bool:
             and l2 <= box_hi[q, 2] and box_lo[q, 2] <= h2)
 
 
+@njit(cache=True, inline="always")
+def _box_meets_sphere(l0, l1, l2, h0, h1, h2, node_sphere, q) -> bool:
+    """Does the box meet node q's sphere (node_sphere (Q, 4): centre, radius)? The squared
+    distance from the centre to the box against the squared radius."""
+    d0 = max(l0 - node_sphere[q, 0], 0.0, node_sphere[q, 0] - h0)
+    d1 = max(l1 - node_sphere[q, 1], 0.0, node_sphere[q, 1] - h1)
+    d2 = max(l2 - node_sphere[q, 2], 0.0, node_sphere[q, 2] - h2)
+    r = node_sphere[q, 3]
+    return d0 * d0 + d1 * d1 + d2 * d2 <= r * r
+
+
+@njit(cache=True, inline="always")
+def _box_meets_obb(l0, l1, l2, h0, h1, h2, node_obb, q) -> bool:
+    """Does the box (axis-aligned) meet node q's oriented box (node_obb (Q, 15): centre,
+    axes as rows, half extents)? The separating-axis test (Ericson 4.4.1) with the box's
+    axes the world's: 3 + 3 face axes and the 9 edge-edge crosses, each |R| guarded by
+    PARALLEL_GUARD so that near-parallel axes stay conservative."""
+    o = node_obb[q]
+    ea0, ea1, ea2 = 0.5 * (h0 - l0), 0.5 * (h1 - l1), 0.5 * (h2 - l2)
+    t0, t1, t2 = o[0] - 0.5 * (l0 + h0), o[1] - 0.5 * (l1 + h1), o[2] - 0.5 * (l2 + h2)
+    eb0, eb1, eb2 = o[12], o[13], o[14]
+    g = PARALLEL_GUARD
+    # r_ij = a_i · b_j with a the world's axes: component i of B's axis j (row j of the axes)
+    r00, r01, r02 = o[3], o[6], o[9]
+    r10, r11, r12 = o[4], o[7], o[10]
+    r20, r21, r22 = o[5], o[8], o[11]
+    a00, a01, a02 = abs(r00) + g, abs(r01) + g, abs(r02) + g
+    a10, a11, a12 = abs(r10) + g, abs(r11) + g, abs(r12) + g
+    a20, a21, a22 = abs(r20) + g, abs(r21) + g, abs(r22) + g
+    # A's axes
+    if abs(t0) > ea0 + eb0 * a00 + eb1 * a01 + eb2 * a02:
+        return False
+    if abs(t1) > ea1 + eb0 * a10 + eb1 * a11 + eb2 * a12:
+        return False
+    if abs(t2) > ea2 + eb0 * a20 + eb1 * a21 + eb2 * a22:
+        return False
+    # B's axes
+    if abs(t0 * r00 + t1 * r10 + t2 * r20) > ea0 * a00 + ea1 * a10 + ea2 * a20 + eb0:
+        return False
+    if abs(t0 * r01 + t1 * r11 + t2 * r21) > ea0 * a01 + ea1 * a11 + ea2 * a21 + eb1:
+        return False
+    if abs(t0 * r02 + t1 * r12 + t2 * r22) > ea0 * a02 + ea1 * a12 + ea2 * a22 + eb2:
+        return False
+    # A_i x B_j
+    if abs(t2 * r10 - t1 * r20) > ea1 * a20 + ea2 * a10 + eb1 * a02 + eb2 * a01:
+        return False
+    if abs(t2 * r11 - t1 * r21) > ea1 * a21 + ea2 * a11 + eb0 * a02 + eb2 * a00:
+        return False
+    if abs(t2 * r12 - t1 * r22) > ea1 * a22 + ea2 * a12 + eb0 * a01 + eb1 * a00:
+        return False
+    if abs(t0 * r20 - t2 * r00) > ea0 * a20 + ea2 * a00 + eb1 * a12 + eb2 * a11:
+        return False
+    if abs(t0 * r21 - t2 * r01) > ea0 * a21 + ea2 * a01 + eb0 * a12 + eb2 * a10:
+        return False
+    if abs(t0 * r22 - t2 * r02) > ea0 * a22 + ea2 * a02 + eb0 * a11 + eb1 * a10:
+        return False
+    if abs(t1 * r00 - t0 * r10) > ea0 * a10 + ea1 * a00 + eb1 * a22 + eb2 * a21:
+        return False
+    if abs(t1 * r01 - t0 * r11) > ea0 * a11 + ea1 * a01 + eb0 * a22 + eb2 * a20:
+        return False
+    if abs(t1 * r02 - t0 * r12) > ea0 * a12 + ea1 * a02 + eb0 * a21 + eb1 * a20:
+        return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def _node_meets(volume, l0, l1, l2, h0, h1, h2, meshes, q) -> bool:
+    """Does the box (l0, l1, l2)–(h0, h1, h2) (in the mesh's frame) meet node q of a tree
+    walked with ``volume`` (VOLUME_AABB, VOLUME_SPHERE or VOLUME_OBB)? The one node test
+    of every walk (``walk``, ``reachable_together``). Each test is monotone: a box inside
+    another meets no node the other does not (so a node missed by a box holding many
+    spheres' boxes is missed by each of them)."""
+    if volume == VOLUME_SPHERE:
+        return _box_meets_sphere(l0, l1, l2, h0, h1, h2, meshes[13], q)
+    if volume == VOLUME_OBB:
+        return _box_meets_obb(l0, l1, l2, h0, h1, h2, meshes[14], q)
+    return _box_meets(l0, l1, l2, h0, h1, h2, meshes[3], meshes[4], q)
+
+
 @borrowing
 def _sift_down(column, root, end):
     while 2 * root + 1 < end:
@@ -460,11 +569,12 @@ def walk(k, l0, l1, l2, h0, h1, h2, meshes, p, out, m, log, logged):
     (node, outcome: 0 met, 1 culled, 2 a triangle reached) from row ``logged`` on, when
     log has rows (``search_visits``; the contact loop passes none, ``out[:0]``). Returns (m,
     logged) after the walk."""
-    box_lo, box_hi, leaf, skip, tree_first = meshes[3], meshes[4], meshes[5], meshes[6], meshes[7]
+    leaf, skip, tree_first = meshes[5], meshes[6], meshes[7]
+    volume = meshes[12][k]
     record = log.shape[0] > 0
     q = tree_first[k]
     while q < tree_first[k + 1]:
-        meets = _box_meets(l0, l1, l2, h0, h1, h2, box_lo, box_hi, q)
+        meets = _node_meets(volume, l0, l1, l2, h0, h1, h2, meshes, q)
         if record:
             log[logged, 0] = q
             log[logged, 1] = (_REACHED if leaf[q] >= 0 else _MET) if meets else _CULLED
@@ -562,6 +672,191 @@ def reachable(lo, hi, meshes):
             it[m] = scratch[r, 1]
             m += 1
     return ip[:m], it[:m]
+
+
+# a box of the spheres' tree is grown by this much of its largest coordinate (and this much
+# of a metre) before a node test: a rounding of the OBB test (whose centre and half extents
+# are computed apart) can never then cull a node one of its spheres' boxes meets
+_TOGETHER_PAD = 1e-9
+
+
+@njit(cache=True, inline="always")
+def _grow_box(l0, l1, l2, h0, h1, h2):
+    """A box grown by _TOGETHER_PAD of its largest coordinate's size, and of a metre."""
+    pad = _TOGETHER_PAD * (1.0 + max(abs(l0), abs(l1), abs(l2), abs(h0), abs(h1), abs(h2)))
+    return l0 - pad, l1 - pad, l2 - pad, h0 + pad, h1 + pad, h2 + pad
+
+
+@njit(cache=True, inline="always")
+def _half_perimeter(l0, l1, l2, h0, h1, h2) -> float:
+    return (h0 - l0) + (h1 - l1) + (h2 - l2)
+
+
+@njit(cache=True, inline="always")
+def _on_the_way(volume, l0, l1, l2, h0, h1, h2, meshes, q) -> tuple:
+    """(meets, tests): whether the box meets every node above q on the way from its tree's
+    root (parent links), as a walk from the root requires, and how many it tested."""
+    parent = meshes[11]
+    up = parent[q]
+    tests = 0
+    while up >= 0:
+        tests += 1
+        if not _node_meets(volume, l0, l1, l2, h0, h1, h2, meshes, up):
+            return False, tests
+        up = parent[up]
+    return True, tests
+
+
+@kernel
+def _boxes_in_frame(k, lo, hi, meshes):
+    """The boxes lo, hi (N, 3) carried into mesh k's frame (``frame_box``) without those with
+    a NaN or infinite bound (which meet nothing): (lo (n, 3), hi (n, 3), sphere (n,))."""
+    n = lo.shape[0]
+    flo = np.empty((n, 3))
+    fhi = np.empty((n, 3))
+    keep = np.empty(n, dtype=np.int64)
+    kept = 0
+    for i in range(n):
+        l0, l1, l2, h0, h1, h2 = frame_box(k, lo[i, 0], lo[i, 1], lo[i, 2], hi[i, 0], hi[i, 1], hi[i, 2], meshes)
+        if not (math.isfinite(l0) and math.isfinite(l1) and math.isfinite(l2) and math.isfinite(h0)
+                and math.isfinite(h1) and math.isfinite(h2)):
+            continue
+        flo[kept, 0], flo[kept, 1], flo[kept, 2] = l0, l1, l2
+        fhi[kept, 0], fhi[kept, 1], fhi[kept, 2] = h0, h1, h2
+        keep[kept] = i
+        kept += 1
+    return flo[:kept], fhi[:kept], keep[:kept]
+
+
+@kernel
+def _descend_together(k, flo, fhi, keep, spheres, meshes, keys, m, tests):
+    """The simultaneous descent of the spheres' tree ``spheres`` (build_lbvh's arrays over
+    flo, fhi; row r is sphere keep[r]) and mesh k's tree: each pair of a sphere and a
+    triangle it reaches appended to keys (sphere * triangles + triangle) from row m on.
+    Returns (keys, m, tests)."""
+    node_lo, node_hi, left, right, start, order = spheres[0], spheres[1], spheres[2], spheres[3], spheres[6], spheres[8]
+    tree_first, leaf, skip, box_lo, box_hi = meshes[7], meshes[5], meshes[6], meshes[3], meshes[4]
+    volume = meshes[12][k]
+    total = count(meshes)
+    root = tree_first[k]
+    # pairs (spheres' node, mesh node, whether the nodes above the mesh node are known to
+    # meet the sphere's own box), depth first: never deeper than both trees' depths
+    capacity = node_lo.shape[0] + (tree_first[k + 1] - root) + 8
+    pair_a = np.empty(capacity, dtype=np.int64)
+    pair_q = np.empty(capacity, dtype=np.int64)
+    pair_known = np.empty(capacity, dtype=np.bool_)
+    # each node's box as tested: a leaf's the sphere's own, an inner node's grown (_grow_box)
+    size = node_lo.shape[0]
+    test_box = np.empty((size, 6))
+    half = np.empty(size)
+    for a in range(size):
+        if left[a] < 0:
+            r = order[start[a]]
+            l0, l1, l2, h0, h1, h2 = flo[r, 0], flo[r, 1], flo[r, 2], fhi[r, 0], fhi[r, 1], fhi[r, 2]
+        else:
+            l0, l1, l2, h0, h1, h2 = _grow_box(node_lo[a, 0], node_lo[a, 1], node_lo[a, 2],
+                                               node_hi[a, 0], node_hi[a, 1], node_hi[a, 2])
+        test_box[a, 0], test_box[a, 1], test_box[a, 2] = l0, l1, l2
+        test_box[a, 3], test_box[a, 4], test_box[a, 5] = h0, h1, h2
+        half[a] = _half_perimeter(l0, l1, l2, h0, h1, h2)
+    pair_a[0], pair_q[0], pair_known[0] = 0, root, True
+    top = 1
+    while top > 0:
+        top -= 1
+        a, q, known = pair_a[top], pair_q[top], pair_known[top]
+        a_leaf = left[a] < 0
+        l0, l1, l2 = test_box[a, 0], test_box[a, 1], test_box[a, 2]
+        h0, h1, h2 = test_box[a, 3], test_box[a, 4], test_box[a, 5]
+        tests += 1
+        if not _node_meets(volume, l0, l1, l2, h0, h1, h2, meshes, q):
+            continue
+        if a_leaf and not known and volume != VOLUME_AABB:
+            ok, up_tests = _on_the_way(volume, l0, l1, l2, h0, h1, h2, meshes, q)
+            tests += up_tests
+            if not ok:
+                continue
+        q_leaf = leaf[q] >= 0
+        if a_leaf and q_leaf:
+            if m == keys.shape[0]:
+                grown = np.empty(2 * m, dtype=np.int64)
+                grown[:m] = keys[:m]
+                keys = grown
+            keys[m] = keep[order[start[a]]] * total + leaf[q]
+            m += 1
+            continue
+        # split the mesh node when the spheres' node is a leaf or the smaller of the two
+        if a_leaf or (not q_leaf and _half_perimeter(box_lo[q, 0], box_lo[q, 1], box_lo[q, 2], box_hi[q, 0],
+                                                     box_hi[q, 1], box_hi[q, 2]) >= half[a]):
+            # in pre-order q's left child follows it; its right child starts where that one's subtree ends
+            pair_a[top], pair_q[top], pair_known[top] = a, skip[q + 1], a_leaf
+            pair_a[top + 1], pair_q[top + 1], pair_known[top + 1] = a, q + 1, a_leaf
+        else:
+            pair_a[top], pair_q[top], pair_known[top] = right[a], q, False
+            pair_a[top + 1], pair_q[top + 1], pair_known[top + 1] = left[a], q, False
+        top += 2
+    return keys, m, tests
+
+
+@kernel
+def reachable_together(lo, hi, meshes):
+    """``reachable`` by the seed's simultaneous descent: for each mesh, a tree over the
+    spheres' path boxes (carried into the mesh's frame, ``frame_box``; an LBVH, built once
+    for the fixed meshes and once for each moving one) descended together with the mesh's
+    tree, a pair of nodes whose volumes miss ending both branches at once, the larger node
+    of a meeting pair split. Returns (spheres (K,), triangles (K,), tests): the same
+    candidates in the same order as ``reachable``, and the node tests made.
+
+    The same candidates: the walk's triangles for a box are those whose every node on the
+    way down from the root meets it. A pair of a spheres' node and a mesh node is culled
+    only when the spheres' box (grown: _TOGETHER_PAD) misses the node, and a box inside it
+    misses it too (each node test is monotone); when a sphere's own box first meets a mesh
+    node below the root, the nodes above it are tested with that box too (``_on_the_way``),
+    except with AABBs, whose parents hold their children exactly. A box with a NaN or
+    infinite bound is left out (the walk's AABB test misses it too)."""
+    total = count(meshes)
+    tree_first, moving = meshes[7], meshes[9]
+    keys = np.empty(max(4 * lo.shape[0], 16), dtype=np.int64)
+    m = 0
+    tests = 0
+    fixed_built = False
+    fixed_lo, fixed_hi, fixed_keep = _boxes_in_frame(0, lo[:0], hi[:0], meshes)
+    fixed = build_lbvh(fixed_lo, fixed_hi)
+    for k in range(tree_first.shape[0] - 1):
+        if tree_first[k] == tree_first[k + 1]:
+            continue
+        if moving[k]:
+            flo, fhi, keep = _boxes_in_frame(k, lo, hi, meshes)
+            if keep.shape[0] == 0:
+                continue
+            keys, m, tests = _descend_together(k, flo, fhi, keep, build_lbvh(flo, fhi), meshes, keys, m, tests)
+        else:
+            if not fixed_built:  # a fixed mesh's frame is the world's: one tree serves them all
+                fixed_lo, fixed_hi, fixed_keep = _boxes_in_frame(k, lo, hi, meshes)
+                fixed = build_lbvh(fixed_lo, fixed_hi)
+                fixed_built = True
+            if fixed_keep.shape[0] == 0:
+                continue
+            keys, m, tests = _descend_together(k, fixed_lo, fixed_hi, fixed_keep, fixed, meshes, keys, m, tests)
+    if total == 0 or m == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), tests
+    keys = np.sort(keys[:m])  # sphere by sphere, each one's triangles in number order, as reachable
+    return keys // total, keys % total, tests
+
+
+@kernel
+def walk_tests(lo, hi, meshes) -> int:
+    """How many node tests ``reachable`` makes for the boxes lo, hi (N, 3) (each visit of
+    its walks, ``walk``): its work, in the unit of ``reachable_together``'s."""
+    tree_first = meshes[7]
+    log = np.empty((max(meshes[5].shape[0], 1), 2), dtype=np.int64)  # a walk visits a node at most once
+    leaves = np.empty((max(count(meshes), 1), 2), dtype=np.int64)
+    tests = 0
+    for i in range(lo.shape[0]):
+        for k in range(tree_first.shape[0] - 1):
+            l0, l1, l2, h0, h1, h2 = frame_box(k, lo[i, 0], lo[i, 1], lo[i, 2], hi[i, 0], hi[i, 1], hi[i, 2], meshes)
+            _m, logged = walk(k, l0, l1, l2, h0, h1, h2, meshes, i, leaves, 0, log, 0)
+            tests += logged
+    return tests
 
 
 @borrowing
