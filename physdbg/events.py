@@ -74,6 +74,7 @@ HOW_IMPULSE = 0  # the seed's impulse (or reflection), alone
 HOW_RESTING = 1  # held by the resting rule, restitution 0
 HOW_RAPID = 2  # held by the rapid-contact (TC) rule, restitution 0
 HOW_WITH_HELD = 3  # an impulse solved together with the held contacts it reached
+HOW_AT_ONE_INSTANT = 4  # an impulse solved together with the sphere's other contacts at that instant
 
 # Outcomes of one swept test (SweptTests.outcome).
 OUTCOME_MISS = 0  # no contact before the end of the step
@@ -129,8 +130,10 @@ class ContactResolved:
     used; resting: True when the contact was held (restitution 0: the resting rule or
     the rapid-contact rule). closing_speed: normal approach speed before the contact
     (m/s, >= 0). how: HOW_IMPULSE (the seed's impulse alone), HOW_RESTING, HOW_RAPID
-    (held by that rule) or HOW_WITH_HELD (an impulse solved together with the held
-    contacts it reached, which also moved other spheres). feature: for a mesh's triangle,
+    (held by that rule), HOW_WITH_HELD (an impulse solved together with the held
+    contacts it reached, which also moved other spheres) or HOW_AT_ONE_INSTANT (an impulse
+    solved together with the sphere's other contacts with immovable partners at the same
+    instant, and the held contacts they reached: resolve.resolve_at_one_instant). feature: for a mesh's triangle,
     1 + the index in FEATURE_NAMES of where it was touched (face, edge, corner); else 0.
     """
 

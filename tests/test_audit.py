@@ -4,12 +4,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
 from physdbg import api
 from physdbg.analysis import explain
 from physdbg.cli import app
+from physdbg.events import HOW_AT_ONE_INSTANT
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -213,30 +215,59 @@ V_MESH = ("v -1 1 -1\nv 0 0 -1\nv 0 0 1\nv -1 1 1\nv 1 1 -1\nv 1 1 1\n"
           "f 1 2 3\nf 1 3 4\nf 2 5 6\nf 2 6 3\n")  # a symmetric 90° V, its crease along z at the origin
 
 
-def test_a_drop_onto_the_crease_of_a_symmetric_v_is_a_simultaneous_finding(tmp_path):
-    """A ball (e = 0.6) dropped exactly onto the crease meets both slopes at one instant; they
-    are resolved in turn and the second is held by the rapid-contact rule, so the ball leaves
-    sideways. The audit names the pair and says the order decided it; the same ball dropped
-    beside the crease meets one slope at a time and is clean."""
-    (tmp_path / "v.obj").write_text(V_MESH)
+V_REORDERED = V_MESH.replace("f 1 2 3\nf 1 3 4\nf 2 5 6\nf 2 6 3\n", "f 2 5 6\nf 2 6 3\nf 1 3 4\nf 1 2 3\n")
+
+
+def _v_drop(tmp_path, mesh: str, overrides=()):
+    """A ball (e = 0.6) dropped exactly onto the crease of the V: the recording's path and
+    the first step with contacts."""
+    (tmp_path / "v.obj").write_text(mesh)
     scene = tmp_path / "vdrop.toml"
     scene.write_text('name = "vdrop"\ndt = "1/60"\nduration = 0.5\ngravity = [0.0, -9.81, 0.0]\n'
                      '[[meshes]]\nname = "v"\nfile = "v.obj"\nrestitution = 0.6\n'
                      '[[particles]]\nposition = [0.0, 1.0, 0.0]\nradius = 0.1\nrestitution = 0.6\n')
     recording = tmp_path / "vdrop.mcap"
-    api.record(str(scene), mcap_path=str(recording), rrd=False)
+    api.record(str(scene), list(overrides), mcap_path=str(recording), rrd=False, force=True)
     report = explain(str(recording))
-    found = [f for f in report.findings if f.kind == "simultaneous"]
-    assert len(found) == 1 and report.counts == {"simultaneous": 1}, report.counts
-    finding = found[0]
     first = next(s for s in range(1, report.steps + 1) if len(explain_contacts(recording, s)))
+    return recording, report, first
+
+
+@pytest.mark.parametrize("mesh", [V_MESH, V_REORDERED], ids=["faces-in-order", "faces-reordered"])
+def test_a_drop_onto_the_crease_of_a_symmetric_v_leaves_it_straight_up(tmp_path, mesh):
+    """The ball meets both slopes at one instant; the two contacts are solved together
+    (resolve.resolve_at_one_instant), each with e = 0.6 and the same impulse, so it leaves
+    straight up at 0.6 of its landing speed, whichever face the file lists first, and the
+    audit has nothing to say."""
+    recording, report, first = _v_drop(tmp_path, mesh)
+    assert report.counts == {}, report.counts
+    rows = explain_contacts(recording, first)
+    assert len(rows) == 2 and rows.time_in_step[0] == rows.time_in_step[1]  # one instant, to the bit
+    assert list(rows.how) == [HOW_AT_ONE_INSTANT] * 2 and list(rows.restitution) == [0.6, 0.6]
+    assert rows.impulse[0] == pytest.approx(rows.impulse[1], rel=1e-12)
+    before, after = np.asarray(rows.velocity_a_before[0]), np.asarray(rows.velocity_a_after[1])
+    assert abs(after[0]) < 1e-12 and abs(after[2]) < 1e-12
+    assert after[1] == pytest.approx(-0.6 * before[1], rel=1e-12)
+
+
+def test_a_drop_onto_the_crease_resolved_in_turn_is_a_simultaneous_finding(tmp_path):
+    """ordering = index resolves the two contacts one after the other: the second is held
+    by the rapid-contact rule only because it came right after the first, and the ball
+    leaves sideways. The audit names the pair and says the order decided it; the same ball
+    dropped beside the crease meets one slope at a time and is clean."""
+    recording, report, first = _v_drop(tmp_path, V_MESH, ["ordering=index"])
+    found = [f for f in report.findings if f.kind == "simultaneous"]
+    assert len(found) == 1 and report.counts.get("simultaneous") == 1, report.counts
+    finding = found[0]
     assert finding.step == first and finding.particles == [0]
     assert "mesh 'v' triangle" in finding.message and "the order decided how it left" in finding.message
+    assert "ordering = time solves a sphere's contacts at one instant together" in finding.advice
     rows = explain_contacts(recording, first)
     assert rows.time_in_step[0] == rows.time_in_step[1]  # one instant, to the bit
     assert abs(rows.velocity_a_after[1][0]) > 1.0  # and it left sideways
     beside = tmp_path / "beside.mcap"
-    api.record(str(scene), ["particles.0.position=[0.3, 1.0, 0.0]"], mcap_path=str(beside), rrd=False)
+    api.record(str(tmp_path / "vdrop.toml"), ["ordering=index", "particles.0.position=[0.3, 1.0, 0.0]"],
+               mcap_path=str(beside), rrd=False)
     assert not [f for f in explain(str(beside)).findings if f.kind == "simultaneous"]
 
 

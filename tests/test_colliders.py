@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import assume, event, given, settings
+from hypothesis import HealthCheck, assume, event, given, settings
 from hypothesis import strategies as st
 
 from physdbg.engine.colliders import (
@@ -49,7 +49,7 @@ def test_the_table_names_each_kind_and_which_partners_move():
     assert partner_restitution(KIND_WALL, 0, restitution, walls) == 0.7
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.filter_too_much])
 @given(kind=st.sampled_from([KIND_PAIR, KIND_WALL]), integrator=st.sampled_from([EULER, EXACT, VERLET]),
        xa=vector, xb=vector, va=vector.map(lambda v: 4.0 * v), vb=vector.map(lambda v: 4.0 * v),
        gravity=vector.map(lambda g: 10.0 * g), normal=vector, offset=coordinate, two_sided=st.booleans(),

@@ -12,7 +12,7 @@ from physdbg.engine.periodic import minimum_image
 from physdbg.engine.reference import ReferenceWorld
 from physdbg.engine.state import Settings, State, Walls
 from physdbg.engine.world import World
-from physdbg.events import Contacts
+from physdbg.events import HOW_AT_ONE_INSTANT, Contacts
 
 
 class _Contacts:
@@ -226,3 +226,47 @@ def test_the_compiled_loop_gives_the_reference_contacts_and_states_with_a_mesh(s
     """Meshes are a collider kind like the others: both loops meet the same triangles at
     the same times and end every step in the same state, also when the mesh turns."""
     _both_loops_agree(*scene, steps=40)
+
+
+def _v_and_a_corner(shuffle: int) -> tuple:
+    """Balls (e = 0.6, under gravity) dropped exactly onto the crease of a symmetric 90° V of
+    four triangles, and one thrown into the edge of the box's floor and a wall, so that each
+    meets two immovable partners at one instant; the V's triangles in an order from
+    ``shuffle``."""
+    from physdbg.engine.state import Meshes
+
+    a, b, c, d, e, f = (np.array(p) for p in ([0.0, 0.6, 0.1], [0.5, 0.1, 0.1], [0.5, 0.1, 0.9], [0.0, 0.6, 0.9],
+                                              [1.0, 0.6, 0.1], [1.0, 0.6, 0.9]))
+    triangles = [np.array(t) for t in ([a, b, c], [a, c, d], [b, e, f], [b, f, c])]
+    order = np.random.default_rng(shuffle).permutation(4)
+    corners = np.array([triangles[i] for i in order])
+    positions = [[0.5, 0.6, 0.3], [0.5, 0.75, 0.5], [0.5, 0.9, 0.7], [0.3, 0.3, 0.08]]
+    velocities = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 0.0]]
+    radius = [0.05, 0.05, 0.05, 0.05]
+    # the last ball is thrown down into the edge of the floor and the x- wall, so that it
+    # meets both at t = 0.02 s: 3 cm from each at 1.5 m/s across, the floor also 4.905·t² nearer
+    positions[3] = [0.08, 0.05 + 0.03 + 4.905 * 0.02 ** 2, 0.5]
+    velocities[3] = [-1.5, -1.5, 0.0]
+    n = len(positions)
+    state = State(np.array(positions), np.array(velocities), np.ones(n), np.array(radius), np.full(n, 0.6),
+                  np.ones(n))
+    walls = _box(1.0, 0.6)
+    walls.meshes = Meshes(["v"], np.array([0.6]), corners, np.zeros(4, dtype=np.int64), ["v"], [],
+                          np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)))
+    return state, walls, Settings(gravity=(0.0, -9.81, 0.0)), 1 / 60
+
+
+@settings(max_examples=6, deadline=None)
+@given(st.integers(0, 2**16))
+def test_contacts_at_one_instant_are_resolved_alike_by_both_loops(shuffle):
+    """Contacts at one instant are solved together by both loops (resolve.resolve_at_one_instant):
+    the compiled loop gathers them from its queue, the reference from its list of every
+    contact; they must give the same rows, in the same order, and the same states."""
+    state, walls, method, dt = _v_and_a_corner(shuffle)
+    observer = _Contacts()
+    world = World(state.copy(), walls, method, observer)
+    for _ in range(40):
+        world.step(dt)
+    together = [row for row in observer.rows if row[5] == HOW_AT_ONE_INSTANT]
+    assert {row[2] for row in together} >= {0, 1, 2, 3}, together  # the three drops and the corner
+    _both_loops_agree(state, walls, method, dt, steps=40)

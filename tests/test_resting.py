@@ -91,24 +91,29 @@ def test_a_satisfied_seed_costs_one_update(pile):
 def test_the_held_store_grows_only_what_ran_out():
     """The per-sphere lists are (N, K): K doubles only when a sphere's list is full, the
     capacity only when the store is (doubling both at once made K 8 192 wide, 6.5 GB, for
-    a 100 000-sphere pile)."""
-    from physdbg.engine.resting import grow_held, held_add, held_find, held_room, new_held
+    a 100 000-sphere pile). Full means without room for AT_ONE_INSTANT more contacts: a
+    sphere's contacts at one instant are held together."""
+    from physdbg.engine.resting import AT_ONE_INSTANT, grow_held, held_add, held_find, held_room, new_held
 
-    h = new_held(4, capacity=2, per_particle=2)
+    room = AT_ONE_INSTANT
+    h = new_held(8, capacity=room + 2, per_particle=room + 1)
     held_add(h, KIND_PAIR, 0, 1, 1.0, 0.0, 0.0)
     held_add(h, KIND_PAIR, 2, 3, 0.0, 1.0, 0.0)
-    assert not held_room(h, 0, 2)  # the store is full; no sphere is
+    assert held_room(h, 0, 4)
+    held_add(h, KIND_PAIR, 4, 5, 0.0, 1.0, 0.0)
+    assert not held_room(h, 0, 6)  # the store is full; no sphere is
     h = grow_held(h)
-    assert (h.kind.shape[0], h.slots.shape[1]) == (4, 2)
+    assert (h.kind.shape[0], h.slots.shape[1]) == (2 * (room + 2), room + 1)
     held_add(h, KIND_PAIR, 0, 2, 0.0, 0.0, 1.0)
     assert not held_room(h, 0, 3)  # sphere 0's list is full; the store is not
     h = grow_held(h)
-    assert (h.kind.shape[0], h.slots.shape[1]) == (4, 4)
+    assert (h.kind.shape[0], h.slots.shape[1]) == (2 * (room + 2), 2 * (room + 1))
     held_add(h, KIND_PAIR, 0, 3, 1.0, 0.0, 0.0)
     # every contact is still found where it was, with its normal
-    for c, (a, b) in enumerate([(0, 1), (2, 3), (0, 2), (0, 3)]):
+    for c, (a, b) in enumerate([(0, 1), (2, 3), (4, 5), (0, 2), (0, 3)]):
         assert held_find(h, KIND_PAIR, a, b) == c and held_find(h, KIND_PAIR, b, a) == -1
-    assert h.normal[2].tolist() == [0.0, 0.0, 1.0] and h.count[HELD] == 4 and h.deg.tolist() == [3, 1, 2, 2]
+    assert h.normal[3].tolist() == [0.0, 0.0, 1.0] and h.count[HELD] == 5
+    assert h.deg.tolist() == [3, 1, 2, 2, 1, 1, 0, 0]
 
 
 def _left_looking_cholesky_solve(big, idx, n, ridge, xs):

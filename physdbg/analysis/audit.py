@@ -23,9 +23,11 @@ Checks (kind: what it means):
 * ``pinned``: a kinematic mesh pressed a sphere against something immovable from the
   opposite side (the engine's ``pinned`` warning, resting.pinned_by): no impulse can stop
   a prescribed motion, so the run ended there;
-* ``simultaneous``: a sphere met two immovable partners at one instant whose normals are
-  neither parallel nor at right angles, and the two were resolved one after the other:
-  the first impulse changed the second's closing speed, so the order decided the outcome.
+* ``simultaneous``: a sphere met two immovable partners at one instant, and the two were
+  resolved one after the other (``ordering = "index"``; the time-ordered loop solves them
+  together): the first impulse changed the second's closing speed (normals neither
+  parallel nor at right angles), or the rapid-contact rule held the second only because
+  it came right after the first, so the order decided the outcome.
 """
 
 from __future__ import annotations
@@ -36,8 +38,9 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..events import (FEATURE_NAMES, HOW_IMPULSE, HOW_RAPID, KIND_MESH, KIND_WALL, PARTNER_IS_SPHERE, Contacts, EngineWarning, StepEnd, contact_words,
-                      partner_is_sphere, partner_words)
+from ..events import (FEATURE_NAMES, HOW_AT_ONE_INSTANT, HOW_IMPULSE, HOW_RAPID, HOW_RESTING, KIND_MESH, KIND_WALL,
+                      PARTNER_IS_SPHERE, Contacts, EngineWarning, StepEnd, contact_words, partner_is_sphere,
+                      partner_words)
 from .mesh_overlap import MeshOverlaps
 from .quiet import quiet_numerics
 from .tunnel import StepChecker
@@ -456,26 +459,30 @@ class Auditor:
 
     def _check_simultaneous(self, step: int, dt: float, c: Contacts) -> None:
         """Two contacts of one sphere with immovable partners at the same instant (the same
-        time_in_step, to the bit), both with an impulse, whose normals are neither parallel
-        nor perpendicular (|n_1·n_2| between 1e-9 and 1 - 1e-9), or the second held by the
-        rapid-contact rule right after the first: resolved in turn, the order decided how the
-        sphere left (a ball dropped onto the crease of a symmetric V leaves it sideways).
-        Named once per step, the first such pair; swept runs only (another detection's, or
-        another engine's, times are not instants)."""
+        time_in_step, to the bit), resolved one after the other, the first with an impulse
+        not held, whose normals are neither parallel nor perpendicular (|n_1·n_2| between
+        1e-9 and 1 - 1e-9), or the second held by the rapid-contact rule right after the
+        first: the order decided how the sphere left (a ball dropped onto the crease of a
+        symmetric V leaves it sideways). The time-ordered loop solves such contacts together
+        (how = HOW_AT_ONE_INSTANT: never named); ``ordering = "index"`` resolves them in
+        turn. Named once per step, the first such pair; swept runs only (another
+        detection's, or another engine's, times are not instants)."""
         if self.settings.get("detection", "swept") != "swept" or self.header.meta.get("foreign"):
             return  # only a swept test's times are instants (a discrete run's contacts share the step's end)
         # the candidates, grouped by sphere and instant, in numpy (a step holds hundreds of
         # contacts, and a loop over every pair of them would be quadratic)
-        rows = np.flatnonzero(~partner_is_sphere(c.kind) & (c.impulse > 0.0))
+        rows = np.flatnonzero(~partner_is_sphere(c.kind) & (c.impulse > 0.0) & (c.how != HOW_AT_ONE_INSTANT))
         if len(rows) < 2:
             return
         rows = rows[np.lexsort((rows, c.time_in_step[rows], c.a[rows]))]
         same = (c.a[rows[1:]] == c.a[rows[:-1]]) & (c.time_in_step[rows[1:]] == c.time_in_step[rows[:-1]])
         for k in np.flatnonzero(same):
             i, j = int(rows[k]), int(rows[k + 1])  # in the order they were resolved
+            if int(c.how[i]) in (HOW_RESTING, HOW_RAPID):
+                continue  # held first: the second was solved with it, together
             facing = abs(float(np.dot(c.normal[i], c.normal[j])))
             coupled = 1e-9 < facing < 1.0 - 1e-9
-            by_rule = int(c.how[j]) == HOW_RAPID and int(c.how[i]) != HOW_RAPID
+            by_rule = int(c.how[j]) == HOW_RAPID
             if not (coupled or by_rule):
                 continue
             a = int(c.a[i])
@@ -483,14 +490,19 @@ class Auditor:
             leaving = ", ".join(f"{q:.3g}" for q in np.asarray(c.velocity_a_after[j], dtype=np.float64))
             why = ("the rapid-contact rule held the second, with restitution 0, only because it came right "
                    "after the first" if by_rule else "the first impulse changed the second's closing speed")
+            by_index = self.settings.get("ordering", "time") == "index"
             self._add(Finding("simultaneous", step, [a],
                               f"sphere {a} met {first} and {second} at one instant ({c.time_in_step[i] / dt:.3f}·dt "
                               f"into the step), and they were resolved one after the other: {first} first, with "
                               f"restitution {c.restitution[i]:.3g}, then {second}, with {c.restitution[j]:.3g}; "
                               f"{why}, so the order decided how it left (at ({leaving}) m/s)",
-                              "contacts at one instant are resolved in turn, in the order their swept tests came "
-                              "out (docs/meshes.md, \"Contacts at one instant\"); move the sphere off the "
-                              "crease, or read the outcome as one of the orders, not the answer",
+                              ("ordering = index resolves contacts in turn, in the order they were detected; "
+                               "ordering = time solves a sphere's contacts at one instant together"
+                               if by_index else
+                               "the time-ordered loop solves together at most 4 contacts of a sphere at one "
+                               "instant, one of each set of parallel normals")
+                              + " (docs/meshes.md, \"Contacts at one instant\"); read the outcome as one of the "
+                                "orders, not the answer",
                               evidence={"rows": [i, j], "time": float(c.time_in_step[i])}))
             return
 

@@ -126,6 +126,7 @@ M_RUN_TIME, M_STEP_END, M_INTEGRATOR, M_DRAG, M_K, M_DETECTION, M_SAMPLES, M_TOL
     _M[n] for n in ("run_time", "step_end", "integrator", "drag", "k", "detection", "samples", "tolerance"))
 M_REST_FRACTION, M_REST_STEP_FACTOR, M_ANCHOR_IS_FLOW, M_PATH_FOLLOWS_ACC, M_VTOL, M_ATOL = (
     _M[n] for n in ("rest_fraction", "rest_step_factor", "anchor_is_flow", "path_follows_acc", "vtol", "atol"))
+M_RESTITUTION_RULE, M_RAPID_TIME, M_RAPID_RULE = (_M[n] for n in ("rule", "rapid_time", "rapid_rule"))
 C_ADJ_START, C_ADJ, C_BOX_LO, C_BOX_HI, C_BOX_MARGIN, C_MAX_DEGREE, C_PATH_LO, C_PATH_HI, C_SCAN_PARTNERS = (
     _C[n] for n in ("adj_start", "adj", "box_lo", "box_hi", "box_margin", "max_degree", "path_lo", "path_hi",
                     "scan_partners"))

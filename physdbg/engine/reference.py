@@ -5,7 +5,8 @@ resolve phase is a plain Python loop with no broad phase, no event queue, no ver
 no re-query: before every contact it swept-tests *every* pair and every sphere–wall pair
 from the current anchors, takes the earliest contact in the step (ties: walls before
 pairs, then by sphere and partner index), and resolves it with the same resolver
-(resolve.resolve_contact). Whatever the fast loop gains by remembering predictions,
+(resolve.resolve_contact; with the sphere's other contacts with immovable partners at that
+instant, resolve.resolve_at_one_instant). Whatever the fast loop gains by remembering predictions,
 pruning pairs with swept boxes, invalidating stale ones and pausing for Python, it must
 give the same contacts in the same order and the same states; a hypothesis test
 (tests/test_reference.py) checks that on small random scenes, as the brute-force broad
@@ -19,7 +20,7 @@ from __future__ import annotations
 
 from ..events import OUTCOME_HIT, OUTCOME_SUPERSEDED
 from .colliders import KINDS, PARTNER_IS_SPHERE, every_candidate
-from .resolve import OUT_OF_WORK, SKIPPED
+from .resolve import AT_ONE_INSTANT_CANDIDATES, OUT_OF_WORK, SAME_INSTANT, SKIPPED
 from .step_context import StepContext
 from .timeline import CONTACTS, EVENTS, ROWS, TESTS, Buffers, predict_into
 from .world import World
@@ -58,13 +59,29 @@ class ReferenceWorld(World):
             self._buf.counters[EVENTS] += 1
             if self._buf.counters[CONTACTS] >= self.event_cap:
                 return "max_events_per_step"
-            status = self._resolve_one(ctx, kind, a, other, toi)
+            # contacts of the sphere with immovable partners at that instant go together
+            # (resolve.resolve_at_one_instant), as the compiled loop gathers them from its queue
+            together = [(kind, other)]
+            if not PARTNER_IS_SPHERE[kind] and self.settings.detection == "swept":
+                until = toi + SAME_INSTANT * ctx.dt
+                together += sorted({(k, o) for t, _, i, o, k in candidates
+                                    if i == a and not PARTNER_IS_SPHERE[k] and t <= until and (k, o) != (kind, other)})
+                together = together[:AT_ONE_INSTANT_CANDIDATES]
+            if len(together) > 1:
+                status, resolved = self._resolve_at_one_instant(ctx, together, a, toi)
+                for (k, o), done in list(zip(together, resolved))[1:]:
+                    if done:
+                        self._record_outcome(ctx, k, a, o, toi, OUTCOME_HIT)
+                if not resolved[0]:
+                    status = SKIPPED
+            else:
+                status = self._resolve_one(ctx, kind, a, other, toi)
             changed = {int(c) for c in self._buf.changed[1:1 + int(self._buf.changed[0])]}
             if changed:
                 used_up = {(k, i, j) for k, i, j in used_up
                            if i not in changed and not (PARTNER_IS_SPHERE[k] and j in changed)}
-            if status == SKIPPED:
-                used_up.add((kind, a, other))
+            if status == SKIPPED and a not in changed and not (PARTNER_IS_SPHERE[kind] and other in changed):
+                used_up.add((kind, a, other))  # (a skip that moved an anchor changed the path: predicted anew)
             self._record_outcome(ctx, kind, a, other, toi, OUTCOME_SUPERSEDED if status == SKIPPED else OUTCOME_HIT)
             if status == OUT_OF_WORK:
                 return "max_resting_work_per_step"

@@ -29,16 +29,26 @@ import math
 
 import numpy as np
 
-from ..events import HOW_IMPULSE, HOW_RAPID, HOW_RESTING, HOW_WITH_HELD
+from ..events import HOW_AT_ONE_INSTANT, HOW_IMPULSE, HOW_RAPID, HOW_RESTING, HOW_WITH_HELD
 from .colliders import (contact_feature, contact_gap, contact_normal, partner_moves, partner_normal_motion,
                         partner_restitution, partner_sphere, partner_surface, surface_gap)
 from .jit import borrowing, kernel
 from .kernel_args import (
     M_ANCHOR_IS_FLOW,
     M_PATH_FOLLOWS_ACC,
+    M_RAPID_RULE,
+    M_RAPID_TIME,
     M_REST_FRACTION,
     M_REST_STEP_FACTOR,
+    M_RESTITUTION_RULE,
+    M_RUN_TIME,
+    M_STEP_END,
+    P_A,
+    P_LAST_CONTACT,
+    P_RADIUS,
+    P_SIGMA,
     P_V,
+    P_X,
     forces,
     motion_of,
     paths,
@@ -46,6 +56,7 @@ from .kernel_args import (
 )
 from .motion import KICK_AT_STEP_START, advance_particle, kick
 from .resting import (
+    AT_ONE_INSTANT,
     HELD,
     STEP_RELEASED,
     begin_solve,
@@ -137,33 +148,31 @@ def judge_contact(kind, ia, other, toi, particles, method, geometry, h, contacts
     restitution used, how (HOW_*), rapid): status SKIPPED, RESOLVED, or NEEDS_HELD — the
     row is begun (time, normal, point, velocities before) and :func:`finish_with_held`
     must solve it with the held contacts it reaches."""
-    # (unpacked to distinct names: numba types each variable once)
-    x, v, a, acc, radius, inverse_mass, restitution, sigma, last_contact = particles
-    (run_time, step_end, integrator, drag, k, _detection, _samples, _tolerance, rest_fraction, rest_step_factor, rule,
-     rapid_time, rapid_rule, anchor_is_flow, path_follows_acc, vtol, atol) = method
+    x, v, a = particles[P_X], particles[P_V], particles[P_A]
+    sigma = particles[P_SIGMA]
+    _step_end, integrator, drag, k = motion_of(method)
     ib = partner_sphere(kind, other)
-    changed[0] = 0
     moved_a = sigma[ia] < toi  # (an anchor already at the contact's time keeps its path)
     moved_b = ib >= 0 and sigma[ib] < toi
     advance_particle(x, v, a, sigma, ia, toi, integrator, drag, k)
     if ib >= 0:
         advance_particle(x, v, a, sigma, ib, toi, integrator, drag, k)
-    nx, ny, nz = contact_normal(kind, x, sigma, ia, other, geometry)
-    closing = -relative_normal(v, ia, ib, nx, ny, nz)
-    # a kinematic mesh's surface moves: the closing speed and the press are relative to it
-    u0, u1, u2, driven = partner_surface(kind, x, sigma, radius, ia, other, nx, ny, nz, geometry)
-    surface_speed, surface_acc = partner_normal_motion(kind, x, v, sigma, radius, ia, other, nx, ny, nz, geometry)
-    rel_acc = relative_normal(acc, ia, ib, nx, ny, nz)
-    if driven:
-        closing += surface_speed
-        rel_acc -= surface_acc
-    e = combine(rule, restitution[ia], partner_restitution(kind, other, restitution, geometry))
-    wsum = inverse_mass[ia] + inverse_mass[ib] if ib >= 0 else inverse_mass[ia]
-    # (the velocities' rounding counts only on paths that are the flow: there a contact
-    # judged no approach is not predicted again, while on Euler paths it is, at once, by a
-    # narrow phase that knows nothing of rounding: see pressed_closing)
-    closing = pressed_closing(closing, rel_acc, step_end, velocity_scale(v, ia, ib) if anchor_is_flow else 0.0)
-    if closing < 0.0 or (closing == 0.0 and not rel_acc < 0.0) or wsum == 0.0:
+    return _judge_at(kind, ia, other, toi, moved_a, moved_b, particles, method, geometry, h, contacts, counters,
+                     contacts_slot, rapid_slot, changed)
+
+
+@borrowing
+def _judge_at(kind, ia, other, toi, moved_a, moved_b, particles, method, geometry, h, contacts, counters,
+              contacts_slot, rapid_slot, changed):
+    """judge_contact once the spheres' anchors are at the contact (moved_a, moved_b: whether
+    advancing them there moved them)."""
+    x, v, _a, _acc, radius, inverse_mass, _restitution, sigma, last_contact = particles
+    anchor_is_flow = method[M_ANCHOR_IS_FLOW]
+    ib = partner_sphere(kind, other)
+    changed[0] = 0
+    nx, ny, nz, closing, rel_acc, e, wsum, driven, u0, u1, u2 = _approach(kind, ia, other, particles, method,
+                                                                         geometry)
+    if not _approaches(closing, rel_acc, wsum):
         # Euler (and dragged Verlet) paths change with the anchor, so a sphere whose anchor
         # moved is predicted again; one whose anchor was already there keeps its path, and
         # predicting it again would only find this same contact again, forever
@@ -175,31 +184,10 @@ def judge_contact(kind, ia, other, toi, particles, method, geometry, h, contacts
                 changed[0] += 1
                 changed[changed[0]] = ib
         return SKIPPED, closing, 0.0, HOW_IMPULSE, False
-    now = run_time + toi
-    resting = rests(closing, rel_acc, step_end, rest_step_factor, rest_fraction)
-    is_rapid = not resting and rapid(now, last_contact[ia], last_contact[ib] if ib >= 0 else -math.inf, e,
-                                     rapid_time)
-    # a rapid contact that something presses is held like a resting one (under the "tc"
-    # rule only a slow one); one that is not held is elastic (the original TC model): a
-    # free cluster cannot collapse, and nothing that never rests (a gas, a break shot)
-    # loses energy to the rule
-    held = HOW_RESTING if resting else (
-        HOW_RAPID if is_rapid and rapid_holds(closing, rel_acc, rapid_time, rapid_rule) else HOW_IMPULSE)
-    used = 0.0 if held != HOW_IMPULSE else (1.0 if is_rapid else e)
-    row = contacts[counters[contacts_slot]]
-    row.time_in_step = toi
-    row.feature = contact_feature(kind, x, sigma, ia, other, geometry)
-    row.normal[0] = nx
-    row.normal[1] = ny
-    row.normal[2] = nz
-    for c in range(3):
-        row.point[c] = x[ia, c] - row.normal[c] * radius[ia]
-        row.velocity_a_before[c] = v[ia, c]
-        row.velocity_b_before[c] = v[ib, c] if ib >= 0 else math.nan
-    if driven:  # an immovable partner's velocity is NaN, a moving surface's its own
-        row.velocity_b_before[0] = u0
-        row.velocity_b_before[1] = u1
-        row.velocity_b_before[2] = u2
+    now = method[M_RUN_TIME] + toi
+    held, used, is_rapid = _judged_how(closing, rel_acc, e, now, ia, ib, last_contact, method)
+    _begin_row(contacts[counters[contacts_slot]], kind, ia, other, toi, nx, ny, nz, driven, u0, u1, u2, x, v, radius,
+               sigma, geometry)
     last_contact[ia] = now
     if ib >= 0:
         last_contact[ib] = now
@@ -214,9 +202,86 @@ def judge_contact(kind, ia, other, toi, particles, method, geometry, h, contacts
     _finish_row(kind, ia, other, ib, v, j, used, closing, held, is_rapid, contacts, counters, contacts_slot,
                 rapid_slot)
     if driven:
+        row = contacts[counters[contacts_slot] - 1]
         for c in range(3):
             row.velocity_b_after[c] = row.velocity_b_before[c]
     return RESOLVED, closing, used, held, is_rapid
+
+
+@borrowing
+def _approach(kind, ia, other, particles, method, geometry):
+    """How contact (kind, ia, other) closes, its spheres' anchors at the contact: its normal
+    (nx, ny, nz, from the partner towards ia), the closing speed to judge it by (m/s, the
+    rounding rule of pressed_closing applied), the relative normal acceleration (m/s²,
+    < 0 when pressed), the restitution by the scene's rule, the sum of the inverse masses,
+    and whether the partner's surface is driven (a kinematic mesh's) with its velocity at
+    the contact (u0, u1, u2; m/s). Both measured from a moving surface's own motion."""
+    x, v, _a, acc, radius, inverse_mass, restitution, sigma, _last_contact = particles
+    ib = partner_sphere(kind, other)
+    nx, ny, nz = contact_normal(kind, x, sigma, ia, other, geometry)
+    closing = -relative_normal(v, ia, ib, nx, ny, nz)
+    # a kinematic mesh's surface moves: the closing speed and the press are relative to it
+    u0, u1, u2, driven = partner_surface(kind, x, sigma, radius, ia, other, nx, ny, nz, geometry)
+    surface_speed, surface_acc = partner_normal_motion(kind, x, v, sigma, radius, ia, other, nx, ny, nz, geometry)
+    rel_acc = relative_normal(acc, ia, ib, nx, ny, nz)
+    if driven:
+        closing += surface_speed
+        rel_acc -= surface_acc
+    e = combine(method[M_RESTITUTION_RULE], restitution[ia], partner_restitution(kind, other, restitution, geometry))
+    wsum = inverse_mass[ia] + inverse_mass[ib] if ib >= 0 else inverse_mass[ia]
+    # (the velocities' rounding counts only on paths that are the flow: there a contact
+    # judged no approach is not predicted again, while on Euler paths it is, at once, by a
+    # narrow phase that knows nothing of rounding: see pressed_closing)
+    closing = pressed_closing(closing, rel_acc, method[M_STEP_END],
+                              velocity_scale(v, ia, ib) if method[M_ANCHOR_IS_FLOW] else 0.0)
+    return nx, ny, nz, closing, rel_acc, e, wsum, driven, u0, u1, u2
+
+
+@borrowing
+def _approaches(closing, rel_acc, wsum) -> bool:
+    """Whether a judged contact (_approach) is one to resolve: it closes, or touches while
+    pressed, and something in it can move."""
+    return not (closing < 0.0 or (closing == 0.0 and not rel_acc < 0.0) or wsum == 0.0)
+
+
+@borrowing
+def _judged_how(closing, rel_acc, e, now, ia, ib, last_contact, method):
+    """How an approaching contact is resolved: (how: HOW_RESTING or HOW_RAPID if a rule
+    holds it, else HOW_IMPULSE; the restitution used; whether the rapid-contact rule saw it
+    come within its window of a previous contact). now: the contact's time (s since the
+    run began); last_contact (N,): each sphere's previous contact (s)."""
+    resting = rests(closing, rel_acc, method[M_STEP_END], method[M_REST_STEP_FACTOR], method[M_REST_FRACTION])
+    is_rapid = not resting and rapid(now, last_contact[ia], last_contact[ib] if ib >= 0 else -math.inf, e,
+                                     method[M_RAPID_TIME])
+    # a rapid contact that something presses is held like a resting one (under the "tc"
+    # rule only a slow one); one that is not held is elastic (the original TC model): a
+    # free cluster cannot collapse, and nothing that never rests (a gas, a break shot)
+    # loses energy to the rule
+    held = HOW_RESTING if resting else (
+        HOW_RAPID if is_rapid and rapid_holds(closing, rel_acc, method[M_RAPID_TIME], method[M_RAPID_RULE])
+        else HOW_IMPULSE)
+    used = 0.0 if held != HOW_IMPULSE else (1.0 if is_rapid else e)
+    return held, used, is_rapid
+
+
+@borrowing
+def _begin_row(row, kind, ia, other, toi, nx, ny, nz, driven, u0, u1, u2, x, v, radius, sigma, geometry) -> None:
+    """Begin a contact's row: its time, feature, normal, point and velocities before (a
+    moving surface's own as the partner's; NaN for anything else immovable)."""
+    ib = partner_sphere(kind, other)
+    row.time_in_step = toi
+    row.feature = contact_feature(kind, x, sigma, ia, other, geometry)
+    row.normal[0] = nx
+    row.normal[1] = ny
+    row.normal[2] = nz
+    for c in range(3):
+        row.point[c] = x[ia, c] - row.normal[c] * radius[ia]
+        row.velocity_a_before[c] = v[ia, c]
+        row.velocity_b_before[c] = v[ib, c] if ib >= 0 else math.nan
+    if driven:  # an immovable partner's velocity is NaN, a moving surface's its own
+        row.velocity_b_before[0] = u0
+        row.velocity_b_before[1] = u1
+        row.velocity_b_before[2] = u2
 
 
 @kernel
@@ -229,13 +294,156 @@ def finish_with_held(kind, ia, other, toi, particles, method, geometry, h, conta
     v = particles[P_V]
     ib = partner_sphere(kind, other)
     row = contacts[counters[contacts_slot]]
-    j, ok = _solve_with_held(kind, ia, ib, other, toi, row.normal[0], row.normal[1], row.normal[2], used * closing,
-                             how != HOW_IMPULSE, particles, method, geometry, h, changed, work_budget)
-    _finish_row(kind, ia, other, ib, v, j, used, closing, how if how != HOW_IMPULSE else HOW_WITH_HELD, is_rapid,
-                contacts, counters, contacts_slot, rapid_slot)
+    kinds = np.full(1, kind, np.int64)
+    others = np.full(1, other, np.int64)
+    normals = np.empty((1, 3))
+    for c in range(3):
+        normals[0, c] = row.normal[c]
+    targets = np.full(1, used * closing)
+    holds = np.full(1, how != HOW_IMPULSE)
+    impulses = np.zeros(1)
+    ok = _solve_with_held(kinds, others, 1, ia, ib, toi, normals, targets, holds, particles, method, geometry, h,
+                          changed, work_budget, impulses)
+    _finish_row(kind, ia, other, ib, v, impulses[0], used, closing, how if how != HOW_IMPULSE else HOW_WITH_HELD,
+                is_rapid, contacts, counters, contacts_slot, rapid_slot)
     if ib < 0 and not math.isnan(row.velocity_b_before[0]):  # a moving surface keeps its velocity
         for c in range(3):
             row.velocity_b_after[c] = row.velocity_b_before[c]
+    return RESOLVED if ok else OUT_OF_WORK
+
+
+# The most contacts of one sphere solved together at one instant (resolve_at_one_instant;
+# resting.AT_ONE_INSTANT, 4: a ball meeting the crease of a V meets two triangles, a box's
+# corner three planes) and how many candidates the loops gather for it (a fan of triangles
+# meeting at a vertex gives several with one normal, of which only one is kept).
+AT_ONE_INSTANT_CANDIDATES = 8
+# Two swept times of one instant may differ in their last bits: contacts whose times lie
+# within this fraction of the step of each other are at one instant.
+SAME_INSTANT = 1e-12
+# Normals this close to parallel (|n_1·n_2| above 1 - PARALLEL) are one contact met twice
+# (an edge or corner shared by triangles): only the first is kept.
+PARALLEL = 1e-9
+
+
+@kernel
+def resolve_at_one_instant(kinds, others, n, ia, toi, particles, method, geometry, h, contacts, counters,
+                           contacts_slot, rapid_slot, changed, work_budget, resolved):
+    """Resolve sphere ia's contacts with immovable partners (walls, meshes' triangles) that
+    its swept tests put at one instant: kinds, others (n,) int64, the first the contact
+    the queue popped (at ``toi``, s into the step), the others within SAME_INSTANT of it.
+    Other arguments as :func:`resolve_contact`; resolved (n,) int64 is set to 1 for each
+    contact resolved here, 0 for each left (it is predicted again with ia's new path).
+
+    Contacts met at one instant are solved *together*, so that no order decides the
+    outcome: a ball dropped onto the crease of a symmetric V leaves it straight up, as it
+    would from a V of any numbering. Each contact is judged at the instant, before any
+    impulse (closing speed, restitution, the resting and rapid rules, all against the
+    sphere's previous contact, not against one another); those that approach, but one of
+    each group of parallel normals (a shared edge met through two triangles), and at most
+    AT_ONE_INSTANT, in order of kind then partner, are solved in one projected solve with
+    the held contacts they reach, each to its own restitution target (resting/). Each
+    keeps its own row; an impulse solved so says HOW_AT_ONE_INSTANT. Where fewer than two
+    approach, or where the order cannot decide (every pair of normals perpendicular, so
+    that each impulse leaves the others' closing speeds as they were, and the rapid-contact
+    rule cannot hold one only for coming after another: the rule off, every restitution 1,
+    no member pressed, or the sphere's previous contact already within the rule's window,
+    as in a pile against a box's walls), the popped contact is resolved alone, exactly as
+    resolve_contact does, and the others in turn.
+    Returns resolve_contact's statuses."""
+    x, v, a = particles[P_X], particles[P_V], particles[P_A]
+    sigma, last_contact = particles[P_SIGMA], particles[P_LAST_CONTACT]
+    _step_end, integrator, drag, k = motion_of(method)
+    moved = sigma[ia] < toi
+    advance_particle(x, v, a, sigma, ia, toi, integrator, drag, k)
+    order = np.argsort(kinds[:n] * (np.int64(1) << 40) + others[:n], kind="mergesort")
+    members = np.empty(n, np.int64)  # indices into kinds, others
+    normals = np.empty((n, 3))
+    closings = np.empty(n)
+    m = 0
+    coupled = False  # two members neither parallel nor perpendicular
+    elastic = True  # every member's restitution 1 (the rapid-contact rule cannot act)
+    held_by_rule = False  # a member the rapid-contact rule would hold, were it rapid
+    for s in range(n):
+        resolved[s] = 0
+    for s in range(n):
+        q = order[s]
+        nx, ny, nz, closing, rel_acc, e, wsum, _driven, _u0, _u1, _u2 = _approach(kinds[q], ia, others[q],
+                                                                                particles, method, geometry)
+        if not _approaches(closing, rel_acc, wsum) or m == AT_ONE_INSTANT:
+            continue
+        repeated = False
+        for r in range(m):
+            facing = abs(nx * normals[r, 0] + ny * normals[r, 1] + nz * normals[r, 2])
+            if facing > 1.0 - PARALLEL:
+                repeated = True
+            elif facing > PARALLEL:
+                coupled = True
+        if repeated:
+            continue
+        members[m] = q
+        normals[m, 0] = nx
+        normals[m, 1] = ny
+        normals[m, 2] = nz
+        closings[m] = closing
+        elastic = elastic and e >= 1.0
+        held_by_rule = held_by_rule or (rel_acc < 0.0 and rapid_holds(closing, rel_acc, method[M_RAPID_TIME],
+                                                                        method[M_RAPID_RULE]))
+        m += 1
+    # perpendicular contacts are independent: in turn they give what together would (to the
+    # bit where the normals are the axes, as a box's walls), unless the rapid-contact rule
+    # would hold the second only because the first came right before it: a pressed contact
+    # with a restitution below 1, of a sphere whose previous contact is outside the rule's
+    # window. (One already within it, as in a pile, is judged rapid in either order, and an
+    # unpressed rapid contact is elastic in either: in turn, as always.)
+    window = method[M_RAPID_TIME]
+    fresh = window > 0.0 and not method[M_RUN_TIME] + toi - last_contact[ia] < window
+    if m >= 2 and not coupled and (elastic or not fresh or not held_by_rule):
+        m = 0
+    if m < 2:  # nothing to solve together: the popped contact alone
+        resolved[0] = 1
+        status, closing, used, how, is_rapid = _judge_at(kinds[0], ia, others[0], toi, moved, False, particles,
+                                                         method, geometry, h, contacts, counters, contacts_slot,
+                                                         rapid_slot, changed)
+        if status != NEEDS_HELD:
+            return status
+        return finish_with_held(kinds[0], ia, others[0], toi, particles, method, geometry, h, contacts, counters,
+                                contacts_slot, rapid_slot, changed, work_budget, closing, used, how, is_rapid)
+    now = method[M_RUN_TIME] + toi
+    hows = np.empty(m, np.int64)
+    useds = np.empty(m)
+    rapids = np.zeros(m, np.bool_)
+    targets = np.empty(m)
+    holds = np.zeros(m, np.bool_)
+    group_kinds = np.empty(m, np.int64)
+    group_others = np.empty(m, np.int64)
+    first_row = counters[contacts_slot]
+    for r in range(m):
+        q = members[r]
+        resolved[q] = 1
+        group_kinds[r] = kinds[q]
+        group_others[r] = others[q]
+        nx, ny, nz, closing, rel_acc, e, _wsum, driven, u0, u1, u2 = _approach(kinds[q], ia, others[q], particles,
+                                                                             method, geometry)
+        how, used, is_rapid = _judged_how(closing, rel_acc, e, now, ia, -1, last_contact, method)
+        hows[r] = how
+        useds[r] = used
+        rapids[r] = is_rapid
+        targets[r] = useds[r] * closings[r]
+        holds[r] = hows[r] != HOW_IMPULSE
+        _begin_row(contacts[first_row + r], kinds[q], ia, others[q], toi, nx, ny, nz, driven, u0, u1, u2, x, v,
+                   particles[P_RADIUS], sigma, geometry)
+    last_contact[ia] = now
+    impulses = np.zeros(m)
+    ok = _solve_with_held(group_kinds, group_others, m, ia, -1, toi, normals, targets, holds, particles, method,
+                          geometry, h, changed, work_budget, impulses)
+    for r in range(m):
+        row = contacts[counters[contacts_slot]]
+        _finish_row(group_kinds[r], ia, group_others[r], -1, v, impulses[r], useds[r], closings[r],
+                    hows[r] if holds[r] else HOW_AT_ONE_INSTANT, rapids[r], contacts, counters, contacts_slot,
+                    rapid_slot)
+        if not math.isnan(row.velocity_b_before[0]):  # a moving surface keeps its velocity
+            for c in range(3):
+                row.velocity_b_after[c] = row.velocity_b_before[c]
     return RESOLVED if ok else OUT_OF_WORK
 
 
@@ -262,10 +470,13 @@ def _finish_row(kind, ia, other, ib, v, j, used, closing, how, is_rapid, contact
 
 
 @kernel
-def _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, target, hold, particles, method, geometry, h, changed,
-                     work_budget):
-    """The contact solved together with the held contacts it reaches (resting/); returns
-    (its impulse, whether the work budget sufficed) and lists the changed spheres."""
+def _solve_with_held(kinds, others, n, ia, ib, toi, normals, targets, holds, particles, method, geometry, h, changed,
+                     work_budget, impulses):
+    """The contacts (kinds, others (n,) of sphere ia, and sphere ib (-1: none) for a pair;
+    normals (n, 3); targets (n,) the separation speed each must reach, m/s; holds (n,)
+    whether each is held after) solved together with the held contacts they reach
+    (resting/); writes each one's impulse (N·s) to impulses (n,), lists the changed
+    spheres, and returns whether the work budget sufficed."""
     x, v, a, radius, sigma = paths(particles)
     acc, inverse_mass = forces(particles)
     step_end, integrator, drag, k = motion_of(method)
@@ -276,27 +487,34 @@ def _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, target, hold, particl
     touch(h, ia, x, v, a, sigma, toi, integrator, drag, k, solve)
     if ib >= 0:
         touch(h, ib, x, v, a, sigma, toi, integrator, drag, k, solve)
-    c0 = held_find(h, kind, ia, other)
-    if c0 < 0:
-        c0 = held_add(h, kind, ia, other, nx, ny, nz)
-    else:
-        h.normal[c0, 0] = nx
-        h.normal[c0, 1] = ny
-        h.normal[c0, 2] = nz
-    h.target[c0] = target
-    h.surface[c0, 0], h.surface[c0, 1] = partner_normal_motion(kind, x, v, sigma, radius, ia, other, nx, ny, nz,
-                                                               geometry)
+    seeds = np.empty(n, np.int64)
+    for r in range(n):
+        nx, ny, nz = normals[r, 0], normals[r, 1], normals[r, 2]
+        c0 = held_find(h, kinds[r], ia, others[r])
+        if c0 < 0:
+            c0 = held_add(h, kinds[r], ia, others[r], nx, ny, nz)
+        else:
+            h.normal[c0, 0] = nx
+            h.normal[c0, 1] = ny
+            h.normal[c0, 2] = nz
+        h.target[c0] = targets[r]
+        h.surface[c0, 0], h.surface[c0, 1] = partner_normal_motion(kinds[r], x, v, sigma, radius, ia, others[r], nx,
+                                                                   ny, nz, geometry)
+        seeds[r] = c0
     if h.deg[ia] > 1 and pinned_by(h, ia):  # a motion no impulse can stop: the step ends here
-        return 0.0, False
-    seeds = np.full(1, c0, np.int64)
-    ok = solve_contacts(h, v, True, seeds, 1, x, v, a, sigma, inverse_mass, toi, integrator, drag, k, vtol,
+        return False
+    ok = solve_contacts(h, v, True, seeds, n, x, v, a, sigma, inverse_mass, toi, integrator, drag, k, vtol,
                         work_budget, stick)
-    j = h.jv[c0]
-    h.target[c0] = 0.0
-    if not hold:
-        if h.lam[c0] != 0.0:
-            push_along(acc, inverse_mass, ia, ib, h.normal[c0, 0], h.normal[c0, 1], h.normal[c0, 2], -h.lam[c0])
-        held_remove(h, c0)
+    for r in range(n):
+        impulses[r] = h.jv[seeds[r]]
+        h.target[seeds[r]] = 0.0
+    for r in range(n):
+        if not holds[r]:  # (ids move as contacts are removed: found again)
+            c0 = held_find(h, kinds[r], ia, others[r])
+            if h.lam[c0] != 0.0:
+                push_along(acc, inverse_mass, ia, ib, h.normal[c0, 0], h.normal[c0, 1], h.normal[c0, 2],
+                           -h.lam[c0])
+            held_remove(h, c0)
     release_loose(h, v, acc, inverse_mass, True, x, a, sigma, toi, integrator, drag, k, vtol, atol, stick)
     if ok:
         ok = _solve_accelerations(h, x, v, a, acc, inverse_mass, sigma, toi, integrator, drag, k, work_budget, vtol,
@@ -319,7 +537,7 @@ def _solve_with_held(kind, ia, ib, other, toi, nx, ny, nz, target, hold, particl
             n_changed += 1
             changed[n_changed] = p
     changed[0] = n_changed
-    return j, ok
+    return ok
 
 
 @kernel

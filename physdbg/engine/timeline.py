@@ -38,11 +38,13 @@ from ..events import CONTACT_ROW, OUTCOME_CAPPED, OUTCOME_HIT, OUTCOME_MISS, OUT
 from .broadphase.boxes import box_meets
 from .colliders import KINDS, most_partners, partner_sphere, partners_bound, partners_of, searches_meshes, time_of_impact
 from .jit import borrowing, kernel, records
-from .kernel_args import B_BATCH_MARK, B_COUNTERS, B_MESH_QUERIES, C_SCAN_PARTNERS, LoopBuffers, boxes, partner_lists, paths, sweep, test_log
+from .kernel_args import B_BATCH_MARK, B_COUNTERS, B_MESH_QUERIES, B_TEST_INT, C_SCAN_PARTNERS, M_DETECTION, M_STEP_END, LoopBuffers, boxes, partner_lists, paths, sweep, test_log
 from .motion import particle_box
-from .resolve import NEEDS_HELD, OUT_OF_WORK, SKIPPED, finish_with_held, judge_contact
+from .resolve import (AT_ONE_INSTANT, AT_ONE_INSTANT_CANDIDATES, NEEDS_HELD, OUT_OF_WORK, SAME_INSTANT, SKIPPED,
+                      finish_with_held, judge_contact, resolve_at_one_instant)
 from .resting import held_find, held_room
 from .resting.store import STOP
+from .toi import SWEPT
 
 # statuses
 DONE = 0
@@ -395,6 +397,9 @@ def _inside_box(x, v, a, radius, sigma, p, step_end, integrator, k, margin, box_
 
 
 _HELD_SOLVE = -1  # _run_events: the contact in ``judged`` is to be solved with held contacts
+_AT_ONE_INSTANT = -2  # ... the contacts in ``judged`` (from judged[5]) are at one instant
+# (the loop keeps room in the contact rows for a whole instant's rows)
+CONTACT_ROOM = AT_ONE_INSTANT + 1
 
 
 @kernel
@@ -416,18 +421,36 @@ def run_time_order(particles, method, geometry, held, candidates, budgets, buffe
      _requery, requery_count, _mesh_queries) = buffers
     scratch = np.empty((2, 3))  # the lo, hi rows of _inside_box
     found = np.empty((most_partners(geometry, max_degree) + 1, 2), dtype=np.int64)  # one kind's (_repredict)
-    judged = np.empty(5, dtype=np.int64)  # a contact _run_events left for the held solve: rid, kind, a, other, how
+    # a contact _run_events left for the held solve: rid, kind, a, other, how; or the
+    # contacts it found at one instant: how many, then their rows (from judged[5])
+    judged = np.empty(5 + AT_ONE_INSTANT_CANDIDATES, dtype=np.int64)
     judged_f = np.empty(4)  # ... its time, closing speed, restitution used, rapid (1.0) or not
+    stack = np.empty(2 * 64 + 2, dtype=np.int64)  # the heap's walk (_at_one_instant): two a level
+    test_int = buffers[B_TEST_INT]
     while True:
         status = _run_events(particles, method, geometry, held, candidates, budgets, buffers, scratch, found, judged,
-                             judged_f)
-        if status != _HELD_SOLVE:
+                             judged_f, stack)
+        if status == _AT_ONE_INSTANT:
+            n = judged[4]
+            rows = judged[5:5 + n].copy()
+            resolved = np.zeros(n, dtype=np.int64)
+            solved = resolve_at_one_instant(test_int[rows, 0], test_int[rows, 2], n, judged[2], judged_f[0], particles,
+                                            method, geometry, held, contacts, counters, CONTACTS, RAPID, changed,
+                                            work_budget, resolved)
+            _after_contact(solved, rows[0], batch_mark, pending, changed, test_outcome, counters, requery_count)
+            if not resolved[0]:  # it did not approach: the others were resolved without it
+                test_outcome[rows[0]] = OUTCOME_SUPERSEDED
+            for s in range(1, n):  # the others resolved with it; one left is superseded once popped
+                if resolved[s]:
+                    test_outcome[rows[s]] = OUTCOME_HIT
+        elif status == _HELD_SOLVE:
+            rid, kind, ia, other, how = judged[0], judged[1], judged[2], judged[3], judged[4]
+            solved = finish_with_held(kind, ia, other, judged_f[0], particles, method, geometry, held, contacts,
+                                      counters, CONTACTS, RAPID, changed, work_budget, judged_f[1], judged_f[2], how,
+                                      judged_f[3] != 0.0)
+            _after_contact(solved, rid, batch_mark, pending, changed, test_outcome, counters, requery_count)
+        else:
             return status
-        rid, kind, ia, other, how = judged[0], judged[1], judged[2], judged[3], judged[4]
-        solved = finish_with_held(kind, ia, other, judged_f[0], particles, method, geometry, held, contacts, counters,
-                                  CONTACTS, RAPID, changed, work_budget, judged_f[1], judged_f[2], how,
-                                  judged_f[3] != 0.0)
-        _after_contact(solved, rid, batch_mark, pending, changed, test_outcome, counters, requery_count)
         if solved == OUT_OF_WORK:
             mark_capped(heap_data, test_outcome, counters)
             return RESTING_BUDGET
@@ -449,10 +472,13 @@ def _after_contact(status, rid, batch_mark, pending, changed, test_outcome, coun
 
 
 @borrowing
-def _run_events(particles, method, geometry, held, candidates, budgets, buffers, scratch, found, judged, judged_f):
+def _run_events(particles, method, geometry, held, candidates, budgets, buffers, scratch, found, judged, judged_f,
+                stack):
     """run_time_order's loop: re-predict, pop, resolve (resolve.judge_contact), until
-    done, a pause, or a contact that must be solved with held contacts (_HELD_SOLVE,
-    the contact in judged, judged_f: see run_time_order)."""
+    done, a pause, a contact that must be solved with held contacts (_HELD_SOLVE, the
+    contact in judged, judged_f: see run_time_order), or contacts of one sphere with
+    immovable partners at one instant (_AT_ONE_INSTANT, resolved together by
+    resolve.resolve_at_one_instant). stack: scratch for the heap's walk."""
     # positional, in kernel_args' field order (the groups come as plain tuples, see there);
     # distinct names for what the loop does not read itself: numba types each name once
     adj_start, adj, box_lo, box_hi, _box_margin, max_degree, _path_lo, _path_hi, scan_boxes, _scan = candidates
@@ -484,7 +510,7 @@ def _run_events(particles, method, geometry, held, candidates, budgets, buffers,
         if counters[HEAP_SIZE] == 0:
             return DONE
         if (heap_toi.shape[0] - counters[HEAP_SIZE] < room or test_outcome.shape[0] - counters[ROWS] < room
-                or contacts.shape[0] - counters[CONTACTS] < 2):
+                or contacts.shape[0] - counters[CONTACTS] < CONTACT_ROOM):
             return GROW
         top = heap_data[0, 0]
         if not held_room(held, test_int[top, 1], partner_sphere(test_int[top, 0], test_int[top, 2])):
@@ -505,12 +531,23 @@ def _run_events(particles, method, geometry, held, candidates, budgets, buffers,
         ib = partner_sphere(kind, other)
         # stale: a batch after the one that made the prediction changed a sphere of it
         if batch_mark[ia] > batch or (ib >= 0 and batch_mark[ib] > batch):
-            test_outcome[rid] = OUTCOME_SUPERSEDED
+            if test_outcome[rid] != OUTCOME_HIT:  # (not one resolved with others at one instant)
+                test_outcome[rid] = OUTCOME_SUPERSEDED
             continue
         if counters[CONTACTS] >= cap:
             test_outcome[rid] = OUTCOME_CAPPED
             mark_capped(heap_data, test_outcome, counters)
             return CAPPED
+        # contacts with immovable partners at one instant are resolved together (run_time_order);
+        # only a swept test's times are instants (sampled and discrete ones are the samples')
+        if ib < 0 and method[M_DETECTION] == SWEPT:
+            n = _at_one_instant(heap_toi, heap_data, test_int, batch_mark, counters, ia, toi,
+                                toi + SAME_INSTANT * method[M_STEP_END], rid, judged, stack)
+            if n > 1:
+                judged[2] = ia
+                judged[4] = n
+                judged_f[0] = toi
+                return _AT_ONE_INSTANT
         # resolve.resolve_contact's first stage; the second, which allocates, is run_time_order's
         status, closing, used, how, is_rapid = judge_contact(kind, ia, other, toi, particles, method, geometry, held,
                                                              contacts, counters, CONTACTS, RAPID, changed)
@@ -527,6 +564,45 @@ def _run_events(particles, method, geometry, held, candidates, budgets, buffers,
             return _HELD_SOLVE
         # re-predict only the particles whose paths changed (next time round the loop)
         _after_contact(status, rid, batch_mark, pending, changed, test_outcome, counters, requery_count)
+
+
+@borrowing
+def _at_one_instant(heap_toi, heap_data, test_int, batch_mark, counters, ia, toi, until, rid, judged, stack):
+    """The popped contact (test-log row rid, of sphere ia with an immovable partner, at
+    toi) and the queued ones of ia with immovable partners up to ``until`` (s), still
+    current and each (kind, partner) once: their rows into judged[5:], the popped one
+    first, at most AT_ONE_INSTANT_CANDIDATES; returns how many. A walk of the heap that
+    enters only entries at or before ``until`` (a heap's children are never earlier than
+    their parent), so it costs the entries at that instant: one comparison at the root's
+    children nearly always."""
+    judged[5] = rid
+    n = 1
+    top = 0
+    if counters[HEAP_SIZE] > 0:
+        stack[0] = 0
+        top = 1
+    while top > 0:
+        top -= 1
+        e = stack[top]
+        if heap_toi[e] > until:
+            continue
+        r = heap_data[e, 0]
+        kind = test_int[r, 0]
+        other = test_int[r, 2]
+        if (test_int[r, 1] == ia and partner_sphere(kind, other) < 0 and batch_mark[ia] <= heap_data[e, 1]
+                and n < AT_ONE_INSTANT_CANDIDATES):
+            known = False
+            for s in range(n):
+                if test_int[judged[5 + s], 0] == kind and test_int[judged[5 + s], 2] == other:
+                    known = True
+            if not known:
+                judged[5 + n] = r
+                n += 1
+        for child in (2 * e + 1, 2 * e + 2):
+            if child < counters[HEAP_SIZE] and top < stack.shape[0]:
+                stack[top] = child
+                top += 1
+    return n
 
 
 # ------------------------------------------------------------------------------ step helpers

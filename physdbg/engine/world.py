@@ -73,6 +73,7 @@ from .resolve import (
     RESTITUTION_RULES,
     SKIPPED,
     keep_on_moving_partners,
+    resolve_at_one_instant,
     resolve_contact,
     settle_held,
 )
@@ -87,6 +88,7 @@ from .state import (BUDGETS, STATE_FIELDS, NonFiniteState, Settings, State, Wall
 from .step_context import StepContext, wants_mesh_search, wants_swept_tests
 from .timeline import (
     CAPPED,
+    CONTACT_ROOM,
     CONTACTS,
     DONE,
     EVENTS,
@@ -718,7 +720,7 @@ class World:
                 return None  # World.step raises StepStopped after this phase
             if status == GROW:
                 room = prediction_room(geometry, ctx.max_degree)
-                self._ensure(ctx, room, room, 2)
+                self._ensure(ctx, room, room, CONTACT_ROOM)
             elif status == GROW_HELD:
                 self._grow_held(ctx)
             elif status == REQUERY:
@@ -788,6 +790,24 @@ class World:
         particles, method, geometry = self._kernel_groups(ctx)
         return resolve_contact(kind, a, other, when, particles, method, geometry, self.held, records(buf.contacts),
                                buf.counters, CONTACTS, RAPID, buf.changed, self.resting_budget)
+
+    def _resolve_at_one_instant(self, ctx: StepContext, contacts: list[tuple[int, int]], a: int,
+                                when: float) -> tuple[int, list[bool]]:
+        """Resolve sphere a's contacts (kind, partner) with immovable partners at one
+        instant, ``when`` in the step, together (resolve.resolve_at_one_instant; the first
+        is the one taken from the queue); returns its status and which were resolved."""
+        buf = self._buf
+        buf.ensure(0, 0, CONTACT_ROOM)
+        while not held_room(self.held, a, -1):
+            self.held = grow_held(self.held)
+        particles, method, geometry = self._kernel_groups(ctx)
+        kinds = np.array([k for k, _ in contacts], dtype=np.int64)
+        others = np.array([o for _, o in contacts], dtype=np.int64)
+        resolved = np.zeros(len(contacts), dtype=np.int64)
+        status = resolve_at_one_instant(kinds, others, len(contacts), a, when, particles, method, geometry, self.held,
+                                        records(buf.contacts), buf.counters, CONTACTS, RAPID, buf.changed,
+                                        self.resting_budget, resolved)
+        return int(status), [bool(r) for r in resolved]
 
     def _kernel_groups(self, ctx: StepContext) -> tuple[tuple, tuple, tuple]:
         """The step's arrays and settings as the compiled loop and resolver take them:

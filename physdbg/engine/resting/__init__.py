@@ -71,6 +71,7 @@ from .rules import (  # noqa: F401
     velocity_scale,
 )
 from .store import (  # noqa: F401
+    AT_ONE_INSTANT,
     HELD,
     PINNED,
     PINNED_CONTACTS,

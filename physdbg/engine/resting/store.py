@@ -31,6 +31,11 @@ PINNED = 6
 PINNED_CONTACTS = 7  # kind, other, kind, other in slots 7..10
 COUNT_SLOTS = 11
 
+# The most contacts of one sphere a resolve holds at once: its contacts with immovable
+# partners at one instant, solved together (resolve.resolve_at_one_instant). The store
+# keeps room for that many before each contact.
+AT_ONE_INSTANT = 4
+
 
 class HeldContacts(NamedTuple):
     """The held contacts of a world, as arrays (capacity C, N spheres, K per sphere).
@@ -122,8 +127,8 @@ def grow_held(h: HeldContacts) -> HeldContacts:
     """
     c = h.kind.shape[0]
     k = h.slots.shape[1]
-    capacity = 2 * c if h.count[HELD] >= c else c
-    per_sphere = 2 * k if h.deg.shape[0] and int(h.deg.max()) >= k else k
+    capacity = 2 * c if h.count[HELD] + AT_ONE_INSTANT > c else c
+    per_sphere = 2 * k if h.deg.shape[0] and int(h.deg.max()) + AT_ONE_INSTANT > k else k
     if capacity == c and per_sphere == k:  # asked to grow with room left: grow the store anyway
         capacity = 2 * c
     big = new_held(h.deg.shape[0], capacity, per_sphere)
@@ -139,8 +144,9 @@ def grow_held(h: HeldContacts) -> HeldContacts:
 
 @borrowing
 def held_room(h, a, b) -> bool:
-    """Whether one more contact of spheres a and b (b = -1: a wall) fits without growing."""
-    return (h.count[HELD] < h.kind.shape[0] and h.deg[a] < h.slots.shape[1]
+    """Whether AT_ONE_INSTANT more contacts of sphere a, or one of spheres a and b (b = -1:
+    an immovable partner), fit without growing."""
+    return (h.count[HELD] + AT_ONE_INSTANT <= h.kind.shape[0] and h.deg[a] + AT_ONE_INSTANT <= h.slots.shape[1]
             and (b < 0 or h.deg[b] < h.slots.shape[1]))
 
 
