@@ -142,6 +142,11 @@ def advise(scene) -> Advice:
 
     if periodic is not None and not periodic["fits"]:
         predictions.append(Prediction("dt", f"{dt:.6g}", "pairs untested", periodic["why"]))
+    overlaps = starting_overlaps(scene)  # a sphere inside another body at the start: overlap left, whatever the method
+    facts["start_overlaps"] = overlaps
+    facts["out_of_reach"] = meshes_out_of_reach(scene)
+    if overlaps:
+        predictions.append(Prediction("start", "positions", "overlap left", start_words(overlaps)))
     pile = _pile(state, walls, np.asarray(s.gravity, dtype=float))
     facts["pile"] = pile
     if pile is not None:
@@ -491,3 +496,100 @@ def mesh_sizes(meshes) -> dict[str, int]:
     """Each fixed mesh's name and its number of triangles (state.Meshes)."""
     first = meshes.first
     return {name: int(first[k + 1] - first[k]) for k, name in enumerate(meshes.names)}
+
+
+# ----------------------------------------------------------------------------- the starting state
+START_EXAMPLES = 3  # starting overlaps named in full; the rest counted
+START_NOT_PUSHED = ("physdbg does not push bodies apart: it resolves contacts from where they are, so the overlap "
+                    "stays until their motions part them, and every step warns")
+
+
+def starting_overlaps(scene) -> list[dict]:
+    """Every sphere that starts inside another body, deeper than the contact tolerance:
+    [{"sphere": i, "partner": "sphere 4" / "wall 'floor'" / "mesh 'trough' triangle 1",
+    "depth": m}], each sphere once (its deepest), deepest first. Spheres with spheres by the
+    grid broad phase on their own boxes (periodic images included by the minimum image),
+    walls by their gaps (colliders.plane.gaps) and triangles by the engine's mesh search
+    (colliders.mesh.deepest_where), all at run time 0: the engine's own rules."""
+    from .engine.broadphase.boxes import NO_LIMIT
+    from .engine.broadphase.grid import grid_pairs
+    from .engine.colliders.mesh import MeshGeometry, deepest_where
+    from .engine.colliders.plane import gaps
+    from .events import KIND_MESH, KIND_WALL, partner_words
+
+    state, walls = scene.state, scene.walls
+    x, r = state.positions, state.radius
+    tolerance = scene.settings.contact_tolerance
+    worst: dict[int, tuple[float, str]] = {}
+
+    def note(i: int, depth: float, partner: str) -> None:
+        if depth > tolerance and depth > worst.get(i, (0.0, ""))[0]:
+            worst[i] = (float(depth), partner)
+
+    if state.count == 0 or not np.isfinite(x).all():
+        return []
+    if state.count > 1:
+        pairs, _, _ = grid_pairs(x - r[:, None], x + r[:, None], 0.0, NO_LIMIT)
+        if len(pairs):
+            a, b = pairs[:, 0], pairs[:, 1]
+            depth = r[a] + r[b] - np.linalg.norm(minimum_image(x[a] - x[b], walls.period), axis=1)
+            for k in np.flatnonzero(depth > tolerance):
+                note(int(a[k]), float(depth[k]), f"sphere {int(b[k])}")
+                note(int(b[k]), float(depth[k]), f"sphere {int(a[k])}")
+    names = walls.partner_names()
+    if len(walls.names):
+        depth = -gaps(x, r, walls)
+        for i, w in zip(*np.nonzero(depth > tolerance)):
+            note(int(i), float(depth[i, w]), partner_words(KIND_WALL, int(w), names))
+    if walls.meshes.triangles:
+        geometry = tuple(MeshGeometry.of(walls))
+        corners = walls.meshes.corners.reshape(-1, 3)
+        near = np.all((x + r[:, None] >= corners.min(axis=0)) & (x - r[:, None] <= corners.max(axis=0)), axis=1)
+        for i in np.flatnonzero(near):
+            depth, _, t = deepest_where(np.ascontiguousarray(x[i:i + 1], dtype=np.float64),
+                                        np.ascontiguousarray(r[i:i + 1], dtype=np.float64), geometry, False)
+            note(int(i), float(depth), partner_words(KIND_MESH, int(t), names))
+    return [{"sphere": i, "partner": partner, "depth": depth}
+            for i, (depth, partner) in sorted(worst.items(), key=lambda item: (-item[1][0], item[0]))]
+
+
+def start_words(overlaps: list[dict]) -> str:
+    """The starting overlaps in one line (starting_overlaps' list, not empty)."""
+    from .analysis.audit import _length
+
+    named = "; ".join(f"sphere {o['sphere']} starts {_length(o['depth'])} inside {o['partner']}"
+                      for o in overlaps[:START_EXAMPLES])
+    more = len(overlaps) - START_EXAMPLES
+    return named + (f" (and {more} more spheres)" if more > 0 else "") + f"; {START_NOT_PUSHED}"
+
+
+def meshes_out_of_reach(scene) -> list[str]:
+    """A note for each mesh no sphere can reach within the run (each sphere stays within
+    the advisor's speed bound × duration of where it starts, and a kinematic mesh within
+    its turn radius and drift of where it starts): nothing will touch it."""
+    state, walls, s = scene.state, scene.walls, scene.settings
+    meshes = walls.meshes
+    if not meshes.triangles or state.count == 0:
+        return []
+    duration = scene.duration if scene.duration is not None else (scene.steps or 0) * (scene.dt or 0.0)
+    bound, _ = _speed_bound(state, walls, np.asarray(s.gravity, dtype=float), duration)
+    surface = meshes.surface_speeds()
+    bound += 2.0 * float(surface.max(initial=0.0))
+    movable = state.inverse_mass > 0
+    extent = np.where(movable, bound * duration, 0.0) + state.radius
+    spread = (meshes.turn_radii() * (np.linalg.norm(meshes.angular_velocity, axis=1) > 0)
+              + np.linalg.norm(meshes.velocity, axis=1) * duration)
+    notes = []
+    for k, name in enumerate(meshes.names):
+        corners = meshes.corners[meshes.mesh_of == k].reshape(-1, 3)
+        if not len(corners):
+            continue
+        lo, hi = corners.min(axis=0) - spread[k], corners.max(axis=0) + spread[k]
+        away = np.linalg.norm(np.maximum(0.0, np.maximum(lo - state.positions, state.positions - hi)), axis=1)
+        gap = away - extent
+        if np.all(gap > 0.0):
+            i = int(np.argmin(away))
+            notes.append(f"mesh '{name}' is out of every sphere's reach in this run: the nearest, sphere {i}, starts "
+                         f"{away[i]:.3g} m from it and can travel at most {extent[i] - state.radius[i]:.3g} m "
+                         f"({bound:.3g} m/s at most, {duration:.3g} s); nothing will touch it")
+    return notes

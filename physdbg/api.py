@@ -90,6 +90,8 @@ class RunSummary:
     mesh_notes: list[str] = field(default_factory=list)  # what loading the meshes left out
     kernels: str = "compiled"  # the engine's tier and why (tier.py)
     meshes_move: bool = False  # two meshes or more, one kinematic: the audit looks for them passing into each other
+    overlap_where: str = ""  # who overlapped most and in which step ("spheres 3 and 4, step 12"), when known
+    start_notes: list[str] = field(default_factory=list)  # the spheres that start inside another body
     def as_dict(self) -> dict:
         return asdict(self)
 
@@ -129,9 +131,10 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     called with each finding as it is made.
     """
     scene = ready_scene(scene, overrides)
+    from .advisor import meshes_out_of_reach, start_words, starting_overlaps
     from .engine import NonFiniteState, energies, state_hash
     from .errors import WorldStuck
-    from .events import RunTally
+    from .events import RunTally, overlap_words
     from .interrupt import StopOnCtrlC
     from .observe import FanOut
     from .precompile import compile_kernels
@@ -144,6 +147,9 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
 
         auditor = Auditor(RecordingHeader.from_scene(scene), on_finding)
         observer = FanOut(observer, auditor) if observer is not None else auditor
+    overlaps = starting_overlaps(scene)  # said before a step is run: the run cannot mend them
+    start_notes = [start_words(overlaps)] if overlaps else []
+    out_of_reach = meshes_out_of_reach(scene)
     world = scene.build_world(observer)
     kernels = chosen_tier()
     if on_status is not None and not kernels.interpreted:
@@ -193,7 +199,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         meshes_move=bool(scene.walls.meshes.moving.any()) and len(scene.walls.meshes) > 1,
         mesh_notes=list(scene.walls.meshes.notes) + [
             f"'{name}' {scene.walls.meshes.motion_words(k)}" for k, name in enumerate(scene.walls.meshes.names)
-            if scene.walls.meshes.moving[k]], steps=n_steps,
+            if scene.walls.meshes.moving[k]] + out_of_reach, steps=n_steps,
         sim_time=world.time,
         contacts=tally.total["contacts"], swept_tests=tally.total["swept_tests"],
         held_at_end=tally.total["held"], rapid=tally.total["rapid"], released=tally.total["released"],
@@ -201,6 +207,9 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         max_contacts_in_a_step=tally.most["contacts"], energy_start=e0, energy_end=e1, energy_drift=drift,
         momentum_start=[float(c) for c in mom0], momentum_end=[float(c) for c in mom1],
         momentum_drift=float(np.linalg.norm(mom1 - mom0)), max_overlap=tally.max_overlap,
+        start_notes=start_notes,
+        overlap_where=(f"{overlap_words(tally.overlap_with, scene.walls.partner_names())}, step {tally.overlap_step}"
+                       if tally.overlap_with is not None else ""),
         kernels=kernels.reason, wall_seconds=wall, compile_seconds=compile_seconds, ms_per_step=1000.0 * wall / n_steps if n_steps else math.nan,
         engine_ms_per_step=1000.0 * sum(tally.seconds.values()) / n_steps if n_steps else math.nan,
         phase_seconds=tally.seconds, final_hash=digest, warning_counts=dict(warnings.counts),
@@ -766,6 +775,7 @@ def check(scene: Scene | str, overrides: Sequence[str] = ()) -> CheckResult:
     current = {name: getattr(scene.settings, name) for name in ("integrator", "detection", "ordering")}
     mine = [p for name, value in current.items() for p in advice.fails(name, value)]
     mine += [p for p in advice.predictions if p.setting == "dt"]  # a periodic box too small for dt
+    mine += [p for p in advice.predictions if p.setting == "start"]  # a sphere starting inside another body
     return CheckResult(scene, advice, current, [p for p in mine if p.outcome != "inexact"],
                        [p for p in mine if p.outcome == "inexact"])
 

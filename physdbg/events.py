@@ -65,6 +65,15 @@ def partner_words(kind: int, other: int, names) -> str:
     return f"sphere {other}" if PARTNER_IS_SPHERE[kind] else f"{KIND_NAMES[kind]} {names[kind][other]}"
 
 
+def overlap_words(parties: tuple[int, int, int] | None, names) -> str:
+    """Who overlaps, in words: "spheres 3 and 4", "sphere 3 and mesh 'trough' triangle 1"
+    (parties: (kind, sphere, partner) as StepEnd.overlap_with; None: "spheres")."""
+    if parties is None:
+        return "spheres"
+    kind, a, other = parties
+    return f"spheres {a} and {other}" if PARTNER_IS_SPHERE[kind] else f"sphere {a} and {partner_words(kind, other, names)}"
+
+
 def contact_words(kind: int, a: int, other: int, names) -> str:
     """How reports name a contact in few words: "3–4" (a sphere pair), "3–wall 'floor'"."""
     return f"{a}–{other}" if PARTNER_IS_SPHERE[kind] else f"{a}–{partner_words(kind, other, names)}"
@@ -400,7 +409,9 @@ class StepEnd:
     penetration after the step (m, 0 when none). timings: seconds per phase (STEP_PHASES).
     state_hash: hex digest over the exact bytes of positions and velocities. warnings:
     the step's EngineWarning events. asleep: (N,) bool, the spheres asleep at ``time``
-    (engine/sleep.py), or None when the run does not let spheres sleep.
+    (engine/sleep.py), or None when the run does not let spheres sleep. overlap_with:
+    (kind, sphere, partner) of max_overlap, in the scene's numbering (None when nothing
+    overlaps, and in a run read back from a recording, which keeps only the depth).
     """
 
     step: int
@@ -417,6 +428,7 @@ class StepEnd:
     state_hash: str
     warnings: tuple[EngineWarning, ...] = field(default=())
     asleep: np.ndarray | None = None
+    overlap_with: tuple[int, int, int] | None = None
 
 
 class RunTally:
@@ -430,6 +442,8 @@ class RunTally:
         self.most = dict.fromkeys(STEP_COUNTS, 0)
         self.seconds = dict.fromkeys(STEP_PHASES, 0.0)
         self.max_overlap = 0.0
+        self.overlap_with = None  # (kind, sphere, partner) of the deepest overlap, where known
+        self.overlap_step = 0
 
     def add(self, end: StepEnd) -> None:
         self.steps += 1
@@ -439,7 +453,10 @@ class RunTally:
             self.most[name] = max(self.most[name], value)
         for name, seconds in end.timings.items():
             self.seconds[name] = self.seconds.get(name, 0.0) + seconds
-        self.max_overlap = max(self.max_overlap, end.max_overlap)
+        if end.max_overlap > self.max_overlap:
+            self.max_overlap = end.max_overlap
+            self.overlap_with = end.overlap_with
+            self.overlap_step = end.step
 
 
 Event = StepBegin | BroadPhaseInfo | Contacts | SweptTests | MeshSearch | EngineWarning | StepEnd

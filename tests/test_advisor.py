@@ -259,3 +259,44 @@ def test_a_recorded_scene_comes_back_with_the_settings_the_run_used(tmp_path):
     assert (again.settings.rapid_contact_rule, again.settings.sleep_speed, again.settings.sleep_time) == (
         used["rapid_contact_rule"], used["sleep_speed"], used["sleep_time"])
     assert again.auto["rapid_contact_rule"].endswith(": as recorded")
+
+
+TROUGH = "v -1 0.5 -1\nv -0.3 0 -1\nv 0.3 0 -1\nv 1 0.5 -1\nv -1 0.5 1\nv -0.3 0 1\nv 0.3 0 1\nv 1 0.5 1\n" \
+         "f 1 2 6\nf 1 6 5\nf 2 3 7\nf 2 7 6\nf 3 4 8\nf 3 8 7\n"
+
+
+def _trough_scene(tmp_path, second_ball: str) -> str:
+    (tmp_path / "trough.obj").write_text(TROUGH)
+    scene = tmp_path / "trough.toml"
+    scene.write_text('name = "trough"\ndt = "1/60"\nduration = 1.0\ngravity = [0.0, -9.81, 0.0]\n'
+                     '[[meshes]]\nname = "trough"\nfile = "trough.obj"\n'
+                     '[[particles]]\nposition = [0.0, 1.0, 0.0]\nradius = 0.05\n'
+                     f'[[particles]]\nposition = {second_ball}\nradius = 0.05\n')
+    return str(scene)
+
+
+def test_a_sphere_starting_inside_a_mesh_is_named_by_check_and_by_the_run(tmp_path):
+    """check names the sphere, the triangle and the depth, says what the run will do about
+    it, and fails (exit 1); the run says the same before its first step."""
+    scene = _trough_scene(tmp_path, "[0.3, 0.02, 0.3]")
+    result = CliRunner().invoke(app, ["check", scene])
+    assert result.exit_code == 1, result.output
+    assert ("start       sphere 1 starts 33.7 mm inside mesh 'trough' triangle 5; physdbg does not push bodies apart"
+            in result.output), result.output
+    assert "predicted to fail: it starts with a sphere inside another body (start, above)" in result.output
+    summary = api.run(scene, ["steps=2"])
+    assert summary.start_notes and summary.start_notes[0].startswith("sphere 1 starts 33.7 mm inside mesh 'trough'")
+    # and spheres inside each other, or behind a wall, are named the same way
+    api_check = api.check(scene, ["particles.1.position=[0.0, 1.06, 0.0]"])
+    assert [p.why.split(";")[0] for p in api_check.problems] == ["sphere 0 starts 40 mm inside sphere 1"]
+
+
+def test_a_mesh_no_sphere_can_reach_is_a_note(tmp_path):
+    scene = _trough_scene(tmp_path, "[50.0, 1.0, 0.0]")
+    far = ["particles.0.position=[60.0, 1.0, 0.0]"]
+    result = CliRunner().invoke(app, ["check", scene, *[a for o in far for a in ("-s", o)]])
+    assert result.exit_code == 0, result.output
+    assert ("note        mesh 'trough' is out of every sphere's reach in this run: the nearest, sphere 1, starts 49 m "
+            "from it") in result.output, result.output
+    assert any("out of every sphere's reach" in note for note in api.run(scene, [*far, "steps=2"]).mesh_notes)
+    assert api.check(scene).advice.facts["out_of_reach"] == []  # the ball above the trough reaches it

@@ -15,6 +15,7 @@ from physdbg.engine.colliders import (
     KINDS,
     PARTNER_IS_SPHERE,
     contact_gap,
+    deepest_overlap,
     every_candidate,
     geometry_of,
     max_overlap,
@@ -112,6 +113,12 @@ def test_the_deepest_overlap_is_the_largest_negative_gap_and_no_overlap_is_prune
             if g <= 0.0:
                 assert (i, j) in kept, (KIND_NAMES[kind], i, j, g)
     assert math.isclose(max_overlap(x, r, pairs, walls, False), deepest, rel_tol=0.0, abs_tol=1e-12)
+    depth, kind, a, other = deepest_overlap(x, r, pairs, walls, False)  # and who: the parties of that gap
+    assert depth == max_overlap(x, r, pairs, walls, False)
+    if depth > 0.0:
+        assert math.isclose(-contact_gap(kind, x, zeros, zeros, r, a, other, walls)[0], depth, abs_tol=1e-12)
+    else:
+        assert (kind, a, other) == (-1, -1, -1)
 
 
 # ----------------------------------------------------------------------------- meshes (KIND_MESH)

@@ -638,3 +638,28 @@ def test_highspeed_scans_by_itself_and_lists_again_every_relist_steps():
     listed = [k for k, s in enumerate(scanned) if not s]  # step k + 1 listed (step_index k at its start)
     assert listed[:1] == [0] and set(range(RELIST_EVERY, 70, RELIST_EVERY)) <= set(listed)
     assert sum(scanned) >= 70 - 2 * len(listed) and len(listed) <= 6
+
+
+def test_an_overlap_warning_and_the_summary_name_who_overlaps(tmp_path):
+    """A ball started 3 cm into a mesh, swept detection: each step's warning, the step's
+    record (StepEnd.overlap_with) and the run summary's overlap line name the sphere and the
+    triangle, in the scene's numbering."""
+    from typer.testing import CliRunner
+
+    from physdbg import api
+    from physdbg.cli import app
+    from physdbg.events import KIND_MESH
+
+    (tmp_path / "plate.obj").write_text("v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nf 1 3 2\nf 1 4 3\n")
+    scene = tmp_path / "inside.toml"
+    scene.write_text('name = "inside"\ndt = "1/60"\nsteps = 3\ngravity = [0.0, 0.0, 0.0]\n'
+                     '[[meshes]]\nname = "plate"\nfile = "plate.obj"\n'
+                     '[[particles]]\nposition = [0.5, 2.0, 0.0]\nradius = 0.1\n'
+                     '[[particles]]\nposition = [-0.5, 0.07, 0.5]\nradius = 0.1\n')
+    ends = []
+    api.run(str(scene), observer=type("O", (), {"on_event": lambda self, e: ends.append(e)
+                                                if isinstance(e, StepEnd) else None})())
+    assert ends[0].overlap_with == (KIND_MESH, 1, 1) and ends[0].max_overlap == pytest.approx(0.03)
+    assert ends[0].warnings[0].message.startswith("sphere 1 and mesh 'plate' triangle 1 overlap by 0.03 m")
+    out = CliRunner().invoke(app, ["run", str(scene)]).output
+    assert "overlap     max 0.03 m  (sphere 1 and mesh 'plate' triangle 1, step 1)" in out, out

@@ -406,7 +406,7 @@ class Auditor:
         if self._in_overlap:  # counted where it began
             return
         self._in_overlap = True
-        depth, spheres, partner, where = deepest_overlap(end.positions, self.radius, self.header.walls)
+        depth, spheres, partner, where = deepest_overlap(end.positions, self.radius, self.header.walls, end.time)
         wall = partner[1] if partner is not None and partner[0] == KIND_WALL else None
         if partner is not None:
             who = f"sphere {spheres[0]} and {partner_words(*partner, self.names)} overlap"
@@ -716,12 +716,13 @@ def _explain(rec, on_step, every_finding: bool = False) -> AuditReport:
     return report
 
 
-def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls):
+def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls, time: float = 0.0):
     """(depth m, spheres, partner (kind, index) or None, where (3,) or None) of the deepest
-    overlap of positions x (N, 3): sphere pairs found by the grid broad phase on the
-    spheres' own boxes (not across a periodic boundary; partner None), every sphere with
-    every wall (a sphere past a thin wall's middle went through it: tunnelling, not an
-    overlap) and with every mesh triangle. Depth 0 when none."""
+    overlap of positions x (N, 3) at run time ``time`` (s; where the kinematic meshes
+    are): sphere pairs found by the grid broad phase on the spheres' own boxes (not across
+    a periodic boundary; partner None), every sphere with every wall (a sphere past a thin
+    wall's middle went through it: tunnelling, not an overlap) and with every mesh
+    triangle. Depth 0 when none."""
     from ..engine.broadphase.boxes import NO_LIMIT
     from ..engine.broadphase.grid import grid_pairs
     from ..engine.colliders.plane import gaps
@@ -746,10 +747,12 @@ def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls):
         if pen[i, w] > best[0]:
             best = (float(pen[i, w]), [int(i)], (KIND_WALL, int(w)), x[i])
     if walls.meshes.triangles and finite.all():
-        from ..engine.colliders.mesh import MeshGeometry, deepest_where
+        from ..engine.colliders.mesh import MeshGeometry, deepest_where, place
 
+        geometry = tuple(MeshGeometry.of(walls))
+        place(geometry, walls.meshes, time, 0.0)  # a kinematic mesh where it is at the end of the step
         depth, i, t = deepest_where(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(r, dtype=np.float64),
-                                    tuple(MeshGeometry.of(walls)), True)
+                                    geometry, True)
         if depth > best[0]:
             best = (float(depth), [int(i)], (KIND_MESH, int(t)), x[int(i)])
     return best

@@ -270,7 +270,7 @@ def _errors(run: EngineRun, scene, measured: dict, reference: dict) -> None:
     through = np.zeros(st.count, dtype=bool)
     start_side = np.sign(st.positions @ walls.normals.T - walls.offsets[None, :]) if len(walls) else None
     for t, x, v in measured["frames"]:
-        worst_overlap = max(worst_overlap, deepest_overlap(x, st.radius, walls)[0])
+        worst_overlap = max(worst_overlap, deepest_overlap(x, st.radius, walls, t)[0])
         if len(walls):
             h = x @ walls.normals.T - walls.offsets[None, :]
             crossed = np.where(walls.two_sided[None, :], np.sign(h) != start_side,

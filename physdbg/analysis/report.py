@@ -268,6 +268,7 @@ def summary_text(s, observers: str = "the audit") -> str:
         f"bodies      {count_words(s.particles, 'particle')}, {count_words(len(s.walls), 'wall')}"
         + _mesh_words(getattr(s, "meshes", {})),
         *(f"meshes      {note}" for note in getattr(s, "mesh_notes", [])),
+        *(f"start       {note}" for note in getattr(s, "start_notes", [])),
         *([f"meshes      searched by the simultaneous descent in {s.together_steps} of {s.steps} steps, by a walk "
            f"per sphere in the rest (mesh_search = {s.mesh_search}: docs/meshes.md, \"Walks or the simultaneous "
            f"descent\")"] if getattr(s, "meshes", None) else []),
@@ -280,7 +281,7 @@ def summary_text(s, observers: str = "the audit") -> str:
         # and gravity change momentum by design; the audit line judges whether any was wrong
         f"energy      {s.energy_start:.6g} J -> {s.energy_end:.6g} J  (relative change {s.energy_drift:+.3e})",
         f"momentum    {_vec(s.momentum_start)} -> {_vec(s.momentum_end)} kg·m/s  (|change| {s.momentum_drift:.3e})",
-        f"overlap     max {s.max_overlap:.3g} m",
+        f"overlap     max {s.max_overlap:.3g} m" + (f"  ({s.overlap_where})" if s.overlap_where else ""),
         f"speed       {s.engine_ms_per_step:.3f} ms/step in the engine ({phases}); "
         f"{s.ms_per_step:.3f} ms/step with {observers}"
         + (f"; kernels compiled/loaded in {s.compile_seconds:.2f} s" if not _interpreted(s) else ""),
@@ -375,6 +376,8 @@ def check_text(result) -> str:
     if f["periodic"] is not None:
         lines.append(f"periodic    {f['periodic']['why']}")
     lines += [f"{'sweep' if k == 0 else '':<11} {sweep['why']}" for k, sweep in enumerate(f.get("mesh_sweeps") or [])]
+    lines += [f"start       {p.why}" for p in advice.predictions if p.setting == "start"]
+    lines += [f"note        {note}" for note in f.get("out_of_reach") or []]
     for setting in ("integrator", "detection", "ordering"):
         for k, p in enumerate(x for x in advice.predictions if x.setting == setting):
             mark = "*" if result.current[setting] == p.value else " "
@@ -408,7 +411,8 @@ def check_text(result) -> str:
                         if f.get("mesh_sweeps") else ""))
     else:
         lines.append(f"this scene  {settings} (*): predicted to fail: "
-                     + "; ".join(f"{p.setting}={p.value} {p.outcome}" for p in result.problems))
+                     + "; ".join("it starts with a sphere inside another body (start, above)" if p.setting == "start"
+                                 else f"{p.setting}={p.value} {p.outcome}" for p in result.problems))
     return "\n".join(lines)
 
 

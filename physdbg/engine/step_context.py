@@ -64,6 +64,7 @@ class StepContext:
     mesh_search_method: str = ""  # "walk" or "together": how the step's candidates were found (World._mesh_candidates)
     mesh_search: object | None = None
     max_overlap: float = 0.0
+    overlap_with: tuple[int, int, int] | None = None  # (kind, sphere, partner) of max_overlap
     sleeping_pairs: np.ndarray = field(default_factory=lambda: np.empty((0, 2), np.int64))
     slept: int = 0
     woken: int = 0

@@ -35,25 +35,26 @@ from time import perf_counter
 import numpy as np
 
 from ..events import (
-    BroadPhaseInfo,
     KIND_MESH,
     KIND_PAIR,
     OUTCOME_CAPPED,
     OUTCOME_HIT,
     OUTCOME_SUPERSEDED,
-    Contacts,
     STEP_PHASES,
+    BroadPhaseInfo,
+    Contacts,
+    MeshSearch,
     StepBegin,
     StepCounts,
     StepEnd,
-    MeshSearch,
     SweptTests,
+    overlap_words,
     partner_words,
 )
 from .broadphase import choose_broad_phase, make_broad_phase
 from .broadphase.boxes import boxes_meet
 from .broadphase.periodic import PeriodicBroadPhase
-from .colliders import KINDS, PARTNER_IS_SPHERE, geometry_of, max_overlap, mesh_search, narrow_candidates
+from .colliders import KINDS, PARTNER_IS_SPHERE, deepest_overlap, geometry_of, mesh_search, narrow_candidates
 from .colliders.mesh import place, reachable_together, walk_tests
 from .jit import records
 from .kernel_args import LoopBudgets, LoopCandidates, LoopMethod, LoopParticles
@@ -489,10 +490,10 @@ class World:
         if self._meshes_move and self.held.count[HELD]:  # held spheres end the step on a moving surface
             keep_on_moving_partners(self.held, x, v, ctx.path_accel, st.radius, ctx.sigma, self._inverse_mass, self._geometry,
                                     s.contact_tolerance)
-        ctx.max_overlap = self._max_overlap(ctx)
+        ctx.max_overlap, ctx.overlap_with = self._max_overlap(ctx)
         if s.detection == "swept" and ctx.max_overlap > s.contact_tolerance and not ctx.warnings:
-            ctx.warn("overlap", f"spheres overlap by {ctx.max_overlap:.3g} m, more than the contact tolerance "
-                                f"{s.contact_tolerance:g} m")
+            ctx.warn("overlap", f"{overlap_words(ctx.overlap_with, self.walls.partner_names())} overlap by "
+                                f"{ctx.max_overlap:.3g} m, more than the contact tolerance {s.contact_tolerance:g} m")
         if self.sleepers is not None:
             self._sleep(ctx)
         if self.numbering is not None:  # what leaves the world is in the scene's numbering
@@ -551,7 +552,7 @@ class World:
                             slept=ctx.slept, woken=ctx.woken)
         end = StepEnd(ctx.step, self.time, ctx.dt, self.state.positions.copy(), self.state.velocities.copy(),
                       ctx.kinetic, ctx.potential, ctx.momentum.copy(), counts, ctx.max_overlap, dict(ctx.timings),
-                      ctx.state_hash, tuple(ctx.warnings), self.asleep())
+                      ctx.state_hash, tuple(ctx.warnings), self.asleep(), ctx.overlap_with)
         obs = ctx.observer
         if obs is not None:
             obs.on_event(self._contacts_event(ctx))
@@ -838,16 +839,26 @@ class World:
             rows["a"] = self.numbering.spheres(rows["a"])
         return Contacts(ctx.step, rows)
 
-    def _max_overlap(self, ctx: StepContext) -> float:
+    def _max_overlap(self, ctx: StepContext) -> tuple[float, tuple[int, int, int] | None]:
         """Deepest penetration (m) among candidate pairs and particle–wall pairs (after a
         step that scanned, the pairs whose spheres' boxes meet at its end: the step's
-        pairs are those of the paths at its start)."""
+        pairs are those of the paths at its start), and its parties (kind, sphere, partner)
+        in the scene's numbering (None when nothing overlaps)."""
         st = self._st
         pairs = ctx.pairs
         if ctx.scan_partners:
             r = st.radius[:, None]
             pairs = self.broad_phase.pairs(st.positions - r, st.positions + r)
-        return float(max_overlap(st.positions, st.radius, pairs, self._geometry, self.settings.detection != "swept"))
+        depth, kind, a, other = deepest_overlap(st.positions, st.radius, pairs, self._geometry,
+                                                self.settings.detection != "swept")
+        if kind < 0:
+            return depth, None
+        if self.numbering is not None:
+            a = int(self.numbering.spheres(np.array([a]))[0])
+            other = int(self.numbering.partners(np.array([kind]), np.array([other]))[0])
+        if PARTNER_IS_SPHERE[kind] and other < a:
+            a, other = other, a
+        return depth, (kind, a, other)
 
     def _broad_phase_event(self, ctx: StepContext) -> BroadPhaseInfo:
         bp = self.broad_phase

@@ -33,7 +33,7 @@ from .kinds import KIND_NAMES, KINDS, PARTNER_IS_SPHERE, partner_sphere
 __all__ = ["KIND_NAMES", "KINDS", "KIND_MODULES", "PARTNER_IS_SPHERE", "partner_sphere", "geometry_of",
            "check_kind_modules", "time_of_impact", "contact_normal", "contact_feature", "partner_surface",
            "partner_normal_motion", "partner_moves", "surface_gap", "contact_gap", "partner_restitution",
-           "partners_of", "max_overlap", "narrow_candidates", "every_candidate", "most_partners", "partners_bound",
+           "partners_of", "max_overlap", "deepest_overlap", "narrow_candidates", "every_candidate", "most_partners", "partners_bound",
            "searches_meshes", "mesh_search"]
 
 # each kind's module, in the order of the kinds' codes: its geometry group is ``module.GEOMETRY``
@@ -237,9 +237,24 @@ def partners_bound(geometry, max_degree) -> int:
 def max_overlap(x, radius, pairs, geometry, ignore_tunnelled):
     """Deepest overlap (m, >= 0) of the candidate sphere pairs (M, 2) and of every sphere
     with every wall and triangle (ignore_tunnelled: see plane.deepest, mesh.deepest)."""
-    return max(sphere.deepest(x, radius, pairs, geometry[KIND_PAIR]),
-               plane.deepest(x, radius, geometry[KIND_WALL], ignore_tunnelled),
-               mesh.deepest(x, radius, geometry[KIND_MESH], ignore_tunnelled))
+    return deepest_overlap(x, radius, pairs, geometry, ignore_tunnelled)[0]
+
+
+@borrowing
+def deepest_overlap(x, radius, pairs, geometry, ignore_tunnelled):
+    """max_overlap and who: (depth m >= 0, kind, sphere, partner) of the deepest overlap,
+    (0.0, -1, -1, -1) when none; a pair's partner is the other sphere, as in contacts."""
+    best, kind, a, other = 0.0, -1, -1, -1
+    depth, i, j = sphere.deepest_where(x, radius, pairs, geometry[KIND_PAIR])
+    if depth > best:
+        best, kind, a, other = depth, KIND_PAIR, i, j
+    depth, i, j = plane.deepest_where(x, radius, geometry[KIND_WALL], ignore_tunnelled)
+    if depth > best:
+        best, kind, a, other = depth, KIND_WALL, i, j
+    depth, i, j = mesh.deepest_where(x, radius, geometry[KIND_MESH], ignore_tunnelled)
+    if depth > best:
+        best, kind, a, other = depth, KIND_MESH, i, j
+    return best, kind, a, other
 
 
 def narrow_candidates(kind: int, pairs: np.ndarray, lo: np.ndarray, hi: np.ndarray,

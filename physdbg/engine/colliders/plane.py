@@ -194,13 +194,25 @@ def deepest(x, radius, planes, ignore_tunnelled):
     """Deepest overlap (m, >= 0) of any sphere with any wall. ignore_tunnelled: a sphere
     past the middle of a thin wall went through it (discrete or sampled detection) and is
     not counted as overlapping it."""
+    return deepest_where(x, radius, planes, ignore_tunnelled)[0]
+
+
+@borrowing
+def deepest_where(x, radius, planes, ignore_tunnelled):
+    """(depth m >= 0, sphere, wall) of the deepest overlap of a sphere with a wall ((0, -1,
+    -1) when none); ignore_tunnelled as in ``deepest``."""
     normals, offsets, half_thickness, two_sided, _restitution = _unpack(planes)
     worst = 0.0
+    who = -1
+    which = -1
     for i in range(x.shape[0]):
         for w in range(normals.shape[0]):
             h = normals[w, 0] * x[i, 0] + normals[w, 1] * x[i, 1] + normals[w, 2] * x[i, 2] - offsets[w]
             pen = half_thickness[w] + radius[i] - side_of(h, two_sided[w]) * h
             if ignore_tunnelled and two_sided[w] and pen > radius[i]:
                 pen = 0.0
-            worst = max(worst, pen)
-    return worst
+            if pen > worst:
+                worst = pen
+                who = i
+                which = w
+    return worst, who, which

@@ -145,14 +145,27 @@ def partners_of(p, box, path_lo, path_hi, adj_start, adj, batch_mark, batch, sph
 @borrowing
 def deepest(x, radius, pairs, spheres):
     """Deepest overlap (m, >= 0) among the pairs (M, 2)."""
+    return deepest_where(x, radius, pairs, spheres)[0]
+
+
+@borrowing
+def deepest_where(x, radius, pairs, spheres):
+    """(depth m >= 0, sphere, partner sphere) of the deepest overlap among the pairs (M, 2)
+    ((0, -1, -1) when none)."""
     period = _unpack(spheres)
     worst = 0.0
+    who = -1
+    which = -1
     for m in range(pairs.shape[0]):
         i = pairs[m, 0]
         j = pairs[m, 1]
         d = separation(x, i, j, period)[3]
-        worst = max(worst, radius[i] + radius[j] - d)
-    return worst
+        pen = radius[i] + radius[j] - d
+        if pen > worst:
+            worst = pen
+            who = i
+            which = j
+    return worst, who, which
 
 
 @kernel
