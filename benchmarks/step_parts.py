@@ -55,7 +55,7 @@ from box_rain import box_rain  # noqa: E402
 
 # the compiled calls the step's phases make, by the name world.py imports them under
 CALLS = ("settle_held", "swept_boxes", "grow_to_reach", "split_sleeping", "adjacency_from_pairs",
-         "narrow_candidates", "predict_into", "run_time_order", "advance_particles", "max_overlap",
+         "narrow_candidates", "predict_into", "run_time_order", "advance_particles", "deepest_overlap",
          "first_non_finite", "energies", "state_hash")
 ORDERS = ("as-generated", "random", "morton", "columns", "landed", "inside")
 

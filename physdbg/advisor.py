@@ -144,7 +144,7 @@ def advise(scene) -> Advice:
         predictions.append(Prediction("dt", f"{dt:.6g}", "pairs untested", periodic["why"]))
     overlaps = starting_overlaps(scene)  # a sphere inside another body at the start: overlap left, whatever the method
     facts["start_overlaps"] = overlaps
-    facts["out_of_reach"] = meshes_out_of_reach(scene)
+    facts["notes"] = meshes_out_of_reach(scene) + driven_notes(scene)  # said, not failed
     if overlaps:
         predictions.append(Prediction("start", "positions", "overlap left", start_words(overlaps)))
     pile = _pile(state, walls, np.asarray(s.gravity, dtype=float))
@@ -555,9 +555,10 @@ def starting_overlaps(scene) -> list[dict]:
 
 def start_words(overlaps: list[dict]) -> str:
     """The starting overlaps in one line (starting_overlaps' list, not empty)."""
-    from .analysis.audit import _length
+    def length(metres: float) -> str:  # as the audit writes a depth: mm below a metre
+        return f"{metres * 1000:.3g} mm" if abs(metres) < 1 else f"{metres:.3g} m"
 
-    named = "; ".join(f"sphere {o['sphere']} starts {_length(o['depth'])} inside {o['partner']}"
+    named = "; ".join(f"sphere {o['sphere']} starts {length(o['depth'])} inside {o['partner']}"
                       for o in overlaps[:START_EXAMPLES])
     more = len(overlaps) - START_EXAMPLES
     return named + (f" (and {more} more spheres)" if more > 0 else "") + f"; {START_NOT_PUSHED}"
@@ -592,4 +593,33 @@ def meshes_out_of_reach(scene) -> list[str]:
             notes.append(f"mesh '{name}' is out of every sphere's reach in this run: the nearest, sphere {i}, starts "
                          f"{away[i]:.3g} m from it and can travel at most {extent[i] - state.radius[i]:.3g} m "
                          f"({bound:.3g} m/s at most, {duration:.3g} s); nothing will touch it")
+    return notes
+
+
+def driven_notes(scene) -> list[str]:
+    """Notes on the kinematic meshes: each one's motion does work on what it strikes (the
+    run's energy is not conserved), and each sphere that starts resting on one (within the
+    contact tolerance, or a micrometre, of its surface) is carried by it."""
+    from .engine.colliders.mesh import MeshGeometry, deepest_where
+    from .events import KIND_MESH, partner_words
+
+    state, walls = scene.state, scene.walls
+    meshes = walls.meshes
+    if not meshes.triangles or not meshes.moving.any():
+        return []
+    notes = [f"mesh '{name}' {meshes.motion_words(k)}: its prescribed motion does work on every sphere it strikes, "
+             f"so the run's energy is not conserved (the audit judges each contact against the moving surface)"
+             for k, name in enumerate(meshes.names) if meshes.moving[k]]
+    if state.count and np.isfinite(state.positions).all():
+        geometry = tuple(MeshGeometry.of(walls))
+        names = walls.partner_names()
+        near = max(scene.settings.contact_tolerance, 1e-6)
+        for i in range(state.count):
+            x = np.ascontiguousarray(state.positions[i:i + 1], dtype=np.float64)
+            depth, _, t = deepest_where(x, np.ascontiguousarray(state.radius[i:i + 1] + near, dtype=np.float64),
+                                        geometry, False)
+            if depth > 0.0 and meshes.moving[meshes.mesh_of[t]] and depth <= 2.0 * near:
+                notes.append(f"sphere {i} starts resting on {partner_words(KIND_MESH, int(t), names)}, which moves: "
+                             "it is carried (a held contact takes the surface's velocity); pressed by it against "
+                             "something immovable it is pinned, and the run stops there (docs/meshes.md)")
     return notes

@@ -92,6 +92,7 @@ class RunSummary:
     meshes_move: bool = False  # two meshes or more, one kinematic: the audit looks for them passing into each other
     overlap_where: str = ""  # who overlapped most and in which step ("spheres 3 and 4, step 12"), when known
     start_notes: list[str] = field(default_factory=list)  # the spheres that start inside another body
+    meshes_driven: bool = False  # a kinematic mesh: its prescribed motion does work on what it strikes
     def as_dict(self) -> dict:
         return asdict(self)
 
@@ -155,7 +156,8 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     if on_status is not None and not kernels.interpreted:
         on_status("compiling")
     compile_seconds = 0.0 if kernels.interpreted else compile_kernels(
-        world.broad_phase.name, sleeping=world.sleepers is not None, audit=auditor is not None)
+        world.broad_phase.name, sleeping=world.sleepers is not None, audit=auditor is not None,
+        meshes=bool(scene.walls.meshes.triangles))
     if on_status is not None:
         on_status("running")
     st = world.state
@@ -207,7 +209,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         max_contacts_in_a_step=tally.most["contacts"], energy_start=e0, energy_end=e1, energy_drift=drift,
         momentum_start=[float(c) for c in mom0], momentum_end=[float(c) for c in mom1],
         momentum_drift=float(np.linalg.norm(mom1 - mom0)), max_overlap=tally.max_overlap,
-        start_notes=start_notes,
+        start_notes=start_notes, meshes_driven=bool(scene.walls.meshes.moving.any()),
         overlap_where=(f"{overlap_words(tally.overlap_with, scene.walls.partner_names())}, step {tally.overlap_step}"
                        if tally.overlap_with is not None else ""),
         kernels=kernels.reason, wall_seconds=wall, compile_seconds=compile_seconds, ms_per_step=1000.0 * wall / n_steps if n_steps else math.nan,
@@ -464,7 +466,8 @@ def verify(path: str | Path, on_step: Callable[[int, int | None], None] | None =
                                "physdbg run to repeat. `physdbg explain` audits it; `physdbg diff` compares it "
                                "with a physdbg recording of the same scene")
         world = rec.scene.build_world()
-        compile_kernels(world.broad_phase.name, sleeping=world.sleepers is not None)
+        compile_kernels(world.broad_phase.name, sleeping=world.sleepers is not None,
+                        meshes=bool(rec.scene.walls.meshes.triangles))
         first = rec.state(0)  # the reader checks each state against its stored hash (check_file)
         if world.state.positions.tobytes() != first.positions.tobytes() or \
                 world.state.velocities.tobytes() != first.velocities.tobytes():
@@ -560,6 +563,9 @@ def info(path: str | Path) -> dict:
             "physdbg_version": meta["physdbg_version"], "format_version": meta["format_version"],
             "detail": rec.detail, "particles": n, "walls": list(rec.header.walls.names),
             "meshes": mesh_sizes(rec.header.walls.meshes),
+            # how each kinematic mesh moves, as the run summary says it
+            "mesh_motion": [f"'{name}' {rec.header.walls.meshes.motion_words(k)}"
+                            for k, name in enumerate(rec.header.walls.meshes.names) if rec.header.walls.meshes.moving[k]],
             "steps": rec.steps, "sim_time": last.time, "final_hash": last.state_hash,
             "settings": meta["settings"], "dt": meta.get("dt"), "bvh_max_nodes": meta.get("bvh_max_nodes"),
             "bytes_per_particle_step": size / (n * rec.frames) if n and rec.frames else None,

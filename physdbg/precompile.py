@@ -42,9 +42,9 @@ HELPER_TIMEOUT = 900.0  # s
 
 
 def compile_kernels(broad_phase: str | None = None, sleeping: bool = False, parallel: bool = True,
-                    audit: bool = False) -> float:
-    """``engine.warm_up(broad_phase, sleeping)``, on two processes when the cache is cold
-    and two CPUs are free (module docstring); audit: also the audit's step checker
+                    audit: bool = False, meshes: bool = False) -> float:
+    """``engine.warm_up(broad_phase, sleeping, meshes)``, on two processes when the cache is
+    cold and two CPUs are free (module docstring); audit: also the audit's step checker
     (``analysis.tunnel.warm_up``, ~11 s cold; on the helper, after the held solve, where it
     fits in the time this process spends on the rest); returns the seconds taken."""
     from .engine.warm import warm_up, warm_up_without_forces
@@ -58,7 +58,7 @@ def compile_kernels(broad_phase: str | None = None, sleeping: bool = False, para
                 helper.wait(timeout=HELPER_TIMEOUT)
             except subprocess.TimeoutExpired:
                 pass  # killed below; warm_up compiles the rest
-        warm_up(broad_phase, sleeping)
+        warm_up(broad_phase, sleeping, meshes)
         if audit:
             from .analysis.tunnel import warm_up as warm_up_checker
 

@@ -322,7 +322,7 @@ def main() -> None:
     from .precompile import compile_kernels
 
     try:
-        compile_kernels(None, sleeping=True, parallel=False, audit=True)
+        compile_kernels(None, sleeping=True, parallel=False, audit=True, meshes=True)
     finally:
         marker = _marker()
         try:

@@ -299,4 +299,21 @@ def test_a_mesh_no_sphere_can_reach_is_a_note(tmp_path):
     assert ("note        mesh 'trough' is out of every sphere's reach in this run: the nearest, sphere 1, starts 49 m "
             "from it") in result.output, result.output
     assert any("out of every sphere's reach" in note for note in api.run(scene, [*far, "steps=2"]).mesh_notes)
-    assert api.check(scene).advice.facts["out_of_reach"] == []  # the ball above the trough reaches it
+    assert api.check(scene).advice.facts["notes"] == []  # the ball above the trough reaches it
+
+
+def test_check_notes_a_kinematic_mesh_s_work_and_a_sphere_riding_it(tmp_path):
+    """The elevator: a ball resting on a platform rising at 0.5 m/s. check notes that the
+    platform's motion does work (the energy line will rise) and that the ball is carried."""
+    (tmp_path / "platform.obj").write_text("v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nf 1 3 2\nf 1 4 3\n")
+    scene = tmp_path / "elevator.toml"
+    scene.write_text('name = "elevator"\ndt = "1/60"\nduration = 2.0\ngravity = [0.0, -9.81, 0.0]\n'
+                     '[[meshes]]\nname = "platform"\nfile = "platform.obj"\nvelocity = [0.0, 0.5, 0.0]\n'
+                     '[[particles]]\nposition = [0.0, 0.1, 0.0]\nradius = 0.1\nrestitution = 0.5\n')
+    result = CliRunner().invoke(app, ["check", str(scene)])
+    assert result.exit_code == 0, result.output
+    assert ("note        mesh 'platform' moves at 0.5 m/s: its prescribed motion does work on every sphere it strikes"
+            in result.output), result.output
+    assert "note        sphere 0 starts resting on mesh 'platform' triangle 0, which moves: it is carried" in result.output
+    lifted = CliRunner().invoke(app, ["check", str(scene), "-s", "particles.0.position=[0.0, 0.5, 0.0]"]).output
+    assert "starts resting" not in lifted and "does work on every sphere" in lifted

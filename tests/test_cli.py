@@ -245,6 +245,19 @@ def test_info_prints_scene_settings_steps_channels_and_sizes(tmp_path):
         assert words in text, words
 
 
+def test_info_and_run_say_how_a_kinematic_mesh_moves_and_that_it_does_work(tmp_path):
+    out = tmp_path / "p.mcap"
+    invoke("record", "paddle", "-s", "steps=3", "-o", str(out), "--no-rrd")
+    motion = "meshes      'paddle' turns at 1080 deg/s (3 rev/s) about [0, 0.12, 0]"
+    assert motion in invoke("info", str(out)).output
+    run = invoke("run", "paddle", "-s", "steps=3").output
+    assert motion in run
+    # the energy the paddle puts in, beside an audit that judges contacts against its surface
+    assert "a kinematic mesh's prescribed motion does work on what it strikes, so the audit judges each contact's " \
+           "energy relative to the moving surface" in run
+    assert "does work on what it strikes" not in invoke("run", "bounce", "-s", "steps=3").output
+
+
 def test_replay_verifies_and_rebuilds_the_rerun_file(tmp_path):
     out = tmp_path / "g.mcap"
     invoke("record", "gas", "-s", "steps=40", "-o", str(out), "--no-rrd")

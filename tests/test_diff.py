@@ -323,3 +323,17 @@ def test_the_overlay_opens_on_the_divergence_in_two_colours_in_the_real_viewer(t
     assert count(left, COLOR_A) > 300 and count(left, COLOR_B) < count(left, COLOR_A) / 5
     assert count(right, COLOR_B) > 300 and count(right, COLOR_A) < count(right, COLOR_B)
     assert count(left, RING_COLOR) > 50 and count(right, RING_COLOR) > 50
+
+
+def test_the_header_says_which_frames_were_compared(tmp_path):
+    """Two 120-step runs that part in step 1 are compared up to that step, and the header
+    says so against the frames both hold (it once said only "compared 2 frames"); a run
+    against itself is compared in full."""
+    a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
+    api.record("bounce", ["steps=120"], mcap_path=str(a), rrd=False)
+    api.record("bounce", ["steps=120", "integrator=euler"], mcap_path=str(b), rrd=False)
+    out = CliRunner().invoke(app, ["diff", str(a), str(b)]).output
+    assert ("compared 2 of the 121 frames both runs hold, aligned by step: frame 0 to the first difference (step 1), "
+            "where the comparison stops") in out, out
+    same = CliRunner().invoke(app, ["diff", str(a), str(a)]).output
+    assert "compared all 121 frames both runs hold, aligned by step" in same, same

@@ -125,10 +125,12 @@ def test_the_descent_log_is_the_search_tree():
     log = found.log
     assert tuple(log[0, :2]) == (a.nodes.root, b.nodes.root) and log[0, 2] == MEET
     # each pair after the root is a child pair of a pair that met, split on one side
-    met = {(int(i), int(j)) for i, j, outcome in log if outcome == MEET}
-    for i, j, _ in log[1:]:
+    met = {(int(i), int(j)) for i, j, outcome, _ in log if outcome == MEET}
+    for i, j, _, parent in log[1:]:
         pa, pb = a.nodes.parent[i], b.nodes.parent[j]
         assert (int(pa), int(j)) in met or (int(i), int(pb)) in met
+        # and the row it names as its parent is that pair, which met
+        assert log[parent, 2] == MEET and tuple(log[parent, :2]) in {(pa, j), (i, pb)}
     # culling did work: far fewer triangle tests than pairs of triangles
     assert found.triangle_tests < a.faces.shape[0] * b.faces.shape[0] / 20
     assert np.any(log[:, 2] == APART)
@@ -145,7 +147,7 @@ def test_a_turned_mesh_refits_its_aabbs_and_only_moves_its_obbs_and_spheres():
 def test_hulls_apart_end_the_search_before_any_node_test():
     a, b = _TREES[("icosphere", "sah")], _TREES[("icosphere", "sah")]
     far = descend(a, Pose(), b, Pose.of((1.02, 0.0, 0.0)), "aabb")  # radius 0.5 each: 2 cm apart
-    assert far.hull_test == "apart" and far.volume_tests == 0 and far.log.tolist() == [[-1, -1, HULLS_APART]]
+    assert far.hull_test == "apart" and far.volume_tests == 0 and far.log.tolist() == [[-1, -1, HULLS_APART, -1]]
     near = descend(a, Pose(), b, Pose.of((0.99, 0.0, 0.0)), "aabb")
     assert near.hull_test == "meet" and near.meet
 

@@ -153,6 +153,13 @@ def test_cli_overlap_exits_0_when_apart_and_the_json_holds_the_whole_tree():
     assert result.exit_code == 0 and report["meet"] is False and report["hulls"] == "off"
     assert report["volume"] == "sphere" and report["counts"]["visited"] == len(report["tree"]) > 1
     assert report["counts"]["apart"] > 0 and report["pairs"] == []
+    # each node pair names the pair whose split led to it and its depth: the tree rebuilds
+    tree = report["tree"]
+    assert tree[0]["parent"] == -1 and tree[0]["depth"] == 0
+    for row in tree[1:]:
+        parent = tree[row["parent"]]
+        assert parent["outcome"] == "volumes meet" and row["depth"] == parent["depth"] + 1
+        assert (row["a"] == parent["a"]) != (row["b"] == parent["b"])  # split on one side
 
 
 @pytest.mark.parametrize("args, message", [

@@ -615,7 +615,21 @@ class Auditor:
         walls = self.header.walls
         elastic = bool(np.all(self.header.restitution >= 1.0) and np.all(walls.restitution >= 1.0)
                        and np.all(walls.meshes.restitution >= 1.0))
-        if elastic:
+        # a kinematic mesh's prescribed motion striking the same spheres again and again
+        meshes = walls.meshes
+        on_mesh = bounce & (c.kind == KIND_MESH)
+        driven = on_mesh.copy()
+        if on_mesh.any():
+            driven[on_mesh] = meshes.moving[meshes.mesh_of[c.other[on_mesh]]]
+        if 2 * int(driven.sum()) > bounces:
+            names = sorted({f"'{meshes.names[k]}'" for k in meshes.mesh_of[c.other[driven]].tolist()})
+            why = (f"kinematic mesh {', '.join(names)} drives them: its prescribed motion strikes the same spheres "
+                   "again and again within the step, as when it carries a sphere or squeezes it against something, "
+                   "and no contact can slow it")
+            advice = "; ".join([*(rules[:2] and [f"{'; '.join(rules[:2])}: a held contact rides a moving surface"]),
+                                "lowering the restitution or dt does not stop a prescribed motion: give the spheres "
+                                "room (move what they are pressed against) or slow the mesh (docs/meshes.md)"])
+        elif elastic:
             why = ("with restitution 1 this is not inelastic collapse: the spheres meet this often within one step "
                    "because the step is long for their speeds and the gaps between them")
             advice = "use a shorter dt (each step's contacts are bounded by max_events_per_step)"

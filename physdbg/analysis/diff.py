@@ -798,7 +798,7 @@ class _Differ:
         who = div.state.particles[0] if div.state.particles else {}
         seen = ""
         if event is not None and event["a"] is not None and event["b"] is not None:
-            seen = (f"; the first sign is contact #{event['index']} of the step "
+            seen = (f"; the first sign is contact {event['index'] + 1} of the step "
                     f"({self._describe(event['a'], times=False)}), whose time differs by "
                     f"{abs(event['a']['time'] - event['b']['time']):.2g} s")
         return Cause("outside-change",
@@ -818,8 +818,8 @@ class _Differ:
                     f"one) and bounced in the other")
             return Cause("missed-contact", text + "." + self._consequence(div), {"a": x, "b": y})
         in_other = [r for r in (cb if label == "A" else ca) if _key(r) == _key(present)]
-        text = (f"Step {step}: run {label} resolved {self._describe(present)} (contact {present['index']} of the "
-                f"step); run {other} " + (f"resolved it later, as contact {in_other[0]['index']}"
+        text = (f"Step {step}: run {label} resolved {self._describe(present)} (contact {present['index'] + 1} of the "
+                f"step); run {other} " + (f"resolved it later, as contact {in_other[0]['index'] + 1}"
                                           if in_other else "had no such contact"))
         if missing is not None and not in_other:
             text += f", and resolved {self._describe(missing)} instead"

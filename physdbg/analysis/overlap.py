@@ -70,7 +70,10 @@ class OverlapReport:
                             "depth": t.nodes.max_depth, "pose": list(p), "skipped": m.skipped}
                            for m, t, p in zip(self.meshes, self.trees, self.poses)],
                 "counts": self.counts(), "pairs": d.pairs.tolist(),
-                "tree": [{"a": int(i), "b": int(j), "outcome": OUTCOME_NAMES[o]} for i, j, o in d.log]}
+                # each visited node pair, with the pair whose split led to it (its row here) and its
+                # depth in the search tree: enough to rebuild the tree
+                "tree": [{"a": int(i), "b": int(j), "outcome": OUTCOME_NAMES[o], "parent": int(p), "depth": depth}
+                         for (i, j, o, p), depth in zip(d.log.tolist(), search_depths(d.log), strict=True)]}
 
 
 def overlap(a: str, b: str, pose_a: str | None = None, pose_b: str | None = None, volume: str = "auto",
@@ -143,8 +146,17 @@ def overlap_text(report: OverlapReport, max_lines: int = 40) -> str:
         depth_a, depth_b = report.trees[0].nodes.depth, report.trees[1].nodes.depth
         lines.append("search tree (node of A × node of B: outcome):")
         rows = d.log if max_lines <= 0 else d.log[:max_lines]
-        for i, j, outcome in rows.tolist():
+        for i, j, outcome, _parent in rows.tolist():
             lines.append(f"{'  ' * (int(depth_a[i]) + int(depth_b[j]) + 1)}A{i}×B{j} {OUTCOME_NAMES[outcome]}")
         if len(rows) < len(d.log):
             lines.append(f"  … {len(d.log) - len(rows)} more node pairs (--max-lines 0 shows all)")
     return "\n".join(lines)
+
+
+def search_depths(log) -> list[int]:
+    """Each row's depth in the search tree (0 for the roots) from the descent log's parent
+    column (rows come after their parents)."""
+    depths: list[int] = []
+    for parent in log[:, 3].tolist():
+        depths.append(0 if parent < 0 else depths[parent] + 1)
+    return depths

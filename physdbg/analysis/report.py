@@ -74,10 +74,21 @@ def _integrity(r: DiffReport) -> str:
                                              " (the ones the verdict rests on)"))
 
 
+def _compared(r: DiffReport) -> str:
+    """Which frames the verdict compared: all that both runs hold, or those up to the first
+    difference (where the comparison stops: what follows is described, not compared)."""
+    held = min(r.steps_a, r.steps_b) + 1  # frame 0 (the start) and one frame a step
+    if r.divergence is not None and r.compared < held:
+        return (f"{r.compared} of the {held} frames both runs hold, aligned by {r.aligned_by}: frame 0 to the first "
+                f"difference (step {r.compared - 1}), where the comparison stops")
+    return f"all {r.compared} frames both runs hold, aligned by {r.aligned_by}" if r.compared == held else \
+        f"{r.compared} frames aligned by {r.aligned_by}"
+
+
 def diff_text(r: DiffReport) -> str:
     lines = [f"A  {r.a}  ({r.scene_a}, {r.steps_a} steps)", f"B  {r.b}  ({r.scene_b}, {r.steps_b} steps)",
              f"result   {'EQUIVALENT' if r.equivalent else 'DIFFERENT'}: {r.headline}",
-             f"compared {r.compared} frames aligned by {r.aligned_by}; tolerance {_tolerance(r)}",
+             f"compared {_compared(r)}; tolerance {_tolerance(r)}",
              f"checked  {_integrity(r)}"]
     if r.settings:
         lines.append("settings that differ:")
@@ -91,7 +102,7 @@ def diff_text(r: DiffReport) -> str:
         for p in d.state.particles:
             lines.append(f"  sphere {p['particle']}: |Δx| = {p['position']:.3g} m, |Δv| = {p['velocity']:.3g} m/s")
         if d.first_event is not None:
-            lines.append(f"  first differing contact: #{d.first_event['index']} of the step: "
+            lines.append(f"  first differing contact: contact {d.first_event['index'] + 1} of the step: "
                          f"A {_contact(d.first_event['a'])}; B {_contact(d.first_event['b'])}")
     if r.growth is not None and d is not None:
         lines.append("afterwards: " + r.growth.sentence())
@@ -113,7 +124,7 @@ def diff_markdown(r: DiffReport) -> str:
     lines = [f"### {icon} physdbg diff: {'equivalent' if r.equivalent else 'different'}", "",
              f"**{r.headline}**", "", "| | recording | scene | steps |", "|---|---|---|---|",
              f"| A | `{r.a}` | {r.scene_a} | {r.steps_a} |", f"| B | `{r.b}` | {r.scene_b} | {r.steps_b} |", "",
-             f"Compared {r.compared} frames aligned by {r.aligned_by}; tolerance {_tolerance(r)}. "
+             f"Compared {_compared(r)}; tolerance {_tolerance(r)}. "
              f"Checked {_integrity(r)}.", ""]
     if r.settings:
         lines += ["| setting | A | B | note |", "|---|---|---|---|"]
@@ -127,7 +138,8 @@ def diff_markdown(r: DiffReport) -> str:
         lines += [f"- sphere {p['particle']}: \\|Δx\\| = {p['position']:.3g} m, \\|Δv\\| = {p['velocity']:.3g} m/s"
                   for p in d.state.particles]
         if d.first_event is not None:
-            lines.append(f"- first differing contact #{d.first_event['index']}: A {_contact(d.first_event['a'])}; "
+            lines.append(f"- first differing contact: contact {d.first_event['index'] + 1} of the step: A "
+                         f"{_contact(d.first_event['a'])}; "
                          f"B {_contact(d.first_event['b'])}")
         if r.growth is not None:
             lines.append(f"- afterwards: {r.growth.sentence()}")
@@ -279,7 +291,9 @@ def summary_text(s, observers: str = "the audit") -> str:
            f"{s.woken} woke)"] if s.slept else []),
         # "change", not "drift": restitution, drag and held contacts take energy out and walls
         # and gravity change momentum by design; the audit line judges whether any was wrong
-        f"energy      {s.energy_start:.6g} J -> {s.energy_end:.6g} J  (relative change {s.energy_drift:+.3e})",
+        f"energy      {s.energy_start:.6g} J -> {s.energy_end:.6g} J  (relative change {s.energy_drift:+.3e})"
+        + ("; a kinematic mesh's prescribed motion does work on what it strikes, so the audit judges each "
+           "contact's energy relative to the moving surface" if getattr(s, "meshes_driven", False) else ""),
         f"momentum    {_vec(s.momentum_start)} -> {_vec(s.momentum_end)} kg·m/s  (|change| {s.momentum_drift:.3e})",
         f"overlap     max {s.max_overlap:.3g} m" + (f"  ({s.overlap_where})" if s.overlap_where else ""),
         f"speed       {s.engine_ms_per_step:.3f} ms/step in the engine ({phases}); "
@@ -377,7 +391,7 @@ def check_text(result) -> str:
         lines.append(f"periodic    {f['periodic']['why']}")
     lines += [f"{'sweep' if k == 0 else '':<11} {sweep['why']}" for k, sweep in enumerate(f.get("mesh_sweeps") or [])]
     lines += [f"start       {p.why}" for p in advice.predictions if p.setting == "start"]
-    lines += [f"note        {note}" for note in f.get("out_of_reach") or []]
+    lines += [f"note        {note}" for note in f.get("notes") or []]
     for setting in ("integrator", "detection", "ordering"):
         for k, p in enumerate(x for x in advice.predictions if x.setting == setting):
             mark = "*" if result.current[setting] == p.value else " "
@@ -427,6 +441,7 @@ def info_text(data: dict) -> str:
         f"steps       {data['steps']}  ({data['sim_time']:.6g} s simulated), detail {data['detail']}",
         f"bodies      {count_words(data['particles'], 'particle')}, {count_words(len(data['walls']), 'wall')}"
         + _mesh_words(data.get("meshes") or {}),
+        *(f"meshes      {motion}" for motion in data.get("mesh_motion") or []),
         *([f"sleep       {data['asleep_at_end']} of {data['particles']} spheres asleep at the end "
            f"(sleep_speed {data['settings'].get('sleep_speed')} m/s)"] if data["asleep_at_end"] is not None else []),
         f"size        {data['bytes_per_particle_step']:.1f} bytes per particle-step (everything)"

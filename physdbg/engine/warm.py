@@ -19,13 +19,16 @@ from .timeline import merge_sorted_pairs
 from .world import World
 
 
-def warm_up(broad_phase: str | None = None, sleeping: bool = False) -> float:
+def warm_up(broad_phase: str | None = None, sleeping: bool = False, meshes: bool = False) -> float:
     """Compile (or load from numba's cache) every kernel a step uses; returns seconds taken.
 
     Runs a two-sphere, one-wall world for one step with contacts, so the first real step
     is not charged with compilation. The kernels take the integrator and detection as
     arguments, so one run compiles every method. broad_phase: also compile this one;
-    sleeping: also the sleep rules' (sleep.py; only a run that sleeps loads them).
+    sleeping: also the sleep rules' (sleep.py; only a run that sleeps loads them);
+    meshes: also the meshes' (the trees' walks, their choice, a moving mesh's placing: only
+    a scene with meshes loads them; without this, its first step compiled them, some 10 s
+    cold, and the run summary charged them to the narrow phase).
     (physdbg.precompile runs this on two cores when the cache is cold.)
     """
     started = perf_counter()
@@ -43,7 +46,23 @@ def warm_up(broad_phase: str | None = None, sleeping: bool = False) -> float:
     if sleeping:
         World(state.copy(), walls, Settings(sleep_speed=0.1, sleep_time=0.1)).step(0.5)
         release_static(new_held(state.count), np.zeros(state.count))
+    if meshes:
+        warm_up_meshes()
     return perf_counter() - started
+
+
+def warm_up_meshes() -> None:
+    """warm_up's meshes: warm_up_world with a turning triangle under each sphere, a step in
+    each mesh search (a walk per sphere, the simultaneous descent)."""
+    from .state import Meshes
+
+    state, walls = warm_up_world()
+    corners = np.array([[[-1.0, 0.05, -1.0], [1.0, 0.05, 1.0], [1.0, 0.05, -1.0]],
+                        [[-1.0, 0.05, -1.0], [-1.0, 0.05, 1.0], [1.0, 0.05, 1.0]]])
+    walls.meshes = Meshes(["warm"], np.ones(1), corners, np.zeros(2, dtype=np.int64), ["warm"], [],
+                          np.zeros((1, 3)), np.array([[0.0, 1.0, 0.0]]), np.zeros((1, 3)))
+    for search in ("walk", "together"):
+        World(state.copy(), walls, Settings(mesh_search=search)).step(0.5)
 
 
 def warm_up_held_solve() -> None:

@@ -496,7 +496,8 @@ class RerunSink:
         for j, q, outcome, parent_row in visits.tolist():
             what = meshes.triangle_words(int(leaf_triangle[q])) if outcome == SEARCH_REACHED else f"node {q}"
             after = int(search.query_after[j])
-            asked = f"sphere {int(spheres[j])}" + (f" after contact {after}" if after >= 0 else "")
+            # contacts numbered from 1 within the step, as every report numbers them
+            asked = f"sphere {int(spheres[j])}" + (f" after contact {after + 1}" if after >= 0 else "")
             labels.append(f"{asked}: {what}" if parent_row < 0 else what)
         colors = [[(60, 200, 90), (230, 70, 60), (250, 210, 40)][o] for o in visits[:, 2].tolist()]
         position = mesh_view.tree_layout(visits) * [110.0, 70.0]

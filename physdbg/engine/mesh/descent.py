@@ -103,10 +103,11 @@ def _room_for_one_more(rows, used):
 
 @kernel
 def _descend(volume, a, b, root_a, root_b):
-    """The simultaneous descent; returns (pairs (K, 2) face indices, log (L, 3): node of
-    a, node of b, outcome; volume tests, triangle tests)."""
-    stack = np.empty((64, 2), dtype=np.int64)
-    log = np.empty((64, 3), dtype=np.int64)
+    """The simultaneous descent; returns (pairs (K, 2) face indices, log (L, 4): node of
+    a, node of b, outcome, the row of the pair that led to it (-1 for the roots); volume
+    tests, triangle tests)."""
+    stack = np.empty((64, 3), dtype=np.int64)  # node of a, node of b, the row that pushed them
+    log = np.empty((64, 4), dtype=np.int64)
     pairs = np.empty((16, 2), dtype=np.int64)
     scratch = np.empty((4, 3))
     top = 0
@@ -116,6 +117,7 @@ def _descend(volume, a, b, root_a, root_b):
     triangle_tests = 0
     stack[0, 0] = root_a
     stack[0, 1] = root_b
+    stack[0, 2] = -1
     top = 1
     while top > 0:
         top -= 1
@@ -125,6 +127,7 @@ def _descend(volume, a, b, root_a, root_b):
         log = _room_for_one_more(log, logged)
         log[logged, 0] = i
         log[logged, 1] = j
+        log[logged, 3] = stack[top, 2]
         if not _volumes_meet(volume, a, i, b, j):
             log[logged, 2] = APART
             logged += 1
@@ -163,6 +166,8 @@ def _descend(volume, a, b, root_a, root_b):
             stack[top, 1] = b.right[j]
             stack[top + 1, 0] = i
             stack[top + 1, 1] = b.left[j]
+        stack[top, 2] = logged - 1
+        stack[top + 1, 2] = logged - 1
         top += 2
     return pairs[:found], log[:logged], volume_tests, triangle_tests
 
@@ -171,8 +176,9 @@ def _descend(volume, a, b, root_a, root_b):
 class Descent:
     """What one mesh-against-mesh search found and did.
 
-    ``pairs`` (K, 2): meeting triangles (face of a, face of b), sorted; ``log`` (L, 3): each
-    node pair visited in order (node of a, node of b, outcome, one of OUTCOME_NAMES);
+    ``pairs`` (K, 2): meeting triangles (face of a, face of b), sorted; ``log`` (L, 4): each
+    node pair visited in order (node of a, node of b, outcome, one of OUTCOME_NAMES, and
+    the row of the pair whose split led to it, -1 for the roots);
     ``volume_tests``, ``triangle_tests``, ``refitted`` (AABB nodes refitted for the pose),
     ``hull_test``: "apart", "meet", "off" (not asked for, or a mesh has none) or "too big"
     (skipped: over HULL_TEST_WORK).
@@ -213,7 +219,7 @@ def descend(tree_a: MeshTree, pose_a: Pose, tree_b: MeshTree, pose_b: Pose, volu
                             pose_b.apply(tree_b.hull_points))
         hull_test = "apart" if apart else "meet"
         if apart:
-            return Descent(volume, np.zeros((0, 2), dtype=np.int64), np.array([[-1, -1, HULLS_APART]]), 0, 0, 0,
+            return Descent(volume, np.zeros((0, 2), dtype=np.int64), np.array([[-1, -1, HULLS_APART, -1]]), 0, 0, 0,
                            hull_test)
     a, refit_a = posed(tree_a, pose_a, code)
     b, refit_b = posed(tree_b, pose_b, code)
