@@ -83,7 +83,9 @@ def test_collapse_is_found_where_bounces_pile_up_and_the_advice_names_the_rule_t
     assert report.counts == {"budget": 1, "overlap": 1, "collapse": 1}
     budget, collapse = (next(f for f in report.findings if f.kind == kind) for kind in ("budget", "collapse"))
     assert "max_events_per_step budget (10000 contacts resolved)" in budget.message  # the automatic cap
-    assert collapse.message.startswith("10000 bounces among 1 sphere in one step") and collapse.particles == [0]
+    # and on whom it was spent
+    assert budget.message.endswith("contacts were sphere 0's, most with wall 'floor'.") and budget.particles == [0]
+    assert collapse.message.startswith("10000 bounces among 1 sphere (0) in one step") and collapse.particles == [0]
     assert "rest_fraction, now 0.0" in collapse.advice and "rapid_contact_time (now 0.0 s)" in collapse.advice
 
 
@@ -182,7 +184,7 @@ def test_a_bed_that_rattles_and_then_falls_asleep_is_no_collapse(tmp_path):
                                        for n in report.notes), report.notes
     cut = api.run("rain", ["generate.count=300", "steps=290", *rules])
     assert cut.finding_counts == {"collapse": 3}
-    assert cut.findings[0].startswith("step 282: 354 bounces among 29 spheres in one step")
+    assert cut.findings[0].startswith("step 282: 354 bounces among 29 spheres (")
     assert "7 of the 29 spheres were still awake when the run ended (step 290)" in cut.findings[0]
 
 

@@ -275,3 +275,82 @@ def test_a_mesh_scene_draws_its_bvh_moves_its_kinematic_mesh_and_draws_every_ste
     assert any(text.startswith(f"step {first}: the search of the meshes' BVHs") and "as recorded" in text
                for text in logged)
     assert len(reader.blueprints()) == 2
+
+
+def _last_blueprint(rrd: Path) -> dict:
+    """The blueprint a file opens with (the last one sent; the reader lists them in no set
+    order): entity -> component -> values."""
+    reader = rerun_chunk.RrdReader(rrd)
+
+    def sent(store) -> bytes:  # row ids grow with time: the latest row of a blueprint dates it
+        return max(row for chunk in reader.stream(store=store)
+                   for row in chunk.to_record_batch().column("rerun.controls.RowId").to_pylist())
+
+    out: dict = {}
+    for chunk in reader.stream(store=max(reader.blueprints(), key=sent)):
+        batch = chunk.to_record_batch()
+        for name in batch.schema.names:
+            if name.startswith(("TimePanelBlueprint", "ViewBlueprint")):
+                out.setdefault(str(chunk.entity_path), {})[name] = batch.column(name).to_pylist()
+    return out
+
+
+TROUGH = ("v -1 0.5 -1\nv -0.3 0 -1\nv 0.3 0 -1\nv 1 0.5 -1\nv -1 0.5 1\nv -0.3 0 1\nv 0.3 0 1\nv 1 0.5 1\n"
+          "f 1 2 6\nf 1 6 5\nf 2 3 7\nf 2 7 6\nf 3 4 8\nf 3 8 7\n")
+
+
+def test_a_file_opens_paused_at_its_first_finding_with_the_finding_on_that_timeline(tmp_path):
+    """A fast ball under discrete detection goes through a trough in step 1; a slow one first
+    touches it at step 25. The file opens at the tunnelling (the timeline "from first
+    finding", paused), not at the first mesh contact, and the finding's marker and line are
+    on that timeline."""
+    (tmp_path / "trough.obj").write_text(TROUGH)
+    scene = tmp_path / "trough.toml"
+    scene.write_text('name = "trough"\ndt = "1/60"\nduration = 1.0\ngravity = [0.0, -9.81, 0.0]\n'
+                     'detection = "discrete"\n[[meshes]]\nname = "trough"\nfile = "trough.obj"\n'
+                     '[[particles]]\nposition = [0.0, 1.0, 0.0]\nvelocity = [0.0, -60.0, 0.0]\nradius = 0.05\n'
+                     '[[particles]]\nposition = [0.5, 1.0, 0.3]\nradius = 0.05\n')
+    rec = api.record(str(scene), mcap_path=str(tmp_path / "t.mcap"), rrd_path=str(tmp_path / "t.rrd"))
+    reader = rerun_chunk.RrdReader(Path(rec.rrd))
+    steps = {}
+    for chunk in reader.stream():
+        batch = chunk.to_record_batch()
+        if not chunk.is_static and "from first finding" in batch.schema.names:
+            steps.setdefault(str(chunk.entity_path), []).extend(batch.column("from first finding").to_pylist())
+    assert min(min(v) for v in steps.values()) == 1
+    assert 1 in steps["/world/findings"] and 1 in steps["/world/spheres"] and 1 in steps["/world/paths"]
+    panel = _last_blueprint(Path(rec.rrd))["/time_panel"]
+    assert panel["TimePanelBlueprint:timeline"] == [["from first finding"]]
+    assert panel["TimePanelBlueprint:play_state"] == [[1]]  # paused
+
+
+def test_a_file_with_no_contact_opens_paused_at_its_start_and_says_why_the_search_is_empty(tmp_path):
+    (tmp_path / "trough.obj").write_text(TROUGH)
+    scene = tmp_path / "far.toml"
+    scene.write_text('name = "far"\ndt = "1/60"\nsteps = 20\ngravity = [0.0, 0.0, 0.0]\n'
+                     '[[meshes]]\nname = "trough"\nfile = "trough.obj"\n'
+                     '[[particles]]\nposition = [5.0, 1.0, 0.0]\nvelocity = [1.0, 0.0, 0.0]\nradius = 0.05\n')
+    rec = api.record(str(scene), mcap_path=str(tmp_path / "f.mcap"), rrd_path=str(tmp_path / "f.rrd"))
+    shown = _last_blueprint(Path(rec.rrd))
+    assert shown["/time_panel"]["TimePanelBlueprint:timeline"] == [["step"]]
+    assert shown["/time_panel"]["TimePanelBlueprint:play_state"] == [[1]]  # paused, at the start
+    titles = [c["ViewBlueprint:display_name"][0][0] for c in shown.values() if "ViewBlueprint:display_name" in c]
+    assert "the BVH search: no sphere's path reached a mesh's triangles in this run" in titles, titles
+
+
+def test_only_the_walked_volume_of_a_mesh_s_bvh_is_shown_in_a_run_s_file_and_the_overlay():
+    """funnel walks OBBs (auto) and paddle AABBs: the blueprint shows that volume's first
+    levels and hides the other two (the overlay's the same, under /a and /b)."""
+    from physdbg.record.rerun_sink import BVH_LEVELS_SHOWN, hidden_mesh_volumes
+
+    for name, walked in (("funnel", "obb"), ("paddle", "aabb")):
+        header = RecordingHeader.from_scene(api.ready_scene(name))
+        assert list(header.walls.meshes.bounding_volume) == [walked]
+        for root in ("", "/a"):
+            hidden = hidden_mesh_volumes(header, root)
+            path = f"{root}/world/meshes/{name}/bvh"
+            others = {"aabb", "obb", "sphere"} - {walked}
+            assert all(f"{path}/{volume}" in hidden for volume in others)
+            assert f"{path}/{walked}" not in hidden
+            assert all(f"{path}/{walked}/level_{level}" not in hidden for level in range(BVH_LEVELS_SHOWN))
+            assert f"{path}/{walked}/level_{BVH_LEVELS_SHOWN}" in hidden

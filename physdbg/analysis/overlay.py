@@ -122,13 +122,16 @@ def _mark(stream, rr, runs, ends, watched) -> None:
 def _blueprint(ra, rb, report, energy):
     import rerun.blueprint as rrb
 
-    from ..record.rerun_sink import BVH_LEVELS_SHOWN, camera
+    from ..record.rerun_sink import BVH_LEVELS_SHOWN, hidden_mesh_volumes, camera
 
     div = report.divergence
     hidden = {f"/{root}/world/bvh/level_{level}": rrb.EntityBehavior(visible=False)
               for root in "ab" for level in range(BVH_LEVELS_SHOWN, 64)}
     # a contact's ghost (a sphere where it touched) would hide the runs' own spheres here
     hidden.update({f"/{root}/world/contacts/ghosts": rrb.EntityBehavior(visible=False) for root in "ab"})
+    # of each mesh's BVH, only the volume the run walked, its first levels (as a run's own file)
+    for root, rec in (("a", ra), ("b", rb)):
+        hidden.update(hidden_mesh_volumes(rec.header, f"/{root}"))
     panel = {"timeline": "step"}
     if div is not None:
         from rerun.encodings import AbsoluteTimeRange

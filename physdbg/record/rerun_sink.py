@@ -37,9 +37,10 @@ Entities (timelines ``step`` = frame, steps completed, and ``sim_time`` in secon
     log                      TextLog: contacts and warnings in words
 
 A default blueprint (3D view, energy and contact plots, the event log) goes in the file;
-once the run has a contact, a second one opens it paused there (the timeline "from first
-contact", or "from first mesh contact" where the BVH search is drawn), and up to
-LABELLED_SPHERES spheres carry their numbers.
+at its close a second one opens it paused at the run's first audit finding (the timeline
+"from first finding": each step is drawn once the audit has judged it), else at its first
+contact ("from first contact", or "from first mesh contact" where the BVH search is
+drawn), else at its start; up to LABELLED_SPHERES spheres carry their numbers.
 """
 
 from __future__ import annotations
@@ -64,7 +65,8 @@ IMPULSE_ARROW_SECONDS = 0.05  # an impulse arrow shows how far its velocity chan
 PATHS_ALL_UP_TO = 2000  # above this many particles, only paths of particles with contacts are drawn
 SERIES_BATCH = 128
 SEARCHED_SPHERES = 12  # the most spheres whose search of the triangles' BVH is drawn (one tree each)
-FIRST_CONTACT_TIMELINE = "from first contact"  # a file opens here, paused (a scene without meshes)
+FIRST_FINDING_TIMELINE = "from first finding"  # a file with an audit finding opens here, paused
+FIRST_CONTACT_TIMELINE = "from first contact"  # else here (a scene without meshes)
 MESH_CONTACT_TIMELINE = "from first mesh contact"  # a mesh scene's file opens here (paused)
 LABELLED_SPHERES = 40  # up to this many spheres are drawn with their numbers
 BVH_LEVELS_SHOWN = 3  # levels 0..2 are drawn when the file opens; deeper ones are a click away
@@ -157,7 +159,7 @@ class RerunSink:
             raise ValueError("give an .rrd path, spawn=True, or both")
         if not self.shared:
             self.rec.set_sinks(*sinks)
-            self.rec.send_blueprint(blueprint(header), make_active=True, make_default=True)
+            self.rec.send_blueprint(blueprint(header, playing=True), make_active=True, make_default=True)
             self.rec.send_recording_name(header.run_name)
         self.radius = header.radius.astype(np.float32)
         self.previous = header.positions.copy()
@@ -176,6 +178,10 @@ class RerunSink:
         # on a mesh, where the search is drawn): the rows from there on carry the timeline
         # FIRST_CONTACT_TIMELINE (MESH_CONTACT_TIMELINE), and the last blueprint opens it
         self._open_at_first_contact = not self.shared and opening is None
+        # ... or, before that, at the first audit finding (FIRST_FINDING_TIMELINE): a step
+        # is drawn once the next begins (or at close), when the audit has judged it
+        self._open_at_first_finding = self._open_at_first_contact and open_at is None
+        self._held = None  # the step waiting to be drawn: (StepEnd, its per-step events, its findings)
         if open_at is not None and self._open_at_first_contact:
             self.opening = (f"from step {open_at}", int(open_at))
         # each sphere's number beside it, where there are few enough to read
@@ -185,6 +191,7 @@ class RerunSink:
         self._group = mesh_view.engine_tree(header.walls.meshes) if len(header.walls.meshes) else None
         self._search = None  # the step's MeshSearch, drawn at its end
         self._search_drawn = False
+        self._ever_searched = False  # a search reached a triangle (else the blueprint says why the panel is empty)
         self._sphere_volumes = False  # a node walked with a sphere was drawn (its entity then logged every step)
         self._log_static(header)
 
@@ -241,7 +248,11 @@ class RerunSink:
     # ------------------------------------------------------------------ observer
     def on_event(self, event) -> None:
         if isinstance(event, StepEnd):
-            self._end_step(event)
+            # drawn once the audit has judged it (mark_finding comes right after this)
+            step = (event, self._contacts, self._broad_phase, self._warnings, self._search, [])
+            self._contacts, self._broad_phase, self._warnings, self._search = None, None, [], None
+            self._draw_held()
+            self._held = step
         elif isinstance(event, Contacts):
             self._contacts = event
             self._virial = collision_sums(event, self.header.radius)[0]
@@ -291,9 +302,31 @@ class RerunSink:
         self.previous = end.positions
         self._add_series(frame, end)
 
+    def _draw_held(self) -> None:
+        """Draw the step waiting to be drawn, with the findings made on it."""
+        if self._held is None:
+            return
+        end, self._contacts, self._broad_phase, self._warnings, self._search, findings = self._held
+        self._held = None
+        self._end_step(end)
+        for finding in findings:
+            self._draw_finding(finding)
+        self._contacts, self._broad_phase, self._warnings, self._search = None, None, [], None
+
     def mark_finding(self, finding) -> None:
         """Mark an audit finding where and when it happened: a red marker in the 3D view
-        (world/findings, shown from that step on) and a warning line in the log."""
+        (world/findings, shown from that step on) and a warning line in the log. A finding
+        on the step not drawn yet is drawn with it; the first finding of the run is where a
+        file of its own opens (FIRST_FINDING_TIMELINE), before any contact."""
+        if self._held is not None and finding.step == self._held[0].step:
+            if self._open_at_first_finding:
+                self._open_at_first_finding = False
+                self.opening = (FIRST_FINDING_TIMELINE, finding.step)
+            self._held[5].append(finding)
+            return
+        self._draw_finding(finding)
+
+    def _draw_finding(self, finding) -> None:
         rr, rec = self.rr, self.rec
         frame = finding.step
         self._set_time(frame, self._time_of(frame))
@@ -434,6 +467,7 @@ class RerunSink:
                 self._search_drawn = False
             return []
         self._search_drawn = True
+        self._ever_searched = self._ever_searched or bool(np.any(search.visit_outcome == SEARCH_REACHED))
         shown = mesh_view.searched_spheres(search, contacts, SEARCHED_SPHERES)
         rows = np.flatnonzero(np.isin(search.query_sphere[search.visit_query], shown))  # whole walks
         asked = np.flatnonzero(np.isin(search.query_sphere, shown))
@@ -590,11 +624,17 @@ class RerunSink:
                               f"{now - grew_at:.0f} s ago): is the disk full?") from None
 
     def close(self) -> None:
+        self._draw_held()
         self._send_series()
         if self.shared:
             return
-        if self._open_at_first_contact and self.opening is not None:
-            self.rec.send_blueprint(blueprint(self.header, self.opening), make_active=True, make_default=True)
+        if self._open_at_first_contact:  # at the first finding or contact, or paused at the start
+            why_empty = None
+            if len(self.header.walls.meshes) and not self._ever_searched:
+                why_empty = ("not recorded at --detail state" if self.detail == "state" else
+                             "no sphere's path reached a mesh's triangles in this run")
+            self.rec.send_blueprint(blueprint(self.header, self.opening, search_empty=why_empty), make_active=True,
+                                    make_default=True)
         self._flush_or_give_up()
         self.rec.disconnect()
         if self.path is not None and not rrd_is_whole(self.path):
@@ -679,22 +719,25 @@ def rrd_is_whole(path: Path) -> bool:
 
 
 # ----------------------------------------------------------------------------- blueprint
-def blueprint(header: RecordingHeader, opening: tuple[str, int] | None = None):
+def blueprint(header: RecordingHeader, opening: tuple[str, int] | None = None, search_empty: str | None = None,
+              playing: bool = False):
     """3D view of the world beside the energy and contact plots and the event log; the
     camera looks at the whole scene from above and to the side, up against gravity.
-    opening: (timeline, step) to open on, paused (else the step timeline, playing)."""
+    opening: (timeline, step) to open on, paused (else the step timeline, at its start:
+    paused, or playing for a live view that has not chosen yet); search_empty: why a
+    mesh scene's search panel is empty (it says so in its title)."""
     import rerun.blueprint as rrb
 
     # a mesh scene's view shares its column with the search tree: the eye comes closer
     eye = camera(header, distance=1.0 if len(header.walls.meshes) else 1.4)
     scene = rrb.Spatial3DView(origin="/world", name="scene", eye_controls=eye, overrides={
         **{f"/world/bvh/level_{level}": rrb.EntityBehavior(visible=False) for level in range(BVH_LEVELS_SHOWN, 64)},
-        **_hidden_mesh_volumes(header),
+        **hidden_mesh_volumes(header),
         "/world/mesh_search/all": rrb.EntityBehavior(visible=False)})
     if len(header.walls.meshes):  # the search tree under the scene, as wide
-        scene = rrb.Vertical(scene, rrb.GraphView(origin="/search", name="the step's BVH search, as recorded "
-                                                                          "(green: met, red: culled, yellow: triangle)"),
-                             row_shares=[3, 2])
+        title = (f"the BVH search: {search_empty}" if search_empty else
+                 "the step's BVH search, as recorded (green: met, red: culled, yellow: triangle)")
+        scene = rrb.Vertical(scene, rrb.GraphView(origin="/search", name=title), row_shares=[3, 2])
     return rrb.Blueprint(
         rrb.Horizontal(
             scene,
@@ -710,24 +753,30 @@ def blueprint(header: RecordingHeader, opening: tuple[str, int] | None = None):
             ),
             column_shares=[3, 2],
         ),
-        rrb.TimePanel(timeline=opening[0], play_state="paused") if opening else rrb.TimePanel(timeline="step"),
+        rrb.TimePanel(timeline=opening[0], play_state="paused") if opening else
+        rrb.TimePanel(timeline="step", play_state="playing" if playing else "paused"),
         collapse_panels=True,
     )
 
 
-def _hidden_mesh_volumes(header: RecordingHeader) -> dict:
-    """Blueprint overrides: each mesh's OBBs and spheres hidden, and its AABBs below the
-    first BVH_LEVELS_SHOWN levels (all a click away in the view's entity tree)."""
+def hidden_mesh_volumes(header: RecordingHeader, root: str = "") -> dict:
+    """Blueprint overrides: of each mesh's BVH only the volume its run walked
+    (Meshes.bounding_volume) is shown, its first BVH_LEVELS_SHOWN levels; the other two
+    volumes and the deeper levels are hidden (all a click away in the view's entity tree).
+    root: the run's entity root ("/a" in the diff overlay)."""
     import rerun as rr
     import rerun.blueprint as rrb
 
     hidden = {}
-    for name in header.walls.meshes.names:
-        path = f"/world/meshes/{rr.escape_entity_path_part(name)}/bvh"
-        hidden[f"{path}/obb"] = rrb.EntityBehavior(visible=False)
-        hidden[f"{path}/sphere"] = rrb.EntityBehavior(visible=False)
+    meshes = header.walls.meshes
+    walked = list(getattr(meshes, "bounding_volume", None) or ["aabb"] * len(meshes.names))
+    for name, used in zip(meshes.names, walked, strict=True):
+        path = f"{root}/world/meshes/{rr.escape_entity_path_part(name)}/bvh"
+        for volume in ("aabb", "obb", "sphere"):
+            if volume != used:
+                hidden[f"{path}/{volume}"] = rrb.EntityBehavior(visible=False)
         for level in range(BVH_LEVELS_SHOWN, 64):
-            hidden[f"{path}/aabb/level_{level}"] = rrb.EntityBehavior(visible=False)
+            hidden[f"{path}/{used}/level_{level}"] = rrb.EntityBehavior(visible=False)
     return hidden
 
 
