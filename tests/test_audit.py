@@ -292,7 +292,7 @@ def test_an_overlap_with_a_moving_mesh_names_the_triangle_where_the_mesh_is(tmp_
                      '[[particles]]\nposition = [-0.5, 1.0, 0.5]\nradius = 0.1\n')
     summary = api.run(str(scene))
     first = next(line for line in summary.findings if "overlap by" in line)
-    assert first.startswith("step 1: sphere 0 and mesh 'plate' triangle 1 overlap by 50 mm"), summary.findings
+    assert first.startswith("step 1: sphere 0 and mesh 'plate' triangle 1 (face) overlap by 50 mm"), summary.findings
 
 
 def test_a_collapse_driven_by_a_kinematic_mesh_says_so_and_what_helps(tmp_path):

@@ -39,8 +39,8 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..events import (FEATURE_NAMES, HOW_AT_ONE_INSTANT, HOW_IMPULSE, HOW_RAPID, HOW_RESTING, KIND_MESH, KIND_WALL,
-                      PARTNER_IS_SPHERE, Contacts, EngineWarning, StepEnd, contact_words, partner_is_sphere,
-                      partner_words)
+                      PARTNER_IS_SPHERE, Contacts, EngineWarning, StepEnd, contact_words, feature_words,
+                      partner_is_sphere, partner_words)
 from .mesh_overlap import MeshOverlaps
 from .quiet import quiet_numerics
 from .tunnel import StepChecker
@@ -427,7 +427,9 @@ class Auditor:
         depth, spheres, partner, where = deepest_overlap(end.positions, self.radius, self.header.walls, end.time)
         wall = partner[1] if partner is not None and partner[0] == KIND_WALL else None
         if partner is not None:
-            who = f"sphere {spheres[0]} and {partner_words(*partner, self.names)} overlap"
+            # a triangle with the feature the sphere's centre is nearest: its face, an edge or a corner
+            where_on = f" ({feature_words(partner[2])})" if len(partner) > 2 else ""
+            who = f"sphere {spheres[0]} and {partner_words(partner[0], partner[1], self.names)}{where_on} overlap"
         elif spheres:
             who = f"spheres {spheres[0]} and {spheres[1]} overlap"
         else:  # across a periodic boundary, where the search below does not look
@@ -750,7 +752,8 @@ def _explain(rec, on_step, every_finding: bool = False) -> AuditReport:
 
 
 def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls, time: float = 0.0):
-    """(depth m, spheres, partner (kind, index) or None, where (3,) or None) of the deepest
+    """(depth m, spheres, partner (kind, index), for a triangle (kind, index, contact
+    feature code: events.FEATURE_NAMES, from 1) or None, where (3,) or None) of the deepest
     overlap of positions x (N, 3) at run time ``time`` (s; where the kinematic meshes
     are): sphere pairs found by the grid broad phase on the spheres' own boxes (not across
     a periodic boundary; partner None), every sphere with every wall (a sphere past a thin
@@ -787,7 +790,11 @@ def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls, time: float = 0.0)
         depth, i, t = deepest_where(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(r, dtype=np.float64),
                                     geometry, True)
         if depth > best[0]:
-            best = (float(depth), [int(i)], (KIND_MESH, int(t)), x[int(i)])
+            from ..engine.mesh.closest import closest_on_triangle
+
+            corner = geometry[0][int(t)]  # (3, 3), where the mesh is at ``time``
+            feature = closest_on_triangle(*x[int(i)], *corner[0], *corner[1], *corner[2])[3]
+            best = (float(depth), [int(i)], (KIND_MESH, int(t), int(feature) + 1), x[int(i)])
     return best
 
 
