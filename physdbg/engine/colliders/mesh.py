@@ -38,7 +38,7 @@ from numba import njit
 
 from ..broadphase.bvh import build, build_lbvh
 from ..jit import borrowing, kernel
-from ..mesh.volumes import PARALLEL_GUARD
+from ..mesh.volumes import separating_axes_meet
 from ..mesh.closest import FACE, closest_on_triangle
 from ..mesh.rigid_motion import in_body_frame, surface_acceleration, surface_velocity, turned_with
 from ..toi import (DISCRETE, SWEPT, moving_triangle_toi_sampled, moving_triangle_toi_swept, triangle_toi_sampled,
@@ -475,48 +475,9 @@ def _box_meets_obb(l0, l1, l2, h0, h1, h2, node_obb, q) -> bool:
     ea0, ea1, ea2 = 0.5 * (h0 - l0), 0.5 * (h1 - l1), 0.5 * (h2 - l2)
     t0, t1, t2 = o[0] - 0.5 * (l0 + h0), o[1] - 0.5 * (l1 + h1), o[2] - 0.5 * (l2 + h2)
     eb0, eb1, eb2 = o[12], o[13], o[14]
-    g = PARALLEL_GUARD
     # r_ij = a_i · b_j with a the world's axes: component i of B's axis j (row j of the axes)
-    r00, r01, r02 = o[3], o[6], o[9]
-    r10, r11, r12 = o[4], o[7], o[10]
-    r20, r21, r22 = o[5], o[8], o[11]
-    a00, a01, a02 = abs(r00) + g, abs(r01) + g, abs(r02) + g
-    a10, a11, a12 = abs(r10) + g, abs(r11) + g, abs(r12) + g
-    a20, a21, a22 = abs(r20) + g, abs(r21) + g, abs(r22) + g
-    # A's axes
-    if abs(t0) > ea0 + eb0 * a00 + eb1 * a01 + eb2 * a02:
-        return False
-    if abs(t1) > ea1 + eb0 * a10 + eb1 * a11 + eb2 * a12:
-        return False
-    if abs(t2) > ea2 + eb0 * a20 + eb1 * a21 + eb2 * a22:
-        return False
-    # B's axes
-    if abs(t0 * r00 + t1 * r10 + t2 * r20) > ea0 * a00 + ea1 * a10 + ea2 * a20 + eb0:
-        return False
-    if abs(t0 * r01 + t1 * r11 + t2 * r21) > ea0 * a01 + ea1 * a11 + ea2 * a21 + eb1:
-        return False
-    if abs(t0 * r02 + t1 * r12 + t2 * r22) > ea0 * a02 + ea1 * a12 + ea2 * a22 + eb2:
-        return False
-    # A_i x B_j
-    if abs(t2 * r10 - t1 * r20) > ea1 * a20 + ea2 * a10 + eb1 * a02 + eb2 * a01:
-        return False
-    if abs(t2 * r11 - t1 * r21) > ea1 * a21 + ea2 * a11 + eb0 * a02 + eb2 * a00:
-        return False
-    if abs(t2 * r12 - t1 * r22) > ea1 * a22 + ea2 * a12 + eb0 * a01 + eb1 * a00:
-        return False
-    if abs(t0 * r20 - t2 * r00) > ea0 * a20 + ea2 * a00 + eb1 * a12 + eb2 * a11:
-        return False
-    if abs(t0 * r21 - t2 * r01) > ea0 * a21 + ea2 * a01 + eb0 * a12 + eb2 * a10:
-        return False
-    if abs(t0 * r22 - t2 * r02) > ea0 * a22 + ea2 * a02 + eb0 * a11 + eb1 * a10:
-        return False
-    if abs(t1 * r00 - t0 * r10) > ea0 * a10 + ea1 * a00 + eb1 * a22 + eb2 * a21:
-        return False
-    if abs(t1 * r01 - t0 * r11) > ea0 * a11 + ea1 * a01 + eb0 * a22 + eb2 * a20:
-        return False
-    if abs(t1 * r02 - t0 * r12) > ea0 * a12 + ea1 * a02 + eb0 * a21 + eb1 * a20:
-        return False
-    return True
+    return separating_axes_meet(t0, t1, t2, o[3], o[6], o[9], o[4], o[7], o[10], o[5], o[8], o[11], ea0, ea1, ea2,
+                                eb0, eb1, eb2)
 
 
 @njit(cache=True, inline="always")

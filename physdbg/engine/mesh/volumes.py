@@ -5,10 +5,58 @@ counts as meeting (a volume may only ever be too generous, never too tight)."""
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from ..jit import borrowing
 
 PARALLEL_GUARD = 1e-12  # added to |R_ij| in the OBB test (Ericson): near-parallel axes stay conservative
+
+
+@njit(cache=True, inline="always")
+def separating_axes_meet(t0, t1, t2, r00, r01, r02, r10, r11, r12, r20, r21, r22, ea0, ea1, ea2, eb0, eb1, eb2) -> bool:
+    """The separating-axis test of two oriented boxes A and B, the one rule of both OBB tests
+    (obbs_meet; the engine's walk, colliders/mesh._box_meets_obb): t (m) is B's centre less
+    A's in A's axes, r_ij = a_i · b_j, ea, eb the half extents (m). The 3 + 3 face axes and
+    the 9 edge-edge crosses (Gottschalk; Ericson 4.4.1), each |r_ij| grown by PARALLEL_GUARD
+    so that near-parallel axes stay conservative. True when no axis separates them."""
+    g = PARALLEL_GUARD
+    a00, a01, a02 = abs(r00) + g, abs(r01) + g, abs(r02) + g
+    a10, a11, a12 = abs(r10) + g, abs(r11) + g, abs(r12) + g
+    a20, a21, a22 = abs(r20) + g, abs(r21) + g, abs(r22) + g
+    # A's axes
+    if abs(t0) > ea0 + eb0 * a00 + eb1 * a01 + eb2 * a02:
+        return False
+    if abs(t1) > ea1 + eb0 * a10 + eb1 * a11 + eb2 * a12:
+        return False
+    if abs(t2) > ea2 + eb0 * a20 + eb1 * a21 + eb2 * a22:
+        return False
+    # B's axes
+    if abs(t0 * r00 + t1 * r10 + t2 * r20) > ea0 * a00 + ea1 * a10 + ea2 * a20 + eb0:
+        return False
+    if abs(t0 * r01 + t1 * r11 + t2 * r21) > ea0 * a01 + ea1 * a11 + ea2 * a21 + eb1:
+        return False
+    if abs(t0 * r02 + t1 * r12 + t2 * r22) > ea0 * a02 + ea1 * a12 + ea2 * a22 + eb2:
+        return False
+    # A_i x B_j
+    if abs(t2 * r10 - t1 * r20) > ea1 * a20 + ea2 * a10 + eb1 * a02 + eb2 * a01:
+        return False
+    if abs(t2 * r11 - t1 * r21) > ea1 * a21 + ea2 * a11 + eb0 * a02 + eb2 * a00:
+        return False
+    if abs(t2 * r12 - t1 * r22) > ea1 * a22 + ea2 * a12 + eb0 * a01 + eb1 * a00:
+        return False
+    if abs(t0 * r20 - t2 * r00) > ea0 * a20 + ea2 * a00 + eb1 * a12 + eb2 * a11:
+        return False
+    if abs(t0 * r21 - t2 * r01) > ea0 * a21 + ea2 * a01 + eb0 * a12 + eb2 * a10:
+        return False
+    if abs(t0 * r22 - t2 * r02) > ea0 * a22 + ea2 * a02 + eb0 * a11 + eb1 * a10:
+        return False
+    if abs(t1 * r00 - t0 * r10) > ea0 * a10 + ea1 * a00 + eb1 * a22 + eb2 * a21:
+        return False
+    if abs(t1 * r01 - t0 * r11) > ea0 * a11 + ea1 * a01 + eb0 * a22 + eb2 * a20:
+        return False
+    if abs(t1 * r02 - t0 * r12) > ea0 * a12 + ea1 * a02 + eb0 * a21 + eb1 * a20:
+        return False
+    return True
 
 
 @borrowing
@@ -50,53 +98,8 @@ def obbs_meet(ca, axes_a, half_a, i, cb, axes_b, half_b, j):
     t0 = dx * axes_a[i, 0, 0] + dy * axes_a[i, 0, 1] + dz * axes_a[i, 0, 2]
     t1 = dx * axes_a[i, 1, 0] + dy * axes_a[i, 1, 1] + dz * axes_a[i, 1, 2]
     t2 = dx * axes_a[i, 2, 0] + dy * axes_a[i, 2, 1] + dz * axes_a[i, 2, 2]
-    g = PARALLEL_GUARD
-    a00 = abs(r00) + g
-    a01 = abs(r01) + g
-    a02 = abs(r02) + g
-    a10 = abs(r10) + g
-    a11 = abs(r11) + g
-    a12 = abs(r12) + g
-    a20 = abs(r20) + g
-    a21 = abs(r21) + g
-    a22 = abs(r22) + g
-    ea0 = half_a[i, 0]
-    ea1 = half_a[i, 1]
-    ea2 = half_a[i, 2]
-    eb0 = half_b[j, 0]
-    eb1 = half_b[j, 1]
-    eb2 = half_b[j, 2]
-    if abs(t0) > ea0 + eb0 * a00 + eb1 * a01 + eb2 * a02:
-        return False
-    if abs(t1) > ea1 + eb0 * a10 + eb1 * a11 + eb2 * a12:
-        return False
-    if abs(t2) > ea2 + eb0 * a20 + eb1 * a21 + eb2 * a22:
-        return False
-    if abs(t0 * r00 + t1 * r10 + t2 * r20) > ea0 * a00 + ea1 * a10 + ea2 * a20 + eb0:
-        return False
-    if abs(t0 * r01 + t1 * r11 + t2 * r21) > ea0 * a01 + ea1 * a11 + ea2 * a21 + eb1:
-        return False
-    if abs(t0 * r02 + t1 * r12 + t2 * r22) > ea0 * a02 + ea1 * a12 + ea2 * a22 + eb2:
-        return False
-    if abs(t2 * r10 - t1 * r20) > ea1 * a20 + ea2 * a10 + eb1 * a02 + eb2 * a01:
-        return False
-    if abs(t2 * r11 - t1 * r21) > ea1 * a21 + ea2 * a11 + eb0 * a02 + eb2 * a00:
-        return False
-    if abs(t2 * r12 - t1 * r22) > ea1 * a22 + ea2 * a12 + eb0 * a01 + eb1 * a00:
-        return False
-    if abs(t0 * r20 - t2 * r00) > ea0 * a20 + ea2 * a00 + eb1 * a12 + eb2 * a11:
-        return False
-    if abs(t0 * r21 - t2 * r01) > ea0 * a21 + ea2 * a01 + eb0 * a12 + eb2 * a10:
-        return False
-    if abs(t0 * r22 - t2 * r02) > ea0 * a22 + ea2 * a02 + eb0 * a11 + eb1 * a10:
-        return False
-    if abs(t1 * r00 - t0 * r10) > ea0 * a10 + ea1 * a00 + eb1 * a22 + eb2 * a21:
-        return False
-    if abs(t1 * r01 - t0 * r11) > ea0 * a11 + ea1 * a01 + eb0 * a22 + eb2 * a20:
-        return False
-    if abs(t1 * r02 - t0 * r12) > ea0 * a12 + ea1 * a02 + eb0 * a21 + eb1 * a20:
-        return False
-    return True
+    return separating_axes_meet(t0, t1, t2, r00, r01, r02, r10, r11, r12, r20, r21, r22, half_a[i, 0], half_a[i, 1],
+                                half_a[i, 2], half_b[j, 0], half_b[j, 1], half_b[j, 2])
 
 
 @borrowing
