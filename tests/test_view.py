@@ -33,3 +33,24 @@ def test_asleep_spheres_are_grey_blue_and_immovable_ones_stay_grey():
     colors = sphere_colors(inverse_mass, np.array([False, True, True]))
     assert colors[0].tolist() == [240, 140, 50] and tuple(colors[1]) == ASLEEP_COLOR
     assert colors[2].tolist() == [140, 140, 140]
+
+
+def test_the_views_frame_a_turning_mesh_s_whole_sweep(tmp_path):
+    """A 3 m blade turning about its middle with no walls around it: the box every view is
+    framed on holds every point the blade reaches in a turn (it once held only the blade as
+    it started, and the diff overlay cut the mesh off)."""
+    from physdbg.api import ready_scene
+    from physdbg.record.header import RecordingHeader
+    from physdbg.record.view import scene_bounds
+
+    scene = tmp_path / "blade.toml"
+    scene.write_text('name = "blade"\ndt = "1/60"\nsteps = 10\n[[meshes]]\nname = "blade"\nshape = "paddle"\n'
+                     'scale = [3.0, 1.0, 1.0]\nangular_velocity = [0.0, 360.0, 0.0]\n'
+                     '[[particles]]\nposition = [0.0, 1.0, 0.0]\nradius = 0.05\n')
+    header = RecordingHeader.from_scene(ready_scene(str(scene)))
+    lo, hi = scene_bounds(header)
+    meshes = header.walls.meshes
+    reach = float(meshes.turn_radii()[0])
+    for degrees in range(0, 360, 15):  # the blade's corners at every 15° of its turn
+        corners = meshes.placed(degrees / 360.0)[0].reshape(-1, 3)
+        assert np.all(corners >= lo - 1e-9) and np.all(corners <= hi + 1e-9), (degrees, reach)

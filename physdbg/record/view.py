@@ -30,7 +30,8 @@ def contact_centres(c: Contacts, radius: np.ndarray) -> np.ndarray:
 
 
 def scene_bounds(h: RecordingHeader) -> tuple[np.ndarray, np.ndarray]:
-    """A box around the initial spheres, every axis-aligned wall and every mesh, at least half as deep
+    """A box around the initial spheres, every axis-aligned wall and every mesh (a turning
+    one's whole sweep about its pivot), at least half as deep
     on each axis as on its longest, so a lone floor is drawn bigger than one ball."""
     r = float(h.radius.max()) if h.count else 0.5
     lo = h.positions.min(axis=0) - r if h.count else np.full(3, -1.0)
@@ -40,9 +41,15 @@ def scene_bounds(h: RecordingHeader) -> tuple[np.ndarray, np.ndarray]:
         if abs(normal[axis]) > 1 - 1e-12:
             coordinate = offset / normal[axis]
             lo[axis], hi[axis] = min(lo[axis], coordinate), max(hi[axis], coordinate)
-    if h.walls.meshes.triangles:  # and every mesh
-        corners = h.walls.meshes.corners.reshape(-1, 3)
+    if h.walls.meshes.triangles:  # and every mesh, a turning one wherever its turn takes it
+        meshes = h.walls.meshes
+        corners = meshes.corners.reshape(-1, 3)
         lo, hi = np.minimum(lo, corners.min(axis=0)), np.maximum(hi, corners.max(axis=0))
+        turning = np.flatnonzero(np.any(meshes.angular_velocity != 0.0, axis=1))
+        if len(turning):
+            reach = meshes.turn_radii()[turning][:, None]
+            lo = np.minimum(lo, (meshes.pivot[turning] - reach).min(axis=0))
+            hi = np.maximum(hi, (meshes.pivot[turning] + reach).max(axis=0))
     periodic = h.walls.period > 0
     lo[periodic] = np.minimum(lo, h.walls.period_origin)[periodic]
     hi[periodic] = np.maximum(hi, h.walls.period_origin + h.walls.period)[periodic]
