@@ -211,7 +211,8 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         momentum_drift=float(np.linalg.norm(mom1 - mom0)), max_overlap=tally.max_overlap,
         start_notes=start_notes, meshes_driven=bool(scene.walls.meshes.moving.any()),
         overlap_where=(f"{overlap_words(tally.overlap_with, scene.walls.partner_names())}, step {tally.overlap_step}"
-                       if tally.overlap_with is not None else ""),
+                       if tally.overlap_with is not None and tally.max_overlap > scene.settings.contact_tolerance
+                       else ""),  # (a rounding-sized overlap, within the tolerance, is nobody's doing)
         kernels=kernels.reason, wall_seconds=wall, compile_seconds=compile_seconds, ms_per_step=1000.0 * wall / n_steps if n_steps else math.nan,
         engine_ms_per_step=1000.0 * sum(tally.seconds.values()) / n_steps if n_steps else math.nan,
         phase_seconds=tally.seconds, final_hash=digest, warning_counts=dict(warnings.counts),
