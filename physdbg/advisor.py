@@ -142,9 +142,10 @@ def advise(scene) -> Advice:
 
     if periodic is not None and not periodic["fits"]:
         predictions.append(Prediction("dt", f"{dt:.6g}", "pairs untested", periodic["why"]))
-    overlaps = starting_overlaps(scene)  # a sphere inside another body at the start: overlap left, whatever the method
+    geometry = mesh_geometry(scene)  # the meshes' trees, built once for both checks
+    overlaps = starting_overlaps(scene, geometry)  # a sphere inside another body at the start: overlap left
     facts["start_overlaps"] = overlaps
-    facts["notes"] = meshes_out_of_reach(scene) + driven_notes(scene)  # said, not failed
+    facts["notes"] = meshes_out_of_reach(scene) + driven_notes(scene, geometry)  # said, not failed
     if overlaps:
         predictions.append(Prediction("start", "positions", "overlap left", start_words(overlaps)))
     pile = _pile(state, walls, np.asarray(s.gravity, dtype=float))
@@ -504,16 +505,25 @@ START_NOT_PUSHED = ("physdbg does not push bodies apart: it resolves contacts fr
                     "stays until their motions part them, and every step warns")
 
 
-def starting_overlaps(scene) -> list[dict]:
+def mesh_geometry(scene) -> tuple | None:
+    """The scene's meshes as the engine's collider group (colliders.mesh.MeshGeometry, as a
+    tuple: each mesh's tree built), or None without meshes: built once for the checks below."""
+    from .engine.colliders.mesh import MeshGeometry
+
+    return tuple(MeshGeometry.of(scene.walls)) if scene.walls.meshes.triangles else None
+
+
+def starting_overlaps(scene, geometry: tuple | None = None) -> list[dict]:
     """Every sphere that starts inside another body, deeper than the contact tolerance:
     [{"sphere": i, "partner": "sphere 4" / "wall 'floor'" / "mesh 'trough' triangle 1",
     "depth": m}], each sphere once (its deepest), deepest first. Spheres with spheres by the
     grid broad phase on their own boxes (periodic images included by the minimum image),
     walls by their gaps (colliders.plane.gaps) and triangles by the engine's mesh search
-    (colliders.mesh.deepest_where), all at run time 0: the engine's own rules."""
+    (colliders.mesh.deepest_where), all at run time 0: the engine's own rules. geometry:
+    mesh_geometry(scene), if already built."""
     from .engine.broadphase.boxes import NO_LIMIT
     from .engine.broadphase.grid import grid_pairs
-    from .engine.colliders.mesh import MeshGeometry, deepest_where
+    from .engine.colliders.mesh import deepest_where
     from .engine.colliders.plane import gaps
     from .events import KIND_MESH, KIND_WALL, partner_words
 
@@ -542,7 +552,7 @@ def starting_overlaps(scene) -> list[dict]:
         for i, w in zip(*np.nonzero(depth > tolerance)):
             note(int(i), float(depth[i, w]), partner_words(KIND_WALL, int(w), names))
     if walls.meshes.triangles:
-        geometry = tuple(MeshGeometry.of(walls))
+        geometry = geometry if geometry is not None else mesh_geometry(scene)
         corners = walls.meshes.corners.reshape(-1, 3)
         near = np.all((x + r[:, None] >= corners.min(axis=0)) & (x - r[:, None] <= corners.max(axis=0)), axis=1)
         for i in np.flatnonzero(near):
@@ -596,11 +606,12 @@ def meshes_out_of_reach(scene) -> list[str]:
     return notes
 
 
-def driven_notes(scene) -> list[str]:
+def driven_notes(scene, geometry: tuple | None = None) -> list[str]:
     """Notes on the kinematic meshes: each one's motion does work on what it strikes (the
     run's energy is not conserved), and each sphere that starts resting on one (within the
-    contact tolerance, or a micrometre, of its surface) is carried by it."""
-    from .engine.colliders.mesh import MeshGeometry, deepest_where
+    contact tolerance, or a micrometre, of its surface) is carried by it. geometry:
+    mesh_geometry(scene), if already built."""
+    from .engine.colliders.mesh import deepest_where
     from .events import KIND_MESH, partner_words
 
     state, walls = scene.state, scene.walls
@@ -611,7 +622,7 @@ def driven_notes(scene) -> list[str]:
              f"so the run's energy is not conserved (the audit judges each contact against the moving surface)"
              for k, name in enumerate(meshes.names) if meshes.moving[k]]
     if state.count and np.isfinite(state.positions).all():
-        geometry = tuple(MeshGeometry.of(walls))
+        geometry = geometry if geometry is not None else mesh_geometry(scene)
         names = walls.partner_names()
         near = max(scene.settings.contact_tolerance, 1e-6)
         for i in range(state.count):

@@ -183,6 +183,7 @@ class Auditor:
         self._contacts: Contacts | None = None
         self._warnings: list[EngineWarning] = []
         self._in_overlap = False  # the step before ended overlapping: the same overlap goes on
+        self._mesh_geometry = None  # the meshes' collider group, built at the first overlap (deepest_overlap)
         self._non_finite = False  # the step before ended with a NaN or infinity: the same one goes on
         self._saw_contacts = False
         self._energy: float | None = None  # kinetic + potential after the last step (J)
@@ -424,7 +425,12 @@ class Auditor:
         if self._in_overlap:  # counted where it began
             return
         self._in_overlap = True
-        depth, spheres, partner, where = deepest_overlap(end.positions, self.radius, self.header.walls, end.time)
+        if self._mesh_geometry is None and self.header.walls.meshes.triangles:  # the trees built once a run
+            from ..engine.colliders.mesh import MeshGeometry
+
+            self._mesh_geometry = tuple(MeshGeometry.of(self.header.walls))
+        depth, spheres, partner, where = deepest_overlap(end.positions, self.radius, self.header.walls, end.time,
+                                                         self._mesh_geometry)
         wall = partner[1] if partner is not None and partner[0] == KIND_WALL else None
         if partner is not None:
             # a triangle with the feature the sphere's centre is nearest: its face, an edge or a corner
@@ -751,14 +757,15 @@ def _explain(rec, on_step, every_finding: bool = False) -> AuditReport:
     return report
 
 
-def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls, time: float = 0.0):
+def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls, time: float = 0.0, geometry: tuple | None = None):
     """(depth m, spheres, partner (kind, index), for a triangle (kind, index, contact
     feature code: events.FEATURE_NAMES, from 1) or None, where (3,) or None) of the deepest
     overlap of positions x (N, 3) at run time ``time`` (s; where the kinematic meshes
     are): sphere pairs found by the grid broad phase on the spheres' own boxes (not across
     a periodic boundary; partner None), every sphere with every wall (a sphere past a thin
     wall's middle went through it: tunnelling, not an overlap) and with every mesh
-    triangle. Depth 0 when none."""
+    triangle. Depth 0 when none. geometry: the meshes' collider group
+    (colliders.mesh.MeshGeometry as a tuple), if the caller keeps one: it is placed here."""
     from ..engine.broadphase.boxes import NO_LIMIT
     from ..engine.broadphase.grid import grid_pairs
     from ..engine.colliders.plane import gaps
@@ -785,7 +792,7 @@ def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls, time: float = 0.0)
     if walls.meshes.triangles and finite.all():
         from ..engine.colliders.mesh import MeshGeometry, deepest_where, place
 
-        geometry = tuple(MeshGeometry.of(walls))
+        geometry = geometry if geometry is not None else tuple(MeshGeometry.of(walls))
         place(geometry, walls.meshes, time, 0.0)  # a kinematic mesh where it is at the end of the step
         depth, i, t = deepest_where(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(r, dtype=np.float64),
                                     geometry, True)

@@ -385,6 +385,9 @@ def resolve_at_one_instant(kinds, others, n, ia, toi, particles, method, geometr
     members = np.empty(n, np.int64)  # indices into kinds, others
     normals = np.empty((n, 3))
     closings = np.empty(n)
+    rel_accs = np.empty(n)
+    restitutions = np.empty(n)
+    surfaces = np.empty((n, 3))  # a driven partner's surface velocity (NaN: not driven)
     m = 0
     coupled = False  # two members neither parallel nor perpendicular
     elastic = True  # every member's restitution 1 (the rapid-contact rule cannot act)
@@ -393,8 +396,8 @@ def resolve_at_one_instant(kinds, others, n, ia, toi, particles, method, geometr
         resolved[s] = 0
     for s in range(n):
         q = order[s]
-        nx, ny, nz, closing, rel_acc, e, wsum, _driven, _u0, _u1, _u2 = _approach(kinds[q], ia, others[q],
-                                                                                particles, method, geometry)
+        nx, ny, nz, closing, rel_acc, e, wsum, driven, u0, u1, u2 = _approach(kinds[q], ia, others[q], particles,
+                                                                             method, geometry)
         if not _approaches(closing, rel_acc, wsum) or m == AT_ONE_INSTANT:
             continue
         repeated = False
@@ -411,6 +414,11 @@ def resolve_at_one_instant(kinds, others, n, ia, toi, particles, method, geometr
         normals[m, 1] = ny
         normals[m, 2] = nz
         closings[m] = closing
+        rel_accs[m] = rel_acc
+        restitutions[m] = e
+        surfaces[m, 0] = u0 if driven else math.nan
+        surfaces[m, 1] = u1
+        surfaces[m, 2] = u2
         elastic = elastic and e >= 1.0
         held_by_rule = held_by_rule or (rel_acc < 0.0 and rapid_holds(closing, rel_acc, method[M_RAPID_TIME],
                                                                         method[M_RAPID_RULE]))
@@ -448,17 +456,18 @@ def resolve_at_one_instant(kinds, others, n, ia, toi, particles, method, geometr
         resolved[q] = 1
         group_kinds[r] = kinds[q]
         group_others[r] = others[q]
-        nx, ny, nz, closing, rel_acc, e, _wsum, driven, u0, u1, u2 = _approach(kinds[q], ia, others[q], particles,
-                                                                             method, geometry)
-        press = rel_acc - _crease_press(h, ia, nx, ny, nz, particles[P_INVERSE_MASS][ia])
-        how, used, is_rapid = _judged_how(closing, rel_acc, press, e, now, ia, -1, last_contact, method)
+        nx, ny, nz = normals[r, 0], normals[r, 1], normals[r, 2]
+        press = rel_accs[r] - _crease_press(h, ia, nx, ny, nz, particles[P_INVERSE_MASS][ia])
+        how, used, is_rapid = _judged_how(closings[r], rel_accs[r], press, restitutions[r], now, ia, -1, last_contact,
+                                          method)
         hows[r] = how
         useds[r] = used
         rapids[r] = is_rapid
         targets[r] = useds[r] * closings[r]
         holds[r] = hows[r] != HOW_IMPULSE
-        _begin_row(contacts[first_row + r], kinds[q], ia, others[q], toi, nx, ny, nz, driven, u0, u1, u2, x, v,
-                   particles[P_RADIUS], sigma, geometry)
+        driven = not math.isnan(surfaces[r, 0])
+        _begin_row(contacts[first_row + r], kinds[q], ia, others[q], toi, nx, ny, nz, driven, surfaces[r, 0],
+                   surfaces[r, 1], surfaces[r, 2], x, v, particles[P_RADIUS], sigma, geometry)
     last_contact[ia] = now
     impulses = np.zeros(m)
     ok = _solve_with_held(group_kinds, group_others, m, ia, -1, toi, normals, targets, holds, particles, method,
