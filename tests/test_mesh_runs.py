@@ -90,6 +90,25 @@ def test_the_ramp_scene_comes_to_rest_on_its_meshes_within_the_contact_tolerance
     assert np.allclose(world.state.positions[:, 0], 0.0, atol=1e-3)
 
 
+def test_balls_in_the_ramps_crease_never_gain_energy_and_stop_touching_without_sleeping():
+    """Sleeping off, the balls lie in the crease for the run's second half: held on both
+    faces, none may gain energy from one step to the next (a held contact kept while the
+    ball left its face pushed it up the other: a rocking that never decayed, 6–8 contacts a
+    step), and the contacts die out (docs/meshes.md "In a crease")."""
+    scene = api.load_scene("ramp", ["sleep_speed=0"])
+    world = scene.build_world()
+    energy, contacts = [], []
+    for dt in scene.step_lengths():
+        end = world.step(dt)
+        x, v = world.state.positions, world.state.velocities
+        energy.append(0.5 * (v * v).sum(axis=1) - x @ np.asarray(scene.settings.gravity))
+        contacts.append(end.counts.contacts)
+    half = len(energy) // 2
+    rise = np.diff(np.array(energy[half:]), axis=0)
+    assert rise.max() < 0.0, rise.max()  # drag takes a little every step, contacts never give
+    assert sum(contacts[-300:]) < 10 and end.counts.held == 6  # each ball on both faces
+
+
 def test_a_recording_keeps_its_meshes_and_replays_bit_for_bit(tmp_path):
     recorded = tmp_path / "ramp.mcap"
     done = runner.invoke(app, ["record", "ramp", "-s", "duration=2", "-o", str(recorded), "--no-rrd",

@@ -777,7 +777,8 @@ def release_loose(h, v, acc, inverse_mass, touched_only, x, a, sigma, when, inte
     Separating means a relative normal velocity above what the solve leaves as residue
     (SEPARATION_FACTOR·vtol) plus, for a pressed contact, the speed its force undoes in
     ``stick`` seconds (lam·(w_a + w_b)·stick: the solve's own allowance, see
-    solve_contacts). touched_only: only contacts of the spheres visited by the current
+    solve_contacts) — but for a contact with something immovable whose allowance this
+    solve has spent, the residue alone (_stick_spent). touched_only: only contacts of the spheres visited by the current
     solve (h.touched), including those a release visits; else every held contact. A
     released contact's force is taken back from ``acc`` (its spheres are touched first).
     Returns how many were released.
@@ -817,7 +818,8 @@ def _release_if_loose(h, c, v, acc, inverse_mass, x, a, sigma, when, integrator,
     j = partner_sphere(h.kind[c], h.other[c])
     rel_v = _relative(v, h, c, True)
     wsum = inverse_mass[i] + (inverse_mass[j] if j >= 0 else 0.0)
-    separating = rel_v > SEPARATION_FACTOR * vtol + h.lam[c] * wsum * stick
+    allowance = 0.0 if _stick_spent(h, c, j, solve) else h.lam[c] * wsum * stick
+    separating = rel_v > SEPARATION_FACTOR * vtol + allowance
     # pulled apart, and not approaching by even a rounding error (released, such a
     # contact would be found again at once)
     pulled = h.lam[c] == 0.0 and rel_v >= 0.0 and _relative(acc, h, c, False) > atol
@@ -835,6 +837,24 @@ def _release_if_loose(h, c, v, acc, inverse_mass, x, a, sigma, when, integrator,
     held_remove(h, c)
     h.count[STEP_RELEASED] += 1
     return True
+
+
+@borrowing
+def _stick_spent(h, c, j, solve) -> bool:
+    """Whether held contact c, with something immovable (j: its partner sphere, -1), was
+    pulled by this solve's velocity stage (jv < 0: the stick, see _bounds). One that still
+    separates beyond the residue was pulled as hard as the stick allows: it is leaving.
+
+    Why released then: the sphere's other contacts drive it off (a ball held on one face
+    of a crease that meets the other is pushed off the first by the second's impulse).
+    Kept held, its force would go on pushing the sphere away while it separates — work
+    done by a contact, which in ramp's crease fed a ball's rocking from face to face for
+    ever (6–8 contacts a step; released, 0.5: docs/meshes.md "In a crease"). Between two
+    spheres the allowance stays: released so, a pile's contacts are made again within
+    microseconds, one after another, and the pile churns into the collapse the stick is
+    there against (tests/test_audit.py's bed and README pile, tests/test_sleep.py's narrow
+    pile)."""
+    return j < 0 and h.seen[c] == solve and h.jv[c] < 0.0
 
 
 # Two contacts of one sphere whose normals are within this of opposite (1 + n_a·n_b) leave
