@@ -15,7 +15,7 @@ helper has cached it (its callees first). Then ``engine.warm_up`` runs as ever a
 everything. (Waiting for the helper's resting solve before starting the loop was
 measured, and lost: the loop's own part is the longer.) For an audited run (``physdbg
 run``, ``record``) the helper then compiles the audit's step checker
-(``analysis.tunnel.warm_up``, ~11 s alone), which its shorter share leaves room for; before,
+(``analysis.audit.warm_up``, ~11 s alone), which its shorter share leaves room for; before,
 the first audited step compiled it, and the run reported it as the audit's time a step.
 
 No helper when only one CPU is this process's to use (``taskset``, a CI runner's quota),
@@ -45,7 +45,7 @@ def compile_kernels(broad_phase: str | None = None, sleeping: bool = False, para
                     audit: bool = False, meshes: bool = False) -> float:
     """``engine.warm_up(broad_phase, sleeping, meshes)``, on two processes when the cache is
     cold and two CPUs are free (module docstring); audit: also the audit's step checker
-    (``analysis.tunnel.warm_up``, ~11 s cold; on the helper, after the held solve, where it
+    (``analysis.audit.warm_up``, ~11 s cold; on the helper, after the held solve, where it
     fits in the time this process spends on the rest); returns the seconds taken."""
     from .engine.warm import warm_up, warm_up_without_forces
 
@@ -60,9 +60,9 @@ def compile_kernels(broad_phase: str | None = None, sleeping: bool = False, para
                 pass  # killed below; warm_up compiles the rest
         warm_up(broad_phase, sleeping, meshes)
         if audit:
-            from .analysis.tunnel import warm_up as warm_up_checker
+            from .analysis.audit import warm_up as warm_up_audit
 
-            warm_up_checker()
+            warm_up_audit()
     finally:
         if helper is not None and helper.poll() is None:  # interrupted or stuck: leave nothing running
             helper.kill()
@@ -115,7 +115,7 @@ def helper_command(audit: bool = False) -> list[str]:
     program = (f"import sys; sys.path.insert(0, {root!r}); "
                "from physdbg.engine.warm import warm_up_held_solve; warm_up_held_solve()")
     if audit:
-        program += "; from physdbg.analysis.tunnel import warm_up; warm_up()"
+        program += "; from physdbg.analysis.audit import warm_up; warm_up()"
     return [sys.executable, "-c", program]
 
 

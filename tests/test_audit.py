@@ -312,3 +312,21 @@ def test_a_collapse_driven_by_a_kinematic_mesh_says_so_and_what_helps(tmp_path):
     assert "kinematic mesh 'platform' drives them: its prescribed motion strikes the same spheres" in collapse.message
     assert collapse.advice.startswith("let slow pressed contacts rest (rest_fraction, now 0")
     assert "lowering the restitution or dt does not stop a prescribed motion" in collapse.advice
+
+
+def test_contact_energies_are_the_rows_kinetic_energies_relative_to_a_moving_surface():
+    """Rows: a pair (both spheres count), a pair with an immovable b (only a counts), a
+    wall (b's velocity NaN: a counts as it moved) and a moving mesh (a counts relative to
+    the surface's velocity, recorded as b's)."""
+    from physdbg.analysis.audit import contact_energies
+
+    mass = np.array([2.0, 1.0, np.inf])
+    a, other = np.array([0, 1, 0, 1]), np.array([1, 2, 0, 5])
+    pair = np.array([True, True, False, False])
+    va0 = np.array([[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, -3.0, 0.0], [0.0, -1.0, 0.0]])
+    va1 = np.array([[-1.0, 0.0, 0.0], [0.0, -2.0, 0.0], [0.0, 3.0, 0.0], [0.0, 2.0, 0.0]])
+    vb0 = np.array([[-2.0, 0.0, 0.0], [0.0, 0.0, 0.0], [np.nan] * 3, [0.0, 0.5, 0.0]])
+    vb1 = np.array([[2.0, 0.0, 0.0], [0.0, 0.0, 0.0], [np.nan] * 3, [0.0, 0.5, 0.0]])
+    before, after = contact_energies(mass, a, other, pair, va0, va1, vb0, vb1)
+    assert before.tolist() == [0.5 * 2 * 1 + 0.5 * 1 * 4, 0.5 * 1 * 4, 0.5 * 2 * 9, 0.5 * 1 * 1.5**2]
+    assert after.tolist() == [0.5 * 2 * 1 + 0.5 * 1 * 4, 0.5 * 1 * 4, 0.5 * 2 * 9, 0.5 * 1 * 1.5**2]

@@ -245,3 +245,23 @@ def test_profile_refuses_a_listings_folder_that_is_not_there_before_it_runs(monk
         perf_profile.main()
     assert stopped.value.code == 2
     assert f"--listings {missing}: no such folder" in capsys.readouterr().err
+
+
+def test_audit_cost_times_both_scenes_check_by_check_and_leaves_the_auditor_as_it_was(monkeypatch, capsys):
+    """benchmarks/audit_cost.py as a user runs it (small): both scenes' lines, each check's
+    time; the timing wrappers are taken off again; a bad count ends with argparse's exit 2."""
+    from benchmarks import audit_cost
+    from physdbg.analysis import audit, tunnel
+
+    before = (audit.Auditor._check_crossings, tunnel.pair_crossings)
+    monkeypatch.setattr("sys.argv", ["audit_cost.py", "--count", "200", "--steps", "5", "--gas-count", "100",
+                                     "--gas-steps", "5", "--rounds", "1"])
+    audit_cost.main()
+    out = capsys.readouterr().out
+    assert out.startswith("box-rain 200: engine alone ") and "exact gas 100 (packing 0.3): engine alone " in out
+    assert out.count("with the audit") == 2 and out.count("_check_crossings") == 2 and "pair_crossings" in out
+    assert (audit.Auditor._check_crossings, tunnel.pair_crossings) == before
+    monkeypatch.setattr("sys.argv", ["audit_cost.py", "--count", "1"])
+    with pytest.raises(SystemExit) as stopped:
+        audit_cost.main()
+    assert stopped.value.code == 2 and "at least 2" in capsys.readouterr().err

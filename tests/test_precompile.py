@@ -40,12 +40,12 @@ def test_a_cold_cache_with_two_cpus_compiles_the_held_solve_in_a_helper(monkeypa
     monkeypatch.setattr(precompile, "usable_cpus", lambda: 2)
     monkeypatch.setattr(precompile, "start_helper",
                         lambda audit=False: calls.append(f"helper started, audit {audit}") or Helper())
-    import physdbg.analysis.tunnel as tunnel
+    import physdbg.analysis.audit as audit
     import physdbg.engine.warm as world
 
     monkeypatch.setattr(world, "warm_up_without_forces", lambda bp: calls.append(f"without forces {bp}"))
     monkeypatch.setattr(world, "warm_up", lambda bp, sleeping, meshes=False: calls.append(f"warm up {bp} {sleeping}"))
-    monkeypatch.setattr(tunnel, "warm_up", lambda: calls.append("checker"))
+    monkeypatch.setattr(audit, "warm_up", lambda: calls.append("checker"))
     precompile.compile_kernels("grid", sleeping=True)
     assert calls == ["helper started, audit False", "without forces grid",
                      f"helper waited for (at most {precompile.HELPER_TIMEOUT} s)", "warm up grid True"]
@@ -56,7 +56,7 @@ def test_a_cold_cache_with_two_cpus_compiles_the_held_solve_in_a_helper(monkeypa
     assert calls == ["helper started, audit True", "without forces grid",
                      f"helper waited for (at most {precompile.HELPER_TIMEOUT} s)", "warm up grid True", "checker"]
     assert precompile.helper_command(audit=True)[-1].endswith(
-        "warm_up_held_solve(); from physdbg.analysis.tunnel import warm_up; warm_up()")
+        "warm_up_held_solve(); from physdbg.analysis.audit import warm_up; warm_up()")
 
 
 def test_one_cpu_or_parallel_off_means_one_process(monkeypatch):

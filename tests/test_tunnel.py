@@ -234,3 +234,13 @@ def test_the_compiled_wall_check_answers_as_numpy_did(seed):
     expected = [(float(i), float(j), float(abs(h1[i, j]))) for i, j in zip(*np.nonzero(through), strict=True)]
     got = [tuple(row) for row in _wall_crossings(x0, x1, normals, offsets, two_sided, radius).tolist()]
     assert np.array_equal(np.array(got).reshape(-1, 3), np.array(expected).reshape(-1, 3), equal_nan=True)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.integers(-(2**62), 2**62), max_size=60))
+def test_sorted_unique_is_numpys_unique(values):
+    from physdbg.analysis.tunnel import sorted_unique
+
+    keys = np.array(values, dtype=np.int64)
+    got, want = sorted_unique(keys), np.unique(keys)
+    assert got.dtype == want.dtype and np.array_equal(got, want)

@@ -37,13 +37,14 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
+from numba import njit
 
 from ..events import (FEATURE_NAMES, HOW_AT_ONE_INSTANT, HOW_IMPULSE, HOW_RAPID, HOW_RESTING, KIND_MESH, KIND_WALL,
                       PARTNER_IS_SPHERE, Contacts, EngineWarning, StepEnd, contact_words, feature_words,
                       partner_is_sphere, partner_words)
 from .mesh_overlap import MeshOverlaps
 from .quiet import quiet_numerics
-from .tunnel import StepChecker
+from .tunnel import StepChecker, sorted_unique
 
 FINDING_KINDS = ("tunnelling", "overlap", "order", "energy-gain", "non-finite", "budget", "collapse", "mesh-overlap",
                  "pinned", "simultaneous")
@@ -578,21 +579,12 @@ class Auditor:
                               {"before": before, "after": after}))
 
     def _check_energy(self, step: int, c: Contacts) -> None:
-        ma = self.mass[c.a]
-        finite_a = np.isfinite(ma)
-        pair = partner_is_sphere(c.kind)
-        # a moving mesh's surface (its velocity is recorded as b's) does work on what it
-        # strikes: the energy that must not grow is the one relative to that surface
-        surface = np.where((~pair & np.isfinite(c.velocity_b_before).all(axis=1))[:, None], c.velocity_b_before, 0.0)
-        va0, va1 = c.velocity_a_before - surface, c.velocity_a_after - surface
-        before = np.where(finite_a, 0.5 * ma * np.einsum("ij,ij->i", va0, va0), 0.0)
-        after = np.where(finite_a, 0.5 * ma * np.einsum("ij,ij->i", va1, va1), 0.0)
-        if pair.any():
-            mb = self.mass[c.other[pair]]
-            finite_b = np.isfinite(mb)
-            vb0, vb1 = c.velocity_b_before[pair], c.velocity_b_after[pair]
-            before[pair] += np.where(finite_b, 0.5 * mb * np.einsum("ij,ij->i", vb0, vb0), 0.0)
-            after[pair] += np.where(finite_b, 0.5 * mb * np.einsum("ij,ij->i", vb1, vb1), 0.0)
+        before, after = contact_energies(self.mass, c.a.astype(np.int64), c.other.astype(np.int64),
+                                         partner_is_sphere(c.kind), *(np.ascontiguousarray(rows, dtype=np.float64)
+                                                                      for rows in (c.velocity_a_before,
+                                                                                   c.velocity_a_after,
+                                                                                   c.velocity_b_before,
+                                                                                   c.velocity_b_after)))
         gain = after - before
         # only an impulse alone is a closed exchange between two spheres: a contact solved
         # with held contacts (held itself, or reaching them) moves other spheres as well,
@@ -613,7 +605,7 @@ class Auditor:
         bounces = int(bounce.sum())
         if bounces < COLLAPSE_MIN_CONTACTS:
             return
-        involved = np.unique(np.concatenate([c.a[bounce], c.other[bounce & partner_is_sphere(c.kind)]]))
+        involved = sorted_unique(np.concatenate([c.a[bounce], c.other[bounce & partner_is_sphere(c.kind)]]))
         if bounces < COLLAPSE_CONTACTS_PER_SPHERE * len(involved):
             return
         named = ", ".join(str(int(i)) for i in involved[:5]) + (", …" if len(involved) > 5 else "")
@@ -755,6 +747,57 @@ def _explain(rec, on_step, every_finding: bool = False) -> AuditReport:
     if rec.truncated:
         report.notes.append(f"the file is truncated (its writer was killed): steps 1..{rec.steps} audited")
     return report
+
+
+@njit(cache=True)
+def contact_energies(mass, a, other, pair, va_before, va_after, vb_before, vb_after):
+    """The kinetic energy (J) each contact row found and left: (before, after), each (M,).
+
+    mass: (N,) kg (inf: immovable, which counts 0); a, other: (M,) the rows' spheres and
+    partners; pair: (M,) bool, whether the partner is a sphere; velocities (M, 3) m/s as
+    recorded. A sphere's energy against a moving mesh is measured relative to the surface
+    (recorded as b's velocity; NaN for anything else immovable): the surface does work on
+    what it strikes, and the energy that must not grow is the one relative to it. Compiled:
+    as numpy, ~0.75 ms a step for box-rain 10k's 5,500 contacts; each sum is taken in the
+    order numpy's took it."""
+    m = a.shape[0]
+    before = np.zeros(m)
+    after = np.zeros(m)
+    for r in range(m):
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        if not pair[r] and np.isfinite(vb_before[r, 0]) and np.isfinite(vb_before[r, 1]) \
+                and np.isfinite(vb_before[r, 2]):
+            s0 = vb_before[r, 0]
+            s1 = vb_before[r, 1]
+            s2 = vb_before[r, 2]
+        ma = mass[a[r]]
+        if np.isfinite(ma):
+            x0, x1, x2 = va_before[r, 0] - s0, va_before[r, 1] - s1, va_before[r, 2] - s2
+            before[r] = 0.5 * ma * (x0 * x0 + x1 * x1 + x2 * x2)
+            y0, y1, y2 = va_after[r, 0] - s0, va_after[r, 1] - s1, va_after[r, 2] - s2
+            after[r] = 0.5 * ma * (y0 * y0 + y1 * y1 + y2 * y2)
+        if pair[r]:
+            mb = mass[other[r]]
+            if np.isfinite(mb):
+                x0, x1, x2 = vb_before[r, 0], vb_before[r, 1], vb_before[r, 2]
+                before[r] += 0.5 * mb * (x0 * x0 + x1 * x1 + x2 * x2)
+                y0, y1, y2 = vb_after[r, 0], vb_after[r, 1], vb_after[r, 2]
+                after[r] += 0.5 * mb * (y0 * y0 + y1 * y1 + y2 * y2)
+    return before, after
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) the audit's kernels: the step checker's
+    (tunnel.warm_up) and contact_energies, on two contacts written out (a head-on pair and
+    a wall), so that an audited run's first steps pay for none of it."""
+    from .tunnel import warm_up as warm_up_checker
+
+    warm_up_checker()
+    velocities = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
+    contact_energies(np.ones(2), np.array([0, 1]), np.array([1, 0]), np.array([True, False]), velocities,
+                     -velocities, velocities, np.full((2, 3), np.nan))
 
 
 def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls, time: float = 0.0, geometry: tuple | None = None):

@@ -46,6 +46,19 @@ from ..events import CONTACT_ROW, HOW_IMPULSE, KIND_MESH, KIND_PAIR, KIND_WALL, 
 DEPTH_SAMPLES = 32  # instants at which a touched pair's overlap is measured after the touch
 
 
+def sorted_unique(values: np.ndarray) -> np.ndarray:
+    """np.unique of a 1-d integer array (sorted, each value once), by a sort: numpy 2's
+    np.unique hashes first, ~0.7 ms for the 5,500 contacts of a box-rain 10k step where
+    this takes ~0.12."""
+    ordered = np.sort(values)
+    if len(ordered) < 2:
+        return ordered
+    keep = np.empty(len(ordered), dtype=bool)
+    keep[0] = True
+    np.not_equal(ordered[1:], ordered[:-1], out=keep[1:])
+    return ordered[keep]
+
+
 @dataclass(frozen=True)
 class Crossing:
     """One crossing in a step: kind KIND_WALL (other = wall index), KIND_MESH (other =
@@ -74,6 +87,25 @@ def _at(anchor_t, anchor_x, anchor_v, row, acc, i, t, integrator, drag, k, out):
     for c in range(3):
         out[c] = anchor_x[row, c] + anchor_v[row, c] * p1 + acc[i, c] * p2
         out[3 + c] = anchor_v[row, c] * v0 + acc[i, c] * v1
+
+
+@njit(cache=True, inline="always")
+def _piece_start(anchor_t, anchor_x, anchor_v, row, acc, i, t, integrator, drag, k):
+    """_at as six floats, for where a pinned piece of the pair test begins: the anchor
+    itself when t is its time (most pieces start at one; a pinned anchor is finite, so
+    these are the numbers the path gives there). Inlined, returning scalars: the pair
+    test's walk ran about 1.5 times slower through _at's output array."""
+    tau = t - anchor_t[row]
+    if tau == 0.0:
+        return (anchor_x[row, 0], anchor_x[row, 1], anchor_x[row, 2], anchor_v[row, 0], anchor_v[row, 1],
+                anchor_v[row, 2])
+    p1, p2, _ = path_coefficients(integrator, k, tau)
+    v0, v1 = velocity_coefficients(integrator, drag, k, tau)
+    return (anchor_x[row, 0] + anchor_v[row, 0] * p1 + acc[i, 0] * p2,
+            anchor_x[row, 1] + anchor_v[row, 1] * p1 + acc[i, 1] * p2,
+            anchor_x[row, 2] + anchor_v[row, 2] * p1 + acc[i, 2] * p2,
+            anchor_v[row, 0] * v0 + acc[i, 0] * v1, anchor_v[row, 1] * v0 + acc[i, 1] * v1,
+            anchor_v[row, 2] * v0 + acc[i, 2] * v1)
 
 
 @njit(cache=True)
@@ -160,10 +192,10 @@ def pair_crossings(anchor_start, anchor_t, anchor_x, anchor_v, pinned, acc, radi
             if not (pinned[ri] and pinned[rj]):
                 t0 = t1
                 continue
-            _at(anchor_t, anchor_x, anchor_v, ri, acc, i, t0, integrator, drag, k, si)
-            _at(anchor_t, anchor_x, anchor_v, rj, acc, j, t0, integrator, drag, k, sj)
-            toi = pair_toi_swept_scalar(si[0] - sj[0], si[1] - sj[1], si[2] - sj[2], si[3] - sj[3], si[4] - sj[4],
-                                        si[5] - sj[5], acc[i, 0] - acc[j, 0], acc[i, 1] - acc[j, 1],
+            a0, a1, a2, a3, a4, a5 = _piece_start(anchor_t, anchor_x, anchor_v, ri, acc, i, t0, integrator, drag, k)
+            b0, b1, b2, b3, b4, b5 = _piece_start(anchor_t, anchor_x, anchor_v, rj, acc, j, t0, integrator, drag, k)
+            toi = pair_toi_swept_scalar(a0 - b0, a1 - b1, a2 - b2, a3 - b3, a4 - b4,
+                                        a5 - b5, acc[i, 0] - acc[j, 0], acc[i, 1] - acc[j, 1],
                                         acc[i, 2] - acc[j, 2], big_r, integrator, k, t1 - t0, tolerance)
             if toi == INF:
                 t0 = t1
@@ -403,7 +435,7 @@ class StepChecker:
             who.append(b)
             when.append(contacts.time_in_step[pair])
             order_key.append(np.flatnonzero(pair).astype(np.int64))
-            contacted = np.unique(np.minimum(a[pair], b) * n + np.maximum(a[pair], b))
+            contacted = sorted_unique(np.minimum(a[pair], b) * n + np.maximum(a[pair], b))
         who = np.concatenate(who)
         when = np.concatenate(when)
         order_key = np.concatenate(order_key)

@@ -106,7 +106,7 @@ def _warm_up_broad_phase(broad_phase: str | None) -> None:
 
 def warm_up_world() -> tuple[State, Walls]:
     """Two spheres that meet each other and a floor within 0.5 s (warm_up's, and the
-    audit's: analysis.tunnel.warm_up)."""
+    audit's: analysis.audit.warm_up)."""
     state = State(np.array([[0.0, 0.3, 0.0], [0.5, 0.3, 0.0]]), np.array([[1.0, -1.0, 0.0], [-1.0, 0.0, 0.0]]),
                   np.ones(2), np.full(2, 0.1), np.ones(2), np.ones(2))
     walls = Walls(["floor"], np.array([[0.0, 1.0, 0.0]]), np.zeros(1), np.ones(1), np.zeros(1, dtype=np.bool_),
