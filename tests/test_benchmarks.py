@@ -265,3 +265,45 @@ def test_audit_cost_times_both_scenes_check_by_check_and_leaves_the_auditor_as_i
     with pytest.raises(SystemExit) as stopped:
         audit_cost.main()
     assert stopped.value.code == 2 and "at least 2" in capsys.readouterr().err
+
+
+def test_edmd_harness_sets_the_parameters_writes_the_spheres_in_sigma_and_reads_the_count(tmp_path, monkeypatch,
+                                                                                        capsys):
+    """benchmarks/edmd.py without the foreign code: a stand-in Single/ with EDMD's globals
+    and Makefile, whose program prints what EDMD prints; the harness sets maxtime, turns the
+    thermostat off, gives it the gas in σ units and reads the last collision count. A folder
+    that is not a checkout ends with argparse's exit 2."""
+    from benchmarks import edmd
+
+    single = tmp_path / "EDMD" / "Single"
+    single.mkdir(parents=True)
+    (single / "mdSingle.c").write_text(
+        '#include <stdio.h>\n#include "mdSingle.h"\n'
+        "double maxtime = 100;           //Simulation stops at this time\n"
+        'int initialconfig = 1;\nchar inputfilename[100] = "x.sph";\nconst int usethermostat = 1;\n'
+        'int main(void) { FILE *f = fopen(inputfilename, "r"); int n = 0; if (!f || fscanf(f, "%d", &n) != 1) '
+        'return 3; printf("Simtime: 1, Collisions: 7, T: 1\\nSimtime: 2, Collisions: %d, T: %d\\n'
+        'Packing fraction      : 0.300000\\n", (int)(n * maxtime), usethermostat + initialconfig); return 0; }\n')
+    (single / "mdSingle.h").write_text("")
+    (single / "mt19937ar.c").write_text("")
+    (single / "Makefile").write_text("md: mdSingle.c mdSingle.h\n\tgcc mdSingle.c -o md\n")
+    scene = edmd.gas_scene(64, 0.3, 1)
+    build = tmp_path / "build"
+    build.mkdir()
+    edmd.write_sph(scene, build / "init.sph")
+    lines = (build / "init.sph").read_text().splitlines()
+    assert lines[0] == "64" and len(lines) == 66
+    side = float(lines[1].split()[0])
+    rows = np.array([[float(q) for q in line.split()[1:]] for line in lines[2:]])
+    assert np.allclose(rows[:, 3], 0.5) and side == pytest.approx(scene.walls.period[0] / 0.1)
+    assert np.pi / 6 * 64 / side**3 == pytest.approx(0.3, rel=1e-9)  # the packing, in σ units
+    program = edmd.build_edmd(single, build, 2.5)
+    collisions, cpu, packing = edmd.run_edmd(program)
+    assert collisions == 160 and packing == "0.300000" and cpu >= 0.0  # 64 · maxtime, the last count
+    code = (build / "mdSingle.c").read_text()
+    assert "double maxtime = 2.5;" in code and "const int usethermostat = 0;" in code
+    assert 'char inputfilename[100] = "init.sph";' in code and "int initialconfig = 0;" in code
+    monkeypatch.setattr("sys.argv", ["edmd.py", "--edmd", str(tmp_path)])
+    with pytest.raises(SystemExit) as stopped:
+        edmd.main()
+    assert stopped.value.code == 2 and "no Single/mdSingle.c there" in capsys.readouterr().err
