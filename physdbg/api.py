@@ -40,7 +40,10 @@ class RunSummary:
     "step k: message" with k counted from 1 (step k ends at frame k of a recording).
     finding_counts / findings: what the audit found (physdbg.analysis.audit: tunnelling,
     overlaps, out-of-order contacts, energy gained, NaN, budgets, collapse), per kind and
-    the first few in words; empty when the run is clean or was not audited.
+    the first few in words; empty when the run is clean or was not audited. audit_pairs:
+    in how many steps the audit took the pairs of spheres from the engine's own swept
+    tests instead of walking their paths again, in words (audit.pairs_words; '' when it
+    walked them all).
     """
 
     scene: str
@@ -93,6 +96,7 @@ class RunSummary:
     overlap_where: str = ""  # who overlapped most and in which step ("spheres 3 and 4, step 12"), when known
     start_notes: list[str] = field(default_factory=list)  # the spheres that start inside another body
     meshes_driven: bool = False  # a kinematic mesh: its prescribed motion does work on what it strikes
+    audit_pairs: str = ""
     def as_dict(self) -> dict:
         return asdict(self)
 
@@ -117,7 +121,7 @@ def ready_scene(scene: Scene | str, overrides: Sequence[str] = ()) -> Scene:
 def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         dts: Sequence[float] | None = None,
         on_step: Callable[[int, int | None], None] | None = None,
-        on_status: Callable[[str], None] | None = None, audit: bool = True,
+        on_status: Callable[[str], None] | None = None, audit: bool | str = True,
         on_finding: Callable | None = None) -> RunSummary:
     """Run a scene (built-in name, path, or Scene) to the end and summarise it.
 
@@ -128,8 +132,10 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     velocity becomes NaN or infinite, StuckRunError (its base, exit code 3) when the world
     cannot go on otherwise (a sphere pinned by a moving mesh: errors.PinnedSphere); the
     observer has seen every step up to that one.
-    audit: check every step as it runs (physdbg.analysis.audit); on_finding(finding):
-    called with each finding as it is made.
+    audit: check every step as it runs (physdbg.analysis.audit): True takes the pairs of
+    spheres of a step whose swept tests were exact and complete from the engine
+    (audit.engine_tests_exact), "full" walks every pair's path again as ``explain`` does,
+    False does not audit; on_finding(finding): called with each finding as it is made.
     """
     scene = ready_scene(scene, overrides)
     from .advisor import meshes_out_of_reach, start_words, starting_overlaps
@@ -141,12 +147,14 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     from .precompile import compile_kernels
     from .tier import chosen as chosen_tier
 
+    if audit not in (True, False, "full"):
+        raise PhysdbgError(f"audit must be True, False or 'full', not {audit!r}")
     auditor = None
     if audit:
         from .analysis.audit import Auditor
         from .record.header import RecordingHeader
 
-        auditor = Auditor(RecordingHeader.from_scene(scene), on_finding)
+        auditor = Auditor(RecordingHeader.from_scene(scene), on_finding, engine_tested=audit != "full")
         observer = FanOut(observer, auditor) if observer is not None else auditor
     overlaps = starting_overlaps(scene)  # said before a step is run: the run cannot mend them
     start_notes = [start_words(overlaps)] if overlaps else []
@@ -186,6 +194,8 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
                 on_step(len(used), total)
     wall = time.perf_counter() - started
     report = auditor.report(scene.name) if auditor else None  # before its counts: it ends what waits
+    if auditor:
+        from .analysis.audit import pairs_words
     k1, p1, mom1 = energies(st, world.gravity)
     e0, e1 = k0 + p0, k1 + p1
     drift = (e1 - e0) / abs(e0) if e0 != 0 else (e1 - e0)
@@ -217,7 +227,8 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         engine_ms_per_step=1000.0 * sum(tally.seconds.values()) / n_steps if n_steps else math.nan,
         phase_seconds=tally.seconds, final_hash=digest, warning_counts=dict(warnings.counts),
         warnings=warnings.examples(), findings=report.lines() if report else [],
-        finding_counts=dict(auditor.counts) if auditor else {}, dts=used)
+        finding_counts=dict(auditor.counts) if auditor else {}, dts=used,
+        audit_pairs=pairs_words(auditor.pairs_from_engine, auditor.steps) if auditor else "")
 
 
 class WarningTally:
@@ -310,8 +321,10 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
            rrd_path: str | None = None, rrd: bool = True, detail: str = "full", force: bool = False,
            spawn: bool = False, bvh_max_nodes: int | None = None, dts: Sequence[float] | None = None,
            on_step: Callable[[int, int | None], None] | None = None,
-           on_status: Callable[[str], None] | None = None, view: bool | None = None) -> RecordResult:
-    """Run a scene and record every step to MCAP (and Rerun unless rrd=False).
+           on_status: Callable[[str], None] | None = None, view: bool | None = None,
+           audit: bool | str = True) -> RecordResult:
+    """Run a scene and record every step to MCAP (and Rerun unless rrd=False), audited as
+    it runs (``audit``: as for run).
 
     view: also write the view channels (Foxglove's SceneUpdate, PointCloud and Log; see
     docs/recording-format.md), which Foxglove and ``rerun mcap convert`` show; None: up to
@@ -359,7 +372,7 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
         sinks.insert(0, mcap_sink)
         markers = [s.mark_finding for s in sinks if hasattr(s, "mark_finding")]  # both views mark findings
         summary = run(scene, observer=FanOut(*sinks), dts=dts, on_step=on_step, on_status=on_status,
-                      on_finding=lambda finding: [mark(finding) for mark in markers])
+                      on_finding=lambda finding: [mark(finding) for mark in markers], audit=audit)
     except KeyboardInterrupt:
         interrupted = True
     except StuckRunError as err:

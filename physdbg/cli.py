@@ -221,6 +221,10 @@ def run(
     fail_on_findings: Annotated[bool, typer.Option(
         "--fail-on-findings", help="Exit 1 when the audit finds anything (tunnelling, overlap, energy gain, a "
                                    "budget hit, ...), for CI; without it a run that finished exits 0.")] = False,
+    full_audit: Annotated[bool, typer.Option(
+        "--full-audit", help="Walk every pair of spheres' path again in the audit, as `physdbg explain` does; by "
+                             "default a step whose swept tests were exact and complete takes its pairs from the "
+                             "engine's own tests (docs/diff.md, 'How explain works').")] = False,
 ) -> None:
     """Run a scene and print a summary: steps, contacts, energy and momentum change, ms/step,
     and the audit's findings.
@@ -239,7 +243,8 @@ def run(
         total = len(step_lengths) if step_lengths is not None else loaded.steps
         bar = _progress_bar(total, show=progress and not as_json)
         try:
-            summary = run_scene(loaded, dts=step_lengths, on_step=bar.update, on_status=bar.status)
+            summary = run_scene(loaded, dts=step_lengths, on_step=bar.update, on_status=bar.status,
+                                audit="full" if full_audit else True)
         finally:
             bar.close()
         if dts_out is not None:
@@ -288,6 +293,10 @@ def record(
     check_against: Annotated[Optional[Path], typer.Option(
         "--check-against", help="After recording, diff against this golden recording: exit 1 (and say why) when "
                                 "the runs part.")] = None,
+    full_audit: Annotated[bool, typer.Option(
+        "--full-audit", help="Walk every pair of spheres' path again in the audit, as `physdbg explain` does; by "
+                             "default a step whose swept tests were exact and complete takes its pairs from the "
+                             "engine's own tests (docs/diff.md, 'How explain works').")] = False,
 ) -> None:
     """Run a scene and record every step: MCAP (lossless) and Rerun (.rrd, to look at).
 
@@ -311,7 +320,8 @@ def record(
             result = record_scene(loaded, mcap_path=str(output) if output else None,
                                   rrd_path=str(rrd) if rrd else None, rrd=not no_rrd, detail=detail,
                                   force=force, spawn=spawn, bvh_max_nodes=bvh_max_nodes, dts=step_lengths,
-                                  on_step=bar.update, on_status=bar.status, view=view)
+                                  on_step=bar.update, on_status=bar.status, view=view,
+                                  audit="full" if full_audit else True)
         finally:
             bar.close()
         _after_interpreted(tier)

@@ -259,7 +259,8 @@ def test_audit_cost_times_both_scenes_check_by_check_and_leaves_the_auditor_as_i
     audit_cost.main()
     out = capsys.readouterr().out
     assert out.startswith("box-rain 200: engine alone ") and "exact gas 100 (packing 0.3): engine alone " in out
-    assert out.count("with the audit") == 2 and out.count("_check_crossings") == 2 and "pair_crossings" in out
+    assert out.count("with the default audit") == 2 and out.count(", with --full-audit") == 2
+    assert out.count("_check_crossings") == 2 and "pair_crossings" in out
     assert (audit.Auditor._check_crossings, tunnel.pair_crossings) == before
     monkeypatch.setattr("sys.argv", ["audit_cost.py", "--count", "1"])
     with pytest.raises(SystemExit) as stopped:

@@ -8,7 +8,9 @@ of :class:`Auditor`; each problem found is a :class:`Finding`.
 Checks (kind: what it means):
 
 * ``tunnelling``: a sphere crossed a wall or another sphere with no contact (the exact
-  swept test run over the recorded states, :mod:`.tunnel`);
+  swept test run over the recorded states, :mod:`.tunnel`; watching physdbg's own engine
+  live, a step whose swept tests were exact and complete takes its pairs of spheres from
+  them: engine_tests_exact);
 * ``overlap``: spheres left overlapping after a step by more than the contact tolerance;
 * ``order``: contacts of a step resolved out of time order;
 * ``energy-gain``: a collision that left more kinetic energy than it found (an impulse
@@ -122,6 +124,29 @@ class AuditReport:
         return out
 
 
+def engine_tests_exact(settings: dict, warnings: list) -> bool:
+    """Whether a step of physdbg's engine (its recorded ``settings``; the step's engine
+    ``warnings``) tested every pair that could meet, exactly, and resolved every contact
+    it found: swept tests (times of impact, not samples), time order (a contact one
+    creates is predicted and resolved), and no warning (a budget, max_memory or a
+    too-wide periodic box leaves work undone; an overlap says something went wrong).
+    Then a sphere can pass into another only through a fault in the engine itself,
+    which the tests of its swept tests and its reference loop look for; the live audit
+    takes such a step's pairs from the engine (Auditor.engine_tested)."""
+    return (settings.get("detection", "swept") == "swept" and settings.get("ordering", "time") == "time"
+            and not warnings)
+
+
+def pairs_words(from_engine: int, steps: int) -> str:
+    """What a live audit did with the pairs of spheres, for the run's summary ('' when it
+    walked every step's)."""
+    if not from_engine:
+        return ""
+    which = f"all {steps}" if from_engine == steps else f"{from_engine} of {steps}"
+    return (f"pairs of spheres in {which} steps taken from the engine's own swept tests (exact and complete "
+            f"there), not walked again: `physdbg explain` (or --full-audit) walks them")
+
+
 def said_once(findings: list) -> list[tuple]:
     """(finding, message, advice) of each finding, where what it shares with the first of its
     kind (a long explanation in parentheses, the same advice) is "as above"."""
@@ -162,8 +187,14 @@ class Auditor:
     wants_mesh_search = False  # nor the walks of the meshes' trees
 
     def __init__(self, header, on_finding: Callable[[Finding], None] | None = None,
-                 examples_per_kind: int | None = EXAMPLES_PER_KIND):
+                 examples_per_kind: int | None = EXAMPLES_PER_KIND, engine_tested: bool = False):
         self.header = header
+        # observing physdbg's own engine as it runs (api.run): a step whose swept tests were
+        # exact and complete (engine_tests_exact) takes its pairs of spheres from them
+        # rather than walking every pair's path again (the audit's cost: docs/benchmarks.md,
+        # "What the audit costs"); `physdbg explain` always walks them
+        self.engine_tested = engine_tested and not header.meta.get("foreign")
+        self.pairs_from_engine = 0  # steps whose pairs the engine's tests stood for
         self.examples_per_kind = examples_per_kind  # findings kept of each kind (None: every one)
         self.settings = header.meta.get("settings", {})
         self.names = header.walls.partner_names()
@@ -347,7 +378,10 @@ class Auditor:
         return self._pile_hint
 
     def _check_crossings(self, step: int, end: StepEnd, contacts: Contacts | None) -> None:
-        for c in self.checker.check(self._x, self._v, end.positions, end.dt, contacts, end.time - end.dt):
+        walk_pairs = not (self.engine_tested and engine_tests_exact(self.settings, self._warnings))
+        self.pairs_from_engine += not walk_pairs and len(self.radius) > 1
+        for c in self.checker.check(self._x, self._v, end.positions, end.dt, contacts, end.time - end.dt,
+                                    pairs=walk_pairs):
             detection = "foreign" if self.header.meta.get("foreign") else self.settings.get("detection", "swept")
             how = {"discrete": "detection = discrete tests only where each step ends",
                    "sampled": f"detection = sampled tests only {self.settings.get('samples', 4)} instants a step"}

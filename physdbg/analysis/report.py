@@ -312,6 +312,8 @@ def summary_text(s, observers: str = "the audit") -> str:
                                    ", ".join(f"{n} {kind}" for kind, n in s.finding_counts.items())
                                    + "; the first of each kind:"))
     lines += [f"  {line}" for line in s.findings]
+    if getattr(s, "audit_pairs", ""):
+        lines.append(f"  {s.audit_pairs}")
     return "\n".join(lines)
 
 
