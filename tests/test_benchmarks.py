@@ -219,6 +219,26 @@ def test_queue_benchmark_times_both_heaps_and_they_pop_the_same_order(monkeypatc
         event_queue.main()
 
 
+def test_the_calendar_gas_makes_the_engines_collisions_with_either_queue_and_any_shell(capsys):
+    """benchmarks/experiments/calendar_gas.py (small): the design with anchors that outlive
+    the step, neighbour lists with a shell and one event per sphere makes the engine's
+    collisions — the first ones pair for pair and time for time, and as many in all — with
+    the heap and with the calendar, at a thin and a thick shell."""
+    from benchmarks.experiments import calendar_gas
+
+    calendar_gas.main(["--count", "300", "--steps", "30", "--rounds", "1", "--shells", "1.1", "1.6", "--first", "300"])
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("gas N=300, packing 0.3, periodic, 30 steps of 0.01 s")
+    engine = int(out[1].split(": ")[1].split()[0])
+    rows = out[2:]
+    assert [row.split("  ")[1].strip() for row in rows] == ["shell 1.1, heap", "shell 1.1, calendar",
+                                                            "shell 1.6, heap", "shell 1.6, calendar"]
+    assert engine > 300 and all(f" {engine} collisions in " in row for row in rows)
+    assert all(row.endswith("first 300 collisions the engine's: yes") for row in rows)
+    with pytest.raises(SystemExit):
+        calendar_gas.main(["--shells", "1.0"])
+
+
 def test_partner_scan_replays_the_same_hits_in_every_form(monkeypatch, capsys):
     from benchmarks.experiments import partner_scan
 
