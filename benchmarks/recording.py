@@ -39,6 +39,7 @@ CONFIGS = [  # (label, detail or None for off, Rerun too, view channels)
     ("off", None, False, False),
     ("mcap state --no-view", "state", False, False),
     ("mcap state", "state", False, True),
+    ("mcap contacts --no-view", "contacts", False, False),
     ("mcap contacts", "contacts", False, True),
     ("mcap full --no-view", "full", False, False),
     ("mcap full", "full", False, True),
