@@ -385,6 +385,8 @@ def test_a_live_audit_takes_the_pairs_of_exact_steps_from_the_engine_and_walks_t
     assert said.exit_code == 0 and "  pairs of spheres in all 180 steps taken from the engine's" in said.output
     walked = runner.invoke(app, ["run", "cradle", "--full-audit"])
     assert walked.exit_code == 0 and "audit       clean" in walked.output and "pairs of spheres" not in walked.output
+    recorded = runner.invoke(app, ["record", "cradle", "--full-audit", "--no-rrd", "-o", str(tmp_path / "c.mcap")])
+    assert recorded.exit_code == 0 and "audit       clean" in recorded.output and "pairs of spheres" not in recorded.output
     index = runner.invoke(app, ["run", "cradle", "--set", "ordering=index"])  # not exact: every step walked
     assert "tunnelling" in index.output and "pairs of spheres" not in index.output
 

@@ -33,7 +33,9 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 from numba import njit
@@ -42,6 +44,9 @@ from physdbg.engine.motion import INTEGRATOR_NAMES
 from physdbg.engine.periodic import image
 from physdbg.engine.resolve import seed_impulse
 from physdbg.engine.toi import pair_toi_swept_scalar
+
+if str(Path(__file__).resolve().parents[2]) not in sys.path:  # run as a script: benchmarks/ importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 EXACT = INTEGRATOR_NAMES.index("exact")
 INF = math.inf
@@ -90,26 +95,16 @@ def _heap_fix(heap, where, when, i, n):
 # ------------------------------------------------------------------ the calendar
 @njit(cache=True)
 def _cal_unlink(cal_next, cal_prev, cal_head, cal_bucket, i):
-    b = cal_bucket[i]
-    if b == NONE:
-        return
-    if cal_prev[i] != NONE:
-        cal_next[cal_prev[i]] = cal_next[i]
-    else:
-        cal_head[b] = cal_next[i]
-    if cal_next[i] != NONE:
-        cal_prev[cal_next[i]] = cal_prev[i]
-    cal_bucket[i] = NONE
+    """Sphere i out of its bucket's list (the grid's linked lists: _unlink), if it is in one."""
+    if cal_bucket[i] != NONE:
+        _unlink(cal_head, cal_next, cal_prev, cal_bucket[i], i)
+        cal_bucket[i] = NONE
 
 
 @njit(cache=True)
 def _cal_link(cal_next, cal_prev, cal_head, cal_bucket, i, b):
     cal_bucket[i] = b
-    cal_prev[i] = NONE
-    cal_next[i] = cal_head[b]
-    if cal_head[b] != NONE:
-        cal_prev[cal_head[b]] = i
-    cal_head[b] = i
+    _link(cal_head, cal_next, cal_prev, b, i)
 
 
 @njit(cache=True)
@@ -445,8 +440,8 @@ def run(x, v, radius, period, until, dt, shell, queue, most_collisions, first_pa
 
 # ------------------------------------------------------------------ the measurement
 def engine_gas(scene, first: int):
-    """The engine's time-ordered loop on the scene: (pair collisions, seconds, the first
-    ``first`` pair collisions as (pairs (K, 2) in the scene's numbering, times (K,) s))."""
+    """The engine's time-ordered loop on the scene: (pair collisions, CPU seconds: edmd.py's
+    run, the first ``first`` pair collisions as (pairs (K, 2) in the scene's numbering, times (K,) s))."""
     from physdbg.engine.warm import warm_up
     from physdbg.events import KIND_PAIR, Contacts
     from physdbg.observe import ListObserver
@@ -462,18 +457,14 @@ def engine_gas(scene, first: int):
             if row["kind"] == KIND_PAIR and len(pairs) < first:
                 pairs.append(sorted((int(row["a"]), int(row["other"]))))
                 times.append(world.time - scene.dt + float(row["time_in_step"]))
-    world = scene.build_world()
-    collisions = 0
-    started = time.perf_counter()
-    for _ in range(scene.steps):
-        end = world.step(scene.dt)
-        kinds = world._buf.contacts["kind"][:end.counts.contacts]  # the step's rows, read without observing
-        collisions += int((kinds == KIND_PAIR).sum())
-    return collisions, time.perf_counter() - started, np.array(pairs, dtype=np.int64).reshape(-1, 2), np.array(times)
+    from benchmarks.edmd import run_physdbg
+
+    collisions, seconds = run_physdbg(scene)
+    return collisions, seconds, np.array(pairs, dtype=np.int64).reshape(-1, 2), np.array(times)
 
 
 def calendar_gas(scene, shell: float, queue: int, first: int, order: bool = True):
-    """This design on the scene: (collisions, seconds, crossings, stale, pops, first pairs, first times)."""
+    """This design on the scene: (collisions, CPU seconds, crossings, stale, pops, first pairs, first times)."""
     state = scene.build_world().state
     x = state.positions.copy()
     v = state.velocities.copy()
@@ -485,7 +476,7 @@ def calendar_gas(scene, shell: float, queue: int, first: int, order: bool = True
         raise SystemExit("calendar_gas.py runs a cubic periodic box only")
     pairs = np.zeros((first, 2), dtype=np.int64)
     times = np.zeros(first)
-    started = time.perf_counter()
+    started = time.process_time()
     if order:  # numbered in Morton order of where they start, as the engine numbers its spheres (space_order.py)
         from physdbg.engine.space_order import morton_order
 
@@ -493,7 +484,7 @@ def calendar_gas(scene, shell: float, queue: int, first: int, order: bool = True
         x, v = x[old_of_new], v[old_of_new]
     collisions, crossings, stale, pops, _ = run(x, v, radius, float(period[0]), scene.steps * scene.dt, scene.dt,
                                                 shell, queue, 1 << 62, pairs, times)
-    seconds = time.perf_counter() - started
+    seconds = time.process_time() - started
     if order:
         pairs = np.sort(old_of_new[pairs], axis=1)  # in the scene's numbering again
     return collisions, seconds, crossings, stale, pops, pairs[:min(first, collisions)], times[:min(first, collisions)]
@@ -510,11 +501,7 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     if args.count < 2 or args.steps < 1 or args.rounds < 1 or args.first < 1 or min(args.shells) <= 1.0:
         parser.error("--count at least 2, --steps, --rounds and --first at least 1, every shell above 1")
-    from physdbg.api import load_scene
-
-    def gas_scene(count, packing, steps):  # benchmarks/edmd.py's scene: the gas in a periodic box
-        return load_scene("gas", [f"generate.count={count}", f"generate.packing_fraction={packing}",
-                                  f"steps={steps}", "box.periodic=true"])
+    from benchmarks.edmd import gas_scene
 
     scene = gas_scene(args.count, args.packing, args.steps)
     calendar_gas(gas_scene(args.count, args.packing, 2), args.shells[0], HEAP, 1)  # compiled, not timed
@@ -530,7 +517,7 @@ def main(argv=None) -> None:
     engine = best["engine"]
     print(f"gas N={args.count}, packing {args.packing}, periodic, {scene.steps} steps of {scene.dt:g} s "
           f"({scene.steps * scene.dt:g} s), best of {args.rounds}:")
-    print(f"  engine (time-ordered loop, steps): {engine[0]} collisions in {engine[1]:.3f} s: "
+    print(f"  engine (time-ordered loop, steps): {engine[0]} collisions in {engine[1]:.3f} CPU s: "
           f"{engine[0] / engine[1]:.3g}/s")
     for label, out in best.items():
         if label == "engine":
@@ -539,7 +526,7 @@ def main(argv=None) -> None:
         k = min(len(pairs), len(engine[2]))
         same = bool(k) and (pairs[:k] == engine[2][:k]).all() and np.allclose(times[:k], engine[3][:k], rtol=1e-12,
                                                                                atol=1e-12)
-        print(f"  {label:22s} {collisions} collisions in {seconds:.3f} s: {collisions / seconds:.3g}/s "
+        print(f"  {label:22s} {collisions} collisions in {seconds:.3f} CPU s: {collisions / seconds:.3g}/s "
               f"({engine[1] / seconds * collisions / engine[0]:.2f}x the engine a collision); "
               f"{crossings / max(collisions, 1):.2f} shell crossings, {stale / max(collisions, 1):.2f} stale pops "
               f"a collision; first {k} collisions the engine's: {'yes' if same else 'NO'}")
