@@ -20,15 +20,13 @@ import time
 from contextlib import contextmanager
 
 
-def _best_ms_per_step(scene, steps: int, audit: bool | str, rounds: int) -> float:
+def _ms_per_step(scene, steps: int, audit: bool | str) -> float:
+    """One run through api.run with this audit (False, True or "full"): ms a step."""
     from physdbg import api
 
-    best = float("inf")
-    for _ in range(rounds):
-        started = time.perf_counter()
-        api.run(scene, audit=audit)
-        best = min(best, time.perf_counter() - started)
-    return 1e3 * best / steps
+    started = time.perf_counter()
+    api.run(scene, audit=audit)
+    return 1e3 * (time.perf_counter() - started) / steps
 
 
 @contextmanager
@@ -62,9 +60,9 @@ def measure(label: str, scene, steps: int, rounds: int) -> None:
     api.run(scene, audit=True)  # kernels loaded, caches warm
     alone = audited = full = float("inf")
     for _ in range(rounds):  # in turn, so a slow spell of the machine falls on all three
-        alone = min(alone, _best_ms_per_step(scene, steps, False, 1))
-        audited = min(audited, _best_ms_per_step(scene, steps, True, 1))
-        full = min(full, _best_ms_per_step(scene, steps, "full", 1))
+        alone = min(alone, _ms_per_step(scene, steps, False))
+        audited = min(audited, _ms_per_step(scene, steps, True))
+        full = min(full, _ms_per_step(scene, steps, "full"))
     print(f"{label}: engine alone {alone:.2f} ms/step, with the default audit {audited:.2f} ms/step "
           f"(+{100 * (audited / alone - 1):.0f} %; target <= +25 %), with --full-audit {full:.2f} ms/step "
           f"(+{100 * (full / alone - 1):.0f} %)")

@@ -11,6 +11,7 @@ from typer.testing import CliRunner
 from physdbg import api
 from physdbg.analysis import explain
 from physdbg.cli import app
+from physdbg.errors import PhysdbgError
 from physdbg.events import HOW_AT_ONE_INSTANT
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -389,6 +390,8 @@ def test_a_live_audit_takes_the_pairs_of_exact_steps_from_the_engine_and_walks_t
     assert recorded.exit_code == 0 and "audit       clean" in recorded.output and "pairs of spheres" not in recorded.output
     index = runner.invoke(app, ["run", "cradle", "--set", "ordering=index"])  # not exact: every step walked
     assert "tunnelling" in index.output and "pairs of spheres" not in index.output
+    with pytest.raises(PhysdbgError, match="audit must be True, False or 'full', not 'fast'"):
+        api.run("cradle", audit="fast")
 
 
 @pytest.mark.parametrize("scene", ["billiards", "cradle", "gas", "rain", "ramp", "rest"])
