@@ -239,6 +239,25 @@ def test_the_calendar_gas_makes_the_engines_collisions_with_either_queue_and_any
         calendar_gas.main(["--shells", "1.0"])
 
 
+def test_step_shell_lists_hold_every_pair_the_steps_pair(capsys):
+    """benchmarks/experiments/step_shell.py (small): a list kept across steps holds at least
+    the pairs of every step it lasts (its boxes hold the steps' boxes), a list lasts at
+    least one step, and a thicker skin holds more pairs; bad arguments stop with a usage error."""
+    from benchmarks.experiments import step_shell
+
+    found = step_shell.measure(step_shell.scene_of("gas", 200, 20), [0.05, 0.5])
+    assert found["pairs"] > 0
+    for skin in (0.05, 0.5):
+        lasts, pairs = found[skin]
+        assert 1.0 <= lasts <= 20.0 and pairs >= found["pairs"]
+    assert found[0.5][1] > found[0.05][1]
+    step_shell.main(["--count", "100", "--steps", "5", "--skins", "0.2"])
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("gas N=100, 5 steps: the step's broad phase pairs") and "skin 0.2 σ each side" in out[1]
+    with pytest.raises(SystemExit):
+        step_shell.main(["--skins", "0"])
+
+
 def test_partner_scan_replays_the_same_hits_in_every_form(monkeypatch, capsys):
     from benchmarks.experiments import partner_scan
 
