@@ -34,7 +34,7 @@ import numpy as np
 from ..events import (NO_COLLISIONS, BroadPhaseInfo, Contacts, EngineWarning, MeshSearch, StepEnd, SweptTests,
                       collision_sums)
 from . import format as fmt
-from .state_codec import codec_for, encode_state
+from .state_codec import StateEncoder
 from . import proto
 from .header import RecordingHeader
 
@@ -89,7 +89,7 @@ class McapRecorder:
         self._room = threading.Condition()
         self._error: BaseException | None = None
         self._outbox: list[tuple[int, int, int, bytes]] = []
-        self._history: list[np.ndarray] = []  # the last two frames' (N, 6) states, for the codec
+        self._states = StateEncoder()  # the frames before each, for the codecs
         self._chunk_bytes = chunk_bytes
         self._heavy = {self._channels[t] for t in fmt.HEAVY_TOPICS if t in self._channels}
         self._index_rows: list[tuple[float, int, float, bytes]] = []  # (time, log ns, dt, hash) of every frame
@@ -280,15 +280,8 @@ class McapRecorder:
 
     def _write_state(self, frame: int, time: float, dt: float, digest: str, x: np.ndarray, v: np.ndarray,
                      ns: int, asleep: np.ndarray | None = None) -> None:
-        codec = codec_for(frame, len(self._history))
-        previous = self._history[-1] if self._history else None
-        before = self._history[-2] if len(self._history) > 1 else None
-        data = encode_state(frame, time, dt, digest, x, v, codec, previous, before, asleep)
-        self._write(fmt.TOPIC_STATE, frame, ns, data)
+        self._write(fmt.TOPIC_STATE, frame, ns, self._states.encode(frame, time, dt, digest, x, v, asleep))
         self._index_rows.append((time, ns, dt, bytes.fromhex(digest)))
-        state = np.empty((x.shape[0], 6))
-        state[:, :3], state[:, 3:] = x, v
-        self._history = [*self._history[-1:], state]
         self.frames = frame + 1
 
     def _table(self, topic: str, frame: int, source) -> bytes:
