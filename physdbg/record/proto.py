@@ -116,13 +116,13 @@ def encode_table(name: str, step: int, column) -> bytes:
                 setattr(message, field, values.astype(kind, copy=False).tolist())
         return message.SerializeToString()
     parts = [b"\x08" + _varint(step)] if step else []
-    for number, (field, kind, axis, source, is_bytes) in enumerate(proto_fields(fields), start=2):
+    for tag, kind, axis, source, is_bytes in _table_fields(name):
         values = np.asarray(column(source))
         if is_bytes:
             rows = np.ascontiguousarray(values, dtype=np.uint8)
             if rows.shape[0]:
                 rows = rows.reshape(rows.shape[0], -1)
-                head = _varint(number << 3 | 2) + _varint(rows.shape[1])
+                head = tag + _varint(rows.shape[1])
                 framed = np.empty((rows.shape[0], len(head) + rows.shape[1]), dtype=np.uint8)
                 framed[:, :len(head)] = np.frombuffer(head, dtype=np.uint8)
                 framed[:, len(head):] = rows
@@ -131,9 +131,18 @@ def encode_table(name: str, step: int, column) -> bytes:
         values = values[..., axis] if axis is not None else values
         if values.shape[0] == 0:
             continue
-        payload = _packed(values, np.dtype(kind))
-        parts.append(_varint(number << 3 | 2) + _varint(len(payload)) + payload)
+        payload = _packed(values, kind)
+        parts += [tag, _varint(len(payload)), payload]
     return b"".join(parts)
+
+
+@cache
+def _table_fields(name: str) -> list[tuple[bytes, np.dtype, int | None, str, bool]]:
+    """A table's protobuf fields in order, each as (its tag's bytes (length-delimited), its
+    numpy dtype, vector axis, source column, is bytes): proto_fields, worked out once."""
+    return [(_varint((number << 3) | 2), np.dtype(kind), axis, source, is_bytes)
+            for number, (_field, kind, axis, source, is_bytes)
+            in enumerate(proto_fields(fmt.PROTOBUF_MESSAGES[name][0]), start=2)]
 
 
 def encode_state_message(step: int, values: dict) -> bytes:
@@ -158,7 +167,7 @@ def encode_state_message(step: int, values: dict) -> bytes:
 
 def _packed(values: np.ndarray, dtype: np.dtype) -> bytes:
     """The payload of a packed repeated field of ``dtype``'s protobuf type (_scalar_type)."""
-    if dtype.kind == "f":
+    if dtype.kind == "f":  # (a strided column is copied once, by tobytes)
         return values.astype(dtype.newbyteorder("<"), copy=False).tobytes()
     if dtype.kind == "b":
         return values.astype(np.uint8).tobytes()
