@@ -1,6 +1,6 @@
 """box-rain: N spheres (r = 0.05 m, 10 % of the box's volume, e = 0.8) rain into a box.
 
-    .venv/bin/python benchmarks/box_rain.py [--count 1000] [--steps 240] [--peers [--rounds R]] [--trace]
+    .venv/bin/python benchmarks/box_rain.py [--count 1000] [--steps 240] [--peers [--rounds R] [--with-run]] [--trace]
         [--stop-above-gb G] [--set KEY=VALUE ...] [--checkpoint FILE [--checkpoint-every K]] [--resume FILE]
 
 The built-in ``rain`` scene with the box grown so the spheres fill 10 % of it, dt = 1/240 s;
@@ -177,6 +177,9 @@ def main() -> None:
                              "Newton), with and without speculative contacts and sleeping")
     parser.add_argument("--rounds", type=int, default=1, metavar="R",
                         help="with --peers: run the engines in turn R times; print each ratio's median and range")
+    parser.add_argument("--with-run", action="store_true",
+                        help="with --peers: in each round also time `physdbg run` (the engine and its default audit, "
+                             "api.run) and print its speed against each peer")
     parser.add_argument("--trace", action="store_true", help="print every step, with the peak memory")
     parser.add_argument("--stop-above-gb", type=float, default=None, help="stop once peak memory passes this")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -191,6 +194,8 @@ def main() -> None:
         parser.error("--checkpoint-every must be at least 1")
     if args.rounds < 1 or (args.rounds > 1 and not args.peers):
         parser.error("--rounds must be at least 1, and more than 1 only with --peers")
+    if args.with_run and not args.peers:
+        parser.error("--with-run times `physdbg run` against the peers: give --peers too")
     try:
         scene = box_rain(args.count, args.steps, tuple(args.set))
     except SceneError as error:
@@ -224,19 +229,34 @@ def main() -> None:
           f"{rows[-10:, 3].mean():.0f} released")
     if args.peers:
         compare_with_peers(scene, result["seconds"], args.rounds, FAST_SETUPS if args.peer_setups == "fast"
-                           else ALL_SETUPS)
+                           else ALL_SETUPS, with_run=args.with_run)
 
 
-def compare_with_peers(scene, physdbg_seconds: float, rounds: int, setups=FAST_SETUPS) -> dict[str, list[float]]:
+def run_audited(scene) -> float:
+    """Seconds ``physdbg run`` takes for the scene: api.run, the engine with its default
+    live audit (the world's building counted too, a few ms)."""
+    from physdbg import api
+
+    started = time.perf_counter()
+    api.run(scene)
+    return time.perf_counter() - started
+
+
+def compare_with_peers(scene, physdbg_seconds: float, rounds: int, setups=FAST_SETUPS,
+                       with_run: bool = False) -> dict[str, list[float]]:
     """Step the scene in each peer setup (when importable) and print physdbg's speed
     against each; over ``rounds`` rounds (physdbg, then each peer, in turn; the first
     round's physdbg run is the one already timed) also each ratio's median and range.
-    Returns each setup's ratios, one per round."""
+    with_run: each round also times ``physdbg run`` (run_audited) and its speed against
+    each peer ("<peer> (run)"). Returns each setup's ratios, one per round."""
     ratios: dict[str, list[float]] = {}
     for round_number in range(rounds):
         if round_number:
             physdbg_seconds = run_physdbg(scene)["seconds"]
             print(f"round {round_number + 1}: physdbg {1000 * physdbg_seconds / scene.steps:.1f} ms/step")
+        run_seconds = run_audited(scene) if with_run else None
+        if run_seconds is not None:
+            print(f"physdbg run (engine + default audit): {1000 * run_seconds / scene.steps:.1f} ms/step")
         for setup in setups:
             seconds = run_peer_timed(scene, setup)
             name = setup.label
@@ -245,7 +265,10 @@ def compare_with_peers(scene, physdbg_seconds: float, rounds: int, setups=FAST_S
                     print(f"{name}: not importable (pip install 'physdbg[peers]')")
                 continue
             ratios.setdefault(name, []).append(seconds / physdbg_seconds)
-            print(f"{name}: {1000 * seconds / scene.steps:.1f} ms/step; physdbg is {ratios[name][-1]:.2f}x its speed")
+            print(f"{name}: {1000 * seconds / scene.steps:.1f} ms/step; physdbg is {ratios[name][-1]:.2f}x its speed"
+                  + (f", `physdbg run` {seconds / run_seconds:.2f}x" if run_seconds is not None else ""))
+            if run_seconds is not None:
+                ratios.setdefault(f"{name} (run)", []).append(seconds / run_seconds)
     if rounds > 1:
         for name, values in ratios.items():
             print(f"physdbg against {name} over {rounds} rounds: median {np.median(values):.2f}x, "

@@ -49,7 +49,8 @@ def test_the_command_refuses_bad_checkpoint_options_with_a_clear_error(tmp_path,
              (["--count", "60", "--resume", path], "is a checkpoint of another run (--count 50), not of --count 60"),
              (["--resume", str(tmp_path / "junk")], "cannot resume from"),
              (["--rounds", "2"], "more than 1 only with --peers"),
-             (["--peers", "--rounds", "0"], "--rounds must be at least 1")]
+             (["--peers", "--rounds", "0"], "--rounds must be at least 1"),
+             (["--with-run"], "give --peers too")]
     for argv, said in cases:
         monkeypatch.setattr("sys.argv", ["box_rain.py", *argv])
         with pytest.raises(SystemExit) as stopped:
@@ -74,6 +75,26 @@ def test_rounds_time_every_engine_in_turn_and_summarise_each_ratio(monkeypatch, 
     out = capsys.readouterr().out
     assert "physdbg against pybullet over 3 rounds: median 6.00x, range 2.00-8.00x" in out
     assert f"physdbg against {mujoco} over 3 rounds: median 5.00x, range 1.00-6.00x" in out
+
+
+def test_with_run_times_physdbg_run_against_each_peer_in_every_round(monkeypatch, capsys):
+    """--with-run: each round also times `physdbg run` (the engine with its default audit,
+    really run here) and gives each peer's time over it as a ratio of its own."""
+    from benchmarks import box_rain
+
+    monkeypatch.setattr(box_rain, "run_peer_timed", lambda scene, setup: 10.0)
+    monkeypatch.setattr(box_rain, "run_physdbg", lambda scene: {"seconds": 1.0})
+    ran = []
+    real = box_rain.run_audited
+    monkeypatch.setattr(box_rain, "run_audited", lambda scene: ran.append(real(scene)) or 2.0)
+    ratios = box_rain.compare_with_peers(box_rain.box_rain(20, 2), 1.0, rounds=2, with_run=True)
+    mujoco = box_rain.FAST_SETUPS[1].label
+    assert len(ran) == 2 and all(seconds > 0 for seconds in ran)
+    assert ratios == {"pybullet": [10.0, 10.0], "pybullet (run)": [5.0, 5.0], mujoco: [10.0, 10.0],
+                      f"{mujoco} (run)": [5.0, 5.0]}
+    out = capsys.readouterr().out
+    assert "physdbg run (engine + default audit): 1000.0 ms/step" in out and ", `physdbg run` 5.00x" in out
+    assert f"physdbg against {mujoco} (run) over 2 rounds: median 5.00x" in out
 
 
 def test_the_peers_step_the_scene_physdbg_steps():
