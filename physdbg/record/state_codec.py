@@ -86,6 +86,8 @@ class StateEncoder:
 
     def __init__(self) -> None:
         self._states: np.ndarray | None = None  # (3, N, 6): the frames k-2, k-1 and k, in turn
+        self._prediction: np.ndarray | None = None  # (N, 6) scratch: the predicted state
+        self._scratch: np.ndarray | None = None  # (2, N·6) int64 scratch: the residual and its sign
         self._held = 0  # frames before this one held (at most 2)
         self._newest = -1  # the slot of the last frame encoded
 
