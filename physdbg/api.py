@@ -97,8 +97,23 @@ class RunSummary:
     start_notes: list[str] = field(default_factory=list)  # the spheres that start inside another body
     meshes_driven: bool = False  # a kinematic mesh: its prescribed motion does work on what it strikes
     audit_pairs: str = ""
+    # settings.event_loop = "calendar": in how many steps the calendar served, and why the
+    # last step it could not serve could not (engine/calendar.py); "" for the step loop
+    event_loop: str = ""
+
     def as_dict(self) -> dict:
         return asdict(self)
+
+
+def calendar_words(world, steps: int) -> str:
+    """Where a world asked for the event calendar used it, for the run's summary ('' when
+    it was not asked for)."""
+    if world.settings.event_loop != "calendar":
+        return ""
+    words = f"calendar in {world.calendar_steps} of {steps} steps"
+    if world.calendar_steps < steps and world.calendar_unfit:
+        words += f"; the time-ordered loop took the rest, which it cannot serve: {world.calendar_unfit}"
+    return words + " (docs/engine.md, \"The event calendar\")"
 
 
 def load_scene(scene: str, overrides: Sequence[str] = ()) -> Scene:
@@ -165,7 +180,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         on_status("compiling")
     compile_seconds = 0.0 if kernels.interpreted else compile_kernels(
         world.broad_phase.name, sleeping=world.sleepers is not None, audit=auditor is not None,
-        meshes=bool(scene.walls.meshes.triangles))
+        meshes=bool(scene.walls.meshes.triangles), calendar=scene.settings.event_loop == "calendar")
     if on_status is not None:
         on_status("running")
     st = world.state
@@ -207,6 +222,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         broad_phase=world.broad_phase.name,
         broad_phase_reason=world.broad_phase_reason, scanned_steps=world.scanned_steps,
         together_steps=world.together_steps, mesh_search=scene.settings.mesh_search,
+        event_loop=calendar_words(world, n_steps),
         particles=st.count, walls=list(scene.walls.names), meshes=mesh_sizes(scene.walls.meshes),
         meshes_move=bool(scene.walls.meshes.moving.any()) and len(scene.walls.meshes) > 1,
         mesh_notes=list(scene.walls.meshes.notes) + [

@@ -42,7 +42,7 @@ HELPER_TIMEOUT = 900.0  # s
 
 
 def compile_kernels(broad_phase: str | None = None, sleeping: bool = False, parallel: bool = True,
-                    audit: bool = False, meshes: bool = False) -> float:
+                    audit: bool = False, meshes: bool = False, calendar: bool = False) -> float:
     """``engine.warm_up(broad_phase, sleeping, meshes)``, on two processes when the cache is
     cold and two CPUs are free (module docstring); audit: also the audit's step checker
     (``analysis.audit.warm_up``, ~11 s cold; on the helper, after the held solve, where it
@@ -58,7 +58,7 @@ def compile_kernels(broad_phase: str | None = None, sleeping: bool = False, para
                 helper.wait(timeout=HELPER_TIMEOUT)
             except subprocess.TimeoutExpired:
                 pass  # killed below; warm_up compiles the rest
-        warm_up(broad_phase, sleeping, meshes)
+        warm_up(broad_phase, sleeping, meshes, calendar)
         if audit:
             from .analysis.audit import warm_up as warm_up_audit
 

@@ -44,7 +44,7 @@ from .engine import (
 from .engine.periodic import wrap_positions
 from .engine.colliders.mesh import MESH_SEARCH_NAMES
 from .engine.space_order import RENUMBER_EVERY, SPACE_ORDER_MIN, SPACE_ORDER_NAMES
-from .engine.state import BYTES_PER_PARTICLE, DEFAULT_MAX_MEMORY, Meshes
+from .engine.state import BYTES_PER_PARTICLE, DEFAULT_MAX_MEMORY, EVENT_LOOP_NAMES, Meshes
 from .errors import SceneError, UnknownSceneError
 from .scenes import builtin_names, builtin_text
 
@@ -102,6 +102,10 @@ TOP_FIELDS = {
                     "one with less counted work, chosen again every 32 steps), walk (one walk of each mesh's tree per "
                     "sphere) or together (a tree of the path boxes descended together with each mesh's tree); the "
                     "same candidates and states either way"),
+    "event_loop": ("how contacts are found between steps: step (the default: each step boxes, pairs and predicts "
+                   "every path again) or calendar (predictions kept across steps, each sphere's neighbours in a shell "
+                   "around it; for spheres whose paths are straight between contacts: no gravity, no drag, no "
+                   "meshes, no sleeping; elsewhere the world steps as with step, and the run summary says why)"),
     "max_particle_steps": "refuse a run of more particle-steps (particles × steps) than this (default 1e10)",
     "particles": "array of [[particles]] tables",
     "planes": "array of [[planes]] tables",
@@ -659,6 +663,7 @@ def _validate(raw: dict, source: str, origins: dict[str, str], meshes: Meshes | 
         max_memory=max_memory,
         space_order=c.choice(raw, "space_order", "space_order", SPACE_ORDER_NAMES, d.space_order),
         mesh_search=c.choice(raw, "mesh_search", "mesh_search", MESH_SEARCH_NAMES, d.mesh_search),
+        event_loop=c.choice(raw, "event_loop", "event_loop", EVENT_LOOP_NAMES, d.event_loop),
     )
 
     # walls

@@ -368,3 +368,15 @@ def test_edmd_harness_sets_the_parameters_writes_the_spheres_in_sigma_and_reads_
     with pytest.raises(SystemExit) as stopped:
         edmd.main()
     assert stopped.value.code == 2 and "no Single/mdSingle.c there" in capsys.readouterr().err
+
+
+def test_gas_benchmark_runs_either_event_loop_in_a_periodic_box(monkeypatch, capsys):
+    """benchmarks/gas.py (small): the calendar's rates and phases, in a periodic box."""
+    from benchmarks import gas
+
+    monkeypatch.setattr("sys.argv", ["gas.py", "--count", "100", "--steps", "5", "--periodic",
+                                     "--event-loop", "calendar"])
+    gas.main()
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("gas N=100, packing 0.3, periodic box, event_loop = calendar, 5 steps of 0.01 s")
+    assert "pair collisions" in out[1] and "resolve" in out[2]

@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
+from physdbg.engine.calendar import _before, _heap_fix, _link, _unlink  # the engine's heap and grid lists
 from physdbg.engine.motion import INTEGRATOR_NAMES
 from physdbg.engine.periodic import image
 from physdbg.engine.resolve import seed_impulse
@@ -59,39 +60,6 @@ NONE = -1
 
 
 # ------------------------------------------------------------------ the heap of per-sphere minima
-@njit(cache=True, inline="always")
-def _before(when, i, j):
-    return when[i] < when[j] or (when[i] == when[j] and i < j)
-
-
-@njit(cache=True)
-def _heap_fix(heap, where, when, i, n):
-    """Sphere i's key changed: move it up or down the heap (heap (N,) spheres, where (N,) their slots)."""
-    s = where[i]
-    while s > 0:
-        up = (s - 1) // 2
-        if _before(when, i, heap[up]):
-            heap[s] = heap[up]
-            where[heap[s]] = s
-            s = up
-        else:
-            break
-    while True:
-        child = 2 * s + 1
-        if child >= n:
-            break
-        if child + 1 < n and _before(when, heap[child + 1], heap[child]):
-            child += 1
-        if _before(when, heap[child], i):
-            heap[s] = heap[child]
-            where[heap[s]] = s
-            s = child
-        else:
-            break
-    heap[s] = i
-    where[i] = s
-
-
 # ------------------------------------------------------------------ the calendar
 @njit(cache=True)
 def _cal_unlink(cal_next, cal_prev, cal_head, cal_bucket, i):
@@ -196,25 +164,6 @@ def _near(d, length):
     if d < -0.5 * length:
         return d + length
     return d
-
-
-@njit(cache=True)
-def _link(head, nxt, prv, k, i):
-    prv[i] = NONE
-    nxt[i] = head[k]
-    if head[k] != NONE:
-        prv[head[k]] = i
-    head[k] = i
-
-
-@njit(cache=True)
-def _unlink(head, nxt, prv, k, i):
-    if prv[i] != NONE:
-        nxt[prv[i]] = nxt[i]
-    else:
-        head[k] = nxt[i]
-    if nxt[i] != NONE:
-        prv[nxt[i]] = prv[i]
 
 
 @njit(cache=True)

@@ -137,7 +137,7 @@ class DiffReport:
 # engine settings added after recordings were made, and what a recording made before
 # each one existed used
 SETTINGS_ADDED = {"rapid_contact_rule": "hold", "sleep_speed": 0.0, "sleep_time": 0.5, "space_order": "given",
-                  "mesh_search": "walk"}
+                  "mesh_search": "walk", "event_loop": "step"}
 
 
 def _flatten(value, prefix: str = "") -> dict:

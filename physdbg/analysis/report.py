@@ -277,6 +277,7 @@ def summary_text(s, observers: str = "the audit") -> str:
         f"broad phase {s.broad_phase}: {s.broad_phase_reason}" + (
             f"; {s.scanned_steps} of {s.steps} steps scanned every path box for a changed path instead of listing "
             f"partners (fewer box tests: docs/broadphase.md, \"Partner lists or a scan\")" if s.scanned_steps else ""),
+        *([f"event loop  {s.event_loop}"] if getattr(s, "event_loop", "") else []),
         f"bodies      {count_words(s.particles, 'particle')}, {count_words(len(s.walls), 'wall')}"
         + _mesh_words(getattr(s, "meshes", {})),
         *(f"meshes      {note}" for note in getattr(s, "mesh_notes", [])),

@@ -64,6 +64,8 @@ BUDGETS = {
 }
 
 
+# Settings.event_loop's choices
+EVENT_LOOP_NAMES = ("step", "calendar")
 # settings a scene may give as "auto": the advisor (physdbg.advisor.decide) replaces each by
 # a value before a World is built; the engine itself never decides
 AUTO_SETTINGS = ("integrator", "detection", "ordering", "rapid_contact_rule", "sleep_speed")
@@ -90,6 +92,9 @@ class Settings:
     "walk" (one walk of each mesh's tree per sphere), "together" (the spheres' tree and
     each mesh's descended together) or "auto" (the world picks each step by counted work:
     World._choose_mesh_search); the same candidates, so the same states, either way.
+    event_loop: "step" (every step boxes, pairs and predicts its paths again: timeline.py)
+    or "calendar" (predictions kept across steps where paths are straight between
+    contacts: calendar.py; the world says in which steps it could not, and why).
 
     max_memory (bytes): the particles' own memory (BYTES_PER_PARTICLE each) and the step's
     growable buffers (event queue, swept-test log, contact rows, held contacts) may not
@@ -121,6 +126,7 @@ class Settings:
     max_memory: float = DEFAULT_MAX_MEMORY
     space_order: str = "auto"
     mesh_search: str = "auto"
+    event_loop: str = "step"
 
     def event_cap(self, spheres: int) -> int:
         """The contact budget of one step for this many spheres: max_events_per_step, or

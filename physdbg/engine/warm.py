@@ -19,7 +19,8 @@ from .timeline import merge_sorted_pairs
 from .world import World
 
 
-def warm_up(broad_phase: str | None = None, sleeping: bool = False, meshes: bool = False) -> float:
+def warm_up(broad_phase: str | None = None, sleeping: bool = False, meshes: bool = False,
+            calendar: bool = False) -> float:
     """Compile (or load from numba's cache) every kernel a step uses; returns seconds taken.
 
     Runs a two-sphere, one-wall world for one step with contacts, so the first real step
@@ -28,7 +29,8 @@ def warm_up(broad_phase: str | None = None, sleeping: bool = False, meshes: bool
     sleeping: also the sleep rules' (sleep.py; only a run that sleeps loads them);
     meshes: also the meshes' (the trees' walks, their choice, a moving mesh's placing: only
     a scene with meshes loads them; without this, its first step compiled them, some 10 s
-    cold, and the run summary charged them to the narrow phase).
+    cold, and the run summary charged them to the narrow phase); calendar: also the event
+    calendar's (calendar.py: only a run with event_loop = "calendar" loads them).
     (physdbg.precompile runs this on two cores when the cache is cold.)
     """
     started = perf_counter()
@@ -48,6 +50,8 @@ def warm_up(broad_phase: str | None = None, sleeping: bool = False, meshes: bool
         release_static(new_held(state.count), np.zeros(state.count))
     if meshes:
         warm_up_meshes()
+    if calendar:
+        World(state.copy(), walls, Settings(gravity=(0.0, 0.0, 0.0), event_loop="calendar")).step(0.5)
     return perf_counter() - started
 
 

@@ -51,6 +51,7 @@ from ..events import (
     overlap_words,
     partner_words,
 )
+from . import calendar
 from .broadphase import choose_broad_phase, make_broad_phase
 from .broadphase.boxes import boxes_meet
 from .broadphase.periodic import PeriodicBroadPhase
@@ -132,6 +133,10 @@ RECHOOSE_SEARCH_EVERY = 32
 # acceleration, at least 1 m/s², and for velocities to that acceleration times dt) wake
 # no neighbours: they are rounding.
 SOLVE_TOLERANCE = 1e-12
+
+# the broad phase a calendar step reports (BroadPhaseInfo): its lists stand in for one
+CALENDAR_REASON = ("event_loop = calendar: each sphere's neighbours within its shell, listed again only when it "
+                   "leaves it (engine/calendar.py)")
 
 
 class World:
@@ -238,6 +243,12 @@ class World:
         self.resting_budget = settings.budget("max_resting_work_per_step", state.count)
         self._stop_asked = False  # request_stop
         self.last_step: StepContext | None = None  # the context of the latest step (for inspection)
+        # the event calendar (settings.event_loop = "calendar"): kept across the steps it
+        # serves; the steps it served, and why the last one it could not serve could not
+        self._calendar: calendar.Calendar | None = None
+        self._calendar_settled_unfit = self._calendar_unfit_by_scene()
+        self.calendar_steps = 0
+        self.calendar_unfit: str | None = None
 
     def asleep(self) -> np.ndarray | None:
         """(N,) bool in the scene's numbering: the spheres asleep now (sleep.py), or None
@@ -267,7 +278,13 @@ class World:
         something immovable (resting.pinned_by): the world cannot go on from there.
         """
         self._stop_if_asked()
-        ctx = self._begin(_checked_step_length(dt))
+        dt = _checked_step_length(dt)
+        if self.settings.event_loop == "calendar":
+            self.calendar_unfit = self._calendar_unfit()
+            if self.calendar_unfit is None:
+                return self._calendar_step(dt)
+            self._calendar = None  # the time-ordered loop changes the paths: the calendar is out of date
+        ctx = self._begin(dt)
         for name in STEP_PHASES:  # each phase is the method of its name
             self._timed(ctx, name, getattr(self, f"_{name}"))
             self._stop_if_asked()
@@ -290,7 +307,7 @@ class World:
         if self._stop_asked:
             raise StepStopped(self.step_index + 1)
 
-    def _begin(self, dt: float) -> StepContext:
+    def _begin(self, dt: float, renumber: bool = True) -> StepContext:
         # a velocity residue of vtol moves a sphere vtol·dt in a step: SOLVE_TOLERANCE·a·dt²
         ctx = StepContext(self.step_index + 1, dt, self.time, SOLVE_TOLERANCE * self._accel_scale * dt, self.observer)
         self.last_step = ctx
@@ -298,7 +315,7 @@ class World:
         if self.numbering is not None:  # World.state is the world: what was written to it counts
             self.numbering.inward(self.state.positions, out=self._st.positions)
             self.numbering.inward(self.state.velocities, out=self._st.velocities)
-            if self.step_index and self.step_index % RENUMBER_EVERY == 0:
+            if renumber and self.step_index and self.step_index % RENUMBER_EVERY == 0:
                 self._renumber()
         if ctx.observer is not None:
             ctx.observer.on_event(StepBegin(ctx.step, ctx.run_time, dt))
@@ -484,6 +501,13 @@ class World:
         advance_particles(x, v, ctx.path_accel, ctx.sigma, np.arange(n, dtype=np.int64), ctx.dt, self._integrator,
                           self._drag, self._k)
         ctx.sigma[:] = 0.0
+        self._close(ctx)
+
+    def _close(self, ctx: StepContext) -> None:
+        """The step's end, every sphere at it: wrapped into a periodic box, the overlap
+        audit, the sleep rules, energies and the state hash (both event loops)."""
+        st, s = self._st, self.settings
+        x, v = st.positions, st.velocities
         if self._periodic:  # the paths were continuous through the step; the state is in the box
             wrap_positions(x, self._period_origin, self._period)
         self._place_meshes(self.time + ctx.dt, 0.0)  # the audit sees the meshes where the spheres are
@@ -600,6 +624,109 @@ class World:
         self._buf.renumber(old_of_new)
         self.broad_phase.renumbered()
         self.numbering = Numbering(self.numbering.inner_to_scene[old_of_new])
+
+    # ------------------------------------------------------------------ the event calendar
+    def _calendar_unfit_by_scene(self) -> str | None:
+        """Why the scene and settings keep the calendar (calendar.py) out of every step, or
+        None: it needs paths that are straight between contacts and the swept, time-ordered
+        method; the rest (held contacts, the observer) is judged each step (_calendar_unfit)."""
+        s, st = self.settings, self._st
+        if s.ordering != "time" or s.detection != "swept":
+            return "it resolves contacts in time order from swept tests (ordering = time, detection = swept)"
+        if self._drag != 1.0:
+            return "drag bends every path between contacts"
+        if np.any(self._free_accel):
+            return "gravity bends the paths of movable spheres between contacts"
+        if not self._anchor_is_flow:
+            return f"the {s.integrator} integrator's paths are not straight between contacts"
+        if len(self.walls.meshes):
+            return "it does not take meshes"
+        if self.sleepers is not None:
+            return "it does not let spheres sleep (sleep_speed > 0)"
+        if calendar.periodic_axes_too_short(self._period, st.radius):
+            return "a periodic axis is shorter than three neighbour lists' reach"
+        return None
+
+    def _calendar_unfit(self) -> str | None:
+        """Why this step cannot use the calendar (None: it can)."""
+        if self._calendar_settled_unfit is not None:
+            return self._calendar_settled_unfit
+        if self.held.count[HELD]:
+            return "a contact is held (resting or rapid): it has no held contacts"
+        if wants_swept_tests(self.observer):
+            return "the observer reads every step's swept tests, which it does not run"
+        return None
+
+    def _loop_method(self, run_time: float, dt: float, vtol: float) -> tuple:
+        """kernel_args.LoopMethod of a step (or of the calendar: run_time its epoch), as a plain tuple."""
+        s = self.settings
+        return tuple(LoopMethod(run_time, dt, self._integrator, self._drag, self._k, self._detection, s.samples,
+                                s.contact_tolerance * 1e-3, s.rest_fraction, self._rest_step_factor,
+                                RESTITUTION_RULES.index(s.restitution_rule), s.rapid_contact_time,
+                                RAPID_RULES.index(s.rapid_contact_rule), self._anchor_is_flow,
+                                not self._kick_first, vtol, self._atol))
+
+    def _calendar_step(self, dt: float) -> StepEnd:
+        """One step taken from the event calendar (calendar.py): its events up to the
+        step's end, then every sphere read from its anchor there. The calendar is made
+        afresh when there is none, or when the state was written since the last step."""
+        ctx = self._begin(dt, renumber=False)
+        st, buf = self._st, self._buf
+        for name in ("forces", "broad_phase", "narrow_phase"):
+            ctx.timings[name] = 0.0
+        started = perf_counter()
+        buf.reset(keep_misses=False)
+        cal = self._calendar
+        if cal is None or not (np.array_equal(cal.last_x, st.positions) and np.array_equal(cal.last_v, st.velocities)):
+            cal = self._calendar = calendar.Calendar(st.positions, st.velocities, st.radius, self._period,
+                                                     self._period_origin, self.time)
+            fresh = True
+        else:
+            fresh = False
+        particles = cal.paths(st.radius, self._inverse_mass, st.restitution, self._last_contact)
+        method = self._loop_method(cal.epoch, dt, ctx.vtol)
+        if fresh:
+            cal.build(particles, method, self._geometry, buf.counters)
+        until = cal.now + dt
+        cap = self.event_cap
+        while True:
+            status = cal.run(until, particles, method, self._geometry, self.held, buf.contacts, buf.counters,
+                             buf.changed, cap, calendar.MOST_EVENTS_PER_CONTACT * (cap + st.count), self.resting_budget)
+            if status == calendar.GROW_CONTACTS:
+                if not self._ensure(ctx, 0, 0, calendar.CONTACT_ROOM):
+                    ctx.warn("max_memory", self._memory.message(ctx))
+                    status = calendar.CAPPED  # the step ends as it stands
+                    break
+                continue
+            break
+        if status == calendar.STOPPED:
+            raise StepStopped(self.step_index + 1)
+        if status == calendar.HELD_CONTACT:
+            raise RuntimeError("the event calendar held a contact, which it cannot: a bug (calendar.py)")
+        if status == calendar.CAPPED and not ctx.warnings:
+            ctx.warn("max_events_per_step", _budget_message("max_events_per_step", cap))
+        rows = buf.contacts[:int(buf.counters[CONTACTS])]
+        rows["time_in_step"] -= cal.now  # the resolver's times are the calendar's (since its epoch)
+        ctx.timings["resolve"] = perf_counter() - started
+        started = perf_counter()
+        cal.positions_at(until, self._integrator, self._drag, self._k, st.positions, st.velocities)
+        cal.now = until
+        ctx.pairs = cal.pairs()
+        ctx.sigma = np.zeros(st.count)
+        ctx.path_accel = cal.a
+        if ctx.observer is not None:
+            ctx.observer.on_event(BroadPhaseInfo(ctx.step, "calendar", CALENDAR_REASON, {"pairs": len(ctx.pairs),
+                                                                                        "scanned": False}, None))
+        self._close(ctx)
+        if status == calendar.CAPPED:
+            self._calendar = None  # what it did not take is past: made afresh from the state next step
+        else:
+            cal.last_x = st.positions.copy() if self.numbering is None else self.numbering.inward(self.state.positions)
+            cal.last_v = st.velocities.copy() if self.numbering is None else self.numbering.inward(
+                self.state.velocities)
+        self.calendar_steps += 1
+        ctx.timings["finish"] = perf_counter() - started
+        return self._end(ctx)
 
     # ------------------------------------------------------------------ candidates
     @staticmethod
@@ -821,15 +948,10 @@ class World:
         return ctx.kernel_groups
 
     def _build_kernel_groups(self, ctx: StepContext) -> tuple[tuple, tuple, tuple]:
-        st, s = self._st, self.settings
+        st = self._st
         particles = LoopParticles(st.positions, st.velocities, ctx.path_accel, self._acc, st.radius, self._inverse_mass,
                                   st.restitution, ctx.sigma, self._last_contact)
-        method = LoopMethod(ctx.run_time, ctx.dt, self._integrator, self._drag, self._k, self._detection, s.samples,
-                            s.contact_tolerance * 1e-3, s.rest_fraction, self._rest_step_factor,
-                            RESTITUTION_RULES.index(s.restitution_rule), s.rapid_contact_time,
-                            RAPID_RULES.index(s.rapid_contact_rule), self._anchor_is_flow,
-                            not self._kick_first, ctx.vtol, self._atol)
-        return tuple(particles), tuple(method), self._geometry
+        return tuple(particles), self._loop_method(ctx.run_time, ctx.dt, ctx.vtol), self._geometry
 
     # ------------------------------------------------------------------ events
     def _contacts_event(self, ctx: StepContext) -> Contacts:

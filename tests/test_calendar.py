@@ -1,0 +1,226 @@
+"""The event calendar (engine/calendar.py) against the time-ordered loop it stands beside.
+
+The calendar keeps each sphere's anchor from its last contact where the time-ordered loop
+moves every anchor to each step's end, so the two round differently: their states agree
+to rounding at first and then part as a chaotic gas parts any two roundings. What must
+hold: the same contacts (pairs, walls, order, outcome) while they agree, states within
+rounding of each other, reruns bit for bit, and every step the calendar cannot serve
+taken by the time-ordered loop, as if the calendar were not there.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from physdbg.api import load_scene
+from physdbg.engine.state import Settings, State
+from physdbg.engine.world import World
+from physdbg.errors import StepStopped
+from physdbg.events import KIND_WALL, Contacts, StepEnd
+from physdbg.errors import SceneError
+
+from .test_reference import _box, scenes
+
+
+class _Seen:
+    """Contacts and step ends, as an observer that reads no swept tests (as the recorder below full)."""
+
+    wants_swept_tests = False
+
+    def __init__(self):
+        self.contacts: list[np.ndarray] = []
+        self.ends: list[StepEnd] = []
+
+    def on_event(self, event):
+        if isinstance(event, Contacts):
+            self.contacts.append(event.rows.copy())
+        elif isinstance(event, StepEnd):
+            self.ends.append(event)
+
+
+def _run(state: State, walls, method: Settings, dt: float, steps: int, loop: str) -> tuple[World, _Seen]:
+    seen = _Seen()
+    world = World(state.copy(), walls, dataclasses.replace(method, event_loop=loop), seen)
+    for _ in range(steps):
+        world.step(dt)
+    return world, seen
+
+
+def _in_time_order(rows: np.ndarray) -> np.ndarray:
+    """A step's contacts in time order, those at one instant by kind, sphere and partner:
+    contacts of different spheres at one instant commute, and the two loops take such a
+    tie in their own order (the time-ordered loop in the order it predicted them, the
+    calendar by sphere)."""
+    return rows[np.lexsort((rows["other"], rows["a"], rows["kind"], rows["time_in_step"]))]
+
+
+def _agree(step_loop: _Seen, calendar: _Seen, dt: float, steps: int, tolerance: float = 1e-9) -> None:
+    """The same contacts in every step, their times, impulses and the states within tolerance."""
+    assert len(calendar.contacts) == len(step_loop.contacts) == steps
+    for step, (a, b) in enumerate(zip(step_loop.contacts, calendar.contacts), start=1):
+        a, b = _in_time_order(a), _in_time_order(b)
+        assert [tuple(r) for r in a[["kind", "a", "other", "how"]]] == [tuple(r) for r in b[["kind", "a", "other",
+                                                                                                "how"]]], step
+        np.testing.assert_allclose(b["time_in_step"], a["time_in_step"], rtol=0, atol=tolerance * dt)
+        np.testing.assert_allclose(b["impulse"], a["impulse"], rtol=tolerance, atol=tolerance)
+        np.testing.assert_allclose(b["restitution"], a["restitution"], rtol=0, atol=0)
+    for a, b in zip(step_loop.ends, calendar.ends):
+        np.testing.assert_allclose(b.positions, a.positions, rtol=0, atol=tolerance)
+        np.testing.assert_allclose(b.velocities, a.velocities, rtol=tolerance, atol=tolerance)
+        assert b.warnings == a.warnings
+
+
+@st.composite
+def straight_path_scenes(draw):
+    """test_reference's random scenes (a few spheres, walls or periodic axes, restitution
+    below 1 and the rapid-contact rule) on paths the calendar serves: no gravity, no drag,
+    the integrators whose anchors are the flow."""
+    state, walls, method, dt = draw(scenes())
+    method = dataclasses.replace(method, gravity=(0.0, 0.0, 0.0), drag=1.0,
+                                 integrator=draw(st.sampled_from(["exact", "verlet", "semi-implicit"])))
+    return state, walls, method, dt
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(straight_path_scenes())
+def test_the_calendar_gives_the_time_ordered_loops_contacts_and_states(scene):
+    state, walls, method, dt = scene
+    steps = 20
+    ordered, seen_ordered = _run(state, walls, method, dt, steps, "step")
+    calendar, seen_calendar = _run(state, walls, method, dt, steps, "calendar")
+    assert calendar.calendar_steps == steps, calendar.calendar_unfit
+    assert ordered.calendar_steps == 0
+    _agree(seen_ordered, seen_calendar, dt, steps)
+
+
+@pytest.mark.parametrize("periodic", [False, True])
+def test_the_gas_takes_the_same_contacts_until_rounding_parts_the_runs(periodic):
+    """The built-in gas (64 spheres, walls or a periodic box): every contact of the first
+    40 steps the time-ordered loop's (a few hundred), the states within 1e-9 m."""
+    scene = load_scene("gas", [f"box.periodic={str(periodic).lower()}"])
+    state, walls = scene.build_world().state, scene.walls
+    ordered = _run(state, walls, scene.settings, scene.dt, 40, "step")[1]
+    world, seen = _run(state, walls, scene.settings, scene.dt, 40, "calendar")
+    assert world.calendar_steps == 40
+    assert sum(len(rows) for rows in seen.contacts) > 100
+    _agree(ordered, seen, scene.dt, 40)
+
+
+def test_a_large_gas_agrees_for_its_first_thousand_contacts():
+    """1,000 spheres in a periodic box (the benchmark's gas): the calendar's first 1,000
+    contacts are the time-ordered loop's, in order, at the same times."""
+    scene = load_scene("gas", ["generate.count=1000", "generate.packing_fraction=0.3", "box.periodic=true"])
+    state, walls = scene.build_world().state, scene.walls
+    rows = []
+    for loop in ("step", "calendar"):
+        seen = _run(state, walls, scene.settings, scene.dt, 4, loop)[1]
+        rows.append(np.concatenate([_in_time_order(r) for r in seen.contacts])[:1000])
+    assert len(rows[0]) == len(rows[1]) == 1000
+    assert (rows[0][["kind", "a", "other"]] == rows[1][["kind", "a", "other"]]).all()
+    np.testing.assert_allclose(rows[1]["time_in_step"], rows[0]["time_in_step"], rtol=0, atol=1e-9 * scene.dt)
+
+
+def test_reruns_are_bit_identical():
+    scene = load_scene("gas", ["box.periodic=true", "event_loop=calendar"])
+    hashes = []
+    for _ in range(2):
+        world = scene.build_world()
+        hashes.append([world.step(scene.dt).state_hash for _ in range(50)])
+    assert hashes[0] == hashes[1]
+
+
+def test_a_corner_met_at_one_instant_is_resolved_as_the_time_ordered_loop_does():
+    """A sphere aimed at a box's corner meets three walls at one instant, gathered as the
+    time-ordered loop gathers them (resolve.resolve_at_one_instant: three perpendicular
+    walls are three impulses, in no order that matters), and it comes straight back."""
+    state = State(np.array([[0.5, 0.5, 0.5]]), np.array([[1.0, 1.0, 1.0]]), np.ones(1), np.full(1, 0.1),
+                  np.ones(1), np.ones(1))
+    method = Settings(gravity=(0.0, 0.0, 0.0))
+    runs = [_run(state, _box(1.0, 1.0), method, 0.1, 6, loop) for loop in ("step", "calendar")]
+    _agree(runs[0][1], runs[1][1], 0.1, 6)
+    rows = np.concatenate(runs[1][1].contacts)
+    assert len(rows) == 3 and (rows["kind"] == KIND_WALL).all() and len(set(rows["time_in_step"])) == 1
+    np.testing.assert_allclose(runs[1][0].state.velocities, [[-1.0, -1.0, -1.0]], atol=1e-12)
+
+
+def test_where_it_cannot_serve_the_world_steps_as_without_it():
+    """Gravity, drag, an observer of the swept tests, ordering = index: every step taken by
+    the time-ordered loop, bit for bit the states of a world without the calendar, and the
+    reason kept."""
+    for scene_name, extra, reason in (("bounce", [], "gravity"), ("billiards", [], "drag"),
+                                      ("gas", ["ordering=index"], "time order")):
+        scene = load_scene(scene_name, extra)
+        state, walls = scene.build_world().state, scene.walls
+        a = _run(state, walls, scene.settings, scene.dt, 30, "step")
+        b = _run(state, walls, scene.settings, scene.dt, 30, "calendar")
+        assert b[0].calendar_steps == 0 and reason in b[0].calendar_unfit
+        assert [e.state_hash for e in a[1].ends] == [e.state_hash for e in b[1].ends]
+    scene = load_scene("gas", ["event_loop=calendar"])
+    world = scene.build_world(_SweptTestsReader())
+    world.step(scene.dt)
+    assert world.calendar_steps == 0 and "swept tests" in world.calendar_unfit
+
+
+class _SweptTestsReader:
+    wants_swept_tests = True
+
+    def on_event(self, event):
+        pass
+
+
+def test_a_state_written_between_steps_counts():
+    """A velocity set between steps (a script's kick) is taken: the calendar is made again
+    from the state, and the run goes on as a fresh world from that state would."""
+    scene = load_scene("gas", ["box.periodic=true", "event_loop=calendar"])
+    world = scene.build_world()
+    for _ in range(10):
+        world.step(scene.dt)
+    world.state.velocities[3] = [2.0, -1.0, 0.5]
+    fresh = World(world.state.copy(), scene.walls, world.settings)
+    fresh.time, fresh.step_index = world.time, world.step_index
+    fresh._last_contact[:] = world._last_contact
+    assert [world.step(scene.dt).state_hash for _ in range(5)] == [fresh.step(scene.dt).state_hash
+                                                                   for _ in range(5)]
+
+
+def test_the_step_budget_stops_a_step_as_in_the_time_ordered_loop():
+    scene = load_scene("gas", ["box.periodic=true", "event_loop=calendar", "max_events_per_step=1",
+                               "generate.count=300", "generate.packing_fraction=0.3"])
+    world = scene.build_world()
+    end = world.step(scene.dt)
+    assert end.counts.contacts == 1 and [w.code for w in end.warnings] == ["max_events_per_step"]
+    end = world.step(scene.dt)  # made again from the state the budget left
+    assert end.counts.contacts == 1 and world.calendar_steps == 2
+
+
+def test_a_stop_request_ends_the_step():
+    scene = load_scene("gas", ["box.periodic=true", "event_loop=calendar"])
+    world = scene.build_world()
+    world.step(scene.dt)
+    world.request_stop()
+    with pytest.raises(StepStopped):
+        world.step(scene.dt)
+
+
+def test_the_setting_is_checked_where_the_scene_gives_it():
+    with pytest.raises(SceneError, match="event_loop.*step.*calendar"):
+        load_scene("gas", ["event_loop=fast"])
+
+
+def test_the_run_summary_says_where_the_calendar_served():
+    from typer.testing import CliRunner
+
+    from physdbg.cli import app
+
+    served = CliRunner().invoke(app, ["run", "cradle", "-s", "event_loop=calendar"])
+    assert served.exit_code == 0, served.output
+    assert "event loop  calendar in 180 of 180 steps (docs/engine.md" in served.output
+    not_served = CliRunner().invoke(app, ["run", "bounce", "-s", "event_loop=calendar"])
+    assert not_served.exit_code == 0, not_served.output
+    assert ("calendar in 0 of 300 steps; the time-ordered loop took the rest, which it cannot serve: gravity bends"
+            in not_served.output)
