@@ -44,7 +44,7 @@ def test_a_cold_cache_with_two_cpus_compiles_the_held_solve_in_a_helper(monkeypa
     import physdbg.engine.warm as world
 
     monkeypatch.setattr(world, "warm_up_without_forces", lambda bp: calls.append(f"without forces {bp}"))
-    monkeypatch.setattr(world, "warm_up", lambda bp, sleeping, meshes=False: calls.append(f"warm up {bp} {sleeping}"))
+    monkeypatch.setattr(world, "warm_up", lambda bp, sleeping, meshes=False, calendar=False: calls.append(f"warm up {bp} {sleeping}"))
     monkeypatch.setattr(audit, "warm_up", lambda: calls.append("checker"))
     precompile.compile_kernels("grid", sleeping=True)
     assert calls == ["helper started, audit False", "without forces grid",
