@@ -721,9 +721,7 @@ class World:
         if status == calendar.CAPPED:
             self._calendar = None  # what it did not take is past: made afresh from the state next step
         else:
-            cal.last_x = st.positions.copy() if self.numbering is None else self.numbering.inward(self.state.positions)
-            cal.last_v = st.velocities.copy() if self.numbering is None else self.numbering.inward(
-                self.state.velocities)
+            cal.last_x, cal.last_v = st.positions.copy(), st.velocities.copy()  # (the world's numbering)
         self.calendar_steps += 1
         ctx.timings["finish"] = perf_counter() - started
         return self._end(ctx)
