@@ -27,11 +27,12 @@ from __future__ import annotations
 import numpy as np
 
 from ..events import SEARCH_CULLED, SEARCH_REACHED, Contacts, EngineWarning, StepEnd
-
-SEARCHED_SPHERES = 12  # the most spheres whose walks the "mesh search" entity draws
 from . import format as fmt
 from . import view
 from .header import RecordingHeader
+from .scene_wire import SphereEntities, arrows, entity_field
+
+SEARCHED_SPHERES = 12  # the most spheres whose walks the "mesh search" entity draws
 
 # float32 centres, as both viewers draw them (half the bytes of float64; the exact values
 # are in /physdbg/state)
@@ -55,37 +56,23 @@ class FoxgloveView:
     step; each returns [(topic, serialized message), ...]."""
 
     def __init__(self, header: RecordingHeader, detail: str):
-        from foxglove_schemas_protobuf.SceneEntity_pb2 import SceneEntity
-
         self.header = header
         self.detail = detail
         self.classes = view_schemas()
-        self.names = [f"sphere {i}" for i in range(header.count)]
-        self.diameters = (2.0 * header.radius).tolist()
-        self._scene_entity = SceneEntity
         self._group = None  # the engine's trees of the meshes (mesh_view.engine_tree), when first drawn
-        self._template_by_color: dict[tuple, SceneEntity] = {}  # a sphere's entity is a copy of its colour's
         self._asleep: np.ndarray | None = None
         self._findings = 0  # audit findings marked so far (each its own entity)
-        self._color_spheres(None)
+        self._spheres_wire = SphereEntities(fmt.VIEW_SCENE_FRAME, 2.0 * header.radius, self._sphere_rgba(None))
         self._points = np.zeros(header.count, dtype=POINT_DTYPE)
         self._points["radius"] = header.radius
         self._points["id"] = np.arange(header.count)
 
-    def _color_spheres(self, asleep: np.ndarray | None) -> None:
-        """Pick each sphere's template: its colour, grey-blue while asleep ((N,) bool or None)."""
-        colors, which = np.unique(view.sphere_colors(self.header.inverse_mass, asleep), axis=0, return_inverse=True)
-        self._templates = []
-        for color in colors.tolist():
-            entity = self._template_by_color.get(tuple(color))
-            if entity is None:
-                entity = self._scene_entity(frame_id=fmt.VIEW_SCENE_FRAME)
-                sphere = entity.spheres.add()
-                sphere.pose.orientation.w = 1.0
-                sphere.color.r, sphere.color.g, sphere.color.b, sphere.color.a = (*(c / 255.0 for c in color), 1.0)
-                self._template_by_color[tuple(color)] = entity
-            self._templates.append(entity)
-        self._template_of = which.reshape(-1)
+    def _sphere_rgba(self, asleep: np.ndarray | None) -> np.ndarray:
+        """(N, 4) each sphere's colour in [0, 1], opaque; grey-blue while asleep ((N,) bool or None)."""
+        rgb = view.sphere_colors(self.header.inverse_mass, asleep)
+        rgba = np.ones((len(rgb), 4))
+        rgba[:, :3] = np.asarray(rgb, dtype=np.float64) / 255.0
+        return rgba
 
     # ------------------------------------------------------------------ frames
     def first(self, ns: int) -> list[tuple[str, bytes]]:
@@ -105,7 +92,7 @@ class FoxgloveView:
         the file keeps it), or None."""
         sleep_lines = []
         if view.sleep_changed(self._asleep, end.asleep):
-            self._color_spheres(end.asleep)
+            self._spheres_wire.set_colors(self._sphere_rgba(end.asleep))
             sleep_lines = view.describe_sleep(frame, self._asleep, end.asleep)
         self._asleep = end.asleep
         out = [(fmt.TOPIC_VIEW_SCENE, self._spheres(ns, end.positions, contacts))]
@@ -278,46 +265,24 @@ class FoxgloveView:
         return entity
 
     def _spheres(self, ns: int, positions: np.ndarray, contacts: Contacts | None = None) -> bytes:
-        """One entity per sphere (a stable id Foxglove shows on a click), copied from a
-        template: 2 µs a sphere, where building each from nothing costs 4."""
-        update = self.classes[fmt.TOPIC_VIEW_SCENE]()
-        entities = update.entities
-        templates, which = self._templates, self._template_of.tolist()
-        for i, (position, diameter) in enumerate(zip(positions.tolist(), self.diameters, strict=True)):
-            entity = entities.add()
-            entity.CopyFrom(templates[which[i]])
-            entity.id = self.names[i]
-            sphere = entity.spheres[0]
-            p = sphere.pose.position
-            p.x, p.y, p.z = position
-            s = sphere.size
-            s.x = s.y = s.z = diameter
+        """One entity per sphere (a stable id Foxglove shows on a click) and, at detail
+        contacts or full, entity "contacts": both written with numpy (scene_wire)."""
+        data = self._spheres_wire.encode(ns, positions)
         if self.detail != "state":
-            entities.append(self._arrows(contacts))
-        for entity in entities:
-            entity.timestamp.FromNanoseconds(ns)
-        return update.SerializeToString()
+            data += entity_field(self._arrows(ns, contacts))
+        return data
 
-    def _arrows(self, contacts: Contacts | None):
-        """Entity "contacts": an arrow along each drawn contact's normal (none at frame 0)."""
-        from foxglove_schemas_protobuf.SceneEntity_pb2 import SceneEntity
-
-        entity = SceneEntity(id="contacts", frame_id=fmt.VIEW_SCENE_FRAME)
-        if contacts is None or not len(contacts):
-            return entity
-        count = min(len(contacts), view.DRAWN_CONTACTS_PER_STEP)
-        points, normals = contacts.point[:count], contacts.normal[:count]
-        lengths = self.header.radius[contacts.a[:count]]
-        for point, rotation, length, resting in zip(points.tolist(), _rotations_from_x(normals).tolist(),
-                                                    lengths.tolist(), contacts.resting[:count].tolist(), strict=True):
-            arrow = entity.arrows.add(shaft_length=0.7 * length, head_length=0.3 * length,
-                                      shaft_diameter=0.08 * length, head_diameter=0.2 * length)
-            arrow.pose.position.x, arrow.pose.position.y, arrow.pose.position.z = point
-            q = arrow.pose.orientation
-            q.x, q.y, q.z, q.w = rotation
-            arrow.color.r, arrow.color.g, arrow.color.b, arrow.color.a = (
-                (0.5, 0.5, 0.9, 1.0) if resting else (0.3, 0.86, 0.47, 1.0))
-        return entity
+    def _arrows(self, ns: int, contacts: Contacts | None):
+        """Entity "contacts": an arrow along each drawn contact's normal (none at frame 0),
+        the sphere's radius long, blue where the contact is held or resting."""
+        entity = self.classes[fmt.TOPIC_VIEW_SCENE]().entities.add(id="contacts", frame_id=fmt.VIEW_SCENE_FRAME)
+        entity.timestamp.FromNanoseconds(ns)
+        data = entity.SerializeToString()
+        if contacts is not None and len(contacts):
+            count = min(len(contacts), view.DRAWN_CONTACTS_PER_STEP)
+            data += arrows(contacts.point[:count], _rotations_from_x(contacts.normal[:count]),
+                           self.header.radius[contacts.a[:count]], contacts.resting[:count])
+        return data
 
     def _point_cloud(self, ns: int, positions: np.ndarray) -> bytes:
         from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField

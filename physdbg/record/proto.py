@@ -115,14 +115,14 @@ def encode_table(name: str, step: int, column) -> bytes:
                 values = values[..., axis] if axis is not None else values
                 setattr(message, field, values.astype(kind, copy=False).tolist())
         return message.SerializeToString()
-    parts = [b"\x08" + _varint(step)] if step else []
+    parts = [b"\x08" + varint(step)] if step else []
     for tag, kind, axis, source, is_bytes in _table_fields(name):
         values = np.asarray(column(source))
         if is_bytes:
             rows = np.ascontiguousarray(values, dtype=np.uint8)
             if rows.shape[0]:
                 rows = rows.reshape(rows.shape[0], -1)
-                head = tag + _varint(rows.shape[1])
+                head = tag + varint(rows.shape[1])
                 framed = np.empty((rows.shape[0], len(head) + rows.shape[1]), dtype=np.uint8)
                 framed[:, :len(head)] = np.frombuffer(head, dtype=np.uint8)
                 framed[:, len(head):] = rows
@@ -132,7 +132,7 @@ def encode_table(name: str, step: int, column) -> bytes:
         if values.shape[0] == 0:
             continue
         payload = _packed(values, kind)
-        parts += [tag, _varint(len(payload)), payload]
+        parts += [tag, varint(len(payload)), payload]
     return b"".join(parts)
 
 
@@ -140,7 +140,7 @@ def encode_table(name: str, step: int, column) -> bytes:
 def _table_fields(name: str) -> list[tuple[bytes, np.dtype, int | None, str, bool]]:
     """A table's protobuf fields in order, each as (its tag's bytes (length-delimited), its
     numpy dtype, vector axis, source column, is bytes): proto_fields, worked out once."""
-    return [(_varint((number << 3) | 2), np.dtype(kind), axis, source, is_bytes)
+    return [(varint((number << 3) | 2), np.dtype(kind), axis, source, is_bytes)
             for number, (_field, kind, axis, source, is_bytes)
             in enumerate(proto_fields(fmt.PROTOBUF_MESSAGES[name][0]), start=2)]
 
@@ -150,18 +150,18 @@ def encode_state_message(step: int, values: dict) -> bytes:
     unsigned integers, bytes), written as encode_table writes a table: the protobuf
     library's bytes (proto3 leaves out a field at its default: 0, all-zero bits, empty)
     without copying the state's words twice through the library."""
-    parts = [b"\x08" + _varint(step)] if step else []
+    parts = [b"\x08" + varint(step)] if step else []
     for number, (field, kind) in enumerate(fmt.STATE_MESSAGE_FIELDS, start=2):
         value = values[field]
         if kind == "bytes":
             if len(value):
-                parts += [_varint(number << 3 | 2), _varint(len(value)), value]
+                parts += [varint(number << 3 | 2), varint(len(value)), value]
         elif np.dtype(kind).kind == "f":
             packed = struct.pack("<d" if np.dtype(kind).itemsize == 8 else "<f", value)
             if packed.count(0) != len(packed):
-                parts += [_varint(number << 3 | (1 if len(packed) == 8 else 5)), packed]
+                parts += [varint(number << 3 | (1 if len(packed) == 8 else 5)), packed]
         elif value:
-            parts += [_varint(number << 3), _varint(int(value))]
+            parts += [varint(number << 3), varint(int(value))]
     return b"".join(parts)
 
 
@@ -180,7 +180,7 @@ def _packed(values: np.ndarray, dtype: np.dtype) -> bytes:
     return _varints(((signed << 1) ^ (signed >> 31)).view(np.uint32).astype(np.uint64))
 
 
-def _varint(value: int) -> bytes:
+def varint(value: int) -> bytes:
     """One unsigned integer's varint (a tag, a length: _varints for a column)."""
     out = bytearray()
     while value > 0x7F:
