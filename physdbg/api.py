@@ -12,6 +12,7 @@ import math
 import tempfile
 import time
 from collections.abc import Callable, Sequence
+import dataclasses
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -673,11 +674,12 @@ class ImportResult:
 
 
 def import_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str] = (),
-               mcap_path: str | Path | None = None, force: bool = False) -> ImportResult:
+               mcap_path: str | Path | None = None, force: bool = False, time_unit: str | None = None,
+               length_unit: str | None = None) -> ImportResult:
     """Turn a run of another engine (a .csv or .jsonl trajectory, docs/foreign-runs.md) of
-    ``scene`` into a physdbg recording, so explain, diff and replay work on it."""
+    ``scene`` into a physdbg recording, so explain, diff and replay work on it (units: as
+    for check_run)."""
     from .record.foreign import import_run as write_run
-    from .record.foreign import read_run
     from .record.outputs import write_claimed
 
     scene = ready_scene(scene, overrides)
@@ -685,7 +687,7 @@ def import_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str
     if out.resolve() == Path(run_path).resolve():
         raise PhysdbgError(f"the run and the recording are the same file: {out}")
     check_writable([out], force)
-    run = read_run(run_path, scene.state.count)
+    run = read_run_in_units(run_path, scene, time_unit, length_unit)
     frames = write_claimed(out, force, lambda path: write_run(run, scene, path))
     return ImportResult(str(out), frames, scene.state.count, "given" if run.velocities is not None else "estimated",
                         out.stat().st_size)
@@ -702,25 +704,46 @@ class CheckRunResult:
     velocities: str
 
 
+def read_run_in_units(run_path: str | Path, scene: Scene, time_unit: str | None = None,
+                      length_unit: str | None = None):
+    """A foreign run of ``scene`` (foreign.read_run) in seconds and metres: read as written
+    in the units given, or, with none given, refused (ForeignRunError, a line per unit) when
+    it looks written in other units than SI."""
+    from .errors import ForeignRunError
+    from .record.foreign import in_units, read_run, unit_mistakes
+
+    run = read_run(run_path, scene.state.count)
+    if time_unit is None and length_unit is None:
+        mistakes = unit_mistakes(run, scene.dt, scene.state.positions)
+        if mistakes:
+            raise ForeignRunError(f"{run_path}: " + "; and ".join(mistakes))
+    return in_units(run, time_unit or "s", length_unit or "m")
+
+
 def check_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str] = (), atol: float | None = None,
               rtol: float | None = None, keep: str | Path | None = None, force: bool = False,
-              on_status: Callable[[str], None] | None = None, verify: bool = True) -> CheckRunResult:
+              on_status: Callable[[str], None] | None = None, verify: bool = True,
+              time_unit: str | None = None, length_unit: str | None = None) -> CheckRunResult:
     """Record physdbg's exact run of ``scene`` with the foreign run's own time steps and
     say where the foreign run (a .csv, .jsonl or .mcap trajectory) departs from it and why
     (analysis.departure). keep: a folder to keep both recordings in (run.mcap and
-    reference.mcap, for replay, diff and overlay); otherwise they are temporary."""
+    reference.mcap, for replay, diff and overlay); otherwise they are temporary.
+    time_unit, length_unit: what the run is written in (foreign.TIME_UNITS, LENGTH_UNITS);
+    when neither is given, a run that looks written in milliseconds, centimetres or
+    millimetres is refused with a line naming the unit (foreign.unit_mistakes).
+    A step that only one of physdbg's own modelling rules explains (departure.OWN_RULES)
+    is compared again against physdbg without that rule, and the report says so."""
     import numpy as np
 
     from .analysis.departure import compare
     from .record.foreign import import_run as write_run
-    from .record.foreign import read_run
     from .record.outputs import write_claimed
 
     scene = ready_scene(scene, overrides)
     if scene.walls.periodic:
         raise PhysdbgError(f"scene '{scene.name}' has a periodic box; check-run reads a run's steps from consecutive "
                            f"positions, which wrap there, and does not compare periodic runs yet")
-    run = read_run(run_path, scene.state.count)
+    run = read_run_in_units(run_path, scene, time_unit, length_unit)
     if len(run.times) < 2:
         raise PhysdbgError(f"{run_path}: the run has only its initial state; there is no step to check")
     with tempfile.TemporaryDirectory(prefix="physdbg-check-run-") as scratch:
@@ -744,6 +767,22 @@ def check_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str]
         if on_status is not None:
             on_status("comparing")
         report = compare(run_out, reference_out, atol, rtol, verify=verify)
+        set_aside: list[dict] = []
+        while True:
+            # a step that only physdbg's own modelling rule explains (departure.OWN_RULES): the
+            # run is compared again against physdbg without that rule, once per rule
+            rule = next((d for d in report.departures if d.kind == "own-rule"
+                         and d.evidence["setting"] not in {r["setting"] for r in set_aside}), None)
+            if rule is None:
+                break
+            set_aside.append({**rule.evidence, "step": rule.step})
+            scene = dataclasses.replace(scene, settings=dataclasses.replace(
+                scene.settings, **{rule.evidence["setting"]: rule.evidence["value"]}))
+            if on_status is not None:
+                on_status(f"comparing without physdbg's {rule.evidence['name']}")
+            record(scene, mcap_path=str(reference_out), rrd=False, detail="contacts", force=True,
+                   dts=dts.tolist(), view=False, on_status=on_status)
+            report = compare(run_out, reference_out, atol, rtol, verify=verify, set_aside=set_aside)
         report.run = str(run_path)
         kept = keep is not None
         return CheckRunResult(report, str(run_out) if kept else None, str(reference_out) if kept else None,

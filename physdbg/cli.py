@@ -548,6 +548,14 @@ def _serve_web(rrd: Path, port: int) -> None:
 OverwriteRecording = Annotated[bool, typer.Option("--force", help="Overwrite an existing recording.")]
 
 
+TimeUnitOption = Annotated[Optional[str], typer.Option(
+    "--time-unit", help="The unit of the run's time column: s (the default) or ms (JavaScript's Date.now()); "
+                        "velocities stay per second.")]
+LengthUnitOption = Annotated[Optional[str], typer.Option(
+    "--length-unit", help="The unit of the run's positions and velocities (per second): m (the default), cm or "
+                          "mm.")]
+
+
 @app.command("import")
 def import_(
     run: Annotated[Path, typer.Argument(help="The other engine's run: a .csv or .jsonl trajectory "
@@ -557,6 +565,8 @@ def import_(
     output: Annotated[Optional[Path], typer.Option(
         "--output", "-o", help="The recording to write (default: the run's name, ending .mcap).")] = None,
     force: OverwriteRecording = False,
+    time_unit: TimeUnitOption = None,
+    length_unit: LengthUnitOption = None,
 ) -> None:
     """Turn a run of another engine (your own, pybullet, MuJoCo) into a physdbg recording,
     so explain, diff and replay work on it.
@@ -567,7 +577,7 @@ def import_(
         from .analysis.report import size_words
         from .api import import_run
 
-        result = import_run(run, scene, set_ or [], output, force)
+        result = import_run(run, scene, set_ or [], output, force, time_unit=time_unit, length_unit=length_unit)
         me = _command("physdbg")
         bodies = f"{result.bodies} body" if result.bodies == 1 else f"{result.bodies} bodies"
         typer.echo(f"imported    {result.frames - 1} steps of {bodies} from {run} (velocities {result.velocities})")
@@ -595,6 +605,8 @@ def check_run(
     markdown: Annotated[bool, typer.Option("--markdown", help="Print the report as Markdown.")] = False,
     output_format: OutputFormat = "text",
     no_verify: NoVerifyOption = False,
+    time_unit: TimeUnitOption = None,
+    length_unit: LengthUnitOption = None,
 ) -> None:
     """Run physdbg's exact version of the scene with the run's own time steps and say where
     the run departs and why: tunnelling, a bounce at the wrong time, energy at a contact,
@@ -607,7 +619,7 @@ def check_run(
         from . import api
 
         result = api.check_run(run, scene, set_ or [], atol=atol, rtol=rtol, keep=keep, force=force,
-                               verify=not no_verify)
+                               verify=not no_verify, time_unit=time_unit, length_unit=length_unit)
         _after_interpreted(tier, quiet=True)
         typer.echo(_render(result.report, "check_run", output_format, as_json, markdown))
         if result.run and not (as_json or markdown or output_format != "text"):

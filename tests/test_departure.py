@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 from physdbg import api, open_recording
 from physdbg.cli import app
 from physdbg.api import load_scene
+from physdbg.errors import ForeignRunError
 from tests.student_engine import (EXAMPLES, MISTAKES, example_run, simulate, simulate_swept, write_blown_up,
                                   write_csv, write_jsonl)
 
@@ -152,7 +153,7 @@ def test_an_mcap_run_is_read_like_the_others_and_a_bad_one_is_refused(tmp_path):
 # is the first departure: (its step, its sphere).
 FIRST = {"drag-per-step": (1, 0), "tangent-reversed": (28, 0), "restitution-sign": (16, 0),
          "impulse-doubled": (16, 0), "wrong-normal": (16, 0), "immovable-moved": (25, 0), "skipped-rest": (28, 0),
-         "index-order": (44, 1)}
+         "index-order": (44, 1), "one-missing": (16, 0), "impulse-loop": (16, 0)}
 EXAMPLES_FOLDER = ROOT / "docs" / "examples" / "mistakes"
 
 
@@ -247,3 +248,110 @@ def test_a_javascript_engine_s_nan_arrives_as_null_and_is_named_by_step_and_body
     assert report.exit_code == 1 and report.first.step == 30 and report.first.cause == "non-finite"
     nan = next(d for d in report.departures if d.kind == "non-finite")
     assert nan.step == 30 and nan.body == 0 and "position is NaN or infinite" in nan.text
+
+
+# ----------------------------------------------------------------------------- physdbg's own rules
+def test_a_right_engine_s_break_shot_is_same_and_physdbg_s_rapid_contact_rule_is_named(tmp_path):
+    """The seed's engine (earliest contact first, the rest of the step finished) on
+    billiards: in the break sphere 2 meets 3 16 µs after the cue ball, inside
+    rapid_contact_time, where physdbg's rule makes that contact elastic. check-run says the
+    run is the seed's model and names the rule, instead of blaming the engine."""
+    scene = load_scene("billiards", ["integrator=euler"])
+    steps = round(scene.duration / scene.dt)
+    write_csv(tmp_path / "right.csv", *simulate_swept(scene, steps, scene.dt))
+    result = CliRunner().invoke(app, ["check-run", str(tmp_path / "right.csv"), "--scene", "billiards",
+                                      "--set", "integrator=euler", "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    assert report["first"] is None and report["departures"] == []
+    (rule,) = report["set_aside"]
+    assert (rule["rule"], rule["setting"], rule["value"], rule["step"]) == ("rapid-contact", "rapid_contact_time",
+                                                                            0.0, 22)
+    assert [2, 3, 0] in rule["contacts"]
+    headline = report["headline"]
+    assert headline.startswith("same as the seed's model") and "for all 480 steps" in headline
+    assert "rapid-contact rule made the contact 2–3 in step 22 elastic instead of e = 0.95" in headline
+    assert "µs after 0–2, within rapid_contact_time = 0.0001 s" in headline and "-s rapid_contact_time=0" in headline
+    text = CliRunner().invoke(app, ["check-run", str(tmp_path / "right.csv"), "--scene", "billiards",
+                                    "--set", "integrator=euler"])
+    assert text.exit_code == 0 and "result     SAME: same as the seed's model" in text.output
+
+
+def test_a_real_mistake_after_physdbg_s_rule_is_still_named(tmp_path):
+    """Compared without the rule, a run with a mistake still departs, at the mistake, and
+    the headline says which rule was set aside."""
+    scene = load_scene("billiards", ["integrator=euler"])
+    times, xs, vs = simulate_swept(scene, 120, scene.dt)
+    xs[100:, 8] += 0.01  # a body moved by hand from step 100 on
+    write_csv(tmp_path / "moved.csv", times, xs, vs)
+    report = api.check_run(tmp_path / "moved.csv", scene).report
+    assert report.exit_code == 1 and report.first.step == 100 and report.first.body == 8
+    assert [a["rule"] for a in report.set_aside] == ["rapid-contact"]
+    assert "compared against physdbg without its own rule" in report.headline
+
+
+def test_diff_of_two_physdbg_runs_names_the_rapid_contact_rule_as_the_cause(tmp_path):
+    a = api.record("billiards", ["integrator=euler", "steps=30"], mcap_path=str(tmp_path / "a.mcap"), rrd=False,
+                   detail="contacts").mcap
+    b = api.record("billiards", ["integrator=euler", "steps=30", "rapid_contact_time=0"],
+                   mcap_path=str(tmp_path / "b.mcap"), rrd=False, detail="contacts").mcap
+    result = CliRunner().invoke(app, ["diff", a, b])
+    assert result.exit_code == 1
+    assert "e = 1 in A is physdbg's rapid-contact rule" in result.output
+    assert "rapid_contact_time: 0.0001 (A)  0 (B)" in result.output
+
+
+# ----------------------------------------------------------------------------- units
+def test_a_time_column_in_milliseconds_is_named_and_read_with_time_unit_ms(tmp_path):
+    scene = load_scene("bounce", ["integrator=euler", "steps=60"])
+    times, xs, vs = simulate_swept(scene, 60, scene.dt)
+    write_csv(tmp_path / "ms.csv", times * 1000.0, xs, vs)  # Date.now()
+    args = ["check-run", str(tmp_path / "ms.csv"), "--scene", "bounce", "--set", "integrator=euler", "--set", "steps=60"]
+    refused = CliRunner().invoke(app, args)
+    assert refused.exit_code == 2
+    assert refused.output.count("\n") == 1, refused.output  # one line
+    assert "time column counts milliseconds: its steps are 16.6667 where the scene's dt is 0.0166667 s" in refused.output
+    assert "Date.now()" in refused.output and "--time-unit ms" in refused.output
+    read = CliRunner().invoke(app, [*args, "--time-unit", "ms"])
+    assert read.exit_code == 0 and "result     SAME" in read.output, read.output
+
+
+@pytest.mark.parametrize("unit, factor", [("cm", 100.0), ("mm", 1000.0)])
+def test_positions_in_centimetres_or_millimetres_are_named_and_read_with_length_unit(tmp_path, unit, factor):
+    scene = load_scene("bounce", ["integrator=euler", "steps=60"])
+    times, xs, vs = simulate_swept(scene, 60, scene.dt)
+    write_jsonl(tmp_path / "run.jsonl", times, xs * factor, vs * factor)
+    with pytest.raises(ForeignRunError, match=f"positions are in {'centimetres' if unit == 'cm' else 'millimetres'}"):
+        api.check_run(tmp_path / "run.jsonl", scene)
+    assert api.check_run(tmp_path / "run.jsonl", scene, length_unit=unit).report.exit_code == 0
+    imported = api.import_run(tmp_path / "run.jsonl", scene, mcap_path=tmp_path / "run.mcap", length_unit=unit)
+    assert open_recording(imported.mcap).state(60).positions == pytest.approx(xs[60])
+
+
+def test_an_unknown_unit_is_a_clear_error():
+    result = CliRunner().invoke(app, ["check-run", str(EXAMPLES_FOLDER / "one-missing.csv"), "--scene",
+                                      str(EXAMPLES_FOLDER / "glance.toml"), "--length-unit", "km"])
+    assert result.exit_code == 2 and "length unit 'km': not one physdbg reads (one of m, cm, mm)" in result.output
+
+
+# ----------------------------------------------------------------------------- impulse mistakes
+def test_the_missing_one_of_one_plus_e_is_named_with_energy_lost_not_gained():
+    report = api.check_run(EXAMPLES_FOLDER / "one-missing.csv", str(EXAMPLES_FOLDER / "glance.toml")).report
+    named = report.departures[0]
+    assert named.kind == "one-missing" and named.evidence["restitution"] == pytest.approx(-0.1, abs=1e-3)
+    assert '"1 +" is missing' in named.text and "energy lost, not gained" in named.advice
+    assert "energy gained" not in report.headline
+
+
+def test_a_flipped_impulse_that_loops_to_nan_is_named_at_its_start(tmp_path):
+    """No once-a-step guard: the pair, pushed together, meets again at once, and again,
+    until the numbers overflow; the run holds NaN from that step on."""
+    scene, times, xs, vs = example_run(ROOT, "impulse-loop")
+    xs[16:], vs[16:] = np.nan, np.nan
+    write_jsonl(tmp_path / "nan.jsonl", times, xs, vs)
+    report = api.check_run(tmp_path / "nan.jsonl", scene).report
+    assert report.first.step == 16 and report.first.cause == "impulse-loop"
+    loop = next(d for d in report.departures if d.kind == "impulse-loop")
+    assert (loop.step, loop.body, loop.other) == (16, 0, 1)
+    assert "NaN or infinite" in loop.text and "(2 + e) = 2.9 times" in loop.text
+    assert "missed-contact" not in kinds(report)

@@ -32,6 +32,7 @@ whose run can be written in the foreign-run format (docs/foreign-runs.md).
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -47,9 +48,19 @@ TIME_TOLERANCE = 0.02  # of dt: a kick this close to physdbg's time of impact is
 # read off two frames, so it is known only to about this)
 RESTING_SPEED_STEPS = 2.0  # a contact closing slower than the speed the forces give in this many steps is resting
 RESTITUTION_TOLERANCE = 0.02  # an effective restitution this close to the scene's is right
+RUNAWAY = 100.0  # a pair leaving a contact still approaching at this many times its speed has run away
 MAX_BODY_STEPS = 4_000_000  # frames × bodies compared at once (4 arrays of this many 3-vectors)
 MAX_LISTED = 12  # departures listed; more of a kind are counted on its first
 FIT_SLACK = 1e-9  # m: an integrator's free-step residual this small counts as exact
+
+# physdbg's own modelling rules, which a right engine of the seed's model does not have:
+# (code, the setting that turns the rule off, its value then, the rule's name in words). Where
+# a step departs and physdbg's step without the rule ends where the run's does, the rule is
+# the difference, not the engine (check-run then compares against physdbg without it).
+OWN_RULES = (
+    ("rapid-contact", "rapid_contact_time", 0.0, "rapid-contact rule"),
+    ("resting", "rest_fraction", 0.0, "resting-contact rule"),
+)
 
 # integrator families, as each moves a body through a step with no contact:
 # (name, words, the velocity it moves by, as weights of (v at the start, v at the end))
@@ -151,6 +162,7 @@ class CheckRunReport:
     reference_contacts: int
     headline: str
     notes: list[str] = field(default_factory=list)
+    set_aside: list[dict] = field(default_factory=list)  # physdbg's own rules the reference was run without
 
     @property
     def exit_code(self) -> int:
@@ -199,20 +211,23 @@ def _load(foreign, reference) -> _Runs:
 
 # ----------------------------------------------------------------------------- compare
 def compare(foreign, reference, atol: float | None = None, rtol: float | None = None,
-            verify: bool = True) -> CheckRunReport:
+            verify: bool = True, set_aside: list[dict] | None = None) -> CheckRunReport:
     """Compare a foreign run's recording with physdbg's recording of the same scene and
     steps (paths or open Recordings; any detail level). verify: check every state read
-    against its stored hash and the frame index."""
+    against its stored hash and the frame index. set_aside: the own-rule departures
+    (evidence dicts) of an earlier comparison, whose rules the reference was recorded
+    without (api.check_run): said in the report and its headline."""
     from ..record.reader import opened
 
     with opened(foreign, reference, verify=verify) as (rf, rr), quiet_numerics():
         return _Comparison(rf, rr, DEFAULT_ATOL if atol is None else float(atol),
-                           DEFAULT_RTOL if rtol is None else float(rtol)).run()
+                           DEFAULT_RTOL if rtol is None else float(rtol), set_aside or []).run()
 
 
 class _Comparison:
-    def __init__(self, rf, rr, atol: float, rtol: float):
+    def __init__(self, rf, rr, atol: float, rtol: float, set_aside: list[dict]):
         self.rf, self.rr, self.atol, self.rtol = rf, rr, atol, rtol
+        self.set_aside = set_aside
         self.runs = _load(rf, rr)
         h = rr.header
         self.scene = rr.scene
@@ -250,7 +265,7 @@ class _Comparison:
         return CheckRunReport(str(self.rf.path), str(self.rr.path), self.rr.header.name, len(self.runs.t) - 1,
                               self.rr.header.count, self.atol, self.rtol,
                               "estimated" if self.estimated else "given", first, listed, self.integrator, self.judged,
-                              contacts, self._headline(first, listed), self.notes)
+                              contacts, self._headline(first, listed), self.notes, self.set_aside)
 
     def _beyond(self, x, v, x_ref, v_ref) -> np.ndarray:
         """(..., N) bool: bodies off by more than the tolerance (velocities skipped when estimated)."""
@@ -514,7 +529,7 @@ class _Comparison:
                 continue
             x, v, contacts = local
             off = self._beyond(r.xf[s], r.vf[s], x, v)
-            if not off.any() or self._index_ordered(s, contacts, off):
+            if not off.any() or self._own_rule(s, contacts, off) or self._index_ordered(s, contacts, off):
                 for c in contacts:
                     for b in self._bodies(c):
                         for k in (s, s + 1) if off.any() else (s,):
@@ -587,6 +602,58 @@ class _Comparison:
                 f"{float(np.median(r.dt[1:])):.6g} s), and its forces and drag, to the last digit",
                 evidence={"growth": growth.as_dict()}))
 
+    def _own_rule(self, s: int, contacts: list[dict], off: np.ndarray) -> bool:
+        """The run's step s is physdbg's step taken without one of its own modelling rules
+        (OWN_RULES): named own-rule, with what the rule did to which contact. Tried where a
+        step with contacts ends elsewhere, for each rule the reference has on."""
+        if not contacts:
+            return False
+        r = self.runs
+        for code, setting, value, name in OWN_RULES:
+            if self.settings.get(setting, value) == value:
+                continue
+            alternative = self._local_step(s, **{setting: value})
+            if alternative is None or self._beyond(r.xf[s], r.vf[s], alternative[0], alternative[1]).any():
+                continue
+            changed = _changed_contacts(contacts, alternative[2])
+            dt = float(r.dt[s])
+            did = self._rule_did(code, *changed[0], contacts, dt) if changed else f"changed the contacts of step {s}"
+            if len(changed) > 1:
+                did += f", and {len(changed) - 1} more contact{'s' if len(changed) > 2 else ''} of the step"
+            body = int(np.flatnonzero(off)[0])
+            flag = f"-s {setting}={value:g}"
+            pairs = [[c["a"], c["other"], c["kind"]] for c, _ in changed]
+            self.departures.append(Departure(
+                "own-rule", s, changed[0][0]["a"] if changed else body,
+                f"physdbg's {name} {did}; without the rule ({flag}) physdbg's step {s}, taken from your run's "
+                f"state, ends where your run's does: the seed's model has no such rule, so this is physdbg's "
+                f"modelling, not a mistake of your engine",
+                f"nothing to change in your engine for this step; compare with {flag} to check the rest of the run "
+                f"against physdbg without the rule (check-run does this itself)",
+                other=changed[0][0]["other"] if changed and PARTNER_IS_SPHERE[changed[0][0]["kind"]] else None,
+                evidence={"rule": code, "setting": setting, "value": value, "name": name, "contacts": pairs,
+                          "said": did}))
+            return True
+        return False
+
+    def _rule_did(self, code: str, c: dict, other: dict | None, contacts: list[dict], dt: float) -> str:
+        """What rule ``code`` did to contact c of a step (other: the same contact without the
+        rule), in words: "made the contact 2–3 in step 22 elastic (16 µs after ...)"."""
+        what = f"the contact {self._pair_words(c)} in step {c['step']}"
+        if code == "rapid-contact":
+            earlier = [d for d in contacts if d["index"] < c["index"] and set(self._bodies(d)) & set(self._bodies(c))]
+            when = ""
+            if earlier:
+                d = earlier[-1]
+                when = (f" ({(c['tau'] - d['tau']) * 1e6:.3g} µs after {self._pair_words(d)}, within "
+                        f"rapid_contact_time = {self.settings.get('rapid_contact_time'):g} s)")
+            if c["resting"]:
+                return f"held {what}{when}"
+            e = "elastic" if c["restitution"] == 1.0 else f"e = {c['restitution']:g}"
+            want = f" instead of e = {other['restitution']:g}" if other is not None else ""
+            return f"made {what} {e}{want}{when}"
+        return f"held {what} as resting" if c["resting"] else f"changed {what}"
+
     def _index_ordered(self, s: int, contacts: list[dict], off: np.ndarray) -> bool:
         """The run's step s is physdbg's step taken with ordering = index (the contacts
         predicted at the step's start resolved in index order, none looked for after): named
@@ -639,6 +706,8 @@ class _Comparison:
 
     def _judge_one(self, c: dict) -> None:
         r, kicks = self.runs, self.kicks
+        if self._runaway(c):
+            return
         kick = self._kick_for(c)
         s, dt = c["step"], float(r.dt[c["step"]])
         if kick is None:
@@ -668,6 +737,50 @@ class _Comparison:
         if late:
             self._late(c, kick)
         self._judge_energy(c, kick, quiet_if_late=late)
+
+    def _runaway(self, c: dict) -> bool:
+        """The contact's bodies leave its step still approaching, at RUNAWAY times their
+        speed or more, or with NaN or infinite velocities: what an impulse of the wrong sign
+        does in an engine that looks again at once (the pair, pushed together at (2 + e)
+        times its closing speed, meets again at the same instant, and again, until the
+        numbers overflow). Named impulse-loop, with the meetings it takes to reach the
+        run's speed; True when named."""
+        r = self.runs
+        s, bodies = c["step"], self._bodies(c)
+        if any(self.inv[b] == 0 for b in bodies) and len(bodies) == 1:
+            return False
+        dt = float(r.dt[s])
+        start = max(float(np.linalg.norm(r.vf[s - 1, b])) for b in bodies) + float(np.linalg.norm(self.acc[bodies[0]])) * dt
+        after = r.vf[s, c["a"]] - (r.vf[s, c["other"]] if PARTNER_IS_SPHERE[c["kind"]] else 0.0)
+        normal_after = float(after @ c["normal"])
+        blown = not math.isfinite(normal_after)
+        if not blown and not (normal_after < 0 and -normal_after >= RUNAWAY * max(start, c["closing"], 1e-12)):
+            return False
+        e, closing = c["restitution"], max(c["closing"], 1e-300)
+        factor = 2.0 + e
+        if blown:
+            outcome = "with NaN or infinite velocities"
+            meetings = math.log(sys.float_info.max / closing) / math.log(factor)
+            reached = f"passes the largest float after about {meetings:.0f} meetings"
+        else:
+            outcome = f"still approaching at {-normal_after:.3g} m/s"
+            meetings = math.log(-normal_after / closing) / math.log(factor)
+            reached = f"gets there after about {meetings:.0f} meetings"
+        self._add("impulse-loop", s, c,
+                  f"{self._both(c)}: they met at {closing:.3g} m/s at {c['tau'] / dt:.2f}·dt into step {s} and "
+                  f"left the step {outcome}. An impulse of the wrong sign does this in an engine that looks for the "
+                  f"next contact at once: it pushes the pair together at (2 + e) = {factor:.3g} times their closing "
+                  f"speed, so they meet again at the same instant, and again: their speed {reached}",
+                  "the impulse points the wrong way: j = −(1 + e)·(v_rel·n)/(1/m_a + 1/m_b) pushes a along n (from b "
+                  "towards a) and b against it. A bound on the contacts of a step (physdbg's max_events_per_step) "
+                  "turns such a loop into an error instead of NaN",
+                  {"closing_speed": closing, "factor": factor, "meetings": meetings,
+                   "speed_after": None if blown else -normal_after})
+        for k in (s, s + 1):
+            for b in bodies:
+                if (k, b) in self.kicks:
+                    self.kicks[(k, b)]["matched"] = True
+        return True
 
     def _skipped_rest(self, c: dict) -> bool:
         """The run left sphere a where it touched for the rest of the step: its position at
@@ -802,12 +915,18 @@ class _Comparison:
                       f"effective restitution of {e:.3g} where physdbg applies e = {want:g}: {words}", advice,
                       {"restitution": e, "expected": want, "speed_in": abs(before), "speed_out": abs(after)})
             return
-        if e < 0:
+        if e < -1.0:
             text = (f"{self._both(c)}: after the contact they still approach, at {abs(after):.3g} m/s where they "
                     f"met at {abs(before):.3g} m/s (an effective restitution of {e:.2f}; the scene's is {want:g}): "
                     f"energy gained")
             advice = ("the impulse points the wrong way: j = −(1 + e)·(v_rel·n)/(1/m_a + 1/m_b) pushes a along n "
                       "(from b towards a) and b against it; check its sign and the normal's direction")
+        elif e < 0:
+            text = (f"{self._both(c)}: after the contact they still approach, at {abs(after):.3g} m/s where they "
+                    f"met at {abs(before):.3g} m/s (an effective restitution of {e:.2f}; the scene's is {want:g}): "
+                    f"the impulse points the right way but is too small to part them")
+            advice = ("j = −(1 + e)·(v_rel·n)/(1/m_a + 1/m_b) must take away the whole closing speed (the 1) and "
+                      "give back e of it reversed: check both terms of (1 + e) and the masses")
         else:
             gained = e > 1.0
             verdict = ("energy gained at the contact" if gained else
@@ -1064,6 +1183,13 @@ class _Comparison:
         return list(firsts.values())[:MAX_LISTED]
 
     def _headline(self, first: FirstDeparture | None, listed: list[Departure]) -> str:
+        aside = "; ".join(f"physdbg's {a['name']} {a['said']} — `-s {a['setting']}={a['value']:g}` compares "
+                          f"without it" for a in self.set_aside)
+        if first is None and self.set_aside:
+            flags = " ".join(f"-s {a['setting']}={a['value']:g}" for a in self.set_aside)
+            return (f"same as the seed's model: every body stays within atol={self.atol:g}, rtol={self.rtol:g} of "
+                    f"physdbg's exact run without its own rule{'s' if len(self.set_aside) > 1 else ''} ({flags}) "
+                    f"for all {len(self.runs.t) - 1} steps; {aside}")
         if first is None:
             return (f"no departure: every body stays within atol={self.atol:g}, rtol={self.rtol:g} of physdbg's "
                     f"exact run for all {len(self.runs.t) - 1} steps")
@@ -1078,6 +1204,8 @@ class _Comparison:
         contact = next((d for d in listed if d.kind not in ("drift", first.cause)), None)
         if contact is not None and first.cause == "drift":
             out += f". The first contact that goes wrong: step {contact.step}, {_KIND_WORDS[contact.kind]}"
+        if self.set_aside:
+            out += f" (compared against physdbg without its own rule: {aside})"
         return out
 
 
@@ -1095,6 +1223,10 @@ RESTITUTION_MISTAKES = (
     ("impulse-doubled", lambda e: 1.0 + 2.0 * e, "1 + 2e: the impulse was applied twice (energy gained)",
      "apply each contact's impulse once: +j·n/m_a to a and −j·n/m_b to b, for each unordered pair (a loop over "
      "ordered pairs meets every pair twice)"),
+    ("one-missing", lambda e: e - 1.0, "e − 1: the impulse uses e where (1 + e) belongs (the \"1 +\" is missing), so "
+                                       "it takes away only e of the closing speed and the bodies keep approaching",
+     "j = −(1 + e)·(v_rel·n)/(1/m_a + 1/m_b): the 1 takes the closing speed away, the e gives it back reversed; "
+     "with e alone the bodies still approach after the contact (energy lost, not gained)"),
     ("restitution-squared", lambda e: e * e, "e²: the restitution was applied twice",
      "scale the normal speed by e once: v_n after = −e·v_n before"),
 )
@@ -1115,12 +1247,12 @@ def _restitution_mistake(e: float, want: float):
     return best[1:] if best is not None else None
 
 
-_RUN_WIDE = ("index-order", "drag-per-step", "drag-ignored", "drift", "chaos", "unexplained")
+_RUN_WIDE = ("own-rule", "index-order", "drag-per-step", "drag-ignored", "drift", "chaos", "unexplained")
 _TUNNEL_ADVICE = ("test for contacts along the path through the step (a swept test: solve for the time of impact), "
                   "not where the step ends, or take shorter steps")
-_PRIORITY = ("non-finite", "immovable-moved", "drag-per-step", "drag-ignored", "tunnelling", "impulse-sign",
-             "impulse-doubled", "restitution-sign", "restitution-squared", "contact-energy", "tangent-reversed",
-             "wrong-normal", "index-order", "collision-order", "skipped-rest", "bounce-time", "missed-contact",
+_PRIORITY = ("impulse-loop", "non-finite", "immovable-moved", "drag-per-step", "drag-ignored", "tunnelling", "impulse-sign",
+             "impulse-doubled", "restitution-sign", "one-missing", "restitution-squared", "contact-energy", "tangent-reversed",
+             "wrong-normal", "own-rule", "index-order", "collision-order", "skipped-rest", "bounce-time", "missed-contact",
              "extra-contact", "drift", "chaos", "unexplained")
 _KIND_WORDS = {
     "tunnelling": "tunnelling", "bounce-time": "bounced at the wrong time", "contact-energy": "energy at a contact",
@@ -1129,11 +1261,32 @@ _KIND_WORDS = {
     "drag-per-step": "drag applied per step, not per second", "drag-ignored": "no drag",
     "immovable-moved": "an immovable body moved", "impulse-sign": "an impulse of the wrong sign",
     "impulse-doubled": "an impulse applied twice", "restitution-sign": "restitution with the wrong sign",
+    "one-missing": "the 1 of (1 + e) missing from the impulse",
+    "impulse-loop": "an impulse of the wrong sign, met again and again",
+    "own-rule": "physdbg's own modelling rule, not the engine",
     "restitution-squared": "restitution applied twice", "tangent-reversed": "a reflection of the whole velocity",
     "wrong-normal": "an impulse along the wrong normal", "index-order": "contacts resolved in index order",
     "skipped-rest": "a bounce that skips the rest of the step", "unexplained": "unexplained",
     "chaos": "chaos: differences below the tolerance grew",
 }
+
+
+def _changed_contacts(with_rule: list[dict], without: list[dict]) -> list[tuple[dict, dict | None]]:
+    """The contacts of a step that a rule changed: (the contact with the rule, the same
+    pair's contact without it), matched in order by pair, whose restitution or resting
+    differs; where none does, the contacts one list has and the other not (other: None).
+    (Contacts that only follow from a changed one are not counted as the rule's.)"""
+    left = list(without)
+    changed, unmatched = [], []
+    for c in with_rule:
+        match = next((d for d in left if (d["kind"], d["a"], d["other"]) == (c["kind"], c["a"], c["other"])), None)
+        if match is None:
+            unmatched.append((c, None))
+            continue
+        left.remove(match)
+        if match["restitution"] != c["restitution"] or match["resting"] != c["resting"]:
+            changed.append((c, match))
+    return changed or unmatched
 
 
 def _body_count(n: int) -> str:

@@ -744,6 +744,7 @@ class _Differ:
                     text = (f"Step {step}: the same contact {self._describe(x, times=False)} at the same time had "
                             f"another outcome: impulse {x['impulse']:.6g} N·s with e = {x['restitution']:.3g} in A, "
                             f"{y['impulse']:.6g} N·s with e = {y['restitution']:.3g} in B")
+                    text += self._rapid_rule(x, y, settings_a, settings_b)
                 causes.append(Cause("contact-outcome", text + "." + self._consequence(div), {"a": x, "b": y}))
         elif not any(c.kind in ("tunnelling", "engine-limits", "non-finite", "sleep") for c in causes):
             method = [s.name for s in self.settings if s.matters and s.name in METHOD_SETTINGS]
@@ -756,6 +757,19 @@ class _Differ:
                 causes.append(Cause("method-drift", f"no event differs up to step {step}; the states drift apart "
                                                     f"because of the settings above", {}))
         return causes
+
+    @staticmethod
+    def _rapid_rule(x: dict, y: dict, settings_a: dict, settings_b: dict) -> str:
+        """Words for a contact made elastic in one run by physdbg's rapid-contact rule (e = 1
+        where the other run's e is below 1, and the rule on in that run): its own cause, not
+        the other run's mistake."""
+        for label, row, other, settings in (("A", x, y, settings_a), ("B", y, x, settings_b)):
+            window = settings.get("rapid_contact_time") or 0.0
+            if row["restitution"] == 1.0 and other["restitution"] < 1.0 and window > 0:
+                return (f" — e = 1 in {label} is physdbg's rapid-contact rule, which makes a contact that comes "
+                        f"within rapid_contact_time = {window:g} s of either sphere's previous one elastic when "
+                        f"nothing presses it (-s rapid_contact_time=0 turns it off)")
+        return ""
 
     def _sleep_cause(self, div: Divergence) -> Cause | None:
         """A differing sphere asleep in one run and awake in the other, when the step began

@@ -10,7 +10,9 @@ The format (docs/foreign-runs.md) is what any language writes easily:
 * **MCAP**: the same objects as JSON messages on the channel ``/foreign/frames`` (schema
   ``physdbg.ForeignFrame``, FOREIGN_FRAME_SCHEMA), or a physdbg recording (its states).
 
-Units: metres, seconds, metres per second. The scene (a physdbg TOML scene) says what
+Units: metres, seconds, metres per second (``in_units`` reads a run written in
+milliseconds, centimetres or millimetres, and ``unit_mistakes`` names such a run read as
+SI). The scene (a physdbg TOML scene) says what
 the bodies are: radii, masses, restitution, walls, gravity. Without velocities, each
 step's velocity is estimated as the step's displacement over its dt (energies are then
 approximate, and the audit says so).
@@ -68,6 +70,60 @@ class ForeignRun:
     velocities: np.ndarray | None
     source: str
     format: str
+
+
+# the units a run may be written in: name -> its size in SI (s, m). The time unit is the
+# time column's only: velocities are in the length unit per second (a browser engine that
+# writes Date.now()'s milliseconds still steps its physics in seconds)
+TIME_UNITS = {"s": 1.0, "ms": 1e-3}
+LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
+_UNIT_SLACK = 1e-3  # a ratio within this share of a unit's factor is that unit
+
+
+def in_units(run: ForeignRun, time_unit: str = "s", length_unit: str = "m") -> ForeignRun:
+    """The run in seconds and metres, read as written in ``time_unit`` (TIME_UNITS: its time
+    column) and ``length_unit`` (LENGTH_UNITS: positions, and velocities per second); the
+    run itself when both are SI."""
+    for unit, table, what in ((time_unit, TIME_UNITS, "time"), (length_unit, LENGTH_UNITS, "length")):
+        if unit not in table:
+            raise ForeignRunError(f"{what} unit {unit!r}: not one physdbg reads (one of {', '.join(table)})")
+    seconds, metres = TIME_UNITS[time_unit], LENGTH_UNITS[length_unit]
+    if seconds == 1.0 and metres == 1.0:
+        return run
+    velocities = None if run.velocities is None else run.velocities * metres
+    return ForeignRun(run.times * seconds, run.positions * metres, velocities, run.source, run.format)
+
+
+def unit_mistakes(run: ForeignRun, dt: float | None, positions: np.ndarray) -> list[str]:
+    """What a run read as seconds and metres says of its units, against the scene's step
+    ``dt`` (s) and initial ``positions`` (N, 3) m: a line per unit that is not SI (a time
+    column that is a steady 1000 times the scene's steps: milliseconds, as JavaScript's
+    Date.now() gives; initial positions 100 or 1000 times the scene's: centimetres or
+    millimetres), each with the option that reads the run as it is. Empty when both look SI."""
+    out = []
+    steps = np.diff(run.times)
+    if dt and len(steps) and np.all(np.isfinite(steps)):
+        for unit, size in TIME_UNITS.items():
+            ratio = 1.0 / size
+            if ratio != 1.0 and np.all(np.abs(steps - ratio * dt) <= _UNIT_SLACK * ratio * dt):
+                source = ", as JavaScript's Date.now() gives" if unit == "ms" else ""
+                out.append(f"the run's time column counts {_UNIT_WORDS[unit]}: its steps are "
+                           f"{float(np.median(steps)):.6g} where the scene's dt is {dt:.6g} s ({ratio:g}× "
+                           f"longer{source}); divide the times by {ratio:g}, or read the run as it is with "
+                           f"--time-unit {unit}")
+    first = run.positions[0]
+    given = np.abs(positions) > 1e-12
+    if given.any() and np.all(np.isfinite(first)):
+        for unit, size in LENGTH_UNITS.items():
+            ratio = 1.0 / size
+            if ratio != 1.0 and np.allclose(first, ratio * positions, rtol=_UNIT_SLACK, atol=1e-9 * ratio):
+                out.append(f"the run's positions are in {_UNIT_WORDS[unit]}: its first frame is the scene's initial "
+                           f"positions times {ratio:g}; divide positions and velocities by {ratio:g}, or read the run "
+                           f"as it is with --length-unit {unit}")
+    return out
+
+
+_UNIT_WORDS = {"ms": "milliseconds", "cm": "centimetres", "mm": "millimetres"}
 
 
 def read_run(path: str | Path, bodies: int) -> ForeignRun:
