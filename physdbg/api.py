@@ -704,6 +704,27 @@ class CheckRunResult:
     velocities: str
 
 
+TRACE_JS = "physdbg-trace.js"  # the JavaScript tracer shipped in the package (physdbg/js/)
+
+
+def write_trace_js(folder: str | Path, force: bool = False) -> Path:
+    """Write the JavaScript tracer (physdbg-trace.js: three calls that record a browser or
+    Node engine's run in the JSON Lines run format; docs/foreign-runs.md, "From a
+    JavaScript engine") into ``folder`` (made if missing); an existing file is replaced only
+    with ``force``. Returns its path."""
+    from importlib.resources import files
+
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise PhysdbgError(f"{folder}: exists and is not a folder")
+    out = folder / TRACE_JS
+    if out.exists() and not force:
+        raise PhysdbgError(f"{out} exists; --force replaces it")
+    folder.mkdir(parents=True, exist_ok=True)
+    out.write_text((files("physdbg") / "js" / TRACE_JS).read_text(encoding="utf-8"), encoding="utf-8")
+    return out
+
+
 def read_run_in_units(run_path: str | Path, scene: Scene, time_unit: str | None = None,
                       length_unit: str | None = None):
     """A foreign run of ``scene`` (foreign.read_run) in seconds and metres: read as written

@@ -585,6 +585,28 @@ def import_(
         typer.echo(f"then try    {me} explain {result.mcap}   |   {me} replay {result.mcap} --spawn")
 
 
+@app.command("trace-js")
+def trace_js(
+    output: Annotated[Path, typer.Option("--output", "-o", help="The folder to write physdbg-trace.js into.")]
+    = Path("."),
+    force: Annotated[bool, typer.Option("--force", help="Replace a physdbg-trace.js already there.")] = False,
+) -> None:
+    """Write physdbg-trace.js, a dependency-free JavaScript tracer: three calls in a browser
+    (or Node) engine record its run for check-run (docs/foreign-runs.md, "From a JavaScript
+    engine").
+
+    Example: physdbg trace-js -o my-engine/
+    """
+    with _user_errors():
+        from .api import write_trace_js
+
+        out = write_trace_js(output, force)
+        typer.echo(f"wrote       {out}")
+        typer.echo("then add    const trace = physdbgTrace.start(\"bounce\");  trace.frame(t, positions, velocities);  "
+                   "trace.finish();")
+        typer.echo(f"and run     {_command('physdbg')} check-run bounce.jsonl --scene bounce")
+
+
 @app.command("check-run")
 def check_run(
     run: Annotated[Path, typer.Argument(help="The other engine's run: a .csv, .jsonl or .mcap trajectory "

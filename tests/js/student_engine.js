@@ -1,0 +1,103 @@
+// A student's engine in JavaScript, written from the seed's slides (point masses, gravity,
+// drag v·d^t, Euler, swept sphere–plane and sphere–sphere tests, impulses with restitution,
+// the earliest contact first and the rest of the step finished), traced with
+// physdbg-trace.js. The same engine as tests/student_engine.py's swept one, done right.
+//
+//   node student_engine.js SCENE.json OUT.jsonl [--ms]
+//
+// SCENE.json: what tests/test_trace_js.py dumps of a physdbg scene (positions, velocities,
+// inverse masses, radii, restitution, gravity scales, walls, gravity, drag, dt, steps).
+"use strict";
+const fs = require("fs");
+const path = require("path");
+const physdbgTrace = require(process.env.PHYSDBG_TRACE || path.join(__dirname, "physdbg-trace.js"));
+
+function dot(a, b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+function add(a, b, s) { return [a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2]]; }
+
+function step(world, dt) {
+  const { x, v, inv, r, e, g, walls, drag } = world;
+  const n = r.length;
+  const anchorT = new Array(n).fill(0), anchorX = x.map(p => p.slice()), anchorV = v.map(p => p.slice());
+  const position = (i, t) => add(anchorX[i], anchorV[i], t - anchorT[i]);
+  const velocity = (i, t) => {
+    const tau = t - anchorT[i], d = Math.pow(drag, tau);
+    return [anchorV[i][0] * d + g[i][0] * tau, anchorV[i][1] * d + g[i][1] * tau, anchorV[i][2] * d + g[i][2] * tau];
+  };
+  function events(now) {
+    const found = [];
+    for (let i = 0; i < n; i++) {
+      if (inv[i] === 0) continue;
+      walls.normals.forEach((normal, w) => {
+        const h = dot(position(i, now), normal) - walls.offsets[w] - r[i];
+        const speed = dot(anchorV[i], normal);
+        if (speed < 0 && h >= -1e-12) {
+          const t = now + Math.max(h, 0) / -speed;
+          if (t <= dt) found.push([t, 0, i, w]);
+        }
+      });
+    }
+    for (let i = 0; i < n; i++) {
+      for (let j = i + 1; j < n; j++) {
+        if (inv[i] + inv[j] === 0) continue;
+        const pi = position(i, now), pj = position(j, now);
+        const d = [pi[0] - pj[0], pi[1] - pj[1], pi[2] - pj[2]];
+        const u = [anchorV[i][0] - anchorV[j][0], anchorV[i][1] - anchorV[j][1], anchorV[i][2] - anchorV[j][2]];
+        const closing = dot(d, u);
+        if (closing >= 0) continue;
+        const a = dot(u, u), b = 2 * closing, c = dot(d, d) - (r[i] + r[j]) ** 2;
+        const disc = b * b - 4 * a * c;
+        if (disc < 0) continue;
+        const t = now + Math.max((-b - Math.sqrt(disc)) / (2 * a), 0);
+        if (t <= dt) found.push([t, 1, i, j]);
+      }
+    }
+    return found.sort((p, q) => p[0] - q[0] || p[1] - q[1] || p[2] - q[2] || p[3] - q[3]);
+  }
+  function anchor(i, t, after) { anchorX[i] = position(i, t); anchorV[i] = after; anchorT[i] = t; }
+  function resolve(t, kind, a, other) {
+    const va = velocity(a, t);
+    if (kind === 0) {
+      const normal = walls.normals[other], rest = Math.min(e[a], walls.restitution[other]);
+      anchor(a, t, add(va, normal, -(1 + rest) * dot(va, normal)));   // R = v − (1 + e)(v·n)n
+      return;
+    }
+    const vb = velocity(other, t), xa = position(a, t), xb = position(other, t);
+    const d = [xa[0] - xb[0], xa[1] - xb[1], xa[2] - xb[2]], len = Math.sqrt(dot(d, d));
+    const normal = [d[0] / len, d[1] / len, d[2] / len];
+    const closing = dot([va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]], normal);
+    const j = -(1 + Math.min(e[a], e[other])) * closing / (inv[a] + inv[other]);
+    anchor(a, t, add(va, normal, j * inv[a]));
+    anchor(other, t, add(vb, normal, -j * inv[other]));
+  }
+  let now = 0;
+  for (let k = 0; k < 2000; k++) {
+    const ahead = events(now);
+    if (!ahead.length) break;
+    const [t, kind, a, other] = ahead[0];
+    now = t;
+    resolve(t, kind, a, other);
+  }
+  for (let i = 0; i < n; i++) { x[i] = position(i, dt); v[i] = velocity(i, dt); }
+}
+
+function main() {
+  const [scenePath, out, ...flags] = process.argv.slice(2);
+  const scene = JSON.parse(fs.readFileSync(scenePath, "utf8"));
+  const world = {
+    x: scene.positions.map(p => p.slice()), v: scene.velocities.map(p => p.slice()), inv: scene.inverse_mass,
+    r: scene.radius, e: scene.restitution, walls: scene.walls, drag: scene.drag,
+    g: scene.inverse_mass.map((m, i) => scene.gravity.map(c => m > 0 ? c * scene.gravity_scale[i] : 0)),
+  };
+  const milliseconds = flags.includes("--ms");   // a clock read with Date.now()
+  const trace = physdbgTrace.start(scene.name, { file: out });
+  trace.frame(0, world.x, world.v);
+  for (let k = 1; k <= scene.steps; k++) {
+    step(world, scene.dt);
+    const t = k * scene.dt;
+    trace.frame(milliseconds ? t * 1000 : t, world.x, world.v);
+  }
+  console.log(trace.finish());
+}
+
+main();

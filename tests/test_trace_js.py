@@ -1,0 +1,109 @@
+"""physdbg-trace.js: a JavaScript engine written from the seed's slides (tests/js/), traced
+under Node with the tracer `physdbg trace-js` writes, and its runs checked by check-run."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from physdbg import api
+from physdbg.api import load_scene
+from physdbg.cli import app
+
+ROOT = Path(__file__).resolve().parents[1]
+NODE = shutil.which("node")
+needs_node = pytest.mark.skipif(NODE is None, reason="Node.js is not installed: the JavaScript tracer is not run")
+
+
+def dump_scene(scene, path: Path, steps: int) -> None:
+    """What the JavaScript engine reads of a physdbg scene."""
+    st, walls = scene.state, scene.walls
+    path.write_text(json.dumps({
+        "name": scene.name, "dt": scene.dt, "steps": steps, "gravity": list(scene.settings.gravity),
+        "drag": float(scene.settings.drag), "positions": st.positions.tolist(), "velocities": st.velocities.tolist(),
+        "inverse_mass": st.inverse_mass.tolist(), "radius": st.radius.tolist(), "restitution": st.restitution.tolist(),
+        "gravity_scale": st.gravity_scale.tolist(),
+        "walls": {"normals": walls.normals.tolist(), "offsets": walls.offsets.tolist(),
+                  "restitution": walls.restitution.tolist()}}))
+
+
+@pytest.fixture(scope="module")
+def tracer(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("js")
+    result = CliRunner().invoke(app, ["trace-js", "-o", str(folder)])
+    assert result.exit_code == 0, result.output
+    assert f"wrote       {folder / 'physdbg-trace.js'}" in result.output
+    return folder / "physdbg-trace.js"
+
+
+def run_js(tracer: Path, scene, steps: int, out: Path, *flags: str) -> Path:
+    dump_scene(scene, out.with_suffix(".scene.json"), steps)
+    done = subprocess.run([NODE, str(ROOT / "tests" / "js" / "student_engine.js"), str(out.with_suffix(".scene.json")),
+                           str(out), *flags], capture_output=True, text=True, env={"PHYSDBG_TRACE": str(tracer)},
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == str(out)
+    return out
+
+
+def test_trace_js_writes_the_tracer_and_never_overwrites_it_without_force(tmp_path):
+    first = CliRunner().invoke(app, ["trace-js", "-o", str(tmp_path)])
+    assert first.exit_code == 0 and (tmp_path / "physdbg-trace.js").read_text().startswith("// physdbg-trace.js")
+    again = CliRunner().invoke(app, ["trace-js", "-o", str(tmp_path)])
+    assert again.exit_code == 2 and "exists; --force replaces it" in again.output
+    assert CliRunner().invoke(app, ["trace-js", "-o", str(tmp_path), "--force"]).exit_code == 0
+    assert api.write_trace_js(tmp_path / "new").name == "physdbg-trace.js"
+
+
+@needs_node
+@pytest.mark.parametrize("name", ["bounce", "cradle", "billiards"])
+def test_a_right_javascript_engine_traced_under_node_is_same(tracer, tmp_path, name):
+    scene = load_scene(name, ["integrator=euler"])
+    steps = scene.steps or round(scene.duration / scene.dt)
+    steps = min(steps, 240)
+    run = run_js(tracer, scene, steps, tmp_path / f"{name}.jsonl")
+    report = api.check_run(run, name, ["integrator=euler"]).report
+    assert report.exit_code == 0, report.headline
+    assert report.steps == steps
+    if name == "billiards":  # the break: physdbg's rapid-contact rule, named, not blamed
+        assert [a["rule"] for a in report.set_aside] == ["rapid-contact"]
+
+
+@needs_node
+def test_a_javascript_clock_in_milliseconds_is_named(tracer, tmp_path):
+    scene = load_scene("bounce", ["integrator=euler", "steps=30"])
+    run = run_js(tracer, scene, 30, tmp_path / "ms.jsonl", "--ms")
+    result = CliRunner().invoke(app, ["check-run", str(run), "--scene", "bounce", "--set", "integrator=euler",
+                                      "--set", "steps=30"])
+    assert result.exit_code == 2 and "time column counts milliseconds" in result.output
+    again = CliRunner().invoke(app, ["check-run", str(run), "--scene", "bounce", "--set", "integrator=euler",
+                                     "--set", "steps=30", "--time-unit", "ms"])
+    assert again.exit_code == 0, again.output
+
+
+@needs_node
+def test_nan_and_infinity_reach_check_run_as_what_they_were(tracer, tmp_path):
+    """JSON has neither; the tracer writes them as strings, check-run reads them back."""
+    script = tmp_path / "blow.js"
+    out = tmp_path / "blow.jsonl"
+    script.write_text(f"""
+const t = require({json.dumps(str(tracer))}).start("bounce", {{file: {json.dumps(str(out))}}});
+t.frame(0, new Float64Array([0, 1, 0]), [[0, 0, 0]]);
+t.frame(1 / 60, [[0, NaN, 0]], [[Infinity, -Infinity, 0]]);
+t.finish();
+""")
+    done = subprocess.run([NODE, str(script)], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    lines = [json.loads(line) for line in out.read_text().splitlines()]
+    assert lines[0] == {"step": 0, "time": 0, "positions": [[0, 1, 0]], "velocities": [[0, 0, 0]]}
+    assert lines[1]["positions"] == [[0, "NaN", 0]] and lines[1]["velocities"] == [["Infinity", "-Infinity", 0]]
+    from physdbg.record.foreign import read_run
+
+    run = read_run(out, 1)
+    assert np.isnan(run.positions[1, 0, 1]) and run.velocities[1, 0, 0] == np.inf and run.velocities[1, 0, 1] == -np.inf
