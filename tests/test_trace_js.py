@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
+import time
 from pathlib import Path
 
 import numpy as np
@@ -107,3 +108,52 @@ t.finish();
 
     run = read_run(out, 1)
     assert np.isnan(run.positions[1, 0, 1]) and run.velocities[1, 0, 0] == np.inf and run.velocities[1, 0, 1] == -np.inf
+
+
+# ----------------------------------------------------------------------------- a real browser
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                  "--dump-dom")
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="Chromium is not installed (.ci/run installs Debian's chromium): "
+                                             "the browser test is skipped; the same engine runs under Node above")
+@pytest.mark.parametrize("name", ["bounce", "billiards"])
+def test_a_javascript_engine_in_headless_chromium_downloads_a_run_check_run_finds_same(tracer, tmp_path, name):
+    """The page a student writes: the tracer and the engine as <script>s, finish() downloads
+    the run; the downloaded file goes through check-run."""
+    scene = load_scene(name, ["integrator=euler"])
+    steps = min(scene.steps or round(scene.duration / scene.dt), 480)
+    dump_scene(scene, tmp_path / "scene.json", steps)
+    site = tmp_path / "site"
+    site.mkdir()
+    shutil.copy(tracer, site / "physdbg-trace.js")
+    shutil.copy(ROOT / "tests" / "js" / "student_engine.js", site / "student_engine.js")
+    (site / "index.html").write_text(
+        "<!doctype html><html><body>\n<script src=\"physdbg-trace.js\"></script>\n"
+        "<script src=\"student_engine.js\"></script>\n"
+        f"<script>studentEngine.run({(tmp_path / 'scene.json').read_text()}).finish(); "
+        "document.title = 'traced';</script>\n</body></html>\n")
+    downloads, profile = tmp_path / "downloads", tmp_path / "profile"
+    (profile / "Default").mkdir(parents=True)
+    # where the headless browser saves a download, without asking
+    (profile / "Default" / "Preferences").write_text(json.dumps({
+        "download": {"default_directory": str(downloads), "prompt_for_download": False},
+        "profile": {"default_content_setting_values": {"automatic_downloads": 1}}}))
+    run = downloads / f"{name}.jsonl"
+    # the headless browser may stay open after the page is done: wait for the finished
+    # download (Chromium writes it as .crdownload, then renames it), then close it
+    browser = subprocess.Popen([CHROMIUM, *CHROMIUM_FLAGS, f"--user-data-dir={profile}",
+                                (site / "index.html").as_uri()], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 120
+        while not run.is_file() and browser.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.2)
+    finally:
+        browser.kill()
+        _, err = browser.communicate()
+    assert run.is_file(), (f"no download in {downloads}: {sorted(p.name for p in downloads.glob('*'))}; "
+                           f"{err.decode(errors='replace')[-2000:]}")
+    report = api.check_run(run, name, ["integrator=euler"]).report
+    assert report.exit_code == 0 and report.steps == steps, report.headline

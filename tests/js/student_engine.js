@@ -5,12 +5,10 @@
 //
 //   node student_engine.js SCENE.json OUT.jsonl [--ms]
 //
+// or in a page, after physdbg-trace.js: studentEngine.run(scene).finish() (downloads).
 // SCENE.json: what tests/test_trace_js.py dumps of a physdbg scene (positions, velocities,
 // inverse masses, radii, restitution, gravity scales, walls, gravity, drag, dt, steps).
 "use strict";
-const fs = require("fs");
-const path = require("path");
-const physdbgTrace = require(process.env.PHYSDBG_TRACE || path.join(__dirname, "physdbg-trace.js"));
 
 function dot(a, b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 function add(a, b, s) { return [a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2]]; }
@@ -81,23 +79,30 @@ function step(world, dt) {
   for (let i = 0; i < n; i++) { x[i] = position(i, dt); v[i] = velocity(i, dt); }
 }
 
-function main() {
-  const [scenePath, out, ...flags] = process.argv.slice(2);
-  const scene = JSON.parse(fs.readFileSync(scenePath, "utf8"));
+function run(scene, options) {
+  const opts = options || {};
   const world = {
     x: scene.positions.map(p => p.slice()), v: scene.velocities.map(p => p.slice()), inv: scene.inverse_mass,
     r: scene.radius, e: scene.restitution, walls: scene.walls, drag: scene.drag,
     g: scene.inverse_mass.map((m, i) => scene.gravity.map(c => m > 0 ? c * scene.gravity_scale[i] : 0)),
   };
-  const milliseconds = flags.includes("--ms");   // a clock read with Date.now()
-  const trace = physdbgTrace.start(scene.name, { file: out });
+  const trace = opts.tracer.start(scene.name, { file: opts.file });
   trace.frame(0, world.x, world.v);
   for (let k = 1; k <= scene.steps; k++) {
     step(world, scene.dt);
     const t = k * scene.dt;
-    trace.frame(milliseconds ? t * 1000 : t, world.x, world.v);
+    trace.frame(opts.milliseconds ? t * 1000 : t, world.x, world.v);   // milliseconds: a Date.now() clock
   }
-  console.log(trace.finish());
+  return trace;
 }
 
-main();
+if (typeof module === "object" && module && require.main === module) {
+  const fs = require("fs");
+  const path = require("path");
+  const tracer = require(process.env.PHYSDBG_TRACE || path.join(__dirname, "physdbg-trace.js"));
+  const [scenePath, out, ...flags] = process.argv.slice(2);
+  const scene = JSON.parse(fs.readFileSync(scenePath, "utf8"));
+  console.log(run(scene, { tracer, file: out, milliseconds: flags.includes("--ms") }).finish());
+} else {
+  globalThis.studentEngine = { run: (scene, options) => run(scene, { tracer: globalThis.physdbgTrace, ...options }) };
+}
