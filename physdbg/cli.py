@@ -585,6 +585,27 @@ def import_(
         typer.echo(f"then try    {me} explain {result.mcap}   |   {me} replay {result.mcap} --spawn")
 
 
+def _check_class(folder: Path, scene: str, overrides: list[str], atol, rtol, time_unit, length_unit, jobs, dask,
+                 chosen: str) -> None:
+    """check-run of a folder of runs: one table (analysis.classroom)."""
+    with _user_errors(chosen == "json"):
+        import json
+
+        from .analysis import classroom
+
+        if chosen not in ("text", "json", "markdown", "csv"):
+            raise PhysdbgError(f"--format must be text, json, markdown or csv, not {chosen!r}")
+        runs = classroom.runs_in([folder])
+        report = classroom.check_class(runs, scene, overrides, workers=jobs, dask=dask, atol=atol, rtol=rtol,
+                                       time_unit=time_unit, length_unit=length_unit)
+        if chosen == "json":
+            typer.echo(json.dumps(report.as_dict(), indent=2))
+        else:
+            typer.echo(getattr(classroom, f"class_{chosen}")(report).rstrip("\n"))
+        if report.exit_code:
+            raise typer.Exit(report.exit_code)
+
+
 @app.command("trace-js")
 def trace_js(
     output: Annotated[Path, typer.Option("--output", "-o", help="The folder to write physdbg-trace.js into.")]
@@ -629,13 +650,25 @@ def check_run(
     no_verify: NoVerifyOption = False,
     time_unit: TimeUnitOption = None,
     length_unit: LengthUnitOption = None,
+    jobs: Annotated[Optional[int], typer.Option(
+        "--jobs", "-j", min=1, help="A folder of runs: local processes to check them in (default: every core).")]
+    = None,
+    dask: Annotated[Optional[str], typer.Option(
+        "--dask", help="A folder of runs: check them on an existing Dask cluster (its scheduler's address, "
+                       "tcp://host:8786; needs pip install 'physdbg[dask]').")] = None,
 ) -> None:
     """Run physdbg's exact version of the scene with the run's own time steps and say where
     the run departs and why: tunnelling, a bounce at the wrong time, energy at a contact,
     contacts out of order, the integrator. Exit 0 same within tolerance, 1 departs, 2 error.
+    RUN may be a folder: every run in it is checked (a class of submissions), one row each,
+    as text, markdown, json or csv (--format), the causes counted; exit 0 when all are same.
 
     Example: physdbg check-run docs/examples/student-bounce.csv --scene bounce
     """
+    if run.is_dir():
+        _check_class(run, scene, set_ or [], atol, rtol, time_unit, length_unit, jobs, dask,
+                     "json" if as_json else "markdown" if markdown else output_format)
+        return
     with _user_errors(as_json or output_format == "json"):
         tier = _choose_tier(scene, set_)
         from . import api
