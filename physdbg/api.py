@@ -704,6 +704,32 @@ class CheckRunResult:
     velocities: str
 
 
+def _check_class_row(run: str, scene: str, overrides: tuple, options: dict):
+    """check-run of one run of a class as its row (analysis.classroom): any error, expected
+    or not, is the row's, since a hostile file must not end the batch. Module-level, so a
+    worker process or a Dask worker can be handed it."""
+    from .analysis.classroom import error_row, row_of
+
+    try:
+        return row_of(run, check_run(run, scene, list(overrides), **options).report)
+    except Exception as err:  # noqa: BLE001 - a row, not the end of the class
+        return error_row(run, err)
+
+
+def check_class(runs: Sequence[str | Path], scene: str, overrides: Sequence[str] = (), workers: int | None = None,
+                dask: str | None = None, **options):
+    """check-run of every run of a class (analysis.classroom.runs_in) against ``scene`` (a
+    built-in name or a .toml path, read by each worker): an analysis.classroom.ClassReport.
+    workers: local processes (None: every core); dask: an existing cluster's scheduler;
+    options: check_run's atol, rtol, time_unit, length_unit."""
+    from .analysis.classroom import class_report
+    from .analysis.sweep import run_jobs
+
+    name = load_scene(scene, list(overrides)).name  # a wrong scene is one error, before any run
+    jobs = [(str(run), scene, tuple(overrides), options) for run in runs]
+    return class_report(name, run_jobs(_check_class_row, jobs, workers=workers, dask=dask))
+
+
 TRACE_JS = "physdbg-trace.js"  # the JavaScript tracer shipped in the package (physdbg/js/)
 
 

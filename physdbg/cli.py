@@ -595,9 +595,11 @@ def _check_class(folder: Path, scene: str, overrides: list[str], atol, rtol, tim
 
         if chosen not in ("text", "json", "markdown", "csv"):
             raise PhysdbgError(f"--format must be text, json, markdown or csv, not {chosen!r}")
+        from .api import check_class
+
         runs = classroom.runs_in([folder])
-        report = classroom.check_class(runs, scene, overrides, workers=jobs, dask=dask, atol=atol, rtol=rtol,
-                                       time_unit=time_unit, length_unit=length_unit)
+        report = check_class(runs, scene, overrides, workers=jobs, dask=dask, atol=atol, rtol=rtol,
+                             time_unit=time_unit, length_unit=length_unit)
         if chosen == "json":
             typer.echo(json.dumps(report.as_dict(), indent=2))
         else:

@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from physdbg import api
 from physdbg.analysis import classroom
 from physdbg.cli import app
 from tests.student_engine import simulate_swept, write_csv
@@ -44,7 +45,7 @@ def a_class(folder: Path, size: int) -> dict[str, str]:
 
 def test_a_class_of_200_runs_is_one_table_with_its_causes_counted_and_a_bad_file_as_a_row(tmp_path):
     expected = a_class(tmp_path / "class", 200)
-    report = classroom.check_class(classroom.runs_in([tmp_path / "class"]), GLANCE)
+    report = api.check_class(classroom.runs_in([tmp_path / "class"]), GLANCE)
     rows = list(csv.DictReader(io.StringIO(classroom.class_csv(report))))
     assert len(rows) == 200 and report.exit_code == 1
     for row in rows:
@@ -80,10 +81,10 @@ def test_the_same_table_from_a_dask_cluster(tmp_path):
     distributed = pytest.importorskip("distributed", reason="needs pip install 'physdbg[dask]'")
     a_class(tmp_path / "class", 24)
     runs = classroom.runs_in([tmp_path / "class"])
-    here = classroom.check_class(runs, GLANCE, workers=1)
+    here = api.check_class(runs, GLANCE, workers=1)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
                                   silence_logs=50) as cluster:
-        there = classroom.check_class(runs, GLANCE, dask=cluster.scheduler_address)
+        there = api.check_class(runs, GLANCE, dask=cluster.scheduler_address)
     assert classroom.class_csv(there) == classroom.class_csv(here)
     assert there.counts == here.counts
 

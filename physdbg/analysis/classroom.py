@@ -1,6 +1,6 @@
 """A class at once: check-run on every run in a folder of submissions, one table.
 
-``check_class(runs, scene)`` runs ``api.check_run`` on each run (a .csv, .jsonl or .mcap
+``api.check_class(runs, scene)`` runs ``api.check_run`` on each run (a .csv, .jsonl or .mcap
 file) of the same scene, on local cores or an existing Dask cluster (sweep.run_jobs), and
 returns one row per run: its verdict (SAME, DEPARTS, or ERROR for a file check-run cannot
 read), its first departure and the cause, with the causes counted, most common first —
@@ -69,36 +69,26 @@ def runs_in(paths: list[Path]) -> list[Path]:
     return out
 
 
-def check_one(run: str, scene: str, overrides: tuple, options: dict) -> ClassRow:
-    """check-run of one run as a row; any error, expected or not, is the row's (a hostile
-    file must not end the batch). A module-level function, so a worker can be handed it."""
-    from .. import api
-    from ..errors import PhysdbgError
-
-    try:
-        report = api.check_run(run, scene, list(overrides), **options).report
-    except PhysdbgError as err:
-        return ClassRow(run, "ERROR", None, None, "error", str(err).splitlines()[0] if str(err) else "error")
-    except Exception as err:  # noqa: BLE001 - a row, not the end of the class
-        return ClassRow(run, "ERROR", None, None, "error", f"{type(err).__name__}: {err}".splitlines()[0])
+def row_of(run: str, report) -> ClassRow:
+    """A run's row from its check-run report (departure.CheckRunReport)."""
     if report.first is None:
         cause = report.set_aside[0]["rule"] + " (physdbg's rule)" if report.set_aside else None
         return ClassRow(run, "SAME", None, None, cause, report.headline)
     return ClassRow(run, "DEPARTS", report.first.step, report.first.body, report.first.cause, report.headline)
 
 
-def check_class(runs: list[Path], scene: str, overrides: list[str] = (), workers: int | None = None,
-                dask: str | None = None, on_done=None, **options) -> ClassReport:
-    """check-run of every run (runs_in) of ``scene`` (a built-in name or a .toml path, read
-    by each worker). options: check_run's atol, rtol, time_unit, length_unit."""
-    from ..api import load_scene
-    from .sweep import run_jobs
+def error_row(run: str, err: Exception) -> ClassRow:
+    """A run check-run could not check: its error, in one line."""
+    from ..errors import PhysdbgError
 
-    name = load_scene(scene, list(overrides)).name  # a wrong scene is one error, before any run
-    jobs = [(str(run), scene, tuple(overrides), options) for run in runs]
-    rows = run_jobs(check_one, jobs, workers=workers, dask=dask, on_done=on_done)
+    said = str(err) if isinstance(err, PhysdbgError) else f"{type(err).__name__}: {err}"
+    return ClassRow(run, "ERROR", None, None, "error", said.splitlines()[0] if said else "error")
+
+
+def class_report(scene: str, rows: list[ClassRow]) -> ClassReport:
+    """The rows with their causes counted, most common first ("same" for a SAME run)."""
     counts = Counter(row.cause or "same" for row in rows)
-    return ClassReport(name, rows, dict(counts.most_common()))
+    return ClassReport(scene, rows, dict(counts.most_common()))
 
 
 # ----------------------------------------------------------------------------- reports
