@@ -809,8 +809,12 @@ def check_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str]
             # the scene's steps, summed up in the run's time column: take the scene's dt itself,
             # as the differences of the sums are a bit off it and a chaotic scene grows that
             dts = np.full(len(dts), scene.dt)
-        record(scene, mcap_path=str(reference_out), rrd=False, detail="contacts", force=True, dts=dts.tolist(),
-               view=False, on_status=on_status)
+
+        def reference(scene: Scene) -> None:  # physdbg's run of the scene with the run's own steps
+            record(scene, mcap_path=str(reference_out), rrd=False, detail="contacts", force=True,
+                   dts=dts.tolist(), view=False, on_status=on_status)
+
+        reference(scene)
         if on_status is not None:
             on_status("comparing")
         report = compare(run_out, reference_out, atol, rtol, verify=verify)
@@ -827,8 +831,7 @@ def check_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str]
                 scene.settings, **{rule.evidence["setting"]: rule.evidence["value"]}))
             if on_status is not None:
                 on_status(f"comparing without physdbg's {rule.evidence['name']}")
-            record(scene, mcap_path=str(reference_out), rrd=False, detail="contacts", force=True,
-                   dts=dts.tolist(), view=False, on_status=on_status)
+            reference(scene)
             report = compare(run_out, reference_out, atol, rtol, verify=verify, set_aside=set_aside)
         report.run = str(run_path)
         kept = keep is not None

@@ -616,8 +616,7 @@ class _Comparison:
             if alternative is None or self._beyond(r.xf[s], r.vf[s], alternative[0], alternative[1]).any():
                 continue
             changed = _changed_contacts(contacts, alternative[2])
-            dt = float(r.dt[s])
-            did = self._rule_did(code, *changed[0], contacts, dt) if changed else f"changed the contacts of step {s}"
+            did = self._rule_did(code, *changed[0], contacts) if changed else f"changed the contacts of step {s}"
             if len(changed) > 1:
                 did += f", and {len(changed) - 1} more contact{'s' if len(changed) > 2 else ''} of the step"
             body = int(np.flatnonzero(off)[0])
@@ -636,7 +635,7 @@ class _Comparison:
             return True
         return False
 
-    def _rule_did(self, code: str, c: dict, other: dict | None, contacts: list[dict], dt: float) -> str:
+    def _rule_did(self, code: str, c: dict, other: dict | None, contacts: list[dict]) -> str:
         """What rule ``code`` did to contact c of a step (other: the same contact without the
         rule), in words: "made the contact 2–3 in step 22 elastic (16 µs after ...)"."""
         what = f"the contact {self._pair_words(c)} in step {c['step']}"
