@@ -13,6 +13,13 @@ one process and alternating so the machine's drift falls on both alike:
 * ``explain`` (every check over every step), with and without the check.
 
 Prints the best of ``--rounds`` for each, and what the check adds to each command.
+
+Then ``check-run`` (``api.check_run``, once each: it records physdbg's reference every time)
+of each recording taken as another engine's run of the exact scene: the exact one (SAME:
+every state of both runs compared) and the nudged one (it departs at its first collision,
+and every later step is taken again from the run's own state and judged: chaos), with the
+time each part took (reading the run and importing it, recording the reference,
+comparing).
 """
 
 from __future__ import annotations
@@ -74,6 +81,21 @@ def main() -> None:
         print(f"| {name} | {times[True]:.2f} | {times[False]:.2f} | {added:+.2f} s ({100 * added / times[False]:+.0f} %) |")
     report = diff(*paths)
     print(f"\ndiff said: {report.headline}")
+    print("\n| check-run of | import (s) | reference (s) | compare (s) | total (s) | verdict |\n|---|---|---|---|---|---|")
+    scene = ["gas", [f"generate.count={args.count}", f"steps={args.steps}"]]
+    for name, path in (("the exact run", paths[0]), ("the nudged run", paths[1])):
+        marks = [("start", time.perf_counter())]
+        result = api.check_run(path, scene[0], scene[1],
+                               on_status=lambda what: marks.append((what, time.perf_counter())))
+        marks.append(("end", time.perf_counter()))
+        # the run read and imported until the reference's run starts ("compiling", or
+        # "running" on a warm cache), the reference recorded until "comparing"
+        comparing = next(t for what, t in marks if what == "comparing")
+        recording = next(t for what, t in marks if what in ("compiling", "running"))
+        parts = (recording - marks[0][1], comparing - recording, marks[-1][1] - comparing)
+        verdict = "SAME" if result.report.exit_code == 0 else f"DEPARTS ({result.report.first.cause})"
+        print(f"| {name} | {parts[0]:.1f} | {parts[1]:.1f} | {parts[2]:.1f} | {marks[-1][1] - marks[0][1]:.1f} | "
+              f"{verdict} |")
 
 
 if __name__ == "__main__":

@@ -46,11 +46,13 @@ import numpy as np
 from .engine.broadphase import choose_broad_phase
 from .engine.motion import EXACT_UNDER, INTEGRATOR_NAMES
 from .engine.periodic import minimum_image
+from .engine.state import RAPID_CONTACT_TIME
 from .engine.toi import DETECTION_NAMES
 
 AUTO = "auto"
 CHOSEN = ("integrator", "detection", "ordering")  # what ``auto`` may decide in a scene
-PILE_RULES = ("rapid_contact_rule", "sleep_speed")  # ``auto`` by default: decided by whether a pile forms
+PILE_RULES = ("rapid_contact_time", "rapid_contact_rule", "sleep_speed")  # ``auto`` by default: decided by whether a
+# pile forms (resolve_pile_rules)
 PILE_LAYERS = 1.0  # layers of spheres at rest on the floor from which the rain makes a pile
 RANDOM_CLOSE_PACKING = 0.64  # the volume fraction of a settled pile of equal spheres
 PILE_REMEDY = {"rapid_contact_rule": "tc", "sleep_speed": 0.1, "sleep_time": 0.1}  # measured on box-rain and rain
@@ -441,29 +443,44 @@ def resolve_auto(scene) -> dict[str, str]:
 
 
 def resolve_pile_rules(scene) -> dict[str, str]:
-    """``auto`` rapid_contact_rule and sleep_speed: where the spheres will make a pile (an
-    exact pile never rests by itself: module doc), the TC rule and sleeping at 0.1 m/s
-    after 0.1 s (PILE_REMEDY, measured on box-rain and rain; sleep_time only when the scene
-    does not give it); elsewhere the exact rules: hold, and no sleeping."""
+    """``auto`` rapid_contact_time, rapid_contact_rule and sleep_speed: where the spheres
+    will make a pile (an exact pile never rests by itself: module doc), the rapid-contact
+    rule (RAPID_CONTACT_TIME), the TC rule and sleeping at 0.1 m/s after 0.1 s (PILE_REMEDY,
+    measured on box-rain and rain; sleep_time only when the scene does not give it);
+    elsewhere the seed's model, no more: no rapid-contact rule (a break shot keeps each
+    contact's restitution), held contacts exact, and no sleeping."""
     s = scene.settings
     asked = [name for name in PILE_RULES if getattr(s, name) == AUTO]
     if not asked:
         return {}
     pile, why_not = pile_or_why_not(scene.state, scene.walls, np.asarray(s.gravity, dtype=float))
     if pile is not None:
-        values = {name: PILE_REMEDY[name] for name in asked}
+        values = {name: {**PILE_REMEDY, "rapid_contact_time": RAPID_CONTACT_TIME}[name] for name in asked}
         if "sleep_speed" in asked and "sleep_time" not in scene.raw:
             values["sleep_time"] = PILE_REMEDY["sleep_time"]
-        why = (f"{pile['why']}: an exact pile does not rest by itself; the TC rule and sleeping let it fall asleep "
+        rules = _and([words for name, words in (("rapid_contact_time", "the rapid-contact rule"),
+                                                ("rapid_contact_rule", "the TC rule"),
+                                                ("sleep_speed", "sleeping")) if name in asked])
+        why = (f"{pile['why']}: an exact pile does not rest by itself; {rules} let it fall asleep "
                f"(docs/engine.md, \"Sleeping\")")
     else:
-        values = {name: {"rapid_contact_rule": "hold", "sleep_speed": 0.0}[name] for name in asked}
-        why = f"{why_not}: contacts are held exactly" + (" and nothing sleeps" if "sleep_speed" in asked else "")
+        values = {name: {"rapid_contact_time": 0.0, "rapid_contact_rule": "hold", "sleep_speed": 0.0}[name]
+                  for name in asked}
+        why = f"{why_not}: " + _and([
+            words for name, words in (("rapid_contact_time", "no rapid-contact rule (the seed's model: each contact "
+                                                              "with its own restitution)"),
+                                      ("rapid_contact_rule", "contacts are held exactly"),
+                                      ("sleep_speed", "nothing sleeps")) if name in asked])
     for name, value in values.items():
         setattr(s, name, value)
     # one line says why; the others point to it
     first = next(iter(values))
     return {name: f"{value}: {why}" if name == first else f"{value}: as {first}" for name, value in values.items()}
+
+
+def _and(parts: list[str]) -> str:
+    """"a", "a and b", "a, b and c"."""
+    return ", ".join(parts[:-1]) + (" and " if len(parts) > 1 else "") + parts[-1]
 
 
 # A kinematic mesh turning more than this in one step sweeps boxes that cover most of its

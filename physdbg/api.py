@@ -805,6 +805,8 @@ def check_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str]
             on_status("importing")
         write_claimed(run_out, force, lambda path: write_run(run, scene, path))
         dts = np.diff(run.times)
+        velocities = "given" if run.velocities is not None else "estimated"
+        del run  # (the comparison reads it back from run.mcap: one copy in memory at a time)
         if scene.dt is not None and np.all(np.abs(dts - scene.dt) <= 1e-9 * scene.dt):
             # the scene's steps, summed up in the run's time column: take the scene's dt itself,
             # as the differences of the sums are a bit off it and a chaotic scene grows that
@@ -836,7 +838,7 @@ def check_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str]
         report.run = str(run_path)
         kept = keep is not None
         return CheckRunResult(report, str(run_out) if kept else None, str(reference_out) if kept else None,
-                              "given" if run.velocities is not None else "estimated")
+                              velocities)
 
 
 @dataclass

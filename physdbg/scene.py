@@ -70,7 +70,8 @@ TOP_FIELDS = {
                       "the speed its pressing acceleration adds in one step (0 to 1, default 0.01)"),
     "rapid_contact_time": ("a contact with restitution < 1 within this many seconds of either sphere's previous "
                            "contact is held like a resting one if something presses it, and elastic if not (the TC "
-                           "model against inelastic collapse), seconds >= 0, 0 = off (default 1e-4)"),
+                           "model against inelastic collapse), seconds >= 0, 0 = off, or auto (the default: 1e-4 where the "
+                           "spheres will make a pile, off elsewhere; physdbg check says which)"),
     "rapid_contact_rule": ("what the rapid-contact rule does with a pressed contact: hold (hold it at any speed: "
                            "a pile settles sooner but passes each impact through its held contacts), tc (hold it "
                            "only if it closes no faster than its press adds in rapid_contact_time, else elastic: a "
@@ -648,8 +649,8 @@ def _validate(raw: dict, source: str, origins: dict[str, str], meshes: Meshes | 
         restitution_rule=c.choice(raw, "restitution_rule", "restitution_rule", RESTITUTION_RULES,
                                   d.restitution_rule),
         rest_fraction=c.number(raw, "rest_fraction", "rest_fraction", default=d.rest_fraction, lo=0, hi=1),
-        rapid_contact_time=c.number(raw, "rapid_contact_time", "rapid_contact_time", default=d.rapid_contact_time,
-                                    lo=0),
+        rapid_contact_time="auto" if raw.get("rapid_contact_time", "auto") == "auto" else c.number(
+            raw, "rapid_contact_time", "rapid_contact_time", lo=0),
         rapid_contact_rule=c.choice(raw, "rapid_contact_rule", "rapid_contact_rule", (*RAPID_RULES, "auto"),
                                     "auto"),
         contact_tolerance=c.number(raw, "contact_tolerance", "contact_tolerance",

@@ -92,9 +92,12 @@ GUARDED = ("drag-per-step", "tangent-reversed", "restitution-sign", "impulse-dou
            "immovable-moved", "skipped-rest", "one-missing")
 
 
-def simulate_swept(scene, steps: int, dt: float, mistake: str | None = None):
+def simulate_swept(scene, steps: int, dt: float, mistake: str | None = None, ties: str = "first"):
     """(times (F,), positions (F, N, 3), velocities (F, N, 3)) of a physdbg Scene run by
-    the swept student engine, with one of MISTAKES or none."""
+    the swept student engine, with one of MISTAKES or none. ties: which of the contacts at
+    one instant it takes first, "first" (walls, then by index, as the loops find them) or
+    "last" (the last found: a right engine too, which compares with <= where the other
+    compares with <)."""
     assert mistake in (None, *MISTAKES), mistake
     st, walls = scene.state, scene.walls
     x, v = st.positions.copy(), st.velocities.copy()
@@ -106,14 +109,14 @@ def simulate_swept(scene, steps: int, dt: float, mistake: str | None = None):
     times, xs, vs = [0.0], [x.copy()], [v.copy()]
     for k in range(1, steps + 1):
         with np.errstate(over="ignore", invalid="ignore"):  # impulse-loop's speeds overflow, as in the engine it copies
-            x, v = _swept_step(x, v, g, inv, r, e, walls, dt, mistake, drag)
+            x, v = _swept_step(x, v, g, inv, r, e, walls, dt, mistake, drag, ties)
         times.append(k * dt)
         xs.append(x.copy())
         vs.append(v.copy())
     return np.array(times), np.array(xs), np.array(vs)
 
 
-def _swept_step(x0, v0, g, inv, r, e, walls, dt, mistake, drag):
+def _swept_step(x0, v0, g, inv, r, e, walls, dt, mistake, drag, ties="first"):
     n = len(r)
     anchor_t = np.zeros(n)
     anchor_x = x0.copy()
@@ -160,6 +163,8 @@ def _swept_step(x0, v0, g, inv, r, e, walls, dt, mistake, drag):
                 t = now + max((-b - np.sqrt(disc)) / (2 * a), 0.0)
                 if t <= dt:
                     found.append((t, 1, i, j))
+        if ties == "last":
+            return sorted(found, key=lambda ev: (ev[0], -ev[1], -ev[2], -ev[3]))
         return sorted(found)
 
     def resolve(t, kind, a, other):

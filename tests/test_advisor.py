@@ -107,7 +107,7 @@ def test_auto_settings_are_decided_said_and_repeat_on_replay(tmp_path):
         normal = [0.0, 1.0, 0.0]
     '''))
     # integrator was given, so not decided; the pile rules are auto unless given (no pile here)
-    assert set(scene.auto) == {"detection", "ordering", "rapid_contact_rule", "sleep_speed"}
+    assert set(scene.auto) == {"detection", "ordering", "rapid_contact_time", "rapid_contact_rule", "sleep_speed"}
     assert (scene.settings.rapid_contact_rule, scene.settings.sleep_speed) == ("hold", 0.0)
     assert (scene.settings.integrator, scene.settings.detection) == ("verlet", "swept")
     done = CliRunner().invoke(app, ["run", "bounce", "-s", "detection=automatic"])
@@ -211,39 +211,54 @@ def test_run_and_record_say_before_they_start_that_the_pile_will_not_rest(tmp_pa
     assert quiet.exit_code == 0 and "note:" not in quiet.stderr
 
 
-def test_the_pile_rules_default_to_auto_tc_and_sleeping_only_where_a_pile_forms():
+def test_the_pile_rules_default_to_auto_on_only_where_a_pile_forms():
+    """The rapid-contact rule, the TC rule and sleeping where a pile forms; elsewhere the
+    seed's model: no rapid-contact rule, held contacts exact, nothing asleep."""
     from physdbg.api import load_scene
 
     pile = load_scene("rain", ["generate.count=500"])
-    assert (pile.settings.rapid_contact_rule, pile.settings.sleep_speed, pile.settings.sleep_time) == ("tc", 0.1, 0.1)
-    assert pile.auto["rapid_contact_rule"].startswith("tc: 500 spheres settle about 1.5 layers deep")
-    assert pile.auto["sleep_speed"] == "0.1: as rapid_contact_rule"
+    assert (pile.settings.rapid_contact_time, pile.settings.rapid_contact_rule, pile.settings.sleep_speed,
+            pile.settings.sleep_time) == (1e-4, "tc", 0.1, 0.1)
+    assert pile.auto["rapid_contact_time"].startswith("0.0001: 500 spheres settle about 1.5 layers deep")
+    assert "the rapid-contact rule, the TC rule and sleeping let it fall asleep" in pile.auto["rapid_contact_time"]
+    assert pile.auto["rapid_contact_rule"] == "tc: as rapid_contact_time"
+    assert pile.auto["sleep_speed"] == "0.1: as rapid_contact_time"
     thin = load_scene("rain", ["generate.count=100"])  # 0.29 of a layer on the floor
-    assert (thin.settings.rapid_contact_rule, thin.settings.sleep_speed) == ("hold", 0.0)
-    assert "not a pile" in thin.auto["rapid_contact_rule"]
-    for name in ("bounce", "cradle", "gas", "billiards"):  # no closed box under gravity: the exact rules
+    assert (thin.settings.rapid_contact_time, thin.settings.rapid_contact_rule, thin.settings.sleep_speed) == \
+        (0.0, "hold", 0.0)
+    assert "not a pile" in thin.auto["rapid_contact_time"] and "no rapid-contact rule" in thin.auto["rapid_contact_time"]
+    for name in ("bounce", "cradle", "gas", "billiards"):  # no closed box under gravity: the seed's model
         scene = load_scene(name)
-        assert (scene.settings.rapid_contact_rule, scene.settings.sleep_speed) == ("hold", 0.0), name
+        assert (scene.settings.rapid_contact_time, scene.settings.rapid_contact_rule,
+                scene.settings.sleep_speed) == (0.0, "hold", 0.0), name
     # asked for: kept, and a given sleep_time is kept too
-    asked = load_scene("rain", ["generate.count=500", "rapid_contact_rule=hold", "sleep_time=0.3"])
-    assert (asked.settings.rapid_contact_rule, asked.settings.sleep_speed, asked.settings.sleep_time) == \
-        ("hold", 0.1, 0.3)
-    assert "rapid_contact_rule" not in asked.auto and "sleep_time" not in asked.auto
+    asked = load_scene("rain", ["generate.count=500", "rapid_contact_rule=hold", "sleep_time=0.3",
+                                "rapid_contact_time=2e-4"])
+    assert (asked.settings.rapid_contact_time, asked.settings.rapid_contact_rule, asked.settings.sleep_speed,
+            asked.settings.sleep_time) == (2e-4, "hold", 0.1, 0.3)
+    assert not {"rapid_contact_time", "rapid_contact_rule", "sleep_time"} & set(asked.auto)
+    on = load_scene("billiards", ["rapid_contact_time=1e-4"])  # a scene may ask for the rule anywhere
+    assert on.settings.rapid_contact_time == 1e-4 and "rapid_contact_time" not in on.auto
     done = CliRunner().invoke(app, ["check", "rain", "-s", "generate.count=500"])
-    assert "auto        rapid_contact_rule=tc, sleep_speed=0.1, sleep_time=0.1: 500 spheres settle" in done.output
+    assert ("auto        rapid_contact_time=0.0001, rapid_contact_rule=tc, sleep_speed=0.1, sleep_time=0.1: 500 "
+            "spheres settle" in done.output)
     done = CliRunner().invoke(app, ["run", "rain", "-s", "generate.count=500", "-s", "steps=2"])
-    assert done.exit_code == 0 and "auto        rapid_contact_rule=tc, sleep_speed=0.1, sleep_time=0.1:" in done.output
+    assert done.exit_code == 0 and ("auto        rapid_contact_time=0.0001, rapid_contact_rule=tc, sleep_speed=0.1, "
+                                    "sleep_time=0.1:" in done.output)
+    done = CliRunner().invoke(app, ["run", "billiards", "-s", "steps=2"])
+    assert done.exit_code == 0 and "auto        rapid_contact_time=0.0, rapid_contact_rule=hold" in done.output
 
 
 def test_reading_a_scene_decides_nothing_and_a_world_refuses_what_is_still_auto():
     from physdbg.scene import read_scene
 
     scene = read_scene("bounce", ["detection=auto"])
-    assert scene.settings.undecided() == ["detection", "rapid_contact_rule", "sleep_speed"] and scene.auto == {}
-    with pytest.raises(ValueError, match="detection, rapid_contact_rule, sleep_speed still 'auto': decide it"):
+    undecided = ["detection", "rapid_contact_time", "rapid_contact_rule", "sleep_speed"]
+    assert scene.settings.undecided() == undecided and scene.auto == {}
+    with pytest.raises(ValueError, match=f"{', '.join(undecided)} still 'auto': decide it"):
         scene.build_world()
     decide(scene)
-    assert scene.settings.undecided() == [] and set(scene.auto) == {"detection", "rapid_contact_rule", "sleep_speed"}
+    assert scene.settings.undecided() == [] and set(scene.auto) == set(undecided)
     assert api.run(read_scene("bounce", ["steps=3"])).steps == 3  # the api decides what it is given
 
 

@@ -131,8 +131,8 @@ def test_under_the_tc_rule_the_collapse_advice_names_the_hold_rule():
     for rule, sleep_speed, named, asleep_said in (("hold", 0.0, False, False), ("tc", 0.0, True, False),
                                                   ("tc", 0.05, True, True)):
         auditor = Auditor(header)
-        auditor.settings = {**auditor.settings, "rapid_contact_rule": rule, "sleep_speed": sleep_speed,
-                            "sleep_time": 0.1}
+        auditor.settings = {**auditor.settings, "rapid_contact_time": 1e-4, "rapid_contact_rule": rule,
+                            "sleep_speed": sleep_speed, "sleep_time": 0.1}
         auditor._check_collapse(5, contacts)
         auditor.finish()
         assert auditor.counts == {"collapse": 1}
@@ -173,7 +173,7 @@ def test_a_bed_that_rattles_and_then_falls_asleep_is_no_collapse(tmp_path):
     fall asleep. Run to step 360 every one of them sleeps: a note, no finding, and explain
     of the recording agrees. Stopped at step 290, some are still awake: collapse findings,
     which say how many."""
-    rules = ["rapid_contact_rule=tc", "sleep_speed=0.1", "sleep_time=0.1"]
+    rules = ["rapid_contact_time=1e-4", "rapid_contact_rule=tc", "sleep_speed=0.1", "sleep_time=0.1"]
     whole = api.run("rain", ["generate.count=300", "steps=360", *rules])
     assert whole.finding_counts == {} and whole.asleep_at_end == 300
     out = tmp_path / "pile.mcap"
@@ -241,8 +241,10 @@ def test_a_drop_onto_the_crease_of_a_symmetric_v_leaves_it_straight_up(tmp_path,
     """The ball meets both slopes at one instant; the two contacts are solved together
     (resolve.resolve_at_one_instant), each with e = 0.6 and the same impulse, so it leaves
     straight up at 0.6 of its landing speed, whichever face the file lists first, and the
-    audit has nothing to say."""
-    recording, report, first = _v_drop(tmp_path, mesh)
+    audit has nothing to say. (With the rapid-contact rule on, as a scene may ask: without
+    it the two perpendicular contacts are independent and are resolved in turn, to the same
+    outcome, which the last lines check.)"""
+    recording, report, first = _v_drop(tmp_path, mesh, ["rapid_contact_time=1e-4"])
     assert report.counts == {}, report.counts
     rows = explain_contacts(recording, first)
     assert len(rows) == 2 and rows.time_in_step[0] == rows.time_in_step[1]  # one instant, to the bit
@@ -251,14 +253,21 @@ def test_a_drop_onto_the_crease_of_a_symmetric_v_leaves_it_straight_up(tmp_path,
     before, after = np.asarray(rows.velocity_a_before[0]), np.asarray(rows.velocity_a_after[1])
     assert abs(after[0]) < 1e-12 and abs(after[2]) < 1e-12
     assert after[1] == pytest.approx(-0.6 * before[1], rel=1e-12)
+    recording, report, first = _v_drop(tmp_path, mesh)  # the default: no rapid-contact rule
+    assert report.counts == {}, report.counts
+    rows = explain_contacts(recording, first)
+    assert len(rows) == 2 and list(rows.how) != [HOW_AT_ONE_INSTANT] * 2  # in turn
+    after = np.asarray(rows.velocity_a_after[1])
+    assert abs(after[0]) < 1e-12 and abs(after[2]) < 1e-12 and after[1] == pytest.approx(-0.6 * before[1], rel=1e-12)
 
 
 def test_a_drop_onto_the_crease_resolved_in_turn_is_a_simultaneous_finding(tmp_path):
     """ordering = index resolves the two contacts one after the other: the second is held
     by the rapid-contact rule only because it came right after the first, and the ball
     leaves sideways. The audit names the pair and says the order decided it; the same ball
-    dropped beside the crease meets one slope at a time and is clean."""
-    recording, report, first = _v_drop(tmp_path, V_MESH, ["ordering=index"])
+    dropped beside the crease meets one slope at a time and is clean. (The rule on, as a
+    scene may ask; without it the order cannot decide: the test above.)"""
+    recording, report, first = _v_drop(tmp_path, V_MESH, ["ordering=index", "rapid_contact_time=1e-4"])
     found = [f for f in report.findings if f.kind == "simultaneous"]
     assert len(found) == 1 and report.counts.get("simultaneous") == 1, report.counts
     finding = found[0]
@@ -269,7 +278,8 @@ def test_a_drop_onto_the_crease_resolved_in_turn_is_a_simultaneous_finding(tmp_p
     assert rows.time_in_step[0] == rows.time_in_step[1]  # one instant, to the bit
     assert abs(rows.velocity_a_after[1][0]) > 1.0  # and it left sideways
     beside = tmp_path / "beside.mcap"
-    api.record(str(tmp_path / "vdrop.toml"), ["ordering=index", "particles.0.position=[0.3, 1.0, 0.0]"],
+    api.record(str(tmp_path / "vdrop.toml"), ["ordering=index", "rapid_contact_time=1e-4",
+                                              "particles.0.position=[0.3, 1.0, 0.0]"],
                mcap_path=str(beside), rrd=False)
     assert not [f for f in explain(str(beside)).findings if f.kind == "simultaneous"]
 

@@ -44,7 +44,8 @@ def test_the_summary_counts_the_held_contacts_let_go_as_the_steps_do():
     """`run`'s contacts line: rapid and released over the run, each the sum of the steps'."""
     from physdbg.api import load_scene
 
-    options = ["generate.count=300", "steps=150", "rapid_contact_rule=hold", "sleep_speed=0"]  # the engine's rules
+    options = ["generate.count=300", "steps=150", "rapid_contact_time=1e-4", "rapid_contact_rule=hold",
+               "sleep_speed=0"]  # the engine's rules
     scene = load_scene("rain", options)
     world = scene.build_world()
     steps = [world.step(dt) for dt in scene.step_lengths(None)]

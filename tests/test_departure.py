@@ -253,14 +253,21 @@ def test_a_javascript_engine_s_nan_arrives_as_null_and_is_named_by_step_and_body
 # ----------------------------------------------------------------------------- physdbg's own rules
 def test_a_right_engine_s_break_shot_is_same_and_physdbg_s_rapid_contact_rule_is_named(tmp_path):
     """The seed's engine (earliest contact first, the rest of the step finished) on
-    billiards: in the break sphere 2 meets 3 16 µs after the cue ball, inside
-    rapid_contact_time, where physdbg's rule makes that contact elastic. check-run says the
-    run is the seed's model and names the rule, instead of blaming the engine."""
+    billiards: SAME, with nothing set aside, since no pile forms and the rapid-contact rule
+    is off (rapid_contact_time = "auto"). With the rule on, as a scene may ask: in the
+    break sphere 2 meets 3 16 µs after the cue ball, inside rapid_contact_time, where the
+    rule makes that contact elastic; check-run says the run is the seed's model and names
+    the rule, instead of blaming the engine."""
     scene = load_scene("billiards", ["integrator=euler"])
     steps = round(scene.duration / scene.dt)
     write_csv(tmp_path / "right.csv", *simulate_swept(scene, steps, scene.dt))
+    plain = CliRunner().invoke(app, ["check-run", str(tmp_path / "right.csv"), "--scene", "billiards",
+                                     "--set", "integrator=euler", "--json"])
+    assert plain.exit_code == 0, plain.output
+    plain = json.loads(plain.output)
+    assert plain["first"] is None and plain["set_aside"] == [] and plain["headline"].startswith("no departure")
     result = CliRunner().invoke(app, ["check-run", str(tmp_path / "right.csv"), "--scene", "billiards",
-                                      "--set", "integrator=euler", "--json"])
+                                      "--set", "integrator=euler", "--set", "rapid_contact_time=1e-4", "--json"])
     assert result.exit_code == 0, result.output
     report = json.loads(result.output)
     assert report["first"] is None and report["departures"] == []
@@ -273,14 +280,14 @@ def test_a_right_engine_s_break_shot_is_same_and_physdbg_s_rapid_contact_rule_is
     assert "rapid-contact rule made the contact 2–3 in step 22 elastic instead of e = 0.95" in headline
     assert "µs after 0–2, within rapid_contact_time = 0.0001 s" in headline and "-s rapid_contact_time=0" in headline
     text = CliRunner().invoke(app, ["check-run", str(tmp_path / "right.csv"), "--scene", "billiards",
-                                    "--set", "integrator=euler"])
+                                    "--set", "integrator=euler", "--set", "rapid_contact_time=1e-4"])
     assert text.exit_code == 0 and "result     SAME: same as the seed's model" in text.output
 
 
 def test_a_real_mistake_after_physdbg_s_rule_is_still_named(tmp_path):
     """Compared without the rule, a run with a mistake still departs, at the mistake, and
     the headline says which rule was set aside."""
-    scene = load_scene("billiards", ["integrator=euler"])
+    scene = load_scene("billiards", ["integrator=euler", "rapid_contact_time=1e-4"])
     times, xs, vs = simulate_swept(scene, 120, scene.dt)
     xs[100:, 8] += 0.01  # a body moved by hand from step 100 on
     write_csv(tmp_path / "moved.csv", times, xs, vs)
@@ -291,14 +298,82 @@ def test_a_real_mistake_after_physdbg_s_rule_is_still_named(tmp_path):
 
 
 def test_diff_of_two_physdbg_runs_names_the_rapid_contact_rule_as_the_cause(tmp_path):
-    a = api.record("billiards", ["integrator=euler", "steps=30"], mcap_path=str(tmp_path / "a.mcap"), rrd=False,
-                   detail="contacts").mcap
+    a = api.record("billiards", ["integrator=euler", "steps=30", "rapid_contact_time=1e-4"],
+                   mcap_path=str(tmp_path / "a.mcap"), rrd=False, detail="contacts").mcap
     b = api.record("billiards", ["integrator=euler", "steps=30", "rapid_contact_time=0"],
                    mcap_path=str(tmp_path / "b.mcap"), rrd=False, detail="contacts").mcap
     result = CliRunner().invoke(app, ["diff", a, b])
     assert result.exit_code == 1
     assert "e = 1 in A is physdbg's rapid-contact rule" in result.output
     assert "rapid_contact_time: 0.0001 (A)  0 (B)" in result.output
+
+
+# ----------------------------------------------------------------------------- ties
+TIE = ROOT / "docs" / "examples" / "mistakes" / "tie.toml"
+
+
+def test_a_tie_taken_in_another_order_is_named_a_tie_and_the_run_is_same(tmp_path):
+    """Two balls meet a heavier one from both sides at one instant (docs/examples/mistakes/
+    tie.toml). A right engine that takes the last-found of tied contacts first ends the
+    step elsewhere than physdbg, which takes 0–1 first; check-run takes physdbg's step
+    again in the run's order, names the tie, and goes on from there: SAME."""
+    scene = load_scene(str(TIE))
+    times, xs, vs = simulate_swept(scene, scene.steps, scene.dt, ties="last")
+    first_taken = simulate_swept(scene, scene.steps, scene.dt)[1]
+    assert np.abs(xs[-1] - first_taken[-1]).max() > 0.4  # the order changes the outcome
+    write_csv(tmp_path / "last.csv", times, xs, vs)
+    result = CliRunner().invoke(app, ["check-run", str(tmp_path / "last.csv"), "--scene", str(TIE), "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    assert report["first"] is None and report["departures"] == [] and report["set_aside"] == []
+    (tie,) = report["ties"]
+    assert tie["step"] == 20 and tie["time"] == pytest.approx(0.32, abs=1e-12)
+    assert tie["physdbg_order"][0] == [0, 1, 0] and sorted(tie["run_order"][0][:2]) == [1, 2]
+    assert "collision-order" not in result.output and "collision order" not in result.output
+    headline = report["headline"]
+    assert headline.startswith("same as the seed's model") and "for all 60 steps" in headline
+    assert "in step 20 the contacts 0–1 and 1–2 happen at one instant (t = 0.32 s)" in headline
+    assert "your run takes 1–2 first" in headline and "taken in your run's order" in headline
+    from physdbg.analysis.classroom import row_of
+
+    row = row_of("last.csv", api.check_run(tmp_path / "last.csv", scene).report)  # a class's table says it too
+    assert (row.verdict, row.cause) == ("SAME", "tie (either order)")
+    # the engine that takes ties as physdbg does: no tie to name
+    write_csv(tmp_path / "first.csv", times, first_taken, simulate_swept(scene, scene.steps, scene.dt)[2])
+    plain = api.check_run(tmp_path / "first.csv", scene).report
+    assert plain.exit_code == 0 and plain.ties == [] and plain.headline.startswith("no departure")
+
+
+def test_a_tie_in_a_step_that_departs_for_another_reason_later_is_still_a_tie(tmp_path):
+    """After the tie, a body moved by hand: the run departs there, and the headline says
+    the tie before it was taken in the run's order."""
+    scene = load_scene(str(TIE))
+    times, xs, vs = simulate_swept(scene, scene.steps, scene.dt, ties="last")
+    xs[40:, 2] += 0.01
+    write_csv(tmp_path / "moved.csv", times, xs, vs)
+    report = api.check_run(tmp_path / "moved.csv", scene).report
+    assert report.exit_code == 1 and report.first.step == 40 and report.first.body == 2
+    assert [t["step"] for t in report.ties] == [20]
+    assert "tie" not in kinds(report) and "collision-order" not in kinds(report)
+    assert "(before it, in step 20 the contacts 0–1 and 1–2 happen at one instant" in report.headline
+
+
+def test_diff_of_two_physdbg_runs_names_a_tie_as_the_cause(tmp_path):
+    """The tie scene with its spheres listed right to left: the given numbering takes 0–1
+    (the right-hand pair) first, the Morton numbering the left-hand one: diff names the
+    tie and the numbering, never a missed contact or collision order."""
+    text = TIE.read_text()
+    head, *spheres = text.split("[[particles]]")
+    (tmp_path / "tie.toml").write_text(head + "".join("[[particles]]" + p.rstrip("\n") + "\n\n"
+                                                      for p in reversed(spheres)))
+    runs = [api.record(str(tmp_path / "tie.toml"), [f"space_order={order}"], mcap_path=str(tmp_path / f"{order}.mcap"),
+                       rrd=False, detail="contacts").mcap for order in ("given", "morton")]
+    result = CliRunner().invoke(app, ["diff", *runs])
+    assert result.exit_code == 1
+    assert "the contacts 0–1 and 1–2 happen at one instant (t = 0.20·dt) in both runs" in result.output
+    assert "This is a tie" in result.output and "space_order: given in A, morton in B" in result.output
+    assert "[tie] the main cause" in result.output
+    assert "missed-contact" not in result.output and "collision-order" not in result.output
 
 
 # ----------------------------------------------------------------------------- units

@@ -18,7 +18,9 @@ from physdbg.errors import StepStopped
 
 # 20 spheres at 10⁶ m/s in the rain box, with the held-contact budget of a big pile: each
 # step spends ~10 s in hopeless held-contact solves inside compiled code
-LONG_STEPS = ["generate.count=20", "generate.speed=1e6", "steps=7", "max_resting_work_per_step=1000000000"]
+# (the rapid-contact rule's held contacts make the long solves: on, as a scene may ask)
+LONG_STEPS = ["generate.count=20", "generate.speed=1e6", "steps=7", "max_resting_work_per_step=1000000000",
+              "rapid_contact_time=1e-4"]
 
 
 def test_a_world_asked_to_stop_from_another_thread_stops_mid_step_at_once():

@@ -82,7 +82,7 @@ def test_a_scene_names_the_field_and_the_choices_for_a_wrong_space_order():
 
 
 # the pile rules (auto picks them for rain from about 350 spheres; 300 is given them here)
-PILE = ["rapid_contact_rule=tc", "sleep_speed=0.1", "sleep_time=0.1"]
+PILE = ["rapid_contact_time=1e-4", "rapid_contact_rule=tc", "sleep_speed=0.1", "sleep_time=0.1"]
 
 
 # ----------------------------------------------------------------------------- the same physics

@@ -450,7 +450,7 @@ def test_under_the_tc_rule_a_lone_ball_still_comes_to_rest():
     held, as under hold: the same run to the bit."""
     hashes = {}
     for rule in ("hold", "tc"):
-        scene = load_scene("bounce", ["rest_fraction=0", f"rapid_contact_rule={rule}"])
+        scene = load_scene("bounce", ["rest_fraction=0", "rapid_contact_time=1e-4", f"rapid_contact_rule={rule}"])
         world = scene.build_world()
         steps = [world.step(scene.dt) for _ in range(scene.steps)]
         assert sum(s.counts.rapid for s in steps) > 0 and steps[-1].counts.held == 1

@@ -23,8 +23,8 @@ MAX_RUNS = 10_000  # runs in one class, counted before any is checked
 @dataclass
 class ClassRow:
     """One run: verdict SAME | DEPARTS | ERROR; step, body: its first departure (None when
-    SAME or ERROR); cause: the departure's kind (or the rule a SAME run set aside, or
-    "error"); said: the headline, or the error in one line."""
+    SAME or ERROR); cause: the departure's kind (or the rule a SAME run set aside, a
+    tie it took in another order, or "error"); said: the headline, or the error in one line."""
 
     run: str
     verdict: str
@@ -72,7 +72,8 @@ def runs_in(paths: list[Path]) -> list[Path]:
 def row_of(run: str, report) -> ClassRow:
     """A run's row from its check-run report (departure.CheckRunReport)."""
     if report.first is None:
-        cause = report.set_aside[0]["rule"] + " (physdbg's rule)" if report.set_aside else None
+        cause = (report.set_aside[0]["rule"] + " (physdbg's rule)" if report.set_aside
+                 else "tie (either order)" if report.ties else None)
         return ClassRow(run, "SAME", None, None, cause, report.headline)
     return ClassRow(run, "DEPARTS", report.first.step, report.first.body, report.first.cause, report.headline)
 

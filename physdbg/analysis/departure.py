@@ -21,6 +21,11 @@ kicks of the same bodies (in the step or the next), and judged:
   momentum kept and no energy gained but other velocities is **collision-order**;
 * a kick where physdbg has no contact: **extra-contact**; physdbg's contact with neither a
   kick nor a crossing: **missed-contact**;
+* contacts of one step at one instant that share a sphere, taken in another order than
+  physdbg's (which one goes first is not the model's to say): a **tie**, found by taking
+  physdbg's step again with the tied spheres numbered so that it takes them in the run's
+  order. A tie that parts the runs is not blamed: the reference goes on from physdbg's step
+  taken in the run's order (``_continue_reference``), and the comparison with it;
 * a step with neither that still ends elsewhere: **drift**; the foreign engine's
   **integrator** is named from its free steps (which velocity moved the body: the step's
   first, its last, or their mean).
@@ -50,6 +55,7 @@ RESTING_SPEED_STEPS = 2.0  # a contact closing slower than the speed the forces 
 RESTITUTION_TOLERANCE = 0.02  # an effective restitution this close to the scene's is right
 RUNAWAY = 100.0  # a pair leaving a contact still approaching at this many times its speed has run away
 MAX_BODY_STEPS = 4_000_000  # frames × bodies compared at once (4 arrays of this many 3-vectors)
+CHUNK_BODY_STEPS = 1 << 20  # frames × bodies a whole-run check reads at a time, where it can go in parts
 MAX_LISTED = 12  # departures listed; more of a kind are counted on its first
 FIT_SLACK = 1e-9  # m: an integrator's free-step residual this small counts as exact
 
@@ -61,6 +67,14 @@ OWN_RULES = (
     ("rapid-contact", "rapid_contact_time", 0.0, "rapid-contact rule"),
     ("resting", "rest_fraction", 0.0, "resting-contact rule"),
 )
+
+# A tie: contacts at one instant, within this fraction of the step of each other (resolve.SAME_INSTANT,
+# physdbg's own), that share a sphere. Orders tried: every numbering of the tied spheres up to
+# TIE_SPHERES of them (4! = 24 local steps at most), past that the reversed one alone. After
+# MAX_TIES ties that part the runs, the reference is not continued again (each continuation
+# steps physdbg through the rest of the run).
+TIE_SPHERES = 4
+MAX_TIES = 20
 
 # integrator families, as each moves a body through a step with no contact:
 # (name, words, the velocity it moves by, as weights of (v at the start, v at the end))
@@ -163,6 +177,7 @@ class CheckRunReport:
     headline: str
     notes: list[str] = field(default_factory=list)
     set_aside: list[dict] = field(default_factory=list)  # physdbg's own rules the reference was run without
+    ties: list[dict] = field(default_factory=list)  # ties the reference went on from in the run's order
 
     @property
     def exit_code(self) -> int:
@@ -245,15 +260,20 @@ class _Comparison:
         self.notes: list[str] = []
         self.judged = 0
         self.run_decay: float | None = None  # the run's own drag factor a step, when it is not the scene's
+        self.ties: list[Departure] = []  # ties the reference went on from in the run's order (_tie_parts)
 
     def run(self) -> CheckRunReport:
+        if self.estimated:
+            self.notes.append("velocities estimated from positions: bodies compared by position only")
         first = self._first_departure()
+        while first is not None and len(self.ties) < MAX_TIES and self._tie_parts(first):
+            first = self._first_departure()
         self._measure_drag()
         self._immovable_moved()
         kicked = self._kick_sizes() > self._kick_thresholds()  # (F-1, N)
         self.integrator = self._integrator(kicked)
         self._non_finite()
-        self.kicks = self._kicks(kicked)
+        self.kicks = self._kicks(kicked) if first is not None else {}  # (read only when steps are judged)
         if first is not None:  # before it the runs agree, so there is nothing to judge
             self._judge_steps(max(first.step, 1))
             if not any(first.body in (d.body, d.other) or d.kind in _RUN_WIDE for d in self.departures):
@@ -265,7 +285,8 @@ class _Comparison:
         return CheckRunReport(str(self.rf.path), str(self.rr.path), self.rr.header.name, len(self.runs.t) - 1,
                               self.rr.header.count, self.atol, self.rtol,
                               "estimated" if self.estimated else "given", first, listed, self.integrator, self.judged,
-                              contacts, self._headline(first, listed), self.notes, self.set_aside)
+                              contacts, self._headline(first, listed), self.notes, self.set_aside,
+                              [{**d.evidence, "step": d.step} for d in self.ties])
 
     def _beyond(self, x, v, x_ref, v_ref) -> np.ndarray:
         """(..., N) bool: bodies off by more than the tolerance (velocities skipped when estimated)."""
@@ -278,19 +299,24 @@ class _Comparison:
 
     # ------------------------------------------------------------------ the first departure
     def _first_departure(self) -> FirstDeparture | None:
+        """The first frame where a body is off, read in chunks of about CHUNK_BODY_STEPS
+        (the temporaries of a whole long run would be several times its size)."""
         r = self.runs
-        if self.estimated:
-            self.notes.append("velocities estimated from positions: bodies compared by position only")
-        beyond = self._beyond(r.xf, r.vf, r.xr, r.vr)
-        frames = np.flatnonzero(beyond.any(axis=1))
-        if not len(frames):
+        chunk = max(1, CHUNK_BODY_STEPS // max(r.xf.shape[1], 1))
+        for start in range(0, len(r.t), chunk):
+            stop = start + chunk
+            beyond = self._beyond(r.xf[start:stop], r.vf[start:stop], r.xr[start:stop], r.vr[start:stop])
+            frames = np.flatnonzero(beyond.any(axis=1))
+            if len(frames):
+                break
+        else:
             return None
-        k = int(frames[0])
+        off, k = beyond[frames[0]], start + int(frames[0])
         dx = np.linalg.norm(r.xf[k] - r.xr[k], axis=1)
         dv = np.linalg.norm(r.vf[k] - r.vr[k], axis=1)
-        score = np.where(beyond[k], np.nan_to_num(dx, nan=np.inf) + np.nan_to_num(dv, nan=np.inf), -1.0)
+        score = np.where(off, np.nan_to_num(dx, nan=np.inf) + np.nan_to_num(dv, nan=np.inf), -1.0)
         body = int(np.argmax(score))
-        return FirstDeparture(k, float(r.t[k]), body, float(dx[body]), float(dv[body]), int(beyond[k].sum()), "")
+        return FirstDeparture(k, float(r.t[k]), body, float(dx[body]), float(dv[body]), int(off.sum()), "")
 
     def _cause_of(self, first: FirstDeparture) -> str:
         """The kind of the earliest local departure of the body at or before the first
@@ -480,9 +506,12 @@ class _Comparison:
         return float(np.clip((lever @ along) / size, 0.0, dt))
 
     # ------------------------------------------------------------------ step by step
-    def _local_step(self, s: int, **settings):
-        """physdbg's exact step s from the foreign state at its start: (x, v, contacts as
-        dicts), with the scene's settings or, given, some of them replaced (ordering="index")."""
+    def _local_step(self, s: int, start: tuple[np.ndarray, np.ndarray] | None = None,
+                    order: np.ndarray | None = None, **settings):
+        """physdbg's exact step s from the foreign state at its start (or ``start``, (x, v)
+        (N, 3) each): (x, v, contacts as dicts), with the scene's settings or, given, some of
+        them replaced (ordering="index"). order (N,): the world numbers sphere order[k] as k
+        (to take a tie in another order); what it returns is in the scene's numbering."""
         import dataclasses
 
         from ..engine import World
@@ -492,10 +521,15 @@ class _Comparison:
         from ..observe import ListObserver
 
         r, st = self.runs, self.scene.state
-        state = State(r.xf[s - 1].copy(), r.vf[s - 1].copy(), st.inverse_mass, st.radius, st.restitution,
-                      st.gravity_scale)
-        if self.estimated:  # the velocity at the step's start: the step's average less half the forces' change
-            state.velocities = np.ascontiguousarray(r.vf[s] - 0.5 * self.acc * float(r.dt[s]))
+        if start is not None:
+            x0, v0 = start
+        else:
+            x0, v0 = r.xf[s - 1], r.vf[s - 1]
+            if self.estimated:  # the velocity at the step's start: the step's average less half the forces' change
+                v0 = r.vf[s] - 0.5 * self.acc * float(r.dt[s])
+        k = np.arange(st.count) if order is None else np.asarray(order)
+        state = State(np.ascontiguousarray(x0[k]), np.ascontiguousarray(v0[k]), st.inverse_mass[k], st.radius[k],
+                      st.restitution[k], st.gravity_scale[k])
         seen = ListObserver()
         world = World(state, self.scene.walls, dataclasses.replace(self.scene.settings, **settings) if settings
                       else self.scene.settings, seen)
@@ -504,17 +538,21 @@ class _Comparison:
             world.step(float(r.dt[s]))
         except WorldStuck:
             return None
+        x, v = np.empty_like(state.positions), np.empty_like(state.velocities)
+        x[k], v[k] = state.positions, state.velocities
         out = []
         batches = seen.of_type(Contacts)
         c = batches[0] if batches else None
         resting = c.resting if c is not None else None
-        for k in range(len(c) if c is not None else 0):
-            out.append({"step": s, "index": k, "kind": int(c.kind[k]), "a": int(c.a[k]), "other": int(c.other[k]),
-                        "tau": float(c.time_in_step[k]), "time": float(r.t[s - 1] + c.time_in_step[k]),
-                        "normal": c.normal[k].copy(), "restitution": float(c.restitution[k]),
-                        "resting": bool(resting[k]), "closing": abs(float(c.closing_speed[k])),
-                        "centre": c.point[k] + c.normal[k] * self.radius[int(c.a[k])]})
-        return state.positions, state.velocities, out
+        for j in range(len(c) if c is not None else 0):
+            kind, a, other = int(c.kind[j]), int(k[c.a[j]]), int(c.other[j])
+            other = int(k[other]) if PARTNER_IS_SPHERE[kind] else other
+            out.append({"step": s, "index": j, "kind": kind, "a": a, "other": other,
+                        "tau": float(c.time_in_step[j]), "time": float(r.t[s - 1] + c.time_in_step[j]),
+                        "normal": c.normal[j].copy(), "restitution": float(c.restitution[j]),
+                        "resting": bool(resting[j]), "closing": abs(float(c.closing_speed[j])),
+                        "centre": c.point[j] + c.normal[j] * self.radius[a]})
+        return x, v, out
 
     def _judge_steps(self, start: int) -> None:
         """Each step from ``start`` on where the foreign run ends elsewhere than physdbg's
@@ -529,7 +567,8 @@ class _Comparison:
                 continue
             x, v, contacts = local
             off = self._beyond(r.xf[s], r.vf[s], x, v)
-            if not off.any() or self._own_rule(s, contacts, off) or self._index_ordered(s, contacts, off):
+            if (not off.any() or self._own_rule(s, contacts, off) or self._tie(s, contacts, off)
+                    or self._index_ordered(s, contacts, off)):
                 for c in contacts:
                     for b in self._bodies(c):
                         for k in (s, s + 1) if off.any() else (s,):
@@ -634,6 +673,119 @@ class _Comparison:
                           "said": did}))
             return True
         return False
+
+    def _ties_in(self, contacts: list[dict], dt: float) -> list[list[dict]]:
+        """The step's ties: groups of contacts at one instant (within SAME_INSTANT of the
+        step) that share a sphere, in physdbg's order."""
+        from ..engine.resolve import SAME_INSTANT
+
+        groups: list[list[dict]] = []
+        for c in contacts:
+            if groups and abs(c["tau"] - groups[-1][0]["tau"]) <= SAME_INSTANT * dt:
+                groups[-1].append(c)
+            else:
+                groups.append([c])
+        return [g for g in groups if len(g) > 1 and any(
+            set(self._bodies(c)) & set(self._bodies(d)) for i, c in enumerate(g) for d in g[i + 1:])]
+
+    def _tie_orders(self, s: int, contacts: list[dict], start=None):
+        """Each (tie, order, the local step) of step s taken with a tie's spheres numbered in
+        another order (``_local_step``'s order), from the run's state or ``start``."""
+        import itertools
+
+        n = self.scene.state.count
+        for tie in self._ties_in(contacts, float(self.runs.dt[s])):
+            spheres = sorted({b for c in tie for b in self._bodies(c)})
+            renumbered = (itertools.permutations(spheres) if len(spheres) <= TIE_SPHERES
+                          else [tuple(reversed(spheres))])
+            for numbering in renumbered:
+                if list(numbering) == spheres:
+                    continue
+                order = np.arange(n)
+                order[spheres] = numbering
+                step = self._local_step(s, start, order, space_order="given")
+                if step is not None:
+                    yield tie, order, step
+
+    def _tie(self, s: int, contacts: list[dict], off: np.ndarray) -> bool:
+        """The run's step s is physdbg's step with contacts at one instant taken in another
+        order (a tie: ``_ties_in``): named tie, with both orders. Tried where a step of
+        several contacts ends elsewhere."""
+        if len(contacts) < 2:
+            return False
+        from ..engine.resolve import SAME_INSTANT
+
+        r = self.runs
+        for tie, order, (x, v, taken) in self._tie_orders(s, contacts):
+            if self._beyond(r.xf[s], r.vf[s], x, v).any():
+                continue
+            instant = [c for c in taken if abs(c["tau"] - tie[0]["tau"]) <= SAME_INSTANT * float(r.dt[s])]
+            ours = [self._listed(c) for c in tie]
+            theirs = [self._listed(c) for c in instant] or ours
+            if theirs == ours:
+                continue  # the same order, and yet the run's step: not a tie's doing
+            tied = " and ".join(self._sequence([c]) for c in dict.fromkeys(map(tuple, ours)))
+            said = (f"in step {s} the contacts {tied} happen at one instant (t = {tie[0]['time']:.6g} s) and your "
+                    f"run takes {self._sequence(theirs[:1])} first")
+            self.departures.append(Departure(
+                "tie", s, tie[0]["a"],
+                f"{said}: physdbg takes {self._sequence(ours)}; your run {self._sequence(theirs)}. Taken in your run's "
+                f"order, physdbg's "
+                f"step {s} from your run's state ends where your run's does. Which of two contacts at one instant "
+                f"goes first is not the model's to say (each is the earliest), so this is a tie, not a mistake",
+                "nothing to change in your engine: either order is right. (Runs that take ties in one order compare "
+                "bit for bit; physdbg takes them in the order its tests found them.)",
+                other=tie[0]["other"] if PARTNER_IS_SPHERE[tie[0]["kind"]] else None,
+                evidence={"time": tie[0]["time"], "physdbg_order": ours, "run_order": theirs,
+                          "numbering": order.tolist(), "said": said}))
+            return True
+        return False
+
+    def _tie_parts(self, first: FirstDeparture) -> bool:
+        """Where the runs first part at a tie (``_tie``), the reference goes on from physdbg's
+        step taken in the run's order (``_continue_reference``): True when it did."""
+        s = first.step
+        local = self._local_step(s) if s >= 1 else None
+        if local is None:
+            return False
+        x, v, contacts = local
+        off = self._beyond(self.runs.xf[s], self.runs.vf[s], x, v)
+        if not off.any():
+            return False  # the step itself ends where physdbg's does: no tie parted them
+        found = len(self.departures)
+        if not self._tie(s, contacts, off):
+            return False
+        tie = self.departures.pop(found)
+        self.ties.append(tie)
+        self._continue_reference(s, np.asarray(tie.evidence["numbering"]))
+        return True
+
+    def _continue_reference(self, s: int, order: np.ndarray) -> None:
+        """Replace physdbg's reference from frame s on: its step s from its own state,
+        taken in ``order`` (a tie in the run's order), then every later step from there, in
+        one world as a run takes them."""
+        import dataclasses
+
+        from ..engine import World
+        from ..engine.state import State
+        from ..errors import WorldStuck  # (a NaN or infinity is one too: NonFiniteState)
+
+        r, st = self.runs, self.scene.state
+        step = self._local_step(s, (r.xr[s - 1], r.vr[s - 1]), order, space_order="given")
+        if step is None:
+            r.xr[s:], r.vr[s:] = np.nan, np.nan
+            return
+        r.xr[s], r.vr[s] = step[0], step[1]
+        state = State(step[0].copy(), step[1].copy(), st.inverse_mass, st.radius, st.restitution, st.gravity_scale)
+        world = World(state, self.scene.walls, dataclasses.replace(self.scene.settings))
+        world.time = float(r.t[s])
+        for k in range(s + 1, len(r.t)):
+            try:
+                world.step(float(r.dt[k]))
+            except WorldStuck:
+                r.xr[k:], r.vr[k:] = np.nan, np.nan
+                return
+            r.xr[k], r.vr[k] = state.positions, state.velocities
 
     def _rule_did(self, code: str, c: dict, other: dict | None, contacts: list[dict]) -> str:
         """What rule ``code`` did to contact c of a step (other: the same contact without the
@@ -1158,6 +1310,19 @@ class _Comparison:
     def _both(self, c: dict) -> str:
         return f"spheres {c['a']} and {c['other']}" if PARTNER_IS_SPHERE[c["kind"]] else f"sphere {c['a']}"
 
+    @staticmethod
+    def _listed(c: dict) -> list[int]:
+        """A contact as [a, other, kind], a pair of spheres lower index first (as it is
+        either way round)."""
+        if PARTNER_IS_SPHERE[c["kind"]]:
+            return [min(c["a"], c["other"]), max(c["a"], c["other"]), c["kind"]]
+        return [c["a"], c["other"], c["kind"]]
+
+    def _sequence(self, contacts) -> str:
+        """Contacts given as [a, other, kind], in words and in order: "0–1, then 1–2"."""
+        listed = ", then ".join(contact_words(kind, a, other, self.names) for a, other, kind in contacts[:4])
+        return listed + (" …" if len(contacts) > 4 else "")
+
     def _pair_words(self, c: dict) -> str:
         return contact_words(c["kind"], c["a"], c["other"], self.names)
 
@@ -1184,11 +1349,18 @@ class _Comparison:
     def _headline(self, first: FirstDeparture | None, listed: list[Departure]) -> str:
         aside = "; ".join(f"physdbg's {a['name']} {a['said']} — `-s {a['setting']}={a['value']:g}` compares "
                           f"without it" for a in self.set_aside)
-        if first is None and self.set_aside:
+        ties = ""
+        if self.ties:
+            more = len(self.ties) - 1
+            ties = (f"{self.ties[0].evidence['said']}, and physdbg went on from that step taken in your run's order"
+                    + (f" (and so at {more} more tie{'s' if more > 1 else ''})" if more else ""))
+        if first is None and (self.set_aside or self.ties):
             flags = " ".join(f"-s {a['setting']}={a['value']:g}" for a in self.set_aside)
+            without = (f" without its own rule{'s' if len(self.set_aside) > 1 else ''} ({flags})" if self.set_aside
+                       else "")
             return (f"same as the seed's model: every body stays within atol={self.atol:g}, rtol={self.rtol:g} of "
-                    f"physdbg's exact run without its own rule{'s' if len(self.set_aside) > 1 else ''} ({flags}) "
-                    f"for all {len(self.runs.t) - 1} steps; {aside}")
+                    f"physdbg's exact run{without} for all {len(self.runs.t) - 1} steps; "
+                    + "; ".join(part for part in (aside, ties) if part))
         if first is None:
             return (f"no departure: every body stays within atol={self.atol:g}, rtol={self.rtol:g} of physdbg's "
                     f"exact run for all {len(self.runs.t) - 1} steps")
@@ -1205,6 +1377,8 @@ class _Comparison:
             out += f". The first contact that goes wrong: step {contact.step}, {_KIND_WORDS[contact.kind]}"
         if self.set_aside:
             out += f" (compared against physdbg without its own rule: {aside})"
+        if self.ties:
+            out += f" (before it, {ties})"
         return out
 
 
@@ -1251,7 +1425,7 @@ _TUNNEL_ADVICE = ("test for contacts along the path through the step (a swept te
                   "not where the step ends, or take shorter steps")
 _PRIORITY = ("impulse-loop", "non-finite", "immovable-moved", "drag-per-step", "drag-ignored", "tunnelling", "impulse-sign",
              "impulse-doubled", "restitution-sign", "one-missing", "restitution-squared", "contact-energy", "tangent-reversed",
-             "wrong-normal", "own-rule", "index-order", "collision-order", "skipped-rest", "bounce-time", "missed-contact",
+             "wrong-normal", "own-rule", "tie", "index-order", "collision-order", "skipped-rest", "bounce-time", "missed-contact",
              "extra-contact", "drift", "chaos", "unexplained")
 _KIND_WORDS = {
     "tunnelling": "tunnelling", "bounce-time": "bounced at the wrong time", "contact-energy": "energy at a contact",
@@ -1263,6 +1437,7 @@ _KIND_WORDS = {
     "one-missing": "the 1 of (1 + e) missing from the impulse",
     "impulse-loop": "an impulse of the wrong sign, met again and again",
     "own-rule": "physdbg's own modelling rule, not the engine",
+    "tie": "contacts at one instant taken in another order (a tie, not a mistake)",
     "restitution-squared": "restitution applied twice", "tangent-reversed": "a reflection of the whole velocity",
     "wrong-normal": "an impulse along the wrong normal", "index-order": "contacts resolved in index order",
     "skipped-rest": "a bounce that skips the rest of the step", "unexplained": "unexplained",

@@ -64,7 +64,7 @@ DIFFERENT_ALONE = ("structure", "records")
 @dataclass
 class Cause:
     """One reason the runs part. kind: settings | engine-version | engine-limits |
-    non-finite | tunnelling | collision-order | missed-contact | contact-outcome |
+    non-finite | tunnelling | collision-order | tie | missed-contact | contact-outcome |
     method-drift | outside-change | length | records (bit-identical states, other recorded
     contacts); where one run is another engine's, the kinds of
     analysis.departure (bounce-time, contact-energy, extra-contact, drift, integrator,
@@ -721,6 +721,8 @@ class _Differ:
                     f"{self._sequence(cb, event['index'])}.{_order_note(settings_a, settings_b)}"
                     + self._consequence(div), {"a": x, "b": y, "index": event["index"],
                                                "ordering": [settings_a.get("ordering"), settings_b.get("ordering")]}))
+            elif x is not None and y is not None and _key(x) != _key(y) and _tied(x, y, ca, cb):
+                causes.append(self._tie(step, x, y, ca, cb, div, settings_a, settings_b))
             elif x is not None and y is not None and keys_a == keys_b and _key(x) != _key(y):
                 first_a, first_b = self._describe(x), self._describe(y)
                 later_a = next((r for r in ca if _key(r) == _key(y)), None)
@@ -839,6 +841,22 @@ class _Differ:
             text += f", and resolved {self._describe(missing)} instead"
         return Cause("missed-contact", text + "." + self._consequence(div), {"a": x, "b": y})
 
+    def _tie(self, step, x, y, ca, cb, div, settings_a: dict, settings_b: dict) -> Cause:
+        """Two runs that took contacts at one instant (_tied) in another order: a tie, which
+        neither run has wrong; what in their settings orders ties otherwise, where one does."""
+        names = sorted({_key(r) for r in ca if _at_one_instant(r, x)})
+        both = " and ".join(contact_words(kind, a, other, self.names_a) for kind, a, other in names[:4])
+        why = ""
+        if settings_a.get("space_order") != settings_b.get("space_order"):
+            why = (f" The runs number their spheres differently (space_order: {settings_a.get('space_order')} in A, "
+                   f"{settings_b.get('space_order')} in B), and the numbering orders tied contacts.")
+        text = (f"Step {step}: the contacts {both} happen at one instant (t = {x['time_in_step'] / x['dt']:.2f}·dt) in "
+                f"both runs; run A took {self._describe(x, times=False)} first, run B {self._describe(y, times=False)}. "
+                f"This is a tie: which of contacts at one instant goes first is not the model's to say, so neither run "
+                f"is wrong.{why}")
+        return Cause("tie", text + self._consequence(div), {"a": x, "b": y, "step": step,
+                                                            "contacts": [list(k) for k in names]})
+
     def _sequence(self, rows: list[dict], index: int) -> str:
         """The step's contacts in the order resolved, up to two past ``index``."""
         shown = [self._describe(r) for r in rows[:index + 2]]
@@ -954,6 +972,27 @@ def _key(r: dict) -> tuple:
     if PARTNER_IS_SPHERE[r["kind"]]:  # a pair is the same pair either way round
         return (r["kind"], min(r["a"], r["other"]), max(r["a"], r["other"]))
     return (r["kind"], r["a"], r["other"])
+
+
+def _at_one_instant(r: dict, x: dict) -> bool:
+    """Contact rows r and x of one step at one instant (resolve.SAME_INSTANT of the step)."""
+    from ..engine.resolve import SAME_INSTANT
+
+    return abs(r["time_in_step"] - x["time_in_step"]) <= SAME_INSTANT * x["dt"]
+
+
+def _tied(x: dict, y: dict, ca, cb) -> bool:
+    """Runs A and B first differ at contacts x (A's) and y (B's) of one step, at one instant,
+    that share a sphere, and each run has the other's contact at that instant too: the
+    contacts tied, and the runs took them in another order."""
+    if not _at_one_instant(y, x) or not (set(_spheres(x)) & set(_spheres(y))):
+        return False
+    return (any(_key(r) == _key(y) and _at_one_instant(r, x) for r in ca)
+            and any(_key(r) == _key(x) and _at_one_instant(r, y) for r in cb))
+
+
+def _spheres(r: dict) -> tuple[int, ...]:
+    return (r["a"], r["other"]) if PARTNER_IS_SPHERE[r["kind"]] else (r["a"],)
 
 
 def _touches(r: dict, crossing) -> bool:

@@ -68,7 +68,10 @@ BUDGETS = {
 EVENT_LOOP_NAMES = ("step", "calendar")
 # settings a scene may give as "auto": the advisor (physdbg.advisor.decide) replaces each by
 # a value before a World is built; the engine itself never decides
-AUTO_SETTINGS = ("integrator", "detection", "ordering", "rapid_contact_rule", "sleep_speed")
+AUTO_SETTINGS = ("integrator", "detection", "ordering", "rapid_contact_time", "rapid_contact_rule", "sleep_speed")
+# the rapid-contact rule's window (s) where it is on: a pile forms (advisor.resolve_pile_rules)
+# or a scene gives it; a tenth of a millisecond holds a sphere squeezed between two
+RAPID_CONTACT_TIME = 1e-4
 
 
 @dataclass
@@ -114,7 +117,7 @@ class Settings:
     drag: float = 1.0
     restitution_rule: str = "min"
     rest_fraction: float = 0.01
-    rapid_contact_time: float = 1e-4
+    rapid_contact_time: float = RAPID_CONTACT_TIME
     rapid_contact_rule: str = "hold"
     contact_tolerance: float = 1e-9
     sleep_speed: float = 0.0
