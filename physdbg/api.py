@@ -782,7 +782,7 @@ def check_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str]
     is compared again against physdbg without that rule, and the report says so."""
     import numpy as np
 
-    from .analysis.departure import compare
+    from .analysis.departure import compare, too_long
     from .record.foreign import import_run as write_run
     from .record.outputs import write_claimed
 
@@ -793,6 +793,7 @@ def check_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str]
     run = read_run_in_units(run_path, scene, time_unit, length_unit)
     if len(run.times) < 2:
         raise PhysdbgError(f"{run_path}: the run has only its initial state; there is no step to check")
+    too_long(len(run.times), scene.state.count)  # before physdbg's reference is recorded
     with tempfile.TemporaryDirectory(prefix="physdbg-check-run-") as scratch:
         folder = Path(keep) if keep is not None else Path(scratch)
         if keep is not None:

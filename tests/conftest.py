@@ -11,6 +11,14 @@ os.environ.setdefault("PHYSDBG_COMPILE", "now")
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from hypothesis import settings as hypothesis_settings  # noqa: E402
+
+# Hypothesis draws: in CI (CI set) the same draw every run, so a failure there is the code's,
+# not the draw's, and repeats; in development a new draw each run, to find what CI's misses.
+# HYPOTHESIS_PROFILE=ci|dev picks one by hand.
+hypothesis_settings.register_profile("ci", derandomize=True, print_blob=True)
+hypothesis_settings.register_profile("dev", print_blob=True)
+hypothesis_settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci" if os.environ.get("CI") else "dev"))
 
 from physdbg.engine import Settings, State, Walls, World  # noqa: E402
 from physdbg.observe import ListObserver  # noqa: E402

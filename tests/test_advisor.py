@@ -20,6 +20,7 @@ BAD = {"tunnelling", "overlap", "non-finite", "energy-gain"}
 
 
 @pytest.mark.parametrize("name", builtin_names())
+@pytest.mark.slow
 def test_the_recommended_settings_never_tunnel_overlap_or_blow_up(name):
     advice = advise(load_scene(name))
     overrides = [f"{k}={v}" for k, v in advice.recommended.items()]
@@ -28,6 +29,7 @@ def test_the_recommended_settings_never_tunnel_overlap_or_blow_up(name):
 
 
 @pytest.mark.parametrize("name", builtin_names())
+@pytest.mark.slow
 def test_no_sphere_outruns_the_speed_bound(name):
     """The speed bound holds in every built-in scene; where it cannot be a bound (a
     kinematic mesh pumps energy at every strike: paddle) the advice says it is an estimate,
@@ -140,6 +142,7 @@ NARROW_PILE = ["generate.count=100", "box.max=[0.3,1,0.3]", "generate.speed=0", 
                "box.restitution=0.5", "steps=240", *ENGINE_RULES]
 
 
+@pytest.mark.slow
 def test_a_pile_is_foreseen_and_each_rule_does_on_it_what_check_says():
     """100 spheres in a 0.3 m × 0.3 m box settle ~3 layers deep. hold churns (held contacts
     let go and held again, the swept tests of a step up a hundredfold), tc collapses (the

@@ -32,6 +32,7 @@ def test_explain_finds_the_discrete_tunnelling_and_nothing_in_the_swept_run(tmp_
 
 
 @pytest.mark.parametrize("scene", ["billiards", "bounce", "bullet-wall", "cradle", "funnel", "gas", "rain", "ramp", "rest"])
+@pytest.mark.slow
 def test_no_false_alarms_on_the_builtin_scenes(scene):
     report = explain(ROOT / "recordings" / "ci" / f"{scene}.mcap")
     assert report.clean, report.lines()

@@ -4,6 +4,7 @@ inside the held-contact solve on a pile too large to solve directly."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
@@ -95,6 +96,7 @@ def _problem(seed, n_spheres, n_contacts, walls):
 @settings(max_examples=40, deadline=None)
 @given(st.integers(0, 10**6), st.integers(2, 12), st.integers(1, 30), st.floats(0.0, 0.5))
 @example(1166, 4, 21, 0.0625)  # where Gauss–Seidel alone was 5e-8 off (see _reference)
+@pytest.mark.slow
 def test_mprgp_finds_the_complementary_solution_of_the_dense_reference(seed, n_spheres, n_contacts, walls):
     end_a, end_b, normal, inverse_mass, lower, rhs = _problem(seed, n_spheres, n_contacts, walls)
     big = _dense(end_a, end_b, normal, inverse_mass)

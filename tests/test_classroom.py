@@ -43,6 +43,7 @@ def a_class(folder: Path, size: int) -> dict[str, str]:
     return out
 
 
+@pytest.mark.slow
 def test_a_class_of_200_runs_is_one_table_with_its_causes_counted_and_a_bad_file_as_a_row(tmp_path):
     expected = a_class(tmp_path / "class", 200)
     report = api.check_class(classroom.runs_in([tmp_path / "class"]), GLANCE)
@@ -77,6 +78,7 @@ def test_check_run_of_a_folder_prints_the_table_in_each_format(tmp_path, fmt):
         assert json.loads(result.output)["counts"]["one-missing"] == 1
 
 
+@pytest.mark.slow
 def test_the_same_table_from_a_dask_cluster(tmp_path):
     distributed = pytest.importorskip("distributed", reason="needs pip install 'physdbg[dask]'")
     a_class(tmp_path / "class", 24)

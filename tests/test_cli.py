@@ -154,6 +154,7 @@ def test_help_does_not_import_the_engine():
     assert out.stdout.strip().splitlines()[-1] == "False False False False False"
 
 
+@pytest.mark.slow
 def test_console_script_runs(tmp_path):
     exe = [sys.executable, "-m", "physdbg.cli", "run", "cradle", "--set", "steps=3"]
     out = subprocess.run(exe, capture_output=True, text=True)
@@ -299,12 +300,11 @@ def test_a_damaged_chunk_is_reported_not_raised(tmp_path):
         assert result.exit_code == 2 and "damaged" in result.output, result.output
 
 
+@pytest.mark.slow
 def test_replay_web_serves_the_recording_on_localhost_and_cleans_up_on_sigterm(tmp_path):
-    import glob
     import os
     import signal
     import socket
-    import tempfile
     import time
     import urllib.request
 
@@ -314,9 +314,11 @@ def test_replay_web_serves_the_recording_on_localhost_and_cleans_up_on_sigterm(t
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    scratch_before = set(glob.glob(os.path.join(tempfile.gettempdir(), "physdbg-*")))
+    scratch = tmp_path / "tmp"  # the replay's own temp folder: another physdbg beside this test has its own
+    scratch.mkdir()
     proc = subprocess.Popen([sys.executable, "-m", "physdbg.cli", "replay", str(out), "--web", "--port", str(port)],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ, CI="1"))
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env=dict(os.environ, CI="1", TMPDIR=str(scratch)))
     try:
         lines = [proc.stdout.readline() for _ in range(2)]
         url = lines[1].split()[1]
@@ -339,7 +341,7 @@ def test_replay_web_serves_the_recording_on_localhost_and_cleans_up_on_sigterm(t
     time.sleep(0.5)
     with pytest.raises(OSError):
         urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=2)  # the viewer child is gone
-    assert set(glob.glob(os.path.join(tempfile.gettempdir(), "physdbg-*"))) <= scratch_before  # no folder left
+    assert list(scratch.iterdir()) == []  # no folder left
 
 
 def test_record_caps_a_big_bvh_and_says_so(tmp_path):
@@ -383,6 +385,7 @@ def test_record_repeats_a_real_time_run_from_its_step_lengths(tmp_path):
     assert open_recording(again).state(-1).state_hash == rec.state(-1).state_hash
 
 
+@pytest.mark.slow
 def test_record_spawn_streams_to_a_viewer_it_starts(tmp_path, virtual_display):
     import os
 

@@ -251,6 +251,7 @@ def test_a_javascript_engine_s_nan_arrives_as_null_and_is_named_by_step_and_body
 
 
 # ----------------------------------------------------------------------------- physdbg's own rules
+@pytest.mark.slow
 def test_a_right_engine_s_break_shot_is_same_and_physdbg_s_rapid_contact_rule_is_named(tmp_path):
     """The seed's engine (earliest contact first, the rest of the step finished) on
     billiards: SAME, with nothing set aside, since no pile forms and the rapid-contact rule
@@ -306,6 +307,57 @@ def test_diff_of_two_physdbg_runs_names_the_rapid_contact_rule_as_the_cause(tmp_
     assert result.exit_code == 1
     assert "e = 1 in A is physdbg's rapid-contact rule" in result.output
     assert "rapid_contact_time: 0.0001 (A)  0 (B)" in result.output
+
+
+SLIDE = """
+name = "slide"
+dt = "1/60"
+duration = 1.0
+gravity = [0.0, -9.81, 0.0]
+sleep_speed = 0.1
+sleep_time = 0.1
+[[planes]]
+name = "floor"
+normal = [0.0, 1.0, 0.0]
+[[particles]]
+position = [0.0, 0.1, 0.0]
+velocity = [0.05, 0.0, 0.0]
+radius = 0.1
+restitution = 0.5
+"""
+
+
+def test_physdbg_s_sleeping_is_named_and_set_aside_where_it_froze_a_sphere_the_run_keeps_moving(tmp_path):
+    """A ball sliding at 0.05 m/s on a floor, under sleep_speed = 0.1: physdbg freezes it
+    after sleep_time, a run with no sleeping keeps it moving. Every step from the run's
+    state ends where the run's does (a step starts with every sphere awake), so this is
+    physdbg's rule: named, and the run compared again without sleeping: SAME."""
+    (tmp_path / "slide.toml").write_text(SLIDE)
+    run = api.record(str(tmp_path / "slide.toml"), ["sleep_speed=0"], mcap_path=str(tmp_path / "awake.mcap"),
+                     rrd=False).mcap
+    result = CliRunner().invoke(app, ["check-run", run, "--scene", str(tmp_path / "slide.toml"), "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    (rule,) = report["set_aside"]
+    assert (rule["rule"], rule["setting"], rule["value"], rule["step"]) == ("sleeping", "sleep_speed", 0.0, 7)
+    assert ("physdbg's sleeping rule put sphere 0 to sleep (frozen from step 7, once slower than sleep_speed = "
+            "0.1 m/s for sleep_time = 0.1 s), where your run keeps it moving (0.05 m/s at step 7)") in report["headline"]
+    assert "`-s sleep_speed=0` compares without it" in report["headline"]
+    assert "unexplained" not in result.output and "chaos" not in result.output
+
+
+def test_a_run_longer_than_check_run_compares_at_once_is_refused_before_the_reference_is_recorded(tmp_path,
+                                                                                                 monkeypatch):
+    from physdbg.analysis import departure
+
+    scene = load_scene("bounce", ["integrator=euler", "steps=60"])
+    write_csv(tmp_path / "run.csv", *simulate_swept(scene, 60, scene.dt))
+    monkeypatch.setattr(departure, "MAX_BODY_STEPS", 50)
+    result = CliRunner().invoke(app, ["check-run", str(tmp_path / "run.csv"), "--scene", "bounce", "--set",
+                                      "integrator=euler", "--set", "steps=60", "--keep", str(tmp_path / "kept")])
+    assert result.exit_code == 2, result.output
+    assert "61 frames of 1 body is 61 body-steps; check-run compares at most 50 at once" in result.output
+    assert not (tmp_path / "kept" / "reference.mcap").exists()
 
 
 # ----------------------------------------------------------------------------- ties

@@ -44,6 +44,7 @@ def test_index_against_time_ordering_is_a_collision_order(tmp_path):
     assert "From there sphere 1 leaves at 0.00 m/s in A and 1.00 m/s in B" in order.text
 
 
+@pytest.mark.slow
 def test_dt_is_aligned_by_time_drift_for_euler_and_equivalent_for_the_exact_integrator(tmp_path):
     r = diff(_rec(tmp_path, "a", "bounce", ["integrator=euler"]),
              _rec(tmp_path, "b", "bounce", ["integrator=euler", "dt=1/240"]))
@@ -205,6 +206,7 @@ def test_the_overlay_holds_both_runs_under_two_roots(tmp_path):
 
 
 @pytest.mark.parametrize("scene", ["billiards", "bounce", "bullet-wall", "cradle", "funnel", "gas", "rain", "ramp", "rest"])
+@pytest.mark.slow
 def test_every_builtin_scene_still_matches_its_ci_golden(tmp_path, scene):
     """Every built-in scene but highspeed (5,000 spheres for 600 steps: a golden of tens of
     MB and half a minute a run; tests/test_mesh_runs.py runs it small)."""
@@ -292,6 +294,7 @@ def test_a_one_ball_drift_between_integrators_is_not_called_chaotic(tmp_path):
     assert "chaotic" not in r.headline and "not chaos: no two spheres collide" in r.growth.sentence()
 
 
+@pytest.mark.slow
 def test_the_overlay_opens_on_the_divergence_in_two_colours_in_the_real_viewer(tmp_path, virtual_display):
     """A screenshot of the overlay as it opens: run A's spheres blue on the left, run B's
     orange on the right, the diverging spheres ringed in magenta in both."""

@@ -77,7 +77,12 @@ def test_the_docs_show_physdbg_commands_to_run():
 
 
 # README.md's commands and examples run in a fresh venv made by its command 1 (tests/test_readme.py)
-@pytest.mark.parametrize("path", [p for p in DOCS if p.name != "README.md"], ids=lambda p: p.name)
+# pages whose commands take 2 s or more here (pytest --durations=0): the slow tier
+SLOW_PAGES = {"accuracy.md", "diff.md", "foreign-runs.md", "stability.md"}
+
+
+@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.name in SLOW_PAGES else p
+                                  for p in DOCS if p.name != "README.md"], ids=lambda p: p.name)
 def test_every_command_and_python_example_in_the_docs_runs_as_written(path, tmp_path, monkeypatch):
     import shlex
     import shutil
@@ -107,3 +112,55 @@ def test_every_command_and_python_example_in_the_docs_runs_as_written(path, tmp_
         from physdbg.scene import parse_scene
 
         parse_scene(block, f"{path.name} example")
+
+
+# ----------------------------------------------------------------------------- docs held to the code
+def _table_codes(text: str) -> set[str]:
+    """The codes a Markdown table lists in its first column: | `code` | or | `a` / `b` |."""
+    rows = re.findall(r"^\| ((?:`[a-z_/.-]+`(?: / )?)+) \|", text, re.M)
+    return {code for row in rows for code in re.findall(r"`([a-z_/.-]+)`", row)}
+
+
+def test_every_channel_kind_cause_finding_and_phase_the_code_has_is_in_the_docs():
+    """The lists the docs share with the code: a new one in the code and not in its page
+    fails here, by name."""
+    from physdbg import events
+    from physdbg.analysis import audit, departure
+    from physdbg.engine import colliders
+    from physdbg.record import format as fmt
+
+    docs = ROOT / "docs"
+    channels = {value for name, value in vars(fmt).items() if name.startswith("TOPIC_")}
+    assert channels - _table_codes((docs / "recording-format.md").read_text()) == set()
+    check_run = _table_codes((docs / "foreign-runs.md").read_text())
+    assert set(departure._KIND_WORDS) - check_run == set()  # check-run's causes
+    diff_page = _table_codes((docs / "diff.md").read_text())
+    diff_causes = set(re.findall(r'Cause\(\s*"([a-z-]+)"', (ROOT / "physdbg" / "analysis" / "diff.py").read_text()))
+    assert len(diff_causes) > 10 and diff_causes - diff_page == set()
+    assert set(audit.FINDING_KINDS) - diff_page == set()  # explain's findings
+    engine = (docs / "engine.md").read_text()
+    assert [p for p in events.STEP_PHASES if f"`_{p}`" not in engine] == []
+    for kind, module in zip(events.KIND_NAMES, colliders.KIND_MODULES, strict=True):  # the collider kinds
+        assert f"`{module.__name__.rsplit('.', 1)[1]}.py`" in engine, kind
+    codes = [f"{code} " for code in range(len(events.KIND_NAMES))]
+    for page in ("events.md", "recording-format.md"):  # every `kind` (0 pair, 1 wall, ...) lists every code
+        lists = re.findall(r"`kind` \(([^)]*)\)", (docs / page).read_text())
+        assert lists and all(all(code in listed for code in codes) for listed in lists), (page, lists)
+
+
+def test_the_architecture_page_names_every_module_and_only_files_that_exist():
+    """docs/architecture.md is the map: every module of physdbg (outside the engine's own
+    packages, which engine.md lists) is on it, and every path it names exists."""
+    page = (ROOT / "docs" / "architecture.md").read_text()
+    package = ROOT / "physdbg"
+    named = set(re.findall(r"`((?:[a-z_]+/)*[a-z_-]+\.(?:py|js))`", page)) - {"engine/colliders/capsule.py"}  # the example
+    missing = sorted(path for path in named if not any((root / path).exists() for root in (package, ROOT)))
+    assert missing == [], missing
+    modules = [p.relative_to(package).as_posix() for p in package.glob("*.py")] + \
+        [p.relative_to(package).as_posix() for folder in ("analysis", "record") for p in (package / folder).glob("*.py")]
+    unmapped = sorted(m for m in modules if not m.endswith("__init__.py") and m not in ("__main__.py", "py.typed")
+                      and f"`{m}`" not in page)
+    assert unmapped == [], unmapped
+    index = (ROOT / "docs" / "README.md").read_text()
+    pages = sorted(p.name for p in (ROOT / "docs").glob("*.md") if p.name != "README.md")
+    assert [name for name in pages if f"({name})" not in index] == []

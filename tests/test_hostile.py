@@ -358,6 +358,7 @@ def test_a_run_that_turns_nan_exits_3_and_leaves_a_readable_recording(tmp_path, 
         assert np.isnan(rec.state(3).velocities[1]).any() and np.isfinite(rec.state(2).velocities).all()
 
 
+@pytest.mark.slow
 def test_a_full_disk_ends_the_recording_readable_with_a_message(tmp_path):
     out = tmp_path / "full.mcap"
     done = _cli_on_a_full_disk(1500000, "record", "rain", "-s", "generate.count=300", "-s", "steps=400", "-o", str(out),
@@ -423,6 +424,7 @@ def test_a_packing_fraction_that_makes_the_box_too_big_is_refused_with_the_least
     assert "field 'generate.packing_fraction'" in str(info.value) and "give at least 3.35e-38" in str(info.value)
 
 
+@pytest.mark.slow
 def test_a_full_disk_under_the_rerun_file_is_said_and_never_hangs(tmp_path):
     """The .rrd fills the disk first (it is larger than a --detail state MCAP): rerun's own
     file writer only logs the failure, and its flush (and its exit hook) then waited
@@ -440,6 +442,7 @@ def test_a_full_disk_under_the_rerun_file_is_said_and_never_hangs(tmp_path):
     assert not (tmp_path / "full.rrd").exists()
 
 
+@pytest.mark.slow
 def test_a_full_disk_under_the_recording_says_what_became_of_the_rerun_file(tmp_path):
     """The MCAP file fails first (a --detail full recording outgrows the .rrd): one line, no
     traceback from the abandoned Rerun stream at exit, and the .rrd is removed or whole."""

@@ -35,6 +35,7 @@ def test_a_world_asked_to_stop_from_another_thread_stops_mid_step_at_once():
         world.step(1 / 120)
 
 
+@pytest.mark.slow
 def test_ctrl_c_ends_a_recording_in_a_long_step_within_a_second(tmp_path):
     out = tmp_path / "long.mcap"
     proc = subprocess.Popen([sys.executable, "-m", "physdbg", "record", "rain", *sum((["-s", o] for o in LONG_STEPS), []),

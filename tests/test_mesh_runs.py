@@ -109,6 +109,7 @@ def test_balls_in_the_ramps_crease_never_gain_energy_and_stop_touching_without_s
     assert sum(contacts[-300:]) < 10 and end.counts.held == 6  # each ball on both faces
 
 
+@pytest.mark.slow
 def test_a_recording_keeps_its_meshes_and_replays_bit_for_bit(tmp_path):
     recorded = tmp_path / "ramp.mcap"
     done = runner.invoke(app, ["record", "ramp", "-s", "duration=2", "-o", str(recorded), "--no-rrd",
@@ -828,6 +829,7 @@ def _triangle_meets_box(tri: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool
 @settings(max_examples=120, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), count=st.integers(1, 40), builder=st.sampled_from(["median", "mean", "sah", "lbvh"]),
        volume=st.sampled_from(["aabb", "sphere", "obb"]))
+@pytest.mark.slow
 def test_the_walk_finds_what_a_brute_force_finds_with_every_volume_and_builder(seed, count, builder, volume):
     """colliders.mesh's walk (search_visits, the walk the contact loop makes) with any
     volume over a tree by any builder reaches exactly the triangles whose every node on the
@@ -884,6 +886,7 @@ def test_every_bounding_volume_gives_the_same_run(name):
 @given(seed=st.integers(0, 2**32 - 1), meshes=st.integers(1, 3), spheres=st.integers(0, 60),
        builder=st.sampled_from(["median", "mean", "sah", "lbvh"]), volume=st.sampled_from(["aabb", "sphere", "obb"]),
        moving=st.booleans())
+@pytest.mark.slow
 def test_the_simultaneous_descent_finds_what_a_walk_per_sphere_finds(seed, meshes, spheres, builder, volume, moving):
     """colliders.mesh.reachable_together (the spheres' tree and each mesh's descended
     together) gives the candidates of a walk per sphere (reachable: the triangles whose

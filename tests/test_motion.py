@@ -172,6 +172,7 @@ def test_a_sphere_far_from_fast_ones_keeps_a_small_box_and_one_near_them_a_large
 @given(st.sampled_from(["euler", "semi-implicit", "verlet", "exact"]), st.sampled_from([0.0, 0.7]),
        st.lists(st.floats(-3.0, 3.0), min_size=3, max_size=3), st.lists(st.floats(-20.0, 20.0), min_size=3, max_size=3),
        st.floats(0.0, 0.01))
+@pytest.mark.slow
 def test_particle_box_holds_the_path_and_its_extremes(integrator, k, velocity, acceleration, anchor):
     """The box of a path from its anchor to the step's end holds every point of the path
     (sampled densely) and is no larger than its extremes (the closed-form parabola vertex

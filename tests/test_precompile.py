@@ -7,6 +7,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from physdbg import precompile
 from physdbg.engine.warm import warm_up_without_forces
@@ -120,6 +121,7 @@ def test_the_helper_compiles_this_physdbg_whatever_the_working_folder_holds(tmp_
     assert done.stdout.strip() == precompile.__file__.replace("precompile.py", "__init__.py")
 
 
+@pytest.mark.slow
 def test_the_helper_fills_an_empty_cache_with_the_held_solve(tmp_path):
     """The real thing, once: the helper's program compiles into an empty cache folder, and
     a process started afterwards finds the held solve and the resting solve there (so the

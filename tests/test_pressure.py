@@ -55,6 +55,7 @@ def test_a_hard_sphere_gas_reads_close_to_carnahan_starling(tmp_path):
     assert "Carnahan–Starling at packing fraction 0.1: Z = 1.5213" in done.output
 
 
+@pytest.mark.slow
 def test_a_pile_that_fell_asleep_has_no_equation_of_state_and_info_says_nothing_of_one(tmp_path):
     """Nothing moves once a pile sleeps (engine/sleep.py): no temperature to divide by, so
     no Z (the ValueError says why) and no NaN or RuntimeWarning in `physdbg info`."""

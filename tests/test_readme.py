@@ -49,6 +49,7 @@ def newcomer(tmp_path_factory):
     return folder, env
 
 
+@pytest.mark.slow
 def test_readme_command_1_installs_no_more_than_the_core(newcomer):
     """What the README's commands need is in the core install: no test or chart extras."""
     folder, env = newcomer
@@ -58,6 +59,7 @@ def test_readme_command_1_installs_no_more_than_the_core(newcomer):
     assert done.stdout.split() == ["True", "True"]
 
 
+@pytest.mark.slow
 def test_every_readme_command_runs_in_the_fresh_venv_as_written(newcomer):
     folder, env = newcomer
     setup_commands = set(_readme_commands())

@@ -402,6 +402,7 @@ def _start_recording(tmp_path, extra=()):
     pytest.fail("the recording did not grow")
 
 
+@pytest.mark.slow
 def test_a_recorder_killed_outright_leaves_a_readable_file(tmp_path):
     proc, out = _start_recording(tmp_path)
     proc.send_signal(signal.SIGKILL)
@@ -416,6 +417,7 @@ def test_a_recorder_killed_outright_leaves_a_readable_file(tmp_path):
     assert state_hash(last.positions, last.velocities) == last.state_hash
 
 
+@pytest.mark.slow
 def test_ctrl_c_finishes_a_valid_file_up_to_the_last_step(tmp_path):
     proc, out = _start_recording(tmp_path)
     proc.send_signal(signal.SIGINT)
@@ -440,6 +442,7 @@ def test_record_never_overwrites_without_force(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize("force", [False, True])
+@pytest.mark.slow
 def test_two_writers_racing_on_one_path_leave_one_whole_recording(tmp_path, force):
     """Two `physdbg record` started together on one output: without --force one wins and
     the other exits 2 (the file is claimed exclusively before the run); with --force both
@@ -532,6 +535,7 @@ def test_a_damaged_chunk_is_found_by_the_command_line_with_exit_2(full_recording
         assert "damaged: its chunk at byte" in result.output and "Traceback" not in result.output
 
 
+@pytest.mark.slow
 def test_verify_passes_on_a_good_file_and_names_the_first_bad_step_of_a_tampered_one(tmp_path):
     path, live = record_with_events(tmp_path, "billiards")
     assert api.verify(path).ok
@@ -594,6 +598,7 @@ def test_a_real_time_run_is_recorded_with_its_step_lengths_and_verifies(tmp_path
     assert rec.meta["dt"] is None and api.verify(result.mcap).ok
 
 
+@pytest.mark.slow
 def test_the_contact_row_is_one_schema_from_the_loop_to_the_file():
     """The loop's buffer, the Contacts event and the recording's table are one dtype, and a
     file written while the ``how`` column was still named ``resting`` (the golden bounce)

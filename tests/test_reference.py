@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
@@ -258,6 +259,7 @@ def _v_and_a_corner(shuffle: int) -> tuple:
 
 @settings(max_examples=6, deadline=None)
 @given(st.integers(0, 2**16))
+@pytest.mark.slow
 def test_contacts_at_one_instant_are_resolved_alike_by_both_loops(shuffle):
     """Contacts at one instant are solved together by both loops (resolve.resolve_at_one_instant):
     the compiled loop gathers them from its queue, the reference from its list of every

@@ -122,6 +122,7 @@ def test_replay_never_overwrites_without_force(billiards_live, tmp_path):
     assert out.read_text() == "keep me"
 
 
+@pytest.mark.slow
 def test_the_real_viewer_opens_the_recording_on_a_picture_that_is_not_blank(tmp_path, virtual_display):
     from PIL import Image
 
@@ -194,6 +195,7 @@ def test_a_step_with_more_contacts_than_are_drawn_says_so(tmp_path, monkeypatch)
                    for (entity, step), comps in rows.items())
 
 
+@pytest.mark.slow
 def test_a_pile_falling_asleep_turns_grey_blue_live_and_replayed(tmp_path):
     """Sleeping spheres are drawn ASLEEP_COLOR from the step they fell asleep, and the log
     names who fell asleep and who woke; the MCAP state carries the mask, so the replay

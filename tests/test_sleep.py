@@ -140,6 +140,7 @@ def test_without_sleeping_the_narrow_pile_collapses():
     assert "max_events_per_step" in codes
 
 
+@pytest.mark.slow
 def test_a_pile_falls_asleep_exactly_and_sleeping_never_adds_energy():
     """100 spheres dropped into a narrow box pile up and every one falls asleep: no contact,
     no event, no motion is left, and no step left an overlap or gained energy beyond the

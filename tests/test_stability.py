@@ -39,6 +39,7 @@ def test_swept_stacks_hold_and_discrete_ones_overlap(restitution, height):
     assert discrete.outcome == "overlap left" and discrete.detail.endswith(" m")
 
 
+@pytest.mark.slow
 def test_bench_stability_writes_the_maps_and_says_where_each_method_tunnels(tmp_path):
     out = tmp_path / "stab"
     done = CliRunner().invoke(app, ["bench", "stability", "--quick", "-o", str(out)])

@@ -16,6 +16,7 @@ def _outcomes(cells):
     return [(c.map, c.method, c.x, c.y, c.outcome, c.detail) for c in cells]
 
 
+@pytest.mark.slow
 def test_local_cores_give_the_serial_results_in_order():
     serial = stability.maps(quick=True, workers=1)
     pooled = stability.maps(quick=True, workers=2)
@@ -25,6 +26,7 @@ def test_local_cores_give_the_serial_results_in_order():
     assert errors == [accuracy.run_named(*job).error for job in jobs]
 
 
+@pytest.mark.slow
 def test_a_dask_cluster_runs_the_same_sweep(tmp_path):
     distributed = pytest.importorskip("distributed", reason="needs pip install 'physdbg[dask]'")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
@@ -44,6 +46,7 @@ def test_a_dask_cluster_runs_the_same_sweep(tmp_path):
     assert errors == [r.error for r in accuracy.run_all(["cradle"], quick=True, workers=1)]
 
 
+@pytest.mark.slow
 def test_an_unreachable_scheduler_is_a_clear_error(tmp_path):
     pytest.importorskip("distributed", reason="needs pip install 'physdbg[dask]'")
     done = CliRunner().invoke(app, ["bench", "stability", "--quick", "--no-chart", "--dask", "tcp://127.0.0.1:9",

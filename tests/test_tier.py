@@ -184,6 +184,7 @@ print(json.dumps({"hits": sum(kernel.stats.cache_hits.values()), "misses": sum(k
 """
 
 
+@pytest.mark.slow
 def test_a_second_clone_of_the_same_version_loads_the_first_clone_s_kernels(tmp_path):
     """numba filed cached kernels under a hash of the checkout's absolute folder, so a second
     clone of one version found nothing to load and compiled for 40 s in the foreground; the

@@ -81,6 +81,7 @@ def _sampled_first_contact(dx, dv, da, radius_sum, integrator, k, horizon, sampl
 @given(relative=approach(scale=0.4), da=vec.map(lambda a: a * 2.0), radius_sum=st.floats(0.05, 1.0),
        horizon=st.floats(0.01, 2.0), integrator=st.sampled_from([VERLET, EXACT]),
        k=st.sampled_from([0.0, 0.3, 2.0]))
+@pytest.mark.slow
 def test_curved_paths_first_contact_matches_dense_sampling(relative, da, radius_sum, horizon, integrator, k):
     """Unequal accelerations (a falling sphere and a resting one): never skip the first root."""
     dx, dv = relative
@@ -231,6 +232,7 @@ def test_the_closest_point_of_a_triangle_is_closer_than_any_sampled_point_of_it(
 @settings(max_examples=100, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), integrator=st.sampled_from([EULER, VERLET, EXACT]),
        speed=st.floats(0.5, 40.0), radius=st.floats(0.02, 0.5))
+@pytest.mark.slow
 def test_sphere_triangle_time_of_impact_against_fine_sampling(seed, integrator, speed, radius):
     """The swept time of impact lies between the last sampled instant clear of the
     triangle and the first touching one (10,000 samples), is a real touch, and none is
@@ -278,6 +280,7 @@ def _moving_corners(tri, motion, tau):
 @given(seed=st.integers(0, 2**32 - 1), integrator=st.sampled_from([EULER, VERLET, EXACT]),
        pace=st.floats(0.0, 2.0), spin=st.floats(0.5, 60.0), radius=st.floats(0.02, 0.3),
        tau0=st.floats(0.0, 0.05))
+@pytest.mark.slow
 def test_sphere_against_a_rotating_triangle_against_fine_sampling(seed, integrator, pace, spin, radius, tau0):
     """A triangle turning (up to 60 rad/s) about a pivot and sliding: the swept time of
     impact lies between the last clear sample and the first touching one of 10,000 (the

@@ -376,6 +376,7 @@ def test_golden_state_hash_of_bounce():
     assert _final_hash("bounce")[-1] == GOLDEN_BOUNCE_HASH
 
 
+@pytest.mark.slow
 def test_same_scene_gives_bit_identical_hashes_in_another_process():
     here = _final_hash("rain", ["steps=40"])
     code = ("from tests.test_world import _final_hash; "
@@ -428,6 +429,7 @@ def test_box_rain_under_the_tc_rule_is_exact_and_does_not_churn():
     assert released["hold"] > 500 and released["tc"] * 50 < released["hold"], released
 
 
+@pytest.mark.slow
 def test_box_rain_comes_entirely_to_rest_under_tc_with_sleeping():
     """Issue 10's "the pile settles, contacts per step bounded": box-rain 1k with
     rapid_contact_rule=tc, sleep_speed=0.1, sleep_time=0.1 is exact at every step and every
@@ -622,6 +624,7 @@ def test_scanning_every_path_box_gives_the_states_listing_partners_gives(name, o
     assert lists[0] == scans[0] and lists[1] == scans[1] and lists[2] == scans[2]
 
 
+@pytest.mark.slow
 def test_highspeed_scans_by_itself_and_lists_again_every_relist_steps():
     """Among 5,000 fast spheres of spread speeds the lists pair each sphere with dozens
     (their boxes grown to their reach), and a step has a few hundred contacts: the world

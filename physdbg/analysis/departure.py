@@ -54,7 +54,9 @@ TIME_TOLERANCE = 0.02  # of dt: a kick this close to physdbg's time of impact is
 RESTING_SPEED_STEPS = 2.0  # a contact closing slower than the speed the forces give in this many steps is resting
 RESTITUTION_TOLERANCE = 0.02  # an effective restitution this close to the scene's is right
 RUNAWAY = 100.0  # a pair leaving a contact still approaching at this many times its speed has run away
-MAX_BODY_STEPS = 4_000_000  # frames × bodies compared at once (4 arrays of this many 3-vectors)
+# frames × bodies compared at once: 4 arrays of this many 3-vectors (96 B a body-step) and
+# the temporaries of the whole-run checks (kicks, integrator, drag: about as much again)
+MAX_BODY_STEPS = 12_000_000
 CHUNK_BODY_STEPS = 1 << 20  # frames × bodies a whole-run check reads at a time, where it can go in parts
 MAX_LISTED = 12  # departures listed; more of a kind are counted on its first
 FIT_SLACK = 1e-9  # m: an integrator's free-step residual this small counts as exact
@@ -67,6 +69,11 @@ OWN_RULES = (
     ("rapid-contact", "rapid_contact_time", 0.0, "rapid-contact rule"),
     ("resting", "rest_fraction", 0.0, "resting-contact rule"),
 )
+# Sleeping is one too, found otherwise: a step taken from the run's state starts with every
+# sphere awake (a sphere falls asleep only after sleep_time of slow steps), so where the
+# reference froze a sphere that the run keeps moving, every step ends where the run's does
+# and the runs still part (_slept).
+SLEEPING_RULE = ("sleeping", "sleep_speed", 0.0, "sleeping rule")
 
 # A tie: contacts at one instant, within this fraction of the step of each other (resolve.SAME_INSTANT,
 # physdbg's own), that share a sphere. Orders tried: every numbering of the tied spheres up to
@@ -202,13 +209,20 @@ class _Runs:
     dt: np.ndarray
 
 
+def too_long(frames: int, bodies: int) -> None:
+    """Refuse a comparison of more than MAX_BODY_STEPS frames × bodies (CheckRunError),
+    before any of it is read."""
+    if frames * bodies > MAX_BODY_STEPS:
+        raise CheckRunError(f"{frames} frames of {_body_count(bodies)} is {frames * bodies:,} body-steps; check-run "
+                            f"compares at most {MAX_BODY_STEPS:,} at once (its memory grows with them): cut the "
+                            f"run shorter, or use physdbg diff, which streams")
+
+
 def _load(foreign, reference) -> _Runs:
     n, frames = reference.header.count, min(foreign.frames, reference.frames)
     if foreign.header.count != n:
         raise CheckRunError(f"the runs have different numbers of bodies ({foreign.header.count} and {n})")
-    if frames * n > MAX_BODY_STEPS:
-        raise CheckRunError(f"{frames} frames of {n} bodies is {frames * n:,} body-steps; check-run compares at most "
-                            f"{MAX_BODY_STEPS:,} at once (cut the run shorter, or use physdbg diff, which streams)")
+    too_long(frames, n)
     tf, tr = foreign.frame_table(), reference.frame_table()
     mismatch = np.flatnonzero(np.abs(tf.time[:frames] - tr.time[:frames]) > 1e-9 * np.maximum(tr.dt[:frames], 1e-300))
     if len(mismatch):
@@ -277,7 +291,8 @@ class _Comparison:
         if first is not None:  # before it the runs agree, so there is nothing to judge
             self._judge_steps(max(first.step, 1))
             if not any(first.body in (d.body, d.other) or d.kind in _RUN_WIDE for d in self.departures):
-                self._no_step_departs(first)
+                if not self._slept(first):
+                    self._no_step_departs(first)
         listed = self._fold(self.departures)
         if first is not None:
             first.cause = self._cause_of(first)
@@ -640,6 +655,36 @@ class _Comparison:
                 "small differences in every step add up: check that the run's steps are the scene's (dt = "
                 f"{float(np.median(r.dt[1:])):.6g} s), and its forces and drag, to the last digit",
                 evidence={"growth": growth.as_dict()}))
+
+    def _slept(self, first: FirstDeparture) -> bool:
+        """Every step ends where the run's does, yet the runs part where physdbg's sleeping
+        rule froze a sphere (at rest in the reference, with spheres asleep in that step)
+        that the run keeps moving: named own-rule, as OWN_RULES are (SLEEPING_RULE;
+        check-run then compares against physdbg without sleeping)."""
+        speed = float(self.settings.get("sleep_speed") or 0.0)
+        r, k, b = self.runs, first.step, first.body
+        if speed <= 0 or k < 1 or np.any(r.vr[k, b]) or not np.any(r.vf[k, b]):
+            return False
+        asleep = self.rr.stats(k, k + 1)["asleep"] if self.rr.frames > k else np.zeros(0)
+        if not (len(asleep) and asleep[0] > 0):
+            return False
+        since = k
+        while since > 1 and not np.any(r.vr[since - 1, b]):
+            since -= 1
+        code, setting, value, name = SLEEPING_RULE
+        moving = float(np.linalg.norm(r.vf[k, b]))
+        did = (f"put sphere {b} to sleep (frozen from step {since}, once slower than sleep_speed = {speed:g} m/s for "
+               f"sleep_time = {float(self.settings.get('sleep_time') or 0.0):g} s), where your run keeps it moving "
+               f"({moving:.3g} m/s at step {k})")
+        flag = f"-s {setting}={value:g}"
+        self.departures.append(Departure(
+            "own-rule", k, b,
+            f"physdbg's {name} {did}; every step taken from your run's state ends where your run's does: the seed's "
+            f"model has no sleeping, so this is physdbg's modelling, not a mistake of your engine",
+            f"nothing to change in your engine; compare with {flag} to check the rest of the run against physdbg "
+            f"without sleeping (check-run does this itself)",
+            evidence={"rule": code, "setting": setting, "value": value, "name": name, "contacts": [], "said": did}))
+        return True
 
     def _own_rule(self, s: int, contacts: list[dict], off: np.ndarray) -> bool:
         """The run's step s is physdbg's step taken without one of its own modelling rules
