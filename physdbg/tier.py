@@ -39,6 +39,8 @@ from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
 
+from . import kernel_cache
+
 # Runs of at most this many sphere-steps are interpreted on a cold cache. Measured on this
 # project's 2-core machines (docs/benchmarks.md, "The first run"): interpreted, a whole
 # `physdbg run` costs about 0.45 s to start and 0.1–0.2 ms a sphere-step (gas, rain,
@@ -68,15 +70,15 @@ def setting() -> str:
 
 
 def cache_is_warm() -> bool:
-    """Whether numba's cache folder for these engine sources (physdbg/__init__.py names
+    """Whether numba's cache folder for these engine sources (physdbg/kernel_cache.py names
     it) holds the compiled step for this CPU: the held-contact solve and the time-ordered
     loop, the two trees a cold compile spends its time on. Read from the files (the engine
     is not imported): each needs its code (.nbc) and, where its index (.nbi) can be read,
     an entry for this machine's CPU (numba keys every cached kernel by the CPU's name and
     features: a folder filled on another CPU model is compiled again; docs/engine.md, "A
     cache for any CPU")."""
-    folder = os.environ.get("NUMBA_CACHE_DIR")
-    if not folder or not Path(folder).is_dir():
+    folder = kernel_cache.folder()
+    if not folder.is_dir():
         return False
     names = ("resolve.settle_held-", "timeline.run_time_order-")
     code = {name: False for name in names}
@@ -261,10 +263,9 @@ def background_command() -> list[str]:
     return [sys.executable, "-c", f"import sys; sys.path.insert(0, {root!r}); import physdbg.tier as t; t.main()"]
 
 
-def _marker() -> Path | None:
+def _marker() -> Path:
     """The file a running background compile holds its pid in (in the cache folder)."""
-    folder = os.environ.get("NUMBA_CACHE_DIR")
-    return Path(folder) / "background-compile.pid" if folder else None
+    return kernel_cache.folder() / "background-compile.pid"
 
 
 def running_background_compile() -> int | None:

@@ -7,6 +7,7 @@ the AST test below is what holds our own source to the rule.)
 from __future__ import annotations
 
 import ast
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -38,7 +39,7 @@ def test_core_source_imports_only_numpy_numba_and_basic_stdlib():
         depth = len(path.relative_to(PACKAGE / "engine").parts)  # 1: engine/x.py, 2: engine/pkg/x.py
         for node in ast.walk(ast.parse(path.read_text())):
             if isinstance(node, ast.ImportFrom) and node.level > depth:
-                assert node.level == depth + 1 and node.module in ("events", "errors"), (
+                assert node.level == depth + 1 and node.module in ("events", "errors", "kernel_cache"), (
                     f"{path.name} reaches outside the core: {'.' * node.level}{node.module}")
 
 
@@ -131,7 +132,7 @@ def test_no_two_modules_import_each_other_however_indirectly():
 
 def test_the_layers_import_only_downwards():
     graph = _module_graph()
-    layer = {"errors": 0, "version": 0, "limits": 0, "events": 1, "observe": 2, "engine": 2, "scenes": 3, "advisor": 3, "meshes": 3,
+    layer = {"errors": 0, "version": 0, "limits": 0, "kernel_cache": 0, "events": 1, "observe": 2, "engine": 2, "scenes": 3, "advisor": 3, "meshes": 3,
              "scene": 4, "record": 5, "peers": 6, "analysis": 7, "precompile": 8, "tier": 9, "interrupt": 9, "api": 10, "cli": 11,
              "__main__": 12, "physdbg": 13}
     for module, imports in graph.items():
@@ -150,3 +151,20 @@ def test_every_exception_class_lives_in_errors_py():
                 bases = {getattr(b, "id", getattr(b, "attr", "")) for b in node.bases}
                 assert not bases & {"Exception", "PhysdbgError", "FloatingPointError", "ValueError", "RuntimeError"} \
                     and not node.name.endswith("Error"), f"{path.name} defines {node.name}"
+
+
+def test_importing_physdbg_defines_names_and_does_nothing_else():
+    """`import physdbg` neither hashes the engine's sources nor sets NUMBA_CACHE_DIR for the
+    process, nor loads numba: the engine does that when it is first imported."""
+    code = ("import os, sys, physdbg\n"
+            "assert 'NUMBA_CACHE_DIR' not in os.environ\n"
+            "assert not {'numba', 'numpy', 'physdbg.kernel_cache', 'physdbg.engine'} & set(sys.modules), "
+            "sorted(m for m in sys.modules if m.startswith(('numba', 'numpy', 'physdbg')))\n"
+            "import physdbg.engine\n"
+            "from physdbg import kernel_cache\n"
+            "assert os.environ['NUMBA_CACHE_DIR'] == str(kernel_cache.folder())\n"
+            "import numba.core.config\n"
+            "assert numba.core.config.CACHE_DIR == os.environ['NUMBA_CACHE_DIR']\n")
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
+    assert done.returncode == 0, done.stderr

@@ -282,6 +282,9 @@ class _Comparison:
         first = self._first_departure()
         while first is not None and len(self.ties) < MAX_TIES and self._tie_parts(first):
             first = self._first_departure()
+        if len(self.ties) == MAX_TIES and first is not None:
+            self.notes.append(f"physdbg's reference went on from {MAX_TIES} ties taken in the run's order and no "
+                              f"further: a tie after them is named where its step departs, not followed")
         self._measure_drag()
         self._immovable_moved()
         kicked = self._kick_sizes() > self._kick_thresholds()  # (F-1, N)
@@ -542,9 +545,13 @@ class _Comparison:
             x0, v0 = r.xf[s - 1], r.vf[s - 1]
             if self.estimated:  # the velocity at the step's start: the step's average less half the forces' change
                 v0 = r.vf[s] - 0.5 * self.acc * float(r.dt[s])
-        k = np.arange(st.count) if order is None else np.asarray(order)
-        state = State(np.ascontiguousarray(x0[k]), np.ascontiguousarray(v0[k]), st.inverse_mass[k], st.radius[k],
-                      st.restitution[k], st.gravity_scale[k])
+        if order is None:  # (the common case: no copies of the constants)
+            k = None
+            state = State(np.array(x0), np.array(v0), st.inverse_mass, st.radius, st.restitution, st.gravity_scale)
+        else:
+            k = np.asarray(order)
+            state = State(np.ascontiguousarray(x0[k]), np.ascontiguousarray(v0[k]), st.inverse_mass[k], st.radius[k],
+                          st.restitution[k], st.gravity_scale[k])
         seen = ListObserver()
         world = World(state, self.scene.walls, dataclasses.replace(self.scene.settings, **settings) if settings
                       else self.scene.settings, seen)
@@ -553,8 +560,12 @@ class _Comparison:
             world.step(float(r.dt[s]))
         except WorldStuck:
             return None
-        x, v = np.empty_like(state.positions), np.empty_like(state.velocities)
-        x[k], v[k] = state.positions, state.velocities
+        if k is None:
+            x, v = state.positions, state.velocities
+            k = np.arange(st.count)
+        else:
+            x, v = np.empty_like(state.positions), np.empty_like(state.velocities)
+            x[k], v[k] = state.positions, state.velocities
         out = []
         batches = seen.of_type(Contacts)
         c = batches[0] if batches else None
