@@ -5,7 +5,7 @@
 
 The built-in ``rain`` scene with the box grown so the spheres fill 10 % of it, dt = 1/240 s;
 its pile rules are left to ``auto``, which picks the TC rule and sleeping at 0.1 m/s after
-0.1 s for a pile (docs/engine.md, "Sleeping"); ``--set rapid_contact_rule=hold --set
+0.1 s for a pile (docs/sleeping.md); ``--set rapid_contact_rule=hold --set
 sleep_speed=0`` runs the exact rules instead.
 Prints, for the run: steps stopped by a budget (the event cap or the held-contact
 solve's), the largest overlap after any step, contacts, held contacts and sleeping spheres

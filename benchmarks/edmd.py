@@ -138,7 +138,7 @@ def main() -> None:
     print(f"hard-sphere gas, N = {args.count}, packing {args.packing}, periodic cube, one core")
     print(f"  EDMD (Single, {args.edmd_time:g} τ, packing {edmd_packing}): {edmd_collisions} collisions in "
           f"{edmd_cpu:.2f} s CPU: {edmd_rate:.3g}/s")
-    for loop in ("step", "calendar"):  # physdbg's two event loops (docs/engine.md, "The event calendar")
+    for loop in ("step", "calendar"):  # physdbg's two event loops (docs/space-order.md, "The event calendar")
         ours, our_cpu = run_physdbg(gas_scene(args.count, args.packing, args.steps, loop))
         our_rate = ours / our_cpu
         print(f"  physdbg, event_loop = {loop} ({args.steps} steps of {scene.dt:g} s): {ours} pair collisions in "

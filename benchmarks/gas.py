@@ -13,7 +13,7 @@ steps, so what the once-a-step phases cost is what physdbg pays for its steps; `
 (with ``--steps`` for the same simulated time) shows how that cost trades against the
 longer steps' larger swept boxes (more candidate pairs a contact). ``--periodic``: the
 gas in a periodic box (the scene of benchmarks/edmd.py); ``--event-loop calendar``: the
-event calendar that keeps predictions across steps (docs/engine.md, "The event calendar").
+event calendar that keeps predictions across steps (docs/space-order.md, "The event calendar").
 """
 
 from __future__ import annotations

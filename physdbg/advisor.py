@@ -32,7 +32,7 @@ itself (docs/benchmarks.md): with ``rapid_contact_rule = "hold"`` each impact on
 solved through its held contacts and the steps slow as it grows (rain of 500: minutes);
 with ``"tc"`` its bed rattles ever faster until a budget stops steps; with ``"tc"`` and
 sleeping (``sleep_speed``) it falls asleep, exactly, at the price of freezing motion below
-``sleep_speed`` (docs/engine.md, "Sleeping"). This is advice on speed and on resting,
+``sleep_speed`` (docs/sleeping.md). This is advice on speed and on resting,
 read from those measurements; it does not change ``check``'s exit code.
 """
 
@@ -462,7 +462,7 @@ def resolve_pile_rules(scene) -> dict[str, str]:
                                                 ("rapid_contact_rule", "the TC rule"),
                                                 ("sleep_speed", "sleeping")) if name in asked])
         why = (f"{pile['why']}: an exact pile does not rest by itself; {rules} let it fall asleep "
-               f"(docs/engine.md, \"Sleeping\")")
+               f"(docs/sleeping.md)")
     else:
         values = {name: {"rapid_contact_time": 0.0, "rapid_contact_rule": "hold", "sleep_speed": 0.0}[name]
                   for name in asked}

@@ -114,7 +114,7 @@ def calendar_words(world, steps: int) -> str:
     words = f"calendar in {world.calendar_steps} of {steps} steps"
     if world.calendar_steps < steps and world.calendar_unfit:
         words += f"; the time-ordered loop took the rest, which it cannot serve: {world.calendar_unfit}"
-    return words + " (docs/engine.md, \"The event calendar\")"
+    return words + " (docs/space-order.md, \"The event calendar\")"
 
 
 def load_scene(scene: str, overrides: Sequence[str] = ()) -> Scene:

@@ -359,7 +359,9 @@ def _render(report, kind: str, output_format: str, as_json: bool, markdown: bool
     chosen = "json" if as_json else "markdown" if markdown else output_format
     if chosen not in ("text", "json", "markdown"):
         raise PhysdbgError(f"--format must be text, json or markdown, not {chosen!r}")
-    return getattr(rendering, f"{kind}_{'text' if chosen == 'text' else chosen}")(report)
+    if chosen == "json":
+        return rendering.report_json(report)
+    return getattr(rendering, f"{kind}_{chosen}")(report)
 
 
 @app.command()
@@ -951,7 +953,7 @@ def overlap(
     Example: physdbg overlap icosphere paddle --pose 0.5,0,0,0,0,30
     """
     with _user_errors(as_json):
-        from .analysis.overlap import overlap as search, overlap_text
+        from .analysis.mesh_pair_search import overlap as search, overlap_text
 
         report = search(a, b, pose_a=pose_a, pose_b=pose, volume=volume, builder=builder, hull=hull)
         from .analysis.report import versioned

@@ -74,7 +74,7 @@ def cache_is_cold() -> bool:
     """Whether numba's cache holds no compiled held solve for these engine sources and this
     CPU (then it holds next to nothing): its index lists no version compiled for this
     machine's CPU name and features (numba's "magic tuple"; a folder filled on another CPU
-    model is recompiled here, docs/engine.md, "A cache for any CPU"), or the code it names
+    model is recompiled here, docs/compiling.md, "A cache for any CPU"), or the code it names
     is not there yet (numba writes the index first). Reads numba's cache object, an
     internal: should that change, the cache counts as warm, and kernels compile in one
     process as before."""

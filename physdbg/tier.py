@@ -75,7 +75,7 @@ def cache_is_warm() -> bool:
     loop, the two trees a cold compile spends its time on. Read from the files (the engine
     is not imported): each needs its code (.nbc) and, where its index (.nbi) can be read,
     an entry for this machine's CPU (numba keys every cached kernel by the CPU's name and
-    features: a folder filled on another CPU model is compiled again; docs/engine.md, "A
+    features: a folder filled on another CPU model is compiled again; docs/compiling.md, "A
     cache for any CPU")."""
     folder = kernel_cache.folder()
     if not folder.is_dir():

@@ -219,7 +219,7 @@ def test_the_run_summary_says_where_the_calendar_served():
 
     served = CliRunner().invoke(app, ["run", "cradle", "-s", "event_loop=calendar"])
     assert served.exit_code == 0, served.output
-    assert "event loop  calendar in 180 of 180 steps (docs/engine.md" in served.output
+    assert "event loop  calendar in 180 of 180 steps (docs/space-order.md" in served.output
     not_served = CliRunner().invoke(app, ["run", "bounce", "-s", "event_loop=calendar"])
     assert not_served.exit_code == 0, not_served.output
     assert ("calendar in 0 of 300 steps; the time-ordered loop took the rest, which it cannot serve: gravity bends"

@@ -164,3 +164,23 @@ def test_the_architecture_page_names_every_module_and_only_files_that_exist():
     index = (ROOT / "docs" / "README.md").read_text()
     pages = sorted(p.name for p in (ROOT / "docs").glob("*.md") if p.name != "README.md")
     assert [name for name in pages if f"({name})" not in index] == []
+
+
+def test_every_relative_link_in_the_docs_resolves():
+    broken = []
+    for page in DOCS:
+        for target in re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", page.read_text()):
+            if not target.startswith(("http://", "https://", "mailto:")) and not (page.parent / target).exists():
+                broken.append(f"{page.relative_to(ROOT)} -> {target}")
+    assert broken == []
+
+
+def test_every_file_the_docs_name_in_the_repository_exists():
+    """A path the docs name in code font (benchmarks/…, tests/…, physdbg/…) is a file that
+    is there: a moved benchmark or module leaves no stale pointer."""
+    missing = []
+    for page in DOCS:
+        for path in re.findall(r"`((?:benchmarks|tests|physdbg)/[A-Za-z0-9_./-]+\.(?:py|js|toml|md))`", page.read_text()):
+            if not (ROOT / path).exists():
+                missing.append(f"{page.relative_to(ROOT)} -> {path}")
+    assert missing == []

@@ -1,4 +1,4 @@
-"""Adding an integrator or a collider kind (docs/engine.md, "Adding an integrator or a
+"""Adding an integrator or a collider kind (docs/colliders.md, "Adding an integrator or a
 collider kind"): a dummy of each, added where the docs say, is handled by every table and
 reader; one left out of a table, or met in a recording this physdbg does not know, is
 refused with a message that says what is missing."""
@@ -36,7 +36,7 @@ def test_an_integrator_without_its_row_in_a_table_is_refused_naming_every_such_t
     assert "5 integrators (euler, semi-implicit, verlet, exact, dummy)" in message
     for table in motion.INTEGRATOR_TABLES:
         assert f"{table} has 4 rows" in message
-    assert 'docs/engine.md, "Adding an integrator or a collider kind"' in message
+    assert 'docs/colliders.md, "Adding an integrator or a collider kind"' in message
 
 
 @pytest.fixture
@@ -93,7 +93,7 @@ def test_a_collider_kind_without_its_module_is_refused_naming_it():
         colliders.check_kind_modules((*events.KIND_NAMES, "capsule"))
     message = str(raised.value)
     assert "4 collider kinds in the table (sphere, wall, mesh, capsule) but 3 modules" in message
-    assert "no module for 3 capsule" in message and 'docs/engine.md, "Adding an integrator or a collider kind"' in message
+    assert "no module for 3 capsule" in message and 'docs/colliders.md, "Adding an integrator or a collider kind"' in message
     colliders.check_kind_modules()  # the engine's own table and modules agree
 
 
@@ -175,3 +175,29 @@ def test_a_kind_with_no_branch_in_the_switch_is_refused_at_its_first_use_never_r
         with pytest.raises(ValueError, match="a collider kind with no branch in this function of the switch"):
             call(3)
     assert "docs/engine.md" in UNKNOWN_KIND
+
+
+# ----------------------------------------------------------------------------- the docs' list
+# The files the tests above exercise for a new collider kind: the table (events.py), the
+# switch and its module table (colliders/__init__.py), and the readers that rebuild a
+# contact's geometry and refuse a kind they have no branch for.
+KIND_FILES = ("events.py", "engine/colliders/__init__.py", "analysis/tunnel.py", "analysis/audit.py",
+              "analysis/departure.py")
+
+
+def test_the_architecture_page_lists_every_file_these_tests_exercise_for_a_new_kind():
+    """docs/architecture.md, "Adding": read alone, it names every file a new collider kind
+    (a capsule) touches; the ones this file checks are among them, and engine.md's own
+    list names them too."""
+    import re
+    from pathlib import Path
+
+    docs = Path(__file__).resolve().parents[1] / "docs"
+    page = (docs / "architecture.md").read_text()
+    listed = page[page.index("**A collider kind**"):page.index("**A cause**")]
+    named = set(re.findall(r"`((?:[a-z_]+/)*[a-z_]+\.py)`", listed))
+    assert "engine/colliders/capsule.py" in named
+    assert [f for f in KIND_FILES if f not in named] == []
+    engine = (docs / "engine.md").read_text()
+    section = engine[engine.index("## Adding an integrator or a collider kind"):engine.index("## Space order")]
+    assert [f for f in KIND_FILES if f.rsplit("/", 1)[-1] not in section] == []

@@ -21,7 +21,7 @@ Checks (kind: what it means):
   bed that rattles like that is judged when its spheres are asleep: if every sphere of
   the step is asleep by the end of the run, sleeping ended it, and a note says so instead;
 * ``mesh-overlap``: two meshes, at least one of them kinematic, pass into each other (their
-  prescribed motions are a scene bug: :mod:`.mesh_overlap`);
+  prescribed motions are a scene bug: :mod:`.mesh_interpenetration`);
 * ``pinned``: a kinematic mesh pressed a sphere against something immovable from the
   opposite side (the engine's ``pinned`` warning, resting.pinned_by): no impulse can stop
   a prescribed motion, so the run ended there;
@@ -44,7 +44,7 @@ from numba import njit
 from ..events import (FEATURE_NAMES, HOW_AT_ONE_INSTANT, HOW_IMPULSE, HOW_RAPID, HOW_RESTING, KIND_MESH, KIND_WALL,
                       PARTNER_IS_SPHERE, Contacts, EngineWarning, StepEnd, contact_words, feature_words,
                       partner_is_sphere, partner_words)
-from .mesh_overlap import MeshOverlaps
+from .mesh_interpenetration import MeshOverlaps
 from .quiet import quiet_numerics
 from .tunnel import StepChecker, sorted_unique
 
@@ -227,7 +227,7 @@ class Auditor:
         gravity = np.asarray(self.settings.get("gravity", (0.0, 0.0, 0.0)), dtype=np.float64)
         self._free_flight_acc = np.where(np.isfinite(self.mass)[:, None],
                                          np.asarray(header.gravity_scale)[:, None] * gravity[None, :], 0.0)
-        # meshes whose prescribed motions pass through each other (mesh_overlap.py)
+        # meshes whose prescribed motions pass through each other (mesh_interpenetration.py)
         self._mesh_overlaps = MeshOverlaps(header.walls.meshes) if header.walls.meshes.moving.any() else None
         self._rattled: list[tuple[int, int]] = []  # (step of the rattle, step all were asleep)
         self._settling: list[tuple[int, int, int]] = []  # (step of the rattle, awake at the end, its spheres)

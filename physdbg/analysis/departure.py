@@ -545,11 +545,10 @@ class _Comparison:
             x0, v0 = r.xf[s - 1], r.vf[s - 1]
             if self.estimated:  # the velocity at the step's start: the step's average less half the forces' change
                 v0 = r.vf[s] - 0.5 * self.acc * float(r.dt[s])
+        k = np.arange(st.count) if order is None else np.asarray(order)
         if order is None:  # (the common case: no copies of the constants)
-            k = None
             state = State(np.array(x0), np.array(v0), st.inverse_mass, st.radius, st.restitution, st.gravity_scale)
         else:
-            k = np.asarray(order)
             state = State(np.ascontiguousarray(x0[k]), np.ascontiguousarray(v0[k]), st.inverse_mass[k], st.radius[k],
                           st.restitution[k], st.gravity_scale[k])
         seen = ListObserver()
@@ -560,10 +559,9 @@ class _Comparison:
             world.step(float(r.dt[s]))
         except WorldStuck:
             return None
-        if k is None:
+        if order is None:
             x, v = state.positions, state.velocities
-            k = np.arange(st.count)
-        else:
+        else:  # back to the scene's numbering
             x, v = np.empty_like(state.positions), np.empty_like(state.velocities)
             x[k], v[k] = state.positions, state.velocities
         out = []

@@ -20,10 +20,6 @@ if TYPE_CHECKING:  # for the annotations only: printing a summary loads no analy
     from .diff import DiffReport
 
 
-def to_json(report: DiffReport | AuditReport) -> str:
-    return json.dumps(report.as_dict(), indent=2, default=_plain, allow_nan=False)
-
-
 def _plain(value):
     if hasattr(value, "tolist"):
         return value.tolist()
@@ -50,11 +46,8 @@ def versioned(data: dict) -> dict:
     return {"physdbg_version": __version__, "format_version": FORMAT_VERSION, **data}
 
 
-def diff_json(report: DiffReport) -> str:
-    return json.dumps(versioned(_clean(report.as_dict())), indent=2, default=_plain)
-
-
-def explain_json(report: AuditReport) -> str:
+def report_json(report: DiffReport | AuditReport | CheckRunReport) -> str:
+    """Any report as JSON: its ``as_dict()`` with the versions first, NaN and infinity as null."""
     return json.dumps(versioned(_clean(report.as_dict())), indent=2, default=_plain)
 
 
@@ -178,10 +171,6 @@ def explain_markdown(r: AuditReport) -> str:
                   for f in r.findings]
     lines += [f"> {n}" for n in r.notes]
     return "\n".join(lines) + "\n"
-
-
-def check_run_json(report: CheckRunReport) -> str:
-    return json.dumps(versioned(_clean(report.as_dict())), indent=2, default=_plain)
 
 
 def _first(r: CheckRunReport) -> str:
@@ -408,7 +397,7 @@ def check_text(result) -> str:
             mark = "*" if p.value == chosen else " "
             lines.append(f"{'':<11} {mark}{p.value:<14} {p.outcome:<13} {p.why}")
         if chosen != "tc+sleep":
-            lines.append(f'  to settle {PILE_REMEDY_FLAGS}  (docs/engine.md, "Sleeping")')
+            lines.append(f'  to settle {PILE_REMEDY_FLAGS}  (docs/sleeping.md)')
     lines += auto_lines(result.scene.auto)
     lines.append("recommended " + " ".join(f"{k}={v}" for k, v in advice.recommended.items()))
     lines += [f"  {k:<12}{advice.reasons[k]}" for k in advice.recommended]

@@ -50,7 +50,7 @@ INTEGRATOR_NAMES = ("euler", "semi-implicit", "verlet", "exact")
 # What the rest of the engine asks about an integrator: one entry per integrator, indexed
 # by its code, so a new integrator is its row here and its path in the functions below
 # (path_coefficients, curvature_scale, velocity_coefficients), and nothing elsewhere
-# branches on which integrator it is (docs/engine.md, "Adding an integrator or a collider kind").
+# branches on which integrator it is (docs/colliders.md, "Adding an integrator or a collider kind").
 #   STRAIGHT_PATH       the position moves on the straight line of the anchor velocity
 #                       inside a step (P2 = 0), whatever the acceleration does to v
 #   KICK_AT_STEP_START  the velocity is updated once, before the paths (semi-implicit):
@@ -86,7 +86,7 @@ def check_integrator_tables(names=INTEGRATOR_NAMES, tables=None) -> None:
     if short:
         raise ValueError(f"engine/motion.py: {len(names)} integrators ({', '.join(names)}) but " + "; ".join(short)
                          + ": give each integrator its row in every table"
-                         " (docs/engine.md, \"Adding an integrator or a collider kind\")")
+                         " (docs/colliders.md, \"Adding an integrator or a collider kind\")")
 
 
 check_integrator_tables()

@@ -16,7 +16,7 @@ each built and unpacked by its own module and handed down whole to every kernel 
 reaches a kind. Adding a kind is one module beside sphere.py, plane.py and mesh.py (its
 functions and its group), its row
 in the table (events.KIND_NAMES, PARTNER_IS_SPHERE), its module in KIND_MODULES, and one
-branch in each function of the switch (docs/engine.md, "Adding an integrator or a collider kind"):
+branch in each function of the switch (docs/colliders.md, "Adding an integrator or a collider kind"):
 every function names each kind it handles and raises UNKNOWN_KIND for any other.
 """
 
@@ -40,7 +40,7 @@ __all__ = ["KIND_NAMES", "KINDS", "KIND_MODULES", "PARTNER_IS_SPHERE", "partner_
 KIND_MODULES = (sphere, plane, mesh)
 # what every function of the switch raises for a kind it has no branch for (a kind added to
 # the table but not to the switch fails at its first use, never runs another kind's code)
-UNKNOWN_KIND = ("engine/colliders: a collider kind with no branch in this function of the switch (docs/engine.md, "
+UNKNOWN_KIND = ("engine/colliders: a collider kind with no branch in this function of the switch (docs/colliders.md, "
                 "\"Adding an integrator or a collider kind\")")
 
 
@@ -52,7 +52,7 @@ def check_kind_modules(names=KIND_NAMES, modules=KIND_MODULES) -> None:
         raise ValueError(f"engine/colliders: {len(names)} collider kinds in the table ({', '.join(names)}) but "
                          f"{len(modules)} modules in KIND_MODULES" + (f"; no module for {missing}" if missing else "")
                          + ": a kind is one module, its table row and one branch per switch function "
-                           "(docs/engine.md, \"Adding an integrator or a collider kind\")")
+                           "(docs/colliders.md, \"Adding an integrator or a collider kind\")")
 
 
 check_kind_modules()
