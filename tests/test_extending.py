@@ -42,7 +42,7 @@ def test_an_integrator_without_its_row_in_a_table_is_refused_naming_every_such_t
 @pytest.fixture
 def dummy_integrator(monkeypatch):
     """A fifth integrator, "dummy", with Verlet's row in every table of motion.py (what
-    docs/engine.md says a new integrator adds there), as every reader sees the tables."""
+    docs/colliders.md says a new integrator adds there), as every reader sees the tables."""
     import physdbg.advisor  # noqa: F401  (the readers, loaded before their tables change)
     import physdbg.analysis.charts  # noqa: F401
     import physdbg.analysis.departure  # noqa: F401
@@ -174,7 +174,7 @@ def test_a_kind_with_no_branch_in_the_switch_is_refused_at_its_first_use_never_r
         call(events.KIND_PAIR)  # a kind it knows
         with pytest.raises(ValueError, match="a collider kind with no branch in this function of the switch"):
             call(3)
-    assert "docs/engine.md" in UNKNOWN_KIND
+    assert "docs/colliders.md" in UNKNOWN_KIND
 
 
 # ----------------------------------------------------------------------------- the docs' list
@@ -187,7 +187,7 @@ KIND_FILES = ("events.py", "engine/colliders/__init__.py", "analysis/tunnel.py",
 
 def test_the_architecture_page_lists_every_file_these_tests_exercise_for_a_new_kind():
     """docs/architecture.md, "Adding": read alone, it names every file a new collider kind
-    (a capsule) touches; the ones this file checks are among them, and engine.md's own
+    (a capsule) touches; the ones this file checks are among them, and colliders.md's own
     list names them too."""
     import re
     from pathlib import Path
@@ -198,6 +198,6 @@ def test_the_architecture_page_lists_every_file_these_tests_exercise_for_a_new_k
     named = set(re.findall(r"`((?:[a-z_]+/)*[a-z_]+\.py)`", listed))
     assert "engine/colliders/capsule.py" in named
     assert [f for f in KIND_FILES if f not in named] == []
-    engine = (docs / "engine.md").read_text()
-    section = engine[engine.index("## Adding an integrator or a collider kind"):engine.index("## Space order")]
+    colliders = (docs / "colliders.md").read_text()
+    section = colliders[colliders.index("## Adding an integrator or a collider kind"):]
     assert [f for f in KIND_FILES if f.rsplit("/", 1)[-1] not in section] == []
