@@ -721,7 +721,7 @@ def check_class(runs: Sequence[str | Path], scene: str, overrides: Sequence[str]
     """check-run of every run of a class (analysis.classroom.runs_in) against ``scene`` (a
     built-in name or a .toml path, read by each worker): an analysis.classroom.ClassReport.
     workers: local processes (None: every core); dask: an existing cluster's scheduler;
-    options: check_run's atol, rtol, time_unit, length_unit."""
+    options: check_run's atol, rtol, time_unit, length_unit, verify."""
     from .analysis.classroom import class_report
     from .analysis.sweep import run_jobs
 

@@ -588,8 +588,9 @@ def import_(
 
 
 def _check_class(folder: Path, scene: str, overrides: list[str], atol, rtol, time_unit, length_unit, jobs, dask,
-                 chosen: str) -> None:
-    """check-run of a folder of runs: one table (analysis.classroom)."""
+                 chosen: str, verify: bool = True) -> None:
+    """check-run of a folder of runs: one table (analysis.classroom); verify: check every
+    state read against its stored hash, as for one run (--no-verify: not)."""
     with _user_errors(chosen == "json"):
         import json
 
@@ -601,7 +602,7 @@ def _check_class(folder: Path, scene: str, overrides: list[str], atol, rtol, tim
 
         runs = classroom.runs_in([folder])
         report = check_class(runs, scene, overrides, workers=jobs, dask=dask, atol=atol, rtol=rtol,
-                             time_unit=time_unit, length_unit=length_unit)
+                             time_unit=time_unit, length_unit=length_unit, verify=verify)
         if chosen == "json":
             typer.echo(json.dumps(report.as_dict(), indent=2))
         else:
@@ -670,8 +671,12 @@ def check_run(
     Example: physdbg check-run docs/examples/student-bounce.csv --scene bounce
     """
     if run.is_dir():
+        if keep is not None:
+            with _user_errors(as_json or output_format == "json"):
+                raise PhysdbgError(f"--keep keeps the two recordings of one run, and {run} is a folder of runs: "
+                                   f"check the run you want to keep on its own with --keep")
         _check_class(run, scene, set_ or [], atol, rtol, time_unit, length_unit, jobs, dask,
-                     "json" if as_json else "markdown" if markdown else output_format)
+                     "json" if as_json else "markdown" if markdown else output_format, verify=not no_verify)
         return
     with _user_errors(as_json or output_format == "json"):
         tier = _choose_tier(scene, set_)

@@ -78,6 +78,28 @@ def test_check_run_of_a_folder_prints_the_table_in_each_format(tmp_path, fmt):
         assert json.loads(result.output)["counts"]["one-missing"] == 1
 
 
+def test_a_folder_refuses_keep_and_passes_no_verify_to_every_run(tmp_path, monkeypatch):
+    """--keep keeps one run's two recordings: with a folder it is refused, in one line, not
+    ignored; --no-verify reaches every run's check-run."""
+    a_class(tmp_path / "class", 3)
+    kept = CliRunner().invoke(app, ["check-run", str(tmp_path / "class"), "--scene", GLANCE, "--keep",
+                                    str(tmp_path / "kept")])
+    assert kept.exit_code == 2 and "--keep keeps the two recordings of one run" in kept.output, kept.output
+    assert kept.output.count("\n") == 1 and not (tmp_path / "kept").exists()
+    seen = []
+    real = api.check_run
+
+    def check_run(*args, **kwargs):
+        seen.append(kwargs.get("verify", True))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(api, "check_run", check_run)
+    done = CliRunner().invoke(app, ["check-run", str(tmp_path / "class"), "--scene", GLANCE, "-j", "1",
+                                    "--no-verify"])
+    assert done.exit_code == 1 and done.output.startswith("class      3 runs of glance"), done.output
+    assert seen == [False, False, False]
+
+
 @pytest.mark.slow
 def test_the_same_table_from_a_dask_cluster(tmp_path):
     distributed = pytest.importorskip("distributed", reason="needs pip install 'physdbg[dask]'")
