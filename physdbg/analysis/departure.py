@@ -742,9 +742,9 @@ class _Comparison:
         return [g for g in groups if len(g) > 1 and any(
             set(self._bodies(c)) & set(self._bodies(d)) for i, c in enumerate(g) for d in g[i + 1:])]
 
-    def _tie_orders(self, s: int, contacts: list[dict], start=None):
-        """Each (tie, order, the local step) of step s taken with a tie's spheres numbered in
-        another order (``_local_step``'s order), from the run's state or ``start``."""
+    def _tie_orders(self, s: int, contacts: list[dict]):
+        """Each (tie, order, the local step) of step s taken from the run's state with a tie's
+        spheres numbered in another order (``_local_step``'s order)."""
         import itertools
 
         n = self.scene.state.count
@@ -757,7 +757,7 @@ class _Comparison:
                     continue
                 order = np.arange(n)
                 order[spheres] = numbering
-                step = self._local_step(s, start, order, space_order="given")
+                step = self._local_step(s, order=order, space_order="given")
                 if step is not None:
                     yield tie, order, step
 
@@ -784,8 +784,7 @@ class _Comparison:
             self.departures.append(Departure(
                 "tie", s, tie[0]["a"],
                 f"{said}: physdbg takes {self._sequence(ours)}; your run {self._sequence(theirs)}. Taken in your run's "
-                f"order, physdbg's "
-                f"step {s} from your run's state ends where your run's does. Which of two contacts at one instant "
+                f"order, physdbg's step {s} from your run's state ends where your run's does. Which of two contacts at one instant "
                 f"goes first is not the model's to say (each is the earliest), so this is a tie, not a mistake",
                 "nothing to change in your engine: either order is right. (Runs that take ties in one order compare "
                 "bit for bit; physdbg takes them in the order its tests found them.)",
@@ -896,8 +895,9 @@ class _Comparison:
         a = max(float(np.linalg.norm(self.acc[b])) for b in self._bodies(c))
         return a > 0 and c["closing"] < RESTING_SPEED_STEPS * a * float(self.runs.dt[s])
 
-    def _bodies(self, c: dict) -> tuple[int, ...]:
-        return (c["a"], c["other"]) if PARTNER_IS_SPHERE[c["kind"]] else (c["a"],)
+    @staticmethod
+    def _bodies(c: dict) -> tuple[int, ...]:
+        return bodies_of(c)
 
     def _kick_for(self, c: dict) -> dict | None:
         """The foreign kick of contact c: on its sphere (or the other sphere of a pair), in
@@ -1515,6 +1515,11 @@ def _changed_contacts(with_rule: list[dict], without: list[dict]) -> list[tuple[
         if match["restitution"] != c["restitution"] or match["resting"] != c["resting"]:
             changed.append((c, match))
     return changed or unmatched
+
+
+def bodies_of(c: dict) -> tuple[int, ...]:
+    """The spheres of a contact row (a dict with kind, a, other): both of a pair, else a."""
+    return (c["a"], c["other"]) if PARTNER_IS_SPHERE[c["kind"]] else (c["a"],)
 
 
 def _body_count(n: int) -> str:

@@ -985,14 +985,12 @@ def _tied(x: dict, y: dict, ca, cb) -> bool:
     """Runs A and B first differ at contacts x (A's) and y (B's) of one step, at one instant,
     that share a sphere, and each run has the other's contact at that instant too: the
     contacts tied, and the runs took them in another order."""
-    if not _at_one_instant(y, x) or not (set(_spheres(x)) & set(_spheres(y))):
+    from .departure import bodies_of
+
+    if not _at_one_instant(y, x) or not (set(bodies_of(x)) & set(bodies_of(y))):
         return False
     return (any(_key(r) == _key(y) and _at_one_instant(r, x) for r in ca)
             and any(_key(r) == _key(x) and _at_one_instant(r, y) for r in cb))
-
-
-def _spheres(r: dict) -> tuple[int, ...]:
-    return (r["a"], r["other"]) if PARTNER_IS_SPHERE[r["kind"]] else (r["a"],)
 
 
 def _touches(r: dict, crossing) -> bool:
