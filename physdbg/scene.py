@@ -19,6 +19,7 @@ import math
 import re
 import sys
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
@@ -44,7 +45,7 @@ from .engine import (
 from .engine.periodic import wrap_positions
 from .engine.colliders.mesh import MESH_SEARCH_NAMES
 from .engine.space_order import RENUMBER_EVERY, SPACE_ORDER_MIN, SPACE_ORDER_NAMES
-from .engine.state import BYTES_PER_PARTICLE, DEFAULT_MAX_MEMORY, EVENT_LOOP_NAMES, Meshes
+from .engine.state import BYTES_PER_PARTICLE, DEFAULT_MAX_MEMORY, EVENT_LOOP_NAMES, RENAMED_SETTINGS, Meshes
 from .errors import SceneError, UnknownSceneError
 from .scenes import builtin_names, builtin_text
 
@@ -84,7 +85,7 @@ TOP_FIELDS = {
                     "pile, with sleep_time 0.1 unless given; 0 elsewhere); not with periodic walls"),
     "sleep_time": "how long a sphere must stay slow to fall asleep, seconds > 0 (default 0.5; 0.1 when "
                   "sleep_speed = auto picks sleeping)",
-    "max_events_per_step": ("budget: contacts resolved in one step, integer >= 0 (default 0 = sized to the scene: "
+    "max_contacts_per_step": ("budget: contacts resolved in one step, integer >= 0 (default 0 = sized to the scene: "
                             "max(10000, 100 per sphere))"),
     "max_pairs_per_step": "budget: broad-phase candidate pairs in one step, integer >= 1 (default 10000000)",
     "max_swept_tests_per_step": ("budget: swept tests in one step, integer >= 0 (default 0 = sized to the scene: "
@@ -306,10 +307,12 @@ def parse_scene(text: str, source: str = "<scene>", overrides=()) -> Scene:
     except ValueError as err:  # an integer of more digits than Python converts (sys.get_int_max_str_digits)
         raise SceneError(source, "", f"a number of more than {sys.get_int_max_str_digits()} digits: "
                                      f"not read (a scene's numbers are at most {MAX_MAGNITUDE:g})") from None
+    raw = _renamed(raw, source)
     origins: dict[str, str] = {}
     for item in overrides:
         _apply_override(raw, item, source)
-        origins[item.split("=", 1)[0].strip()] = item
+        key = item.split("=", 1)[0].strip()
+        origins[RENAMED_SETTINGS.get(key, key)] = item
     _check_nesting(raw, source)
     scene = _validate(raw, source, origins)
     scene.overrides = tuple(overrides)
@@ -323,7 +326,18 @@ def scene_from_dict(raw: dict, source: str, meshes: Meshes | None = None) -> Sce
     if not isinstance(raw, dict):
         raise SceneError(source, "", "the scene is not a table")
     _check_nesting(raw, source)
-    return _validate(copy.deepcopy(raw), source, {}, meshes)
+    return _validate(_renamed(copy.deepcopy(raw), source), source, {}, meshes)
+
+
+def _renamed(raw: dict, source: str) -> dict:
+    """The scene table with each setting's old name (state.RENAMED_SETTINGS) read as its
+    name now; a table that gives both is refused."""
+    for old, new in RENAMED_SETTINGS.items():
+        if old in raw:
+            if new in raw:
+                raise SceneError(source, old, f"{old} is the old name of {new}; give one of them, not both")
+            raw = {(new if key == old else key): value for key, value in raw.items()}
+    return raw
 
 
 def _check_nesting(raw: dict, source: str) -> None:
@@ -356,6 +370,7 @@ def _apply_override(raw: dict, item: str, source: str) -> None:
     key, text = (part.strip() for part in item.split("=", 1))
     if not key:
         raise SceneError(source, item, "an override needs a field name before '='")
+    key = RENAMED_SETTINGS.get(key, key)
     parts = key.split(".")
     if key in ("steps", "duration"):
         # the run length is given one way: overriding one replaces the other
@@ -613,6 +628,120 @@ def _check_scaled_mesh(c: _Checker, p: str, mesh, scaled: np.ndarray, scale) -> 
                             f"triangles keep their shape")
 
 
+# ----------------------------------------------------------------------------- rules
+# What each field of a table may be, once: a rule reads its field through _Checker (which
+# names the file, the field and what is allowed). ``default`` None means required, or, for
+# an engine setting, the engine's own default (Settings); ``optional`` leaves a missing
+# field None; ``auto`` lets a field be "auto" (the advisor decides: physdbg.advisor).
+@dataclass(frozen=True)
+class _Number:
+    lo: float | None = None
+    hi: float | None = None
+    integer: bool = False
+    scale: bool = False  # a length, mass or time something is divided by: at least MIN_SCALE
+    default: Any = None
+    optional: bool = False
+    auto: bool = False
+
+    def read(self, c: _Checker, table: dict, key: str, name: str, default: Any) -> Any:
+        if (self.optional and key not in table) or (self.auto and table.get(key, "auto") == "auto"):
+            return "auto" if self.auto else None
+        return c.number(table, key, name, default=default, lo=self.lo, hi=self.hi, integer=self.integer,
+                        scale=self.scale)
+
+
+@dataclass(frozen=True)
+class _Choice:
+    # the allowed names, looked up at each read: they are the engine's own tables (a name
+    # added to one, e.g. motion.INTEGRATOR_NAMES, is allowed with no change here)
+    options: Callable[[], tuple[str, ...]]
+    default: Any = None
+
+    def read(self, c: _Checker, table: dict, key: str, name: str, default: Any) -> Any:
+        return c.choice(table, key, name, self.options(), default)
+
+
+@dataclass(frozen=True)
+class _Vector:
+    default: Any = None
+
+    def read(self, c: _Checker, table: dict, key: str, name: str, default: Any) -> Any:
+        return c.vector(table, key, name, default)
+
+
+@dataclass(frozen=True)
+class _Flag:
+    default: Any = None
+
+    def read(self, c: _Checker, table: dict, key: str, name: str, default: Any) -> Any:
+        return c.boolean(table, key, name, default)
+
+
+@dataclass(frozen=True)
+class _Text:
+    default: Any = None
+
+    def read(self, c: _Checker, table: dict, key: str, name: str, default: Any) -> Any:
+        return c.text(table, key, name, default)
+
+
+# the top-level fields read as they are (dt, the tables and the engine settings have their own)
+TOP_RULES = {
+    "max_dt": _Number(scale=True, default=0.05),
+    "steps": _Number(lo=1, integer=True, optional=True),
+    "duration": _Number(scale=True, optional=True),
+    "seed": _Number(lo=0, hi=2**64 - 1, integer=True, default=0),
+    "max_memory": _Number(lo=1, hi=1e18, default=DEFAULT_MAX_MEMORY),
+    "max_particle_steps": _Number(lo=1, hi=1e18, default=DEFAULT_MAX_PARTICLE_STEPS),
+    "method": _Choice(lambda: ("auto", "given"), default="given"),
+}
+# the engine's settings (Settings fields but max_memory, which TOP_RULES reads first)
+SETTING_RULES = {
+    "integrator": _Choice(lambda: (*INTEGRATOR_NAMES, "auto")),
+    "detection": _Choice(lambda: (*DETECTION_NAMES, "auto")),
+    "samples": _Number(lo=1, hi=MAX_SAMPLES, integer=True),
+    "ordering": _Choice(lambda: (*ORDERING_NAMES, "auto")),
+    "broad_phase": _Choice(lambda: BROAD_PHASE_NAMES),
+    "gravity": _Vector(),
+    "drag": _Number(hi=1, scale=True),
+    "restitution_rule": _Choice(lambda: RESTITUTION_RULES),
+    "rest_fraction": _Number(lo=0, hi=1),
+    "rapid_contact_time": _Number(lo=0, auto=True),
+    "rapid_contact_rule": _Choice(lambda: (*RAPID_RULES, "auto"), default="auto"),
+    "contact_tolerance": _Number(scale=True),
+    "sleep_speed": _Number(lo=0, auto=True),
+    "sleep_time": _Number(scale=True),
+    **{budget: _Number(lo=0 if budget in SIZED_BUDGETS else 1, integer=True) for budget in BUDGETS},
+    "space_order": _Choice(lambda: SPACE_ORDER_NAMES),
+    "mesh_search": _Choice(lambda: MESH_SEARCH_NAMES),
+    "event_loop": _Choice(lambda: EVENT_LOOP_NAMES),
+}
+# [[planes]] (name's default is the plane's number: plane0, plane1, ...)
+PLANE_RULES = {
+    "normal": _Vector(),
+    "offset": _Number(default=0.0),
+    "restitution": _Number(lo=0, hi=1, default=1.0),
+    "two_sided": _Flag(default=False),
+    "thickness": _Number(lo=0, default=0.0),
+}
+# [[particles]] (mass and inverse_mass, one or the other, are read apart)
+PARTICLE_RULES = {
+    "position": _Vector(),
+    "velocity": _Vector(default=[0.0, 0.0, 0.0]),
+    "radius": _Number(scale=True),
+    "restitution": _Number(lo=0, hi=1, default=1.0),
+    "gravity_scale": _Number(default=1.0),
+}
+
+
+def _read(c: _Checker, table: dict, prefix: str, rules: dict, defaults: dict | None = None) -> dict:
+    """Every field of ``rules`` from ``table`` (its fields named ``prefix`` + key), in the
+    table's order; defaults: a default for a rule that has none of its own."""
+    return {key: rule.read(c, table, key, prefix + key,
+                           rule.default if rule.default is not None else (defaults or {}).get(key))
+            for key, rule in rules.items()}
+
+
 def _validate(raw: dict, source: str, origins: dict[str, str], meshes: Meshes | None = None) -> Scene:
     c = _Checker(source, origins)
     c.known(raw, TOP_FIELDS, "")
@@ -621,68 +750,40 @@ def _validate(raw: dict, source: str, origins: dict[str, str], meshes: Meshes | 
 
     # time
     dt = _dt(c, raw.get("dt"))
-    max_dt = c.number(raw, "max_dt", "max_dt", default=0.05, scale=True)
-    steps = c.number(raw, "steps", "steps", default=0, lo=1, integer=True) if "steps" in raw else None
-    duration = c.number(raw, "duration", "duration", scale=True) if "duration" in raw else None
+    top = _read(c, raw, "", TOP_RULES)
+    max_dt, steps, duration, seed = top["max_dt"], top["steps"], top["duration"], top["seed"]
+    max_memory, max_particle_steps = top["max_memory"], top["max_particle_steps"]
     if steps is None and duration is None:
         c.fail("steps", "give steps (an integer >= 1) or duration (seconds > 0)")
     if steps is not None and duration is not None:
         c.fail("duration", "give steps or duration, not both")
     if steps is None and dt is not None:
         steps = max(1, math.ceil(duration / dt - 1e-9))  # both within range: finite
-    seed = c.number(raw, "seed", "seed", default=0, lo=0, hi=2**64 - 1, integer=True)
-    max_memory = c.number(raw, "max_memory", "max_memory", default=DEFAULT_MAX_MEMORY, lo=1, hi=1e18)
-    max_particle_steps = c.number(raw, "max_particle_steps", "max_particle_steps",
-                                  default=DEFAULT_MAX_PARTICLE_STEPS, lo=1, hi=1e18)
 
     d = _SETTINGS_DEFAULTS
-    if c.choice(raw, "method", "method", ("auto", "given"), "given") == "auto":
+    if top["method"] == "auto":
         d = dataclasses.replace(d, integrator="auto", detection="auto", ordering="auto")
-    settings = Settings(
-        integrator=c.choice(raw, "integrator", "integrator", (*INTEGRATOR_NAMES, "auto"), d.integrator),
-        detection=c.choice(raw, "detection", "detection", (*DETECTION_NAMES, "auto"), d.detection),
-        samples=c.number(raw, "samples", "samples", default=d.samples, lo=1, hi=MAX_SAMPLES, integer=True),
-        ordering=c.choice(raw, "ordering", "ordering", (*ORDERING_NAMES, "auto"), d.ordering),
-        broad_phase=c.choice(raw, "broad_phase", "broad_phase", BROAD_PHASE_NAMES, d.broad_phase),
-        gravity=tuple(c.vector(raw, "gravity", "gravity", d.gravity).tolist()),
-        drag=c.number(raw, "drag", "drag", default=d.drag, hi=1, scale=True),
-        restitution_rule=c.choice(raw, "restitution_rule", "restitution_rule", RESTITUTION_RULES,
-                                  d.restitution_rule),
-        rest_fraction=c.number(raw, "rest_fraction", "rest_fraction", default=d.rest_fraction, lo=0, hi=1),
-        rapid_contact_time="auto" if raw.get("rapid_contact_time", "auto") == "auto" else c.number(
-            raw, "rapid_contact_time", "rapid_contact_time", lo=0),
-        rapid_contact_rule=c.choice(raw, "rapid_contact_rule", "rapid_contact_rule", (*RAPID_RULES, "auto"),
-                                    "auto"),
-        contact_tolerance=c.number(raw, "contact_tolerance", "contact_tolerance",
-                                   default=d.contact_tolerance, scale=True),
-        sleep_speed="auto" if raw.get("sleep_speed", "auto") == "auto" else c.number(raw, "sleep_speed",
-                                                                                      "sleep_speed", lo=0),
-        sleep_time=c.number(raw, "sleep_time", "sleep_time", default=d.sleep_time, scale=True),
-        **{budget: c.number(raw, budget, budget, default=getattr(d, budget),
-                            lo=0 if budget in SIZED_BUDGETS else 1, integer=True)
-           for budget in BUDGETS},
-        max_memory=max_memory,
-        space_order=c.choice(raw, "space_order", "space_order", SPACE_ORDER_NAMES, d.space_order),
-        mesh_search=c.choice(raw, "mesh_search", "mesh_search", MESH_SEARCH_NAMES, d.mesh_search),
-        event_loop=c.choice(raw, "event_loop", "event_loop", EVENT_LOOP_NAMES, d.event_loop),
-    )
+    values = _read(c, raw, "", SETTING_RULES, dataclasses.asdict(d))
+    values["gravity"] = tuple(values["gravity"].tolist())
+    settings = Settings(**values, max_memory=max_memory)
 
     # walls
     names, normals, offsets, rest, two, thick = [], [], [], [], [], []
     for k, plane in enumerate(c.tables(raw, "planes", "planes")):
         p = f"planes.{k}."
         c.known(plane, PLANE_FIELDS, p)
-        normal = c.vector(plane, "normal", p + "normal")
+        v = _read(c, plane, p, PLANE_RULES)
+        normal = v["normal"]
         biggest = float(np.max(np.abs(normal)))
         if biggest == 0.0:
             c.fail(p + "normal", "must not be [0, 0, 0]")
         normal = normal / biggest  # first, so that squaring neither overflows nor underflows
         names.append(c.text(plane, "name", p + "name", f"plane{k}"))
         normals.append(normal / float(np.linalg.norm(normal)))
-        offsets.append(c.number(plane, "offset", p + "offset", default=0.0))
-        rest.append(c.number(plane, "restitution", p + "restitution", default=1.0, lo=0, hi=1))
-        two.append(c.boolean(plane, "two_sided", p + "two_sided", False))
-        thick.append(c.number(plane, "thickness", p + "thickness", default=0.0, lo=0))
+        offsets.append(v["offset"])
+        rest.append(v["restitution"])
+        two.append(v["two_sided"])
+        thick.append(v["thickness"])
         if thick[-1] > 0 and not two[-1]:
             c.fail(p + "thickness", "only a two-sided wall has a thickness; set two_sided = true")
     box = c.table(raw, "box", "box")
@@ -714,9 +815,10 @@ def _validate(raw: dict, source: str, origins: dict[str, str], meshes: Meshes | 
     for k, part in enumerate(c.tables(raw, "particles", "particles")):
         p = f"particles.{k}."
         c.known(part, PARTICLE_FIELDS, p)
-        pos.append(c.vector(part, "position", p + "position"))
-        vel.append(c.vector(part, "velocity", p + "velocity", [0.0, 0.0, 0.0]))
-        rad.append(c.number(part, "radius", p + "radius", scale=True))
+        v = _read(c, part, p, PARTICLE_RULES)
+        pos.append(v["position"])
+        vel.append(v["velocity"])
+        rad.append(v["radius"])
         if "mass" in part and "inverse_mass" in part:
             c.fail(p + "mass", "give mass or inverse_mass, not both")
         if "inverse_mass" in part:
@@ -728,8 +830,8 @@ def _validate(raw: dict, source: str, origins: dict[str, str], meshes: Meshes | 
             inv.append(1.0 / c.number(part, "mass", p + "mass", default=1.0, scale=True))
         if inv[-1] == 0.0 and np.any(vel[-1] != 0.0):
             c.fail(p + "velocity", "an immovable particle (inverse_mass = 0) must have velocity [0, 0, 0]")
-        res.append(c.number(part, "restitution", p + "restitution", default=1.0, lo=0, hi=1))
-        gs.append(c.number(part, "gravity_scale", p + "gravity_scale", default=1.0))
+        res.append(v["restitution"])
+        gs.append(v["gravity_scale"])
 
     gen = c.table(raw, "generate", "generate")
     if gen:

@@ -164,7 +164,7 @@ def test_a_pile_is_foreseen_and_each_rule_does_on_it_what_check_says():
 
     world = load_scene("rain", NARROW_PILE + ["rapid_contact_rule=tc"]).build_world()
     stats = [world.step(1 / 120) for _ in range(60)]
-    assert any("max_events_per_step" in [w.code for w in s.warnings] for s in stats)
+    assert any("max_contacts_per_step" in [w.code for w in s.warnings] for s in stats)
 
     settled = api.run("rain", NARROW_PILE + ["rapid_contact_rule=tc", "sleep_speed=0.05", "sleep_time=0.1"])
     assert settled.asleep_at_end == 100 and settled.max_overlap <= 1e-9 and not settled.warning_counts

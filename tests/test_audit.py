@@ -84,7 +84,7 @@ def test_collapse_is_found_where_bounces_pile_up_and_the_advice_names_the_rule_t
     report = explain(out)
     assert report.counts == {"budget": 1, "overlap": 1, "collapse": 1}
     budget, collapse = (next(f for f in report.findings if f.kind == kind) for kind in ("budget", "collapse"))
-    assert "max_events_per_step budget (10000 contacts resolved)" in budget.message  # the automatic cap
+    assert "max_contacts_per_step budget (10000 contacts resolved)" in budget.message  # the automatic cap
     # and on whom it was spent
     assert budget.message.endswith("contacts were sphere 0's, most with wall 'floor'.") and budget.particles == [0]
     assert collapse.message.startswith("10000 bounces among 1 sphere (0) in one step") and collapse.particles == [0]
@@ -105,11 +105,11 @@ def test_contacts_a_rule_holds_are_the_remedy_not_a_collapse():
     contacts.a[:], contacts.other[:] = [i % 10 for i in range(400)], [10 + i % 10 for i in range(400)]
     contacts.how[:], contacts.restitution[:] = HOW_RAPID, 0.0  # 20 spheres, 20 contacts each, all held
     auditor = Auditor(header)  # rain sleeps: a rattle waits to be judged until the run ends (finish)
-    auditor._check_collapse(5, contacts)
+    auditor._check_collapse(5, None, contacts)
     auditor.finish()
     assert auditor.counts == {}
     contacts.how[:], contacts.restitution[:] = HOW_IMPULSE, 0.8  # the same contacts, all bounces
-    auditor._check_collapse(5, contacts)
+    auditor._check_collapse(5, None, contacts)
     auditor.finish()
     assert auditor.counts == {"collapse": 1}
     assert auditor.examples[0].message.startswith("400 bounces among 20 spheres")
@@ -134,7 +134,7 @@ def test_under_the_tc_rule_the_collapse_advice_names_the_hold_rule():
         auditor = Auditor(header)
         auditor.settings = {**auditor.settings, "rapid_contact_time": 1e-4, "rapid_contact_rule": rule,
                             "sleep_speed": sleep_speed, "sleep_time": 0.1}
-        auditor._check_collapse(5, contacts)
+        auditor._check_collapse(5, None, contacts)
         auditor.finish()
         assert auditor.counts == {"collapse": 1}
         advice = auditor.examples[0].advice
@@ -154,7 +154,7 @@ def test_a_budget_hit_in_a_pile_names_the_settings_that_let_it_rest(tmp_path):
     report = explain(out)
     hint = "this scene makes a pile about 3.3 layers deep, which tc does not let rest"
     budget = next(f for f in report.findings if f.kind == "budget")
-    assert budget.step == 54 and hint in budget.advice and "--set max_events_per_step=N" in budget.advice
+    assert budget.step == 54 and hint in budget.advice and "--set max_contacts_per_step=N" in budget.advice
     assert all(hint in f.advice for f in report.findings if f.kind == "tunnelling")
     from physdbg.analysis.audit import Auditor
     from physdbg.record.header import RecordingHeader
@@ -318,7 +318,7 @@ def test_a_collapse_driven_by_a_kinematic_mesh_says_so_and_what_helps(tmp_path):
                      '[[meshes]]\nname = "platform"\nfile = "platform.obj"\nvelocity = [0.0, 0.5, 0.0]\n'
                      '[[particles]]\nposition = [0.0, 0.1, 0.0]\nradius = 0.1\nrestitution = 0.5\n')
     recording = tmp_path / "elevator.mcap"
-    api.record(str(scene), ["rest_fraction=0", "rapid_contact_time=0", "max_events_per_step=2000"],
+    api.record(str(scene), ["rest_fraction=0", "rapid_contact_time=0", "max_contacts_per_step=2000"],
                mcap_path=str(recording), rrd=False, detail="contacts")
     collapse = next(f for f in explain(str(recording)).findings if f.kind == "collapse")
     assert "kinematic mesh 'platform' drives them: its prescribed motion strikes the same spheres" in collapse.message
@@ -351,7 +351,7 @@ steps = 4
 integrator = "exact"
 detection = "swept"
 gravity = [0.0, 0.0, 0.0]
-max_events_per_step = 1
+max_contacts_per_step = 1
 
 # two pairs head-on, 20 m/s apart: the first meets 0.01 s into step 1, the second 0.04 s
 # in, and would be 1 m past itself by the step's end

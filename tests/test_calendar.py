@@ -189,11 +189,11 @@ def test_a_state_written_between_steps_counts():
 
 
 def test_the_step_budget_stops_a_step_as_in_the_time_ordered_loop():
-    scene = load_scene("gas", ["box.periodic=true", "event_loop=calendar", "max_events_per_step=1",
+    scene = load_scene("gas", ["box.periodic=true", "event_loop=calendar", "max_contacts_per_step=1",
                                "generate.count=300", "generate.packing_fraction=0.3"])
     world = scene.build_world()
     end = world.step(scene.dt)
-    assert end.counts.contacts == 1 and [w.code for w in end.warnings] == ["max_events_per_step"]
+    assert end.counts.contacts == 1 and [w.code for w in end.warnings] == ["max_contacts_per_step"]
     end = world.step(scene.dt)  # made again from the state the budget left
     assert end.counts.contacts == 1 and world.calendar_steps == 2
 

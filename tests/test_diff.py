@@ -119,9 +119,9 @@ def test_a_sphere_asleep_in_one_run_only_is_named_when_it_falls_asleep_and_when_
 
 
 def test_the_event_cap_hit_in_one_run_only(tmp_path):
-    r = diff(_rec(tmp_path, "a", "rain"), _rec(tmp_path, "b", "rain", ["max_events_per_step=20"]))
+    r = diff(_rec(tmp_path, "a", "rain"), _rec(tmp_path, "b", "rain", ["max_contacts_per_step=20"]))
     limits = next(c for c in r.causes if c.kind == "engine-limits")
-    assert "run B hit the max_events_per_step budget in step" in limits.text
+    assert "run B hit the max_contacts_per_step budget in step" in limits.text
     assert f"step {r.divergence.step}" in limits.text
 
 

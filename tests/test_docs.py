@@ -135,9 +135,17 @@ def test_every_channel_kind_cause_finding_and_phase_the_code_has_is_in_the_docs(
     check_run = _table_codes((docs / "foreign-runs.md").read_text())
     assert set(departure._KIND_WORDS) - check_run == set()  # check-run's causes
     diff_page = _table_codes((docs / "diff.md").read_text())
-    diff_causes = set(re.findall(r'Cause\(\s*"([a-z-]+)"', (ROOT / "physdbg" / "analysis" / "diff.py").read_text()))
-    assert len(diff_causes) > 10 and diff_causes - diff_page == set()
+    from physdbg.analysis import diff_causes
+
+    assert set(diff_causes.CAUSE_KINDS) - diff_page == set()  # diff's causes, by its table
+    made = {kind for module in ("diff.py", "diff_causes.py") for kind in
+            re.findall(r'Cause\(\s*"([a-z-]+)"', (ROOT / "physdbg" / "analysis" / module).read_text())}
+    assert len(made) > 10 and made - set(diff_causes.CAUSE_KINDS) == set()  # the table lists every kind made
+    assert {kind for detector in diff_causes.STEP_CAUSES for kind in detector.kinds} <= set(diff_causes.CAUSE_KINDS)
     assert set(audit.FINDING_KINDS) - diff_page == set()  # explain's findings
+    # each finding comes from a check of the audit's table, and every check is a method
+    assert {kind for check in audit.AUDIT_CHECKS for kind in check.kinds} == set(audit.FINDING_KINDS)
+    assert all(callable(getattr(audit.Auditor, check.method, None)) for check in audit.AUDIT_CHECKS)
     engine = (docs / "engine.md").read_text()
     assert [p for p in events.STEP_PHASES if f"`_{p}`" not in engine] == []
     for kind, module in zip(events.KIND_NAMES, colliders.KIND_MODULES, strict=True):  # the collider kinds

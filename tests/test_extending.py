@@ -5,6 +5,8 @@ refused with a message that says what is missing."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from typer.testing import CliRunner
@@ -201,3 +203,44 @@ def test_the_architecture_page_lists_every_file_these_tests_exercise_for_a_new_k
     colliders = (docs / "colliders.md").read_text()
     section = colliders[colliders.index("## Adding an integrator or a collider kind"):]
     assert [f for f in KIND_FILES if f.rsplit("/", 1)[-1] not in section] == []
+
+
+# ----------------------------------------------------------------------------- a new cause
+# The files a new cause of each command is written in (docs/architecture.md, "A cause").
+CAUSE_FILES = ("analysis/diff_causes.py", "analysis/departure.py", "analysis/audit.py")
+
+
+def test_a_new_diff_cause_in_the_table_is_tried_and_printed_in_every_format(monkeypatch, tmp_path):
+    """A detector added to diff_causes.STEP_CAUSES (and its kind to CAUSE_KINDS) is run on
+    the diverging step, after the ones before it, and its cause reaches the text,
+    Markdown and JSON reports with no change anywhere else."""
+    from physdbg.analysis import diff_causes
+
+    def dummy(case, found):
+        return [diff_causes.Cause("dummy", f"step {case.div.step}: after {[c.kind for c in found]}", {})]
+
+    monkeypatch.setattr(diff_causes, "STEP_CAUSES",
+                        (*diff_causes.STEP_CAUSES, diff_causes.Detector(("dummy",), dummy)))
+    monkeypatch.setitem(diff_causes.CAUSE_KINDS, "dummy", "a test's own cause")
+    runner = CliRunner()
+    paths = []
+    for name, flags in (("swept", []), ("discrete", ["-s", "detection=discrete"])):
+        paths.append(str(tmp_path / f"{name}.mcap"))
+        done = runner.invoke(app, ["record", "bullet-wall", *flags, "-o", paths[-1], "--no-rrd", "--detail", "contacts"])
+        assert done.exit_code == 0, done.output
+    text = runner.invoke(app, ["diff", *paths])
+    assert text.exit_code == 1 and "  - [dummy] step 1: after ['settings', 'tunnelling']" in text.output, text.output
+    markdown = runner.invoke(app, ["diff", *paths, "--markdown"])
+    assert "- *dummy*: step 1: after ['settings', 'tunnelling']" in markdown.output
+    data = json.loads(runner.invoke(app, ["diff", *paths, "--json"]).output)
+    assert data["causes"][-1] == {"kind": "dummy", "text": "step 1: after ['settings', 'tunnelling']", "evidence": {}}
+
+
+def test_the_architecture_page_names_every_file_a_new_cause_is_written_in():
+    import re
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "architecture.md").read_text()
+    listed = page[page.index("**A cause**"):page.index("**A channel**")]
+    named = set(re.findall(r"`((?:[a-z_]+/)*[a-z_]+\.py)`", listed))
+    assert [f for f in CAUSE_FILES if f not in named] == []

@@ -37,7 +37,7 @@ SCENES = ["bounce", "cradle", "gas", "rain", "bullet-wall", "ramp"]  # ramp: the
 # What every generated run may use: small budgets, so that a hostile value is refused or
 # hits a budget in milliseconds instead of running for minutes.
 BOUNDS = ["max_particle_steps=3000", "max_memory=2e7", "max_pairs_per_step=20000",
-          "max_swept_tests_per_step=50000", "max_resting_work_per_step=20000", "max_events_per_step=2000"]
+          "max_swept_tests_per_step=50000", "max_resting_work_per_step=20000", "max_contacts_per_step=2000"]
 
 
 def _toml_value(value) -> str:
@@ -406,10 +406,10 @@ def test_run_json_and_info_json_give_walls_the_same_shape(tmp_path):
 
 
 def test_warnings_are_totalled_per_kind_with_one_step_number_each():
-    result = _cli("run", "rain", "-s", "generate.count=300", "-s", "steps=4", "-s", "max_events_per_step=5")
+    result = _cli("run", "rain", "-s", "generate.count=300", "-s", "steps=4", "-s", "max_contacts_per_step=5")
     assert result.exit_code == 0
     line = next(line for line in result.output.splitlines() if line.startswith("warnings"))
-    assert "max_events_per_step" in line
+    assert "max_contacts_per_step" in line
     total = int(line.split()[1])
     assert total >= 4
     examples = [line for line in result.output.splitlines() if line.startswith("  step ")]

@@ -62,7 +62,7 @@ def test_a_gas_stepped_a_million_seconds_at_a_time_finishes_in_seconds():
     started = time.perf_counter()
     summary = api.run("gas", ["dt=1e6", "steps=3"])
     assert time.perf_counter() - started < 10.0
-    assert summary.steps == 3 and summary.warning_counts == {"max_events_per_step": 3}
+    assert summary.steps == 3 and summary.warning_counts == {"max_contacts_per_step": 3}
 
 
 def test_the_held_contact_budget_is_sized_to_the_scene():

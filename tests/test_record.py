@@ -490,7 +490,7 @@ def full_recording(tmp_path_factory):
     folder = tmp_path_factory.mktemp("full")
     path = folder / "billiards.mcap"
     # a BVH broad phase (its nodes are a channel) and a contact budget it hits (warnings)
-    api.record("billiards", ["steps=60", "broad_phase=bvh-sah", "max_events_per_step=1"], mcap_path=str(path),
+    api.record("billiards", ["steps=60", "broad_phase=bvh-sah", "max_contacts_per_step=1"], mcap_path=str(path),
                rrd=False, detail="full", view=True)
     return path
 

@@ -120,7 +120,7 @@ def _both_loops_agree(state, walls, method, dt, steps: int) -> None:
     the ramp scene), which the interpreted reference takes minutes over; so the contact
     budget is MAX_CONTACTS here, both loops must stop such a step alike, and the run ends
     there (what follows a stopped step is not a comparison of the loops' rules)."""
-    method = dataclasses.replace(method, max_events_per_step=MAX_CONTACTS)
+    method = dataclasses.replace(method, max_contacts_per_step=MAX_CONTACTS)
     fast_obs, slow_obs = _Contacts(), _Contacts()
     fast = World(state.copy(), walls, method, fast_obs)
     slow = ReferenceWorld(state.copy(), walls, method, slow_obs)
@@ -215,7 +215,7 @@ def test_a_contact_skipped_where_the_path_already_is_is_not_taken_again():
     changes: both loops end every step, alike."""
     state, walls, method, dt = _scene_with_a_mesh(6, "icosphere", 6, True, 1 / 3, "semi-implicit",
                                                   (0.0, 0.0, 0.0), 1 / 60)
-    world = World(state.copy(), walls, dataclasses.replace(method, max_events_per_step=MAX_CONTACTS))
+    world = World(state.copy(), walls, dataclasses.replace(method, max_contacts_per_step=MAX_CONTACTS))
     ends = [world.step(dt) for _ in range(16)]
     assert world.step_index == 16 and not any(end.warnings for end in ends)
     _both_loops_agree(state, walls, method, dt, steps=16)

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from physdbg.errors import SceneError, UnknownSceneError
+from physdbg import open_recording
 from physdbg.api import load_scene
 from physdbg.scene import FIELDS, parse_scene
 from physdbg.scenes import builtin_descriptions, builtin_names
@@ -123,7 +125,7 @@ def test_fraction_dt_and_duration_give_whole_steps():
     ("gravity=[1, 2]", "gravity", "[x, y, z]"),
     ("rapid_contact_time=-1", "rapid_contact_time", ">= 0"),
     ("rapid_contact_rule=elastic", "rapid_contact_rule", "allowed: hold, tc"),
-    ("max_events_per_step=-1", "max_events_per_step", "an integer >= 0"),
+    ("max_contacts_per_step=-1", "max_contacts_per_step", "an integer >= 0"),
     ("mesh_search=dual", "mesh_search", "allowed: auto, walk, together"),
 ])
 def test_bad_overrides_name_the_field_and_what_is_allowed(override, field, words):
@@ -226,3 +228,35 @@ def test_a_misspelt_field_gets_the_likely_fix_not_every_field():
     assert "fields allowed here are listed in docs/scenes.md (tables among them: particles, planes" in str(info.value)
     with pytest.raises(SceneError, match="unknown field; allowed: name, normal, offset, restitution"):
         load_scene("bounce", ["planes.0.zzz=1"])
+
+
+def test_the_old_name_of_the_contact_budget_is_still_read(tmp_path):
+    """max_events_per_step (it counted contacts) is read as max_contacts_per_step: in a
+    file, in --set, and in a recording made under the old name; a file with both is refused."""
+    text = 'steps = 3\ndt = 0.01\nmax_events_per_step = 7\n[[particles]]\nposition = [0, 0, 0]\nradius = 0.1\n'
+    assert parse_scene(text, "old.toml").settings.max_contacts_per_step == 7
+    assert parse_scene(text, "old.toml", ["max_events_per_step=9"]).settings.max_contacts_per_step == 9
+    assert load_scene("cradle", ["max_events_per_step=2"]).settings.max_contacts_per_step == 2
+    with pytest.raises(SceneError) as err:
+        parse_scene("max_contacts_per_step = 8\n" + text, "both.toml")
+    assert "max_events_per_step is the old name of max_contacts_per_step; give one of them, not both" in str(err.value)
+    # the CI goldens were recorded under the old name: read, their settings say the new one
+    golden = Path(__file__).resolve().parents[1] / "recordings" / "ci" / "rain.mcap"
+    with open_recording(golden) as rec:
+        assert "max_contacts_per_step" in rec.meta["settings"] and "max_events_per_step" not in rec.meta["settings"]
+
+
+def test_each_field_has_one_rule_and_every_engine_setting_is_read():
+    """The rules tables (scene.py) and the field descriptions name the same fields, and the
+    settings rules cover every Settings field (max_memory is a top-level rule): a new
+    setting without a rule fails here, not in a user's scene."""
+    import dataclasses
+
+    from physdbg.engine.state import Settings
+    from physdbg.scene import (PARTICLE_FIELDS, PARTICLE_RULES, PLANE_FIELDS, PLANE_RULES, SETTING_RULES, TOP_FIELDS,
+                               TOP_RULES)
+
+    assert set(SETTING_RULES) | {"max_memory"} == {f.name for f in dataclasses.fields(Settings)}
+    assert set(SETTING_RULES) | set(TOP_RULES) <= set(TOP_FIELDS)
+    assert set(PLANE_RULES) | {"name"} == set(PLANE_FIELDS)
+    assert set(PARTICLE_RULES) | {"mass", "inverse_mass"} == set(PARTICLE_FIELDS)

@@ -137,7 +137,7 @@ def test_without_sleeping_the_narrow_pile_collapses():
     codes = set()
     for _ in range(scene.steps):
         codes.update(w.code for w in world.step(scene.dt).warnings)
-    assert "max_events_per_step" in codes
+    assert "max_contacts_per_step" in codes
 
 
 @pytest.mark.slow

@@ -177,12 +177,12 @@ def test_stacks_and_rows_rest_and_a_dropped_ball_settles():
 
 
 def test_event_cap_stops_the_step_and_warns():
-    scene = load_scene("cradle", ["max_events_per_step=2"])
+    scene = load_scene("cradle", ["max_contacts_per_step=2"])
     obs = ListObserver()
     world = scene.build_world(obs)
     for _ in range(scene.steps):
         world.step(scene.dt)
-    caps = [w for w in obs.warnings if w.code == "max_events_per_step"]
+    caps = [w for w in obs.warnings if w.code == "max_contacts_per_step"]
     assert caps, "the cap must be reported"
     assert max(e.counts.contacts for e in obs.step_ends) == 2
 
@@ -193,7 +193,7 @@ def test_the_contact_and_swept_test_budgets_are_sized_to_the_scene_unless_set(mo
     sized = Settings()
     assert (sized.event_cap(100), sized.swept_test_budget(100)) == (10_000, 10_000_000)
     assert (sized.event_cap(100_000), sized.swept_test_budget(100_000)) == (10_000_000, 200_000_000)
-    chosen = Settings(max_events_per_step=7, max_swept_tests_per_step=9)
+    chosen = Settings(max_contacts_per_step=7, max_swept_tests_per_step=9)
     assert (chosen.event_cap(100_000), chosen.swept_test_budget(100_000)) == (7, 9)
     assert load_scene("rain", ["max_swept_tests_per_step=0"]).settings.max_swept_tests_per_step == 0
     # the world spends the sized budget (made small here: 1 000 tests a sphere, at least 5 000)

@@ -23,6 +23,7 @@ import numpy as np
 from ..engine.motion import INTEGRATOR_NAMES
 from ..engine.state import ORDERING_NAMES
 from ..engine.toi import DETECTION_NAMES
+from .report import markdown_table
 
 G = 9.81
 DTS = (1 / 30, 1 / 60, 1 / 120, 1 / 240)
@@ -317,11 +318,10 @@ def to_markdown(runs: list[Run], command: str) -> str:
         mine = [r for r in runs if r.problem == name]
         if not mine:
             continue
-        lines += [f"### {name}", "", problem.description + f" (error in {problem.unit}).", "",
-                  "| method (integrator/detection/ordering) | dt | error | ms per simulated s |",
-                  "|---|---|---|---|"]
-        for run in pareto(mine):
-            lines.append(f"| {run.method} | 1/{round(1 / run.dt)} | {_fmt(run.error)} | {run.ms_per_second:.3g} |")
+        lines += [f"### {name}", "", problem.description + f" (error in {problem.unit}).", ""]
+        lines += markdown_table(["method (integrator/detection/ordering)", "dt", "error", "ms per simulated s"],
+                                [[run.method, f"1/{round(1 / run.dt)}", _fmt(run.error), f"{run.ms_per_second:.3g}"]
+                                 for run in pareto(mine)])
         failed: dict[str, list[str]] = {}
         for run in mine:
             if run.failure:

@@ -47,6 +47,7 @@ from ..events import (FEATURE_NAMES, HOW_AT_ONE_INSTANT, HOW_IMPULSE, HOW_RAPID,
 from .mesh_interpenetration import MeshOverlaps
 from .quiet import quiet_numerics
 from .tunnel import StepChecker, sorted_unique
+from .tunnel_words import why_tunnelled
 
 FINDING_KINDS = ("tunnelling", "overlap", "order", "energy-gain", "non-finite", "budget", "collapse", "mesh-overlap",
                  "pinned", "simultaneous")
@@ -73,7 +74,9 @@ class Finding:
     """One problem. step: the step it happened in, counted from 1 (step k ends at frame k);
     particles: the spheres involved; message: one sentence; advice: what to change;
     position: (3,) m where to put a marker (None when there is no one place);
-    evidence: the numbers behind the sentence."""
+    evidence: the numbers behind the sentence; aside: the explanation the message gives in
+    parentheses that findings of its kind can share (said once: ``said_once``), or "".
+    The aside is not a field of the JSON: it is in the message already."""
 
     kind: str
     step: int
@@ -82,9 +85,40 @@ class Finding:
     advice: str = ""
     position: list[float] | None = None
     evidence: dict = field(default_factory=dict)
+    aside: str = ""
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        out = asdict(self)
+        del out["aside"]
+        return out
+
+
+@dataclass(frozen=True)
+class AuditCheck:
+    """One check of a step: method, the Auditor's method that makes it (called with the
+    step, its StepEnd and its Contacts or None); kinds: the findings it makes; when: the
+    steps it runs on — "always"; "meshes" (kinematic meshes that can meet); "not finite"
+    (the state holds a NaN or infinity) or "finite"; "contacts" (finite, with contact
+    records); "foreign" (finite, no contact records, another engine's run)."""
+
+    method: str
+    kinds: tuple[str, ...]
+    when: str
+
+
+# the audit's checks of a step, in the order they run: each finding comes from one of them
+AUDIT_CHECKS = (
+    AuditCheck("_check_warnings", ("non-finite", "pinned", "budget"), "always"),
+    AuditCheck("_check_mesh_overlap", ("mesh-overlap",), "meshes"),
+    AuditCheck("_check_finite", ("non-finite",), "not finite"),
+    AuditCheck("_check_crossings", ("tunnelling",), "finite"),
+    AuditCheck("_check_overlap", ("overlap",), "finite"),
+    AuditCheck("_check_order", ("order",), "contacts"),
+    AuditCheck("_check_simultaneous", ("simultaneous",), "contacts"),
+    AuditCheck("_check_energy", ("energy-gain",), "contacts"),
+    AuditCheck("_check_collapse", ("collapse",), "contacts"),
+    AuditCheck("_check_energy_of_states", ("energy-gain",), "foreign"),
+)
 
 
 @dataclass
@@ -149,31 +183,18 @@ def pairs_words(from_engine: int, steps: int) -> str:
 
 def said_once(findings: list) -> list[tuple]:
     """(finding, message, advice) of each finding, where what it shares with the first of its
-    kind (a long explanation in parentheses, the same advice) is "as above"."""
+    kind is "as above": its aside (the explanation in parentheses), when the first's is the
+    same, and its advice, when the same."""
     first: dict[str, Finding] = {}
     out = []
     for f in findings:
         lead = first.setdefault(f.kind, f)
         advice = f.advice if lead is f or f.advice != lead.advice else "as above"
-        out.append((f, _without_repeat(f.message, lead.message), advice))
+        message = f.message
+        if lead is not f and f.aside and f.aside == lead.aside:
+            message = message.replace(f"({f.aside})", "(as above)", 1)
+        out.append((f, message, advice))
     return out
-
-
-def _without_repeat(message: str, said: str) -> str:
-    """message with a parenthesised tail it shares with ``said`` (the first finding of its
-    kind, printed whole) replaced by "(as above)"."""
-    if message is said:
-        return message
-    start = message.find(" (")
-    while start >= 0:
-        end = message.find(")", start)
-        if end < 0:
-            break
-        aside = message[start:end + 1]
-        if len(aside) > 40 and aside in said:  # a long explanation, not a figure of this finding
-            return message[:start] + " (as above)" + message[end + 1:]
-        start = message.find(" (", start + 2)
-    return message
 
 
 class Auditor:
@@ -248,23 +269,16 @@ class Auditor:
     def _end_step(self, end: StepEnd) -> None:
         step = end.step
         contacts = self._contacts
-        self._check_warnings(step)
-        if self._mesh_overlaps is not None and self._mesh_overlaps.pairs:
-            self._check_mesh_overlap(step, end)
-        finite = np.isfinite(end.positions).all() and np.isfinite(end.velocities).all()
-        if not finite:
-            self._check_finite(step, end)
-        else:
-            self._non_finite = False
-            self._check_crossings(step, end, contacts)
-            self._check_overlap(step, end)
-            if contacts is not None and len(contacts):
-                self._check_order(step, end.dt, contacts)
-                self._check_simultaneous(step, end.dt, contacts)
-                self._check_energy(step, contacts)
-                self._check_collapse(step, contacts)
-            elif self.header.meta.get("foreign"):
-                self._check_energy_of_states(step, end)
+        finite = bool(np.isfinite(end.positions).all() and np.isfinite(end.velocities).all())
+        if finite:
+            self._non_finite = False  # a NaN that appears again is named again
+        recorded = contacts is not None and len(contacts) > 0
+        when = {"always": True, "meshes": self._mesh_overlaps is not None and bool(self._mesh_overlaps.pairs),
+                "not finite": not finite, "finite": finite, "contacts": finite and recorded,
+                "foreign": finite and not recorded and bool(self.header.meta.get("foreign"))}
+        for check in AUDIT_CHECKS:
+            if when[check.when]:
+                getattr(self, check.method)(step, end, contacts)
         self._asleep = end.asleep
         # a rattling step's spheres can all be asleep only once one of them fell asleep
         if self._rattling and end.asleep is not None and end.counts.slept:
@@ -289,13 +303,13 @@ class Auditor:
             listener(finding)
 
     # ------------------------------------------------------------------ checks
-    def _check_mesh_overlap(self, step: int, end: StepEnd) -> None:
+    def _check_mesh_overlap(self, step: int, end: StepEnd, contacts: Contacts | None) -> None:
         meshes = self.header.walls.meshes
         for m in self._mesh_overlaps.step(end.time - end.dt, end.time):
             a, b = meshes.names[m.first], meshes.names[m.second]
             moving = " and ".join(f"'{meshes.names[k]}' {meshes.motion_words(k)}" for k in (m.first, m.second)
                                   if meshes.moving[k])
-            at = (f"at the start of the run" if m.time == 0.0 else
+            at = ("at the start of the run" if m.time == 0.0 else
                   f"from t = {m.time:.6g} s ({(m.time - (end.time - end.dt)) / end.dt:.3f}·dt into the step)")
             self._add(Finding("mesh-overlap", step, [],
                               f"meshes '{a}' and '{b}' pass into each other {at}: '{a}' triangle {m.triangles[0]} "
@@ -306,7 +320,7 @@ class Auditor:
                               [float(q) for q in m.point],
                               {"meshes": [a, b], "triangles": list(m.triangles), "time": m.time}))
 
-    def _check_warnings(self, step: int) -> None:
+    def _check_warnings(self, step: int, end: StepEnd, contacts: Contacts | None) -> None:
         from ..engine.state import BUDGETS, budget_value
 
         for w in self._warnings:
@@ -348,7 +362,7 @@ class Auditor:
         return (f"; {int(counts[top]):,} of its {len(c):,} contacts were sphere {top}'s, most with {partner}",
                 [top])
 
-    def _check_finite(self, step: int, end: StepEnd) -> None:
+    def _check_finite(self, step: int, end: StepEnd, contacts: Contacts | None) -> None:
         """A state with a NaN or infinity that no engine warning reported (a run of another
         engine, or a file): named once, at the step it first appears, with the sphere."""
         if self._non_finite or any(w.code == "non-finite" for w in self._warnings):
@@ -383,32 +397,12 @@ class Auditor:
         for c in self.checker.check(self._x, self._v, end.positions, end.dt, contacts, end.time - end.dt,
                                     pairs=walk_pairs):
             detection = "foreign" if self.header.meta.get("foreign") else self.settings.get("detection", "swept")
-            how = {"discrete": "detection = discrete tests only where each step ends",
-                   "sampled": f"detection = sampled tests only {self.settings.get('samples', 4)} instants a step"}
             budgets = [w.code for w in self._warnings if w.code != "non-finite" and w.code != "overlap"]
-            if detection in how:  # a test that looks only at some instants: the first cause, whatever followed
-                advice = "use detection = swept (exact time of impact), or a shorter dt" + (
-                    f" (this step also hit the {budgets[0]} budget: spheres left inside a thin wall by the missed "
-                    f"contacts keep meeting it)" if budgets else "")
-            elif budgets and budgets[0] == "max_memory":
-                advice = ("this step reached max_memory, so contacts after it were not resolved: raise it (the "
-                          "step's warning names a value), or record at --detail contacts, which logs only the "
-                          "swept tests that hit")
-            elif budgets:
-                pile = self._pile()
-                advice = (f"this step hit the {budgets[0]} budget, so contacts after it were not resolved: "
-                          f"raise it, or let slow contacts rest (rest_fraction)" + (f"; {pile}" if pile else ""))
-            elif detection == "foreign":
-                advice = ("the other engine let it cross within one step with no contact: test for contacts along "
-                          "the path through the step (a swept test, as physdbg does), not where the step ends, or "
-                          "take shorter steps")
-            elif detection != "swept":
-                advice = "use detection = swept (exact time of impact), or a shorter dt"
-            elif self.settings.get("ordering") == "index" and PARTNER_IS_SPHERE[c.kind]:
-                advice = ("ordering = index resolves the step's predicted contacts in index order, so a contact "
-                          "that an earlier one creates is missed: use ordering = time")
-            else:
-                advice = "a swept, time-ordered run should never do this: please report it with the recording"
+            why = why_tunnelled(self.settings, budgets, detection == "foreign", PARTNER_IS_SPHERE[c.kind],
+                                self._pile() if budgets else None)
+            advice = why.advice
+            # a test that looks only at some instants says so in the message too
+            how = {detection: why.reason} if detection in ("discrete", "sampled") else {}
             speed = float(np.linalg.norm(self._v[c.a]))
             if c.kind == KIND_WALL:
                 name = self.wall_names[c.other]
@@ -451,9 +445,10 @@ class Auditor:
                            f"{' (' + how[detection] + ')' if detection in how else ''}")
                 where = 0.5 * (end.positions[c.a] + end.positions[c.other])
                 self._add(Finding("tunnelling", step, [c.a, c.other], message, advice, [float(q) for q in where],
-                                  {"time_in_step": c.time, "depth": c.depth, "detection": detection}))
+                                  {"time_in_step": c.time, "depth": c.depth, "detection": detection},
+                                  aside=how.get(detection, "")))
 
-    def _check_overlap(self, step: int, end: StepEnd) -> None:
+    def _check_overlap(self, step: int, end: StepEnd, contacts: Contacts | None) -> None:
         if not end.max_overlap > max(self.tolerance, 0.0):
             self._in_overlap = False
             return
@@ -502,7 +497,8 @@ class Auditor:
         return ("a swept, time-ordered run should leave no overlap: if the scene did not start this way, please "
                 "report it with the recording")
 
-    def _check_order(self, step: int, dt: float, c: Contacts) -> None:
+    def _check_order(self, step: int, end: StepEnd, c: Contacts) -> None:
+        dt = end.dt
         t = c.time_in_step
         late = np.nonzero(t[1:] < t[:-1] - 1e-12 * dt)[0]
         if not len(late):
@@ -518,7 +514,7 @@ class Auditor:
                           evidence={"first": [i, float(t[i])], "second": [i + 1, float(t[i + 1])],
                                     "ordering": ordering}))
 
-    def _check_simultaneous(self, step: int, dt: float, c: Contacts) -> None:
+    def _check_simultaneous(self, step: int, end: StepEnd, c: Contacts) -> None:
         """Two contacts of one sphere with immovable partners at the same instant (the same
         time_in_step, to the bit), resolved one after the other, the first with an impulse
         not held, whose normals are neither parallel nor perpendicular (|n_1·n_2| between
@@ -553,7 +549,7 @@ class Auditor:
                    "after the first" if by_rule else "the first impulse changed the second's closing speed")
             by_index = self.settings.get("ordering", "time") == "index"
             self._add(Finding("simultaneous", step, [a],
-                              f"sphere {a} met {first} and {second} at one instant ({c.time_in_step[i] / dt:.3f}·dt "
+                              f"sphere {a} met {first} and {second} at one instant ({c.time_in_step[i] / end.dt:.3f}·dt "
                               f"into the step), and they were resolved one after the other: {first} first, with "
                               f"restitution {c.restitution[i]:.3g}, then {second}, with {c.restitution[j]:.3g}; "
                               f"{why}, so the order decided how it left (at ({leaving}) m/s)",
@@ -584,7 +580,7 @@ class Auditor:
         allowed = speed * (1.0 - drag ** dt) * 2.0 + 0.01 * float(np.linalg.norm(gravity)) * dt + 1e-9 * (speed + 1.0)
         return bool(np.any(movable & (np.linalg.norm(change, axis=1) > allowed)))
 
-    def _check_energy_of_states(self, step: int, end: StepEnd) -> None:
+    def _check_energy_of_states(self, step: int, end: StepEnd, contacts: None) -> None:
         """A run of another engine has no contact records: a step in which a sphere was
         kicked (its velocity changed by more than free flight explains: ``_kicked``) and
         that gained more mechanical energy than FOREIGN_ENERGY_GAIN of what it had is a
@@ -612,7 +608,7 @@ class Auditor:
                               [float(q) for q in end.positions[who[0]]] if who else None,
                               {"before": before, "after": after}))
 
-    def _check_energy(self, step: int, c: Contacts) -> None:
+    def _check_energy(self, step: int, end: StepEnd, c: Contacts) -> None:
         before, after = contact_energies(self.mass, c.a.astype(np.int64), c.other.astype(np.int64),
                                          partner_is_sphere(c.kind), *(np.ascontiguousarray(rows, dtype=np.float64)
                                                                       for rows in (c.velocity_a_before,
@@ -634,7 +630,7 @@ class Auditor:
                           "a restitution above 1, or an impulse applied twice", list(map(float, c.point[i])),
                           {"before": float(before[i]), "after": float(after[i]), "contact": i}))
 
-    def _check_collapse(self, step: int, c: Contacts) -> None:
+    def _check_collapse(self, step: int, end: StepEnd | None, c: Contacts) -> None:
         bounce = c.restitution > 0.0
         bounces = int(bounce.sum())
         if bounces < COLLAPSE_MIN_CONTACTS:
@@ -685,14 +681,15 @@ class Auditor:
         elif elastic:
             why = ("with restitution 1 this is not inelastic collapse: the spheres meet this often within one step "
                    "because the step is long for their speeds and the gaps between them")
-            advice = "use a shorter dt (each step's contacts are bounded by max_events_per_step)"
+            advice = "use a shorter dt (each step's contacts are bounded by max_contacts_per_step)"
         else:
             why = ("inelastic collapse: with restitution below 1 the gaps between a few spheres shrink geometrically "
                    "and they collide ever more often")
             advice = "; ".join(rules) or "lower the restitution, or use a shorter dt"
         finding = Finding("collapse", step, involved[:10].tolist(),
                           f"{bounces} bounces among {spheres} in one step: the collision rate has blown up ({why})",
-                          advice, evidence={"contacts": len(c), "bounces": bounces, "spheres": len(involved)})
+                          advice, evidence={"contacts": len(c), "bounces": bounces, "spheres": len(involved)},
+                          aside=why)
         if self.settings.get("sleep_speed"):
             self._rattling.append((finding, involved))
             self._last_rattle = step
@@ -892,4 +889,4 @@ def _point(x) -> str:
     return "an unknown place" if x is None else "(" + ", ".join(f"{q:.4g}" for q in x) + ") m"
 
 
-__all__ = ["AuditReport", "Auditor", "Finding", "FINDING_KINDS", "deepest_overlap", "explain"]
+__all__ = ["AUDIT_CHECKS", "AuditCheck", "AuditReport", "Auditor", "Finding", "FINDING_KINDS", "deepest_overlap", "explain"]

@@ -36,6 +36,7 @@ whose run can be written in the foreign-run format (docs/foreign-runs.md).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 from dataclasses import asdict, dataclass, field
@@ -45,6 +46,7 @@ import numpy as np
 from ..errors import CheckRunError
 from ..events import KIND_MESH, KIND_NAMES, KIND_WALL, PARTNER_IS_SPHERE, contact_words, partner_words
 from .quiet import quiet_numerics
+from .tunnel_words import why_tunnelled
 
 DEFAULT_ATOL = 1e-6  # m and m/s: a body departs when |Δx| or |Δv| exceeds atol + rtol·|reference|
 DEFAULT_RTOL = 1e-6
@@ -118,9 +120,53 @@ def integrator_of(family: str | None) -> str:
 
 
 
-def _body_only(i: int) -> dict:
+@dataclass(eq=False)
+class StepContact:
+    """One contact of physdbg's exact step from the run's state (``_Comparison._local_step``):
+    step (1 = the first); index: its place in the step's order; kind: collider kind
+    (events.KIND_*); a: the sphere; other: the other sphere, wall or triangle; tau: s into
+    the step; time: s; normal (3,): from the partner towards a; restitution; resting: held
+    by a resting or rapid rule; closing: closing speed, m/s (>= 0); centre (3,): a's centre
+    at the touch, m. (Compared by identity: two contacts are never "equal".)"""
+
+    step: int
+    index: int
+    kind: int
+    a: int
+    other: int
+    tau: float
+    time: float
+    normal: np.ndarray
+    restitution: float
+    resting: bool
+    closing: float
+    centre: np.ndarray
+
+
+@dataclass(eq=False)
+class Kick:
+    """A step in which a body's velocity changed by more than the forces explain, read off
+    the foreign run (``_Comparison._kicks``): step, body, tau (s into the step), time (s);
+    matched: a contact of physdbg's has claimed it."""
+
+    step: int
+    body: int
+    tau: float
+    time: float
+    matched: bool = False
+
+
+@dataclass(frozen=True)
+class _Lone:
     """What a departure of one body alone is about (no contact: no kind, no partner)."""
-    return {"kind": None, "a": i, "other": None}
+
+    a: int
+    kind: None = None
+    other: None = None
+
+
+def _body_only(i: int) -> _Lone:
+    return _Lone(i)
 
 
 def _no_geometry(kind: int) -> CheckRunError:
@@ -475,8 +521,8 @@ class _Comparison:
         hit = None
         local = self._local_step(k)
         if local is not None:
-            hit = next((c["other"] if c["a"] == body else c["a"] for c in local[2]
-                        if PARTNER_IS_SPHERE[c["kind"]] and body in (c["a"], c["other"])), None)
+            hit = next((c.other if c.a == body else c.a for c in local[2]
+                        if PARTNER_IS_SPHERE[c.kind] and body in (c.a, c.other)), None)
         self.departures.append(Departure(
             "immovable-moved", k, body,
             f"sphere {body} is immovable (inverse mass 0 in the scene), yet your run moves it from step {k} on "
@@ -490,15 +536,15 @@ class _Comparison:
         speed = np.nan_to_num(np.linalg.norm(r.vf[:-1], axis=2))
         return KICK_FRACTION * (speed + np.linalg.norm(self.acc, axis=1)[None, :] * r.dt[1:, None]) + 1e-12
 
-    def _kicks(self, kicked: np.ndarray) -> dict[tuple[int, int], dict]:
-        """{(step, body): kick} with "tau" (s into the step), "time" (s), "matched"."""
+    def _kicks(self, kicked: np.ndarray) -> dict[tuple[int, int], Kick]:
+        """{(step, body): the Kick of that body in that step}."""
         r = self.runs
         steps, bodies = np.nonzero(kicked)
         out = {}
         for s0, i in zip(steps.tolist(), bodies.tolist(), strict=True):
             s = s0 + 1
             tau = self._kick_time(s, i)
-            out[(s, i)] = {"step": s, "body": i, "tau": tau, "time": float(r.t[s - 1] + tau), "matched": False}
+            out[(s, i)] = Kick(s, i, tau, float(r.t[s - 1] + tau))
         return out
 
     def _kick_time(self, s: int, i: int) -> float:
@@ -571,11 +617,10 @@ class _Comparison:
         for j in range(len(c) if c is not None else 0):
             kind, a, other = int(c.kind[j]), int(k[c.a[j]]), int(c.other[j])
             other = int(k[other]) if PARTNER_IS_SPHERE[kind] else other
-            out.append({"step": s, "index": j, "kind": kind, "a": a, "other": other,
-                        "tau": float(c.time_in_step[j]), "time": float(r.t[s - 1] + c.time_in_step[j]),
-                        "normal": c.normal[j].copy(), "restitution": float(c.restitution[j]),
-                        "resting": bool(resting[j]), "closing": abs(float(c.closing_speed[j])),
-                        "centre": c.point[j] + c.normal[j] * self.radius[a]})
+            out.append(StepContact(s, j, kind, a, other, float(c.time_in_step[j]),
+                                   float(r.t[s - 1] + c.time_in_step[j]), c.normal[j].copy(),
+                                   float(c.restitution[j]), bool(resting[j]), abs(float(c.closing_speed[j])),
+                                   c.point[j] + c.normal[j] * self.radius[a]))
         return x, v, out
 
     def _judge_steps(self, start: int) -> None:
@@ -597,14 +642,14 @@ class _Comparison:
                     for b in self._bodies(c):
                         for k in (s, s + 1) if off.any() else (s,):
                             if (k, b) in kicks:
-                                kicks[(k, b)]["matched"] = True
+                                kicks[(k, b)].matched = True
                 continue
-            resting = {b for c in contacts if c["resting"] or self._slow(c, s) for b in self._bodies(c)}
+            resting = {b for c in contacts if c.resting or self._slow(c, s) for b in self._bodies(c)}
             for b in resting:
                 for k in (s, s + 1):
                     if (k, b) in kicks:
-                        kicks[(k, b)]["matched"] = True
-            moving = [c for c in contacts if not (c["resting"] or self._slow(c, s))]
+                        kicks[(k, b)].matched = True
+            moving = [c for c in contacts if not (c.resting or self._slow(c, s))]
             touched = set()
             for group in _chains(moving):
                 bodies = {b for c in group for b in self._bodies(c)}
@@ -612,7 +657,7 @@ class _Comparison:
                 if not any(off[b] for b in bodies):
                     for b in bodies:
                         if (s, b) in kicks:
-                            kicks[(s, b)]["matched"] = True
+                            kicks[(s, b)].matched = True
                     continue
                 self.judged += len(group)
                 if len(group) == 1:
@@ -623,8 +668,8 @@ class _Comparison:
                 if b in touched or b in resting:
                     continue
                 kick = kicks.get((s, b))
-                if kick is not None and not kick["matched"]:
-                    kick["matched"] = True
+                if kick is not None and not kick.matched:
+                    kick.matched = True
                     self._extra(kick)
                 elif kick is None and self.inv[b] > 0 and np.isfinite(r.xf[s, b]).all() and np.isfinite(r.vf[s, b]).all():
                     drift.setdefault(b, []).append(s)  # (a body that turned NaN is the non-finite departure)
@@ -695,7 +740,7 @@ class _Comparison:
             evidence={"rule": code, "setting": setting, "value": value, "name": name, "contacts": [], "said": did}))
         return True
 
-    def _own_rule(self, s: int, contacts: list[dict], off: np.ndarray) -> bool:
+    def _own_rule(self, s: int, contacts: list[StepContact], off: np.ndarray) -> bool:
         """The run's step s is physdbg's step taken without one of its own modelling rules
         (OWN_RULES): named own-rule, with what the rule did to which contact. Tried where a
         step with contacts ends elsewhere, for each rule the reference has on."""
@@ -714,35 +759,35 @@ class _Comparison:
                 did += f", and {len(changed) - 1} more contact{'s' if len(changed) > 2 else ''} of the step"
             body = int(np.flatnonzero(off)[0])
             flag = f"-s {setting}={value:g}"
-            pairs = [[c["a"], c["other"], c["kind"]] for c, _ in changed]
+            pairs = [[c.a, c.other, c.kind] for c, _ in changed]
             self.departures.append(Departure(
-                "own-rule", s, changed[0][0]["a"] if changed else body,
+                "own-rule", s, changed[0][0].a if changed else body,
                 f"physdbg's {name} {did}; without the rule ({flag}) physdbg's step {s}, taken from your run's "
                 f"state, ends where your run's does: the seed's model has no such rule, so this is physdbg's "
                 f"modelling, not a mistake of your engine",
                 f"nothing to change in your engine for this step; compare with {flag} to check the rest of the run "
                 f"against physdbg without the rule (check-run does this itself)",
-                other=changed[0][0]["other"] if changed and PARTNER_IS_SPHERE[changed[0][0]["kind"]] else None,
+                other=changed[0][0].other if changed and PARTNER_IS_SPHERE[changed[0][0].kind] else None,
                 evidence={"rule": code, "setting": setting, "value": value, "name": name, "contacts": pairs,
                           "said": did}))
             return True
         return False
 
-    def _ties_in(self, contacts: list[dict], dt: float) -> list[list[dict]]:
+    def _ties_in(self, contacts: list[StepContact], dt: float) -> list[list[StepContact]]:
         """The step's ties: groups of contacts at one instant (within SAME_INSTANT of the
         step) that share a sphere, in physdbg's order."""
         from ..engine.resolve import SAME_INSTANT
 
-        groups: list[list[dict]] = []
+        groups: list[list[StepContact]] = []
         for c in contacts:
-            if groups and abs(c["tau"] - groups[-1][0]["tau"]) <= SAME_INSTANT * dt:
+            if groups and abs(c.tau - groups[-1][0].tau) <= SAME_INSTANT * dt:
                 groups[-1].append(c)
             else:
                 groups.append([c])
         return [g for g in groups if len(g) > 1 and any(
             set(self._bodies(c)) & set(self._bodies(d)) for i, c in enumerate(g) for d in g[i + 1:])]
 
-    def _tie_orders(self, s: int, contacts: list[dict]):
+    def _tie_orders(self, s: int, contacts: list[StepContact]):
         """Each (tie, order, the local step) of step s taken from the run's state with a tie's
         spheres numbered in another order (``_local_step``'s order)."""
         import itertools
@@ -761,7 +806,7 @@ class _Comparison:
                 if step is not None:
                     yield tie, order, step
 
-    def _tie(self, s: int, contacts: list[dict], off: np.ndarray) -> bool:
+    def _tie(self, s: int, contacts: list[StepContact], off: np.ndarray) -> bool:
         """The run's step s is physdbg's step with contacts at one instant taken in another
         order (a tie: ``_ties_in``): named tie, with both orders. Tried where a step of
         several contacts ends elsewhere."""
@@ -773,23 +818,23 @@ class _Comparison:
         for tie, order, (x, v, taken) in self._tie_orders(s, contacts):
             if self._beyond(r.xf[s], r.vf[s], x, v).any():
                 continue
-            instant = [c for c in taken if abs(c["tau"] - tie[0]["tau"]) <= SAME_INSTANT * float(r.dt[s])]
+            instant = [c for c in taken if abs(c.tau - tie[0].tau) <= SAME_INSTANT * float(r.dt[s])]
             ours = [self._listed(c) for c in tie]
             theirs = [self._listed(c) for c in instant] or ours
             if theirs == ours:
                 continue  # the same order, and yet the run's step: not a tie's doing
             tied = " and ".join(self._sequence([c]) for c in dict.fromkeys(map(tuple, ours)))
-            said = (f"in step {s} the contacts {tied} happen at one instant (t = {tie[0]['time']:.6g} s) and your "
+            said = (f"in step {s} the contacts {tied} happen at one instant (t = {tie[0].time:.6g} s) and your "
                     f"run takes {self._sequence(theirs[:1])} first")
             self.departures.append(Departure(
-                "tie", s, tie[0]["a"],
+                "tie", s, tie[0].a,
                 f"{said}: physdbg takes {self._sequence(ours)}; your run {self._sequence(theirs)}. Taken in your run's "
                 f"order, physdbg's step {s} from your run's state ends where your run's does. Which of two contacts at one instant "
                 f"goes first is not the model's to say (each is the earliest), so this is a tie, not a mistake",
                 "nothing to change in your engine: either order is right. (Runs that take ties in one order compare "
                 "bit for bit; physdbg takes them in the order its tests found them.)",
-                other=tie[0]["other"] if PARTNER_IS_SPHERE[tie[0]["kind"]] else None,
-                evidence={"time": tie[0]["time"], "physdbg_order": ours, "run_order": theirs,
+                other=tie[0].other if PARTNER_IS_SPHERE[tie[0].kind] else None,
+                evidence={"time": tie[0].time, "physdbg_order": ours, "run_order": theirs,
                           "numbering": order.tolist(), "said": said}))
             return True
         return False
@@ -840,25 +885,25 @@ class _Comparison:
                 return
             r.xr[k], r.vr[k] = state.positions, state.velocities
 
-    def _rule_did(self, code: str, c: dict, other: dict | None, contacts: list[dict]) -> str:
+    def _rule_did(self, code: str, c: StepContact, other: StepContact | None, contacts: list[StepContact]) -> str:
         """What rule ``code`` did to contact c of a step (other: the same contact without the
         rule), in words: "made the contact 2–3 in step 22 elastic (16 µs after ...)"."""
-        what = f"the contact {self._pair_words(c)} in step {c['step']}"
+        what = f"the contact {self._pair_words(c)} in step {c.step}"
         if code == "rapid-contact":
-            earlier = [d for d in contacts if d["index"] < c["index"] and set(self._bodies(d)) & set(self._bodies(c))]
+            earlier = [d for d in contacts if d.index < c.index and set(self._bodies(d)) & set(self._bodies(c))]
             when = ""
             if earlier:
                 d = earlier[-1]
-                when = (f" ({(c['tau'] - d['tau']) * 1e6:.3g} µs after {self._pair_words(d)}, within "
+                when = (f" ({(c.tau - d.tau) * 1e6:.3g} µs after {self._pair_words(d)}, within "
                         f"rapid_contact_time = {self.settings.get('rapid_contact_time'):g} s)")
-            if c["resting"]:
+            if c.resting:
                 return f"held {what}{when}"
-            e = "elastic" if c["restitution"] == 1.0 else f"e = {c['restitution']:g}"
-            want = f" instead of e = {other['restitution']:g}" if other is not None else ""
+            e = "elastic" if c.restitution == 1.0 else f"e = {c.restitution:g}"
+            want = f" instead of e = {other.restitution:g}" if other is not None else ""
             return f"made {what} {e}{want}{when}"
-        return f"held {what} as resting" if c["resting"] else f"changed {what}"
+        return f"held {what} as resting" if c.resting else f"changed {what}"
 
-    def _index_ordered(self, s: int, contacts: list[dict], off: np.ndarray) -> bool:
+    def _index_ordered(self, s: int, contacts: list[StepContact], off: np.ndarray) -> bool:
         """The run's step s is physdbg's step taken with ordering = index (the contacts
         predicted at the step's start resolved in index order, none looked for after): named
         index-order. Tried where a step of several contacts ends elsewhere."""
@@ -870,7 +915,7 @@ class _Comparison:
             return False
         body = int(np.flatnonzero(off)[0])
         dt = float(r.dt[s])
-        order = ", then ".join(f"{self._pair_words(c)} at {c['tau'] / dt:.2f}·dt" for c in contacts[:6])
+        order = ", then ".join(f"{self._pair_words(c)} at {c.tau / dt:.2f}·dt" for c in contacts[:6])
         indexed = [c for c in (alternative[2] or [])]
         self.departures.append(Departure(
             "index-order", s, body,
@@ -880,70 +925,70 @@ class _Comparison:
             f"earlier one creates within the step is never looked for",
             "resolve contacts one at a time in time order (earliest time of impact first), and look again for new "
             "contacts after each: a chain of touching spheres passes its impulse along only that way",
-            evidence={"physdbg_order": [[c["a"], c["other"], c["kind"]] for c in contacts],
-                      "index_order": [[c["a"], c["other"], c["kind"]] for c in indexed]}))
+            evidence={"physdbg_order": [[c.a, c.other, c.kind] for c in contacts],
+                      "index_order": [[c.a, c.other, c.kind] for c in indexed]}))
         return True
 
-    def _slow(self, c: dict, s: int) -> bool:
+    def _slow(self, c: StepContact, s: int) -> bool:
         """Not judged one by one: a contact closing slower than the forces' speed over
         RESTING_SPEED_STEPS steps (a resting contact, whose handling differs between engines
         by design), or one at the very start of a step right after the foreign run kicked
         the body (the aftermath of that kick, already judged)."""
-        if c["tau"] <= TIME_TOLERANCE * float(self.runs.dt[s]) and any(
-                self.kicks.get((k, b), {}).get("matched") for b in self._bodies(c) for k in (s - 1, s)):
+        if c.tau <= TIME_TOLERANCE * float(self.runs.dt[s]) and any(
+                getattr(self.kicks.get((k, b)), "matched", None) for b in self._bodies(c) for k in (s - 1, s)):
             return True
         a = max(float(np.linalg.norm(self.acc[b])) for b in self._bodies(c))
-        return a > 0 and c["closing"] < RESTING_SPEED_STEPS * a * float(self.runs.dt[s])
+        return a > 0 and c.closing < RESTING_SPEED_STEPS * a * float(self.runs.dt[s])
 
     @staticmethod
-    def _bodies(c: dict) -> tuple[int, ...]:
-        return bodies_of(c)
+    def _bodies(c: StepContact) -> tuple[int, ...]:
+        return bodies_of(c.kind, c.a, c.other)
 
-    def _kick_for(self, c: dict) -> dict | None:
+    def _kick_for(self, c: StepContact) -> Kick | None:
         """The foreign kick of contact c: on its sphere (or the other sphere of a pair), in
         its step or the next."""
-        for s in (c["step"], c["step"] + 1):
+        for s in (c.step, c.step + 1):
             for b in self._bodies(c):
                 k = self.kicks.get((s, b))
-                if k is not None and not k["matched"] and self.inv[b] > 0:
+                if k is not None and not k.matched and self.inv[b] > 0:
                     return k
         return None
 
-    def _judge_one(self, c: dict) -> None:
+    def _judge_one(self, c: StepContact) -> None:
         r, kicks = self.runs, self.kicks
         if self._runaway(c):
             return
         kick = self._kick_for(c)
-        s, dt = c["step"], float(r.dt[c["step"]])
+        s, dt = c.step, float(r.dt[c.step])
         if kick is None:
             crossing = self._crossing(c)
             if crossing is not None:
                 self._tunnelled(c, crossing)
             else:
                 self._add("missed-contact", s, c, f"{self._subject(c)}: physdbg, stepping from the same state, "
-                                                  f"touches {self._what(c)} at t = {c['time']:.6g} s "
-                                                  f"({c['tau'] / dt:.2f}·dt); your run shows no change of velocity",
+                                                  f"touches {self._what(c)} at t = {c.time:.6g} s "
+                                                  f"({c.tau / dt:.2f}·dt); your run shows no change of velocity",
                           "look for contacts along each step's whole path; a contact within the step that your "
-                          "engine did not see changes everything after it", {"time": c["time"]})
+                          "engine did not see changes everything after it", {"time": c.time})
             return
         for b in self._bodies(c):
-            k = kicks.get((kick["step"], b))
+            k = kicks.get((kick.step, b))
             if k is not None:
-                k["matched"] = True
+                k.matched = True
         # how well a kick's instant is known: TIME_TOLERANCE, plus the part of the step's velocity
         # change that the forces make, since when the engine applied them is not known
-        i, k = kick["body"], kick["step"] + (1 if self.estimated else 0)  # estimated: between two averages
+        i, k = kick.body, kick.step + (1 if self.estimated else 0)  # estimated: between two averages
         change = float(np.linalg.norm(r.vf[min(k, len(r.t) - 1), i] - r.vf[k - 1, i]))
         slack = float(np.linalg.norm(self.acc[i])) * dt / change if change > 0 else 0.0
         if self._skipped_rest(c):
             self._judge_energy(c, kick, quiet_if_late=True)
             return
-        late = abs(kick["time"] - c["time"]) > (TIME_TOLERANCE + slack) * dt
+        late = abs(kick.time - c.time) > (TIME_TOLERANCE + slack) * dt
         if late:
             self._late(c, kick)
         self._judge_energy(c, kick, quiet_if_late=late)
 
-    def _runaway(self, c: dict) -> bool:
+    def _runaway(self, c: StepContact) -> bool:
         """The contact's bodies leave its step still approaching, at RUNAWAY times their
         speed or more, or with NaN or infinite velocities: what an impulse of the wrong sign
         does in an engine that looks again at once (the pair, pushed together at (2 + e)
@@ -951,17 +996,17 @@ class _Comparison:
         numbers overflow). Named impulse-loop, with the meetings it takes to reach the
         run's speed; True when named."""
         r = self.runs
-        s, bodies = c["step"], self._bodies(c)
+        s, bodies = c.step, self._bodies(c)
         if any(self.inv[b] == 0 for b in bodies) and len(bodies) == 1:
             return False
         dt = float(r.dt[s])
         start = max(float(np.linalg.norm(r.vf[s - 1, b])) for b in bodies) + float(np.linalg.norm(self.acc[bodies[0]])) * dt
-        after = r.vf[s, c["a"]] - (r.vf[s, c["other"]] if PARTNER_IS_SPHERE[c["kind"]] else 0.0)
-        normal_after = float(after @ c["normal"])
+        after = r.vf[s, c.a] - (r.vf[s, c.other] if PARTNER_IS_SPHERE[c.kind] else 0.0)
+        normal_after = float(after @ c.normal)
         blown = not math.isfinite(normal_after)
-        if not blown and not (normal_after < 0 and -normal_after >= RUNAWAY * max(start, c["closing"], 1e-12)):
+        if not blown and not (normal_after < 0 and -normal_after >= RUNAWAY * max(start, c.closing, 1e-12)):
             return False
-        e, closing = c["restitution"], max(c["closing"], 1e-300)
+        e, closing = c.restitution, max(c.closing, 1e-300)
         factor = 2.0 + e
         if blown:
             outcome = "with NaN or infinite velocities"
@@ -972,41 +1017,41 @@ class _Comparison:
             meetings = math.log(-normal_after / closing) / math.log(factor)
             reached = f"gets there after about {meetings:.0f} meetings"
         self._add("impulse-loop", s, c,
-                  f"{self._both(c)}: they met at {closing:.3g} m/s at {c['tau'] / dt:.2f}·dt into step {s} and "
+                  f"{self._both(c)}: they met at {closing:.3g} m/s at {c.tau / dt:.2f}·dt into step {s} and "
                   f"left the step {outcome}. An impulse of the wrong sign does this in an engine that looks for the "
                   f"next contact at once: it pushes the pair together at (2 + e) = {factor:.3g} times their closing "
                   f"speed, so they meet again at the same instant, and again: their speed {reached}",
                   "the impulse points the wrong way: j = −(1 + e)·(v_rel·n)/(1/m_a + 1/m_b) pushes a along n (from b "
-                  "towards a) and b against it. A bound on the contacts of a step (physdbg's max_events_per_step) "
+                  "towards a) and b against it. A bound on the contacts of a step (physdbg's max_contacts_per_step) "
                   "turns such a loop into an error instead of NaN",
                   {"closing_speed": closing, "factor": factor, "meetings": meetings,
                    "speed_after": None if blown else -normal_after})
         for k in (s, s + 1):
             for b in bodies:
                 if (k, b) in self.kicks:
-                    self.kicks[(k, b)]["matched"] = True
+                    self.kicks[(k, b)].matched = True
         return True
 
-    def _skipped_rest(self, c: dict) -> bool:
+    def _skipped_rest(self, c: StepContact) -> bool:
         """The run left sphere a where it touched for the rest of the step: its position at
         the step's end is physdbg's centre at the touch (the seed moves a body on after a
         bounce for the time the step has left)."""
         r = self.runs
-        s, a = c["step"], c["a"]
+        s, a = c.step, c.a
         dt = float(r.dt[s])
-        if c["tau"] >= (1.0 - TIME_TOLERANCE) * dt or self.inv[a] == 0:
+        if c.tau >= (1.0 - TIME_TOLERANCE) * dt or self.inv[a] == 0:
             return False
-        centre = c["centre"]
+        centre = c.centre
         if np.linalg.norm(r.xf[s, a] - centre) > self.atol + self.rtol * float(np.linalg.norm(centre)):
             return False
-        left = dt - c["tau"]
+        left = dt - c.tau
         self._add("skipped-rest", s, c,
-                  f"{self._subject(c)} touched {self._what(c)} at {c['tau'] / dt:.2f}·dt into step {s} and stayed "
+                  f"{self._subject(c)} touched {self._what(c)} at {c.tau / dt:.2f}·dt into step {s} and stayed "
                   f"there for the rest of the step ({left:.3g} s, {left / dt:.2f}·dt); physdbg moves it on with its "
                   f"new velocity, to {float(np.linalg.norm(r.xf[s, a] - self._end_of(s)[a])):.3g} m from where your "
                   f"run left it",
                   "after resolving a contact at time τ into the step, move the body on with its new velocity for the "
-                  "time left (dt − τ), and look for further contacts in that time", {"tau": c["tau"], "left": left})
+                  "time left (dt − τ), and look for further contacts in that time", {"tau": c.tau, "left": left})
         return True
 
     def _end_of(self, s: int) -> np.ndarray:
@@ -1014,19 +1059,19 @@ class _Comparison:
         local = self._local_step(s)
         return local[0] if local is not None else np.full_like(self.runs.xf[s], np.nan)
 
-    def _late(self, c: dict, kick: dict) -> None:
+    def _late(self, c: StepContact, kick: Kick) -> None:
         r = self.runs
-        s, a = kick["step"], kick["body"]
-        dt = float(r.dt[c["step"]])
-        x = r.xf[s - 1, a] + (r.xf[s, a] - r.xf[s - 1, a]) * (kick["tau"] / float(r.dt[s]))
-        depth = -self._gap(c, a, x, s, kick["tau"])
-        shift = kick["time"] - c["time"]
-        fraction = kick["tau"] / float(r.dt[s])
+        s, a = kick.step, kick.body
+        dt = float(r.dt[c.step])
+        x = r.xf[s - 1, a] + (r.xf[s, a] - r.xf[s - 1, a]) * (kick.tau / float(r.dt[s]))
+        depth = -self._gap(c, a, x, s, kick.tau)
+        shift = kick.time - c.time
+        fraction = kick.tau / float(r.dt[s])
         where = (f"at the end of step {s}" if fraction >= 1 - TIME_TOLERANCE else
                  f"at the start of step {s}" if fraction <= TIME_TOLERANCE else f"{fraction:.2f}·dt into step {s}")
-        text = (f"{self._subject(c)} bounced off {self._what(c)} at t = {kick['time']:.6g} s ({where}), "
+        text = (f"{self._subject(c)} bounced off {self._what(c)} at t = {kick.time:.6g} s ({where}), "
                 f"{abs(shift) * 1000:.3g} ms ({abs(shift) / dt:.2f}·dt) {'after' if shift > 0 else 'before'} the "
-                f"exact time of impact t = {c['time']:.6g} s")
+                f"exact time of impact t = {c.time:.6g} s")
         if depth > 0:
             text += f", when it was already {depth * 1000:.3g} mm inside"
             advice = ("your engine tests for contact where each step ends (discrete detection) and bounces there, "
@@ -1038,27 +1083,27 @@ class _Comparison:
         else:
             advice = ("the bounce came after the touch but before an overlap showed: find the time of impact "
                       "within the step (the swept test) instead of testing at sampled instants")
-        self._add("bounce-time", c["step"], c, text, advice, {"physdbg_time": c["time"], "time": kick["time"],
+        self._add("bounce-time", c.step, c, text, advice, {"physdbg_time": c.time, "time": kick.time,
                                                                 "shift": shift, "depth": max(depth, 0.0)})
 
-    def _judge_energy(self, c: dict, kick: dict, quiet_if_late: bool) -> None:
+    def _judge_energy(self, c: StepContact, kick: Kick, quiet_if_late: bool) -> None:
         """Compare the contact's outgoing normal speed with the restitution's. After a late
         bounce, only a clear error is reported (below 0 or above 1): the speeds of a body
         bounced from inside are not the exact contact's."""
         r = self.runs
-        s = kick["step"]
-        tau, dt = kick["tau"], float(r.dt[s])
-        n = c["normal"]
+        s = kick.step
+        tau, dt = kick.tau, float(r.dt[s])
+        n = c.normal
         # a soft contact (MuJoCo's) spreads its impulse over steps: the contact lasts while the
         # kicks go on, and its outcome is the velocity after the last of them
         end = s
 
         def normal_speed(k):
-            v = r.vf[k, c["a"]] - (r.vf[k, c["other"]] if PARTNER_IS_SPHERE[c["kind"]] else 0.0)
+            v = r.vf[k, c.a] - (r.vf[k, c.other] if PARTNER_IS_SPHERE[c.kind] else 0.0)
             return float(v @ n)
 
         def pushing_apart(k):  # step k's kick pushes the bodies apart while they touch or approach
-            gap = self._gap(c, c["a"], r.xf[k - 1, c["a"]], k, 0.0)
+            gap = self._gap(c, c.a, r.xf[k - 1, c.a], k, 0.0)
             return normal_speed(k) > normal_speed(k - 1) and (gap <= 0.0 or normal_speed(k - 1) < 0.0)
 
         while (not self.estimated and pushing_apart(s) and end + 1 < len(r.t)
@@ -1066,7 +1111,7 @@ class _Comparison:
             end += 1
             for b in self._bodies(c):
                 if (end, b) in self.kicks:
-                    self.kicks[(end, b)]["matched"] = True
+                    self.kicks[(end, b)].matched = True
 
         def readings(i, last=None):
             """(velocity just before, just after) the contact, as each way of applying the
@@ -1083,14 +1128,14 @@ class _Comparison:
             return [(v0 + a * tau, v1 - a * (length - tau)), (v0 + a * dt, v1 - a * (length - dt)),
                     (v0, v1 - a * length)]
 
-        want = c["restitution"]
+        want = c.restitution
 
         def effective(last=None):
             """(|e − want|, e, normal speed before, after) of each reading of the contact."""
             out = []
-            pair = PARTNER_IS_SPHERE[c["kind"]]
-            for (before_a, after_a), other in zip(readings(c["a"], last),
-                                                  readings(c["other"], last) if pair else [(0.0, 0.0)] * 3):
+            pair = PARTNER_IS_SPHERE[c.kind]
+            for (before_a, after_a), other in zip(readings(c.a, last),
+                                                  readings(c.other, last) if pair else [(0.0, 0.0)] * 3):
                 before, after = (before_a - other[0]) @ n, (after_a - other[1]) @ n
                 if math.isfinite(before) and math.isfinite(after) and before < 0:
                     out.append((abs(-after / before - want), -after / before, before, after))
@@ -1114,7 +1159,7 @@ class _Comparison:
             return
         if mistake is not None:
             code, words, advice = mistake
-            self._add(code, c["step"], c,
+            self._add(code, c.step, c,
                       f"{self._both(c)}: they met at {abs(before):.3g} m/s and "
                       f"{'still approach' if after < 0 else 'part'} at {abs(after):.3g} m/s after the contact, an "
                       f"effective restitution of {e:.3g} where physdbg applies e = {want:g}: {words}", advice,
@@ -1144,16 +1189,16 @@ class _Comparison:
                       if gained else
                       "check the restitution your engine was given and how it combines two bodies' (physdbg's "
                       f"rule here: restitution_rule = {self.settings.get('restitution_rule', 'min')})")
-        self._add("contact-energy", c["step"], c, text, advice,
+        self._add("contact-energy", c.step, c, text, advice,
                   {"restitution": e, "expected": want, "speed_in": abs(before), "speed_out": abs(after)})
 
-    def _judge_tangent(self, c: dict, readings) -> bool:
+    def _judge_tangent(self, c: StepContact, readings) -> bool:
         """A frictionless contact pushes along its normal only, so each sphere keeps its
         velocity across the normal (its tangential part). A run that changes it either
         reflected the whole velocity (tangent-reversed: the seed's R = Ri − 2N(Ri·N) turns
         only the normal part) or pushed along another direction (wrong-normal). True when
         one was named."""
-        n = c["normal"]
+        n = c.normal
         for i in self._bodies(c):
             if self.inv[i] == 0:
                 continue
@@ -1166,13 +1211,13 @@ class _Comparison:
             if best is None:
                 continue
             change, before, after, t0, t1 = best
-            scale = float(np.linalg.norm(before)) + float(np.linalg.norm(self.acc[i])) * float(self.runs.dt[c["step"]])
+            scale = float(np.linalg.norm(before)) + float(np.linalg.norm(self.acc[i])) * float(self.runs.dt[c.step])
             if change <= RESTITUTION_TOLERANCE * scale + self.atol:
                 continue
-            c_i = dict(c, a=i, other=c["other"] if i == c["a"] else c["a"]) if PARTNER_IS_SPHERE[c["kind"]] else c
+            c_i = dataclasses.replace(c, a=i, other=c.other if i == c.a else c.a) if PARTNER_IS_SPHERE[c.kind] else c
             size0, size1 = float(np.linalg.norm(t0)), float(np.linalg.norm(t1))
             if size0 > 0 and size1 > 0 and float(t0 @ t1) < -0.9 * size0 * size1:
-                self._add("tangent-reversed", c["step"], c_i,
+                self._add("tangent-reversed", c.step, c_i,
                           f"{self._subject(c_i)}: the contact with {self._what(c_i)} reversed its velocity along the "
                           f"surface too, from {size0:.3g} m/s to {size1:.3g} m/s the other way; a frictionless "
                           f"contact keeps that part and turns only the part along the normal",
@@ -1182,7 +1227,7 @@ class _Comparison:
                 kick = after - before
                 along = abs(float(kick @ n)) / max(float(np.linalg.norm(kick)), 1e-300)
                 angle = math.degrees(math.acos(min(1.0, along)))
-                self._add("wrong-normal", c["step"], c_i,
+                self._add("wrong-normal", c.step, c_i,
                           f"{self._subject(c_i)}: the contact with {self._what(c_i)} pushed it {angle:.3g}° away from "
                           f"the normal at the touch, changing its velocity across the normal by {change:.3g} m/s "
                           f"(a frictionless contact changes only the part along the normal)",
@@ -1192,14 +1237,14 @@ class _Comparison:
             return True
         return False
 
-    def _judge_chain(self, s: int, group: list[dict], v_local: np.ndarray) -> None:
+    def _judge_chain(self, s: int, group: list[StepContact], v_local: np.ndarray) -> None:
         """Contacts of one step that share bodies: the group's outcome as a whole."""
         r = self.runs
         bodies = sorted({b for c in group for b in self._bodies(c) if self.inv[b] > 0})
         for b in bodies:
             for k in (s, s + 1):
                 if (k, b) in self.kicks:
-                    self.kicks[(k, b)]["matched"] = True
+                    self.kicks[(k, b)].matched = True
         idx = np.array(bodies)
         vf, vr = r.vf[s, idx], v_local[idx]
         gap = np.linalg.norm(vf - vr, axis=1)
@@ -1210,9 +1255,9 @@ class _Comparison:
         energy_f, energy_r = 0.5 * float(mass @ (vf * vf).sum(axis=1)), 0.5 * float(mass @ (vr * vr).sum(axis=1))
         scale = max(float(np.sum(mass * np.linalg.norm(vr, axis=1))), 1e-300)
         kept = float(np.linalg.norm(momentum_f - momentum_r)) <= 1e-3 * scale
-        order = ", then ".join(f"{self._pair_words(c)} at {c['tau'] / float(r.dt[s]):.2f}·dt" for c in group[:6])
+        order = ", then ".join(f"{self._pair_words(c)} at {c.tau / float(r.dt[s]):.2f}·dt" for c in group[:6])
         worst = int(idx[int(np.argmax(gap))])
-        evidence = {"bodies": bodies, "physdbg_order": [[c["a"], c["other"], c["kind"]] for c in group],
+        evidence = {"bodies": bodies, "physdbg_order": [[c.a, c.other, c.kind] for c in group],
                     "energy": energy_f, "physdbg_energy": energy_r, "momentum_kept": kept}
         first = group[0]
         if energy_f > energy_r * (1 + 1e-3) + 1e-12:
@@ -1234,12 +1279,12 @@ class _Comparison:
                       "apply each impulse to both bodies, equal and opposite, scaled by their inverse masses",
                       evidence)
 
-    def _extra(self, kick: dict) -> None:
+    def _extra(self, kick: Kick) -> None:
         r = self.runs
-        s, i = kick["step"], kick["body"]
+        s, i = kick.step, kick.body
         size = float(np.linalg.norm(r.vf[s, i] - r.vf[s - 1, i]))
         self._add("extra-contact", s, _body_only(i),
-                  f"sphere {i} changed velocity by {size:.3g} m/s at t ≈ {kick['time']:.6g} s; physdbg, stepping "
+                  f"sphere {i} changed velocity by {size:.3g} m/s at t ≈ {kick.time:.6g} s; physdbg, stepping "
                   f"from the same state, touches nothing in that step",
                   "a contact physdbg does not see: a test that fires too early or against the wrong body, or a "
                   "body that was already inside another (look at the step before)", {"change": size})
@@ -1278,46 +1323,46 @@ class _Comparison:
             return []
         return self._checker.check(r.xf[s - 1], r.vf[s - 1], r.xf[s], float(r.dt[s]), None, float(r.t[s - 1]))
 
-    def _crossing(self, c: dict):
+    def _crossing(self, c: StepContact):
         """The foreign crossing of contact c's bodies in its step or the next, or None."""
-        for s in (c["step"], c["step"] + 1):
+        for s in (c.step, c.step + 1):
             if s >= len(self.runs.t):
                 break
             for x in self._crossings_in(s):
-                if x.kind == c["kind"] and {x.a, x.other} == ({c["a"], c["other"]} if PARTNER_IS_SPHERE[c["kind"]]
-                                                              else {x.a, c["other"]}) and x.a in self._bodies(c):
+                if x.kind == c.kind and {x.a, x.other} == ({c.a, c.other} if PARTNER_IS_SPHERE[c.kind]
+                                                              else {x.a, c.other}) and x.a in self._bodies(c):
                     return s, x
         return None
 
-    def _tunnelled(self, c: dict, crossing) -> None:
+    def _tunnelled(self, c: StepContact, crossing) -> None:
         r = self.runs
         s, x = crossing
-        a, dt = c["a"], float(r.dt[c["step"]])
+        a, dt = c.a, float(r.dt[c.step])
         speed = float(np.linalg.norm(r.vf[s - 1, a]))
-        if PARTNER_IS_SPHERE[c["kind"]]:
-            room = 2 * float(self.radius[a] + self.radius[c["other"]])
+        if PARTNER_IS_SPHERE[c.kind]:
+            room = 2 * float(self.radius[a] + self.radius[c.other])
             what = f"more than the two spheres' diameters ({room:.3g} m)"
-        elif c["kind"] == KIND_WALL:
-            room = float(self.walls.thickness[c["other"]]) + 2 * float(self.radius[a])
+        elif c.kind == KIND_WALL:
+            room = float(self.walls.thickness[c.other]) + 2 * float(self.radius[a])
             what = f"more than the wall's thickness plus the sphere's diameter ({room:.3g} m)"
-        elif c["kind"] == KIND_MESH:
+        elif c.kind == KIND_MESH:
             room = 2 * float(self.radius[a])
             what = f"more than the sphere's diameter ({room:.3g} m: a mesh's triangle has no thickness)"
         else:
-            raise _no_geometry(c["kind"])
+            raise _no_geometry(c.kind)
         text = (f"{self._subject(c)} went through {self._what(c)} with no contact; physdbg's swept test, from the "
-                f"same state, finds the touch at t = {c['time']:.6g} s ({c['tau'] / dt:.2f}·dt) and bounces it back")
-        advice = _TUNNEL_ADVICE
+                f"same state, finds the touch at t = {c.time:.6g} s ({c.tau / dt:.2f}·dt) and bounces it back")
+        advice = why_tunnelled(self.settings, [], foreign=True).advice
         carried = speed * float(r.dt[s])
         inside = -self._gap(c, a, r.xf[s - 1, a], s, 0.0)
-        if inside > self.settings.get("contact_tolerance", 0.0) and PARTNER_IS_SPHERE[c["kind"]]:
+        if inside > self.settings.get("contact_tolerance", 0.0) and PARTNER_IS_SPHERE[c.kind]:
             text += f"; it was already {inside * 1000:.3g} mm inside at the step's start"
             advice = ("it started the step inside the other sphere, after a contact resolved late or with the wrong "
                       "impulse: fix that first (see the departure before this one)")
         elif carried > room:
             text += f". At {speed:.3g} m/s a step of {float(r.dt[s]):.3g} s carries it {carried:.3g} m, {what}"
             advice += f" (steps under {room / max(speed, 1e-300):.3g} s here)"
-        self._add("tunnelling", s, c, text, advice, {"physdbg_time": c["time"], "speed": speed, "depth": x.depth})
+        self._add("tunnelling", s, c, text, advice, {"physdbg_time": c.time, "speed": speed, "depth": x.depth})
 
     def _non_finite(self) -> None:
         r = self.runs
@@ -1332,58 +1377,59 @@ class _Comparison:
                       "zero mass is the usual start", {"frame": k})
 
     # ------------------------------------------------------------------ words
-    def _gap(self, c: dict, a: int, x: np.ndarray, s: int, tau: float) -> float:
+    def _gap(self, c: StepContact, a: int, x: np.ndarray, s: int, tau: float) -> float:
         """Distance from contact (m; negative inside) of body a at x, the other body where
         the foreign run had it at that instant."""
         r = self.runs
-        if c["kind"] == KIND_WALL:
+        if c.kind == KIND_WALL:
             from ..engine.colliders.plane import gaps
 
-            return float(gaps(np.asarray(x, dtype=np.float64).reshape(1, 3), self.radius[a:a + 1], self.walls)[0, c["other"]])
-        if c["kind"] == KIND_MESH:
+            return float(gaps(np.asarray(x, dtype=np.float64).reshape(1, 3), self.radius[a:a + 1], self.walls)[0, c.other])
+        if c.kind == KIND_MESH:
             from ..engine.mesh.closest import closest_on_triangle
 
             meshes = self.walls.meshes
-            corners = meshes.corners[c["other"]]
-            if meshes.moving[meshes.mesh_of[c["other"]]]:  # a kinematic mesh, where it was then
-                corners = meshes.placed(float(r.t[s - 1]) + tau)[0][c["other"]]
+            corners = meshes.corners[c.other]
+            if meshes.moving[meshes.mesh_of[c.other]]:  # a kinematic mesh, where it was then
+                corners = meshes.placed(float(r.t[s - 1]) + tau)[0][c.other]
             q = np.array(closest_on_triangle(*(float(v) for v in x), *corners.ravel())[:3])
             return float(np.linalg.norm(x - q)) - float(self.radius[a])
-        if not PARTNER_IS_SPHERE[c["kind"]]:
-            raise _no_geometry(c["kind"])
-        b = c["other"] if a == c["a"] else c["a"]
+        if not PARTNER_IS_SPHERE[c.kind]:
+            raise _no_geometry(c.kind)
+        b = c.other if a == c.a else c.a
         xb = r.xf[s - 1, b] + (r.xf[s, b] - r.xf[s - 1, b]) * (tau / float(r.dt[s]))
         return float(np.linalg.norm(x - xb)) - float(self.radius[a] + self.radius[b])
 
-    def _what(self, c: dict) -> str:
-        return partner_words(c["kind"], c["other"], self.names)
+    def _what(self, c: StepContact) -> str:
+        return partner_words(c.kind, c.other, self.names)
 
-    def _subject(self, c: dict) -> str:
-        return f"sphere {c['a']}"
+    def _subject(self, c: StepContact) -> str:
+        return f"sphere {c.a}"
 
-    def _both(self, c: dict) -> str:
-        return f"spheres {c['a']} and {c['other']}" if PARTNER_IS_SPHERE[c["kind"]] else f"sphere {c['a']}"
+    def _both(self, c: StepContact) -> str:
+        return f"spheres {c.a} and {c.other}" if PARTNER_IS_SPHERE[c.kind] else f"sphere {c.a}"
 
     @staticmethod
-    def _listed(c: dict) -> list[int]:
+    def _listed(c: StepContact) -> list[int]:
         """A contact as [a, other, kind], a pair of spheres lower index first (as it is
         either way round)."""
-        if PARTNER_IS_SPHERE[c["kind"]]:
-            return [min(c["a"], c["other"]), max(c["a"], c["other"]), c["kind"]]
-        return [c["a"], c["other"], c["kind"]]
+        if PARTNER_IS_SPHERE[c.kind]:
+            return [min(c.a, c.other), max(c.a, c.other), c.kind]
+        return [c.a, c.other, c.kind]
 
     def _sequence(self, contacts) -> str:
         """Contacts given as [a, other, kind], in words and in order: "0–1, then 1–2"."""
         listed = ", then ".join(contact_words(kind, a, other, self.names) for a, other, kind in contacts[:4])
         return listed + (" …" if len(contacts) > 4 else "")
 
-    def _pair_words(self, c: dict) -> str:
-        return contact_words(c["kind"], c["a"], c["other"], self.names)
+    def _pair_words(self, c: StepContact) -> str:
+        return contact_words(c.kind, c.a, c.other, self.names)
 
-    def _add(self, kind: str, step: int, c: dict, text: str, advice: str, evidence: dict | None = None) -> None:
-        other = c["other"] if c["kind"] is not None and PARTNER_IS_SPHERE[c["kind"]] else None
-        wall = self.wall_names[c["other"]] if c["kind"] == KIND_WALL else None
-        self.departures.append(Departure(kind, step, c["a"], text, advice, other, wall, evidence or {}))
+    def _add(self, kind: str, step: int, c: StepContact | _Lone, text: str, advice: str,
+             evidence: dict | None = None) -> None:
+        other = c.other if c.kind is not None and PARTNER_IS_SPHERE[c.kind] else None
+        wall = self.wall_names[c.other] if c.kind == KIND_WALL else None
+        self.departures.append(Departure(kind, step, c.a, text, advice, other, wall, evidence or {}))
 
     @staticmethod
     def _fold(departures: list[Departure]) -> list[Departure]:
@@ -1475,8 +1521,6 @@ def _restitution_mistake(e: float, want: float):
 
 
 _RUN_WIDE = ("own-rule", "index-order", "drag-per-step", "drag-ignored", "drift", "chaos", "unexplained")
-_TUNNEL_ADVICE = ("test for contacts along the path through the step (a swept test: solve for the time of impact), "
-                  "not where the step ends, or take shorter steps")
 _PRIORITY = ("impulse-loop", "non-finite", "immovable-moved", "drag-per-step", "drag-ignored", "tunnelling", "impulse-sign",
              "impulse-doubled", "restitution-sign", "one-missing", "restitution-squared", "contact-energy", "tangent-reversed",
              "wrong-normal", "own-rule", "tie", "index-order", "collision-order", "skipped-rest", "bounce-time", "missed-contact",
@@ -1499,7 +1543,8 @@ _KIND_WORDS = {
 }
 
 
-def _changed_contacts(with_rule: list[dict], without: list[dict]) -> list[tuple[dict, dict | None]]:
+def _changed_contacts(with_rule: list[StepContact],
+                      without: list[StepContact]) -> list[tuple[StepContact, StepContact | None]]:
     """The contacts of a step that a rule changed: (the contact with the rule, the same
     pair's contact without it), matched in order by pair, whose restitution or resting
     differs; where none does, the contacts one list has and the other not (other: None).
@@ -1507,26 +1552,26 @@ def _changed_contacts(with_rule: list[dict], without: list[dict]) -> list[tuple[
     left = list(without)
     changed, unmatched = [], []
     for c in with_rule:
-        match = next((d for d in left if (d["kind"], d["a"], d["other"]) == (c["kind"], c["a"], c["other"])), None)
+        match = next((d for d in left if (d.kind, d.a, d.other) == (c.kind, c.a, c.other)), None)
         if match is None:
             unmatched.append((c, None))
             continue
         left.remove(match)
-        if match["restitution"] != c["restitution"] or match["resting"] != c["resting"]:
+        if match.restitution != c.restitution or match.resting != c.resting:
             changed.append((c, match))
     return changed or unmatched
 
 
-def bodies_of(c: dict) -> tuple[int, ...]:
-    """The spheres of a contact row (a dict with kind, a, other): both of a pair, else a."""
-    return (c["a"], c["other"]) if PARTNER_IS_SPHERE[c["kind"]] else (c["a"],)
+def bodies_of(kind: int, a: int, other: int) -> tuple[int, ...]:
+    """The spheres of a contact (its kind, a and other): both of a pair, else a."""
+    return (a, other) if PARTNER_IS_SPHERE[kind] else (a,)
 
 
 def _body_count(n: int) -> str:
     return f"{n} body" if n == 1 else f"{n} bodies"
 
 
-def _chains(contacts: list[dict]) -> list[list[dict]]:
+def _chains(contacts: list[StepContact]) -> list[list[StepContact]]:
     """Contacts of one step grouped by shared bodies (walls do not join groups), in order."""
     parent: dict[int, int] = {}
 
@@ -1537,13 +1582,13 @@ def _chains(contacts: list[dict]) -> list[list[dict]]:
         return i
 
     for c in contacts:
-        find(c["a"])
-        if PARTNER_IS_SPHERE[c["kind"]]:
-            parent[find(c["a"])] = find(c["other"])
-    groups: dict[int, list[dict]] = {}
+        find(c.a)
+        if PARTNER_IS_SPHERE[c.kind]:
+            parent[find(c.a)] = find(c.other)
+    groups: dict[int, list[StepContact]] = {}
     for c in contacts:
-        groups.setdefault(find(c["a"]), []).append(c)
-    return sorted(groups.values(), key=lambda g: g[0]["index"])
+        groups.setdefault(find(c.a), []).append(c)
+    return sorted(groups.values(), key=lambda g: g[0].index)
 
 
 __all__ = ["CheckRunError", "CheckRunReport", "Departure", "FirstDeparture", "compare"]

@@ -18,11 +18,11 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..engine.space_order import chosen_order
-from ..events import PARTNER_IS_SPHERE, contact_words, partner_words
+from ..events import PARTNER_IS_SPHERE, contact_words
 from ..record.format import TOPIC_CONTACTS as CONTACTS_TOPIC
 from . import align
 from .quiet import quiet_numerics
-from .tunnel import StepChecker
+from .diff_causes import Cause, Divergence, StepCase, _count, _key, _show, step_causes
 
 DEFAULT_TOLERANCE = 1e-9  # atol (m, m/s) and rtol when a setting that matters differs
 GROWTH_DENSE_STEPS = 64  # every frame this many steps after the divergence, then key frames
@@ -40,9 +40,8 @@ CANNOT_MATTER_MESH = {
     "bounding_volume": ("every volume's walk finds every triangle a path box meets, and a swept test decides the "
                         "rest, so runs are identical by design"),
 }
-BUDGET_SETTINGS = ("max_events_per_step", "max_pairs_per_step", "max_swept_tests_per_step",
+BUDGET_SETTINGS = ("max_contacts_per_step", "max_pairs_per_step", "max_swept_tests_per_step",
                    "max_resting_work_per_step", "max_memory", "max_particle_steps")
-METHOD_SETTINGS = ("integrator", "dt", "drag", "gravity", "detection", "samples", "steps", "duration")
 
 
 @dataclass
@@ -59,34 +58,6 @@ class SettingDifference:
 
 # causes that make runs different whatever their states do
 DIFFERENT_ALONE = ("structure", "records")
-
-
-@dataclass
-class Cause:
-    """One reason the runs part. kind: settings | engine-version | engine-limits |
-    non-finite | tunnelling | collision-order | tie | missed-contact | contact-outcome |
-    method-drift | outside-change | length | records (bit-identical states, other recorded
-    contacts); where one run is another engine's, the kinds of
-    analysis.departure (bounce-time, contact-energy, extra-contact, drift, integrator,
-    foreign); text: the sentence; evidence: its numbers."""
-
-    kind: str
-    text: str
-    evidence: dict = field(default_factory=dict)
-
-
-@dataclass
-class Divergence:
-    """The first step where the runs differ beyond the tolerance. step / step_b: its
-    number in A / B (counted from 1; equal when aligned by step); time: s at its end;
-    state: StateDifference at its end; first_event: the first differing contact of the
-    step (index, and each run's contact as a dict or None), or None when none differs."""
-
-    step: int
-    step_b: int
-    time: float
-    state: align.StateDifference
-    first_event: dict | None
 
 
 @dataclass
@@ -114,6 +85,9 @@ class DiffReport:
     # what was checked of each file's integrity: {"verified": bool, "a": frames checked,
     # "frames_a": frames held, "b", "frames_b"} (docs/recording.md, "Integrity")
     integrity: dict = field(default_factory=dict)
+    # the cause the headline says whole (its index in causes), so the report says it once;
+    # not a field of the JSON, whose headline and causes both hold it
+    headline_cause: int | None = None
 
     @property
     def equivalent(self) -> bool:
@@ -126,6 +100,7 @@ class DiffReport:
 
     def as_dict(self) -> dict:
         out = asdict(self)
+        del out["headline_cause"]
         out["equivalent"] = self.equivalent
         out["exit_code"] = self.exit_code
         if self.growth is not None:
@@ -250,7 +225,7 @@ def _explain_foreign(report: DiffReport, ra, rb, label: str, atol, rtol) -> None
                                     f"{d.advice}", {"departure": asdict(d)}))
     if found.integrator is not None:
         causes.append(Cause("integrator", f"run {label}: {found.integrator['sentence']}", found.integrator))
-    report.causes = causes
+    report.causes, report.headline_cause = causes, None
     report.headline = found.headline.replace("the run departs from physdbg's",
                                              f"run {label} (another engine's) departs from run {other}")
 
@@ -315,7 +290,8 @@ class _Differ:
         event, contacts_a, contacts_b = self._first_event(fa, fb)
         divergence = Divergence(fa, fb, float(self.ta.time[fa]), state, event)
         growth = self._growth(fa, fb)
-        causes = structure + self._causes(divergence, prev_a, prev_b, contacts_a, contacts_b, growth)
+        causes = structure + step_causes(StepCase(self, divergence, prev_a, prev_b, contacts_a, contacts_b, growth),
+                                           self._setting_causes())
         return self._report(divergence, growth, causes, compared)
 
     def _structure(self) -> list[Cause]:
@@ -382,12 +358,13 @@ class _Differ:
                 "(its own frame when one falls there, else Hermite interpolation between its two frames)")
         structure = next((c for c in causes if c.kind == "structure"), None)
         records = next((c for c in causes if c.kind == "records"), None)
+        said = None  # the cause the headline says whole
         if structure is not None:
             headline = "different structure: " + structure.text[len("the runs are not of the same bodies: "):]
             if divergence is not None:
                 headline += f"; their states part in step {divergence.step}"
         elif records is not None:
-            headline = "different records: " + records.text
+            headline, said = "different records: " + records.text, records
         elif divergence is None:
             if not self._same_length():
                 headline = (f"different lengths: they agree for the {min(ra.steps, rb.steps)} steps both have, then "
@@ -403,11 +380,13 @@ class _Differ:
                         f"the runs part in step {divergence.step}") + (
                 f" (step {divergence.step_b} of B)" if divergence.step_b != divergence.step else "") + \
                 (": " + re.sub(r"^step \d+: ", "", _main(causes).text, flags=re.IGNORECASE) if causes else "")
+            said = _main(causes) if causes else None
         return DiffReport(str(ra.path), str(rb.path), ra.header.name, rb.header.name, ra.steps, rb.steps,
                           "step" if self.by_step else "time", note, self.atol, self.rtol, compared,
                           self.settings, divergence, growth, causes, headline, self._same_length(),
                           {"verified": ra.verify and rb.verify, "a": ra.checked_frames, "frames_a": ra.frames,
-                           "b": rb.checked_frames, "frames_b": rb.frames})
+                           "b": rb.checked_frames, "frames_b": rb.frames},
+                          next((i for i, c in enumerate(causes) if c is said), None))
 
     def _same_length(self) -> bool:
         if self.by_step:
@@ -633,262 +612,11 @@ class _Differ:
                 f"{s.name} {s.a} in A, {s.b} in B" for s in versions), {"versions": [asdict(s) for s in versions]}))
         return out
 
-    def _causes(self, div: Divergence, prev_a, prev_b, ca, cb, growth) -> list[Cause]:
-        causes = self._setting_causes()
-        step, step_b = div.step, div.step_b
-        if step == 0 or step_b == 0:  # no step was taken: the runs did not start alike
-            worst = div.state.particles[0] if div.state.particles else {}
-            changed = [s.name for s in self.settings if s.matters and s.name.startswith(("particles", "generate"))]
-            causes.append(Cause(
-                "initial-state",
-                f"at frame 0, before any step, {_count(div.state.count, 'sphere')} "
-                f"{'differ' if div.state.count != 1 else 'differs'} "
-                f"(sphere {worst.get('particle')} by {worst.get('position', 0.0):.3g} m and "
-                f"{worst.get('velocity', 0.0):.3g} m/s)"
-                + (f"; the scenes differ there ({', '.join(changed)})" if changed else
-                   "; no scene field differs, so a script set the starting state"),
-                {"particle": worst, "fields": changed}))
-            if growth is not None and growth.model:
-                causes[-1].text += "; " + growth.sentence()
-            return causes
-        if prev_a is not None:  # decoded already by the search for the divergence
-            self._states[(False, step - 1)], self._states[(True, step_b - 1)] = prev_a, prev_b
-        settings_a, settings_b = self.ra.meta["settings"], self.rb.meta["settings"]
-        # engine limits and NaN, in either run, in the diverging step
-        for label, warns, k in (("A", self.warn_a, step), ("B", self.warn_b, step_b)):
-            for w in warns.get(k, []):
-                if w["code"] == "non-finite":
-                    causes.append(Cause("non-finite", f"in run {label}, step {k}: {w['message']}", w))
-                elif w["code"].startswith("max_"):
-                    other = self.warn_b if label == "A" else self.warn_a
-                    other_k = step_b if label == "A" else step
-                    if not any(x["code"] == w["code"] for x in other.get(other_k, [])):
-                        causes.append(Cause("engine-limits", f"run {label} hit the {w['code']} budget in step {k} "
-                                            f"and left the rest of the step unresolved; run "
-                                            f"{'B' if label == 'A' else 'A'} did not ({w['message']})", w))
-        # tunnelling: the exact swept test over each run's recorded step
-        crossed = {}
-        if self.by_step and prev_a is not None:
-            for label, rec, prev, contacts_rec in (("A", self.ra, prev_a, self.ra), ("B", self.rb, prev_b, self.rb)):
-                contacts = contacts_rec.contacts(step) if rec.detail != "state" else None
-                after = self._state(rec, step)
-                checker = StepChecker(rec.header.radius, rec.header.inverse_mass, rec.header.gravity_scale,
-                                      rec.header.walls, rec.meta["settings"])
-                crossed[label] = checker.check(prev.positions, prev.velocities, after.positions, after.dt, contacts,
-                                               after.time - after.dt)
-            for label, other in (("A", "B"), ("B", "A")):
-                theirs = {(c.kind, c.a, c.other) for c in crossed[other]}
-                for c in crossed[label]:
-                    if (c.kind, c.a, c.other) in theirs:
-                        continue
-                    what = (f"passed into sphere {c.other}" if PARTNER_IS_SPHERE[c.kind]
-                            else f"went through {partner_words(c.kind, c.other, self.names_a)}")
-                    rec = self.ra if label == "A" else self.rb
-                    run_settings = rec.meta["settings"]
-                    if run_settings.get("detection") != "swept":
-                        reason = f"detection = {run_settings.get('detection')}"
-                    elif run_settings.get("ordering") == "index":
-                        reason = "ordering = index: a contact that an earlier one creates is not looked for"
-                    else:
-                        reason = "a budget or the resting rule"
-                    made = [x for x in ((cb if label == "A" else ca) or []) if _touches(x, c)]
-                    other_did = (f"run {other} resolved a contact there at {made[0]['time_in_step'] / made[0]['dt']:.3f}·dt"
-                                 if made else f"run {other} did not cross")
-                    causes.append(Cause("tunnelling", f"step {step}: in run {label} sphere {c.a} {what} "
-                                                      f"with no contact ({reason}); {other_did}",
-                                        {"run": label, "particle": c.a, "other": c.other, "kind": c.kind}))
-        event = div.first_event
-        # the same settings and a bit-identical state before the step: a deterministic
-        # engine cannot part them, whatever the events show
-        identical_start = (self.by_step and prev_a is not None and not any(s.matters for s in self.settings)
-                           and np.array_equal(self.ta.hashes[step - 1], self.tb.hashes[step - 1]))
-        if identical_start and not any(c.kind in ("engine-limits", "non-finite") for c in causes):
-            causes.append(self._outside_change(step, div, event))
-            return causes
-        sleep = self._sleep_cause(div)
-        if sleep is not None:
-            causes.append(sleep)
-        if event is not None:
-            x, y = event["a"], event["b"]
-            keys_a = sorted(_key(r) for r in ca)
-            keys_b = sorted(_key(r) for r in cb)
-            orders_differ = settings_a.get("ordering") != settings_b.get("ordering")
-            if orders_differ and (x is None or y is None or _key(x) != _key(y)):
-                causes.insert(1 if causes and causes[0].kind == "settings" else 0, Cause(
-                    "collision-order",
-                    f"Step {step}: run A (ordering = {settings_a.get('ordering')}) resolved "
-                    f"{self._sequence(ca, event['index'])}; run B (ordering = {settings_b.get('ordering')}) resolved "
-                    f"{self._sequence(cb, event['index'])}.{_order_note(settings_a, settings_b)}"
-                    + self._consequence(div), {"a": x, "b": y, "index": event["index"],
-                                               "ordering": [settings_a.get("ordering"), settings_b.get("ordering")]}))
-            elif x is not None and y is not None and _key(x) != _key(y) and _tied(x, y, ca, cb):
-                causes.append(self._tie(step, x, y, ca, cb, div, settings_a, settings_b))
-            elif x is not None and y is not None and keys_a == keys_b and _key(x) != _key(y):
-                first_a, first_b = self._describe(x), self._describe(y)
-                later_a = next((r for r in ca if _key(r) == _key(y)), None)
-                why_a = _why_order(settings_a.get("ordering"))
-                why_b = _why_order(settings_b.get("ordering"))
-                text = (f"Step {step}: run A resolved {first_a} before {self._describe(later_a) if later_a else '…'}"
-                        f"{why_a}; run B resolved {first_b} first{why_b}.")
-                causes.append(Cause("collision-order", text + self._consequence(div),
-                                    {"a": x, "b": y, "ordering": [settings_a.get("ordering"),
-                                                                  settings_b.get("ordering")]}))
-            elif x is None or y is None or _key(x) != _key(y) or x["resting"] != y["resting"]:
-                if not any(c.kind == "tunnelling" for c in causes):
-                    causes.append(self._missed(step, x, y, ca, cb, div))
-            else:
-                dt = x["dt"]
-                if abs(x["time"] - y["time"]) > 0:
-                    text = (f"Step {step}: the same contact {self._describe(x, times=False)} happened at "
-                            f"{x['time_in_step'] / dt:.6f}·dt in A and {y['time_in_step'] / y['dt']:.6f}·dt in B "
-                            f"(a difference of {abs(x['time'] - y['time']):.2g} s)")
-                else:
-                    text = (f"Step {step}: the same contact {self._describe(x, times=False)} at the same time had "
-                            f"another outcome: impulse {x['impulse']:.6g} N·s with e = {x['restitution']:.3g} in A, "
-                            f"{y['impulse']:.6g} N·s with e = {y['restitution']:.3g} in B")
-                    text += self._rapid_rule(x, y, settings_a, settings_b)
-                causes.append(Cause("contact-outcome", text + "." + self._consequence(div), {"a": x, "b": y}))
-        elif not any(c.kind in ("tunnelling", "engine-limits", "non-finite", "sleep") for c in causes):
-            method = [s.name for s in self.settings if s.matters and s.name in METHOD_SETTINGS]
-            if method or not self.by_step:
-                causes.append(Cause("method-drift", f"no event differs up to step {step}: the states drift apart "
-                                                    f"smoothly ({', '.join(method) or 'dt'} differ{'s' if len(method) == 1 else ''})"
-                                                    f"; {growth.sentence() if growth else ''}",
-                                    {"settings": method}))
-            else:
-                causes.append(Cause("method-drift", f"no event differs up to step {step}; the states drift apart "
-                                                    f"because of the settings above", {}))
-        return causes
-
-    @staticmethod
-    def _rapid_rule(x: dict, y: dict, settings_a: dict, settings_b: dict) -> str:
-        """Words for a contact made elastic in one run by physdbg's rapid-contact rule (e = 1
-        where the other run's e is below 1, and the rule on in that run): its own cause, not
-        the other run's mistake."""
-        for label, row, other, settings in (("A", x, y, settings_a), ("B", y, x, settings_b)):
-            window = settings.get("rapid_contact_time") or 0.0
-            if row["restitution"] == 1.0 and other["restitution"] < 1.0 and window > 0:
-                return (f" — e = 1 in {label} is physdbg's rapid-contact rule, which makes a contact that comes "
-                        f"within rapid_contact_time = {window:g} s of either sphere's previous one elastic when "
-                        f"nothing presses it (-s rapid_contact_time=0 turns it off)")
-        return ""
-
-    def _sleep_cause(self, div: Divergence) -> Cause | None:
-        """A differing sphere asleep in one run and awake in the other, when the step began
-        or when it ended (engine/sleep.py): a sleeper does not move, and falling asleep
-        sets a sphere's velocity to zero. None when no differing sphere's sleep differs."""
-        if not self.by_step:
-            return None
-        frames = {"start": (self._state(self.ra, div.step - 1).asleep, self._state(self.rb, div.step_b - 1).asleep),
-                  "end": (self._state(self.ra, div.step).asleep, self._state(self.rb, div.step_b).asleep)}
-        if all(mask is None for pair in frames.values() for mask in pair):
-            return None
-
-        def asleep(when: str, run: int, p: int) -> bool:
-            mask = frames[when][run]
-            return bool(mask is not None and mask[p])
-
-        sleep_settings = [f"{d.name}: {_show(d.a)} in A, {_show(d.b)} in B" for d in self.settings
-                          if d.name in ("sleep_speed", "sleep_time")]
-        why = f" ({'; '.join(sleep_settings)})" if sleep_settings else ""
-        for p in (entry["particle"] for entry in div.state.particles):
-            start, end = (asleep("start", 0, p), asleep("start", 1, p)), (asleep("end", 0, p), asleep("end", 1, p))
-            if start[0] != start[1]:
-                sleeper, other = ("A", "B") if start[0] else ("B", "A")
-                text = (f"Step {div.step}: sphere {p} was asleep in run {sleeper} and awake in run {other} when "
-                        f"the step began{why}. A sleeping sphere does not move: what hits or pushes it bounces "
-                        f"off it as off a wall")
-            elif end[0] != end[1]:
-                changed, other = ("A", "B") if end[0] != start[0] else ("B", "A")
-                verb = "fell asleep" if not start[0] else "woke"
-                text = (f"Step {div.step}: sphere {p} {verb} at the end of the step in run {changed} and did not in "
-                        f"run {other}{why}" + (". Falling asleep sets its velocity to zero" if verb == "fell asleep"
-                                               else ""))
-            else:
-                continue
-            return Cause("sleep", text + "." + self._consequence(div),
-                         {"particle": p, "asleep_at_start": list(start), "asleep_at_end": list(end)})
-        return None
-
-    def _outside_change(self, step: int, div: Divergence, event: dict | None) -> Cause:
-        who = div.state.particles[0] if div.state.particles else {}
-        seen = ""
-        if event is not None and event["a"] is not None and event["b"] is not None:
-            seen = (f"; the first sign is contact {event['index'] + 1} of the step "
-                    f"({self._describe(event['a'], times=False)}), whose time differs by "
-                    f"{abs(event['a']['time'] - event['b']['time']):.2g} s")
-        return Cause("outside-change",
-                     f"both runs were bit-identical at the start of step {step} (frame {step - 1}), with the same "
-                     f"settings and engine, yet sphere {who.get('particle')} differs by {who.get('position', 0):.3g} m "
-                     f"after it{seen}. The engine is deterministic, so the state was changed outside its rules (a "
-                     f"script that moved a sphere between steps), or the two runs did not come from the same engine "
-                     f"build", {"particle": who})
-
-    def _missed(self, step, x, y, ca, cb, div) -> Cause:
-        present, missing, label, other = (x, y, "A", "B") if x is not None else (y, x, "B", "A")
-        if present is not None and missing is not None and _key(present) == _key(missing):
-            rest = "A" if x["resting"] else "B"
-            text = (f"Step {step}: {self._describe(x, times=False)} was held in run {rest} (with restitution 0, "
-                    f"instead of bounced: the resting rule holds a pressed, slow contact, the rapid-contact rule a "
-                    f"pressed one soon after the spheres' previous contact, under rapid_contact_rule=tc only a slow "
-                    f"one) and bounced in the other")
-            return Cause("missed-contact", text + "." + self._consequence(div), {"a": x, "b": y})
-        in_other = [r for r in (cb if label == "A" else ca) if _key(r) == _key(present)]
-        text = (f"Step {step}: run {label} resolved {self._describe(present)} (contact {present['index'] + 1} of the "
-                f"step); run {other} " + (f"resolved it later, as contact {in_other[0]['index'] + 1}"
-                                          if in_other else "had no such contact"))
-        if missing is not None and not in_other:
-            text += f", and resolved {self._describe(missing)} instead"
-        return Cause("missed-contact", text + "." + self._consequence(div), {"a": x, "b": y})
-
-    def _tie(self, step, x, y, ca, cb, div, settings_a: dict, settings_b: dict) -> Cause:
-        """Two runs that took contacts at one instant (_tied) in another order: a tie, which
-        neither run has wrong; what in their settings orders ties otherwise, where one does."""
-        names = sorted({_key(r) for r in ca if _at_one_instant(r, x)})
-        both = " and ".join(contact_words(kind, a, other, self.names_a) for kind, a, other in names[:4])
-        why = ""
-        if settings_a.get("space_order") != settings_b.get("space_order"):
-            why = (f" The runs number their spheres differently (space_order: {settings_a.get('space_order')} in A, "
-                   f"{settings_b.get('space_order')} in B), and the numbering orders tied contacts.")
-        text = (f"Step {step}: the contacts {both} happen at one instant (t = {x['time_in_step'] / x['dt']:.2f}·dt) in "
-                f"both runs; run A took {self._describe(x, times=False)} first, run B {self._describe(y, times=False)}. "
-                f"This is a tie: which of contacts at one instant goes first is not the model's to say, so neither run "
-                f"is wrong.{why}")
-        return Cause("tie", text + self._consequence(div), {"a": x, "b": y, "step": step,
-                                                            "contacts": [list(k) for k in names]})
-
-    def _sequence(self, rows: list[dict], index: int) -> str:
-        """The step's contacts in the order resolved, up to two past ``index``."""
-        shown = [self._describe(r) for r in rows[:index + 2]]
-        if not shown:
-            return "no contacts"
-        more = f", … ({len(rows)} in all)" if len(rows) > index + 2 else ""
-        return ", then ".join(shown) + more
-
-    def _describe(self, r: dict | None, times: bool = True) -> str:
-        if r is None:
-            return "nothing"
-        who = contact_words(r["kind"], r["a"], r["other"], self.names_a)
-        return who + (f" (t = {r['time_in_step'] / r['dt']:.2f}·dt)" if times else "")
-
-    def _consequence(self, div: Divergence) -> str:
-        if not div.state.particles:
-            return ""
-        p = div.state.particles[0]["particle"]
-        va = np.linalg.norm(self._state(self.ra, div.step).velocities[p])
-        vb = np.linalg.norm(self._state(self.rb, div.step_b).velocities[p])
-        return f" From there sphere {p} leaves at {va:.2f} m/s in A and {vb:.2f} m/s in B."
-
 
 def _last_below(steps: np.ndarray, gaps: np.ndarray, level: float) -> int:
     """The last sampled frame before the gap first reaches ``level`` (or the last one)."""
     above = np.flatnonzero(~(gaps < level))
     return int(steps[above[0]]) if len(above) else int(steps[-1]) if len(steps) else 0
-
-
-def _count(n: int, noun: str) -> str:
-    """'1 more step', '3 more steps'."""
-    return f"{n} {noun}{'' if n == 1 else 's'}"
 
 
 def _walls_words(walls) -> str:
@@ -902,18 +630,6 @@ def _main(causes: list[Cause]) -> Cause:
     """The most telling cause: the mechanism, rather than the list of settings."""
     specific = [c for c in causes if c.kind not in ("settings", "engine-version")]
     return specific[0] if specific else causes[0]
-
-
-def _order_note(sa: dict, sb: dict) -> str:
-    if "index" in (sa.get("ordering"), sb.get("ordering")):
-        return (" Ordering by index resolves the contacts predicted at the start of the step in index order, so a "
-                "contact that an earlier one creates in the same step is missed; ordering by time resolves each "
-                "contact at its time of impact and looks again after it.")
-    return ""
-
-
-def _why_order(ordering: str | None) -> str:
-    return {"index": " because it orders by index", "time": " because it orders by time"}.get(ordering or "", "")
 
 
 POINT_ULPS = 8  # a pair's contact point, computed from the other sphere's side, may differ by rounding
@@ -968,49 +684,10 @@ def _contacts_differ(a, b, names) -> str:
     return "their messages differ, not their rows"
 
 
-def _key(r: dict) -> tuple:
-    if PARTNER_IS_SPHERE[r["kind"]]:  # a pair is the same pair either way round
-        return (r["kind"], min(r["a"], r["other"]), max(r["a"], r["other"]))
-    return (r["kind"], r["a"], r["other"])
-
-
-def _at_one_instant(r: dict, x: dict) -> bool:
-    """Contact rows r and x of one step at one instant (resolve.SAME_INSTANT of the step)."""
-    from ..engine.resolve import SAME_INSTANT
-
-    return abs(r["time_in_step"] - x["time_in_step"]) <= SAME_INSTANT * x["dt"]
-
-
-def _tied(x: dict, y: dict, ca, cb) -> bool:
-    """Runs A and B first differ at contacts x (A's) and y (B's) of one step, at one instant,
-    that share a sphere, and each run has the other's contact at that instant too: the
-    contacts tied, and the runs took them in another order."""
-    from .departure import bodies_of
-
-    if not _at_one_instant(y, x) or not (set(bodies_of(x)) & set(bodies_of(y))):
-        return False
-    return (any(_key(r) == _key(y) and _at_one_instant(r, x) for r in ca)
-            and any(_key(r) == _key(x) and _at_one_instant(r, y) for r in cb))
-
-
-def _touches(r: dict, crossing) -> bool:
-    if r["kind"] != crossing.kind:
-        return False
-    if PARTNER_IS_SPHERE[crossing.kind]:
-        return {r["a"], r["other"]} == {crossing.a, crossing.other}
-    return r["a"] == crossing.a and r["other"] == crossing.other
-
-
 def _close(a: float, b: float, atol: float, rtol: float) -> bool:
     if a == b or (math.isinf(a) and a == b):
         return True
     return abs(a - b) <= atol + rtol * abs(b)
-
-
-def _show(value) -> str:
-    if isinstance(value, float):
-        return f"{value:.6g}"
-    return str(value)
 
 
 def _warnings(rec) -> dict[int, list[dict]]:
@@ -1018,10 +695,13 @@ def _warnings(rec) -> dict[int, list[dict]]:
     import json
 
     from ..record import format as fmt
+    from ..record.header import current_name
 
     out: dict[int, list[dict]] = {}
     for _, frame, data in rec._messages([fmt.TOPIC_WARNINGS], 1, rec.frames - 1):
-        out.setdefault(frame, []).append(json.loads(data))
+        warning = json.loads(data)
+        warning["code"] = current_name(warning["code"])
+        out.setdefault(frame, []).append(warning)
     return out
 
 

@@ -33,6 +33,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..peers import PeerSetup
+from .report import markdown_table
 
 SAMPLE_BUDGET = 30_000_000  # floats of positions and velocities a measured run keeps
 KICK_FRACTION = 0.02  # as check-run: a velocity change beyond this share of speed + |a|·dt is a kick
@@ -321,15 +322,13 @@ def _fmt(value, unit: str = "") -> str:
 
 def to_markdown(runs: list[EngineRun], command: str) -> str:
     lines = [f"Made by `{command}`: each scene in each engine and setting, the steps timed with nothing watching; "
-             f"the errors against physdbg's exact run of the scene (docs/benchmarks.md, \"Engines\").", "",
-             "| scene | engine and setting | ms/step | largest overlap (m) | energy error | contact time error (s) | "
-             "tunnelled |", "|---|---|---|---|---|---|---|"]
-    for run in runs:
-        if run.failure:
-            lines.append(f"| {run.scene} | {run.method} | could not run: {run.failure} | | | | |")
-            continue
-        lines.append(f"| {run.scene} | {run.method} | {run.ms_per_step:.3g} | {_fmt(run.largest_overlap)} | "
-                     f"{_fmt(run.energy_error)} | {_fmt(run.contact_time_error)} | {_fmt(run.tunnelled)} |")
+             f"the errors against physdbg's exact run of the scene (docs/benchmarks.md, \"Engines\").", ""]
+    lines += markdown_table(
+        ["scene", "engine and setting", "ms/step", "largest overlap (m)", "energy error", "contact time error (s)",
+         "tunnelled"],
+        [[run.scene, run.method, f"could not run: {run.failure}", None, None, None, None] if run.failure else
+         [run.scene, run.method, f"{run.ms_per_step:.3g}", _fmt(run.largest_overlap), _fmt(run.energy_error),
+          _fmt(run.contact_time_error), _fmt(run.tunnelled)] for run in runs])
     notes = {}
     for run in runs:  # each setting's notes once, from the first scene it ran
         if run.notes and run.method not in notes:

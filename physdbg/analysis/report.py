@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 
 from typing import TYPE_CHECKING
 
@@ -49,6 +48,29 @@ def versioned(data: dict) -> dict:
 def report_json(report: DiffReport | AuditReport | CheckRunReport) -> str:
     """Any report as JSON: its ``as_dict()`` with the versions first, NaN and infinity as null."""
     return json.dumps(versioned(_clean(report.as_dict())), indent=2, default=_plain)
+
+
+def markdown_table(columns: list[str], rows: list[list]) -> list[str]:
+    """A Markdown table's lines: the header, its rule and one line per row (each cell as
+    str; None a cell with nothing in it). The one table writer of every Markdown report
+    and chart page."""
+    def line(cells) -> str:
+        return "|" + "".join(" |" if cell is None else f" {cell} |" for cell in cells)
+
+    return [line(columns), "|" + "---|" * len(columns)] + [line(row) for row in rows]
+
+
+def record_lines(kind: str, text: str, step: int | None = None, advice: str = "") -> list[str]:
+    """One cause, finding or departure as the text reports print it: '  - step 3 [kind] text'
+    (no step: a diff's cause) and, with advice, '      what to do: advice'."""
+    head = f"  - step {step} [{kind}] " if step is not None else f"  - [{kind}] "
+    return [head + text] + ([f"      what to do: {advice}"] if advice else [])
+
+
+def record_markdown(kind: str, text: str, step: int | None = None, advice: str = "") -> str:
+    """The same record as a Markdown list item: '- **step 3** *kind*: text — advice'."""
+    return (f"- **step {step}** " if step is not None else "- ") + f"*{kind}*: {text}" + (
+        f" — {advice}" if advice else "")
 
 
 def _tolerance(r: DiffReport) -> str:
@@ -101,15 +123,15 @@ def diff_text(r: DiffReport) -> str:
         lines.append("afterwards: " + r.growth.sentence())
     if r.causes:
         lines.append("why:")
-        lines.extend(f"  - [{c.kind}] {_cause_text(c, r)}" for c in r.causes)
+        lines.extend(line for c in r.causes for line in record_lines(c.kind, _cause_text(c, r)))
     return "\n".join(lines)
 
 
 def _cause_text(cause, r: DiffReport) -> str:
     """A cause's sentence, or a pointer to the result line when that already says it whole
     (the main cause's 80 words were printed twice)."""
-    said = re.sub(r"^step \d+: ", "", cause.text, flags=re.IGNORECASE)
-    return "the main cause, said on the result line" if said and said in r.headline else cause.text
+    said = r.headline_cause is not None and r.causes[r.headline_cause] is cause
+    return "the main cause, said on the result line" if said else cause.text
 
 
 def diff_markdown(r: DiffReport) -> str:
@@ -120,9 +142,9 @@ def diff_markdown(r: DiffReport) -> str:
              f"Compared {_compared(r)}; tolerance {_tolerance(r)}. "
              f"Checked {_integrity(r)}.", ""]
     if r.settings:
-        lines += ["| setting | A | B | note |", "|---|---|---|---|"]
-        lines += [f"| `{s.name}` | {_show(s.a)} | {_show(s.b)} | {'' if s.matters else 'cannot matter: ' + s.note} |"
-                  for s in r.settings]
+        lines += markdown_table(["setting", "A", "B", "note"],
+                                [[f"`{s.name}`", _show(s.a), _show(s.b), "" if s.matters else "cannot matter: " + s.note]
+                                 for s in r.settings])
         lines.append("")
     d = r.divergence
     if d is not None:
@@ -138,7 +160,7 @@ def diff_markdown(r: DiffReport) -> str:
             lines.append(f"- afterwards: {r.growth.sentence()}")
         lines.append("")
     if r.causes:
-        lines += ["**Why**", ""] + [f"- *{c.kind}*: {_cause_text(c, r)}" for c in r.causes]
+        lines += ["**Why**", ""] + [record_markdown(c.kind, _cause_text(c, r)) for c in r.causes]
     return "\n".join(lines) + "\n"
 
 
@@ -153,9 +175,7 @@ def explain_text(r: AuditReport) -> str:
         from .audit import said_once
 
         for f, message, advice in said_once(r.findings):
-            lines.append(f"  - step {f.step} [{f.kind}] {message}")
-            if advice:
-                lines.append(f"      what to do: {advice}")
+            lines += record_lines(f.kind, message, f.step, advice)
         lines.extend("  " + line for line in r.lines() if line.startswith("..."))
     lines.extend(f"note     {n}" for n in r.notes)
     return "\n".join(lines)
@@ -166,9 +186,8 @@ def explain_markdown(r: AuditReport) -> str:
     lines = [f"### {icon} physdbg explain: {'clean' if r.clean else 'findings'}", "",
              f"`{r.source}` ({r.scene}, {r.checked} of {r.steps} steps audited)", ""]
     if not r.clean:
-        lines += ["| kind | count |", "|---|---|"] + [f"| {k} | {v} |" for k, v in r.counts.items()] + [""]
-        lines += [f"- **step {f.step}** *{f.kind}*: {f.message}" + (f" — {f.advice}" if f.advice else "")
-                  for f in r.findings]
+        lines += markdown_table(["kind", "count"], [[k, v] for k, v in r.counts.items()]) + [""]
+        lines += [record_markdown(f.kind, f.message, f.step, f.advice) for f in r.findings]
     lines += [f"> {n}" for n in r.notes]
     return "\n".join(lines) + "\n"
 
@@ -199,8 +218,7 @@ def check_run_text(r: CheckRunReport) -> str:
     if r.departures:
         lines.append("departures, in step order:")
         for d in r.departures:
-            lines.append(f"  - step {d.step} [{d.kind}] {d.text}{_more(d.more)}")
-            lines.append(f"      what to do: {d.advice}")
+            lines += record_lines(d.kind, d.text + _more(d.more), d.step, d.advice)
     lines.extend(f"note       {n}" for n in r.notes)
     return "\n".join(lines)
 
@@ -217,8 +235,8 @@ def check_run_markdown(r: CheckRunReport) -> str:
         lines += [f"- **integrator**: {r.integrator['sentence']}"]
     lines.append("")
     if r.departures:
-        lines += ["| step | kind | what happened | what to do |", "|---|---|---|---|"]
-        lines += [f"| {d.step} | {d.kind} | {d.text}{_more(d.more)} | {d.advice} |" for d in r.departures]
+        lines += markdown_table(["step", "kind", "what happened", "what to do"],
+                                [[d.step, d.kind, d.text + _more(d.more), d.advice] for d in r.departures])
         lines.append("")
     lines += [f"> {n}" for n in r.notes]
     return "\n".join(lines) + "\n"
@@ -322,7 +340,7 @@ def auto_lines(auto: dict[str, str]) -> list[str]:
 
 
 def _warning_totals(counts: dict[str, int]) -> str:
-    """'none', or the total and a count per kind: '197: 76 max_events_per_step, 121 overlap'."""
+    """'none', or the total and a count per kind: '197: 76 max_contacts_per_step, 121 overlap'."""
     if not counts:
         return "none"
     kinds = ", ".join(f"{n} {code}" for code, n in sorted(counts.items(), key=lambda item: -item[1]))

@@ -34,6 +34,7 @@ import numpy as np
 
 from ..engine.motion import INTEGRATOR_NAMES
 from ..engine.toi import DETECTION_NAMES
+from .report import markdown_table
 
 OUTCOMES = ("pass", "blew up", "tunnelled", "budget hit", "overlap left", "energy changed", "sank")
 ENERGY_TOLERANCE = 1e-6
@@ -203,7 +204,8 @@ def to_markdown(cells: list[Cell], command: str) -> str:
     """Per map and method: how many cells pass, and each failure with where it begins."""
     lines = [f"Made by `{command}`.", ""]
     for name, x_name, y_name in (("impact", "dt (s)", "speed (m/s)"), ("stack", "restitution", "height")):
-        lines += [f"### {name}", "", "| method | pass | failures (first at) |", "|---|---|---|"]
+        lines += [f"### {name}", ""]
+        rows = []
         methods = sorted({c.method for c in cells if c.map == name}, key=lambda m: (
             INTEGRATOR_NAMES.index(m.split("/")[0]), DETECTION_NAMES.index(m.split("/")[1])))
         for method in methods:
@@ -215,7 +217,8 @@ def to_markdown(cells: list[Cell], command: str) -> str:
                 if bad:
                     first = min(bad, key=lambda c: (c.x * c.y if name == "impact" else c.y, c.x))
                     failures.append(f"{outcome} ×{len(bad)} (e.g. {x_name} {first.x:.3g}, {y_name} {first.y:.3g})")
-            lines.append(f"| {method} | {passed}/{len(mine)} | {'; '.join(failures) or '-'} |")
+            rows.append([method, f"{passed}/{len(mine)}", "; ".join(failures) or "-"])
+        lines += markdown_table(["method", "pass", "failures (first at)"], rows)
         lines.append("")
     return "\n".join(lines)
 

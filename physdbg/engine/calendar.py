@@ -75,7 +75,7 @@ CONTACT_ROOM = AT_ONE_INSTANT_CANDIDATES + 1  # contact rows the loop wants free
 DONE = 0
 GROW_CONTACTS = 1  # the contact rows are nearly full: grow them and call again
 GROW_LISTS = 2  # a neighbour list is full: grow the lists and call again
-CAPPED = 3  # the step's contact budget is spent (max_events_per_step)
+CAPPED = 3  # the step's contact budget is spent (max_contacts_per_step)
 STOPPED = 4  # World.request_stop
 HELD_CONTACT = 5  # a contact was held: this loop has no held contacts (a world that holds one cannot use it)
 

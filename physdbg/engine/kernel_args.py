@@ -88,7 +88,7 @@ class LoopCandidates(NamedTuple):
 
 
 class LoopBudgets(NamedTuple):
-    """cap: contacts (max_events_per_step); max_tests: swept tests; work_budget: held-solve updates."""
+    """cap: contacts (max_contacts_per_step); max_tests: swept tests; work_budget: held-solve updates."""
 
     cap: int
     max_tests: int

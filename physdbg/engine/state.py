@@ -25,8 +25,8 @@ ORDERING_NAMES = ("time", "index")
 # needs up to 62 contacts and 1 280 swept tests a sphere in a step: under 20 and 400 every
 # step from step 49 on was stopped and spheres were left 6 mm inside each other; under
 # these it is exact and asleep by step 185 (docs/benchmarks.md, "Budgets")
-MIN_EVENT_CAP = 10_000
-EVENTS_PER_SPHERE = 100
+MIN_CONTACT_CAP = 10_000
+CONTACTS_PER_SPHERE = 100
 MIN_SWEPT_TESTS = 10_000_000
 SWEPT_TESTS_PER_SPHERE = 2_000
 
@@ -49,12 +49,16 @@ RESTING_WORK_PER_SPHERE = 1_000_000
 MAX_RESTING_WORK = 1_000_000_000
 
 # The budgets whose 0 (their default) means "sized to the scene's sphere count" (budget_value).
-SIZED_BUDGETS = ("max_events_per_step", "max_swept_tests_per_step", "max_resting_work_per_step")
+SIZED_BUDGETS = ("max_contacts_per_step", "max_swept_tests_per_step", "max_resting_work_per_step")
+
+# settings renamed (old name -> name now): a scene or recording made before still says the
+# old one, which is read as the new (max_events_per_step counted contacts, not events)
+RENAMED_SETTINGS = {"max_events_per_step": "max_contacts_per_step"}
 
 # The work budgets of one step (Settings fields), each with what it counts and what
 # happens to the rest of the step when it is reached.
 BUDGETS = {
-    "max_events_per_step": ("contacts resolved", "the remaining contacts of the step were not resolved"),
+    "max_contacts_per_step": ("contacts resolved", "the remaining contacts of the step were not resolved"),
     "max_pairs_per_step": ("broad-phase candidate pairs",
                            "sphere–sphere contacts were not tested in this step (spheres may pass through "
                            "or overlap each other); usually dt is too long for the speeds, or spheres overlap"),
@@ -103,7 +107,7 @@ class Settings:
     growable buffers (event queue, swept-test log, contact rows, held contacts) may not
     pass it; a step whose buffers would is stopped like a budget (warning "max_memory").
     Budgets bound the work of one step (see BUDGETS); when one is reached the step still
-    finishes, and a warning names the budget. max_events_per_step = 0 and
+    finishes, and a warning names the budget. max_contacts_per_step = 0 and
     max_swept_tests_per_step = 0 (the defaults) are sized to the scene: see ``event_cap``
     and ``swept_test_budget``.
     """
@@ -122,7 +126,7 @@ class Settings:
     contact_tolerance: float = 1e-9
     sleep_speed: float = 0.0
     sleep_time: float = 0.5
-    max_events_per_step: int = 0
+    max_contacts_per_step: int = 0
     max_pairs_per_step: int = 10_000_000
     max_swept_tests_per_step: int = 0
     max_resting_work_per_step: int = 0  # sized: MIN_RESTING_WORK .. MAX_RESTING_WORK, per sphere
@@ -132,11 +136,11 @@ class Settings:
     event_loop: str = "step"
 
     def event_cap(self, spheres: int) -> int:
-        """The contact budget of one step for this many spheres: max_events_per_step, or
-        when it is 0, max(MIN_EVENT_CAP, EVENTS_PER_SPHERE × spheres) — a settling pile
+        """The contact budget of one step for this many spheres: max_contacts_per_step, or
+        when it is 0, max(MIN_CONTACT_CAP, CONTACTS_PER_SPHERE × spheres) — a settling pile
         of N spheres legitimately resolves a few contacts per sphere in a step, so a fixed
         cap that suits 100 spheres stops every step of a pile of 10 000."""
-        return self.budget("max_events_per_step", spheres)
+        return self.budget("max_contacts_per_step", spheres)
 
     def swept_test_budget(self, spheres: int) -> int:
         """The swept-test budget of one step for this many spheres: max_swept_tests_per_step,
@@ -489,6 +493,6 @@ def budget_value(name: str, value: int | None, spheres: int) -> int:
         return int(value or 0)
     if name == "max_resting_work_per_step":
         return min(MAX_RESTING_WORK, max(MIN_RESTING_WORK, RESTING_WORK_PER_SPHERE * spheres))
-    least, per_sphere = ((MIN_EVENT_CAP, EVENTS_PER_SPHERE) if name == "max_events_per_step"
+    least, per_sphere = ((MIN_CONTACT_CAP, CONTACTS_PER_SPHERE) if name == "max_contacts_per_step"
                          else (MIN_SWEPT_TESTS, SWEPT_TESTS_PER_SPHERE))
     return max(least, per_sphere * spheres)

@@ -21,7 +21,7 @@ to Python for:
   nothing new itself, where the broad phase's query is a scan: grow_unpartnered);
 * GROW: a buffer, or the held-contact store, is nearly full.
 
-It stops for good with CAPPED (the contact budget, max_events_per_step), TEST_BUDGET
+It stops for good with CAPPED (the contact budget, max_contacts_per_step), TEST_BUDGET
 (max_swept_tests_per_step) or RESTING_BUDGET (max_resting_work_per_step): the step's
 remaining predictions are marked capped; and with STOPPED at once, leaving the step
 half done, when the world's stop switch is set (World.request_stop: Ctrl-C).

@@ -704,7 +704,7 @@ class World:
         if status == calendar.HELD_CONTACT:
             raise RuntimeError("the event calendar held a contact, which it cannot: a bug (calendar.py)")
         if status == calendar.CAPPED and not ctx.warnings:
-            ctx.warn("max_events_per_step", _budget_message("max_events_per_step", cap))
+            ctx.warn("max_contacts_per_step", _budget_message("max_contacts_per_step", cap))
         rows = buf.contacts[:int(buf.counters[CONTACTS])]
         rows["time_in_step"] -= cal.now  # the resolver's times are the calendar's (since its epoch)
         ctx.timings["resolve"] = perf_counter() - started
@@ -837,7 +837,7 @@ class World:
             if status == DONE:
                 return None
             if status == CAPPED:
-                return "max_events_per_step"
+                return "max_contacts_per_step"
             if status == TEST_BUDGET:
                 return "max_swept_tests_per_step"
             if status == RESTING_BUDGET:
@@ -869,7 +869,7 @@ class World:
             buf.counters[EVENTS] += 1
             if buf.counters[CONTACTS] >= self.event_cap:
                 buf.test_outcome[hits[hits >= rid]] = OUTCOME_CAPPED
-                return "max_events_per_step"
+                return "max_contacts_per_step"
             kind, a, other = (int(c) for c in buf.test_int[rid])
             if not self._ensure(ctx, 0, 0, 1) or not self._held_room(ctx, a, other if PARTNER_IS_SPHERE[kind] else -1):
                 buf.test_outcome[hits[hits >= rid]] = OUTCOME_CAPPED

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..version import __version__
 from ..engine import Walls, state_hash
-from ..engine.state import Meshes
+from ..engine.state import RENAMED_SETTINGS, Meshes
 from .format import DETAIL_LEVELS, FORMAT_NAME, FORMAT_VERSION
 
 NULLABLE_META = ("dt", "bvh_max_nodes")  # None in meta: left out of the file (Foxglove has no null type)
@@ -163,9 +163,20 @@ class RecordingHeader:
         if isinstance(scene.get("table"), str):
             scene["table"] = json.loads(scene["table"])
         meta["scene"] = scene
+        # a recording made before a setting was renamed holds the old name: read as the new
+        if isinstance(scene.get("table"), dict):
+            scene["table"] = {current_name(k): v for k, v in scene["table"].items()}
+        if isinstance(meta.get("settings"), dict):
+            meta["settings"] = {current_name(k): v for k, v in meta["settings"].items()}
         for key in NULLABLE_META:
             meta.setdefault(key, None)
         return meta
+
+
+def current_name(name: str) -> str:
+    """A setting's name, or a warning's code (a budget's setting name), as it is now: a
+    recording made before a setting was renamed (state.RENAMED_SETTINGS) holds the old."""
+    return RENAMED_SETTINGS.get(name, name)
 
 
 def _plain(value):

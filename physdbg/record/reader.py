@@ -38,7 +38,7 @@ from ..events import (STEP_COUNTS, BroadPhaseInfo, check_kinds, Contacts, Engine
 from . import format as fmt
 from . import proto
 from .state_codec import decode_state, decode_state_header
-from .header import RecordingHeader
+from .header import RecordingHeader, current_name
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 FOOTER_BYTES = 1 + 8 + 8 + 8 + 4  # opcode, record length, summary_start, summary_offset_start, summary_crc
@@ -666,7 +666,7 @@ class Recording:
                     stats[key] = meta[key]
             events.append(BroadPhaseInfo(step, meta["name"], meta["reason"], stats, nodes))
         warnings = [json.loads(w) for w in parts.get(fmt.TOPIC_WARNINGS, [])]
-        events.extend(EngineWarning(step, w["code"], w["message"]) for w in warnings)
+        events.extend(EngineWarning(step, current_name(w["code"]), w["message"]) for w in warnings)
         if fmt.TOPIC_CONTACTS in self._channels and fmt.TOPIC_CONTACTS in topics:
             events.append(self._contacts(step, parts.get(fmt.TOPIC_CONTACTS, [b""])[0]))
         if fmt.TOPIC_SWEPT in self._channels and fmt.TOPIC_SWEPT in topics:
