@@ -192,3 +192,34 @@ def test_every_file_the_docs_name_in_the_repository_exists():
             if not (ROOT / path).exists():
                 missing.append(f"{page.relative_to(ROOT)} -> {path}")
     assert missing == []
+
+
+def test_every_exit_code_the_code_uses_is_in_the_exit_code_table():
+    """The codes the CLI exits with (its typer.Exit calls, and each error class's
+    exit_code) are the rows of diff.md's table for every command, and no more."""
+    source = (ROOT / "physdbg" / "cli.py").read_text() + (ROOT / "physdbg" / "errors.py").read_text()
+    used = {int(code) for code in re.findall(r"typer\.Exit\((\d+)\)|exit_code = (\d+)", source) for code in code if code}
+    page = (ROOT / "docs" / "diff.md").read_text()
+    table = page[page.index("| code | every command |"):]
+    listed = {int(code) for code in re.findall(r"^\| \*\*(\d+)\*\* \|", table[:table.index("\n\n")], re.M)}
+    assert used | {0, 1} == listed
+
+
+
+def test_every_field_of_every_table_channel_is_named_in_its_row():
+    """recording-format.md's row of each protobuf channel names each of its fields (the
+    fields are the code's tables, record/format.py): a field added to a channel and not to
+    its row fails here, by channel and name."""
+    from physdbg.record import format as fmt
+
+    rows = {line.split(" | ")[0].strip("| `"): line for line in
+            (ROOT / "docs" / "recording-format.md").read_text().splitlines() if line.startswith("| `/physdbg/")}
+    missing = {}
+    for topic, message in fmt.MESSAGE_OF_TOPIC.items():
+        if message not in fmt.PROTOBUF_MESSAGES:
+            continue
+        fields, _ = fmt.PROTOBUF_MESSAGES[message]
+        absent = [name for name, *_ in fields if f"`{name}`" not in rows[topic]]
+        if absent:
+            missing[topic] = absent
+    assert missing == {}

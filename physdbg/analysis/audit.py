@@ -87,6 +87,12 @@ class Finding:
     evidence: dict = field(default_factory=dict)
     aside: str = ""
 
+    # the record every report prints (report.Record); the JSON keeps the fields above
+    code = property(lambda self: self.kind)
+    bodies = property(lambda self: tuple(self.particles))
+    summary = property(lambda self: self.message)
+    detail = property(lambda self: self.evidence)
+
     def as_dict(self) -> dict:
         out = asdict(self)
         del out["aside"]

@@ -192,6 +192,12 @@ class Departure:
     evidence: dict = field(default_factory=dict)
     more: int = 0
 
+    # the record every report prints (report.Record); the JSON keeps the fields above
+    code = property(lambda self: self.kind)
+    bodies = property(lambda self: (self.body,) if self.other is None else (self.body, self.other))
+    summary = property(lambda self: self.text)
+    detail = property(lambda self: self.evidence)
+
 
 @dataclass
 class FirstDeparture:

@@ -61,6 +61,14 @@ class Cause:
     text: str
     evidence: dict = field(default_factory=dict)
 
+    # the record every report prints (report.Record); the JSON keeps the fields above
+    code = property(lambda self: self.kind)
+    step = property(lambda self: None, doc="None: a cause's sentence names its step")
+    bodies = property(lambda self: (), doc="(): the sentence and the evidence name them")
+    summary = property(lambda self: self.text)
+    detail = property(lambda self: self.evidence)
+    advice = property(lambda self: "")
+
 
 @dataclass
 class Divergence:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import math
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 if TYPE_CHECKING:  # for the annotations only: printing a summary loads no analysis
     from .audit import AuditReport
@@ -60,17 +60,36 @@ def markdown_table(columns: list[str], rows: list[list]) -> list[str]:
     return [line(columns), "|" + "---|" * len(columns)] + [line(row) for row in rows]
 
 
-def record_lines(kind: str, text: str, step: int | None = None, advice: str = "") -> list[str]:
-    """One cause, finding or departure as the text reports print it: '  - step 3 [kind] text'
-    (no step: a diff's cause) and, with advice, '      what to do: advice'."""
-    head = f"  - step {step} [{kind}] " if step is not None else f"  - [{kind}] "
-    return [head + text] + ([f"      what to do: {advice}"] if advice else [])
+class Record(Protocol):
+    """What every report prints of a diff cause (diff_causes.Cause), an audit finding
+    (audit.Finding) or a check-run departure (departure.Departure): code, its kind; step,
+    the step (from 1) or None where the summary names it; bodies, the spheres; summary,
+    one sentence; detail, the numbers behind it; advice, what to change ("" for none).
+    Each class keeps its own JSON fields; these are read-only names over them."""
+
+    code: str
+    step: int | None
+    bodies: tuple[int, ...]
+    summary: str
+    detail: dict
+    advice: str
 
 
-def record_markdown(kind: str, text: str, step: int | None = None, advice: str = "") -> str:
-    """The same record as a Markdown list item: '- **step 3** *kind*: text — advice'."""
-    return (f"- **step {step}** " if step is not None else "- ") + f"*{kind}*: {text}" + (
-        f" — {advice}" if advice else "")
+def record_lines(record: Record, summary: str | None = None, advice: str | None = None) -> list[str]:
+    """A record as the text reports print it: '  - step 3 [code] summary' (no step: a diff's
+    cause) and, with advice, '      what to do: advice'. summary, advice: the record's own,
+    or what a report says instead (a part said once already is "as above")."""
+    summary = record.summary if summary is None else summary
+    advice = record.advice if advice is None else advice
+    head = f"  - step {record.step} [{record.code}] " if record.step is not None else f"  - [{record.code}] "
+    return [head + summary] + ([f"      what to do: {advice}"] if advice else [])
+
+
+def record_markdown(record: Record, summary: str | None = None) -> str:
+    """The same record as a Markdown list item: '- **step 3** *code*: summary — advice'."""
+    summary = record.summary if summary is None else summary
+    return (f"- **step {record.step}** " if record.step is not None else "- ") + f"*{record.code}*: {summary}" + (
+        f" — {record.advice}" if record.advice else "")
 
 
 def _tolerance(r: DiffReport) -> str:
@@ -123,7 +142,7 @@ def diff_text(r: DiffReport) -> str:
         lines.append("afterwards: " + r.growth.sentence())
     if r.causes:
         lines.append("why:")
-        lines.extend(line for c in r.causes for line in record_lines(c.kind, _cause_text(c, r)))
+        lines.extend(line for c in r.causes for line in record_lines(c, _cause_text(c, r)))
     return "\n".join(lines)
 
 
@@ -160,7 +179,7 @@ def diff_markdown(r: DiffReport) -> str:
             lines.append(f"- afterwards: {r.growth.sentence()}")
         lines.append("")
     if r.causes:
-        lines += ["**Why**", ""] + [record_markdown(c.kind, _cause_text(c, r)) for c in r.causes]
+        lines += ["**Why**", ""] + [record_markdown(c, _cause_text(c, r)) for c in r.causes]
     return "\n".join(lines) + "\n"
 
 
@@ -175,7 +194,7 @@ def explain_text(r: AuditReport) -> str:
         from .audit import said_once
 
         for f, message, advice in said_once(r.findings):
-            lines += record_lines(f.kind, message, f.step, advice)
+            lines += record_lines(f, message, advice)
         lines.extend("  " + line for line in r.lines() if line.startswith("..."))
     lines.extend(f"note     {n}" for n in r.notes)
     return "\n".join(lines)
@@ -187,7 +206,7 @@ def explain_markdown(r: AuditReport) -> str:
              f"`{r.source}` ({r.scene}, {r.checked} of {r.steps} steps audited)", ""]
     if not r.clean:
         lines += markdown_table(["kind", "count"], [[k, v] for k, v in r.counts.items()]) + [""]
-        lines += [record_markdown(f.kind, f.message, f.step, f.advice) for f in r.findings]
+        lines += [record_markdown(f) for f in r.findings]
     lines += [f"> {n}" for n in r.notes]
     return "\n".join(lines) + "\n"
 
@@ -218,7 +237,7 @@ def check_run_text(r: CheckRunReport) -> str:
     if r.departures:
         lines.append("departures, in step order:")
         for d in r.departures:
-            lines += record_lines(d.kind, d.text + _more(d.more), d.step, d.advice)
+            lines += record_lines(d, d.text + _more(d.more))
     lines.extend(f"note       {n}" for n in r.notes)
     return "\n".join(lines)
 
