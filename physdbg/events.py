@@ -89,7 +89,7 @@ HOW_AT_ONE_INSTANT = 4  # an impulse solved together with the sphere's other con
 OUTCOME_MISS = 0  # no contact before the end of the step
 OUTCOME_HIT = 1  # the predicted contact was resolved
 OUTCOME_SUPERSEDED = 2  # a contact was predicted, but an earlier one changed a path first
-OUTCOME_CAPPED = 3  # predicted, but the per-step event cap stopped the step first
+OUTCOME_CAPPED = 3  # predicted, but the per-step contact cap (max_contacts_per_step) stopped the step first
 OUTCOME_NAMES = ("miss", "hit", "superseded", "capped")
 
 

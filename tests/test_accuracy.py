@@ -96,6 +96,7 @@ def test_the_pareto_front_skips_failed_runs_and_is_monotone():
 
 
 # ----------------------------------------------------------------------------- the command
+@pytest.mark.slow
 def test_bench_accuracy_writes_the_table_csv_and_chart_and_never_overwrites(tmp_path):
     runner = CliRunner()
     out = tmp_path / "acc"

@@ -168,6 +168,7 @@ def test_a_budget_hit_in_a_pile_names_the_settings_that_let_it_rest(tmp_path):
     assert Auditor(RecordingHeader.from_scene(load_scene("rain", pile + ["sleep_speed=0.1"])))._pile() is None
 
 
+@pytest.mark.slow
 def test_a_bed_that_rattles_and_then_falls_asleep_is_no_collapse(tmp_path):
     """rain's 300 spheres under the pile rules (tc, sleeping; auto picks them from about 350
     spheres): from step 282 a few dozen spheres of the bed bounce 10+ times a step, then

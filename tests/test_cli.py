@@ -404,6 +404,7 @@ def test_record_spawn_streams_to_a_viewer_it_starts(tmp_path, virtual_display):
         subprocess.run(["pkill", "-f", "rerun_cli/rerun --port=9876"], check=False)
 
 
+@pytest.mark.slow
 def test_output_into_a_closed_pipe_stops_quietly(tmp_path):
     """`physdbg ... | head` closes the pipe early: no 'internal error', no traceback."""
     import os

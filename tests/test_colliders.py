@@ -55,6 +55,7 @@ def test_the_table_names_each_kind_and_which_partners_move():
        xa=vector, xb=vector, va=vector.map(lambda v: 4.0 * v), vb=vector.map(lambda v: 4.0 * v),
        gravity=vector.map(lambda g: 10.0 * g), normal=vector, offset=coordinate, two_sided=st.booleans(),
        radius=st.floats(0.02, 0.3), aim=st.floats(0.5, 4.0))
+@pytest.mark.slow
 def test_each_kind_s_gap_closes_at_its_time_of_impact(kind, integrator, xa, xb, va, vb, gravity, normal, offset,
                                                       two_sided, radius, aim):
     """Advance to the predicted time of impact on the method's path: the kind's own gap is

@@ -142,6 +142,7 @@ def test_a_tampered_file_is_an_error_naming_the_frame_or_the_damage(tmp_path):
     assert str(b) in result.output
 
 
+@pytest.mark.slow
 def test_bit_identical_states_with_an_edited_contact_record_are_different_records(tmp_path):
     """Every state agrees bit for bit, but one recorded contact's impulse was edited: not
     the same record, and never "equivalent" (the states alone cannot show it)."""
@@ -183,6 +184,7 @@ def test_cli_formats_and_exit_codes(tmp_path):
     assert missing.exit_code == 2 and "nope.mcap" in missing.output
 
 
+@pytest.mark.slow
 def test_the_overlay_holds_both_runs_under_two_roots(tmp_path):
     from rerun.chunk import RrdReader  # rerun's own reader
 

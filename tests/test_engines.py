@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import csv
 
+import pytest
 from typer.testing import CliRunner
 
 from physdbg.analysis import engines
 from physdbg.cli import app
 
 
+@pytest.mark.slow
 def test_the_exact_run_is_the_zero_every_error_is_measured_from_and_the_thin_wall_is_tunnelled(tmp_path):
     result = CliRunner().invoke(app, ["bench", "engines", "--scene", "bounce", "--scene", "bullet-wall",
                                       "-o", str(tmp_path), "--no-progress"])

@@ -20,6 +20,7 @@ def _need(module: str) -> None:
         pytest.skip(f"{module} is not installed (pip install 'physdbg[peers]'); the adapter cannot be run")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("peer", ["pybullet", "mujoco"])
 def test_a_peer_s_bounce_opens_replays_diffs_and_check_runs(tmp_path, peer):
     _need(peer)

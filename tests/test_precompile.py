@@ -100,6 +100,7 @@ def test_a_stuck_helper_is_killed_and_the_compile_goes_on(monkeypatch):
     assert helper.poll() is not None
 
 
+@pytest.mark.slow
 def test_the_helper_program_and_this_process_s_part_run_on_a_warm_cache():
     """The helper's program itself, on the warm cache (it loads, so it is quick), exits 0;
     this process's part runs too, and a warm-up after them takes a finite time."""

@@ -48,11 +48,13 @@ def _refused_everywhere(good, bad, tmp_path, *expected):
     assert not (tmp_path / "bad.rrd").exists()  # no half-made picture left behind
 
 
+@pytest.mark.slow
 def test_an_edited_state_with_its_old_hash_is_refused_naming_the_frame(bounce, tmp_path):
     bad = tamper.nudge_state(bounce, tmp_path / "kept.mcap", FRAME)
     _refused_everywhere(bounce, bad, tmp_path, f"frame {FRAME}", "does not give its stored hash")
 
 
+@pytest.mark.slow
 def test_an_edited_state_with_a_rewritten_hash_is_refused_by_the_frame_index(bounce, tmp_path):
     bad = tamper.nudge_state(bounce, tmp_path / "rehashed.mcap", FRAME, rehash=True)
     _refused_everywhere(bounce, bad, tmp_path, f"frame {FRAME}", "the frame index and the stored state disagree")
@@ -96,6 +98,7 @@ def test_a_file_with_two_scene_headers_is_refused(bounce, tmp_path):
     _refused_everywhere(bounce, bad, tmp_path, "more than one recording")
 
 
+@pytest.mark.slow
 def test_frames_out_of_order_are_refused(bounce, tmp_path):
     bad = tamper.swap_frames(bounce, tmp_path / "swapped.mcap", FRAME)
     _refused_everywhere(bounce, bad, tmp_path, "out of order")

@@ -123,6 +123,7 @@ def test_ballistic_states_compress_to_a_fraction_of_their_raw_size():
 
 
 # ----------------------------------------------------------------------------- write + read
+@pytest.mark.slow
 def test_reader_gives_back_every_state_hash_and_event_of_the_live_run(tmp_path):
     path, live = record_with_events(tmp_path, "cradle")
     rec = open_recording(path)
@@ -154,6 +155,7 @@ def test_reader_gives_back_every_state_hash_and_event_of_the_live_run(tmp_path):
         rec.state(181)
 
 
+@pytest.mark.slow
 def test_random_access_reads_only_the_chunks_it_needs(tmp_path):
     """state(k) on a long recording decodes at most one key-frame interval of states."""
     path, live = record_with_events(tmp_path, "bounce", ["steps=2000"], detail="state")
@@ -304,6 +306,7 @@ PLAIN_READER = textwrap.dedent('''
 ''')
 
 
+@pytest.mark.slow
 def test_a_program_with_standard_decoders_only_reads_every_channel(tmp_path):
     """Every channel decodes with the mcap protobuf decoder or JSON (whose schemas describe
     every field in the subset Foxglove parses), and gives the engine's states, hashes,

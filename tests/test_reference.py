@@ -106,6 +106,7 @@ def _euler_pair_after_a_bounce():
                                               restitution_rule="product"), 1 / 60)
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(scenes())
 @example(_euler_pair_after_a_bounce())

@@ -27,6 +27,7 @@ def _interpreted_run(name: str, overrides: list[str]) -> dict:
     return json.loads(done.stdout)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", builtin_names())
 def test_every_built_in_scene_gives_the_same_hash_interpreted_and_compiled(name):
     overrides = SMALL.get(name, [])

@@ -191,10 +191,10 @@ def test_the_contact_and_swept_test_budgets_are_sized_to_the_scene_unless_set(mo
     from physdbg.engine import Settings, state
 
     sized = Settings()
-    assert (sized.event_cap(100), sized.swept_test_budget(100)) == (10_000, 10_000_000)
-    assert (sized.event_cap(100_000), sized.swept_test_budget(100_000)) == (10_000_000, 200_000_000)
+    assert (sized.contact_cap(100), sized.swept_test_budget(100)) == (10_000, 10_000_000)
+    assert (sized.contact_cap(100_000), sized.swept_test_budget(100_000)) == (10_000_000, 200_000_000)
     chosen = Settings(max_contacts_per_step=7, max_swept_tests_per_step=9)
-    assert (chosen.event_cap(100_000), chosen.swept_test_budget(100_000)) == (7, 9)
+    assert (chosen.contact_cap(100_000), chosen.swept_test_budget(100_000)) == (7, 9)
     assert load_scene("rain", ["max_swept_tests_per_step=0"]).settings.max_swept_tests_per_step == 0
     # the world spends the sized budget (made small here: 1 000 tests a sphere, at least 5 000)
     monkeypatch.setattr(state, "MIN_SWEPT_TESTS", 5_000)

@@ -16,7 +16,7 @@ Checks (kind: what it means):
 * ``energy-gain``: a collision that left more kinetic energy than it found (an impulse
   alone: one solved with held contacts also moves the spheres they hold);
 * ``non-finite``: a position or velocity became NaN or infinite;
-* ``budget``: a step hit the event cap or another work budget and left work undone;
+* ``budget``: a step hit the contact cap (max_contacts_per_step) or another work budget and left work undone;
 * ``collapse``: a collision rate that blows up (inelastic collapse). With sleeping on, a
   bed that rattles like that is judged when its spheres are asleep: if every sphere of
   the step is asleep by the end of the run, sleeping ended it, and a note says so instead;

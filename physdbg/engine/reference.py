@@ -57,7 +57,7 @@ class ReferenceWorld(World):
                 return None
             toi, _, a, other, kind = self._first(candidates)
             self._buf.counters[EVENTS] += 1
-            if self._buf.counters[CONTACTS] >= self.event_cap:
+            if self._buf.counters[CONTACTS] >= self.contact_cap:
                 return "max_contacts_per_step"
             # contacts of the sphere with immovable partners at that instant go together
             # (resolve.resolve_at_one_instant), as the compiled loop gathers them from its queue

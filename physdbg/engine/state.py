@@ -19,7 +19,7 @@ from ..errors import NonFiniteState  # noqa: F401 (raised here; every exception 
 
 ORDERING_NAMES = ("time", "index")
 
-# the default contact budget of a step (Settings.event_cap), and of swept tests
+# the default contact budget of a step (Settings.contact_cap), and of swept tests
 # (Settings.swept_test_budget). A settling bed under the rain scene's rules rattles before
 # it sleeps: `physdbg run rain -s generate.count=10000 -s generate.radius=0.02` (dt 1/120)
 # needs up to 62 contacts and 1 280 swept tests a sphere in a step: under 20 and 400 every
@@ -108,7 +108,7 @@ class Settings:
     pass it; a step whose buffers would is stopped like a budget (warning "max_memory").
     Budgets bound the work of one step (see BUDGETS); when one is reached the step still
     finishes, and a warning names the budget. max_contacts_per_step = 0 and
-    max_swept_tests_per_step = 0 (the defaults) are sized to the scene: see ``event_cap``
+    max_swept_tests_per_step = 0 (the defaults) are sized to the scene: see ``contact_cap``
     and ``swept_test_budget``.
     """
 
@@ -135,7 +135,7 @@ class Settings:
     mesh_search: str = "auto"
     event_loop: str = "step"
 
-    def event_cap(self, spheres: int) -> int:
+    def contact_cap(self, spheres: int) -> int:
         """The contact budget of one step for this many spheres: max_contacts_per_step, or
         when it is 0, max(MIN_CONTACT_CAP, CONTACTS_PER_SPHERE × spheres) — a settling pile
         of N spheres legitimately resolves a few contacts per sphere in a step, so a fixed
@@ -145,7 +145,7 @@ class Settings:
     def swept_test_budget(self, spheres: int) -> int:
         """The swept-test budget of one step for this many spheres: max_swept_tests_per_step,
         or when it is 0, max(MIN_SWEPT_TESTS, SWEPT_TESTS_PER_SPHERE × spheres) (the same
-        reason as event_cap)."""
+        reason as contact_cap)."""
         return self.budget("max_swept_tests_per_step", spheres)
 
     def budget(self, name: str, spheres: int) -> int:

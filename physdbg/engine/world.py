@@ -239,7 +239,7 @@ class World:
         self._box_margin = settings.contact_tolerance
         if self.sleepers is not None and st.count:
             self._box_margin += SUPPORT_GAP * float(st.radius.max())
-        self.event_cap = settings.event_cap(state.count)
+        self.contact_cap = settings.contact_cap(state.count)
         self.resting_budget = settings.budget("max_resting_work_per_step", state.count)
         self._stop_asked = False  # request_stop
         self.last_step: StepContext | None = None  # the context of the latest step (for inspection)
@@ -688,7 +688,7 @@ class World:
         if fresh:
             cal.build(particles, method, self._geometry, buf.counters)
         until = cal.now + dt
-        cap = self.event_cap
+        cap = self.contact_cap
         while True:
             status = cal.run(until, particles, method, self._geometry, self.held, buf.contacts, buf.counters,
                              buf.changed, cap, calendar.MOST_EVENTS_PER_CONTACT * (cap + st.count), self.resting_budget)
@@ -823,7 +823,7 @@ class World:
         s = self.settings
         buf = self._buf
         particles, method, geometry = self._kernel_groups(ctx)
-        budgets = tuple(LoopBudgets(self.event_cap, s.swept_test_budget(self._st.count),
+        budgets = tuple(LoopBudgets(self.contact_cap, s.swept_test_budget(self._st.count),
                                     self.resting_budget))
         while True:
             if ctx.out_of_memory:  # the narrow phase, or a re-query's predictions, did not fit
@@ -867,7 +867,7 @@ class World:
             return "max_memory"
         for rid in hits.tolist():
             buf.counters[EVENTS] += 1
-            if buf.counters[CONTACTS] >= self.event_cap:
+            if buf.counters[CONTACTS] >= self.contact_cap:
                 buf.test_outcome[hits[hits >= rid]] = OUTCOME_CAPPED
                 return "max_contacts_per_step"
             kind, a, other = (int(c) for c in buf.test_int[rid])

@@ -92,7 +92,7 @@ def pressed_closing(closing: float, rel_acc: float, dt: float, scale: float) -> 
     * within ROUNDING_ULPS rounding errors of the velocities (``scale``, velocity_scale).
       An impulse that small cannot change them: each component absorbs it, so the pair
       would be found approaching at once, again, for ever (a pile once spent its whole
-      event budget, 8 477 contacts at one instant, on one pair closing at 4e-106 m/s
+      contact budget, 8 477 contacts at one instant, on one pair closing at 4e-106 m/s
       between spheres moving at 1e-13 m/s). The resolver passes scale = 0 (the rule
       off) where a contact judged no approach is predicted again at once (Euler paths
       change with the anchor): the narrow phase would find it again, approaching by the
