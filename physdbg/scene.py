@@ -677,14 +677,6 @@ class _Flag:
         return c.boolean(table, key, name, default)
 
 
-@dataclass(frozen=True)
-class _Text:
-    default: Any = None
-
-    def read(self, c: _Checker, table: dict, key: str, name: str, default: Any) -> Any:
-        return c.text(table, key, name, default)
-
-
 # the top-level fields read as they are (dt, the tables and the engine settings have their own)
 TOP_RULES = {
     "max_dt": _Number(scale=True, default=0.05),
@@ -736,7 +728,7 @@ PARTICLE_RULES = {
 
 def _read(c: _Checker, table: dict, prefix: str, rules: dict, defaults: dict | None = None) -> dict:
     """Every field of ``rules`` from ``table`` (its fields named ``prefix`` + key), in the
-    table's order; defaults: a default for a rule that has none of its own."""
+    rules' order; defaults: a default for a rule that has none of its own."""
     return {key: rule.read(c, table, key, prefix + key,
                            rule.default if rule.default is not None else (defaults or {}).get(key))
             for key, rule in rules.items()}
