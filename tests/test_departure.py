@@ -482,3 +482,28 @@ def test_a_flipped_impulse_that_loops_to_nan_is_named_at_its_start(tmp_path):
     assert (loop.step, loop.body, loop.other) == (16, 0, 1)
     assert "NaN or infinite" in loop.text and "(2 + e) = 2.9 times" in loop.text
     assert "missed-contact" not in kinds(report)
+
+
+def test_each_cause_of_check_run_is_named_by_the_judgements_its_table_row_lists():
+    """departure.DEPARTURE_KINDS is check-run's one table of causes: every method a row
+    lists exists and names that kind (in its source, or, for a restitution mistake, through
+    _restitution_mistake), and every kind a judgement names has its row."""
+    import inspect
+    import re
+
+    from physdbg.analysis import departure
+
+    restitution = {code for code, *_ in departure.RESTITUTION_MISTAKES}
+    named_by: dict[str, set[str]] = {}
+    for name, method in inspect.getmembers(departure._Comparison, inspect.isfunction):
+        source = inspect.getsource(method)
+        kinds = {k for k in departure.DEPARTURE_KINDS if f'"{k}"' in source}
+        if "_restitution_mistake(" in source:
+            kinds |= restitution
+        for kind in kinds:
+            named_by.setdefault(kind, set()).add(name)
+    for kind, (_, methods) in departure.DEPARTURE_KINDS.items():
+        assert set(methods) <= named_by.get(kind, set()), (kind, methods, named_by.get(kind))
+    # every kind made with a literal in an _add or a Departure(...) has its row
+    made = set(re.findall(r'(?:_add\(|Departure\(\s*)"([a-z-]+)"', inspect.getsource(departure)))
+    assert made and made <= set(departure.DEPARTURE_KINDS)

@@ -133,7 +133,7 @@ def test_every_channel_kind_cause_finding_and_phase_the_code_has_is_in_the_docs(
     channels = {value for name, value in vars(fmt).items() if name.startswith("TOPIC_")}
     assert channels - _table_codes((docs / "recording-format.md").read_text()) == set()
     check_run = _table_codes((docs / "foreign-runs.md").read_text())
-    assert set(departure._KIND_WORDS) - check_run == set()  # check-run's causes
+    assert set(departure.DEPARTURE_KINDS) - check_run == set()  # check-run's causes, by its table
     diff_page = _table_codes((docs / "diff.md").read_text())
     from physdbg.analysis import diff_causes
 

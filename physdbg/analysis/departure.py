@@ -1527,26 +1527,40 @@ def _restitution_mistake(e: float, want: float):
 
 
 _RUN_WIDE = ("own-rule", "index-order", "drag-per-step", "drag-ignored", "drift", "chaos", "unexplained")
-_PRIORITY = ("impulse-loop", "non-finite", "immovable-moved", "drag-per-step", "drag-ignored", "tunnelling", "impulse-sign",
-             "impulse-doubled", "restitution-sign", "one-missing", "restitution-squared", "contact-energy", "tangent-reversed",
-             "wrong-normal", "own-rule", "tie", "index-order", "collision-order", "skipped-rest", "bounce-time", "missed-contact",
-             "extra-contact", "drift", "chaos", "unexplained")
-_KIND_WORDS = {
-    "tunnelling": "tunnelling", "bounce-time": "bounced at the wrong time", "contact-energy": "energy at a contact",
-    "collision-order": "contacts resolved out of order", "missed-contact": "a contact missed",
-    "extra-contact": "a contact physdbg does not have", "non-finite": "NaN or infinity", "drift": "drift in free flight",
-    "drag-per-step": "drag applied per step, not per second", "drag-ignored": "no drag",
-    "immovable-moved": "an immovable body moved", "impulse-sign": "an impulse of the wrong sign",
-    "impulse-doubled": "an impulse applied twice", "restitution-sign": "restitution with the wrong sign",
-    "one-missing": "the 1 of (1 + e) missing from the impulse",
-    "impulse-loop": "an impulse of the wrong sign, met again and again",
-    "own-rule": "physdbg's own modelling rule, not the engine",
-    "tie": "contacts at one instant taken in another order (a tie, not a mistake)",
-    "restitution-squared": "restitution applied twice", "tangent-reversed": "a reflection of the whole velocity",
-    "wrong-normal": "an impulse along the wrong normal", "index-order": "contacts resolved in index order",
-    "skipped-rest": "a bounce that skips the rest of the step", "unexplained": "unexplained",
-    "chaos": "chaos: differences below the tolerance grew",
+# check-run's causes, one table: each kind of departure, in the order of telling (the most
+# telling first within a step: _fold), with its words and the judgements (methods of
+# _Comparison) that name it. The restitution mistakes are RESTITUTION_MISTAKES' codes,
+# which _judge_energy names through _restitution_mistake. A test holds every method here
+# to the kinds it names (tests/test_departure.py).
+DEPARTURE_KINDS = {
+    "impulse-loop": ("an impulse of the wrong sign, met again and again", ("_runaway",)),
+    "non-finite": ("NaN or infinity", ("_non_finite",)),
+    "immovable-moved": ("an immovable body moved", ("_immovable_moved",)),
+    "drag-per-step": ("drag applied per step, not per second", ("_measure_drag",)),
+    "drag-ignored": ("no drag", ("_measure_drag",)),
+    "tunnelling": ("tunnelling", ("_tunnelled",)),
+    "impulse-sign": ("an impulse of the wrong sign", ("_judge_energy",)),
+    "impulse-doubled": ("an impulse applied twice", ("_judge_energy",)),
+    "restitution-sign": ("restitution with the wrong sign", ("_judge_energy",)),
+    "one-missing": ("the 1 of (1 + e) missing from the impulse", ("_judge_energy",)),
+    "restitution-squared": ("restitution applied twice", ("_judge_energy",)),
+    "contact-energy": ("energy at a contact", ("_judge_energy", "_judge_chain")),
+    "tangent-reversed": ("a reflection of the whole velocity", ("_judge_tangent",)),
+    "wrong-normal": ("an impulse along the wrong normal", ("_judge_tangent",)),
+    "own-rule": ("physdbg's own modelling rule, not the engine", ("_own_rule", "_slept")),
+    "tie": ("contacts at one instant taken in another order (a tie, not a mistake)", ("_tie",)),
+    "index-order": ("contacts resolved in index order", ("_index_ordered",)),
+    "collision-order": ("contacts resolved out of order", ("_judge_chain",)),
+    "skipped-rest": ("a bounce that skips the rest of the step", ("_skipped_rest",)),
+    "bounce-time": ("bounced at the wrong time", ("_late",)),
+    "missed-contact": ("a contact missed", ("_judge_one",)),
+    "extra-contact": ("a contact physdbg does not have", ("_extra",)),
+    "drift": ("drift in free flight", ("_drift",)),
+    "chaos": ("chaos: differences below the tolerance grew", ("_no_step_departs",)),
+    "unexplained": ("unexplained", ("_no_step_departs",)),
 }
+_PRIORITY = tuple(DEPARTURE_KINDS)
+_KIND_WORDS = {kind: words for kind, (words, _) in DEPARTURE_KINDS.items()}
 
 
 def _changed_contacts(with_rule: list[StepContact],
