@@ -572,8 +572,8 @@ def _meshes(c: _Checker, raw: dict, max_memory: float) -> Meshes:
         else:
             spec = str(folder / c.text(table, "file", p + "file", ""))
         name = c.text(table, "name", p + "name", f"mesh{k}")
-        position = c.vector(table, "position", p + "position", (0.0, 0.0, 0.0))
-        rotation = c.vector(table, "rotation", p + "rotation", (0.0, 0.0, 0.0))
+        m = _read(c, table, p, MESH_RULES)
+        position, rotation = m["position"], m["rotation"]
         if isinstance(table.get("scale"), list):
             scale = c.vector(table, "scale", p + "scale")
             if not np.all(scale >= MIN_SCALE):
@@ -581,12 +581,11 @@ def _meshes(c: _Checker, raw: dict, max_memory: float) -> Meshes:
                                     f"{MAX_MAGNITUDE:g}")
         else:
             scale = c.number(table, "scale", p + "scale", default=1.0, scale=True)
-        restitution.append(c.number(table, "restitution", p + "restitution", default=1.0, lo=0, hi=1))
-        velocity.append(c.vector(table, "velocity", p + "velocity", (0.0, 0.0, 0.0)))
-        angular_velocity.append(np.radians(c.vector(table, "angular_velocity", p + "angular_velocity",
-                                                    (0.0, 0.0, 0.0))))
-        pivot.append(c.vector(table, "pivot", p + "pivot", tuple(position)))
-        volumes.append(c.choice(table, "bounding_volume", p + "bounding_volume", BOUNDING_VOLUMES, "auto"))
+        restitution.append(m["restitution"])
+        velocity.append(m["velocity"])
+        angular_velocity.append(np.radians(m["angular_velocity"]))
+        pivot.append(c.vector(table, "pivot", p + "pivot", tuple(position)))  # by default the mesh's position
+        volumes.append(m["bounding_volume"])
         try:
             mesh = load_mesh(spec, name, max_memory=max_memory, hull=False)
         except MeshError as err:
@@ -723,6 +722,25 @@ PARTICLE_RULES = {
     "radius": _Number(scale=True),
     "restitution": _Number(lo=0, hi=1, default=1.0),
     "gravity_scale": _Number(default=1.0),
+}
+
+
+# [[meshes]] (shape or file, name, scale, which is a number or [x, y, z], and pivot, whose
+# default is the mesh's position, are read apart)
+MESH_RULES = {
+    "position": _Vector(default=(0.0, 0.0, 0.0)),
+    "rotation": _Vector(default=(0.0, 0.0, 0.0)),
+    "restitution": _Number(lo=0, hi=1, default=1.0),
+    "velocity": _Vector(default=(0.0, 0.0, 0.0)),
+    "angular_velocity": _Vector(default=(0.0, 0.0, 0.0)),
+    "bounding_volume": _Choice(lambda: BOUNDING_VOLUMES, default="auto"),
+}
+# [generate] (kind, count, packing_fraction, min and max depend on the kind: read apart)
+GENERATE_RULES = {
+    "radius": _Number(scale=True),
+    "mass": _Number(scale=True, default=1.0),
+    "restitution": _Number(lo=0, hi=1, default=1.0),
+    "speed": _Number(lo=0, default=1.0),
 }
 
 
@@ -912,10 +930,8 @@ def _check_resources(c: _Checker, particles: int, steps: int | None, max_memory:
 def _generate(c: _Checker, gen: dict, kind: str, count: int, seed: int, box_lo, box_hi) -> dict:
     """Particles for ``[generate]``, on randomly chosen cells of a jittered lattice, so none
     overlap and a gas starts uniform (cells are drawn without building the lattice)."""
-    radius = c.number(gen, "radius", "generate.radius", scale=True)
-    mass = c.number(gen, "mass", "generate.mass", default=1.0, scale=True)
-    restitution = c.number(gen, "restitution", "generate.restitution", default=1.0, lo=0, hi=1)
-    speed = c.number(gen, "speed", "generate.speed", default=1.0, lo=0)
+    g = _read(c, gen, "generate.", GENERATE_RULES)
+    radius, mass, restitution, speed = g["radius"], g["mass"], g["restitution"], g["speed"]
     rng = np.random.default_rng(seed)
     out: dict[str, Any] = {}
     if kind == "gas":

@@ -253,10 +253,12 @@ def test_each_field_has_one_rule_and_every_engine_setting_is_read():
     import dataclasses
 
     from physdbg.engine.state import Settings
-    from physdbg.scene import (PARTICLE_FIELDS, PARTICLE_RULES, PLANE_FIELDS, PLANE_RULES, SETTING_RULES, TOP_FIELDS,
-                               TOP_RULES)
+    from physdbg.scene import (GENERATE_FIELDS, GENERATE_RULES, MESH_FIELDS, MESH_RULES, PARTICLE_FIELDS,
+                               PARTICLE_RULES, PLANE_FIELDS, PLANE_RULES, SETTING_RULES, TOP_FIELDS, TOP_RULES)
 
     assert set(SETTING_RULES) | {"max_memory"} == {f.name for f in dataclasses.fields(Settings)}
     assert set(SETTING_RULES) | set(TOP_RULES) <= set(TOP_FIELDS)
     assert set(PLANE_RULES) | {"name"} == set(PLANE_FIELDS)
     assert set(PARTICLE_RULES) | {"mass", "inverse_mass"} == set(PARTICLE_FIELDS)
+    assert set(MESH_RULES) | {"shape", "file", "name", "scale", "pivot"} == set(MESH_FIELDS)
+    assert set(GENERATE_RULES) | {"kind", "count", "packing_fraction", "min", "max"} == set(GENERATE_FIELDS)
