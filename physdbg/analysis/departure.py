@@ -165,10 +165,6 @@ class _Lone:
     other: None = None
 
 
-def _body_only(i: int) -> _Lone:
-    return _Lone(i)
-
-
 def _no_geometry(kind: int) -> CheckRunError:
     return CheckRunError(f"check-run has no geometry for a contact with a {KIND_NAMES[kind]} (collider kind {kind}): "
                          f"analysis/departure.py's _gap and _tunnelled need a branch for it")
@@ -1289,7 +1285,7 @@ class _Comparison:
         r = self.runs
         s, i = kick.step, kick.body
         size = float(np.linalg.norm(r.vf[s, i] - r.vf[s - 1, i]))
-        self._add("extra-contact", s, _body_only(i),
+        self._add("extra-contact", s, _Lone(i),
                   f"sphere {i} changed velocity by {size:.3g} m/s at t ≈ {kick.time:.6g} s; physdbg, stepping "
                   f"from the same state, touches nothing in that step",
                   "a contact physdbg does not see: a test that fires too early or against the wrong body, or a "
@@ -1376,7 +1372,7 @@ class _Comparison:
         frames, bodies = np.nonzero(bad)
         if len(frames):
             k, i = int(frames[0]), int(bodies[0])
-            self._add("non-finite", k, _body_only(i),
+            self._add("non-finite", k, _Lone(i),
                       f"sphere {i}'s {'position' if not np.isfinite(r.xf[k, i]).all() else 'velocity'} is NaN or "
                       f"infinite from t = {r.t[k]:.6g} s ({_body_count(int(bad[k].sum()))} then)",
                       "look at the step before: a division by a zero distance (two centres at one point) or a "

@@ -509,7 +509,8 @@ def _touches(r: dict, crossing) -> bool:
 
 
 def _count(n: int, noun: str) -> str:
-    """'1 more step', '3 more steps'."""
+    """'1 more step', '3 more steps' (report.count_words's words; report's annotations name
+    diff's types, so this module does not import it)."""
     return f"{n} {noun}{'' if n == 1 else 's'}"
 
 

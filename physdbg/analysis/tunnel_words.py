@@ -34,9 +34,9 @@ def why_tunnelled(settings: dict, budgets: list[str], foreign: bool = False, pai
     settings; budgets: the codes of the work budgets (max_…) the step hit, in order;
     foreign: the run is another engine's; pair: the body crossed is another sphere;
     pile: advisor.pile_hint for the run, added to a budget's advice (None: no pile)."""
-    detection = "foreign" if foreign else settings.get("detection", "swept")
     if foreign:
         return TunnelWhy("the other engine let it cross within one step", FOREIGN_ADVICE)
+    detection = settings.get("detection", "swept")
     if detection in ("discrete", "sampled"):  # a test only at some instants: the first cause, whatever followed
         reason = ("detection = discrete tests only where each step ends" if detection == "discrete" else
                   f"detection = sampled tests only {settings.get('samples', 4)} instants a step")
