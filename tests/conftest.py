@@ -33,6 +33,19 @@ def pytest_sessionstart(session):
     compile_kernels("grid", sleeping=True)
 
 
+def pytest_collection_modifyitems(config, items):
+    """For pytest-xdist (pyproject's addopts: ``-n auto --dist loadgroup``, one worker per
+    core): the slow tests first, so that the last test a worker takes is a short one and
+    the workers end together; every test that opens the native Rerun viewer (it asks for
+    ``virtual_display``) on one worker, one at a time: a viewer started while another
+    listens on rerun's port hands its file to that one, and one Xvfb display is enough. Every worker collects the same items in the same order, as xdist requires.
+    Without xdist (``-p no:xdist`` or ``-n 0``) the marks do nothing and only the order changes."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)  # stable: file order within each tier
+    for item in items:
+        if "virtual_display" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.xdist_group("viewer"))
+
+
 def make_state(positions, velocities=None, *, radius=0.1, inverse_mass=1.0, restitution=1.0, gravity_scale=1.0):
     positions = np.asarray(positions, dtype=float).reshape(-1, 3)
     n = len(positions)

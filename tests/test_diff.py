@@ -312,7 +312,8 @@ def test_the_overlay_opens_on_the_divergence_in_two_colours_in_the_real_viewer(t
     out = tmp_path / "overlay.rrd"
     assert CliRunner().invoke(app, ["diff", str(a), str(b), "--rrd", str(out)]).exit_code == 1
     shot = tmp_path / "overlay.png"
-    done = subprocess.run([viewer_binary(), str(out), "--screenshot-to", str(shot), "--window-size", "1200x750"],
+    done = subprocess.run([viewer_binary(), str(out), "--new", "--screenshot-to", str(shot),
+                           "--window-size", "1200x750"],
                           env=dict(os.environ, DISPLAY=virtual_display, CI="1"), capture_output=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
     image = np.asarray(Image.open(shot).convert("RGB")).astype(int)

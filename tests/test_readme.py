@@ -18,6 +18,9 @@ from .test_docs import OPENS_A_WINDOW, ROOT, _commands_and_exits_in, _readme_com
 
 README = ROOT / "README.md"
 
+# One fresh venv for the module: under pytest-xdist both tests run on the worker that made it.
+pytestmark = pytest.mark.xdist_group("readme")
+
 
 def _fresh_copy(dest: Path) -> None:
     """The repository's files as a clone would have them (tracked and new, not ignored)."""

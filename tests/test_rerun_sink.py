@@ -128,7 +128,8 @@ def test_the_real_viewer_opens_the_recording_on_a_picture_that_is_not_blank(tmp_
 
     rec = api.record("cradle", ["steps=100"], mcap_path=str(tmp_path / "c.mcap"), rrd_path=str(tmp_path / "c.rrd"))
     shot = tmp_path / "shot.png"
-    done = subprocess.run([viewer_binary(), rec.rrd, "--screenshot-to", str(shot), "--window-size", "1200x750"],
+    done = subprocess.run([viewer_binary(), rec.rrd, "--new", "--screenshot-to", str(shot),
+                           "--window-size", "1200x750"],
                           env=dict(os.environ, DISPLAY=virtual_display, CI="1"), capture_output=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
     image = np.asarray(Image.open(shot).convert("RGB"))

@@ -196,21 +196,38 @@ def test_sampled_detection_catches_what_falls_between_its_samples_only_if_slow()
 
 # ----------------------------------------------------------------------------- sphere–triangle
 def _closest_distances(points, tri):
-    """Distance (K,) from points (K, 3) to triangle tri (3, 3), by the compiled closest point."""
-    from physdbg.engine.mesh.closest import closest_on_triangle
+    """Distance (K,) from points (K, 3) to a triangle tri (3, 3), or to one triangle each
+    (K, 3, 3): the nearest of its three edges and, where the point's foot on the plane lies
+    inside, its face. Plain numpy over all K at once, apart from the engine's closest point
+    (which test_the_closest_point_of_a_triangle_is_closer_than_any_sampled_point_of_it holds)."""
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    tri = np.broadcast_to(np.asarray(tri, dtype=float), (len(points), 3, 3))
+    corners = tri[:, 0], tri[:, 1], tri[:, 2]
+    edges = list(zip(corners, corners[1:] + corners[:1]))
 
-    out = np.empty(len(points))
-    for i, p in enumerate(points):
-        q = np.array(closest_on_triangle(*p, *tri.ravel())[:3])
-        out[i] = np.linalg.norm(p - q)
-    return out
+    def dot(u, w):
+        return np.einsum("ki,ki->k", u, w)
+
+    nearest = np.full(len(points), np.inf)
+    for p, q in edges:
+        along = np.clip(dot(points - p, q - p) / dot(q - p, q - p), 0.0, 1.0)
+        nearest = np.minimum(nearest, np.linalg.norm(points - (p + along[:, None] * (q - p)), axis=1))
+    normal = np.cross(corners[1] - corners[0], corners[2] - corners[0])
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    height = dot(points - corners[0], normal)
+    foot = points - height[:, None] * normal
+    inside = np.logical_and.reduce([dot(np.cross(q - p, foot - p), normal) >= 0.0 for p, q in edges])
+    return np.where(inside, np.minimum(np.abs(height), nearest), nearest)
 
 
 def _center_at(x, v, a, integrator, t):
-    from physdbg.engine.motion import STRAIGHT_PATH, path_coefficients
+    """The sphere's centre (3,) at local time t (s), or (T, 3) at times t (T,)."""
+    from physdbg.engine.motion import STRAIGHT_PATH
 
-    p1, p2, _ = path_coefficients(integrator, 0.0, t)
-    return x + v * p1 + (0.0 if STRAIGHT_PATH[integrator] else 1.0) * a * p2
+    times = np.atleast_1d(t)
+    p1, p2 = np.array([path_coefficients(integrator, 0.0, s)[:2] for s in times]).T
+    centers = x + v * p1[:, None] + (0.0 if STRAIGHT_PATH[integrator] else 1.0) * a * p2[:, None]
+    return centers if np.ndim(t) else centers[0]
 
 
 def test_the_closest_point_of_a_triangle_is_closer_than_any_sampled_point_of_it():
@@ -250,8 +267,7 @@ def test_sphere_triangle_time_of_impact_against_fine_sampling(seed, integrator, 
     horizon = 0.4
     t, feature, _passes = triangle_toi_swept(*x, *v, *a, radius, tri, integrator, 0.0, horizon, 1e-10)
     times = np.linspace(0.0, horizon, 10_001)
-    centers = np.array([_center_at(x, v, a, integrator, s) for s in times])
-    gaps = _closest_distances(centers, tri) - radius
+    gaps = _closest_distances(_center_at(x, v, a, integrator, times), tri) - radius
     inside = np.nonzero(gaps <= 0.0)[0]
     if len(inside):
         first = inside[0]
@@ -264,16 +280,17 @@ def test_sphere_triangle_time_of_impact_against_fine_sampling(seed, integrator, 
         assert len(inside) == 0
 
 
-def _rotation(w, t):
-    from physdbg.engine.mesh.rigid_motion import rotation_about
-
-    return rotation_about(w, t)
-
-
 def _moving_corners(tri, motion, tau):
-    """A moving triangle's corners (3, 3) at tau: R(w·tau)(c - P) + P + v·tau (motion: P, v, w)."""
+    """A moving triangle's corners (3, 3) at tau (s), or (T, 3, 3) at taus (T,):
+    R(w·tau)(c - P) + P + v·tau (motion: P, v, w), R by Rodrigues' formula."""
     pivot, velocity, spin = motion[:3], motion[3:6], motion[6:]
-    return (tri - pivot) @ _rotation(spin, tau).T + pivot + velocity * tau
+    taus = np.atleast_1d(tau)
+    speed = np.linalg.norm(spin)
+    k = np.cross(np.eye(3), spin / speed)  # the cross-product matrix of the axis
+    angle = (speed * taus)[:, None, None]
+    turns = np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+    corners = (tri - pivot) @ turns.transpose(0, 2, 1) + pivot + velocity * taus[:, None, None]
+    return corners if np.ndim(tau) else corners[0]
 
 
 @settings(max_examples=100, deadline=None)
@@ -306,8 +323,7 @@ def test_sphere_against_a_rotating_triangle_against_fine_sampling(seed, integrat
     a = np.array([0.0, 0.0, -9.81])
     t, feature, _passes = moving_triangle_toi_swept(*x, *v, *a, radius, tri, motion, tau0, integrator, 0.0, horizon, 1e-10)
     times = np.linspace(0.0, horizon, 10_001)
-    gaps = np.array([_closest_distances(_center_at(x, v, a, integrator, s)[None],
-                                        _moving_corners(tri, motion, tau0 + s))[0] for s in times]) - radius
+    gaps = _closest_distances(_center_at(x, v, a, integrator, times), _moving_corners(tri, motion, tau0 + times)) - radius
     inside = np.nonzero(gaps <= 0.0)[0]
     event("touches" if len(inside) else "misses")
     if len(inside):
