@@ -39,7 +39,7 @@ def pytest_collection_modifyitems(config, items):
     the workers end together; every test that opens the native Rerun viewer (it asks for
     ``virtual_display``) on one worker, one at a time: a viewer started while another
     listens on rerun's port hands its file to that one, and one Xvfb display is enough. Every worker collects the same items in the same order, as xdist requires.
-    Without xdist (``-p no:xdist`` or ``-n 0``) the marks do nothing and only the order changes."""
+    In one process (``-n 0``) the marks do nothing and only the order changes."""
     items.sort(key=lambda item: item.get_closest_marker("slow") is None)  # stable: file order within each tier
     for item in items:
         if "virtual_display" in getattr(item, "fixturenames", ()):
