@@ -33,6 +33,22 @@ def pytest_sessionstart(session):
     compile_kernels("grid", sleeping=True)
 
 
+MAX_AUTO_WORKERS = 4  # a worker holds ~0.5 GB (numba and the kernels) before its tests use any
+
+
+def pytest_xdist_auto_num_workers(config):
+    """``-n auto``: one worker per CPU this process may use (its affinity, as
+    physdbg.precompile counts them, not the host's cores that psutil would count in a
+    container), at most MAX_AUTO_WORKERS: beyond that the README test's fresh venv
+    (about 2 min, one worker) bounds the suite's time, and the workers' memory would only
+    grow. PYTEST_XDIST_AUTO_NUM_WORKERS, when set, decides instead (xdist's own rule)."""
+    if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS"):
+        return None
+    from physdbg.precompile import usable_cpus
+
+    return max(1, min(usable_cpus(), MAX_AUTO_WORKERS))
+
+
 def pytest_collection_modifyitems(config, items):
     """For pytest-xdist (pyproject's addopts: ``-n auto --dist loadgroup``, one worker per
     core): the slow tests first, so that the last test a worker takes is a short one and
