@@ -50,12 +50,13 @@ def pytest_xdist_auto_num_workers(config):
 
 
 def pytest_collection_modifyitems(config, items):
-    """For pytest-xdist (pyproject's addopts: ``-n auto --dist loadgroup``, one worker per
-    core): the slow tests first, so that the last test a worker takes is a short one and
-    the workers end together; every test that opens the native Rerun viewer (it asks for
+    """For pytest-xdist (pyproject's addopts: ``-n auto --dist loadgroup``): the slow tests
+    first, so that the last test a worker takes is a short one and the workers end
+    together; every test that opens the native Rerun viewer (it asks for
     ``virtual_display``) on one worker, one at a time: a viewer started while another
-    listens on rerun's port hands its file to that one, and one Xvfb display is enough. Every worker collects the same items in the same order, as xdist requires.
-    In one process (``-n 0``) the marks do nothing and only the order changes."""
+    listens on rerun's port hands its file to that one, and one Xvfb display is enough.
+    Every worker collects the same items in the same order, as xdist requires. In one
+    process (``-n 0``) the marks do nothing and only the order changes."""
     items.sort(key=lambda item: item.get_closest_marker("slow") is None)  # stable: file order within each tier
     for item in items:
         if "virtual_display" in getattr(item, "fixturenames", ()):

@@ -282,7 +282,9 @@ def test_sphere_triangle_time_of_impact_against_fine_sampling(seed, integrator, 
 
 def _moving_corners(tri, motion, tau):
     """A moving triangle's corners (3, 3) at tau (s), or (T, 3, 3) at taus (T,):
-    R(w·tau)(c - P) + P + v·tau (motion: P, v, w), R by Rodrigues' formula."""
+    R(w·tau)(c - P) + P + v·tau (motion: P, v, w), R by Rodrigues' formula, written here
+    over all taus at once (rigid_motion.rotation_about takes one tau; tests/test_rigid_motion.py
+    holds the engine's turns to it), and apart from the engine's own."""
     pivot, velocity, spin = motion[:3], motion[3:6], motion[6:]
     taus = np.atleast_1d(tau)
     speed = np.linalg.norm(spin)
