@@ -457,6 +457,10 @@ class _Checker:
                 self.fail(name, "is required: " + self._what(lo, hi, lo_open, integer))
             return default
         value = table[key]
+        if integer and isinstance(value, float) and math.isfinite(value) and value.is_integer():
+            # 1e6 and 100.0 are floats in TOML: say so, or "got 1e+12; expected <= 1e+12" reads as a riddle
+            self.fail(name, f"got {_short(value)}, a float; expected " + self._what(lo, hi, lo_open, integer)
+                      + f", written without a decimal point or exponent (such as {int(value)})")
         if isinstance(value, bool) or not isinstance(value, (int, float)) or (integer and not isinstance(value, int)):
             self.fail(name, f"got {_short(value)}; expected " + self._what(lo, hi, lo_open, integer))
         # compare before converting: an integer too big for a float is out of range, not an overflow

@@ -120,6 +120,8 @@ def test_fraction_dt_and_duration_give_whole_steps():
     ("particles.0.radius=-1", "particles.0.radius", ">= 1e-12"),
     ("particles.0.restitution=2", "particles.0.restitution", "<= 1"),
     ("samples=2.5", "samples", "an integer"),
+    ("steps=1e6", "steps", "got 1000000.0, a float; expected an integer >= 1 and <= 1e+12, written without a "
+                           "decimal point or exponent (such as 1000000)"),
     ("dt=0", "dt", "seconds > 0"),
     ("dt=fast", "dt", '"real"'),
     ("gravity=[1, 2]", "gravity", "[x, y, z]"),
