@@ -457,17 +457,18 @@ class _Checker:
                 self.fail(name, "is required: " + self._what(lo, hi, lo_open, integer))
             return default
         value = table[key]
-        if integer and isinstance(value, float) and math.isfinite(value) and value.is_integer():
-            # 1e6 and 100.0 are floats in TOML: say so, or "got 1e+12; expected <= 1e+12" reads as a riddle
-            self.fail(name, f"got {_short(value)}, a float; expected " + self._what(lo, hi, lo_open, integer)
-                      + f", written without a decimal point or exponent (such as {int(value)})")
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or (integer and not isinstance(value, int)):
-            self.fail(name, f"got {_short(value)}; expected " + self._what(lo, hi, lo_open, integer))
+        number = isinstance(value, (int, float)) and not isinstance(value, bool)
         # compare before converting: an integer too big for a float is out of range, not an overflow
-        in_range = (not isinstance(value, float) or math.isfinite(value)) and (
+        in_range = number and (not isinstance(value, float) or math.isfinite(value)) and (
             lo is None or (value > lo if lo_open else value >= lo)) and value <= hi
-        if not in_range:
-            self.fail(name, f"got {_short(value)}; expected " + self._what(lo, hi, lo_open, integer))
+        expected = self._what(lo, hi, lo_open, integer)
+        if integer and in_range and isinstance(value, float) and value.is_integer():
+            # 1e6 and 100.0 are floats in TOML: say so, or "got 1e+12; expected <= 1e+12" reads as a
+            # riddle (out of range, the range alone is said: its integer would be refused too)
+            self.fail(name, f"got {_short(value)}, a float; expected {expected}, written without a decimal "
+                            f"point or exponent (such as {int(value)})")
+        if not in_range or (integer and not isinstance(value, int)):
+            self.fail(name, f"got {_short(value)}; expected {expected}")
         return int(value) if integer else float(value)
 
     @staticmethod
