@@ -8,6 +8,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import tempfile
 import time
@@ -704,7 +705,7 @@ class CheckRunResult:
     velocities: str
 
 
-def _check_class_row(run: str, scene: str, overrides: tuple, options: dict):
+def _check_class_row(run: str, scene: str | None, overrides: tuple, options: dict):
     """check-run of one run of a class as its row (analysis.classroom): any error, expected
     or not, is the row's, since a hostile file must not end the batch. Module-level, so a
     worker process or a Dask worker can be handed it."""
@@ -716,18 +717,59 @@ def _check_class_row(run: str, scene: str, overrides: tuple, options: dict):
         return error_row(run, err)
 
 
-def check_class(runs: Sequence[str | Path], scene: str, overrides: Sequence[str] = (), workers: int | None = None,
-                dask: str | None = None, **options):
+def check_class(runs: Sequence[str | Path], scene: str | None, overrides: Sequence[str] = (),
+                workers: int | None = None, dask: str | None = None, **options):
     """check-run of every run of a class (analysis.classroom.runs_in) against ``scene`` (a
-    built-in name or a .toml path, read by each worker): an analysis.classroom.ClassReport.
+    built-in name or a .toml path, read by each worker; None: each run's own scene, which
+    a run without one is an error row for): an analysis.classroom.ClassReport.
     workers: local processes (None: every core); dask: an existing cluster's scheduler;
     options: check_run's atol, rtol, time_unit, length_unit, verify."""
     from .analysis.classroom import class_report
     from .analysis.sweep import run_jobs
 
-    name = load_scene(scene, list(overrides)).name  # a wrong scene is one error, before any run
+    # a wrong scene is one error, before any run
+    name = load_scene(scene, list(overrides)).name if scene is not None else "each run's own scene"
     jobs = [(str(run), scene, tuple(overrides), options) for run in runs]
     return class_report(name, run_jobs(_check_class_row, jobs, workers=workers, dask=dask))
+
+
+SCENE_FORMATS = ("toml", "json", "js")
+
+
+def show_scene(scene: str, output_format: str = "toml", overrides: Sequence[str] = ()) -> str:
+    """A scene (a built-in name or a .toml file) as text: "toml", the file as it is (with
+    ``overrides`` only as a stated table: TOML text is not rewritten, so overrides need
+    json or js); "json", its table with every value stated (scene.scene_table: what
+    check-run reads from a run's first line); "js", that table as a JavaScript file that
+    defines ``physdbgScenes[NAME]`` in a page and exports it under Node."""
+    from .scene import read_scene, read_scene_text, scene_table
+
+    if output_format not in SCENE_FORMATS:
+        raise PhysdbgError(f"--format {output_format!r}: one of {', '.join(SCENE_FORMATS)}")
+    if output_format == "toml":
+        if overrides:
+            raise PhysdbgError("--set with --format toml: the TOML is printed as it is; give --format json or js "
+                               "for the scene with the overrides applied")
+        read_scene(scene)  # a scene that does not load is refused here too
+        return read_scene_text(scene)[0]
+    table = scene_table(read_scene(scene, list(overrides)))
+    # one line a field, a sphere or a plane
+    text = "{\n" + ",\n".join(
+        f"  {json.dumps(key)}: [\n" + ",\n".join(f"    {json.dumps(item)}" for item in value) + "\n  ]"
+        if isinstance(value, list) and value and isinstance(value[0], dict) else f"  {json.dumps(key)}: {json.dumps(value)}"
+        for key, value in table.items()) + "\n}"
+    if output_format == "json":
+        return text + "\n"
+    name = json.dumps(table["name"])
+    return (f"// physdbg scene {table['name']}: {table.get('description', '')}\n"
+            f"// Made by `physdbg scenes show {scene} --format js`: dt and every value in SI units (s, m, kg).\n"
+            f"// In a page: <script src=\"this file\"></script> defines physdbgScenes[{name}];\n"
+            f"// under Node: const scene = require(\"./this file\");\n"
+            f"(function (root) {{\n"
+            f"  const scene = {text.replace(chr(10), chr(10) + '  ')};\n"
+            f"  if (typeof module === \"object\" && module && module.exports) module.exports = scene;\n"
+            f"  root.physdbgScenes = Object.assign(root.physdbgScenes || {{}}, {{ [{name}]: scene }});\n"
+            f"}})(typeof globalThis !== \"undefined\" ? globalThis : this);\n")
 
 
 TRACE_JS = "physdbg-trace.js"  # the JavaScript tracer shipped in the package (physdbg/js/)
@@ -767,7 +809,29 @@ def read_run_in_units(run_path: str | Path, scene: Scene, time_unit: str | None 
     return in_units(run, time_unit or "s", length_unit or "m")
 
 
-def check_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str] = (), atol: float | None = None,
+def scene_of_run(run_path: str | Path, overrides: Sequence[str] = ()) -> Scene:
+    """The scene a JSON Lines run carries on its first line (foreign.run_scene, written by
+    physdbg-trace.js's start(scene)), ready to run: a built-in scene's name is loaded; a
+    scene object is validated as a scene file is (an error names the run's line 1 and
+    the field), with ``key=value`` overrides applied."""
+    from .record.foreign import run_scene
+    from .scene import scene_from_dict
+    from .scenes import builtin_names
+
+    value = run_scene(run_path)
+    if value is None:
+        raise PhysdbgError(f"{run_path}: the run carries no scene (a run traced with physdbgTrace.start(scene) has it "
+                           f"on its first line); give the scene it ran with --scene, a built-in name or a .toml file")
+    if isinstance(value, str):
+        if value not in builtin_names():
+            raise PhysdbgError(f"{run_path}, line 1: field 'scene' is {value[:60]!r}, not a built-in scene (one of "
+                               f"{', '.join(builtin_names())}); give a scene object, or the scene with --scene")
+        return load_scene(value, overrides)
+    return decide(scene_from_dict(value, f"{run_path}, line 1 (the run's scene)", overrides=overrides))
+
+
+def check_run(run_path: str | Path, scene: Scene | str | None = None, overrides: Sequence[str] = (),
+              atol: float | None = None,
               rtol: float | None = None, keep: str | Path | None = None, force: bool = False,
               on_status: Callable[[str], None] | None = None, verify: bool = True,
               time_unit: str | None = None, length_unit: str | None = None) -> CheckRunResult:
@@ -786,7 +850,8 @@ def check_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str]
     from .record.foreign import import_run as write_run
     from .record.outputs import write_claimed
 
-    scene = ready_scene(scene, overrides)
+    carried = scene is None
+    scene = scene_of_run(run_path, overrides) if carried else ready_scene(scene, overrides)
     if scene.walls.periodic:
         raise PhysdbgError(f"scene '{scene.name}' has a periodic box; check-run reads a run's steps from consecutive "
                            f"positions, which wrap there, and does not compare periodic runs yet")
@@ -837,6 +902,12 @@ def check_run(run_path: str | Path, scene: Scene | str, overrides: Sequence[str]
             reference(scene)
             report = compare(run_out, reference_out, atol, rtol, verify=verify, set_aside=set_aside)
         report.run = str(run_path)
+        if carried:
+            walls = len(scene.walls)
+            report.notes.insert(0, f"the scene is the one the run carries on its first line ('{scene.name}': "
+                                   f"{scene.state.count} sphere{'s' if scene.state.count != 1 else ''}, {walls} "
+                                   f"plane{'s' if walls != 1 else ''}), compared with its own integrator "
+                                   f"({scene.settings.integrator})")
         kept = keep is not None
         return CheckRunResult(report, str(run_out) if kept else None, str(reference_out) if kept else None,
                               velocities)

@@ -106,15 +106,22 @@ def _json_error(message: str, code: int) -> None:
     typer.echo(json.dumps(versioned({"error": message, "exit_code": code}), indent=2))
 
 
-@app.command()
+scenes_app = typer.Typer()  # (its help is the callback's docstring)
+app.add_typer(scenes_app, name="scenes")
+
+
+@scenes_app.callback(invoke_without_command=True)
 def scenes(
+    ctx: typer.Context,
     as_json: Annotated[bool, typer.Option("--json", help="Print the scenes as JSON (name and description).")]
     = False,
 ) -> None:
-    """List the built-in scenes, one line each.
+    """List the built-in scenes, one line each; `physdbg scenes show NAME` prints one.
 
     Example: physdbg scenes
     """
+    if ctx.invoked_subcommand is not None:
+        return
     from .scenes import builtin_descriptions
 
     rows = builtin_descriptions()
@@ -124,6 +131,27 @@ def scenes(
     width = max(len(name) for name, _ in rows)
     for name, description in rows:
         typer.echo(f"{name:<{width}}  {description}")
+
+
+@scenes_app.command("show")
+def scenes_show(
+    scene: Annotated[str, typer.Argument(help="Built-in scene name (see `physdbg scenes`) or a .toml file.",
+                                         autocompletion=lambda incomplete: _complete_scene(incomplete))],
+    set_: SetOption = None,
+    output_format: Annotated[str, typer.Option(
+        "--format", help="toml: the scene file as it is; json: the scene with every value stated (each sphere "
+                         "and plane listed, dt in seconds), as check-run and physdbg-trace.js read it; js: the "
+                         "same as a JavaScript file a browser page or Node loads.")] = "toml",
+) -> None:
+    """Print a scene as a file (TOML), as JSON, or as a JavaScript module an engine loads:
+    the spheres, planes, gravity, drag, dt and integrator of a sphere scene, stated in full.
+
+    Example: physdbg scenes show bounce --format js > bounce-scene.js
+    """
+    with _user_errors():
+        from .api import show_scene
+
+        typer.echo(show_scene(scene, output_format, set_ or []).rstrip("\n"))
 
 
 def _pile_note(scene) -> None:
@@ -136,7 +164,7 @@ def _pile_note(scene) -> None:
         typer.echo(f"note: {note}", err=True)
 
 
-def _choose_tier(scene: str, overrides) -> object:
+def _choose_tier(scene, overrides) -> object:
     """Compiled or interpreted for a run of ``scene`` (physdbg/tier.py), chosen and
     applied before the engine is loaded."""
     from . import tier
@@ -587,7 +615,7 @@ def import_(
         typer.echo(f"then try    {me} explain {result.mcap}   |   {me} replay {result.mcap} --spawn")
 
 
-def _check_class(folder: Path, scene: str, overrides: list[str], atol, rtol, time_unit, length_unit, jobs, dask,
+def _check_class(folder: Path, scene: str | None, overrides: list[str], atol, rtol, time_unit, length_unit, jobs, dask,
                  chosen: str, verify: bool = True) -> None:
     """check-run of a folder of runs: one table (analysis.classroom); verify: check every
     state read against its stored hash, as for one run (--no-verify: not)."""
@@ -627,17 +655,23 @@ def trace_js(
         from .api import write_trace_js
 
         out = write_trace_js(output, force)
+        me = _command("physdbg")
         typer.echo(f"wrote       {out}")
-        typer.echo("then add    const trace = physdbgTrace.start(\"bounce\");  trace.frame(t, positions, velocities);  "
+        typer.echo(f"scene       {me} scenes show bounce --format js > bounce-scene.js   (your engine loads it; "
+                   f"scene.integrator = \"euler\" if it steps x += v·dt, v += a·dt)")
+        typer.echo("then add    const trace = physdbgTrace.start(scene);  trace.frame(t, positions, velocities);  "
                    "trace.finish();")
-        typer.echo(f"and run     {_command('physdbg')} check-run bounce.jsonl --scene bounce")
+        typer.echo(f"and run     {me} check-run bounce.jsonl   (the run carries its scene; a run started with "
+                   f"start(\"bounce\") compares with the scene's own integrator: add -s integrator=euler)")
 
 
 @app.command("check-run")
 def check_run(
-    run: Annotated[Path, typer.Argument(help="The other engine's run: a .csv, .jsonl or .mcap trajectory "
-                                              "(docs/foreign-runs.md).")],
-    scene: Annotated[str, typer.Option("--scene", help="The scene it ran: a built-in name or a .toml file.")],
+    run: Annotated[Optional[Path], typer.Argument(help="The other engine's run: a .csv, .jsonl or .mcap trajectory "
+                                                        "(docs/foreign-runs.md), or a folder of runs.")] = None,
+    scene: Annotated[Optional[str], typer.Option(
+        "--scene", help="The scene it ran: a built-in name or a .toml file (default: the scene a .jsonl run "
+                        "carries on its first line, as physdbg-trace.js's start(scene) writes it).")] = None,
     set_: SetOption = None,
     atol: Annotated[Optional[float], typer.Option(
         "--atol", min=0.0, help="A body departs when its position (m) or velocity (m/s) is off by more than "
@@ -661,6 +695,14 @@ def check_run(
     dask: Annotated[Optional[str], typer.Option(
         "--dask", help="A folder of runs: check them on an existing Dask cluster (its scheduler's address, "
                        "tcp://host:8786; needs pip install 'physdbg[dask]').")] = None,
+    serve: Annotated[bool, typer.Option(
+        "--serve", help="Listen on 127.0.0.1 for runs a page sends (physdbg-trace.js's finish()): check each, "
+                        "print its verdict, keep its recordings (in --keep, default physdbg-runs) and answer the "
+                        "page, which shows it. Ctrl-C stops.")] = False,
+    port: Annotated[int, typer.Option("--port", min=0, max=65535, help="With --serve: the port (0: any free one).")]
+    = 8765,
+    max_bytes: Annotated[int, typer.Option(
+        "--max-bytes", min=1, help="With --serve: the largest run a page may send, in bytes.")] = 64 * 2**20,
 ) -> None:
     """Run physdbg's exact version of the scene with the run's own time steps and say where
     the run departs and why: tunnelling, a bounce at the wrong time, energy at a contact,
@@ -669,7 +711,19 @@ def check_run(
     as text, markdown, json or csv (--format), the causes counted; exit 0 when all are same.
 
     Example: physdbg check-run docs/examples/student-bounce.csv --scene bounce
+    (a run traced with its scene needs no --scene: physdbg check-run bounce.jsonl;
+    the verdict in the page that traced it: physdbg check-run --serve)
     """
+    if serve:
+        with _user_errors():
+            if run is not None:
+                raise PhysdbgError(f"--serve checks the runs pages send; check {run} without --serve")
+            _serve(scene, set_ or [], keep or Path("physdbg-runs"), port, max_bytes, force)
+        return
+    if run is None:
+        with _user_errors(as_json or output_format == "json"):
+            raise PhysdbgError("give the run to check (a .csv, .jsonl or .mcap file, or a folder of runs), or "
+                               "--serve to check the runs pages send")
     if run.is_dir():
         if keep is not None:
             with _user_errors(as_json or output_format == "json"):
@@ -679,7 +733,12 @@ def check_run(
                      "json" if as_json else "markdown" if markdown else output_format, verify=not no_verify)
         return
     with _user_errors(as_json or output_format == "json"):
-        tier = _choose_tier(scene, set_)
+        if scene is None:  # the run's own scene, for the tier's estimate of the work
+            from .record.foreign import run_scene
+
+            tier = _choose_tier(run_scene(run) or "", set_)
+        else:
+            tier = _choose_tier(scene, set_)
         from . import api
 
         result = api.check_run(run, scene, set_ or [], atol=atol, rtol=rtol, keep=keep, force=force,
@@ -691,6 +750,32 @@ def check_run(
             typer.echo(f"kept       {result.run}, {result.reference}")
             typer.echo(f"then try   {me} diff {result.run} {result.reference} --rrd both.rrd   |   {me} replay {result.run} --spawn")
         raise typer.Exit(result.report.exit_code)
+
+
+def _serve(scene: str | None, overrides: list[str], folder: Path, port: int, max_bytes: int, force: bool) -> None:
+    """check-run --serve (physdbg/serve.py) until Ctrl-C or SIGTERM."""
+    import signal
+
+    from .serve import CheckServer
+
+    server = CheckServer(folder, scene, overrides, port=port, max_bytes=max_bytes, force=force,
+                         on_verdict=lambda verdict: typer.echo(verdict.line()))
+
+    def stop(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    typer.echo(f"serving     {server.url}  (127.0.0.1 only; pages with physdbg-trace.js send their runs here "
+               f"when finish() is called)")
+    typer.echo(f"scene       {scene or 'each run' + chr(39) + 's own (its first line)'}"
+               + (f", {' '.join('-s ' + o for o in overrides)}" if overrides else ""))
+    typer.echo(f"keeping     {folder}/  (each run with run.mcap and reference.mcap; Ctrl-C stops)")
+    try:
+        server.serve_forever()
+    except KeyboardInterrupt:
+        typer.echo("stopped")
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 @app.command("record-peer")

@@ -319,14 +319,83 @@ def parse_scene(text: str, source: str = "<scene>", overrides=()) -> Scene:
     return scene
 
 
-def scene_from_dict(raw: dict, source: str, meshes: Meshes | None = None) -> Scene:
-    """Validate an already-parsed scene table (e.g. the one kept in a recording). meshes:
-    the scene's meshes as recorded (state.Meshes), used instead of reading its [[meshes]]
-    again (a recording keeps its triangles; the files may be gone)."""
+def scene_from_dict(raw: dict, source: str, meshes: Meshes | None = None, overrides=()) -> Scene:
+    """Validate an already-parsed scene table (the one kept in a recording, or a scene
+    object a JavaScript engine's trace carries), after applying ``key=value`` overrides.
+    meshes: the scene's meshes as recorded (state.Meshes), used instead of reading its
+    [[meshes]] again (a recording keeps its triangles; the files may be gone)."""
     if not isinstance(raw, dict):
-        raise SceneError(source, "", "the scene is not a table")
+        raise SceneError(source, "", f"the scene is not a table (got {type(raw).__name__})")
     _check_nesting(raw, source)
-    return _validate(_renamed(copy.deepcopy(raw), source), source, {}, meshes)
+    raw = _renamed(copy.deepcopy(raw), source)
+    origins: dict[str, str] = {}
+    for item in overrides:
+        _apply_override(raw, item, source)
+        key = item.split("=", 1)[0].strip()
+        origins[RENAMED_SETTINGS.get(key, key)] = item
+    scene = _validate(raw, source, origins, meshes)
+    scene.overrides = tuple(overrides)
+    return scene
+
+
+# the settings a sphere scene's table always states (scene_table), whatever their values
+_STATED_SETTINGS = ("integrator", "detection", "ordering", "gravity", "drag", "restitution_rule")
+
+
+def scene_table(scene: Scene) -> dict:
+    """The scene as an explicit table of its own fields (what a TOML scene holds, each
+    value stated): dt (s) and steps as numbers, every sphere of ``[[particles]]`` (a
+    [generate] made, each listed) with its position, velocity, radius, mass (or
+    inverse_mass = 0: immovable), restitution and gravity_scale, and every wall as a
+    ``[[planes]]`` entry (a closed [box] as its six planes), the settings that differ from
+    the defaults and those in _STATED_SETTINGS. ``scene_from_dict`` reads it back to the
+    same scene. For a sphere scene with a fixed dt only: meshes and periodic boxes are
+    refused (SceneError), as a table of spheres and planes cannot hold them."""
+    if len(scene.walls.meshes.corners):
+        raise SceneError(scene.source, "meshes", "a scene with meshes is written whole only as TOML "
+                                                 "(--format toml); as a table of spheres and planes it has no meshes")
+    if scene.walls.periodic:
+        raise SceneError(scene.source, "box.periodic", "a periodic box has no planes to write; the scene is written "
+                                                       "whole only as TOML (--format toml)")
+    if scene.dt is None:
+        raise SceneError(scene.source, "dt", 'dt = "real" has no fixed step to write; give the scene a dt')
+    st, walls, settings = scene.state, scene.walls, scene.settings
+    table: dict[str, Any] = {"name": scene.name}
+    if scene.description:
+        table["description"] = scene.description
+    table["dt"] = float(scene.dt)
+    table["steps"] = int(scene.steps)
+    defaults = dataclasses.asdict(_SETTINGS_DEFAULTS)
+    for key in SETTING_RULES:
+        value = getattr(settings, key)
+        if key in _STATED_SETTINGS or value != defaults[key]:
+            table[key] = list(value) if isinstance(value, tuple) else value
+    if settings.max_memory != _SETTINGS_DEFAULTS.max_memory:
+        table["max_memory"] = settings.max_memory
+    particles = []
+    for i in range(st.count):
+        sphere: dict[str, Any] = {"position": st.positions[i].tolist(), "velocity": st.velocities[i].tolist(),
+                                  "radius": float(st.radius[i])}
+        if st.inverse_mass[i] > 0:
+            sphere["mass"] = 1.0 / float(st.inverse_mass[i])
+        else:
+            sphere["inverse_mass"] = 0.0
+        sphere["restitution"] = float(st.restitution[i])
+        if st.gravity_scale[i] != 1.0:
+            sphere["gravity_scale"] = float(st.gravity_scale[i])
+        particles.append(sphere)
+    table["particles"] = particles
+    planes = []
+    for k, name in enumerate(walls.names):
+        plane: dict[str, Any] = {"name": name, "normal": walls.normals[k].tolist(),
+                                 "offset": float(walls.offsets[k]), "restitution": float(walls.restitution[k])}
+        if walls.two_sided[k]:
+            plane["two_sided"] = True
+            plane["thickness"] = float(walls.thickness[k])
+        planes.append(plane)
+    if planes:
+        table["planes"] = planes
+    return table
 
 
 def _renamed(raw: dict, source: str) -> dict:

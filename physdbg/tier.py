@@ -132,7 +132,7 @@ def _number(value) -> float | None:
     return number if math.isfinite(number) else None
 
 
-def estimate(spec: str, overrides=()) -> int | None:
+def estimate(spec: str | dict, overrides=()) -> int | None:
     """Sphere-steps (spheres × steps) of a scene, read from its TOML before it is loaded
     (a built-in name or a file; ``overrides`` as ``-s key=value``), or None when the file
     does not say (a real-time dt, a file that does not parse: the engine's checks will
@@ -140,8 +140,10 @@ def estimate(spec: str, overrides=()) -> int | None:
     from .scenes import builtin_names, builtin_text
 
     try:
-        path = Path(spec)
-        if path.is_file():
+        path = Path(spec) if isinstance(spec, str) else None
+        if isinstance(spec, dict):  # a scene table (a run's own scene: foreign.run_scene)
+            raw = spec
+        elif path.is_file():
             raw = tomllib.loads(path.read_text(encoding="utf-8"))
         elif spec in builtin_names():
             raw = tomllib.loads(builtin_text(spec))

@@ -487,7 +487,7 @@ def test_a_flipped_impulse_that_loops_to_nan_is_named_at_its_start(tmp_path):
 def test_each_cause_of_check_run_is_named_by_the_judgements_its_table_row_lists():
     """departure.DEPARTURE_KINDS is check-run's one table of causes: every method a row
     lists exists and names that kind (in its source, or, for a restitution mistake, through
-    _restitution_mistake), and every kind a judgement names has its row."""
+    restitution_mistake or step_with_mistake), and every kind a judgement names has its row."""
     import inspect
     import re
 
@@ -498,7 +498,7 @@ def test_each_cause_of_check_run_is_named_by_the_judgements_its_table_row_lists(
     for name, method in inspect.getmembers(departure._Comparison, inspect.isfunction):
         source = inspect.getsource(method)
         kinds = {k for k in departure.DEPARTURE_KINDS if f'"{k}"' in source}
-        if "_restitution_mistake(" in source:
+        if "restitution_mistake(" in source or "step_with_mistake(" in source:
             kinds |= restitution
         for kind in kinds:
             named_by.setdefault(kind, set()).add(name)

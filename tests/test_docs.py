@@ -36,7 +36,8 @@ def test_readme_has_the_two_commands_and_ci_runs_the_second_verbatim():
 
 # ----------------------------------------------------------------------------- every command runs
 # Commands that open a window or serve until stopped are the only ones not run here.
-OPENS_A_WINDOW = ("--spawn", "--web", "bin/rerun ")
+# commands that open a window or serve until stopped (tests/test_serve.py runs --serve)
+OPENS_A_WINDOW = ("--spawn", "--web", "bin/rerun ", "--serve")
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 
 
@@ -103,9 +104,12 @@ def test_every_command_and_python_example_in_the_docs_runs_as_written(path, tmp_
         for command, expected in _commands_and_exits_in(block):
             if any(marker in command for marker in OPENS_A_WINDOW):
                 continue
+            command, _, into = command.partition(" > ")  # `physdbg ... > FILE` writes what it prints there
             result = runner.invoke(app, shlex.split(command)[1:])
             assert result.exit_code == expected, f"{path.name}: `{command}` exited {result.exit_code}:\n{result.output}"
             output = result.output
+            if into:
+                Path(into.strip()).write_text(output)
     for block in re.findall(r"```python\n(.*?)```", path.read_text(), re.S):
         exec(compile(block, f"{path.name} example", "exec"), {})  # noqa: S102 - our own docs
     for block in re.findall(r"```toml\n(.*?)```", path.read_text(), re.S):

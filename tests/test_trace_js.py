@@ -16,6 +16,7 @@ from typer.testing import CliRunner
 from physdbg import api
 from physdbg.api import load_scene
 from physdbg.cli import app
+from physdbg.scene import scene_table
 
 ROOT = Path(__file__).resolve().parents[1]
 NODE = shutil.which("node")
@@ -23,15 +24,9 @@ needs_node = pytest.mark.skipif(NODE is None, reason="Node.js is not installed: 
 
 
 def dump_scene(scene, path: Path, steps: int) -> None:
-    """What the JavaScript engine reads of a physdbg scene."""
-    st, walls = scene.state, scene.walls
-    path.write_text(json.dumps({
-        "name": scene.name, "dt": scene.dt, "steps": steps, "gravity": list(scene.settings.gravity),
-        "drag": float(scene.settings.drag), "positions": st.positions.tolist(), "velocities": st.velocities.tolist(),
-        "inverse_mass": st.inverse_mass.tolist(), "radius": st.radius.tolist(), "restitution": st.restitution.tolist(),
-        "gravity_scale": st.gravity_scale.tolist(),
-        "walls": {"normals": walls.normals.tolist(), "offsets": walls.offsets.tolist(),
-                  "restitution": walls.restitution.tolist()}}))
+    """The scene as the JavaScript engine reads it: physdbg's scene table (what `physdbg
+    scenes show NAME --format json` prints), run for ``steps`` steps."""
+    path.write_text(json.dumps({**scene_table(scene), "steps": steps}))
 
 
 @pytest.fixture(scope="module")
@@ -102,7 +97,8 @@ t.finish();
 """)
     done = subprocess.run([NODE, str(script)], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
-    lines = [json.loads(line) for line in out.read_text().splitlines()]
+    head, *lines = [json.loads(line) for line in out.read_text().splitlines()]
+    assert head == {"scene": "bounce"}  # the run's scene, on its first line
     assert lines[0] == {"step": 0, "time": 0, "positions": [[0, 1, 0]], "velocities": [[0, 0, 0]]}
     assert lines[1]["positions"] == [[0, "NaN", 0]] and lines[1]["velocities"] == [["Infinity", "-Infinity", 0]]
     from physdbg.record.foreign import read_run
@@ -113,9 +109,10 @@ t.finish();
 
 # ----------------------------------------------------------------------------- a real browser
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+# (no --dump-dom here: it ends the browser once the page has loaded, which may be before
+# the download it started is written; the test waits for the file and then ends it)
 CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                  "--dump-dom")
+                  "--disable-background-networking", "--disable-component-update", "--disable-sync")
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="Chromium is not installed (.ci/run installs Debian's chromium): "
@@ -143,7 +140,7 @@ def test_a_javascript_engine_in_headless_chromium_downloads_a_run_check_run_find
         "download": {"default_directory": str(downloads), "prompt_for_download": False},
         "profile": {"default_content_setting_values": {"automatic_downloads": 1}}}))
     run = downloads / f"{name}.jsonl"
-    # the headless browser may stay open after the page is done: wait for the finished
+    # the headless browser stays open after the page is done: wait for the finished
     # download (Chromium writes it as .crdownload, then renames it), then close it
     browser = subprocess.Popen([CHROMIUM, *CHROMIUM_FLAGS, f"--user-data-dir={profile}",
                                 (site / "index.html").as_uri()], stdout=subprocess.PIPE, stderr=subprocess.PIPE)

@@ -54,3 +54,38 @@ def test_the_views_frame_a_turning_mesh_s_whole_sweep(tmp_path):
     for degrees in range(0, 360, 15):  # the blade's corners at every 15° of its turn
         corners = meshes.placed(degrees / 360.0)[0].reshape(-1, 3)
         assert np.all(corners >= lo - 1e-9) and np.all(corners <= hi + 1e-9), (degrees, reach)
+
+
+def test_a_file_that_opens_at_a_finding_frames_the_finding_not_the_whole_scene(tmp_path, monkeypatch):
+    """The plate of docs/examples/meshes: a ball at 1,000 m/s tunnels through a 2 m plate 25 m
+    from where it starts. The Rerun file opens at the finding with the eye on the plate and
+    the ball's path near it, not on the 25 m scene."""
+    from pathlib import Path
+
+    from physdbg import api
+    from physdbg.record import rerun_sink, view
+
+    seen = []
+    original = rerun_sink.blueprint
+
+    def spy(header, opening=None, search_empty=None, playing=False, focus=None):
+        seen.append((opening, focus, rerun_sink.camera(header, 1.0, focus), rerun_sink.camera(header, 1.0)))
+        return original(header, opening, search_empty, playing, focus)
+
+    monkeypatch.setattr(rerun_sink, "blueprint", spy)
+    scene = Path(__file__).resolve().parents[1] / "docs" / "examples" / "meshes" / "plate.toml"
+    api.record(str(scene), mcap_path=str(tmp_path / "plate.mcap"), rrd=str(tmp_path / "plate.rrd"))
+    opening, focus, framed, whole = seen[-1]  # (the one sent when the file is closed)
+    assert opening[0] == rerun_sink.FIRST_FINDING_TIMELINE and focus is not None
+    centre, extent = focus
+    assert abs(centre[2]) < 1e-9 and 2.0 <= extent <= 10.0  # on the plate (z = 0), about its size
+
+    def eye_distance(eye):
+        return float(np.linalg.norm(np.subtract(eye.position.as_arrow_array().to_pylist()[0],
+                                                eye.look_target.as_arrow_array().to_pylist()[0])))
+
+    assert eye_distance(framed) < 0.5 * eye_distance(whole)
+    import physdbg
+
+    assert view.finding_frame(physdbg.open_recording(tmp_path / "plate.mcap").header, type(
+        "F", (), {"position": None, "particles": [0], "evidence": {}})()) is None

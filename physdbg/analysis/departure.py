@@ -46,6 +46,8 @@ import numpy as np
 from ..errors import CheckRunError
 from ..events import KIND_MESH, KIND_NAMES, KIND_WALL, PARTNER_IS_SPHERE, contact_words, partner_words
 from .quiet import quiet_numerics
+from .restitution_mistakes import (MISTAKE_SPHERES, RESTITUTION_MISTAKES, RESTITUTION_TOLERANCE,
+                                   restitution_mistake, step_with_mistake)
 from .tunnel_words import why_tunnelled
 
 DEFAULT_ATOL = 1e-6  # m and m/s: a body departs when |Δx| or |Δv| exceeds atol + rtol·|reference|
@@ -54,7 +56,6 @@ KICK_FRACTION = 0.02  # a velocity change beyond this share of (speed + |a|·dt)
 TIME_TOLERANCE = 0.02  # of dt: a kick this close to physdbg's time of impact is on time (a kick's instant is
 # read off two frames, so it is known only to about this)
 RESTING_SPEED_STEPS = 2.0  # a contact closing slower than the speed the forces give in this many steps is resting
-RESTITUTION_TOLERANCE = 0.02  # an effective restitution this close to the scene's is right
 RUNAWAY = 100.0  # a pair leaving a contact still approaching at this many times its speed has run away
 # frames × bodies compared at once: 4 arrays of this many 3-vectors (96 B a body-step) and
 # the temporaries of the whole-run checks (kicks, integrator, drag: about as much again)
@@ -336,12 +337,13 @@ class _Comparison:
         self._measure_drag()
         self._immovable_moved()
         kicked = self._kick_sizes() > self._kick_thresholds()  # (F-1, N)
+        self.kicked = kicked
         self.integrator = self._integrator(kicked)
         self._non_finite()
         self.kicks = self._kicks(kicked) if first is not None else {}  # (read only when steps are judged)
         if first is not None:  # before it the runs agree, so there is nothing to judge
             self._judge_steps(max(first.step, 1))
-            if not any(first.body in (d.body, d.other) or d.kind in _RUN_WIDE for d in self.departures):
+            if not any(_involves(d, first.body) or d.kind in _RUN_WIDE for d in self.departures):
                 if not self._slept(first):
                     self._no_step_departs(first)
         listed = self._fold(self.departures)
@@ -387,7 +389,7 @@ class _Comparison:
     def _cause_of(self, first: FirstDeparture) -> str:
         """The kind of the earliest local departure of the body at or before the first
         departure, the most telling kind first where several fall in that step."""
-        own = [d for d in self.departures if first.body in (d.body, d.other) and d.step <= first.step]
+        own = [d for d in self.departures if (_involves(d, first.body) or d.kind in _RUN_WIDE) and d.step <= first.step]
         if own:
             step = min(d.step for d in own)
             return min((d for d in own if d.step == step), key=lambda d: _PRIORITY.index(d.kind)).kind
@@ -454,6 +456,17 @@ class _Comparison:
         factor = self._decay(dt)
         forces = r.vf[:-1] * (factor - 1.0) + self.acc[None, :, :] * dt
         return np.nan_to_num(np.linalg.norm(r.vf[1:] - r.vf[:-1] - forces, axis=2), nan=0.0)
+
+    def _change_beyond_forces(self, s: int, b: int) -> float:
+        """|Δv − the forces' Δv| (m/s) of body b over step s, as _kick_sizes reads it."""
+        r = self.runs
+        if self.estimated:
+            if s + 1 >= len(r.t):
+                return 0.0
+            change = r.vf[s + 1, b] - r.vf[s, b] - self.acc[b] * r.dt[s + 1]
+        else:
+            change = r.vf[s, b] - r.vf[s - 1, b] - (r.vf[s - 1, b] * (self._decay(r.dt[s]) - 1.0) + self.acc[b] * r.dt[s])
+        return float(np.nan_to_num(np.linalg.norm(change), nan=0.0))
 
     def _decay(self, dt):
         """Drag's factor on the velocity over steps of dt (s): the scene's d^dt, or, once
@@ -639,14 +652,15 @@ class _Comparison:
             x, v, contacts = local
             off = self._beyond(r.xf[s], r.vf[s], x, v)
             if (not off.any() or self._own_rule(s, contacts, off) or self._tie(s, contacts, off)
-                    or self._index_ordered(s, contacts, off)):
+                    or self._index_ordered(s, contacts, off) or self._mistaken_chain(s, contacts, off)):
                 for c in contacts:
                     for b in self._bodies(c):
                         for k in (s, s + 1) if off.any() else (s,):
                             if (k, b) in kicks:
                                 kicks[(k, b)].matched = True
                 continue
-            resting = {b for c in contacts if c.resting or self._slow(c, s) for b in self._bodies(c)}
+            slow = {b: c for c in contacts if c.resting or self._slow(c, s) for b in self._bodies(c)}
+            resting = set(slow)
             for b in resting:
                 for k in (s, s + 1):
                     if (k, b) in kicks:
@@ -667,6 +681,8 @@ class _Comparison:
                 else:
                     self._judge_chain(s, group, v)
             for b in np.flatnonzero(off).tolist():
+                if b in resting and b not in touched and self.inv[b] > 0:
+                    self._resting(slow[b], b, x)
                 if b in touched or b in resting:
                     continue
                 kick = kicks.get((s, b))
@@ -931,6 +947,64 @@ class _Comparison:
                       "index_order": [[c.a, c.other, c.kind] for c in indexed]}))
         return True
 
+    def _resting(self, c: StepContact, b: int, x: np.ndarray) -> None:
+        """Sphere b ends step c.step elsewhere than physdbg's step, whose only contact of b
+        is resting or slow (_slow: not judged one by one, as engines hold such contacts
+        their own ways): named resting, with where the run left b. x: physdbg's positions
+        (N, 3) at the step's end."""
+        r = self.runs
+        s = c.step
+        b_c = dataclasses.replace(c, a=b, other=c.a if b == c.other else c.other) if PARTNER_IS_SPHERE[c.kind] else c
+        apart = float(np.linalg.norm(r.xf[s, b] - x[b]))
+        gap = self._gap(b_c, b, r.xf[s, b], s, float(r.dt[s]))
+        inside = f", {-gap * 1000:.3g} mm inside {self._what(b_c)}" if gap < -self.atol else ""
+        self._add("resting", s, b_c,
+                  f"sphere {b}: physdbg's step {s}, taken from your run's state, has a slow contact with "
+                  f"{self._what(b_c)} (closing at {c.closing:.3g} m/s, slower than the forces give in "
+                  f"{RESTING_SPEED_STEPS:g} steps), which it {'holds' if c.resting else 'resolves'}; your run ends "
+                  f"the step with sphere {b} {apart * 1000:.3g} mm from where physdbg's does{inside}",
+                  "slow and resting contacts are held in different ways by different engines, and are not judged "
+                  "one by one; a body that sinks into what it rests on needs a contact that acts at zero closing "
+                  "speed (an overlap tested where each step ends, or a held resting contact)",
+                  {"time": c.time, "apart": apart, "gap": gap, "held": bool(c.resting)})
+
+    def _mistaken_chain(self, s: int, contacts: list[StepContact], off: np.ndarray) -> bool:
+        """The run's step s is physdbg's step from the run's state with every sphere pair's
+        impulse made with one of RESTITUTION_MISTAKES, each contact once a step
+        (restitution_mistakes.step_with_mistake): named that mistake. Tried where a chain of
+        moving contacts (one step's contacts sharing spheres) ends elsewhere, in scenes of up
+        to MISTAKE_SPHERES spheres: there the speeds around each contact are not in the run's
+        frames, so the mistake that reproduces the step is named rather than the chain's
+        symptoms (a single contact's effective restitution is read off it: _judge_energy)."""
+        moving = [c for c in contacts if not (c.resting or self._slow(c, s))]
+        chains = [g for g in _chains(moving) if len(g) > 1 and any(PARTNER_IS_SPHERE[c.kind] for c in g)]
+        if not chains or self.scene.state.count > MISTAKE_SPHERES:
+            return False
+        r = self.runs
+        right = np.asarray(self.scene.state.restitution, dtype=float)
+        for code, predicted, words, advice in RESTITUTION_MISTAKES:
+            if all(abs(predicted(float(e)) - e) <= 2 * RESTITUTION_TOLERANCE for e in right):
+                continue  # the same as the scene's own restitution here (e² for e = 1)
+            stepped = step_with_mistake(self.scene, r.xf[s - 1], r.vf[s - 1], float(r.t[s - 1]), float(r.dt[s]),
+                                        predicted)
+            if stepped is None or self._beyond(r.xf[s], r.vf[s], *stepped).any():
+                continue
+            chain = chains[0]
+            first = next(c for c in chain if PARTNER_IS_SPHERE[c.kind])
+            want = float(first.restitution)
+            dt = float(r.dt[s])
+            order = ", then ".join(f"{self._pair_words(c)} at {c.tau / dt:.2f}·dt" for c in chain[:6])
+            bodies = sorted({b for g in chains for c in g for b in self._bodies(c)})
+            self._add(code, s, first,
+                      f"in the chain {order}{' …' if len(chain) > 6 else ''}, your run's step {s} is physdbg's step "
+                      f"from your run's state with each impulse made with an effective restitution of "
+                      f"{predicted(want):.3g} where physdbg applies e = {want:g} (each contact once): "
+                      f"{predicted(want):.3g} = {words}", advice,
+                      {"restitution": predicted(want), "expected": want, "bodies": bodies,
+                       "physdbg_order": [[c.a, c.other, c.kind] for c in chain], "reproduced": True})
+            return True
+        return False
+
     def _slow(self, c: StepContact, s: int) -> bool:
         """Not judged one by one: a contact closing slower than the forces' speed over
         RESTING_SPEED_STEPS steps (a resting contact, whose handling differs between engines
@@ -966,12 +1040,17 @@ class _Comparison:
             crossing = self._crossing(c)
             if crossing is not None:
                 self._tunnelled(c, crossing)
-            else:
+            elif not any(self.kicked[s - 1, b] for b in self._bodies(c) if self.inv[b] > 0):
+                # (a change the forces do not explain that another contact took is a change all
+                # the same: then nothing the frames show is missing, and nothing is said)
+                change = max(self._change_beyond_forces(s, b) for b in self._bodies(c) if self.inv[b] > 0)
                 self._add("missed-contact", s, c, f"{self._subject(c)}: physdbg, stepping from the same state, "
                                                   f"touches {self._what(c)} at t = {c.time:.6g} s "
-                                                  f"({c.tau / dt:.2f}·dt); your run shows no change of velocity",
+                                                  f"({c.tau / dt:.2f}·dt); your run shows no change of velocity "
+                                                  f"in that step beyond the forces' ({change:.3g} m/s)",
                           "look for contacts along each step's whole path; a contact within the step that your "
-                          "engine did not see changes everything after it", {"time": c.time})
+                          "engine did not see changes everything after it",
+                          {"time": c.time, "velocity_change": change})
             return
         for b in self._bodies(c):
             k = kicks.get((kick.step, b))
@@ -1147,12 +1226,12 @@ class _Comparison:
         if not options:
             return
         _, e, before, after = min(options)  # the reading kindest to the run: report only what none explains
-        mistake = _restitution_mistake(e, want)
+        mistake = restitution_mistake(e, want)
         if mistake is None and end > s:  # a mistake shows whole in the contact's own step, before what it leads to
             first = effective(s)
-            if first and _restitution_mistake(min(first)[1], want) is not None:
+            if first and restitution_mistake(min(first)[1], want) is not None:
                 _, e, before, after = min(first)
-                mistake = _restitution_mistake(e, want)
+                mistake = restitution_mistake(e, want)
         # the direction of the push, over the contact's own step (a wrong normal impulse
         # that leaves the bodies approaching makes more contacts in the steps after)
         if self._judge_tangent(c, lambda i: readings(i, s)) and mistake is None:
@@ -1162,8 +1241,12 @@ class _Comparison:
         if mistake is not None:
             code, words, advice = mistake
             self._add(code, c.step, c,
-                      f"{self._both(c)}: they met at {abs(before):.3g} m/s and "
-                      f"{'still approach' if after < 0 else 'part'} at {abs(after):.3g} m/s after the contact, an "
+                      f"{self._both(c)}: "
+                      + (f"they met at {abs(before):.3g} m/s and {'still approach' if after < 0 else 'part'}"
+                         if PARTNER_IS_SPHERE[c.kind] else
+                         f"it met {self._what(c)} at {abs(before):.3g} m/s and "
+                         f"{'still approaches it' if after < 0 else 'leaves'}")
+                      + f" at {abs(after):.3g} m/s after the contact, an "
                       f"effective restitution of {e:.3g} where physdbg applies e = {want:g}: {words}", advice,
                       {"restitution": e, "expected": want, "speed_in": abs(before), "speed_out": abs(after)})
             return
@@ -1252,34 +1335,80 @@ class _Comparison:
         gap = np.linalg.norm(vf - vr, axis=1)
         if not np.any(gap > self.atol + self.rtol * np.linalg.norm(vr, axis=1)):
             return  # the chain's outcome is physdbg's; what differs is where the bodies are (drift)
-        mass = 1.0 / self.inv[idx]
-        momentum_f, momentum_r = (mass[:, None] * vf).sum(axis=0), (mass[:, None] * vr).sum(axis=0)
-        energy_f, energy_r = 0.5 * float(mass @ (vf * vf).sum(axis=1)), 0.5 * float(mass @ (vr * vr).sum(axis=1))
-        scale = max(float(np.sum(mass * np.linalg.norm(vr, axis=1))), 1e-300)
-        kept = float(np.linalg.norm(momentum_f - momentum_r)) <= 1e-3 * scale
-        order = ", then ".join(f"{self._pair_words(c)} at {c.tau / float(r.dt[s]):.2f}·dt" for c in group[:6])
+        # what the run's own frames say of the chain: momentum and energy at the step's end
+        # against its start carried over the step by the forces and drag alone, over the
+        # chain's spheres and every other sphere the run kicked in the step (where the run's
+        # contacts took momentum)
+        changed = [b for b in np.flatnonzero(self.inv > 0).tolist()
+                   if self._change_beyond_forces(s, b) > self.atol + self.rtol * float(np.linalg.norm(r.vf[s, b]))]
+        members = np.array(sorted(set(bodies) | set(changed)))
+        mass = 1.0 / self.inv[members]
+        dt = float(r.dt[s])
+        start = r.vf[s - 1, members] * float(self._decay(dt)) + self.acc[members] * dt
+        end = r.vf[s, members]
+        momentum_0, momentum_1 = (mass[:, None] * start).sum(axis=0), (mass[:, None] * end).sum(axis=0)
+        energy_0, energy_1 = (0.5 * float(mass @ (start * start).sum(axis=1)),
+                              0.5 * float(mass @ (end * end).sum(axis=1)))
+        energy_r = 0.5 * float((1.0 / self.inv[idx]) @ (vr * vr).sum(axis=1))
+        # slack for how the forces and drag were applied around the contacts (not known)
+        forces = float(np.sum(mass * (np.linalg.norm(self.acc[members], axis=1) * dt
+                                      + np.linalg.norm(r.vf[s - 1, members], axis=1) * abs(1.0 - self._decay(dt)))))
+        scale = max(float(np.sum(mass * np.linalg.norm(end, axis=1))), float(np.sum(mass * np.linalg.norm(start, axis=1))),
+                    1e-300)
+        momentum_off = float(np.linalg.norm(momentum_1 - momentum_0))
+        walls = self._may_touch_a_wall(s, members)  # a wall or a mesh takes momentum: not compared then
+        kept = walls or momentum_off <= 1e-3 * scale + forces
+        speed = max(float(np.max(np.linalg.norm(end, axis=1))), float(np.max(np.linalg.norm(start, axis=1))))
+        energy_slack = 1e-3 * max(energy_0, 1e-300) + forces * (speed + forces / float(mass.min()))
+        gained = energy_1 > energy_0 + energy_slack
+        order = ", then ".join(f"{self._pair_words(c)} at {c.tau / dt:.2f}·dt" for c in group[:6])
         worst = int(idx[int(np.argmax(gap))])
-        evidence = {"bodies": bodies, "physdbg_order": [[c.a, c.other, c.kind] for c in group],
-                    "energy": energy_f, "physdbg_energy": energy_r, "momentum_kept": kept}
+        spheres = ", ".join(map(str, members.tolist()[:12])) + (" …" if len(members) > 12 else "")
+        evidence = {"bodies": members.tolist(), "physdbg_order": [[c.a, c.other, c.kind] for c in group],
+                    "energy_before": energy_0, "energy": energy_1, "physdbg_energy": energy_r,
+                    "momentum_before": momentum_0.tolist(), "momentum": momentum_1.tolist(),
+                    "momentum_off": momentum_off, "momentum_kept": kept, "forces_slack": forces, "walls": walls}
         first = group[0]
-        if energy_f > energy_r * (1 + 1e-3) + 1e-12:
-            self._add("contact-energy", s, first, f"in the chain {order}, the bodies leave with {energy_f:.4g} J of "
-                                                  f"kinetic energy where physdbg's leave with {energy_r:.4g} J: "
-                                                  f"energy gained",
+        if gained:
+            self._add("contact-energy", s, first,
+                      f"in the chain {order}, your run's spheres {spheres} leave step {s} with {energy_1:.4g} J of "
+                      f"kinetic energy where they had {energy_0:.4g} J (the step's start, carried by the forces and "
+                      f"drag alone): energy gained (physdbg's leave with {energy_r:.4g} J)",
                       "check each impulse's sign and that restitution is at most 1", evidence)
         elif kept:
             self._add("collision-order", s, first,
                       f"physdbg resolves {order}; your run gives sphere {worst} a velocity {gap.max():.3g} m/s "
-                      f"away, with momentum kept and no energy gained: the same contacts in another order (or all "
-                      f"at once)",
+                      f"away, with {'no energy gained (a wall within reach takes momentum: not compared)' if walls else 'momentum kept and no energy gained'}: "
+                      f"the same contacts in another order (or all at once)",
                       "resolve contacts one at a time in the order they happen (earliest time of impact first), "
                       "looking again for new contacts after each: a chain of touching spheres passes its impulse "
                       "along only in that order", evidence)
         else:
-            self._add("contact-energy", s, first, f"in the chain {order}, momentum is not kept (off by "
-                                                  f"{float(np.linalg.norm(momentum_f - momentum_r)):.3g} N·s)",
+            self._add("contact-energy", s, first,
+                      f"in the chain {order}, momentum is not kept: your run's spheres {spheres} change their total "
+                      f"momentum by {momentum_off:.3g} N·s in step {s} (from {float(np.linalg.norm(momentum_0)):.4g} "
+                      f"to {float(np.linalg.norm(momentum_1)):.4g} N·s), where the forces and drag account for at most "
+                      f"{forces:.3g} N·s",
                       "apply each impulse to both bodies, equal and opposite, scaled by their inverse masses",
                       evidence)
+
+    def _may_touch_a_wall(self, s: int, members: np.ndarray) -> bool:
+        """Whether any of spheres ``members`` may have touched a wall or a mesh in step s of
+        the run: a plane within its radius plus the step's travel at the step's start or end
+        (a scene with meshes: always, not measured here)."""
+        if len(self.walls.meshes.corners):
+            return True
+        if not len(self.walls):
+            return False
+        r = self.runs
+        from ..engine.colliders.plane import gaps
+
+        reach = np.maximum(np.linalg.norm(r.xf[s, members] - r.xf[s - 1, members], axis=1), 0.0)
+        for k in (s - 1, s):
+            g = gaps(np.ascontiguousarray(r.xf[k, members], dtype=np.float64), self.radius[members], self.walls)
+            if np.any(np.nan_to_num(g, nan=-1.0) <= reach[:, None] + self.atol):
+                return True
+        return False
 
     def _extra(self, kick: Kick) -> None:
         r = self.runs
@@ -1466,7 +1595,8 @@ class _Comparison:
         if first is None:
             return (f"no departure: every body stays within atol={self.atol:g}, rtol={self.rtol:g} of physdbg's "
                     f"exact run for all {len(self.runs.t) - 1} steps")
-        cause = next((d for d in listed if d.kind == first.cause and first.body in (d.body, d.other)), None)
+        cause = next((d for d in listed if d.kind == first.cause and (_involves(d, first.body) or d.kind in _RUN_WIDE)),
+                     None)
         if first.cause == "drift" and self.integrator is not None and self.integrator["differs"]:
             why = "integrator: " + self.integrator["sentence"]
         elif cause is not None:
@@ -1484,49 +1614,11 @@ class _Comparison:
         return out
 
 
-# Effective restitutions that name a mistake: (code, the effective e it gives for the scene's e,
-# words, what to do). Each is told apart from the scene's own e before it is named.
-RESTITUTION_MISTAKES = (
-    ("restitution-sign", lambda e: -e, "−e: the impulse uses (1 − e) where (1 + e) belongs, so the bodies keep "
-                                       "approaching",
-     "j = −(1 + e)·(v_rel·n)/(1/m_a + 1/m_b): with (1 − e) an elastic contact does nothing and every other one "
-     "leaves the bodies approaching"),
-    ("impulse-sign", lambda e: -(2.0 + e), "−(2 + e): the impulse points the wrong way, adding the closing speed "
-                                           "instead of taking it away (energy gained)",
-     "the impulse points the wrong way: j = −(1 + e)·(v_rel·n)/(1/m_a + 1/m_b) pushes a along n (from b towards "
-     "a) and b against it; check its sign and the normal's direction"),
-    ("impulse-doubled", lambda e: 1.0 + 2.0 * e, "1 + 2e: the impulse was applied twice (energy gained)",
-     "apply each contact's impulse once: +j·n/m_a to a and −j·n/m_b to b, for each unordered pair (a loop over "
-     "ordered pairs meets every pair twice)"),
-    ("one-missing", lambda e: e - 1.0, "e − 1: the impulse uses e where (1 + e) belongs (the \"1 +\" is missing), so "
-                                       "it takes away only e of the closing speed and the bodies keep approaching",
-     "j = −(1 + e)·(v_rel·n)/(1/m_a + 1/m_b): the 1 takes the closing speed away, the e gives it back reversed; "
-     "with e alone the bodies still approach after the contact (energy lost, not gained)"),
-    ("restitution-squared", lambda e: e * e, "e²: the restitution was applied twice",
-     "scale the normal speed by e once: v_n after = −e·v_n before"),
-)
-
-
-def _restitution_mistake(e: float, want: float):
-    """(code, words, advice) of the mistake whose effective restitution ``e`` is, for a
-    contact whose restitution is ``want``; None when none fits or it cannot be told from
-    the right one."""
-    best = None
-    for code, predicted, words, advice in RESTITUTION_MISTAKES:
-        p = predicted(want)
-        slack = RESTITUTION_TOLERANCE * max(1.0, abs(p))
-        if abs(p - want) <= 2 * slack or abs(e - p) > slack:
-            continue
-        if best is None or abs(e - p) < best[0]:
-            best = (abs(e - p), code, f"{p:.3g} = {words}", advice)
-    return best[1:] if best is not None else None
-
-
 _RUN_WIDE = ("own-rule", "index-order", "drag-per-step", "drag-ignored", "drift", "chaos", "unexplained")
 # check-run's causes, one table: each kind of departure, in the order of telling (the most
 # telling first within a step: _fold), with its words and the judgements (methods of
 # _Comparison) that name it. The restitution mistakes are RESTITUTION_MISTAKES' codes,
-# which _judge_energy names through _restitution_mistake. A test holds every method here
+# which _judge_energy names through restitution_mistake. A test holds every method here
 # to the kinds it names (tests/test_departure.py).
 DEPARTURE_KINDS = {
     "impulse-loop": ("an impulse of the wrong sign, met again and again", ("_runaway",)),
@@ -1535,11 +1627,11 @@ DEPARTURE_KINDS = {
     "drag-per-step": ("drag applied per step, not per second", ("_measure_drag",)),
     "drag-ignored": ("no drag", ("_measure_drag",)),
     "tunnelling": ("tunnelling", ("_tunnelled",)),
-    "impulse-sign": ("an impulse of the wrong sign", ("_judge_energy",)),
-    "impulse-doubled": ("an impulse applied twice", ("_judge_energy",)),
-    "restitution-sign": ("restitution with the wrong sign", ("_judge_energy",)),
-    "one-missing": ("the 1 of (1 + e) missing from the impulse", ("_judge_energy",)),
-    "restitution-squared": ("restitution applied twice", ("_judge_energy",)),
+    "impulse-sign": ("an impulse of the wrong sign", ("_judge_energy", "_mistaken_chain")),
+    "impulse-doubled": ("an impulse applied twice", ("_judge_energy", "_mistaken_chain")),
+    "restitution-sign": ("restitution with the wrong sign", ("_judge_energy", "_mistaken_chain")),
+    "one-missing": ("the 1 of (1 + e) missing from the impulse", ("_judge_energy", "_mistaken_chain")),
+    "restitution-squared": ("restitution applied twice", ("_judge_energy", "_mistaken_chain")),
     "contact-energy": ("energy at a contact", ("_judge_energy", "_judge_chain")),
     "tangent-reversed": ("a reflection of the whole velocity", ("_judge_tangent",)),
     "wrong-normal": ("an impulse along the wrong normal", ("_judge_tangent",)),
@@ -1549,6 +1641,7 @@ DEPARTURE_KINDS = {
     "collision-order": ("contacts resolved out of order", ("_judge_chain",)),
     "skipped-rest": ("a bounce that skips the rest of the step", ("_skipped_rest",)),
     "bounce-time": ("bounced at the wrong time", ("_late",)),
+    "resting": ("a slow or resting contact, held another way", ("_resting",)),
     "missed-contact": ("a contact missed", ("_judge_one",)),
     "extra-contact": ("a contact physdbg does not have", ("_extra",)),
     "drift": ("drift in free flight", ("_drift",)),
@@ -1576,6 +1669,12 @@ def _changed_contacts(with_rule: list[StepContact],
         if match.restitution != c.restitution or match.resting != c.resting:
             changed.append((c, match))
     return changed or unmatched
+
+
+def _involves(d: Departure, body: int) -> bool:
+    """Whether departure d is about sphere ``body``: its own, its partner, or one of a
+    chain's spheres (evidence "bodies")."""
+    return body in (d.body, d.other) or body in d.evidence.get("bodies", ())
 
 
 def bodies_of(kind: int, a: int, other: int) -> tuple[int, ...]:

@@ -27,7 +27,14 @@ from .world import World
 
 
 class ReferenceWorld(World):
-    """A World whose time-ordered resolve phase is the O(N²) reference loop (module doc)."""
+    """A World whose time-ordered resolve phase is the O(N²) reference loop (module doc).
+
+    once_a_step: take each contact (kind, sphere, partner) at most once a step, as an engine
+    with a guard against meeting a pair twice in a step does (check-run re-simulates a
+    student's step that way to test a mistake that leaves a pair approaching:
+    analysis/departure.py, "a mistake re-simulated"); physdbg's own loop has no such guard."""
+
+    once_a_step = False
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -41,6 +48,7 @@ class ReferenceWorld(World):
         # a skipped contact is not taken again until a path of its spheres changes: the
         # compiled loop's prediction of it was used up, and only a changed path predicts it anew
         used_up: set[tuple[int, int, int]] = set()
+        taken: set[tuple[int, int, int]] = set()  # (once_a_step)
         while True:
             candidates = []
             for kind, ia, ib in every:
@@ -51,7 +59,7 @@ class ReferenceWorld(World):
                     toi = float(scratch.test_float[row, 1])
                     if toi <= ctx.dt:
                         k, a, other = (int(c) for c in scratch.test_int[row])
-                        if (k, a, other) not in used_up:
+                        if (k, a, other) not in used_up and (k, a, other) not in taken:
                             candidates.append((toi, PARTNER_IS_SPHERE[k], a, other, k))
             if not candidates:
                 return None
@@ -76,6 +84,8 @@ class ReferenceWorld(World):
                     status = SKIPPED
             else:
                 status = self._resolve_one(ctx, kind, a, other, toi)
+            if self.once_a_step:
+                taken.update((k, a, o) for k, o in together)
             changed = {int(c) for c in self._buf.changed[1:1 + int(self._buf.changed[0])]}
             if changed:
                 used_up = {(k, i, j) for k, i, j in used_up

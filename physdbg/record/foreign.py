@@ -105,12 +105,20 @@ def unit_mistakes(run: ForeignRun, dt: float | None, positions: np.ndarray) -> l
     if dt and len(steps) and np.all(np.isfinite(steps)):
         for unit, size in TIME_UNITS.items():
             ratio = 1.0 / size
-            if ratio != 1.0 and np.all(np.abs(steps - ratio * dt) <= _UNIT_SLACK * ratio * dt):
+            if ratio == 1.0:
+                continue
+            if np.all(np.abs(steps - ratio * dt) <= _UNIT_SLACK * ratio * dt):
                 source = ", as JavaScript's Date.now() gives" if unit == "ms" else ""
                 out.append(f"the run's time column counts {_UNIT_WORDS[unit]}: its steps are "
                            f"{float(np.median(steps)):.6g} where the scene's dt is {dt:.6g} s ({ratio:g}× "
                            f"longer{source}); divide the times by {ratio:g}, or read the run as it is with "
                            f"--time-unit {unit}")
+            elif _whole_clock(run.times, steps, ratio * dt):
+                counts = ", ".join(f"{int(k):g}" for k in sorted(set(steps.tolist()))[:4])
+                out.append(f"the run's time column is a clock in whole {_UNIT_WORDS[unit]} (as JavaScript's "
+                           f"Date.now() gives): its steps are {counts} where the scene's dt is {dt:.6g} s "
+                           f"({ratio * dt:.6g} {unit}); give each frame the simulated time in seconds (the step "
+                           f"number × dt) instead of a clock, or read the times as they are with --time-unit {unit}")
     first = run.positions[0]
     given = np.abs(positions) > 1e-12
     if given.any() and np.all(np.isfinite(first)):
@@ -124,6 +132,16 @@ def unit_mistakes(run: ForeignRun, dt: float | None, positions: np.ndarray) -> l
 
 
 _UNIT_WORDS = {"ms": "milliseconds", "cm": "centimetres", "mm": "millimetres"}
+
+
+def _whole_clock(times: np.ndarray, steps: np.ndarray, tick: float) -> bool:
+    """Whether ``times`` (F,) are a clock that counts whole units read once a step of
+    ``tick`` units (16.67 ms for dt = 1/60 s): every time a whole number, every step the
+    tick rounded down or up (16 or 17), and the clock keeping pace with the steps."""
+    if tick <= 1.0 or len(steps) < 2 or not np.all(times == np.round(times)):
+        return False
+    whole = (steps == np.floor(tick)) | (steps == np.ceil(tick))
+    return bool(np.all(whole) and abs(float(times[-1] - times[0]) - tick * len(steps)) <= 1.0 + 1e-9 * tick)
 
 
 def read_run(path: str | Path, bodies: int) -> ForeignRun:
@@ -258,10 +276,59 @@ class _Frames:
 
 def _read_jsonl(f, path: Path, bodies: int) -> ForeignRun:
     frames = _Frames(path, bodies, "line")
+    first = True
     for line, text in enumerate(f, start=1):
         if text.strip():
+            if first and _scene_line(text) is not None:
+                first = False
+                continue  # the run's scene (run_scene reads it)
+            first = False
             frames.add(text, f"{path}, line {line}")
     return frames.run("jsonl")
+
+
+# A JSON Lines run may carry its scene on its first line, {"scene": NAME or a scene table}
+# (physdbg-trace.js writes what start(scene) was given): run_scene reads it.
+SCENE_KEY = "scene"
+MAX_SCENE_LINE = 16 * 2**20  # bytes: a scene line longer than this is refused unread
+
+
+def _scene_line(text: str):
+    """The value of a {"scene": ...} line (no "step" field), else None."""
+    stripped = text.lstrip()
+    if not stripped.startswith("{") or f'"{SCENE_KEY}"' not in stripped[:64 + len(SCENE_KEY)]:
+        return None
+    try:
+        record = json.loads(text)
+    except (json.JSONDecodeError, RecursionError):
+        return None
+    if isinstance(record, dict) and SCENE_KEY in record and "step" not in record:
+        return record[SCENE_KEY]
+    return None
+
+
+def run_scene(path: str | Path):
+    """The scene a JSON Lines run carries on its first line: a built-in scene's name (str)
+    or a scene table (dict, what scene.scene_from_dict reads); None when the file is not
+    a .jsonl run or its first line is a frame."""
+    path = Path(path)
+    if path.suffix.lower() not in (".jsonl", ".ndjson") or not path.is_file():
+        return None
+    try:
+        with open(path, encoding="utf-8") as f:
+            for text in iter(lambda: f.readline(MAX_SCENE_LINE + 1), ""):
+                if len(text) > MAX_SCENE_LINE:
+                    raise ForeignRunError(f"{path}, line 1: a line of more than {MAX_SCENE_LINE // 2**20} MiB; a "
+                                          f"scene line is at most that")
+                if text.strip():
+                    value = _scene_line(text)
+                    if value is not None and not isinstance(value, (str, dict)):
+                        raise ForeignRunError(f"{path}, line 1: field 'scene' is {type(value).__name__}; expected a "
+                                              f"built-in scene's name or a scene object (docs/foreign-runs.md)")
+                    return value
+    except UnicodeDecodeError as err:
+        raise ForeignRunError(f"{path}: not UTF-8 text ({err.reason})") from None
+    return None
 
 
 def _read_mcap(path: Path, bodies: int) -> ForeignRun:
@@ -336,6 +403,11 @@ def _check_time(times: list[float], time: float, where: str) -> None:
         raise ForeignRunError(f"{where}: field 'time' is {time}; times must be finite seconds")
     if not times and time != 0.0:
         raise ForeignRunError(f"{where}: field 'time' is {time!r}; step 0 is the initial state at time 0")
+    if times and time == times[-1] and len(times) >= 1 and float(time).is_integer():
+        raise ForeignRunError(f"{where}: field 'time' is {time!r}, the same as the step before: a clock that counts "
+                              "whole milliseconds (JavaScript's Date.now()) reads the same time for steps taken "
+                              "faster than it ticks; give each frame the simulated time in seconds (the step number "
+                              "× dt) instead of a clock")
     if times and time <= times[-1]:
         raise ForeignRunError(f"{where}: field 'time' is {time!r}, not after the step before ({times[-1]!r}); "
                               "time must increase (seconds, not milliseconds or frames?)")

@@ -181,6 +181,7 @@ class RerunSink:
         # ... or, before that, at the first audit finding (FIRST_FINDING_TIMELINE): a step
         # is drawn once the next begins (or at close), when the audit has judged it
         self._open_at_first_finding = self._open_at_first_contact and open_at is None
+        self._focus = None  # what the eye frames when the file opens at a finding (view.finding_frame)
         self._held = None  # the step waiting to be drawn: (StepEnd, its per-step events, its findings)
         if open_at is not None and self._open_at_first_contact:
             self.opening = (f"from step {open_at}", int(open_at))
@@ -322,6 +323,7 @@ class RerunSink:
             if self._open_at_first_finding:
                 self._open_at_first_finding = False
                 self.opening = (FIRST_FINDING_TIMELINE, finding.step)
+                self._focus = view.finding_frame(self.header, finding)  # the eye frames it
             self._held[5].append(finding)
             return
         self._draw_finding(finding)
@@ -633,7 +635,8 @@ class RerunSink:
             if len(self.header.walls.meshes) and not self._ever_searched:
                 why_empty = ("not recorded at --detail state" if self.detail == "state" else
                              "no sphere's path reached a mesh's triangles in this run")
-            self.rec.send_blueprint(blueprint(self.header, self.opening, search_empty=why_empty), make_active=True,
+            self.rec.send_blueprint(blueprint(self.header, self.opening, search_empty=why_empty,
+                                              focus=self._focus), make_active=True,
                                     make_default=True)
         self._flush_or_give_up()
         self.rec.disconnect()
@@ -720,16 +723,17 @@ def rrd_is_whole(path: Path) -> bool:
 
 # ----------------------------------------------------------------------------- blueprint
 def blueprint(header: RecordingHeader, opening: tuple[str, int] | None = None, search_empty: str | None = None,
-              playing: bool = False):
+              playing: bool = False, focus: tuple[np.ndarray, float] | None = None):
     """3D view of the world beside the energy and contact plots and the event log; the
     camera looks at the whole scene from above and to the side, up against gravity.
     opening: (timeline, step) to open on, paused (else the step timeline, at its start:
     paused, or playing for a live view that has not chosen yet); search_empty: why a
-    mesh scene's search panel is empty (it says so in its title)."""
+    mesh scene's search panel is empty (it says so in its title); focus: what the eye
+    frames instead of the whole scene (camera)."""
     import rerun.blueprint as rrb
 
     # a mesh scene's view shares its column with the search tree: the eye comes closer
-    eye = camera(header, distance=1.0 if len(header.walls.meshes) else 1.4)
+    eye = camera(header, distance=1.0 if len(header.walls.meshes) else 1.4, focus=focus)
     scene = rrb.Spatial3DView(origin="/world", name="scene", eye_controls=eye, overrides={
         **{f"/world/bvh/level_{level}": rrb.EntityBehavior(visible=False) for level in range(BVH_LEVELS_SHOWN, 64)},
         **hidden_mesh_volumes(header),
@@ -780,14 +784,19 @@ def hidden_mesh_volumes(header: RecordingHeader, root: str = "") -> dict:
     return hidden
 
 
-def camera(header: RecordingHeader, distance: float = 1.4):
+def camera(header: RecordingHeader, distance: float = 1.4, focus: tuple[np.ndarray, float] | None = None):
     """The 3D view's eye: on the whole scene, from above and to the side, up against
     gravity (every view of a scene framed alike, so two runs side by side line up);
-    distance: from the scene's centre, in the scene box's diagonals."""
+    distance: from the scene's centre, in the scene box's diagonals. focus: (centre (3,),
+    extent m) to frame instead (a finding the file opens at: view.finding_frame), from
+    the same side."""
     import rerun.blueprint as rrb
 
     lo, hi = scene_bounds(header)
     centre = (lo + hi) / 2
+    if focus is not None:
+        centre = np.asarray(focus[0], dtype=float)
+        lo, hi = centre - focus[1] / 2, centre + focus[1] / 2
     up = up_axis(header)
     helper = np.array([0.0, 0.0, 1.0]) if not up[2] else np.array([0.0, -1.0, 0.0])
     side = np.cross(up, helper)

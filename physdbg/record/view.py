@@ -5,6 +5,8 @@ outlines, the spheres' colours, and each contact in words.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..events import Contacts, feature_words, partner_words
@@ -101,6 +103,31 @@ def finding_marker_radius(h: RecordingHeader, finding) -> float:
     """Radius (m) of the marker drawn where an audit finding happened (Rerun and Foxglove)."""
     involved = h.radius[list(finding.particles)] if finding.particles else h.radius
     return FINDING_MARKER_SCALE * float(involved.max())
+
+
+def finding_frame(h: RecordingHeader, finding) -> tuple[np.ndarray, float] | None:
+    """(centre (3,), extent m) that frames an audit finding: where it happened, wide enough
+    for its spheres, the way they went in the step (speed·dt, when the finding says) and
+    the triangle it names; None when the finding has no one place."""
+    if finding.position is None:
+        return None
+    centre = np.asarray(finding.position, dtype=float)
+    if not np.all(np.isfinite(centre)):
+        return None
+    radius = float(h.radius[list(finding.particles)].max()) if finding.particles else float(h.radius.max())
+    extent = 6.0 * radius
+    evidence = finding.evidence or {}
+    travel = float(evidence.get("speed", 0.0)) * float(evidence.get("dt", 0.0))
+    triangle = evidence.get("triangle_index")
+    meshes = h.walls.meshes
+    if triangle is not None and 0 <= int(triangle) < len(meshes.corners):
+        corners = np.asarray(meshes.corners[int(triangle)], dtype=float)
+        size = 2.0 * float(np.max(np.linalg.norm(corners - centre, axis=1)))
+        extent = max(extent, size)
+        travel = min(travel, 2.0 * size)  # a path far longer than the triangle: its part near it
+    if math.isfinite(travel):
+        extent = max(extent, travel + 4.0 * radius)
+    return centre, extent
 
 
 def finding_line(finding) -> tuple[str, str]:
