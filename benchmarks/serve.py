@@ -26,15 +26,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 def run_text(name: str, mistake: str | None = None) -> bytes:
     from physdbg.api import load_scene
-    from physdbg.scene import scene_table
-    from tests.student_engine import simulate_swept
+    from tests.student_engine import simulate_swept, trace_text
 
     scene = load_scene(name, ["integrator=euler"])
-    times, xs, vs = simulate_swept(scene, scene.steps, scene.dt, mistake)
-    lines = [json.dumps({"scene": scene_table(scene)})]
-    lines += [json.dumps({"step": k, "time": float(t), "positions": xs[k].tolist(), "velocities": vs[k].tolist()})
-              for k, t in enumerate(times)]
-    return ("\n".join(lines) + "\n").encode()
+    return trace_text(scene, *simulate_swept(scene, scene.steps, scene.dt, mistake))
 
 
 def main() -> None:

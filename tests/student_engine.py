@@ -66,6 +66,17 @@ def write_jsonl(path, times, xs, vs=None) -> None:
             f.write(json.dumps(record) + "\n")
 
 
+def trace_text(scene, times, xs, vs) -> bytes:
+    """A run as physdbg-trace.js writes it: the scene (its table, as `physdbg scenes show
+    NAME --format json` prints it) on the first line, then a frame a line."""
+    from physdbg.scene import scene_table
+
+    lines = [json.dumps({"scene": scene_table(scene)})]
+    lines += [json.dumps({"step": k, "time": float(t), "positions": xs[k].tolist(), "velocities": vs[k].tolist()})
+              for k, t in enumerate(times)]
+    return ("\n".join(lines) + "\n").encode()
+
+
 # ----------------------------------------------------------------------------- a swept student engine
 # The same course's engine done right: explicit Euler as paths (a sphere moves on the
 # straight line of its velocity at the last contact, its velocity gains a·t), contacts

@@ -32,16 +32,20 @@ NODE = shutil.which("node")
 KICK_FRACTION = 0.02  # departure.py's: a velocity change beyond this share of the speed is a kick
 
 # every built-in sphere scene (no meshes), small enough for the student engines' O(N²) loops
-SCENES = {
+SCENES = {  # (the steps that hold the scene's contacts: billiards breaks at step 22)
     "bounce": ["steps=300"],
-    "billiards": ["steps=240"],
+    "billiards": ["steps=60"],
     "bullet-wall": [],
     "cradle": [],
-    "rest": ["steps=120"],
-    "rain": ["generate.count=10", "steps=120"],
-    "gas": ["generate.count=12", "steps=120"],
+    "rest": ["steps=60"],
+    "rain": ["generate.count=10", "steps=90"],
+    "gas": ["generate.count=12", "steps=60"],
 }
 JS_MISTAKES = ("one-missing", "impulse-doubled", "restitution-sign", "tangent-reversed", "drag-per-step")
+# the JavaScript engine's doubled impulse with no guard blows billiards up within a few steps,
+# and check-run of that run takes ~30 s (every departing step's ties tried in every order);
+# the Python engine's (guarded) doubled impulse on billiards stays in the matrix
+JS_LEFT_OUT = {("billiards", "impulse-doubled")}
 
 
 def test_the_matrix_covers_every_built_in_sphere_scene():
@@ -136,6 +140,8 @@ def _js_runs(name: str, overrides: list[str], folder: Path, tracer: Path):
     scene_file = folder / f"{name}.scene.json"
     scene_file.write_text(json.dumps(scene_table(scene)))
     for mistake in (None, *JS_MISTAKES):
+        if (name, mistake) in JS_LEFT_OUT:
+            continue
         out = folder / f"{name}-js-{mistake or 'right'}.jsonl"
         flags = ["--mistake", mistake] if mistake else []
         done = subprocess.run([NODE, str(ROOT / "tests" / "js" / "student_engine.js"), str(scene_file), str(out),

@@ -19,22 +19,16 @@ from typer.testing import CliRunner
 from physdbg.api import load_scene, write_trace_js
 from physdbg.cli import app
 from physdbg.serve import CheckServer
-from tests.student_engine import simulate_swept
+from tests.student_engine import simulate_swept, trace_text
 
 ROOT = Path(__file__).resolve().parents[1]
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 
-def run_text(name: str, overrides: list[str], mistake: str | None = None, scene_line=True) -> bytes:
-    """A run as physdbg-trace.js writes it: the scene on its first line, then the frames."""
-    from physdbg.scene import scene_table
-
+def run_text(name: str, overrides: list[str], mistake: str | None = None) -> bytes:
+    """A run of the swept student engine as physdbg-trace.js writes it (its scene first)."""
     scene = load_scene(name, overrides)
-    times, xs, vs = simulate_swept(scene, scene.steps, scene.dt, mistake)
-    lines = [json.dumps({"scene": scene_table(scene)})] if scene_line else []
-    lines += [json.dumps({"step": k, "time": float(t), "positions": xs[k].tolist(), "velocities": vs[k].tolist()})
-              for k, t in enumerate(times)]
-    return ("\n".join(lines) + "\n").encode()
+    return trace_text(scene, *simulate_swept(scene, scene.steps, scene.dt, mistake))
 
 
 @pytest.fixture

@@ -155,3 +155,130 @@ def test_a_javascript_engine_in_headless_chromium_downloads_a_run_check_run_find
                            f"{err.decode(errors='replace')[-2000:]}")
     report = api.check_run(run, name, ["integrator=euler"]).report
     assert report.exit_code == 0 and report.steps == steps, report.headline
+
+
+THREE_BALLS = {  # a student's own scene, not a built-in: three balls rolling down onto a tilted plane
+    "name": "three-balls", "dt": 1 / 120, "steps": 240, "integrator": "euler", "gravity": [0, -9.81, 0],
+    "drag": 0.9,
+    "particles": [
+        {"position": [-0.5, 1.0, 0.0], "velocity": [1.0, 0.0, 0.0], "radius": 0.1, "mass": 1.0, "restitution": 0.9},
+        {"position": [0.0, 1.2, 0.0], "velocity": [0.0, 0.0, 0.0], "radius": 0.1, "mass": 2.0, "restitution": 0.9},
+        {"position": [0.6, 0.9, 0.1], "velocity": [-1.0, 0.5, 0.0], "radius": 0.15, "mass": 1.5, "restitution": 0.7},
+    ],
+    "planes": [{"name": "tilted", "normal": [0.2, 1.0, 0.0], "offset": -0.2, "restitution": 0.8}],
+}
+
+
+@needs_node
+def test_a_trace_carrying_its_own_scene_is_checked_without_scene(tmp_path):
+    """A scene of the student's own, as a plain object: the run carries it on its first line,
+    check-run reads it (and says so), compares with the integrator it names: SAME; the same
+    run with its mistake departs. No --scene anywhere."""
+    scene_file = tmp_path / "three.json"
+    scene_file.write_text(json.dumps(THREE_BALLS))
+    tracer = api.write_trace_js(tmp_path)
+    for mistake in (None, "impulse-doubled"):
+        out = tmp_path / f"three-{mistake or 'right'}.jsonl"
+        done = subprocess.run([NODE, str(ROOT / "tests" / "js" / "student_engine.js"), str(scene_file), str(out),
+                               *(["--mistake", mistake] if mistake else [])], capture_output=True, text=True,
+                              env={"PHYSDBG_TRACE": str(tracer)}, timeout=120)
+        assert done.returncode == 0, done.stderr
+        assert json.loads(out.read_text().splitlines()[0]) == {"scene": THREE_BALLS}
+        result = CliRunner().invoke(app, ["check-run", str(out)])
+        assert "the scene is the one the run carries on its first line ('three-balls': 3 spheres, 1 plane), " \
+               "compared with its own integrator (euler)" in result.output
+        if mistake is None:
+            assert result.exit_code == 0 and "SAME" in result.output, result.output
+        else:
+            assert result.exit_code == 1 and "impulse applied twice" in result.output, result.output
+
+
+def test_a_bad_scene_object_gets_the_one_line_error_a_toml_scene_gets(tmp_path):
+    bad = {**THREE_BALLS, "particles": [{**THREE_BALLS["particles"][0], "radius": -1}]}
+    run = tmp_path / "bad.jsonl"
+    run.write_text(json.dumps({"scene": bad}) + "\n" + json.dumps({"step": 0, "time": 0, "positions": [[0, 1, 0]]}))
+    result = CliRunner().invoke(app, ["check-run", str(run)])
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert f"{run}, line 1 (the run's scene): field 'particles.0.radius'" in result.output
+    none = tmp_path / "none.jsonl"
+    none.write_text(json.dumps({"step": 0, "time": 0, "positions": [[0, 1, 0]]}) + "\n")
+    result = CliRunner().invoke(app, ["check-run", str(none)])
+    assert result.exit_code == 2 and "carries no scene" in result.output and "--scene" in result.output
+
+
+@needs_node
+def test_scenes_show_js_is_loaded_by_the_javascript_engine_and_its_run_is_same(tmp_path):
+    """`physdbg scenes show bounce --format js`, required under Node, is the scene the test
+    engine runs; with scene.integrator = "euler" its run is SAME, with no --scene."""
+    shown = CliRunner().invoke(app, ["scenes", "show", "bounce", "--format", "js"])
+    assert shown.exit_code == 0
+    (tmp_path / "bounce-scene.js").write_text(shown.output)
+    tracer = api.write_trace_js(tmp_path)
+    script = tmp_path / "run.js"
+    script.write_text(f"""
+const scene = require({json.dumps(str(tmp_path / 'bounce-scene.js'))});
+scene.integrator = "euler";
+global.physdbgTrace = require({json.dumps(str(tracer))});
+require({json.dumps(str(ROOT / 'tests' / 'js' / 'student_engine.js'))});
+console.log(globalThis.studentEngine.run(scene, {{file: {json.dumps(str(tmp_path / 'bounce.jsonl'))}}}).finish());
+""")
+    done = subprocess.run([NODE, str(script)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    report = api.check_run(tmp_path / "bounce.jsonl").report
+    assert report.exit_code == 0 and report.steps == 300, report.headline
+
+
+def test_scenes_show_prints_a_scene_as_toml_json_and_js(tmp_path):
+    from physdbg.scene import read_scene, scene_from_dict
+
+    toml = CliRunner().invoke(app, ["scenes", "show", "cradle"])
+    assert toml.exit_code == 0 and toml.output.startswith('name = "cradle"')
+    shown = CliRunner().invoke(app, ["scenes", "show", "billiards", "--format", "json"])
+    table = json.loads(shown.output)
+    assert len(table["particles"]) == 12 and len(table["planes"]) == 6  # the [box]'s cushions as planes
+    again = scene_from_dict(table, "shown")
+    assert np.array_equal(again.state.positions, read_scene("billiards").state.positions)
+    assert again.settings == read_scene("billiards").settings and again.dt == read_scene("billiards").dt
+    for args, words in ((["funnel", "--format", "json"], "meshes"), (["bounce", "--format", "yaml"], "one of toml"),
+                        (["bounc"], "Did you mean 'bounce'"), (["bounce", "-s", "dt=2"], "--format json or js")):
+        refused = CliRunner().invoke(app, ["scenes", "show", *args])
+        assert refused.exit_code == 2 and words in refused.output and "Traceback" not in refused.output, args
+    overridden = json.loads(CliRunner().invoke(app, ["scenes", "show", "bounce", "--format", "json", "-s",
+                                                     "integrator=euler"]).output)
+    assert overridden["integrator"] == "euler"
+
+
+def test_date_now_clocks_in_whole_milliseconds_and_repeated_times_are_named_as_milliseconds(tmp_path):
+    """Date.now() as it really is: whole milliseconds (0, 17, 33, 50, ...) where dt is 1/60 s,
+    and a loop faster than the clock (0, 0, 0, ...): each named in one line with the fix."""
+    from tests.student_engine import simulate_swept
+
+    scene = load_scene("bounce", ["integrator=euler", "steps=60"])
+    times, xs, vs = simulate_swept(scene, 60, scene.dt)
+    for label, clock, words in (("whole", [round(t * 1000) for t in times], "a clock in whole milliseconds"),
+                                ("stuck", [0] * len(times), "the same as the step before: a clock that counts "
+                                                            "whole milliseconds")):
+        run = tmp_path / f"{label}.jsonl"
+        run.write_text("".join(json.dumps({"step": k, "time": clock[k], "positions": xs[k].tolist(),
+                                           "velocities": vs[k].tolist()}) + "\n" for k in range(len(times))))
+        result = CliRunner().invoke(app, ["check-run", str(run), "--scene", "bounce", "-s", "integrator=euler",
+                                          "-s", "steps=60"])
+        assert result.exit_code == 2 and words in result.output and "Traceback" not in result.output, result.output
+        assert "simulated time in seconds" in result.output and len(result.output.strip().splitlines()) == 1
+
+
+def test_a_class_of_runs_that_carry_their_scenes_needs_no_scene(tmp_path):
+    from physdbg.scene import scene_table
+    from tests.student_engine import simulate_swept
+
+    folder = tmp_path / "class"
+    folder.mkdir()
+    for name in ("bounce", "cradle"):
+        scene = load_scene(name, ["integrator=euler", "steps=60"])
+        times, xs, vs = simulate_swept(scene, 60, scene.dt)
+        (folder / f"{name}.jsonl").write_text(json.dumps({"scene": scene_table(scene)}) + "\n" + "".join(
+            json.dumps({"step": k, "time": float(t), "positions": xs[k].tolist(), "velocities": vs[k].tolist()}) + "\n"
+            for k, t in enumerate(times)))
+    result = CliRunner().invoke(app, ["check-run", str(folder), "-j", "1"])
+    assert result.exit_code == 0, result.output
+    assert "2 runs of each run's own scene: 2 same" in result.output

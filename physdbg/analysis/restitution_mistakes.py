@@ -61,12 +61,14 @@ def restitution_mistake(e: float, want: float):
     return best[1:] if best is not None else None
 
 
-def step_with_mistake(scene, x0: np.ndarray, v0: np.ndarray, time: float, dt: float, predicted):
+def step_with_mistake(scene, x0: np.ndarray, v0: np.ndarray, time: float, dt: float, predicted, once: bool = True):
     """physdbg's step of ``scene`` from (x0, v0) (N, 3) at ``time`` (s) over ``dt`` (s), with
     every sphere pair's contact made with the effective restitution ``predicted(e)`` of
-    its own e (walls keep theirs) and each contact taken at most once: (x, v) (N, 3) at its
-    end, or None when the step cannot be taken (a budget). The scene's numbering is kept
-    (space_order = "given")."""
+    its own e (walls keep theirs) and, with ``once``, each contact taken at most once (a
+    mistake that leaves pairs approaching needs that guard; one that parts them, such as
+    the impulse applied twice, may be made without it): (x, v) (N, 3) at its end, or None
+    when the step cannot be taken (a budget). The scene's numbering is kept (space_order
+    = "given")."""
     import dataclasses
 
     from ..engine.state import State
@@ -77,6 +79,7 @@ def step_with_mistake(scene, x0: np.ndarray, v0: np.ndarray, time: float, dt: fl
     state = State(np.array(x0, dtype=float), np.array(v0, dtype=float), st.inverse_mass, st.radius,
                   np.array([predicted(float(e)) for e in right]), st.gravity_scale)
     world = _once_a_step_world()(state, scene.walls, dataclasses.replace(scene.settings, space_order="given"))
+    world.once_a_step = once
     world.right_restitution = right
     world.time = float(time)
     try:
