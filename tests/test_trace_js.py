@@ -282,3 +282,9 @@ def test_a_class_of_runs_that_carry_their_scenes_needs_no_scene(tmp_path):
     result = CliRunner().invoke(app, ["check-run", str(folder), "-j", "1"])
     assert result.exit_code == 0, result.output
     assert "2 runs of each run's own scene: 2 same" in result.output
+
+
+def test_check_run_of_a_missing_run_says_so_with_or_without_scene(tmp_path):
+    for args in ([], ["--scene", "bounce"]):
+        result = CliRunner().invoke(app, ["check-run", str(tmp_path / "gone.jsonl"), *args])
+        assert result.exit_code == 2 and "gone.jsonl: no such file" in result.output, (args, result.output)

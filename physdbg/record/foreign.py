@@ -312,7 +312,9 @@ def run_scene(path: str | Path):
     or a scene table (dict, what scene.scene_from_dict reads); None when the file is not
     a .jsonl run or its first line is a frame."""
     path = Path(path)
-    if path.suffix.lower() not in (".jsonl", ".ndjson") or not path.is_file():
+    if not path.is_file():
+        raise ForeignRunError(f"{path}: no such file (a foreign run is a .csv, .jsonl or .mcap file)")
+    if path.suffix.lower() not in (".jsonl", ".ndjson"):
         return None
     try:
         with open(path, encoding="utf-8") as f:
