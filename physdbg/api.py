@@ -809,11 +809,20 @@ def read_run_in_units(run_path: str | Path, scene: Scene, time_unit: str | None 
     return in_units(run, time_unit or "s", length_unit or "m")
 
 
-def scene_of_run(run_path: str | Path, overrides: Sequence[str] = ()) -> Scene:
+# what a scene sent by a page (check-run --serve) may not hold: fields that read files or
+# lift the limits on the work and memory a run takes (the server's own stay in force)
+PAGE_SCENE_REFUSED = ("meshes", "max_memory", "max_particle_steps")
+
+
+def scene_of_run(run_path: str | Path, overrides: Sequence[str] = (), from_a_page: bool = False) -> Scene:
     """The scene a JSON Lines run carries on its first line (foreign.run_scene, written by
     physdbg-trace.js's start(scene)), ready to run: a built-in scene's name is loaded; a
     scene object is validated as a scene file is (an error names the run's line 1 and
-    the field), with ``key=value`` overrides applied."""
+    the field), with ``key=value`` overrides applied. from_a_page: the run came over the
+    network (check-run --serve), so its scene may hold none of PAGE_SCENE_REFUSED nor a
+    budget (state.BUDGETS)."""
+    from .engine.state import BUDGETS, RENAMED_SETTINGS
+    from .errors import SceneError
     from .record.foreign import run_scene
     from .scene import scene_from_dict
     from .scenes import builtin_names
@@ -827,14 +836,23 @@ def scene_of_run(run_path: str | Path, overrides: Sequence[str] = ()) -> Scene:
             raise PhysdbgError(f"{run_path}, line 1: field 'scene' is {value[:60]!r}, not a built-in scene (one of "
                                f"{', '.join(builtin_names())}); give a scene object, or the scene with --scene")
         return load_scene(value, overrides)
-    return decide(scene_from_dict(value, f"{run_path}, line 1 (the run's scene)", overrides=overrides))
+    source = f"{run_path}, line 1 (the run's scene)"
+    if from_a_page and isinstance(value, dict):
+        for key in (*PAGE_SCENE_REFUSED, *BUDGETS, *RENAMED_SETTINGS):
+            if key in value:
+                why = ("meshes are read from files" if key == "meshes" else
+                       "it lifts a bound on the work and memory a check takes")
+                raise SceneError(source, key, f"a scene a page sends may not set {key} ({why}); give the scene "
+                                              f"with check-run --serve --scene instead")
+    return decide(scene_from_dict(value, source, overrides=overrides))
 
 
 def check_run(run_path: str | Path, scene: Scene | str | None = None, overrides: Sequence[str] = (),
               atol: float | None = None,
               rtol: float | None = None, keep: str | Path | None = None, force: bool = False,
               on_status: Callable[[str], None] | None = None, verify: bool = True,
-              time_unit: str | None = None, length_unit: str | None = None) -> CheckRunResult:
+              time_unit: str | None = None, length_unit: str | None = None,
+              from_a_page: bool = False) -> CheckRunResult:
     """Record physdbg's exact run of ``scene`` with the foreign run's own time steps and
     say where the foreign run (a .csv, .jsonl or .mcap trajectory) departs from it and why
     (analysis.departure). keep: a folder to keep both recordings in (run.mcap and
@@ -843,7 +861,8 @@ def check_run(run_path: str | Path, scene: Scene | str | None = None, overrides:
     when neither is given, a run that looks written in milliseconds, centimetres or
     millimetres is refused with a line naming the unit (foreign.unit_mistakes).
     A step that only one of physdbg's own modelling rules explains (departure.OWN_RULES)
-    is compared again against physdbg without that rule, and the report says so."""
+    is compared again against physdbg without that rule, and the report says so.
+    scene None: the scene the run carries (scene_of_run; from_a_page: sent by a page)."""
     import numpy as np
 
     from .analysis.departure import compare, too_long
@@ -851,7 +870,7 @@ def check_run(run_path: str | Path, scene: Scene | str | None = None, overrides:
     from .record.outputs import write_claimed
 
     carried = scene is None
-    scene = scene_of_run(run_path, overrides) if carried else ready_scene(scene, overrides)
+    scene = scene_of_run(run_path, overrides, from_a_page) if carried else ready_scene(scene, overrides)
     if scene.walls.periodic:
         raise PhysdbgError(f"scene '{scene.name}' has a periodic box; check-run reads a run's steps from consecutive "
                            f"positions, which wrap there, and does not compare periodic runs yet")

@@ -20,6 +20,7 @@ from typing import Annotated, Optional
 import typer
 
 from .errors import PhysdbgError, one_line, os_error_words
+from .serve import DEFAULT_PORT as SERVE_PORT, MAX_BYTES as SERVE_MAX_BYTES
 
 app = typer.Typer(
     name="physdbg",
@@ -538,18 +539,11 @@ def _serve_web(rrd: Path, port: int) -> None:
     """Serve the recording to the web viewer on localhost only, until Ctrl-C or SIGTERM;
     the viewer process is stopped either way."""
     import signal
-    import socket
-    import subprocess
 
-    from .record.rerun_sink import viewer_binary
+    from .record.rerun_sink import start_web_viewer, stop_process
 
-    with socket.socket() as probe:  # a free port for the recording's gRPC server
-        probe.bind(("127.0.0.1", 0))
-        grpc_port = probe.getsockname()[1]
-    args = [viewer_binary(), str(rrd), "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port", str(port),
-            "--port", str(grpc_port)]
     try:
-        viewer = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        viewer, port, grpc_port = start_web_viewer(str(rrd), port)
     except OSError as err:
         raise PhysdbgError(f"cannot start the Rerun viewer ({err})") from None
 
@@ -567,12 +561,7 @@ def _serve_web(rrd: Path, port: int) -> None:
         pass
     finally:
         signal.signal(signal.SIGTERM, previous)
-        if viewer.poll() is None:
-            viewer.terminate()
-            try:
-                viewer.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                viewer.kill()
+        stop_process(viewer)
 
 
 OverwriteRecording = Annotated[bool, typer.Option("--force", help="Overwrite an existing recording.")]
@@ -699,10 +688,11 @@ def check_run(
         "--serve", help="Listen on 127.0.0.1 for runs a page sends (physdbg-trace.js's finish()): check each, "
                         "print its verdict, keep its recordings (in --keep, default physdbg-runs) and answer the "
                         "page, which shows it. Ctrl-C stops.")] = False,
-    port: Annotated[int, typer.Option("--port", min=0, max=65535, help="With --serve: the port (0: any free one).")]
-    = 8765,
-    max_bytes: Annotated[int, typer.Option(
-        "--max-bytes", min=1, help="With --serve: the largest run a page may send, in bytes.")] = 64 * 2**20,
+    port: Annotated[Optional[int], typer.Option(
+        "--port", min=0, max=65535, help=f"With --serve: the port (0: any free one; default {SERVE_PORT}).")] = None,
+    max_bytes: Annotated[Optional[int], typer.Option(
+        "--max-bytes", min=1, help=f"With --serve: the largest run a page may send, in bytes (default "
+                                   f"{SERVE_MAX_BYTES}).")] = None,
 ) -> None:
     """Run physdbg's exact version of the scene with the run's own time steps and say where
     the run departs and why: tunnelling, a bounce at the wrong time, energy at a contact,
@@ -718,8 +708,13 @@ def check_run(
         with _user_errors():
             if run is not None:
                 raise PhysdbgError(f"--serve checks the runs pages send; check {run} without --serve")
-            _serve(scene, set_ or [], keep or Path("physdbg-runs"), port, max_bytes, force)
+            _serve(scene, set_ or [], keep or Path("physdbg-runs"), SERVE_PORT if port is None else port,
+                   max_bytes or SERVE_MAX_BYTES, force, atol=atol, rtol=rtol, time_unit=time_unit,
+                   length_unit=length_unit, verify=not no_verify)
         return
+    if port is not None or max_bytes is not None:
+        with _user_errors(as_json or output_format == "json"):
+            raise PhysdbgError("--port and --max-bytes go with --serve")
     if run is None:
         with _user_errors(as_json or output_format == "json"):
             raise PhysdbgError("give the run to check (a .csv, .jsonl or .mcap file, or a folder of runs), or "
@@ -735,8 +730,10 @@ def check_run(
     with _user_errors(as_json or output_format == "json"):
         if scene is None:  # the run's own scene, for the tier's estimate of the work
             from .record.foreign import run_scene
+            from .scenes import builtin_names
 
-            tier = _choose_tier(run_scene(run) or "", set_)
+            carried = run_scene(run)  # (a name that is not a built-in one is not read as a file)
+            tier = _choose_tier(carried if isinstance(carried, dict) or carried in builtin_names() else "", set_)
         else:
             tier = _choose_tier(scene, set_)
         from . import api
@@ -752,14 +749,15 @@ def check_run(
         raise typer.Exit(result.report.exit_code)
 
 
-def _serve(scene: str | None, overrides: list[str], folder: Path, port: int, max_bytes: int, force: bool) -> None:
-    """check-run --serve (physdbg/serve.py) until Ctrl-C or SIGTERM."""
+def _serve(scene: str | None, overrides: list[str], folder: Path, port: int, max_bytes: int, force: bool,
+           **options) -> None:
+    """check-run --serve (physdbg/serve.py) until Ctrl-C or SIGTERM; options: check_run's."""
     import signal
 
     from .serve import CheckServer
 
     server = CheckServer(folder, scene, overrides, port=port, max_bytes=max_bytes, force=force,
-                         on_verdict=lambda verdict: typer.echo(verdict.line()))
+                         on_verdict=lambda verdict: typer.echo(verdict.line()), **options)
 
     def stop(signum, frame):
         raise KeyboardInterrupt

@@ -16,8 +16,12 @@ localhost), paused where the runs part.
 
 Every answer is JSON or a file; a request from a page of another origin than this machine
 (not file://, localhost or 127.0.0.1), a Host header naming another server, a body larger
-than ``max_bytes`` (refused before it is read), a malformed run or a hostile scene object
-gets a clear error and the server goes on.
+than ``max_bytes`` (refused before it is read) or sent slower than READ_TIMEOUT allows, a
+malformed run or a hostile scene object gets a clear error and the server goes on. A
+page opened from a file sends the Origin "null", as a sandboxed frame of any site can:
+so what a run may make the server do is bounded whoever sends it — a run's scene object
+reads no file (no meshes), keeps the scene limits (no max_memory, max_particle_steps or
+budget of its own: api.scene_of_run), and the runs are checked one at a time.
 """
 
 from __future__ import annotations
@@ -25,12 +29,10 @@ from __future__ import annotations
 import json
 import queue
 import re
-import shutil
 import subprocess
 import threading
 import time
 from dataclasses import asdict, dataclass, field
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 from urllib.parse import quote, urlsplit
 
@@ -40,7 +42,9 @@ DEFAULT_PORT = 8765  # physdbg-trace.js sends to http://127.0.0.1:8765 unless to
 MAX_BYTES = 64 * 2**20  # a run's body larger than this is refused unread (--max-bytes)
 QUEUE = 64  # runs waiting to be checked; a page that finds the queue full is told so
 CHECK_TIMEOUT = 600.0  # s a page waits for its verdict
-READ_TIMEOUT = 30.0  # s a request may take to send its headers and body
+READ_TIMEOUT = 30.0  # s a request may take to send its body, in all (and each read of its headers)
+CONNECTIONS = 32  # requests served at once; one more is answered 503 at once
+_LENGTH = re.compile(r"^[0-9]{1,12}$")  # a Content-Length (ASCII digits: "²".isdigit() is True)
 _LOCAL_HOSTS = ("127.0.0.1", "localhost", "[::1]")
 _ROUTE_VIEW = re.compile(r"^/view/([0-9]{1,9})$")
 _ROUTE_RRD = re.compile(r"^/runs/([0-9]{1,9})/view\.rrd$")
@@ -91,18 +95,23 @@ class CheckServer:
     """The server: ``serve_forever`` until ``shutdown``. scene: the scene every run is
     checked against (None: each run's own, from its first line); overrides: -s KEY=VALUE;
     folder: where each run and its two recordings are kept (runs/N-NAME/); on_verdict:
-    called with each Verdict (the CLI prints it)."""
+    called with each Verdict (the CLI prints it); options: check_run's (atol, rtol,
+    time_unit, length_unit, verify)."""
 
     def __init__(self, folder: str | Path, scene: str | None = None, overrides=(), port: int = DEFAULT_PORT,
-                 max_bytes: int = MAX_BYTES, viewer_port: int | None = None, on_verdict=None, force: bool = False):
+                 max_bytes: int = MAX_BYTES, viewer_port: int = 0, on_verdict=None, force: bool = False,
+                 **options):
         self.folder = Path(folder)
         self.scene, self.overrides = scene, list(overrides)
+        self.options = options  # check_run's atol, rtol, time_unit, length_unit, verify
         self.max_bytes = int(max_bytes)
         self.on_verdict = on_verdict
         if self.folder.exists() and any(self.folder.iterdir()) and not force:
             raise PhysdbgError(f"{self.folder}: holds runs of another session; --force adds to it (runs already "
                                f"there are kept), or give another --keep folder")
         self.folder.mkdir(parents=True, exist_ok=True)
+        from http.server import ThreadingHTTPServer
+
         try:
             self.http = ThreadingHTTPServer(("127.0.0.1", port), _handler(self))
         except OSError as err:
@@ -114,7 +123,9 @@ class CheckServer:
         self._viewer: subprocess.Popen | None = None
         self._viewer_lock = threading.Lock()
         self._queue: queue.Queue[_Job | None] = queue.Queue(QUEUE)
-        self._count = len(list(self.folder.glob("[0-9]*")))
+        self._connections = threading.BoundedSemaphore(CONNECTIONS)
+        # (numbered after the runs kept there already, so none is written over)
+        self._count = max((int(p.name[:4]) for p in self.folder.glob("[0-9][0-9][0-9][0-9]-*")), default=0)
         self._count_lock = threading.Lock()
         self._runs: dict[int, Path] = {}
         self._worker = threading.Thread(target=self._work, name="physdbg-check", daemon=True)
@@ -135,14 +146,11 @@ class CheckServer:
         self.http.shutdown()
 
     def close(self) -> None:
+        from .record.rerun_sink import stop_process
+
         self._queue.put(None)
         self.http.server_close()
-        if self._viewer is not None and self._viewer.poll() is None:
-            self._viewer.terminate()
-            try:
-                self._viewer.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                self._viewer.kill()
+        stop_process(self._viewer)
 
     # ------------------------------------------------------------------ checking
     def submit(self, file: str, text: bytes) -> _Job:
@@ -169,26 +177,27 @@ class CheckServer:
 
     def _check(self, job: _Job) -> Verdict:
         from . import api
-        from .analysis.departure import DEPARTURE_KINDS
+        from .analysis.departure import DEPARTURE_KINDS, cause_of
         from .errors import one_line
 
         started = time.perf_counter()
         stem = re.sub(r"[^A-Za-z0-9_.-]+", "-", Path(job.file).stem)[:40] or "run"
         where = self.folder / f"{job.number:04d}-{stem}"
-        where.mkdir(parents=True, exist_ok=True)
+        where.mkdir(parents=True)
         run = where / "run.jsonl"
         run.write_bytes(job.text)
         try:
-            result = api.check_run(run, self.scene, self.overrides, keep=where, force=True)
+            result = api.check_run(run, self.scene, self.overrides, keep=where, force=True, from_a_page=True,
+                                   **self.options)
         except PhysdbgError as err:
-            return Verdict(job.number, job.file, "ERROR", err.exit_code, summary=one_line(str(err)),
+            # (the page is told the run's name, not where this server keeps it)
+            said = one_line(str(err)).replace(str(run), job.file)
+            return Verdict(job.number, job.file, "ERROR", err.exit_code, summary=said,
                            seconds=time.perf_counter() - started)
         report = result.report
         self._runs[job.number] = where
         first = report.first
-        departure = None
-        if first is not None:
-            departure = next((d for d in report.departures if d.kind == first.cause), None)
+        departure = cause_of(first, report.departures) if first is not None else None
         return Verdict(job.number, job.file, "SAME" if first is None else "DEPARTS", report.exit_code,
                        scene=report.scene, step=first.step if first else None, body=first.body if first else None,
                        cause=first.cause if first else None,
@@ -222,22 +231,9 @@ class CheckServer:
         return f"http://127.0.0.1:{self.viewer_port}/?url={quote(rrd, safe='')}"
 
     def _start_viewer(self) -> None:
-        import socket
+        from .record.rerun_sink import start_web_viewer
 
-        from .record.rerun_sink import viewer_binary
-
-        ports = []
-        for wanted in (self.viewer_port, 0):
-            with socket.socket() as probe:
-                probe.bind(("127.0.0.1", wanted or 0))
-                ports.append(probe.getsockname()[1])
-        self.viewer_port, grpc_port = ports
-        binary = viewer_binary()
-        if shutil.which(binary) is None and not Path(binary).is_file():
-            raise PhysdbgError("the Rerun viewer is not installed (it comes with rerun-sdk)")
-        self._viewer = subprocess.Popen([binary, "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port",
-                                         str(self.viewer_port), "--port", str(grpc_port)],
-                                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        self._viewer, self.viewer_port, _ = start_web_viewer(None, self.viewer_port)
 
     # ------------------------------------------------------------------ who may ask
     def allowed_origin(self, origin: str | None) -> bool:
@@ -257,6 +253,8 @@ class CheckServer:
 
 
 def _handler(server: CheckServer):
+    from http.server import BaseHTTPRequestHandler
+
     from .version import __version__
 
     class Handler(BaseHTTPRequestHandler):
@@ -266,6 +264,20 @@ def _handler(server: CheckServer):
 
         def log_message(self, format, *args):  # noqa: A002 - the verdicts are printed, not each request
             pass
+
+        def handle(self):
+            if not server._connections.acquire(blocking=False):  # (slow senders may not pile up)
+                self.close_connection = True
+                try:
+                    self.wfile.write(b"HTTP/1.1 503 Service Unavailable\r\nContent-Length: 0\r\n"
+                                     b"Connection: close\r\n\r\n")
+                except OSError:
+                    pass
+                return
+            try:
+                super().handle()
+            finally:
+                server._connections.release()
 
         def _cors(self) -> None:
             origin = self.headers.get("Origin")
@@ -281,8 +293,7 @@ def _handler(server: CheckServer):
             self.send_header("Cache-Control", "no-store")
             self._cors()
             self.end_headers()
-            if self.command != "HEAD":
-                self.wfile.write(body)
+            self.wfile.write(body)
 
         def _refuse(self, code: int, message: str) -> None:
             self.close_connection = True
@@ -299,6 +310,26 @@ def _handler(server: CheckServer):
                                   f"machine only (file://, localhost, 127.0.0.1)")
                 return False
             return True
+
+        def _body(self, size: int) -> bytes | None:
+            """The request's body, read within READ_TIMEOUT in all (a sender that trickles its
+            bytes is cut off); None when it did not arrive in time."""
+            deadline = time.monotonic() + READ_TIMEOUT
+            parts, got = [], 0
+            while got < size:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return None
+                self.connection.settimeout(left)
+                try:
+                    part = self.rfile.read1(min(size - got, 1 << 16))
+                except OSError:
+                    return None
+                if not part:
+                    break
+                parts.append(part)
+                got += len(part)
+            return b"".join(parts)
 
         def do_OPTIONS(self):  # noqa: N802 - a CORS preflight
             if not self._who():
@@ -318,8 +349,7 @@ def _handler(server: CheckServer):
             if path == "/ping":
                 return self._send(200, {"physdbg": __version__, "check": "/check"})
             if path == "/":
-                return self._send(200, {"physdbg": __version__, "check": f"POST {server.url}/check",
-                                        "runs": f"{server.folder}"})
+                return self._send(200, {"physdbg": __version__, "check": f"POST {server.url}/check"})
             found = _ROUTE_RRD.match(path)
             if found:
                 try:
@@ -350,18 +380,18 @@ def _handler(server: CheckServer):
                 return
             if urlsplit(self.path).path != "/check":
                 return self._refuse(404, f"no {self.path} here: POST a run to /check")
-            length = self.headers.get("Content-Length")
-            if length is None or not length.isdigit():
-                return self._refuse(411, "a run needs a Content-Length")
-            if int(length) > server.max_bytes:
-                return self._refuse(413, f"a run of {int(length):,} bytes is more than this server takes "
+            length = self.headers.get("Content-Length", "")
+            if not _LENGTH.match(length):
+                return self._refuse(411, "a run needs a Content-Length (a whole number of bytes)")
+            size = int(length)
+            if size > server.max_bytes:
+                return self._refuse(413, f"a run of {size:,} bytes is more than this server takes "
                                          f"({server.max_bytes:,}: --max-bytes)")
-            try:
-                text = self.rfile.read(int(length))
-            except OSError:
-                return self._refuse(408, "the run did not arrive in time")
-            if len(text) != int(length):
-                return self._refuse(400, f"the run ended after {len(text)} of {length} bytes")
+            text = self._body(size)
+            if text is None:
+                return self._refuse(408, f"the run did not arrive within {READ_TIMEOUT:.0f} s")
+            if len(text) != size:
+                return self._refuse(400, f"the run ended after {len(text)} of {size} bytes")
             file = Path(self.headers.get("X-Physdbg-File") or "run.jsonl").name[:80] or "run.jsonl"
             try:
                 job = server.submit(file, text)

@@ -92,7 +92,7 @@ def check_claims(scene, run_path: Path, report) -> None:
                 change = min(float(np.linalg.norm(v[k, b] - v[k - 1, b] * f - acc[b] * dt)) for f in _decays(scene, dt))
                 assert change <= KICK_FRACTION * speed + 1e-9, (run_path.name, d.step, b, change, d.text)
         if d.kind in ("contact-energy", "collision-order") and "momentum_off" in d.evidence:
-            bodies = np.array(d.evidence["bodies"])
+            bodies = np.array(d.evidence["momentum_bodies"])
             mass = 1.0 / inv[bodies]
             start = [v[k - 1, bodies] * f + acc[bodies] * dt for f in _decays(scene, dt)]
             offs = [float(np.linalg.norm((mass[:, None] * (v[k, bodies] - s)).sum(axis=0))) for s in start]
@@ -196,7 +196,7 @@ def test_the_missing_one_on_billiards_is_named_one_missing_in_a_single_check_and
     report = api.check_run(path, "billiards", ["integrator=euler", "steps=60"]).report
     assert report.first.cause == "one-missing" and report.first.step == 22
     named = next(d for d in report.departures if d.kind == "one-missing")
-    assert named.step == 22 and "effective restitution of -0.05" in named.text and named.evidence["reproduced"]
+    assert named.step == 22 and "effective restitution (-0.05 for 0–2" in named.text and named.evidence["reproduced"]
     assert "one-missing" in report.headline.split(":")[1] or "(1 + e)" in report.headline
     assert "unexplained" not in report.headline and "every step" not in report.headline
     table = api.check_class([path], "billiards", ["integrator=euler", "steps=60"], workers=1)

@@ -91,8 +91,8 @@ def test_physdbg_s_own_run_exported_and_imported_is_clean(tmp_path):
     ("step,time,body,x,y\n", "line 1: the header lacks z"),
     ("step,time,body,x,y,z\n0,0,0,0,0,0\n0,0,1,0,0,0\n", "line 3: field 'body' is 1; the scene has 1 body (0..0)"),
     ("step,time,body,x,y,z\n0,0,0,0,0,0\n2,0.1,0,0,0,0\n", "line 3: field 'step' is 2; expected 1"),
-    ("step,time,body,x,y,z\n0,0,0,0,0,0\n1,0,0,0,0,0\n", "line 3: field 'time' is 0.0, the same as the step before: "
-                                                       "a clock that counts whole milliseconds"),
+    ("step,time,body,x,y,z\n0,0,0,0,0,0\n1,0,0,0,0,0\n", "line 3: field 'time' is 0.0, the same as the step before; "
+                                                       "time must increase. A clock that counts whole milliseconds"),
     ("step,time,body,x,y,z\n0,0,0,0,0,0\n1,0.5,0,0,0,0\n2,0.25,0,0,0,0\n",
      "line 4: field 'time' is 0.25, not after the step before"),
     ("step,time,body,x,y,z\n0,0.5,0,0,0,0\n", "line 2: field 'time' is 0.5; step 0 is the initial state at time 0"),

@@ -63,7 +63,7 @@ def test_a_run_sent_to_the_server_is_checked_and_its_verdict_answered(server, tm
     status, wrong = ask(server, "/check", run_text("billiards", ["integrator=euler", "steps=60"], "one-missing"))
     assert status == 200 and wrong["verdict"] == "DEPARTS"
     assert (wrong["step"], wrong["cause"]) == (22, "one-missing") and "(1 + e)" in wrong["cause_words"]
-    assert "effective restitution of -0.05" in wrong["finding"] and wrong["advice"]
+    assert "effective restitution (-0.05 for 0–2" in wrong["finding"] and wrong["advice"]
     assert wrong["view"] == f"{server.url}/view/{wrong['run']}"
     # the terminal's lines, and the recordings kept for replay and diff
     assert [v.verdict for v in server.said] == ["SAME", "DEPARTS"]
@@ -204,3 +204,45 @@ def test_with_no_server_the_page_still_downloads_the_run(tmp_path):
     assert run.is_file()
     first = json.loads(run.read_text().splitlines()[0])
     assert first["scene"]["name"] == "bounce" and first["scene"]["integrator"] == "euler"
+
+
+def test_what_a_page_may_send_is_bounded_whoever_sends_it(server):
+    """A page opened from a file sends Origin "null", as a sandboxed frame of any site can:
+    a scene a page sends reads no file and lifts no limit; a Content-Length that is not
+    ASCII digits, a scene line that is not JSON, too deep or of a 5000-digit number, and a
+    body trickled past the read time, each get a clear answer."""
+    import http.client
+    import socket
+
+    from physdbg import serve
+
+    for scene, field in (({"meshes": [{"file": "/etc/passwd"}]}, "meshes"), ({"max_memory": 1e18}, "max_memory"),
+                         ({"max_contacts_per_step": 10**12}, "max_contacts_per_step"),
+                         ({"max_events_per_step": 10**12}, "max_events_per_step")):
+        status, answer = ask(server, "/check", json.dumps({"scene": scene}).encode() + b"\n", {"Origin": "null"})
+        assert status == 400 and f"may not set {field}" in answer["summary"], answer
+        assert str(server.folder) not in answer["summary"]  # (the page is told its run's name, not the folder)
+    status, answer = ask(server, "/check", b'{"scene": {"dt": ' + b"9" * 5000 + b"}}\n")
+    assert status == 400 and "not readable JSON" in answer["summary"]
+    status, answer = ask(server, "/check", b'{"scene": ' + b"[" * 5000 + b"]" * 5000 + b"}\n")
+    assert status == 400 and "nested more deeply" in answer["summary"]
+    connection = http.client.HTTPConnection("127.0.0.1", server.port, timeout=30)
+    connection.putrequest("POST", "/check")
+    connection.putheader("Content-Length", "\u00b2")
+    connection.endheaders()
+    answer = connection.getresponse()
+    assert answer.status == 411
+    connection.close()
+    # a body sent slower than the read time allows, in all, is cut off
+    serve_timeout, serve.READ_TIMEOUT = serve.READ_TIMEOUT, 1.0
+    try:
+        with socket.create_connection(("127.0.0.1", server.port), timeout=30) as slow:
+            slow.sendall(f"POST /check HTTP/1.1\r\nHost: 127.0.0.1:{server.port}\r\nContent-Length: 100\r\n\r\n"
+                         .encode())
+            for _ in range(3):
+                slow.sendall(b"x")
+                threading.Event().wait(0.5)
+            assert b" 408 " in slow.recv(4096)
+    finally:
+        serve.READ_TIMEOUT = serve_timeout
+    assert ask(server, "/ping")[0] == 200  # still serving

@@ -256,8 +256,8 @@ def test_date_now_clocks_in_whole_milliseconds_and_repeated_times_are_named_as_m
     scene = load_scene("bounce", ["integrator=euler", "steps=60"])
     times, xs, vs = simulate_swept(scene, 60, scene.dt)
     for label, clock, words in (("whole", [round(t * 1000) for t in times], "a clock in whole milliseconds"),
-                                ("stuck", [0] * len(times), "the same as the step before: a clock that counts "
-                                                            "whole milliseconds")):
+                                ("stuck", [0] * len(times), "the same as the step before; time must increase. "
+                                                            "A clock that counts whole milliseconds")):
         run = tmp_path / f"{label}.jsonl"
         run.write_text("".join(json.dumps({"step": k, "time": clock[k], "positions": xs[k].tolist(),
                                            "velocities": vs[k].tolist()}) + "\n" for k in range(len(times))))

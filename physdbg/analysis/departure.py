@@ -962,10 +962,13 @@ class _Comparison:
         apart = float(np.linalg.norm(r.xf[s, b] - x[b]))
         gap = self._gap(b_c, b, r.xf[s, b], s, float(r.dt[s]))
         inside = f", {-gap * 1000:.3g} mm inside {self._what(b_c)}" if gap < -self.atol else ""
+        slow = (f"a slow contact with {self._what(b_c)} (closing at {c.closing:.3g} m/s, slower than the forces "
+                f"give in {RESTING_SPEED_STEPS:g} steps), which it {'holds' if c.resting else 'resolves'}"
+                if self._resting_speed(c, s) else
+                f"a contact with {self._what(b_c)} (closing at {c.closing:.3g} m/s) that it holds (its resting or "
+                f"rapid-contact rule)")
         self._add("resting", s, b_c,
-                  f"sphere {b}: physdbg's step {s}, taken from your run's state, has a slow contact with "
-                  f"{self._what(b_c)} (closing at {c.closing:.3g} m/s, slower than the forces give in "
-                  f"{RESTING_SPEED_STEPS:g} steps), which it {'holds' if c.resting else 'resolves'}; your run ends "
+                  f"sphere {b}: physdbg's step {s}, taken from your run's state, has {slow}; your run ends "
                   f"the step with sphere {b} {apart * 1000:.3g} mm from where physdbg's does{inside}",
                   "slow and resting contacts are held in different ways by different engines, and are not judged "
                   "one by one; a body that sinks into what it rests on needs a contact that acts at zero closing "
@@ -1009,10 +1012,9 @@ class _Comparison:
             bodies = sorted({b for g in chains for c in g for b in self._bodies(c)})
             self._add(code, s, first,
                       f"in the chain {order}{' …' if len(chain) > 6 else ''}, your run's step {s} is physdbg's step "
-                      f"from your run's state with each impulse made with an effective restitution of "
-                      f"{predicted(want):.3g} where physdbg applies e = {want:g}"
-                      f"{' (each contact once)' if once else ''}: "
-                      f"{predicted(want):.3g} = {words}", advice,
+                      f"from your run's state with each sphere's restitution replaced by the mistake's effective "
+                      f"restitution ({predicted(want):.3g} for {self._pair_words(first)}, where physdbg applies "
+                      f"e = {want:g}){', each contact once' if once else ''}: {predicted(want):.3g} = {words}", advice,
                       {"restitution": predicted(want), "expected": want, "bodies": bodies,
                        "physdbg_order": [[c.a, c.other, c.kind] for c in chain], "reproduced": True})
             self.mistake_found = code
@@ -1359,9 +1361,7 @@ class _Comparison:
         # against its start carried over the step by the forces and drag alone, over the
         # chain's spheres and every other sphere the run kicked in the step (where the run's
         # contacts took momentum)
-        changed = [b for b in np.flatnonzero(self.inv > 0).tolist()
-                   if self._change_beyond_forces(s, b) > self.atol + self.rtol * float(np.linalg.norm(r.vf[s, b]))]
-        members = np.array(sorted(set(bodies) | set(changed)))
+        members = np.array(sorted(set(bodies) | set(self._changed_near(s, bodies))))
         mass = 1.0 / self.inv[members]
         dt = float(r.dt[s])
         start = r.vf[s - 1, members] * float(self._decay(dt)) + self.acc[members] * dt
@@ -1384,7 +1384,8 @@ class _Comparison:
         order = ", then ".join(f"{self._pair_words(c)} at {c.tau / dt:.2f}·dt" for c in group[:6])
         worst = int(idx[int(np.argmax(gap))])
         spheres = ", ".join(map(str, members.tolist()[:12])) + (" …" if len(members) > 12 else "")
-        evidence = {"bodies": members.tolist(), "physdbg_order": [[c.a, c.other, c.kind] for c in group],
+        evidence = {"bodies": bodies, "momentum_bodies": members.tolist(),
+                    "physdbg_order": [[c.a, c.other, c.kind] for c in group],
                     "energy_before": energy_0, "energy": energy_1, "physdbg_energy": energy_r,
                     "momentum_before": momentum_0.tolist(), "momentum": momentum_1.tolist(),
                     "momentum_off": momentum_off, "momentum_kept": kept, "forces_slack": forces, "walls": walls}
@@ -1398,8 +1399,11 @@ class _Comparison:
         elif kept:
             self._add("collision-order", s, first,
                       f"physdbg resolves {order}; your run gives sphere {worst} a velocity {gap.max():.3g} m/s "
-                      f"away, with {'no energy gained (a wall within reach takes momentum: not compared)' if walls else 'momentum kept and no energy gained'}: "
-                      f"the same contacts in another order (or all at once)",
+                      f"away, with " + (
+                          "no energy gained; with a wall within reach, momentum is not compared, so this is the same "
+                          "contacts in another order (or all at once), or an impulse a wall does not explain"
+                          if walls else
+                          "momentum kept and no energy gained: the same contacts in another order (or all at once)"),
                       "resolve contacts one at a time in the order they happen (earliest time of impact first), "
                       "looking again for new contacts after each: a chain of touching spheres passes its impulse "
                       "along only in that order", evidence)
@@ -1412,6 +1416,26 @@ class _Comparison:
                       "apply each impulse to both bodies, equal and opposite, scaled by their inverse masses",
                       evidence)
 
+    def _changed_near(self, s: int, chain: list[int]) -> list[int]:
+        """Spheres outside ``chain`` whose velocity the run changed in step s beyond the
+        forces (and the tolerance) and that came within reach of a chain sphere (the sum of
+        the radii plus both spheres' travel in the step): where the run's chain may have
+        taken momentum that physdbg's did not."""
+        r = self.runs
+        travel = np.linalg.norm(r.xf[s] - r.xf[s - 1], axis=1)
+        near = []
+        for b in np.flatnonzero(self.inv > 0).tolist():
+            if b in chain or not (self._change_beyond_forces(s, b)
+                                  > self.atol + self.rtol * float(np.linalg.norm(r.vf[s, b]))):
+                continue
+            for k in (s - 1, s):
+                gaps = (np.linalg.norm(r.xf[k, chain] - r.xf[k, b], axis=1) - self.radius[chain] - self.radius[b]
+                        - travel[chain] - travel[b])
+                if np.any(np.nan_to_num(gaps, nan=-1.0) <= self.atol):
+                    near.append(b)
+                    break
+        return near
+
     def _may_touch_a_wall(self, s: int, members: np.ndarray) -> bool:
         """Whether any of spheres ``members`` may have touched a wall or a mesh in step s of
         the run: a plane within its radius plus the step's travel at the step's start or end
@@ -1423,7 +1447,7 @@ class _Comparison:
         r = self.runs
         from ..engine.colliders.plane import gaps
 
-        reach = np.maximum(np.linalg.norm(r.xf[s, members] - r.xf[s - 1, members], axis=1), 0.0)
+        reach = np.linalg.norm(r.xf[s, members] - r.xf[s - 1, members], axis=1)
         for k in (s - 1, s):
             g = gaps(np.ascontiguousarray(r.xf[k, members], dtype=np.float64), self.radius[members], self.walls)
             if np.any(np.nan_to_num(g, nan=-1.0) <= reach[:, None] + self.atol):
@@ -1615,8 +1639,7 @@ class _Comparison:
         if first is None:
             return (f"no departure: every body stays within atol={self.atol:g}, rtol={self.rtol:g} of physdbg's "
                     f"exact run for all {len(self.runs.t) - 1} steps")
-        cause = next((d for d in listed if d.kind == first.cause and (_involves(d, first.body) or d.kind in _RUN_WIDE)),
-                     None)
+        cause = cause_of(first, listed)
         if first.cause == "drift" and self.integrator is not None and self.integrator["differs"]:
             why = "integrator: " + self.integrator["sentence"]
         elif cause is not None:
@@ -1691,6 +1714,13 @@ def _changed_contacts(with_rule: list[StepContact],
     return changed or unmatched
 
 
+def cause_of(first: FirstDeparture, departures: list[Departure]) -> Departure | None:
+    """The departure that is the first departure's cause: of its kind, about its sphere
+    (or a way of stepping the whole run has), the earliest listed."""
+    return next((d for d in departures if d.kind == first.cause and (_involves(d, first.body) or d.kind in _RUN_WIDE)),
+                None)
+
+
 def _involves(d: Departure, body: int) -> bool:
     """Whether departure d is about sphere ``body``: its own, its partner, or one of a
     chain's spheres (evidence "bodies")."""
@@ -1726,4 +1756,4 @@ def _chains(contacts: list[StepContact]) -> list[list[StepContact]]:
     return sorted(groups.values(), key=lambda g: g[0].index)
 
 
-__all__ = ["CheckRunError", "CheckRunReport", "Departure", "FirstDeparture", "compare"]
+__all__ = ["CheckRunError", "CheckRunReport", "Departure", "FirstDeparture", "cause_of", "compare"]

@@ -279,7 +279,7 @@ def _read_jsonl(f, path: Path, bodies: int) -> ForeignRun:
     first = True
     for line, text in enumerate(f, start=1):
         if text.strip():
-            if first and _scene_line(text) is not None:
+            if first and _scene_line(text, f"{path}, line {line}") is not None:
                 first = False
                 continue  # the run's scene (run_scene reads it)
             first = False
@@ -293,15 +293,19 @@ SCENE_KEY = "scene"
 MAX_SCENE_LINE = 16 * 2**20  # bytes: a scene line longer than this is refused unread
 
 
-def _scene_line(text: str):
-    """The value of a {"scene": ...} line (no "step" field), else None."""
+def _scene_line(text: str, where: str):
+    """The value of a {"scene": ...} line (no "step" field), else None; a line that begins
+    as one and does not parse is refused (ForeignRunError, naming ``where``)."""
     stripped = text.lstrip()
     if not stripped.startswith("{") or f'"{SCENE_KEY}"' not in stripped[:64 + len(SCENE_KEY)]:
         return None
     try:
         record = json.loads(text)
-    except (json.JSONDecodeError, RecursionError):
-        return None
+    except RecursionError:
+        raise ForeignRunError(f"{where}: the scene is nested more deeply than any scene can be") from None
+    except ValueError as err:  # (not JSON, or an integer of more digits than Python reads)
+        raise ForeignRunError(f"{where}: the scene line is not readable JSON ({getattr(err, 'msg', None) or err})"
+                              ) from None
     if isinstance(record, dict) and SCENE_KEY in record and "step" not in record:
         return record[SCENE_KEY]
     return None
@@ -323,7 +327,7 @@ def run_scene(path: str | Path):
                     raise ForeignRunError(f"{path}, line 1: a line of more than {MAX_SCENE_LINE // 2**20} MiB; a "
                                           f"scene line is at most that")
                 if text.strip():
-                    value = _scene_line(text)
+                    value = _scene_line(text, f"{path}, line 1")
                     if value is not None and not isinstance(value, (str, dict)):
                         raise ForeignRunError(f"{path}, line 1: field 'scene' is {type(value).__name__}; expected a "
                                               f"built-in scene's name or a scene object (docs/foreign-runs.md)")
@@ -405,11 +409,11 @@ def _check_time(times: list[float], time: float, where: str) -> None:
         raise ForeignRunError(f"{where}: field 'time' is {time}; times must be finite seconds")
     if not times and time != 0.0:
         raise ForeignRunError(f"{where}: field 'time' is {time!r}; step 0 is the initial state at time 0")
-    if times and time == times[-1] and len(times) >= 1 and float(time).is_integer():
-        raise ForeignRunError(f"{where}: field 'time' is {time!r}, the same as the step before: a clock that counts "
-                              "whole milliseconds (JavaScript's Date.now()) reads the same time for steps taken "
-                              "faster than it ticks; give each frame the simulated time in seconds (the step number "
-                              "× dt) instead of a clock")
+    if times and time == times[-1] and float(time).is_integer():
+        raise ForeignRunError(f"{where}: field 'time' is {time!r}, the same as the step before; time must increase. "
+                              "A clock that counts whole milliseconds (JavaScript's Date.now()) reads the same time "
+                              "for steps taken faster than it ticks: give each frame the simulated time in seconds "
+                              "(the step number × dt), not a clock")
     if times and time <= times[-1]:
         raise ForeignRunError(f"{where}: field 'time' is {time!r}, not after the step before ({times[-1]!r}); "
                               "time must increase (seconds, not milliseconds or frames?)")

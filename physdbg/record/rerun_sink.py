@@ -91,6 +91,37 @@ def viewer_binary() -> str:
     return path if os.access(path, os.X_OK) else "rerun"
 
 
+def start_web_viewer(rrd: str | None, web_port: int = 0):
+    """The Rerun web viewer (the one rerun-sdk ships) on 127.0.0.1 only, serving ``rrd``
+    (or none: a page given ?url= loads one): (the viewer process, its web port, its gRPC
+    port). web_port 0: any free one. Raises OSError when it cannot start."""
+    import socket
+    import subprocess
+
+    ports = []
+    for wanted in (web_port, 0):
+        with socket.socket() as probe:  # a free port (the gRPC one always: the recording's server)
+            probe.bind(("127.0.0.1", wanted))
+            ports.append(probe.getsockname()[1])
+    web, grpc = ports
+    args = [viewer_binary(), *([str(rrd)] if rrd else []), "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port",
+            str(web), "--port", str(grpc)]
+    process = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    return process, web, grpc
+
+
+def stop_process(process, grace: float = 10.0) -> None:
+    """Terminate a viewer process, killing it after ``grace`` seconds."""
+    import subprocess
+
+    if process is not None and process.poll() is None:
+        process.terminate()
+        try:
+            process.wait(timeout=grace)
+        except subprocess.TimeoutExpired:
+            process.kill()
+
+
 def file_sink(path):
     """rerun's FileSink for ``path``, or a RecordingError naming the file when it cannot be
     created (a read-only folder, a missing one rerun will not make)."""
