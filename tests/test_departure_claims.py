@@ -39,7 +39,7 @@ SCENES = {  # (the steps that hold the scene's contacts: billiards breaks at ste
     "cradle": [],
     "rest": ["steps=60"],
     "rain": ["generate.count=10", "steps=90"],
-    "gas": ["generate.count=12", "steps=60"],
+    "gas": ["generate.count=12", "steps=40"],
 }
 JS_MISTAKES = ("one-missing", "impulse-doubled", "restitution-sign", "tangent-reversed", "drag-per-step")
 # the JavaScript engine's doubled impulse with no guard blows billiards up within a few steps,

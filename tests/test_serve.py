@@ -54,6 +54,7 @@ def ask(srv, path: str, data: bytes | None = None, headers: dict | None = None, 
         return err.code, json.loads(err.read())
 
 
+@pytest.mark.slow
 def test_a_run_sent_to_the_server_is_checked_and_its_verdict_answered(server, tmp_path):
     status, ping = ask(server, "/ping")
     assert status == 200 and "physdbg" in ping
@@ -109,6 +110,7 @@ def test_hostile_requests_get_a_clear_error_and_the_server_goes_on(server):
     assert status == 200 and answer["verdict"] == "SAME"  # still serving
 
 
+@pytest.mark.slow
 def test_check_run_serve_from_the_command_line_answers_and_stops_on_sigterm(tmp_path):
     process = subprocess.Popen([sys.executable, "-m", "physdbg", "check-run", "--serve", "--port", "0", "--keep",
                                 str(tmp_path / "kept")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -162,6 +164,7 @@ def _dom(page: Path, profile: Path) -> str:
     return done.stdout
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(CHROMIUM is None, reason="Chromium is not installed (.ci/run installs Debian's chromium): "
                                              "the page's verdict panel is not read")
 def test_the_verdict_appears_in_the_students_page_in_headless_chromium(server, tmp_path):
