@@ -249,3 +249,18 @@ def test_what_a_page_may_send_is_bounded_whoever_sends_it(server):
     finally:
         serve.READ_TIMEOUT = serve_timeout
     assert ask(server, "/ping")[0] == 200  # still serving
+
+
+def test_the_server_keeps_runs_apart_from_another_session_s(tmp_path):
+    kept = tmp_path / "kept"
+    (kept / "0007-bounce").mkdir(parents=True)
+    with pytest.raises(Exception, match="holds runs of another session; --force adds to it"):
+        CheckServer(kept, port=0)
+    srv = CheckServer(kept, port=0, force=True)
+    try:
+        job = srv.submit("bounce.jsonl", b"")
+        assert job.number == 8  # after the runs kept there: none is written over
+    finally:
+        srv.http.server_close()
+    refused = CliRunner().invoke(app, ["check-run", "--serve", "--port", "0", "--keep", str(kept)])
+    assert refused.exit_code == 2 and "--force adds to it" in refused.output and "Traceback" not in refused.output
