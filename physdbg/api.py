@@ -1,5 +1,10 @@
 """What the CLI calls: run a scene and summarise it.
 
+Why one module of this size: it is the library's one public surface — each command's one
+function (run, record, replay, diff, explain, check, check-run, import, record-peer, scenes
+show, the benches), each a short composition of the layers below it, so that a user reads
+one page of entry points. The work itself lives in engine/, record/ and analysis/.
+
 >>> from physdbg.api import run
 >>> summary = run("bounce", ["duration=1.0"])
 >>> summary.steps, summary.contacts

@@ -4,6 +4,10 @@ Each command parses its options, calls one library function and prints. Every
 user-facing failure is a PhysdbgError, printed as ``error: ...`` with exit code 2 —
 never a traceback. Heavy modules (numpy, numba) are imported inside the commands so
 ``physdbg --help`` stays quick.
+
+Why one module of this size: typer reads each command's options from its signature, so
+the options and their --help text are most of it (one command, one function, in the order
+of ``physdbg --help``); what a command does is a call into api.
 """
 
 from __future__ import annotations

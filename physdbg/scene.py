@@ -8,6 +8,11 @@ value is a TOML value (bare words are taken as strings).
 
 Every mistake raises :class:`~physdbg.errors.SceneError` naming the file, the field and
 what is allowed.
+
+Why one module of this size: it is the scene format, read and written — its field table,
+the rules each field is read by, the cross-field checks, the generators that fill a box,
+and ``scene_table`` that writes a scene back as a table of the same fields — kept in one
+place so that a field is added, documented and checked once.
 """
 
 from __future__ import annotations

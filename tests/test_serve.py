@@ -132,6 +132,9 @@ def test_check_run_serve_from_the_command_line_answers_and_stops_on_sigterm(tmp_
 def test_check_run_serve_refuses_a_run_and_check_run_asks_for_one(tmp_path):
     both = CliRunner().invoke(app, ["check-run", str(tmp_path / "x.jsonl"), "--serve"])
     assert both.exit_code == 2 and "without --serve" in both.output
+    for option in (["--port", "9"], ["--max-bytes", "5"]):
+        alone = CliRunner().invoke(app, ["check-run", str(tmp_path / "x.jsonl"), *option])
+        assert alone.exit_code == 2 and "go with --serve" in alone.output, option
     none = CliRunner().invoke(app, ["check-run"])
     assert none.exit_code == 2 and "--serve" in none.output and "Traceback" not in none.output
 

@@ -32,6 +32,14 @@ kicks of the same bodies (in the step or the next), and judged:
 
 Every judgement is made from positions and velocities alone, so it works for any engine
 whose run can be written in the foreign-run format (docs/foreign-runs.md).
+
+Why one module of this size: the judgements are methods of one ``_Comparison`` because
+they share its state — both runs' arrays, the kicks and which of them a contact already
+took, the local steps taken from the run's state — and they form a decision tree (a
+missed contact, then tunnelling or a late bounce, then energy). The parts that stand on
+their own are apart already (the impulse mistakes: restitution_mistakes.py; the growth fit:
+align.py; the words for tunnelling: tunnel_words.py). Splitting the rest means turning that
+shared state into a record the judges take one at a time, which is a change of its own.
 """
 
 from __future__ import annotations
