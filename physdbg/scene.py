@@ -111,8 +111,8 @@ TOP_FIELDS = {
                     "same candidates and states either way"),
     "event_loop": ("how contacts are found between steps: step (the default: each step boxes, pairs and predicts "
                    "every path again) or calendar (predictions kept across steps, each sphere's neighbours in a shell "
-                   "around it; for spheres whose paths are straight between contacts: no gravity, no drag, no "
-                   "meshes, no sleeping; elsewhere the world steps as with step, and the run summary says why)"),
+                   "around it; under gravity and drag with the exact integrator, not with euler, meshes, sleeping "
+                   "or a held contact; elsewhere the world steps as with step, and the run summary says why)"),
     "max_particle_steps": "refuse a run of more particle-steps (particles × steps) than this (default 1e10)",
     "particles": "array of [[particles]] tables",
     "planes": "array of [[planes]] tables",

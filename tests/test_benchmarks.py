@@ -380,3 +380,20 @@ def test_gas_benchmark_runs_either_event_loop_in_a_periodic_box(monkeypatch, cap
     out = capsys.readouterr().out.splitlines()
     assert out[0].startswith("gas N=100, packing 0.3, periodic box, event_loop = calendar, 5 steps of 0.01 s")
     assert "pair collisions" in out[1] and "resolve" in out[2]
+
+
+def test_calendar_scenes_benchmark_says_where_the_calendar_served_each_scene(monkeypatch, capsys):
+    """benchmarks/calendar_scenes.py (small): a row per scene with both loops' times, the
+    calendar's measured phases and the run summary's words on where it served."""
+    from benchmarks import calendar_scenes
+
+    monkeypatch.setattr("sys.argv", ["calendar_scenes.py", "--longest", "0.1", "--scene", "cradle", "--scene",
+                                     "paddle"])
+    calendar_scenes.main()
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("scene") and len(out) == 3
+    cradle, paddle = out[1].split(), out[2].split()
+    assert cradle[0] == "cradle" and cradle[1] == "6" and out[1].endswith("calendar in 6 of 6 steps")
+    shares = [float(p.rstrip("%,")) for p in cradle[4:9]]
+    assert shares[3] > 0 and abs(sum(shares) - 100) <= 3  # measured: resolve takes time, the shares make the whole
+    assert paddle[0] == "paddle" and "calendar in 0 of 6 steps" in out[2] and "mesh partners" in out[2]

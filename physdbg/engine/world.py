@@ -55,7 +55,8 @@ from . import calendar
 from .broadphase import choose_broad_phase, make_broad_phase
 from .broadphase.boxes import boxes_meet
 from .broadphase.periodic import PeriodicBroadPhase
-from .colliders import KINDS, PARTNER_IS_SPHERE, deepest_overlap, geometry_of, mesh_search, narrow_candidates
+from .colliders import (CALENDAR_TAKES, KIND_NAMES, KINDS, PARTNER_IS_SPHERE, deepest_overlap, geometry_of, mesh_search,
+                        narrow_candidates, partner_count)
 from .colliders.mesh import place, reachable_together, walk_tests
 from .jit import records
 from .kernel_args import LoopBudgets, LoopCandidates, LoopMethod, LoopParticles
@@ -81,7 +82,7 @@ from .resolve import (
 )
 from .resting import (HELD, PINNED, PINNED_CONTACTS, RAPID_RULES, STEP_RELEASED, STEP_WORK, grow_held, held_room,
                       new_held, renumber_held)
-from .resting.store import STOP
+from .resting.store import STOP, forget_held
 from ..errors import PinnedSphere, StepStopped
 from .sleep import SUPPORT_GAP, Sleepers, release_static, split_sleeping
 from .space_order import RENUMBER_EVERY, Numbering, chosen_order, inverse_permutation, morton_order
@@ -134,6 +135,8 @@ RECHOOSE_SEARCH_EVERY = 32
 # no neighbours: they are rounding.
 SOLVE_TOLERANCE = 1e-12
 
+# why a step the calendar began was taken by the time-ordered loop (World.calendar_unfit)
+HELD_IN_STEP = "a contact came to rest or was met again at once (the resolver held it): it has no held contacts"
 # the broad phase a calendar step reports (BroadPhaseInfo): its lists stand in for one
 CALENDAR_REASON = ("event_loop = calendar: each sphere's neighbours within its shell, listed again only when it "
                    "leaves it (engine/calendar.py)")
@@ -279,12 +282,18 @@ class World:
         """
         self._stop_if_asked()
         dt = _checked_step_length(dt)
+        ctx = None
         if self.settings.event_loop == "calendar":
             self.calendar_unfit = self._calendar_unfit()
             if self.calendar_unfit is None:
-                return self._calendar_step(dt)
+                ctx = self._begin(dt, renumber=False)
+                end = self._calendar_step(ctx)
+                if end is not None:
+                    return end
+                self.calendar_unfit = HELD_IN_STEP  # the step is taken again below, from its start
             self._calendar = None  # the time-ordered loop changes the paths: the calendar is out of date
-        ctx = self._begin(dt)
+        if ctx is None:
+            ctx = self._begin(dt)
         for name in STEP_PHASES:  # each phase is the method of its name
             self._timed(ctx, name, getattr(self, f"_{name}"))
             self._stop_if_asked()
@@ -633,14 +642,14 @@ class World:
         s, st = self.settings, self._st
         if s.ordering != "time" or s.detection != "swept":
             return "it resolves contacts in time order from swept tests (ordering = time, detection = swept)"
-        if self._drag != 1.0:
-            return "drag bends every path between contacts"
-        if np.any(self._free_accel):
-            return "gravity bends the paths of movable spheres between contacts"
         if not self._anchor_is_flow:
-            return f"the {s.integrator} integrator's paths are not straight between contacts"
-        if len(self.walls.meshes):
-            return "it does not take meshes"
+            return (f"the {s.integrator} integrator's path starts again at every step's end (re-anchoring changes it"
+                    f"{' under drag' if self._drag != 1.0 else ''}: engine/motion.py, FLOW)")
+        if self._kick_first and (self._drag != 1.0 or np.any(self._free_accel)):
+            return f"the {s.integrator} integrator kicks every velocity at each step's start"
+        for kind in range(KINDS):
+            if not CALENDAR_TAKES[kind] and (PARTNER_IS_SPHERE[kind] or partner_count(kind, self._geometry)):
+                return f"it does not take {KIND_NAMES[kind]} partners (colliders.CALENDAR_TAKES)"
         if self.sleepers is not None:
             return "it does not let spheres sleep (sleep_speed > 0)"
         if calendar.periodic_axes_too_short(self._period, st.radius):
@@ -666,27 +675,33 @@ class World:
                                 RAPID_RULES.index(s.rapid_contact_rule), self._anchor_is_flow,
                                 not self._kick_first, vtol, self._atol))
 
-    def _calendar_step(self, dt: float) -> StepEnd:
+    def _calendar_step(self, ctx: StepContext) -> StepEnd | None:
         """One step taken from the event calendar (calendar.py): its events up to the
         step's end, then every sphere read from its anchor there. The calendar is made
-        afresh when there is none, or when the state was written since the last step."""
-        ctx = self._begin(dt, renumber=False)
-        st, buf = self._st, self._buf
-        for name in ("forces", "broad_phase", "narrow_phase"):
-            ctx.timings[name] = 0.0
+        afresh when there is none, or when the state was written since the last step.
+        None when the resolver would hold a contact, which the calendar cannot: nothing
+        of the world has changed then (the held store, the contact times and the buffers
+        are as the step began), and the caller takes the step with the time-ordered loop."""
+        st, buf, dt = self._st, self._buf, ctx.dt
         started = perf_counter()
         buf.reset(keep_misses=False)
+        last_contact = self._last_contact.copy()  # (the step may be taken again)
         cal = self._calendar
-        if cal is None or not (np.array_equal(cal.last_x, st.positions) and np.array_equal(cal.last_v, st.velocities)):
-            cal = self._calendar = calendar.Calendar(st.positions, st.velocities, st.radius, self._period,
-                                                     self._period_origin, self.time)
-            fresh = True
-        else:
-            fresh = False
+        fresh = cal is None or not (np.array_equal(cal.last_x, st.positions)
+                                    and np.array_equal(cal.last_v, st.velocities))
+        if fresh:
+            cal = self._calendar = calendar.Calendar(st.positions, st.velocities, self._free_accel, st.radius,
+                                                     self._period, self._period_origin, self.time)
+        ctx.path_accel = cal.a
+        ctx.timings["forces"] = perf_counter() - started  # (the paths' accelerations: no contact is held)
         particles = cal.paths(st.radius, self._inverse_mass, st.restitution, self._last_contact)
         method = self._loop_method(cal.epoch, dt, ctx.vtol)
+        started = perf_counter()
         if fresh:
             cal.build(particles, method, self._geometry, buf.counters)
+        ctx.timings["broad_phase"] = perf_counter() - started  # the grid, the lists and the first predictions
+        ctx.timings["narrow_phase"] = 0.0  # (no step-wide narrow phase: each event predicts its own)
+        started = perf_counter()
         until = cal.now + dt
         cap = self.contact_cap
         while True:
@@ -702,7 +717,10 @@ class World:
         if status == calendar.STOPPED:
             raise StepStopped(self.step_index + 1)
         if status == calendar.HELD_CONTACT:
-            raise RuntimeError("the event calendar held a contact, which it cannot: a bug (calendar.py)")
+            self._calendar = None
+            np.copyto(self._last_contact, last_contact)
+            forget_held(self.held)
+            return None
         if status == calendar.CAPPED and not ctx.warnings:
             ctx.warn("max_contacts_per_step", _budget_message("max_contacts_per_step", cap))
         rows = buf.contacts[:int(buf.counters[CONTACTS])]
@@ -713,7 +731,6 @@ class World:
         cal.now = until
         ctx.pairs = cal.pairs()
         ctx.sigma = np.zeros(st.count)
-        ctx.path_accel = cal.a
         if ctx.observer is not None:
             ctx.observer.on_event(BroadPhaseInfo(ctx.step, "calendar", CALENDAR_REASON, {"pairs": len(ctx.pairs),
                                                                                         "scanned": False}, None))

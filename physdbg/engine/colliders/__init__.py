@@ -34,10 +34,14 @@ __all__ = ["KIND_NAMES", "KINDS", "KIND_MODULES", "PARTNER_IS_SPHERE", "partner_
            "check_kind_modules", "time_of_impact", "contact_normal", "contact_feature", "partner_surface",
            "partner_normal_motion", "partner_moves", "surface_gap", "contact_gap", "partner_restitution",
            "partners_of", "max_overlap", "deepest_overlap", "narrow_candidates", "every_candidate", "most_partners", "partners_bound",
-           "searches_meshes", "mesh_search"]
+           "searches_meshes", "mesh_search", "CALENDAR_TAKES", "partner_count"]
 
 # each kind's module, in the order of the kinds' codes: its geometry group is ``module.GEOMETRY``
 KIND_MODULES = (sphere, plane, mesh)
+# whether the event calendar (engine/calendar.py) predicts each kind's contacts, from each
+# kind module's CALENDAR: the calendar tests every kind it takes through this switch, and
+# World refuses the calendar for a scene with partners of a kind it does not take
+CALENDAR_TAKES = tuple(bool(module.CALENDAR) for module in KIND_MODULES)
 # what every function of the switch raises for a kind it has no branch for (a kind added to
 # the table but not to the switch fails at its first use, never runs another kind's code)
 UNKNOWN_KIND = ("engine/colliders: a collider kind with no branch in this function of the switch (docs/colliders.md, "
@@ -217,6 +221,20 @@ def mesh_search(lo: np.ndarray, hi: np.ndarray, geometry: tuple) -> tuple:
     parent) (V,) int64 each."""
     return mesh.search_visits(np.ascontiguousarray(lo, dtype=np.float64), np.ascontiguousarray(hi, dtype=np.float64),
                               geometry[KIND_MESH])
+
+
+@njit(cache=True, inline="always")
+def partner_count(kind, geometry) -> int:
+    """How many immovable partners of ``kind`` the scene has (every wall, every triangle):
+    each is a candidate of every sphere where no broad phase stands between them (the
+    event calendar's walls). A kind whose partners are spheres has none here."""
+    if kind == KIND_PAIR:
+        return 0
+    if kind == KIND_WALL:
+        return plane.count(geometry[KIND_WALL])
+    if kind == KIND_MESH:
+        return mesh.count(geometry[KIND_MESH])
+    raise ValueError(UNKNOWN_KIND)
 
 
 @njit(cache=True, inline="always")

@@ -181,6 +181,10 @@ def frame_box(k, l0, l1, l2, h0, h1, h2, meshes):
 
 
 GEOMETRY = MeshGeometry  # this kind's group (colliders.geometry_of)
+# the event calendar (engine/calendar.py) does not take triangles yet: their candidates
+# come from a walk of each mesh's tree per path, which the calendar's predictions do not
+# make (colliders.CALENDAR_TAKES; World refuses the calendar for a scene with meshes)
+CALENDAR = False
 
 # how a step's spheres are searched against the meshes' trees (Settings.mesh_search)
 MESH_SEARCH_NAMES = ("auto", "walk", "together")

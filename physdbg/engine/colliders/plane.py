@@ -44,6 +44,9 @@ class PlaneGeometry(NamedTuple):
 
 
 GEOMETRY = PlaneGeometry  # this kind's group (colliders.geometry_of)
+# the event calendar (engine/calendar.py) predicts this kind's contacts from the anchors
+# (colliders.CALENDAR_TAKES): every wall is a partner of every sphere
+CALENDAR = True
 
 
 @njit(cache=True, inline="always")

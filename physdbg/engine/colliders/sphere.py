@@ -35,6 +35,9 @@ class SphereGeometry(NamedTuple):
 
 
 GEOMETRY = SphereGeometry  # this kind's group (colliders.geometry_of)
+# the event calendar (engine/calendar.py) predicts this kind's contacts from the anchors
+# (colliders.CALENDAR_TAKES): a pair is a neighbour on both spheres' lists
+CALENDAR = True
 
 
 @njit(cache=True, inline="always")
