@@ -20,9 +20,9 @@ world whose paths change only at contacts:
 * each sphere has **one event** in a heap of the N minima: the earliest of leaving its
   shell, a contact with a neighbour and a contact with an immovable partner (a wall),
   each the engine's swept test through the collider switch (colliders.time_of_impact).
-  Under one gravity two movable spheres' relative path is still a straight line (the
-  acceleration cancels in the pair test); a wall's is the parabola the time-ordered loop
-  tests. A sphere's contact counter (``stamp``) changes with its path; a pair event whose
+  Two spheres that fall alike (one gravity, the same gravity scale) move on a straight
+  line relative to each other (the acceleration cancels in the pair test); a wall's path
+  is the parabola the time-ordered loop tests, as is a pair's that falls differently. A sphere's contact counter (``stamp``) changes with its path; a pair event whose
   partner's counter moved since is stale and is predicted again.
 
 Contacts are resolved by the engine's own resolver (resolve.judge_contact, and
@@ -88,9 +88,10 @@ CAPPED = 3  # the step's contact budget is spent (max_contacts_per_step)
 STOPPED = 4  # World.request_stop
 HELD_CONTACT = 5  # the resolver would hold a contact: this loop has no held contacts (World takes the step again)
 
-# the rows of ``Calendar.ints``' skip table: a contact judged not to approach is not
-# predicted again until one of its spheres changes (as the time-ordered loop, which re-predicts
-# neither sphere after a skipped contact on a flow path)
+# the rows of the skip table: a contact judged not to approach is not predicted again
+# until one of its spheres changes or the step ends (as the time-ordered loop, which
+# re-predicts neither sphere after a skipped contact, and predicts every pair again at its
+# next step's start: Calendar.expire_skips)
 SKIP_KIND, SKIP_OTHER, SKIP_STAMP_A, SKIP_STAMP_B = range(4)
 
 
@@ -181,6 +182,14 @@ class Calendar:
         """The grid, every list and every sphere's first event (the swept tests count in counters)."""
         while not _build(self._lists(), self._events(), particles, method, geometry, counters, self._shell(method)):
             self.grow_lists()
+
+    def expire_skips(self, particles: tuple, method: tuple, geometry: tuple, counters: np.ndarray) -> None:
+        """At a step's start (``now``): forget every contact judged not to approach, and
+        predict its spheres again. The time-ordered loop takes such a skip for the rest of
+        its step only; on a curved path (a wall under gravity, two spheres that fall
+        differently) the contact can come back without either sphere meeting anything else."""
+        _expire_skips(self._lists(), self._events(), particles, method, geometry, counters, self._shell(method),
+                      self.now)
 
     def run(self, until: float, particles: tuple, method: tuple, geometry: tuple, held, contacts: np.ndarray,
             counters: np.ndarray, changed: np.ndarray, cap: int, most_events: int, work_budget: int) -> int:
@@ -630,6 +639,22 @@ def _build(lists, events, particles, method, geometry, counters, shell) -> bool:
         where[i] = i
         _heap_fix(heap, where, when, i, i + 1)
     return True
+
+
+@kernel
+def _expire_skips(lists, events, particles, method, geometry, counters, shell, now) -> None:
+    """Calendar.expire_skips: every sphere with a skip still current forgets its skips
+    and is predicted again from ``now``."""
+    stamp, skip = events[4], events[5]
+    n = stamp.shape[0]
+    for i in range(n):
+        current = False
+        for s in range(SKIPS):
+            if skip[i, s, SKIP_KIND] != NONE and _skipped(skip, stamp, i, skip[i, s, SKIP_KIND], skip[i, s, SKIP_OTHER]):
+                current = True
+            skip[i, s, SKIP_KIND] = NONE
+        if current:
+            _predict(i, now, lists, events, particles, method, geometry, counters, shell, n)
 
 
 @kernel

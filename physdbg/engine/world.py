@@ -287,15 +287,24 @@ class World:
             self.calendar_unfit = self._calendar_unfit()
             if self.calendar_unfit is None:
                 ctx = self._begin(dt, renumber=False)
+                started = perf_counter()
                 end = self._calendar_step(ctx)
                 if end is not None:
                     return end
-                self.calendar_unfit = HELD_IN_STEP  # the step is taken again below, from its start
+                # the step is taken again below, from its start, as if the calendar were not
+                # there (renumbered where due); the attempt's time counts in its resolve phase
+                attempt = perf_counter() - started
+                self.calendar_unfit = HELD_IN_STEP
+                if self._renumber_due():
+                    self._renumber()
             self._calendar = None  # the time-ordered loop changes the paths: the calendar is out of date
         if ctx is None:
             ctx = self._begin(dt)
+            attempt = 0.0
         for name in STEP_PHASES:  # each phase is the method of its name
             self._timed(ctx, name, getattr(self, f"_{name}"))
+            if name == "resolve":
+                ctx.timings[name] += attempt
             self._stop_if_asked()
             if name == "broad_phase" and ctx.observer is not None:  # reported outside its timing
                 ctx.observer.on_event(self._broad_phase_event(ctx))
@@ -324,11 +333,15 @@ class World:
         if self.numbering is not None:  # World.state is the world: what was written to it counts
             self.numbering.inward(self.state.positions, out=self._st.positions)
             self.numbering.inward(self.state.velocities, out=self._st.velocities)
-            if renumber and self.step_index and self.step_index % RENUMBER_EVERY == 0:
+            if renumber and self._renumber_due():
                 self._renumber()
         if ctx.observer is not None:
             ctx.observer.on_event(StepBegin(ctx.step, ctx.run_time, dt))
         return ctx
+
+    def _renumber_due(self) -> bool:
+        """Whether this step renumbers the spheres (space_order.py: every RENUMBER_EVERY steps)."""
+        return self.numbering is not None and bool(self.step_index) and self.step_index % RENUMBER_EVERY == 0
 
     def _place_meshes(self, time: float, span: float) -> None:
         """Kinematic meshes where they are at run time ``time``, and their frames for the
@@ -637,8 +650,9 @@ class World:
     # ------------------------------------------------------------------ the event calendar
     def _calendar_unfit_by_scene(self) -> str | None:
         """Why the scene and settings keep the calendar (calendar.py) out of every step, or
-        None: it needs paths that are straight between contacts and the swept, time-ordered
-        method; the rest (held contacts, the observer) is judged each step (_calendar_unfit)."""
+        None: it needs paths whose anchor is their flow (motion.FLOW), the swept,
+        time-ordered method and partners of the kinds it takes; the rest (held contacts,
+        the observer) is judged each step (_calendar_unfit)."""
         s, st = self.settings, self._st
         if s.ordering != "time" or s.detection != "swept":
             return "it resolves contacts in time order from swept tests (ordering = time, detection = swept)"
@@ -699,7 +713,10 @@ class World:
         started = perf_counter()
         if fresh:
             cal.build(particles, method, self._geometry, buf.counters)
-        ctx.timings["broad_phase"] = perf_counter() - started  # the grid, the lists and the first predictions
+        else:
+            cal.expire_skips(particles, method, self._geometry, buf.counters)
+        # the grid, the lists and the first predictions; or the skips of the last step expired
+        ctx.timings["broad_phase"] = perf_counter() - started
         ctx.timings["narrow_phase"] = 0.0  # (no step-wide narrow phase: each event predicts its own)
         started = perf_counter()
         until = cal.now + dt
