@@ -68,6 +68,13 @@ BUDGETS = {
 }
 
 
+def budget_message(budget: str, value: int) -> str:
+    """What a warning says when a budget stopped a step: which, what happened, what to change."""
+    counts, consequence = BUDGETS[budget]
+    return (f"{budget} reached ({value} {counts}); {consequence}; raise it with --set {budget}=N "
+            f"if the scene really needs more")
+
+
 # Settings.event_loop's choices
 EVENT_LOOP_NAMES = ("step", "calendar")
 # settings a scene may give as "auto": the advisor (physdbg.advisor.decide) replaces each by

@@ -52,11 +52,11 @@ from ..events import (
     partner_words,
 )
 from . import calendar
+from .calendar_step import HELD_IN_STEP, CalendarSteps
 from .broadphase import choose_broad_phase, make_broad_phase
 from .broadphase.boxes import boxes_meet
 from .broadphase.periodic import PeriodicBroadPhase
-from .colliders import (CALENDAR_TAKES, KIND_NAMES, KINDS, PARTNER_IS_SPHERE, deepest_overlap, geometry_of, mesh_search,
-                        narrow_candidates, partner_count)
+from .colliders import KINDS, PARTNER_IS_SPHERE, deepest_overlap, geometry_of, mesh_search, narrow_candidates
 from .colliders.mesh import place, reachable_together, walk_tests
 from .jit import records
 from .kernel_args import LoopBudgets, LoopCandidates, LoopMethod, LoopParticles
@@ -82,12 +82,12 @@ from .resolve import (
 )
 from .resting import (HELD, PINNED, PINNED_CONTACTS, RAPID_RULES, STEP_RELEASED, STEP_WORK, grow_held, held_room,
                       new_held, renumber_held)
-from .resting.store import STOP, forget_held
+from .resting.store import STOP
 from ..errors import PinnedSphere, StepStopped
 from .sleep import SUPPORT_GAP, Sleepers, release_static, split_sleeping
 from .space_order import RENUMBER_EVERY, Numbering, chosen_order, inverse_permutation, morton_order
-from .state import (BUDGETS, STATE_FIELDS, NonFiniteState, Settings, State, Walls, energies, first_non_finite,
-                    state_hash)
+from .state import (STATE_FIELDS, NonFiniteState, Settings, State, Walls, energies, first_non_finite,
+                    budget_message, state_hash)
 from .step_context import StepContext, wants_mesh_search, wants_swept_tests
 from .timeline import (
     CAPPED,
@@ -135,14 +135,7 @@ RECHOOSE_SEARCH_EVERY = 32
 # no neighbours: they are rounding.
 SOLVE_TOLERANCE = 1e-12
 
-# why a step the calendar began was taken by the time-ordered loop (World.calendar_unfit)
-HELD_IN_STEP = "a contact came to rest or was met again at once (the resolver held it): it has no held contacts"
-# the broad phase a calendar step reports (BroadPhaseInfo): its lists stand in for one
-CALENDAR_REASON = ("event_loop = calendar: each sphere's neighbours within its shell, listed again only when it "
-                   "leaves it (engine/calendar.py)")
-
-
-class World:
+class World(CalendarSteps):
     """Particles, walls and settings, stepped in place.
 
     state: the particles (its positions and velocities are updated in place by ``step``,
@@ -391,7 +384,7 @@ class World:
                 ctx.warn("pinned", self._pinned_words())
             else:
                 ctx.warn("max_resting_work_per_step",
-                         _budget_message("max_resting_work_per_step", self.resting_budget))
+                         budget_message("max_resting_work_per_step", self.resting_budget))
 
     def _broad_phase(self, ctx: StepContext) -> None:
         """Each path's swept box over the step, grown to its reach -> candidate pairs (or,
@@ -414,7 +407,7 @@ class World:
         else:
             pairs = self.broad_phase.pairs(ctx.lo, ctx.hi, s.max_pairs_per_step)
         if len(pairs) > s.max_pairs_per_step:
-            ctx.warn("max_pairs_per_step", _budget_message("max_pairs_per_step", s.max_pairs_per_step))
+            ctx.warn("max_pairs_per_step", budget_message("max_pairs_per_step", s.max_pairs_per_step))
             pairs = np.empty((0, 2), dtype=np.int64)
         if self.sleepers is not None and len(pairs):  # two sleeping spheres cannot meet
             pairs, ctx.sleeping_pairs = split_sleeping(np.ascontiguousarray(pairs, dtype=np.int64),
@@ -514,7 +507,7 @@ class World:
         elif budget == "max_memory" and not ctx.warned(budget):
             ctx.warn(budget, self._memory.message(ctx))
         elif budget is not None and not ctx.warned(budget):
-            ctx.warn(budget, _budget_message(budget, s.budget(budget, self._st.count)))
+            ctx.warn(budget, budget_message(budget, s.budget(budget, self._st.count)))
 
     def _finish(self, ctx: StepContext) -> None:
         """Every sphere to the end of the step; the overlap audit, energies and state hash."""
@@ -647,39 +640,6 @@ class World:
         self.broad_phase.renumbered()
         self.numbering = Numbering(self.numbering.inner_to_scene[old_of_new])
 
-    # ------------------------------------------------------------------ the event calendar
-    def _calendar_unfit_by_scene(self) -> str | None:
-        """Why the scene and settings keep the calendar (calendar.py) out of every step, or
-        None: it needs paths whose anchor is their flow (motion.FLOW), the swept,
-        time-ordered method and partners of the kinds it takes; the rest (held contacts,
-        the observer) is judged each step (_calendar_unfit)."""
-        s, st = self.settings, self._st
-        if s.ordering != "time" or s.detection != "swept":
-            return "it resolves contacts in time order from swept tests (ordering = time, detection = swept)"
-        if not self._anchor_is_flow:
-            return (f"the {s.integrator} integrator's path starts again at every step's end (re-anchoring changes it"
-                    f"{' under drag' if self._drag != 1.0 else ''}: engine/motion.py, FLOW)")
-        if self._kick_first and (self._drag != 1.0 or np.any(self._free_accel)):
-            return f"the {s.integrator} integrator kicks every velocity at each step's start"
-        for kind in range(KINDS):
-            if not CALENDAR_TAKES[kind] and (PARTNER_IS_SPHERE[kind] or partner_count(kind, self._geometry)):
-                return f"it does not take {KIND_NAMES[kind]} partners (colliders.CALENDAR_TAKES)"
-        if self.sleepers is not None:
-            return "it does not let spheres sleep (sleep_speed > 0)"
-        if calendar.periodic_axes_too_short(self._period, st.radius):
-            return "a periodic axis is shorter than three neighbour lists' reach"
-        return None
-
-    def _calendar_unfit(self) -> str | None:
-        """Why this step cannot use the calendar (None: it can)."""
-        if self._calendar_settled_unfit is not None:
-            return self._calendar_settled_unfit
-        if self.held.count[HELD]:
-            return "a contact is held (resting or rapid): it has no held contacts"
-        if wants_swept_tests(self.observer):
-            return "the observer reads every step's swept tests, which it does not run"
-        return None
-
     def _loop_method(self, run_time: float, dt: float, vtol: float) -> tuple:
         """kernel_args.LoopMethod of a step (or of the calendar: run_time its epoch), as a plain tuple."""
         s = self.settings
@@ -688,77 +648,6 @@ class World:
                                 RESTITUTION_RULES.index(s.restitution_rule), s.rapid_contact_time,
                                 RAPID_RULES.index(s.rapid_contact_rule), self._anchor_is_flow,
                                 not self._kick_first, vtol, self._atol))
-
-    def _calendar_step(self, ctx: StepContext) -> StepEnd | None:
-        """One step taken from the event calendar (calendar.py): its events up to the
-        step's end, then every sphere read from its anchor there. The calendar is made
-        afresh when there is none, or when the state was written since the last step.
-        None when the resolver would hold a contact, which the calendar cannot: nothing
-        of the world has changed then (the held store, the contact times and the buffers
-        are as the step began), and the caller takes the step with the time-ordered loop."""
-        st, buf, dt = self._st, self._buf, ctx.dt
-        started = perf_counter()
-        buf.reset(keep_misses=False)
-        last_contact = self._last_contact.copy()  # (the step may be taken again)
-        cal = self._calendar
-        fresh = cal is None or not (np.array_equal(cal.last_x, st.positions)
-                                    and np.array_equal(cal.last_v, st.velocities))
-        if fresh:
-            cal = self._calendar = calendar.Calendar(st.positions, st.velocities, self._free_accel, st.radius,
-                                                     self._period, self._period_origin, self.time)
-        ctx.path_accel = cal.a
-        ctx.timings["forces"] = perf_counter() - started  # (the paths' accelerations: no contact is held)
-        particles = cal.paths(st.radius, self._inverse_mass, st.restitution, self._last_contact)
-        method = self._loop_method(cal.epoch, dt, ctx.vtol)
-        started = perf_counter()
-        if fresh:
-            cal.build(particles, method, self._geometry, buf.counters)
-        else:
-            cal.expire_skips(particles, method, self._geometry, buf.counters)
-        # the grid, the lists and the first predictions; or the skips of the last step expired
-        ctx.timings["broad_phase"] = perf_counter() - started
-        ctx.timings["narrow_phase"] = 0.0  # (no step-wide narrow phase: each event predicts its own)
-        started = perf_counter()
-        until = cal.now + dt
-        cap = self.contact_cap
-        while True:
-            status = cal.run(until, particles, method, self._geometry, self.held, buf.contacts, buf.counters,
-                             buf.changed, cap, calendar.MOST_EVENTS_PER_CONTACT * (cap + st.count), self.resting_budget)
-            if status == calendar.GROW_CONTACTS:
-                if not self._ensure(ctx, 0, 0, calendar.CONTACT_ROOM):
-                    ctx.warn("max_memory", self._memory.message(ctx))
-                    status = calendar.CAPPED  # the step ends as it stands
-                    break
-                continue
-            break
-        if status == calendar.STOPPED:
-            raise StepStopped(self.step_index + 1)
-        if status == calendar.HELD_CONTACT:
-            self._calendar = None
-            np.copyto(self._last_contact, last_contact)
-            forget_held(self.held)
-            return None
-        if status == calendar.CAPPED and not ctx.warnings:
-            ctx.warn("max_contacts_per_step", _budget_message("max_contacts_per_step", cap))
-        rows = buf.contacts[:int(buf.counters[CONTACTS])]
-        rows["time_in_step"] -= cal.now  # the resolver's times are the calendar's (since its epoch)
-        ctx.timings["resolve"] = perf_counter() - started
-        started = perf_counter()
-        cal.positions_at(until, self._integrator, self._drag, self._k, st.positions, st.velocities)
-        cal.now = until
-        ctx.pairs = cal.pairs()
-        ctx.sigma = np.zeros(st.count)
-        if ctx.observer is not None:
-            ctx.observer.on_event(BroadPhaseInfo(ctx.step, "calendar", CALENDAR_REASON, {"pairs": len(ctx.pairs),
-                                                                                        "scanned": False}, None))
-        self._close(ctx)
-        if status == calendar.CAPPED:
-            self._calendar = None  # what it did not take is past: made afresh from the state next step
-        else:
-            cal.last_x, cal.last_v = st.positions.copy(), st.velocities.copy()  # (the world's numbering)
-        self.calendar_steps += 1
-        ctx.timings["finish"] = perf_counter() - started
-        return self._end(ctx)
 
     # ------------------------------------------------------------------ candidates
     @staticmethod
@@ -1065,10 +954,3 @@ def _checked_step_length(dt) -> float:
         raise ValueError(f"World.step needs dt, a positive finite number of seconds; got {dt!r} (a scene with "
                          f'dt = "real" gives each step\'s length through Scene.step_lengths())')
     return float(dt)
-
-
-def _budget_message(budget: str, value: int) -> str:
-    """What a warning says when a budget stopped a step: which, what happened, what to change."""
-    counts, consequence = BUDGETS[budget]
-    return (f"{budget} reached ({value} {counts}); {consequence}; raise it with --set {budget}=N "
-            f"if the scene really needs more")

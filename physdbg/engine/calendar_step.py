@@ -1,0 +1,139 @@
+"""A world's step taken from the event calendar (calendar.py): whether the calendar can
+serve a step, and the step it takes.
+
+World inherits these methods (``World.step`` asks ``_calendar_unfit`` each step of a
+world with ``event_loop = "calendar"``, and takes the step here where it is None); they
+stand apart from world.py as the calendar stands apart from the time-ordered loop
+(timeline.py): the step the calendar takes is its own pipeline over the same step
+context, sharing the world's begin, close and end of a step.
+"""
+
+from __future__ import annotations
+
+from time import perf_counter
+
+import numpy as np
+
+from ..errors import StepStopped
+from ..events import BroadPhaseInfo, StepEnd
+from . import calendar
+from .colliders import CALENDAR_TAKES, KIND_NAMES, KINDS, PARTNER_IS_SPHERE, partner_count
+from .resting import HELD
+from .resting.store import forget_held
+from .state import budget_message
+from .step_context import StepContext, wants_swept_tests
+from .timeline import CONTACTS
+
+# why a step the calendar began was taken by the time-ordered loop (World.calendar_unfit)
+HELD_IN_STEP = "a contact came to rest or was met again at once (the resolver held it): it has no held contacts"
+# the broad phase a calendar step reports (BroadPhaseInfo): its lists stand in for one
+CALENDAR_REASON = ("event_loop = calendar: each sphere's neighbours within its shell, listed again only when it "
+                   "leaves it (engine/calendar.py)")
+
+
+class CalendarSteps:
+    """World's steps from the event calendar (the world's own state: ``_calendar``,
+    ``calendar_steps``, ``calendar_unfit``, set up by World.__init__)."""
+
+    def _calendar_unfit_by_scene(self) -> str | None:
+        """Why the scene and settings keep the calendar (calendar.py) out of every step, or
+        None: it needs paths whose anchor is their flow (motion.FLOW), the swept,
+        time-ordered method and partners of the kinds it takes; the rest (held contacts,
+        the observer) is judged each step (_calendar_unfit)."""
+        s, st = self.settings, self._st
+        if s.ordering != "time" or s.detection != "swept":
+            return "it resolves contacts in time order from swept tests (ordering = time, detection = swept)"
+        if not self._anchor_is_flow:
+            return (f"the {s.integrator} integrator's path starts again at every step's end (re-anchoring changes it"
+                    f"{' under drag' if self._drag != 1.0 else ''}: engine/motion.py, FLOW)")
+        if self._kick_first and (self._drag != 1.0 or np.any(self._free_accel)):
+            return f"the {s.integrator} integrator kicks every velocity at each step's start"
+        for kind in range(KINDS):
+            if not CALENDAR_TAKES[kind] and (PARTNER_IS_SPHERE[kind] or partner_count(kind, self._geometry)):
+                return f"it does not take {KIND_NAMES[kind]} partners (colliders.CALENDAR_TAKES)"
+        if self.sleepers is not None:
+            return "it does not let spheres sleep (sleep_speed > 0)"
+        if calendar.periodic_axes_too_short(self._period, st.radius):
+            return "a periodic axis is shorter than three neighbour lists' reach"
+        return None
+
+    def _calendar_unfit(self) -> str | None:
+        """Why this step cannot use the calendar (None: it can)."""
+        if self._calendar_settled_unfit is not None:
+            return self._calendar_settled_unfit
+        if self.held.count[HELD]:
+            return "a contact is held (resting or rapid): it has no held contacts"
+        if wants_swept_tests(self.observer):
+            return "the observer reads every step's swept tests, which it does not run"
+        return None
+
+    def _calendar_step(self, ctx: StepContext) -> StepEnd | None:
+        """One step taken from the event calendar (calendar.py): its events up to the
+        step's end, then every sphere read from its anchor there. The calendar is made
+        afresh when there is none, or when the state was written since the last step.
+        None when the resolver would hold a contact, which the calendar cannot: nothing
+        of the world has changed then (the held store, the contact times and the buffers
+        are as the step began), and the caller takes the step with the time-ordered loop."""
+        st, buf, dt = self._st, self._buf, ctx.dt
+        started = perf_counter()
+        buf.reset(keep_misses=False)
+        last_contact = self._last_contact.copy()  # (the step may be taken again)
+        cal = self._calendar
+        fresh = cal is None or not (np.array_equal(cal.last_x, st.positions)
+                                    and np.array_equal(cal.last_v, st.velocities))
+        if fresh:
+            cal = self._calendar = calendar.Calendar(st.positions, st.velocities, self._free_accel, st.radius,
+                                                     self._period, self._period_origin, self.time)
+        ctx.path_accel = cal.a
+        ctx.timings["forces"] = perf_counter() - started  # (the paths' accelerations: no contact is held)
+        particles = cal.paths(st.radius, self._inverse_mass, st.restitution, self._last_contact)
+        method = self._loop_method(cal.epoch, dt, ctx.vtol)
+        started = perf_counter()
+        if fresh:
+            cal.build(particles, method, self._geometry, buf.counters)
+        else:
+            cal.expire_skips(particles, method, self._geometry, buf.counters)
+        # the grid, the lists and the first predictions; or the skips of the last step expired
+        ctx.timings["broad_phase"] = perf_counter() - started
+        ctx.timings["narrow_phase"] = 0.0  # (no step-wide narrow phase: each event predicts its own)
+        started = perf_counter()
+        until = cal.now + dt
+        cap = self.contact_cap
+        while True:
+            status = cal.run(until, particles, method, self._geometry, self.held, buf.contacts, buf.counters,
+                             buf.changed, cap, calendar.MOST_EVENTS_PER_CONTACT * (cap + st.count), self.resting_budget)
+            if status == calendar.GROW_CONTACTS:
+                if not self._ensure(ctx, 0, 0, calendar.CONTACT_ROOM):
+                    ctx.warn("max_memory", self._memory.message(ctx))
+                    status = calendar.CAPPED  # the step ends as it stands
+                    break
+                continue
+            break
+        if status == calendar.STOPPED:
+            raise StepStopped(self.step_index + 1)
+        if status == calendar.HELD_CONTACT:
+            self._calendar = None
+            np.copyto(self._last_contact, last_contact)
+            forget_held(self.held)
+            return None
+        if status == calendar.CAPPED and not ctx.warnings:
+            ctx.warn("max_contacts_per_step", budget_message("max_contacts_per_step", cap))
+        rows = buf.contacts[:int(buf.counters[CONTACTS])]
+        rows["time_in_step"] -= cal.now  # the resolver's times are the calendar's (since its epoch)
+        ctx.timings["resolve"] = perf_counter() - started
+        started = perf_counter()
+        cal.positions_at(until, self._integrator, self._drag, self._k, st.positions, st.velocities)
+        cal.now = until
+        ctx.pairs = cal.pairs()
+        ctx.sigma = np.zeros(st.count)
+        if ctx.observer is not None:
+            ctx.observer.on_event(BroadPhaseInfo(ctx.step, "calendar", CALENDAR_REASON, {"pairs": len(ctx.pairs),
+                                                                                        "scanned": False}, None))
+        self._close(ctx)
+        if status == calendar.CAPPED:
+            self._calendar = None  # what it did not take is past: made afresh from the state next step
+        else:
+            cal.last_x, cal.last_v = st.positions.copy(), st.velocities.copy()  # (the world's numbering)
+        self.calendar_steps += 1
+        ctx.timings["finish"] = perf_counter() - started
+        return self._end(ctx)
