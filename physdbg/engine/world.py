@@ -52,7 +52,7 @@ from ..events import (
     partner_words,
 )
 from . import calendar
-from .calendar_step import HELD_IN_STEP, CalendarSteps
+from .calendar_step import CalendarSteps
 from .broadphase import choose_broad_phase, make_broad_phase
 from .broadphase.boxes import boxes_meet
 from .broadphase.periodic import PeriodicBroadPhase
@@ -275,29 +275,14 @@ class World(CalendarSteps):
         """
         self._stop_if_asked()
         dt = _checked_step_length(dt)
-        ctx = None
         if self.settings.event_loop == "calendar":
             self.calendar_unfit = self._calendar_unfit()
             if self.calendar_unfit is None:
-                ctx = self._begin(dt, renumber=False)
-                started = perf_counter()
-                end = self._calendar_step(ctx)
-                if end is not None:
-                    return end
-                # the step is taken again below, from its start, as if the calendar were not
-                # there (renumbered where due); the attempt's time counts in its resolve phase
-                attempt = perf_counter() - started
-                self.calendar_unfit = HELD_IN_STEP
-                if self._renumber_due():
-                    self._renumber()
+                return self._calendar_step(self._begin(dt, renumber=False))
             self._calendar = None  # the time-ordered loop changes the paths: the calendar is out of date
-        if ctx is None:
-            ctx = self._begin(dt)
-            attempt = 0.0
+        ctx = self._begin(dt)
         for name in STEP_PHASES:  # each phase is the method of its name
             self._timed(ctx, name, getattr(self, f"_{name}"))
-            if name == "resolve":
-                ctx.timings[name] += attempt
             self._stop_if_asked()
             if name == "broad_phase" and ctx.observer is not None:  # reported outside its timing
                 ctx.observer.on_event(self._broad_phase_event(ctx))

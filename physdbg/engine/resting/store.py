@@ -142,14 +142,6 @@ def grow_held(h: HeldContacts) -> HeldContacts:
     return big
 
 
-def forget_held(h: HeldContacts) -> None:
-    """Release every held contact at once, as if none had been held (a step taken again
-    from its start: World._calendar_step). The solve id keeps counting: marks left by a
-    solve stay older than the next."""
-    h.count[HELD] = 0
-    h.deg[:] = 0
-
-
 @borrowing
 def held_room(h, a, b) -> bool:
     """Whether AT_ONE_INSTANT more contacts of sphere a, or one of spheres a and b (b = -1:
