@@ -181,7 +181,8 @@ def settling_scenes(draw, most: int = 10):
     """A few spheres low in a closed box under gravity, slow, their restitutions 0 to 0.5
     (and the walls'), one of them immovable or not: they land, bounce lower, come to
     rest on the floor and on each other, are held (the resting and rapid-contact rules),
-    and released where a neighbour knocks them off."""
+    and released where a neighbour knocks them off; with sleeping on or not (sleep.py:
+    slow for 0.1 s, they fall asleep, and wake where a neighbour lands on them)."""
     n = draw(st.integers(2, most))
     rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
     radius = rng.uniform(0.05, 0.15, n)
@@ -202,7 +203,8 @@ def settling_scenes(draw, most: int = 10):
     method = Settings(integrator=integrator, gravity=(0.0, -9.81, 0.0),
                       drag=1.0 if integrator == "verlet" else draw(st.sampled_from([1.0, 0.7])),
                       restitution_rule=draw(st.sampled_from(["min", "product"])),
-                      rapid_contact_rule=draw(st.sampled_from(["hold", "tc"])))
+                      rapid_contact_rule=draw(st.sampled_from(["hold", "tc"])),
+                      sleep_speed=draw(st.sampled_from([0.0, 0.05, 0.2])), sleep_time=0.1)
     return state, _box(1.0, draw(st.floats(0.0, 0.5))), method, draw(st.sampled_from([1 / 60, 1 / 240]))
 
 
@@ -420,3 +422,25 @@ def test_a_sphere_all_but_at_rest_does_not_leave_its_shell_at_once():
     t = shell_exit(0.0, 0.0, 0.0, 0.0, -1.778207e-161, 0.0, 0.0, 0.0, 0.0, delta, False)
     assert t >= delta / 1.778207e-161 * (1 - 1e-12)
     assert shell_exit(0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, delta, False) == pytest.approx(delta / 2.0)
+
+
+def test_a_sleeper_woken_by_a_falling_ball_is_as_in_the_time_ordered_loop():
+    """Sleeping in the calendar (sleep.py): a ball at rest on the floor falls asleep (an
+    immovable obstacle, its path anchored again at the step's end), a second ball falls
+    on it, bounces off it as off a wall and wakes it at that step's end (closing faster
+    than sleep_speed), and both come to rest and sleep again. The same contacts, the same
+    sleepers every step, and states within 1e-9 of the time-ordered loop's; every step the
+    calendar's."""
+    state = State(np.array([[0.5, 0.1, 0.5], [0.5, 0.7, 0.5]]), np.zeros((2, 3)), np.ones(2), np.full(2, 0.1),
+                  np.full(2, 0.3), np.ones(2))
+    method = Settings(gravity=(0.0, -9.81, 0.0), sleep_speed=0.05, sleep_time=0.1, contact_tolerance=1e-6)
+    walls, dt, steps = _box(1.0, 0.3), 1 / 60, 120
+    ordered = _run(state, walls, method, dt, steps, "step")[1]
+    world, seen = _run(state, walls, method, dt, steps, "calendar")
+    _agree(ordered, seen, dt, steps, times=1e-12, distance=method.contact_tolerance, pressed=(9.81, 1.0))
+    assert world.calendar_steps == steps
+    asleep = [[end.counts.asleep, end.counts.slept, end.counts.woken] for end in seen.ends]
+    assert asleep == [[end.counts.asleep, end.counts.slept, end.counts.woken] for end in ordered.ends]
+    woke = [end.step for end in seen.ends if end.counts.woken]
+    assert woke and asleep[woke[0] - 2][0] >= 1  # asleep before the ball came down, woken by it
+    assert seen.ends[-1].counts.asleep == 2

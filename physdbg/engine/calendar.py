@@ -39,12 +39,14 @@ anchor and is predicted again; a held contact is never tested. At each step's st
 forces phase's rule (resolve.settle_held, from the state there, as the time-ordered loop
 takes it) releases contacts whose gaps opened and solves the held accelerations, and the
 spheres whose paths that changes are anchored again there (``Calendar.renew``); a settled
-pile keeps its anchors, and costs no event.
+pile keeps its anchors, and costs no event. So are the spheres that fall asleep or wake
+at a step's end (sleep.py): asleep, a sphere is immovable and still, an obstacle whose
+path has no event.
 
 Where it applies (World._calendar_unfit says why not, and the world steps with the
 time-ordered loop instead): paths whose anchor is their flow (not Euler's, not a
 semi-implicit kick under forces), swept detection, time ordering, partners of the kinds
-it takes (colliders.CALENDAR_TAKES: spheres and walls), no sleeping, and no observer
+it takes (colliders.CALENDAR_TAKES: spheres and walls), and no observer
 that reads each step's swept tests (the calendar does not test pairs each step, so it
 has no such log).
 
@@ -194,12 +196,14 @@ class Calendar:
                          self._shell(method)):
             self.grow_lists()
 
-    def renew(self, spheres: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray, particles: tuple,
-              method: tuple, geometry: tuple, held, counters: np.ndarray) -> None:
+    def renew(self, spheres: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray, acc: np.ndarray,
+              particles: tuple, method: tuple, geometry: tuple, held, counters: np.ndarray) -> None:
         """New paths for ``spheres`` (int64 indices) at a step's start (``now``): their
-        rows of x, v (N, 3), m, m/s, and of a (N, 3) m/s², the path accelerations the held
-        contacts' solve gave them; each predicted again (its old events go stale)."""
+        rows of x, v (N, 3), m, m/s, of a (N, 3) m/s², the path accelerations (the held
+        contacts' solve's, or a sleeper's 0), and of acc (N, 3) m/s², the accelerations the
+        resolver judges pressing by; each predicted again (its old events go stale)."""
         self.accelerates = self.accelerates or bool(np.any(a[spheres]))
+        self.acc[spheres] = acc[spheres]
         _renew(self._lists(), self._events(), particles, method, geometry, held, counters, self._shell(method),
                self.now, spheres, x, v, a)
 

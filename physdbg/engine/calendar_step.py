@@ -49,8 +49,6 @@ class CalendarSteps:
         for kind in range(KINDS):
             if not CALENDAR_TAKES[kind] and (PARTNER_IS_SPHERE[kind] or partner_count(kind, self._geometry)):
                 return f"it does not take {KIND_NAMES[kind]} partners (colliders.CALENDAR_TAKES)"
-        if self.sleepers is not None:
-            return "it does not let spheres sleep (sleep_speed > 0)"
         if calendar.periodic_axes_too_short(self._period, st.radius):
             return "a periodic axis is shorter than three neighbour lists' reach"
         return None
@@ -93,8 +91,7 @@ class CalendarSteps:
         else:
             if renewed is not None:
                 x, v, a, acc, spheres = renewed
-                np.copyto(cal.acc, acc)
-                cal.renew(spheres, x, v, a, particles, method, self._geometry, self.held, buf.counters)
+                cal.renew(spheres, x, v, a, acc, particles, method, self._geometry, self.held, buf.counters)
             cal.expire_skips(particles, method, self._geometry, self.held, buf.counters)
         # the grid, the lists and the first predictions; or the held spheres' new paths and
         # the skips of the last step expired
@@ -118,6 +115,9 @@ class CalendarSteps:
         if status != calendar.DONE:
             self._calendar = None  # what it did not take is past: made afresh from the state next step
         else:
+            if ctx.sleep_changed.size:  # fell asleep (immovable, still) or woke: new paths from here
+                cal.renew(ctx.sleep_changed, st.positions, st.velocities, self._free_accel, self._free_accel,
+                          particles, method, self._geometry, self.held, buf.counters)
             cal.last_x, cal.last_v = st.positions.copy(), st.velocities.copy()  # (the world's numbering)
         self.calendar_steps += 1
         ctx.timings["finish"] = perf_counter() - started

@@ -33,8 +33,8 @@ class StepContext:
     resolve: kernel_groups, the step's arrays as the compiled kernels take them (built
     once, World._kernel_groups).
     finish: max_overlap (m); with sleeping on (sleep.py), sleeping_pairs (the broad
-    phase's pairs of two sleeping spheres, left out of ``pairs``) and how many spheres
-    slept and woke; kinetic, potential (J), momentum (3,), state_hash, non_finite.
+    phase's pairs of two sleeping spheres, left out of ``pairs``), how many spheres
+    slept and woke, and which (sleep_changed, int64: their paths changed at the step's end); kinetic, potential (J), momentum (3,), state_hash, non_finite.
     warnings and timings (s per phase) collect through the step.
     """
 
@@ -68,6 +68,7 @@ class StepContext:
     sleeping_pairs: np.ndarray = field(default_factory=lambda: np.empty((0, 2), np.int64))
     slept: int = 0
     woken: int = 0
+    sleep_changed: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
     kinetic: float = 0.0
     potential: float = 0.0
     momentum: np.ndarray | None = None

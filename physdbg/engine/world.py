@@ -548,6 +548,7 @@ class World(CalendarSteps):
             release_static(self.held, self._inverse_mass)
         ctx.slept = int(fell.size)
         ctx.woken += int(woke.size)
+        ctx.sleep_changed = np.concatenate([fell, woke]).astype(np.int64)
 
     def _carried(self) -> np.ndarray | None:
         """(N,) bool: the spheres held on a kinematic mesh (a moving surface carries them,
