@@ -546,11 +546,13 @@ def shell_exit(e0, e1, e2, v0, v1, v2, a0, a1, a2, delta, curved):
             return math.inf
         b = e0 * v0 + e1 * v1 + e2 * v2
         c = e0 * e0 + e1 * e1 + e2 * e2 - delta * delta
-        # no earlier than the room left at full speed: where vv·c underflows (a held
-        # solve's residue of 1e-161 m/s) the root would be 0, and the sphere would leave
-        # its shell at once, for ever
-        room = delta - math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-        return max((-b + math.sqrt(max(b * b - vv * c, 0.0))) / vv, room / math.sqrt(vv))
+        t = (-b + math.sqrt(max(b * b - vv * c, 0.0))) / vv
+        if t > 0.0:
+            return t
+        # on the shell and leaving, or vv·c underflowed (a held solve's residue of 1e-161
+        # m/s), which left the root 0 and the sphere leaving its shell at once, for ever:
+        # no earlier than the room left at full speed
+        return (delta - math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)) / math.sqrt(vv)
     room = delta - math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
     if room <= 0.0:
         return 0.0
@@ -574,21 +576,25 @@ def _earliest(i, lists, events, particles, geometry, held, counters, delta, drag
     x, v, a, radius, sigma = particles[0], particles[1], particles[2], particles[4], particles[7]
     # Every prediction of i need reach only as far as its shell: it is predicted again when
     # it leaves. A straight pair's or wall's test has a closed form at any reach; a curved
-    # one's root search needs a finite bracket, which the sooner of the two shells' exits gives.
+    # one's root search needs a finite bracket, which the sooner of the two shells' exits
+    # gives, and no later than the earliest event found so far (a pair that cannot meet
+    # before it is not i's next event: in a pile, where held spheres and falling ones meet
+    # on curved paths, the shorter bracket ends most searches at once).
     curved_i = curved and _curved(i, a, k)
     exit_i = _exit_time(i, lists, x, v, a, sigma, delta, curved_i)
+    holds = held.deg[i] > 0
     best = exit_i
     kind = LEAVE_SHELL
     other = NONE
     for s in range(count[i]):
         j = neighbours[i, s]
-        if held.deg[i] > 0 and held.deg[j] > 0 and held_find(held, KIND_PAIR, min(i, j), max(i, j)) >= 0:
+        if holds and held.deg[j] > 0 and held_find(held, KIND_PAIR, min(i, j), max(i, j)) >= 0:
             continue  # a held contact is not tested (they touch: the held solves keep it)
         until = math.inf
         if curved:
             curved_j = _curved(j, a, k)
             if curved_i or curved_j:
-                until = min(exit_i, _exit_time(j, lists, x, v, a, sigma, delta, curved_j))
+                until = min(best, _exit_time(j, lists, x, v, a, sigma, delta, curved_j))
         start, t, work = _toi(KIND_PAIR, min(i, j), max(i, j), x, v, a, radius, sigma, until, k, samples, tolerance,
                               geometry)
         counters[TESTS] += work
@@ -598,7 +604,7 @@ def _earliest(i, lists, events, particles, geometry, held, counters, delta, drag
             other = j
     for partner_kind in IMMOVABLE_KINDS:
         for w in range(partner_count(partner_kind, geometry)):
-            if held.deg[i] > 0 and held_find(held, partner_kind, i, w) >= 0:
+            if holds and held_find(held, partner_kind, i, w) >= 0:
                 continue
             start, t, work = _toi(partner_kind, i, w, x, v, a, radius, sigma, exit_i if curved_i else math.inf, k,
                                   samples, tolerance, geometry)
