@@ -11,7 +11,6 @@ taken by the time-ordered loop, as if the calendar were not there.
 from __future__ import annotations
 
 import dataclasses
-import re
 
 import numpy as np
 import pytest
