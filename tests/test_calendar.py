@@ -443,3 +443,26 @@ def test_a_sleeper_woken_by_a_falling_ball_is_as_in_the_time_ordered_loop():
     woke = [end.step for end in seen.ends if end.counts.woken]
     assert woke and asleep[woke[0] - 2][0] >= 1  # asleep before the ball came down, woken by it
     assert seen.ends[-1].counts.asleep == 2
+
+
+def test_a_sleeping_worlds_lists_reach_the_support_gap_farther():
+    """The sleep rules read the step's pairs (World._sleep), and judge two spheres touching
+    up to a gap of sleep.SUPPORT_GAP of their radii: a sphere near its shell's edge may be
+    that close to one whose centre is beyond the plain lists' reach. With sleeping on, a
+    pair as far apart as the plain reach plus the support gap (less a hair) is listed;
+    with it off, not."""
+    from physdbg.engine.calendar import SHELL
+    from physdbg.engine.sleep import SUPPORT_GAP
+
+    r = 0.1
+    apart = 2 * r + 2 * (SHELL - 1) * r + 0.9 * SUPPORT_GAP * 2 * r
+    state = State(np.array([[0.3, r, 0.5], [0.3 + apart, r, 0.5]]), np.zeros((2, 3)), np.ones(2), np.full(2, r),
+                  np.full(2, 0.5), np.ones(2))
+    listed = {}
+    for sleep_speed in (0.0, 0.05):
+        world = World(state.copy(), _box(1.0, 0.5), Settings(gravity=(0.0, -9.81, 0.0), sleep_speed=sleep_speed,
+                                                              event_loop="calendar"))
+        world.step(1 / 60)
+        assert world.calendar_steps == 1
+        listed[sleep_speed] = [tuple(p) for p in world.last_step.pairs]
+    assert listed == {0.0: [], 0.05: [(0, 1)]}

@@ -41,7 +41,8 @@ takes it) releases contacts whose gaps opened and solves the held accelerations,
 spheres whose paths that changes are anchored again there (``Calendar.renew``); a settled
 pile keeps its anchors, and costs no event. So are the spheres that fall asleep or wake
 at a step's end (sleep.py): asleep, a sphere is immovable and still, an obstacle whose
-path has no event.
+path has no event; a world that sleeps has its lists reach the sleep rules' support gap
+farther (Calendar's margin), since the rules read them as the step's pairs.
 
 Where it applies (World._calendar_unfit says why not, and the world steps with the
 time-ordered loop instead): paths whose anchor is their flow (not Euler's, not a
@@ -119,13 +120,15 @@ class Calendar:
 
     x, v (N, 3): the spheres' positions and velocities at run time ``epoch`` (s), in the
     world's numbering (copied); path_accel (N, 3) m/s²: each path's acceleration (the
-    forces phase's, with no contact held); radius (N,) m; period, origin (3,) m (period 0: an axis not
-    periodic). ``build`` predicts every sphere's first event; ``run`` takes the events up
-    to a time; ``positions_at`` reads the anchors at a step's end.
+    forces phase's); radius (N,) m; period, origin (3,) m (period 0: an axis not
+    periodic); margin (m): how much farther apart than touching a listed pair may be
+    (the sleep rules' support gap, which reads the lists as the step's pairs). ``build``
+    predicts every sphere's first event; ``run`` takes the events up to a time;
+    ``positions_at`` reads the anchors at a step's end.
     """
 
     def __init__(self, x: np.ndarray, v: np.ndarray, path_accel: np.ndarray, radius: np.ndarray, period: np.ndarray,
-                 origin: np.ndarray, epoch: float):
+                 origin: np.ndarray, epoch: float, margin: float = 0.0):
         n = x.shape[0]
         self.epoch = float(epoch)
         self.now = 0.0  # s since the epoch: the end of the last step run
@@ -139,8 +142,11 @@ class Calendar:
         self.sigma = np.zeros(n)
         r_max = float(radius.max()) if n else 0.0
         self.delta = (SHELL - 1.0) * r_max
+        # the lists reach as if each shell were margin/2 thicker: a listed pair is every one
+        # within margin of touching while both are inside their shells
+        self.list_delta = self.delta + 0.5 * margin
         self.centre = self.x.copy()
-        self.lo, self.width, self.cells, self.period = _grid(self.centre, period, origin, list_reach(radius))
+        self.lo, self.width, self.cells, self.period = _grid(self.centre, period, origin, list_reach(radius, margin))
         self.head = np.full(int(np.prod(self.cells)), NONE, dtype=np.int64)
         self.next = np.full(n, NONE, dtype=np.int64)
         self.previous = np.full(n, NONE, dtype=np.int64)
@@ -159,6 +165,7 @@ class Calendar:
         self.others = np.zeros(AT_ONE_INSTANT_CANDIDATES, dtype=np.int64)
         self.resolved = np.zeros(AT_ONE_INSTANT_CANDIDATES, dtype=np.int64)
         self.last_x: np.ndarray | None = None  # the state the last step handed out (World: written since?)
+        self.settle_next = False  # whether a contact was held in the last step (CalendarSteps: settle the next)
         self.last_v: np.ndarray | None = None
 
     # the kernels' groups, as plain tuples (again after any growth)
@@ -175,9 +182,10 @@ class Calendar:
         return (self.x, self.v, self.a, self.acc, radius, inverse_mass, restitution, self.sigma, last_contact)
 
     def _shell(self, method: tuple) -> tuple:
-        """(delta m, curved): the shell's thickness, and whether any path bends (drag, or
-        a path acceleration): where none does, a pair's test needs no bracket (_predict)."""
-        return self.delta, bool(method[4] != 0.0 or self.accelerates)
+        """(delta m, curved, list delta m): the shell's thickness, whether any path bends
+        (drag, or a path acceleration: where none does, a pair's test needs no bracket,
+        _predict), and the thickness the lists reach as (delta and half the margin)."""
+        return self.delta, bool(method[4] != 0.0 or self.accelerates), self.list_delta
 
     def grow_lists(self) -> None:
         """Twice the room in every neighbour list (a list was full: GROW_LISTS); a list
@@ -246,11 +254,11 @@ class Calendar:
         return _listed_pairs(self.neighbours, self.count)
 
 
-def list_reach(radius: np.ndarray) -> float:
+def list_reach(radius: np.ndarray, margin: float = 0.0) -> float:
     """The widest reach of a neighbour list (m): two of the largest spheres, each delta
-    from its centre, and the slack."""
+    from its centre, the margin (Calendar) and the slack."""
     r_max = float(radius.max()) if radius.size else 0.0
-    return 2.0 * r_max + 2.0 * (SHELL - 1.0) * r_max * (1.0 + SHELL_SLACK)
+    return 2.0 * r_max + 2.0 * ((SHELL - 1.0) * r_max + 0.5 * margin) * (1.0 + SHELL_SLACK)
 
 
 def periodic_axes_too_short(period: np.ndarray, radius: np.ndarray) -> bool:
@@ -656,7 +664,7 @@ def _predict(i, now, lists, events, particles, method, geometry, held, counters,
 @kernel
 def _build(lists, events, particles, method, geometry, held, counters, shell) -> bool:
     """Calendar.build: False (with nothing listed) if a list overflows."""
-    delta = shell[0]
+    list_delta = shell[2]
     head, nxt, prv, cell, neighbours, count = lists[5], lists[6], lists[7], lists[8], lists[9], lists[10]
     heap, where, when = events[6], events[7], events[0]
     radius = particles[4]
@@ -667,7 +675,7 @@ def _build(lists, events, particles, method, geometry, held, counters, shell) ->
         cell[i] = _cell_of(lists, i)
         _link(head, nxt, prv, cell[i], i)
     for i in range(n):
-        m = _scan(lists, radius, delta, i, lists[9][i])
+        m = _scan(lists, radius, list_delta, i, lists[9][i])
         if m < 0:
             return False
         lists[10][i] = m
@@ -720,7 +728,7 @@ def _renew(lists, events, particles, method, geometry, held, counters, shell, no
 def _run(lists, events, particles, method, geometry, held, contacts, counters, changed, until, cap, most_events,
          work_budget, shell) -> int:
     """Calendar.run's loop (its statuses, and GROW_LISTS before any change)."""
-    delta = shell[0]
+    list_delta = shell[2]
     centre, head, nxt, prv, cell = lists[0], lists[5], lists[6], lists[7], lists[8]
     when, what, partner, partner_stamp, stamp, skip, heap = (events[0], events[1], events[2], events[3], events[4],
                                                              events[5], events[6])
@@ -750,7 +758,7 @@ def _run(lists, events, particles, method, geometry, held, contacts, counters, c
                 if lists[4][d] > 0.0:
                     c -= lists[4][d] * math.floor((c - lists[1][d]) / lists[4][d])
                 centre[i, d] = c
-            if not _relist(lists, radius, delta, i, events[11]):
+            if not _relist(lists, radius, list_delta, i, events[11]):
                 centre[i, 0], centre[i, 1], centre[i, 2] = old0, old1, old2
                 return GROW_LISTS
             counters[EVENTS] += 1
@@ -770,11 +778,10 @@ def _run(lists, events, particles, method, geometry, held, contacts, counters, c
                 if status == SKIPPED:
                     _remember_skip(skip, stamp, i, KIND_PAIR, j)
                     _remember_skip(skip, stamp, j, KIND_PAIR, i)
-            else:
+                again = j
+            else:  # (j was predicted again when its counter moved)
                 counters[EVENTS] += 1
-                status = SKIPPED
                 changed[0] = 0
-            again = j
         else:  # an immovable partner: with every other i meets at the same instant (as the time-ordered loop)
             j = partner[i]
             if counters[CONTACTS] >= cap:

@@ -15,11 +15,12 @@ from time import perf_counter
 import numpy as np
 
 from ..errors import StepStopped
-from ..events import BroadPhaseInfo, StepEnd
+from ..events import HOW_IMPULSE, BroadPhaseInfo, StepEnd
 from . import calendar
 from .colliders import CALENDAR_TAKES, KIND_NAMES, KINDS, PARTNER_IS_SPHERE, partner_count
 from .resolve import settle_held
 from .resting import HELD, PINNED, STEP_RELEASED, STEP_WORK
+from .sleep import SUPPORT_GAP
 from .state import budget_message
 from .step_context import StepContext, wants_swept_tests
 from .timeline import CONTACTS
@@ -36,8 +37,8 @@ class CalendarSteps:
     def _calendar_unfit_by_scene(self) -> str | None:
         """Why the scene and settings keep the calendar (calendar.py) out of every step, or
         None: it needs paths whose anchor is their flow (motion.FLOW), the swept,
-        time-ordered method and partners of the kinds it takes; the rest (held contacts,
-        the observer) is judged each step (_calendar_unfit)."""
+        time-ordered method and partners of the kinds it takes; the observer is judged
+        each step (_calendar_unfit)."""
         s, st = self.settings, self._st
         if s.ordering != "time" or s.detection != "swept":
             return "it resolves contacts in time order from swept tests (ordering = time, detection = swept)"
@@ -73,13 +74,19 @@ class CalendarSteps:
         cal = self._calendar
         fresh = cal is None or not (np.array_equal(cal.last_x, st.positions)
                                     and np.array_equal(cal.last_v, st.velocities))
-        renewed = self._settle_held_paths(ctx) if self.held.count[HELD] else None
+        # the forces phase's rule where a contact is held, or was in the last step (one
+        # released since leaves its spheres' accelerations to be made again from gravity)
+        held_at_start = bool(self.held.count[HELD])
+        renewed = self._settle_held_paths(ctx) if held_at_start or (cal is not None and cal.settle_next) else None
         if fresh:
             if renewed is not None:  # the paths the held contacts' solve gave
                 x, v, a, acc, _spheres = renewed
             else:
                 x, v, a, acc = st.positions, st.velocities, self._free_accel, self._free_accel
-            cal = self._calendar = calendar.Calendar(x, v, a, st.radius, self._period, self._period_origin, self.time)
+            # (a sleeping world's lists reach as far as its support rules look: sleep.py)
+            margin = SUPPORT_GAP * 2.0 * float(st.radius.max()) if self.sleepers is not None and st.count else 0.0
+            cal = self._calendar = calendar.Calendar(x, v, a, st.radius, self._period, self._period_origin, self.time,
+                                                     margin)
             np.copyto(cal.acc, acc)
         ctx.path_accel = cal.a
         ctx.timings["forces"] = perf_counter() - started
@@ -101,6 +108,7 @@ class CalendarSteps:
         status = self._calendar_events(ctx, cal, particles, method)
         rows = buf.contacts[:int(buf.counters[CONTACTS])]
         rows["time_in_step"] -= cal.now  # the resolver's times are the calendar's (since its epoch)
+        cal.settle_next = bool(held_at_start or self.held.count[HELD] or np.any(rows["how"] != HOW_IMPULSE))
         ctx.timings["resolve"] = perf_counter() - started
         started = perf_counter()
         until = cal.now + dt
@@ -173,7 +181,7 @@ class CalendarSteps:
             else:
                 ctx.warn("max_resting_work_per_step", budget_message("max_resting_work_per_step", self.resting_budget))
         cal = self._calendar
-        previous_a = cal.a if cal is not None and cal.a.shape == a.shape else self._free_accel
+        previous_a = cal.a if cal is not None else self._free_accel
         spheres = np.flatnonzero((degree_before != held.deg) | np.any(a != previous_a, axis=1)
                                  | np.any(v != st.velocities, axis=1)).astype(np.int64)
         return st.positions, v, a, acc, spheres
