@@ -396,4 +396,4 @@ def test_calendar_scenes_benchmark_says_where_the_calendar_served_each_scene(mon
     assert cradle[0] == "cradle" and cradle[1] == "6" and out[1].endswith("calendar in 6 of 6 steps")
     shares = [float(p.rstrip("%,")) for p in cradle[4:9]]
     assert shares[3] > 0 and abs(sum(shares) - 100) <= 3  # measured: resolve takes time, the shares make the whole
-    assert paddle[0] == "paddle" and "calendar in 0 of 6 steps" in out[2] and "mesh partners" in out[2]
+    assert paddle[0] == "paddle" and "calendar in 0 of 6 steps" in out[2] and "kinematic mesh" in out[2]

@@ -172,7 +172,8 @@ def test_a_kind_with_no_branch_in_the_switch_is_refused_at_its_first_use_never_r
              lambda kind: colliders.partner_moves(kind, 1, geometry),
              lambda kind: colliders.narrow_candidates(kind, np.zeros((0, 2), dtype=np.int64), x, x, geometry),
              lambda kind: colliders.every_candidate(kind, 2, geometry),
-             lambda kind: colliders.partner_count(kind, geometry)]
+             lambda kind: colliders.partner_count(kind, geometry),
+             lambda kind: colliders.immovable_partners_in(kind, 0, x, x, geometry, np.zeros((4, 2), dtype=np.int64))]
     for call in calls:
         call(events.KIND_PAIR)  # a kind it knows
         with pytest.raises(ValueError, match="a collider kind with no branch in this function of the switch"):
@@ -182,15 +183,22 @@ def test_a_kind_with_no_branch_in_the_switch_is_refused_at_its_first_use_never_r
 
 def test_the_calendar_takes_the_kinds_their_modules_declare_and_refuses_the_rest_by_name(monkeypatch):
     """Each kind's module says whether the event calendar predicts its contacts
-    (``CALENDAR``, gathered in colliders.CALENDAR_TAKES): meshes not yet, so a scene with
-    one is stepped by the time-ordered loop, the reason naming the kind; a kind whose
-    module withdrew its support (the wall, here) is refused the same way, by name, and a
-    scene without its partners is still served."""
+    (``CALENDAR``, gathered in colliders.CALENDAR_TAKES): every kind today, fixed meshes
+    only (a kinematic one is refused by name); a kind whose module withdrew its support
+    (the mesh, then the wall, here) is refused the same way, by name, and a scene without
+    its partners is still served."""
     from physdbg.api import load_scene
 
     assert colliders.CALENDAR_TAKES == tuple(module.CALENDAR for module in colliders.KIND_MODULES)
+    world = load_scene("ramp", ["event_loop=calendar"]).build_world()
+    world.step(1 / 120)
+    assert world.calendar_steps == 1
     world = load_scene("paddle", ["event_loop=calendar"]).build_world()
     world.step(1 / 60)
+    assert world.calendar_steps == 0 and "does not take a kinematic mesh" in world.calendar_unfit
+    _as_if_in_the_source(monkeypatch, colliders, "CALENDAR_TAKES", (True, True, False))
+    world = load_scene("ramp", ["event_loop=calendar"]).build_world()
+    world.step(1 / 120)
     assert world.calendar_steps == 0 and "does not take mesh partners" in world.calendar_unfit
     _as_if_in_the_source(monkeypatch, colliders, "CALENDAR_TAKES", (True, False, False))
     world = load_scene("billiards", ["event_loop=calendar"]).build_world()

@@ -12,13 +12,16 @@ world whose paths change only at contacts:
   That holds wherever re-anchoring a path leaves it unchanged (motion.FLOW): exact paths
   under gravity and drag, Verlet's parabola without drag, straight paths without forces;
 * each sphere has a **neighbour list**: the spheres whose *shell centres* (where it was
-  when its list was made) are within r_i + r_j + 2·delta of its own, delta =
-  (SHELL - 1)·(the largest radius). Two spheres not on each other's lists cannot touch
-  before one of them has moved delta from its centre, and that is an event of its own
-  (leaving the shell: exact on a straight path, a time no later than it on a curved one,
-  ``shell_exit``), at which its list is made again from a grid of the centres;
+  when its list was made) are within r_i + r_j + 2·delta of its own, delta at least
+  (SHELL - 1)·(the largest radius), thicker in a dilute world (``shell_fit``). Two
+  spheres not on each other's lists cannot touch before one of them has moved delta
+  from its centre, and that is an event of its own (leaving the shell: exact on a
+  straight path, a time no later than it on a curved one, ``shell_exit``), at which its
+  list is made again from a grid of the centres, and with it the list of its **immovable
+  partners**: the walls and the fixed meshes' triangles the box of its shell reaches
+  (colliders.immovable_partners_in: each mesh's tree walked once a shell);
 * each sphere has **one event** in a heap of the N minima: the earliest of leaving its
-  shell, a contact with a neighbour and a contact with an immovable partner (a wall),
+  shell, a contact with a neighbour and a contact with a listed immovable partner,
   each the engine's swept test through the collider switch (colliders.time_of_impact).
   Two spheres that fall alike (one gravity, the same gravity scale) move on a straight
   line relative to each other (the acceleration cancels in the pair test); a wall's path
@@ -47,9 +50,11 @@ farther (Calendar's margin), since the rules read them as the step's pairs.
 Where it applies (World._calendar_unfit says why not, and the world steps with the
 time-ordered loop instead): paths whose anchor is their flow (not Euler's, not a
 semi-implicit kick under forces), swept detection, time ordering, partners of the kinds
-it takes (colliders.CALENDAR_TAKES: spheres and walls), and no observer
-that reads each step's swept tests (the calendar does not test pairs each step, so it
-has no such log).
+it takes (colliders.CALENDAR_TAKES: spheres, walls, meshes), fixed meshes only (a
+kinematic mesh's triangles move into shells whose lists were made without them), and
+no observer that reads each step's swept tests or its search of the meshes' trees (the
+calendar tests pairs only when their paths change and walks a tree only when a shell is
+made, so it has no such logs).
 
 Units: s, m, m/s. Arrays are in the world's numbering (space_order.py).
 """
@@ -62,7 +67,7 @@ import numpy as np
 from numba import njit
 
 from ..events import KIND_PAIR
-from .colliders import CALENDAR_TAKES, KINDS, PARTNER_IS_SPHERE, partner_count, time_of_impact
+from .colliders import CALENDAR_TAKES, KINDS, PARTNER_IS_SPHERE, immovable_partners_in, time_of_impact
 from .jit import borrowing, kernel, records
 from .motion import EXACT, advance_particle, advance_particles
 from .periodic import image
@@ -72,17 +77,32 @@ from .resting.store import STOP, held_find, held_room
 from .timeline import CONTACTS, EVENTS, RAPID, TESTS
 from .toi import SWEPT
 
-# Each sphere's neighbours are those within its shell: delta = (SHELL - 1)·r_max from its
-# centre. 1.5 (EDMD's, in units of the diameter there) measured best of 1.1-1.8 on the exact
-# gas (benchmarks/experiments/calendar_gas.py: thinner shells are left too often, thicker
-# ones list too many neighbours).
+# Each sphere's neighbours are those within its shell: at least delta = (SHELL - 1)·r_max
+# from its centre. 1.5 (EDMD's, in units of the diameter there) measured best of 1.1-1.8 on
+# the exact gas (benchmarks/experiments/calendar_gas.py: thinner shells are left too often,
+# thicker ones list too many neighbours). A dilute world's shells are thicker (shell_fit).
 SHELL = 1.5
+# shell_fit's rule: a step that left shells more than SHELL_GROW_AT times as often as it
+# met something (or as an eighth of its spheres, where it met little) doubles the
+# thickness (again while that would still hold, each doubling about halving the shells
+# left), if the lists then stay at most SHELL_MOST_LISTED long on average; one that
+# left them under 1/SHELL_GROW_AT as often, or whose lists are over twice that long,
+# halves it (never below delta). Each change makes the calendar afresh at the next step.
+# Thinning is judged over SHELL_JUDGED_OVER steps at a time: a calendar's first step
+# leaves few shells (each was made at its start), so one step alone would thin every new
+# shell again. Thickening is judged from SHELL_GROWN_AFTER steps (that first step counts
+# against it): a dilute world pays for every step on the thinnest shells.
+SHELL_GROW_AT = 4
+SHELL_MOST_LISTED = 32
+SHELL_JUDGED_OVER = 8
+SHELL_GROWN_AFTER = 2
 # the lists' reach is widened by this fraction of delta, so that a sphere a rounded
 # shell-exit time lets go a little past delta is still on its neighbours' lists
 SHELL_SLACK = 1e-9
 LEAVE_SHELL = -1  # an event's kind besides the collider kinds' codes (events.KIND_*)
 NONE = -1
 FIRST_ROOM = 32  # neighbours a list has room for at first (grown on demand: Calendar.run)
+FIRST_IMMOVABLE_ROOM = 8  # immovable partners (walls, triangles) a shell's list has room for at first
 MOST_CELLS_PER_SPHERE = 8  # a closed box's grid has at most this many cells a sphere
 STOP_CHECK_EVERY = 1024  # events between reads of the world's stop switch
 # a step may pop at most this many events per contact its budget allows (and per sphere):
@@ -99,6 +119,7 @@ CAPPED = 3  # the step's contact budget is spent (max_contacts_per_step)
 STOPPED = 4  # World.request_stop
 GROW_HELD = 5  # the held store has no room for the next contact's: grow it and call again
 RESTING_BUDGET = 6  # a held-contact solve spent the step's resting work (max_resting_work_per_step)
+GROW_PARTNERS = 7  # a list of immovable partners is full: grow the lists and call again
 
 # the rows of the skip table: a contact judged not to approach is not predicted again
 # until one of its spheres changes or the step ends (as the time-ordered loop, which
@@ -109,9 +130,8 @@ SKIP_KIND, SKIP_OTHER, SKIP_STAMP_A, SKIP_STAMP_B = range(4)
 
 SKIPS = 4  # skipped contacts remembered per sphere (SKIP_* fields each)
 
-# the kinds of immovable partner the calendar tests every sphere against (colliders'
-# table: those it takes whose partners are not spheres), a constant tuple the compiler
-# unrolls, so each kind's branch of the switch is folded
+# the kinds of immovable partner the calendar lists for each shell (colliders' table:
+# those it takes whose partners are not spheres), in the order of their codes
 IMMOVABLE_KINDS = tuple(kind for kind in range(KINDS) if CALENDAR_TAKES[kind] and not PARTNER_IS_SPHERE[kind])
 
 
@@ -122,13 +142,17 @@ class Calendar:
     world's numbering (copied); path_accel (N, 3) m/s²: each path's acceleration (the
     forces phase's); radius (N,) m; period, origin (3,) m (period 0: an axis not
     periodic); margin (m): how much farther apart than touching a listed pair may be
-    (the sleep rules' support gap, which reads the lists as the step's pairs). ``build``
+    (the sleep rules' support gap, which reads the lists as the step's pairs);
+    most_partners: the most immovable partners of one kind (colliders.most_partners:
+    every wall, every triangle), the room a shell's search of them needs; delta (m): the
+    shells' thickness (None: thinnest_shell's; shell_fit chooses another). ``build``
     predicts every sphere's first event; ``run`` takes the events up to a time;
     ``positions_at`` reads the anchors at a step's end.
     """
 
     def __init__(self, x: np.ndarray, v: np.ndarray, path_accel: np.ndarray, radius: np.ndarray, period: np.ndarray,
-                 origin: np.ndarray, epoch: float, margin: float = 0.0):
+                 origin: np.ndarray, epoch: float, margin: float = 0.0, most_partners: int = 0,
+                 delta: float | None = None):
         n = x.shape[0]
         self.epoch = float(epoch)
         self.now = 0.0  # s since the epoch: the end of the last step run
@@ -140,19 +164,28 @@ class Calendar:
         self.acc = self.a.copy()
         self.accelerates = bool(np.any(self.a))
         self.sigma = np.zeros(n)
-        r_max = float(radius.max()) if n else 0.0
-        self.delta = (SHELL - 1.0) * r_max
+        self.delta = thinnest_shell(radius) if delta is None else float(delta)
         # the lists reach as if each shell were margin/2 thicker: a listed pair is every one
         # within margin of touching while both are inside their shells
         self.list_delta = self.delta + 0.5 * margin
         self.centre = self.x.copy()
-        self.lo, self.width, self.cells, self.period = _grid(self.centre, period, origin, list_reach(radius, margin))
+        self.lo, self.width, self.cells, self.period = _grid(self.centre, period, origin, list_reach(radius, margin, self.delta))
         self.head = np.full(int(np.prod(self.cells)), NONE, dtype=np.int64)
         self.next = np.full(n, NONE, dtype=np.int64)
         self.previous = np.full(n, NONE, dtype=np.int64)
         self.cell = np.full(n, NONE, dtype=np.int64)
         self.neighbours = np.empty((n, max(1, min(FIRST_ROOM, n - 1))), dtype=np.int64)
         self.count = np.zeros(n, dtype=np.int64)
+        # each sphere's immovable partners within its shell's reach, rows (kind, other), and
+        # the box that reached them (a row of shell_lo, shell_hi (N, 3) m)
+        self.immovables = np.empty((n, FIRST_IMMOVABLE_ROOM, 2), dtype=np.int64)
+        self.immovable_count = np.zeros(n, dtype=np.int64)
+        self.shell_lo = np.zeros((n, 3))
+        self.shell_hi = np.zeros((n, 3))
+        self.found_partners = np.empty((max(int(most_partners), 1), 2), dtype=np.int64)
+        # what the steps since the last judgement did: shells left, contacts met, and how
+        # many steps that was (shell_fit reads and resets it)
+        self.tally = np.zeros(3, dtype=np.int64)
         self.when = np.full(n, math.inf)
         self.what = np.full(n, LEAVE_SHELL, dtype=np.int64)
         self.partner = np.full(n, NONE, dtype=np.int64)
@@ -171,11 +204,13 @@ class Calendar:
     # the kernels' groups, as plain tuples (again after any growth)
     def _lists(self) -> tuple:
         return (self.centre, self.lo, self.width, self.cells, self.period, self.head, self.next, self.previous,
-                self.cell, self.neighbours, self.count)
+                self.cell, self.neighbours, self.count, self.immovables, self.immovable_count, self.shell_lo,
+                self.shell_hi, self.found_partners)
 
     def _events(self) -> tuple:
         return (self.when, self.what, self.partner, self.partner_stamp, self.stamp, self.skip, self.heap, self.where,
-                self.kinds, self.others, self.resolved, np.empty(self.neighbours.shape[1], dtype=np.int64))
+                self.kinds, self.others, self.resolved, np.empty(self.neighbours.shape[1], dtype=np.int64),
+                self.tally)
 
     def paths(self, radius, inverse_mass, restitution, last_contact) -> tuple:
         """kernel_args.LoopParticles of the anchors, as the resolver takes them."""
@@ -197,12 +232,29 @@ class Calendar:
         grown[:, :room] = self.neighbours
         self.neighbours = grown
 
+    def grow_partners(self) -> None:
+        """Twice the room in every list of immovable partners (one was full: GROW_PARTNERS)."""
+        n, room, _ = self.immovables.shape
+        grown = np.empty((n, 2 * room, 2), dtype=np.int64)
+        grown[:, :room] = self.immovables
+        self.immovables = grown
+
+    def _grow(self, status: int) -> bool:
+        """Grow what a kernel's status says was full; whether it was a call to grow."""
+        if status == GROW_LISTS:
+            self.grow_lists()
+        elif status == GROW_PARTNERS:
+            self.grow_partners()
+        else:
+            return False
+        return True
+
     def build(self, particles: tuple, method: tuple, geometry: tuple, held, counters: np.ndarray) -> None:
         """The grid, every list and every sphere's first event (the swept tests count in
         counters; held: the held store, whose contacts are not tested)."""
-        while not _build(self._lists(), self._events(), particles, method, geometry, held, counters,
-                         self._shell(method)):
-            self.grow_lists()
+        while self._grow(_build(self._lists(), self._events(), particles, method, geometry, held, counters,
+                                self._shell(method))):
+            pass
 
     def renew(self, spheres: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray, acc: np.ndarray,
               particles: tuple, method: tuple, geometry: tuple, held, counters: np.ndarray) -> None:
@@ -233,9 +285,8 @@ class Calendar:
         while True:
             status = _run(self._lists(), self._events(), particles, method, geometry, held, records(contacts),
                           counters, changed, until, cap, most_events, work_budget, self._shell(method))
-            if status != GROW_LISTS:
+            if not self._grow(status):
                 return status
-            self.grow_lists()
 
     def positions_at(self, time: float, integrator: int, drag: float, k: float, x_out: np.ndarray,
                      v_out: np.ndarray) -> None:
@@ -254,17 +305,63 @@ class Calendar:
         return _listed_pairs(self.neighbours, self.count)
 
 
-def list_reach(radius: np.ndarray, margin: float = 0.0) -> float:
+def thinnest_shell(radius: np.ndarray) -> float:
+    """The thinnest shell (m): (SHELL - 1)·r_max, the thickness a dense world keeps."""
+    return (SHELL - 1.0) * (float(radius.max()) if radius.size else 0.0)
+
+
+def list_reach(radius: np.ndarray, margin: float = 0.0, delta: float | None = None) -> float:
     """The widest reach of a neighbour list (m): two of the largest spheres, each delta
-    from its centre, the margin (Calendar) and the slack."""
+    (None: thinnest_shell) from its centre, the margin (Calendar) and the slack."""
     r_max = float(radius.max()) if radius.size else 0.0
-    return 2.0 * r_max + 2.0 * ((SHELL - 1.0) * r_max + 0.5 * margin) * (1.0 + SHELL_SLACK)
+    delta = thinnest_shell(radius) if delta is None else delta
+    return 2.0 * r_max + 2.0 * (delta + 0.5 * margin) * (1.0 + SHELL_SLACK)
 
 
-def periodic_axes_too_short(period: np.ndarray, radius: np.ndarray) -> bool:
+def periodic_axes_too_short(period: np.ndarray, radius: np.ndarray, margin: float = 0.0,
+                            delta: float | None = None) -> bool:
     """Whether a periodic axis is shorter than 3 cells of the lists' reach (the 27 cells
-    round a sphere would not be distinct): the calendar cannot serve such a box."""
-    return bool(np.any((period > 0) & (period < 3.0 * list_reach(radius))))
+    round a sphere would not be distinct): the calendar cannot serve such a box (or such
+    a thickness, delta m)."""
+    return bool(np.any((period > 0) & (period < 3.0 * list_reach(radius, margin, delta))))
+
+
+def shell_fit(cal: "Calendar", radius: np.ndarray, period: np.ndarray, margin: float) -> float | None:
+    """The shell thickness (m) the calendar's next build should have, from what its last
+    steps did (cal.tally: shells left, contacts met, steps; the lists' lengths), or None
+    to keep its own (SHELL_GROW_AT's rule: thicker from SHELL_GROWN_AFTER steps, thinner
+    after SHELL_JUDGED_OVER; the tally starts again after each judgement that is made).
+    A dilute gas leaves a thin shell many times between contacts (5,000 spheres at
+    250 m/s, 6 m apart: 33 times a step each at 0.125 m), and each leaving lists the
+    shell again and predicts the sphere again; a pile meets its neighbours many times in
+    a step and leaves few shells, and every one of those contacts tests every listed
+    neighbour. Read from counts, never from clocks: a run chooses the
+    same thicknesses each time (bit-identical reruns)."""
+    n = cal.count.shape[0]
+    steps = int(cal.tally[2])
+    if n == 0 or steps < SHELL_GROWN_AFTER:
+        return None
+    left, met = int(cal.tally[0]) // steps, int(cal.tally[1]) // steps  # a step's
+    base = max(met, n // 8, 1)
+    if left <= SHELL_GROW_AT * base and steps < SHELL_JUDGED_OVER:
+        return None  # (too soon to thin)
+    cal.tally[:] = 0
+    listed = float(cal.count.sum()) / n
+    floor = thinnest_shell(radius)
+    r_max = float(radius.max())
+    if left > SHELL_GROW_AT * base:
+        # doubled while it would still leave them too often (about half as often each
+        # time), and the lists, which grow with the volume of their reach, stay short
+        grown = cal.delta
+        while (left > SHELL_GROW_AT * base
+               and listed * ((r_max + 2.0 * grown) / (r_max + cal.delta)) ** 3 <= SHELL_MOST_LISTED
+               and not periodic_axes_too_short(period, radius, margin, 2.0 * grown)):
+            grown *= 2.0
+            left //= 2
+        return grown if grown > cal.delta else None
+    if cal.delta > floor and (SHELL_GROW_AT * left < base or listed > 2 * SHELL_MOST_LISTED):
+        return max(floor, 0.5 * cal.delta)
+    return None
 
 
 def _grid(centre: np.ndarray, period: np.ndarray, origin: np.ndarray, reach: float) -> tuple:
@@ -462,6 +559,32 @@ def _relist(lists, radius, delta, i, found) -> bool:
     return True
 
 
+@borrowing
+def _list_immovables(lists, radius, delta, geometry, i) -> bool:
+    """i's immovable partners (every kind the calendar takes whose partners are not
+    spheres: walls, a fixed mesh's triangles) that the box of its shell reaches (its
+    centre, r_i + delta and the slack every way), found through the collider switch
+    (colliders.immovable_partners_in: a mesh's tree walked once per shell, not once per
+    prediction); False, with i's list unusable until made again, if it would overflow."""
+    centre, rows, count, lo, hi, found = lists[0], lists[11], lists[12], lists[13], lists[14], lists[15]
+    reach = radius[i] + delta * (1.0 + SHELL_SLACK)
+    for d in range(3):
+        lo[i, d] = centre[i, d] - reach
+        hi[i, d] = centre[i, d] + reach
+    m = 0
+    count[i] = 0
+    for kind in IMMOVABLE_KINDS:
+        reached = immovable_partners_in(kind, i, lo, hi, geometry, found)
+        if m + reached > rows.shape[1]:
+            return False
+        for s in range(reached):
+            rows[i, m, 0] = kind
+            rows[i, m, 1] = found[s, 1]
+            m += 1
+    count[i] = m
+    return True
+
+
 @kernel
 def _listed_pairs(neighbours, count):
     total = 0
@@ -576,7 +699,7 @@ def shell_exit(e0, e1, e2, v0, v1, v2, a0, a1, a2, delta, curved):
 @njit(cache=True, inline="always")
 def _earliest(i, lists, events, particles, geometry, held, counters, delta, drag, k, curved, samples, tolerance):
     """Sphere i's earliest event from its anchor (advanced to now by the caller): (time s
-    since the epoch, kind, partner). ``curved``: whether any path of the world bends (drag,
+    since the epoch, kind, partner), among its listed neighbours and immovable partners. ``curved``: whether any path of the world bends (drag,
     or an acceleration); called with drag, k and curved as constants where none does, so
     the compiler folds the straight paths' tests (_toi)."""
     neighbours, count = lists[9], lists[10]
@@ -610,12 +733,17 @@ def _earliest(i, lists, events, particles, geometry, held, counters, delta, drag
             best = start + t
             kind = KIND_PAIR
             other = j
+    # the immovable partners its shell reaches, tested no further than its shell (the
+    # bracket a triangle's root search needs; a later touch is never before leaving it)
+    # (kind by kind, as the rows are: the compiler unrolls the constant tuple, and folds
+    # each kind's branch of the switch)
+    rows = lists[11]
     for partner_kind in IMMOVABLE_KINDS:
-        for w in range(partner_count(partner_kind, geometry)):
-            if holds and held_find(held, partner_kind, i, w) >= 0:
+        for s in range(lists[12][i]):
+            w = rows[i, s, 1]
+            if rows[i, s, 0] != partner_kind or (holds and held_find(held, partner_kind, i, w) >= 0):
                 continue
-            start, t, work = _toi(partner_kind, i, w, x, v, a, radius, sigma, exit_i if curved_i else math.inf, k,
-                                  samples, tolerance, geometry)
+            start, t, work = _toi(partner_kind, i, w, x, v, a, radius, sigma, exit_i, k, samples, tolerance, geometry)
             counters[TESTS] += work
             if start + t < best and not _skipped(skip, stamp, i, partner_kind, w):
                 best = start + t
@@ -662,8 +790,9 @@ def _predict(i, now, lists, events, particles, method, geometry, held, counters,
 
 
 @kernel
-def _build(lists, events, particles, method, geometry, held, counters, shell) -> bool:
-    """Calendar.build: False (with nothing listed) if a list overflows."""
+def _build(lists, events, particles, method, geometry, held, counters, shell) -> int:
+    """Calendar.build: DONE, or GROW_LISTS or GROW_PARTNERS (nothing predicted) if a list
+    overflows."""
     list_delta = shell[2]
     head, nxt, prv, cell, neighbours, count = lists[5], lists[6], lists[7], lists[8], lists[9], lists[10]
     heap, where, when = events[6], events[7], events[0]
@@ -677,15 +806,17 @@ def _build(lists, events, particles, method, geometry, held, counters, shell) ->
     for i in range(n):
         m = _scan(lists, radius, list_delta, i, lists[9][i])
         if m < 0:
-            return False
+            return GROW_LISTS
         lists[10][i] = m
+        if not _list_immovables(lists, radius, list_delta, geometry, i):
+            return GROW_PARTNERS
     for i in range(n):
         _predict(i, 0.0, lists, events, particles, method, geometry, held, counters, shell, 0)
     for i in range(n):  # one at a time: the first i + 1 slots are a heap
         heap[i] = i
         where[i] = i
         _heap_fix(heap, where, when, i, i + 1)
-    return True
+    return DONE
 
 
 @kernel
@@ -732,7 +863,7 @@ def _run(lists, events, particles, method, geometry, held, contacts, counters, c
     centre, head, nxt, prv, cell = lists[0], lists[5], lists[6], lists[7], lists[8]
     when, what, partner, partner_stamp, stamp, skip, heap = (events[0], events[1], events[2], events[3], events[4],
                                                              events[5], events[6])
-    kinds, others, resolved = events[8], events[9], events[10]
+    kinds, others, resolved, tally = events[8], events[9], events[10], events[12]
     x, v, a, radius, sigma = particles[0], particles[1], particles[2], particles[4], particles[7]
     drag, k, samples, tolerance, step_end = method[3], method[4], method[6], method[7], method[1]
     n = heap.shape[0]
@@ -758,10 +889,15 @@ def _run(lists, events, particles, method, geometry, held, contacts, counters, c
                 if lists[4][d] > 0.0:
                     c -= lists[4][d] * math.floor((c - lists[1][d]) / lists[4][d])
                 centre[i, d] = c
+            # (its immovable partners first: a list that overflows leaves the others as they were)
+            if not _list_immovables(lists, radius, list_delta, geometry, i):
+                centre[i, 0], centre[i, 1], centre[i, 2] = old0, old1, old2
+                return GROW_PARTNERS
             if not _relist(lists, radius, list_delta, i, events[11]):
                 centre[i, 0], centre[i, 1], centre[i, 2] = old0, old1, old2
                 return GROW_LISTS
             counters[EVENTS] += 1
+            tally[0] += 1
             _unlink(head, nxt, prv, cell[i], i)
             cell[i] = _cell_of(lists, i)
             _link(head, nxt, prv, cell[i], i)
@@ -792,19 +928,20 @@ def _run(lists, events, particles, method, geometry, held, contacts, counters, c
             kinds[0] = kind
             others[0] = j
             met = 1
-            for partner_kind in IMMOVABLE_KINDS:
-                for w in range(partner_count(partner_kind, geometry)):
-                    if ((partner_kind == kind and w == j) or met >= AT_ONE_INSTANT_CANDIDATES
-                            or _skipped(skip, stamp, i, partner_kind, w)
-                            or (held.deg[i] > 0 and held_find(held, partner_kind, i, w) >= 0)):
-                        continue
-                    start, t, work = _toi(partner_kind, i, w, x, v, a, radius, sigma,
-                                          now + 2.0 * SAME_INSTANT * step_end, k, samples, tolerance, geometry)
-                    counters[TESTS] += work
-                    if start + t <= now + SAME_INSTANT * step_end:
-                        kinds[met] = partner_kind
-                        others[met] = w
-                        met += 1
+            rows = lists[11]
+            for s in range(lists[12][i]):  # (i's shell lists every immovable partner it can meet)
+                partner_kind, w = rows[i, s, 0], rows[i, s, 1]
+                if ((partner_kind == kind and w == j) or met >= AT_ONE_INSTANT_CANDIDATES
+                        or _skipped(skip, stamp, i, partner_kind, w)
+                        or (held.deg[i] > 0 and held_find(held, partner_kind, i, w) >= 0)):
+                    continue
+                start, t, work = _toi(partner_kind, i, w, x, v, a, radius, sigma,
+                                      now + 2.0 * SAME_INSTANT * step_end, k, samples, tolerance, geometry)
+                counters[TESTS] += work
+                if start + t <= now + SAME_INSTANT * step_end:
+                    kinds[met] = partner_kind
+                    others[met] = w
+                    met += 1
             if met > 1:
                 status = resolve_at_one_instant(kinds, others, met, i, now, particles, method, geometry, held, contacts,
                                                 counters, CONTACTS, RAPID, changed, work_budget, resolved)
@@ -831,6 +968,8 @@ def _run(lists, events, particles, method, geometry, held, contacts, counters, c
             if p == NONE or (q >= 2 and (p == i or p == again)):
                 continue
             _predict(p, now, lists, events, particles, method, geometry, held, counters, shell, n)
+        if kind != LEAVE_SHELL and status != SKIPPED:
+            tally[1] += 1
         if kind != LEAVE_SHELL and status == OUT_OF_WORK:
             return RESTING_BUDGET
     return DONE

@@ -17,12 +17,12 @@ import numpy as np
 from ..errors import StepStopped
 from ..events import HOW_IMPULSE, BroadPhaseInfo, StepEnd
 from . import calendar
-from .colliders import CALENDAR_TAKES, KIND_NAMES, KINDS, PARTNER_IS_SPHERE, partner_count
+from .colliders import CALENDAR_TAKES, KIND_NAMES, KINDS, PARTNER_IS_SPHERE, most_partners, partner_count
 from .resolve import settle_held
 from .resting import HELD, PINNED, STEP_RELEASED, STEP_WORK
 from .sleep import SUPPORT_GAP
 from .state import budget_message
-from .step_context import StepContext, wants_swept_tests
+from .step_context import StepContext, wants_mesh_search, wants_swept_tests
 from .timeline import CONTACTS
 
 # the broad phase a calendar step reports (BroadPhaseInfo): its lists stand in for one
@@ -50,6 +50,9 @@ class CalendarSteps:
         for kind in range(KINDS):
             if not CALENDAR_TAKES[kind] and (PARTNER_IS_SPHERE[kind] or partner_count(kind, self._geometry)):
                 return f"it does not take {KIND_NAMES[kind]} partners (colliders.CALENDAR_TAKES)"
+        if self._meshes_move:
+            return ("it does not take a kinematic mesh (its triangles move into shells whose lists were made "
+                    "without them)")
         if calendar.periodic_axes_too_short(self._period, st.radius):
             return "a periodic axis is shorter than three neighbour lists' reach"
         return None
@@ -60,6 +63,8 @@ class CalendarSteps:
             return self._calendar_settled_unfit
         if wants_swept_tests(self.observer):
             return "the observer reads every step's swept tests, which it does not run"
+        if self._walks_mesh_trees and wants_mesh_search(self.observer):
+            return "the observer reads every step's search of the meshes' trees, which it does not make"
         return None
 
     def _calendar_step(self, ctx: StepContext) -> StepEnd:
@@ -83,10 +88,9 @@ class CalendarSteps:
                 x, v, a, acc, _spheres = renewed
             else:
                 x, v, a, acc = st.positions, st.velocities, self._free_accel, self._free_accel
-            # (a sleeping world's lists reach as far as its support rules look: sleep.py)
-            margin = SUPPORT_GAP * 2.0 * float(st.radius.max()) if self.sleepers is not None and st.count else 0.0
             cal = self._calendar = calendar.Calendar(x, v, a, st.radius, self._period, self._period_origin, self.time,
-                                                     margin)
+                                                     self._calendar_margin(), most_partners(self._geometry, 0),
+                                                     self._calendar_delta)
             np.copyto(cal.acc, acc)
         ctx.path_accel = cal.a
         ctx.timings["forces"] = perf_counter() - started
@@ -127,9 +131,20 @@ class CalendarSteps:
                 cal.renew(ctx.sleep_changed, st.positions, st.velocities, self._free_accel, self._free_accel,
                           particles, method, self._geometry, self.held, buf.counters)
             cal.last_x, cal.last_v = st.positions.copy(), st.velocities.copy()  # (the world's numbering)
+            cal.tally[2] += 1
+            fit = calendar.shell_fit(cal, st.radius, self._period, self._calendar_margin())
+            if fit is not None:  # thicker shells for a dilute world, thinner for a dense one: made afresh
+                self._calendar_delta = fit
+                self._calendar = None
         self.calendar_steps += 1
         ctx.timings["finish"] = perf_counter() - started
         return self._end(ctx)
+
+    def _calendar_margin(self) -> float:
+        """How much farther than touching the calendar's lists reach (m): a sleeping world's
+        as far as its support rules look (sleep.py), which read the lists as the step's pairs."""
+        st = self._st
+        return SUPPORT_GAP * 2.0 * float(st.radius.max()) if self.sleepers is not None and st.count else 0.0
 
     def _calendar_events(self, ctx: StepContext, cal: calendar.Calendar, particles: tuple, method: tuple) -> int:
         """The calendar's events up to the step's end, its buffers grown on demand within

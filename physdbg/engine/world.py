@@ -244,6 +244,7 @@ class World(CalendarSteps):
         self._calendar: calendar.Calendar | None = None
         self._calendar_settled_unfit = self._calendar_unfit_by_scene()
         self.calendar_steps = 0
+        self._calendar_delta: float | None = None  # the calendar's shell thickness (m; calendar.shell_fit)
         self.calendar_unfit: str | None = None
 
     def asleep(self) -> np.ndarray | None:

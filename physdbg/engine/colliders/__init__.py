@@ -34,7 +34,7 @@ __all__ = ["KIND_NAMES", "KINDS", "KIND_MODULES", "PARTNER_IS_SPHERE", "partner_
            "check_kind_modules", "time_of_impact", "contact_normal", "contact_feature", "partner_surface",
            "partner_normal_motion", "partner_moves", "surface_gap", "contact_gap", "partner_restitution",
            "partners_of", "max_overlap", "deepest_overlap", "narrow_candidates", "every_candidate", "most_partners", "partners_bound",
-           "searches_meshes", "mesh_search", "CALENDAR_TAKES", "partner_count"]
+           "searches_meshes", "mesh_search", "CALENDAR_TAKES", "partner_count", "immovable_partners_in"]
 
 # each kind's module, in the order of the kinds' codes: its geometry group is ``module.GEOMETRY``
 KIND_MODULES = (sphere, plane, mesh)
@@ -205,6 +205,22 @@ def partners_of(kind, p, box, adj_start, adj, path_lo, path_hi, batch_mark, batc
         return plane.partners_of(p, path_lo, path_hi, geometry[KIND_WALL], out)
     if kind == KIND_MESH:
         return mesh.partners_of(p, path_lo, path_hi, geometry[KIND_MESH], out)
+    raise ValueError(UNKNOWN_KIND)
+
+
+@njit(cache=True, inline="always")
+def immovable_partners_in(kind, p, lo, hi, geometry, out) -> int:
+    """The immovable partners of ``kind`` (walls, triangles) the box of row p of lo, hi
+    (N, 3) m reaches, as rows (p, other) of out (K, 2), in the order of their numbers;
+    returns how many (out has rows for every partner of the kind: most_partners). A kind
+    whose partners are spheres has none here (the caller lists those: the event
+    calendar's neighbour lists)."""
+    if kind == KIND_PAIR:
+        return 0
+    if kind == KIND_WALL:
+        return plane.partners_of(p, lo, hi, geometry[KIND_WALL], out)
+    if kind == KIND_MESH:
+        return mesh.partners_of(p, lo, hi, geometry[KIND_MESH], out)
     raise ValueError(UNKNOWN_KIND)
 
 

@@ -181,10 +181,11 @@ def frame_box(k, l0, l1, l2, h0, h1, h2, meshes):
 
 
 GEOMETRY = MeshGeometry  # this kind's group (colliders.geometry_of)
-# the event calendar (engine/calendar.py) does not take triangles yet: their candidates
-# come from a walk of each mesh's tree per path, which the calendar's predictions do not
-# make (colliders.CALENDAR_TAKES; World refuses the calendar for a scene with meshes)
-CALENDAR = False
+# the event calendar (engine/calendar.py) takes the triangles of fixed meshes (colliders.
+# CALENDAR_TAKES): each sphere lists those its shell's box reaches (the walk of each
+# mesh's tree, ``partners_of``) whenever its shell is made. A kinematic mesh's triangles
+# move into shells the lists do not watch: World keeps such a scene on the time-ordered loop.
+CALENDAR = True
 
 # how a step's spheres are searched against the meshes' trees (Settings.mesh_search)
 MESH_SEARCH_NAMES = ("auto", "walk", "together")

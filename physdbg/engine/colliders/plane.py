@@ -45,7 +45,7 @@ class PlaneGeometry(NamedTuple):
 
 GEOMETRY = PlaneGeometry  # this kind's group (colliders.geometry_of)
 # the event calendar (engine/calendar.py) predicts this kind's contacts from the anchors
-# (colliders.CALENDAR_TAKES): every wall is a partner of every sphere
+# (colliders.CALENDAR_TAKES): each sphere lists the walls its shell's box reaches
 CALENDAR = True
 
 
