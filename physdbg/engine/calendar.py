@@ -30,8 +30,8 @@ world whose paths change only at contacts:
   partner's counter moved since is stale and is predicted again.
 
 Contacts are resolved by the engine's own resolver (resolve.resolve_contact, and
-resolve.resolve_at_one_instant for a sphere meeting walls at one instant, as the
-time-ordered loop does), so every rule (impulse, restitution, the rapid-contact rule) is
+resolve.resolve_at_one_instant for a sphere meeting walls or triangles at one instant,
+as the time-ordered loop does), so every rule (impulse, restitution, the rapid-contact rule) is
 the one the time-ordered loop applies; the contact rows are the same schema, with each
 row's time made relative to its step by ``Calendar.run``'s caller.
 
@@ -85,7 +85,8 @@ SHELL = 1.5
 # shell_fit's rule: a step that left shells more than SHELL_GROW_AT times as often as it
 # met something (or as an eighth of its spheres, where it met little) doubles the
 # thickness (again while that would still hold, each doubling about halving the shells
-# left), if the lists then stay at most SHELL_MOST_LISTED long on average; one that
+# left), if the lists (neighbours and immovable partners) then stay at most
+# SHELL_MOST_LISTED long on average; one that
 # left them under 1/SHELL_GROW_AT as often, or whose lists are over twice that long,
 # halves it (never below delta). Each change makes the calendar afresh at the next step.
 # Thinning is judged over SHELL_JUDGED_OVER steps at a time: a calendar's first step
@@ -346,7 +347,9 @@ def shell_fit(cal: "Calendar", radius: np.ndarray, period: np.ndarray, margin: f
     if left <= SHELL_GROW_AT * base and steps < SHELL_JUDGED_OVER:
         return None  # (too soon to thin)
     cal.tally[:] = 0
-    listed = float(cal.count.sum()) / n
+    # neighbours and immovable partners a shell lists (a dense terrain mesh among sparse
+    # spheres: each thicker shell would reach many more triangles)
+    listed = float(cal.count.sum() + cal.immovable_count.sum()) / n
     floor = thinnest_shell(radius)
     r_max = float(radius.max())
     if left > SHELL_GROW_AT * base:
