@@ -144,7 +144,7 @@ def advise(scene) -> Advice:
 
     if periodic is not None and not periodic["fits"]:
         predictions.append(Prediction("dt", f"{dt:.6g}", "pairs untested", periodic["why"]))
-    geometry = mesh_geometry(scene)  # the meshes' trees, built once for both checks
+    geometry = mesh_geometry(scene)  # the meshes' collider group, for both checks
     overlaps = starting_overlaps(scene, geometry)  # a sphere inside another body at the start: overlap left
     facts["start_overlaps"] = overlaps
     facts["notes"] = meshes_out_of_reach(scene) + driven_notes(scene, geometry)  # said, not failed
@@ -390,8 +390,7 @@ def resolve_mesh_volumes(scene) -> dict[str, str]:
     triangles (seeded), walked with each volume (colliders/mesh.search_visits): node tests
     and triangles reached, weighed by VOLUME_NODE_COST and TRIANGLE_TEST_COST; the least
     wins (AABB on a tie). Returns {"bounding_volume": "why"} when any was auto."""
-    from .engine.colliders.mesh import MeshGeometry, search_visits
-    from .engine.state import Meshes, Walls
+    from .engine.colliders.mesh import VOLUMES, MeshGeometry, search_visits
 
     meshes, st = scene.walls.meshes, scene.state
     dt = scene.dt if scene.dt is not None else 1.0 / 60.0
@@ -400,6 +399,8 @@ def resolve_mesh_volumes(scene) -> dict[str, str]:
     speed += float(np.linalg.norm(scene.settings.gravity)) * dt
     turn = meshes.turn_radii()
     words = []
+    trees = meshes.mesh_set if "auto" in meshes.bounding_volume else None  # the scene's trees, built once
+    still = np.zeros(len(meshes), dtype=np.bool_)  # each mesh walked where it starts (its motion is in ``half``)
     for k, name in enumerate(meshes.names):
         if meshes.bounding_volume[k] != "auto":
             continue
@@ -411,12 +412,12 @@ def resolve_mesh_volumes(scene) -> dict[str, str]:
         half = (radius + speed * dt + float(np.linalg.norm(meshes.velocity[k])) * dt
                 + float(np.linalg.norm(meshes.angular_velocity[k])) * dt * float(turn[k]))
         work = {}
-        for volume in ("aabb", "sphere", "obb"):
-            one = Meshes([name], meshes.restitution[k:k + 1], mine, np.zeros(len(mine), dtype=np.int64),
-                         bounding_volume=[volume])
-            group = tuple(MeshGeometry.of(Walls(meshes=one)))
-            _query, node, outcome, _parent = search_visits(points - half, points + half, group)
-            work[volume] = VOLUME_NODE_COST[volume] * len(node) + TRIANGLE_TEST_COST * int(np.sum(outcome == 2))
+        for volume in VOLUMES:
+            group = MeshGeometry.of(scene.walls, np.full(len(meshes), VOLUMES.index(volume)))._replace(moving=still)
+            _query, node, outcome, _parent = search_visits(points - half, points + half, tuple(group))
+            mine_only = trees.node_mesh[node] == k  # the boxes are this mesh's: the other trees' visits aside
+            work[volume] = (VOLUME_NODE_COST[volume] * int(np.count_nonzero(mine_only))
+                            + TRIANGLE_TEST_COST * int(np.sum(outcome[mine_only] == 2)))
         best = min(work, key=lambda v: (work[v], v != "aabb"))
         meshes.bounding_volume[k] = best
         words.append(f"mesh '{name}' {best} (counted work per box: " + ", ".join(
@@ -524,7 +525,7 @@ START_NOT_PUSHED = ("physdbg does not push bodies apart: it resolves contacts fr
 
 def mesh_geometry(scene) -> tuple | None:
     """The scene's meshes as the engine's collider group (colliders.mesh.MeshGeometry, as a
-    tuple: each mesh's tree built), or None without meshes: built once for the checks below."""
+    tuple, on the trees of the scene's mesh set), or None without meshes: for the checks below."""
     from .engine.colliders.mesh import MeshGeometry
 
     return tuple(MeshGeometry.of(scene.walls)) if scene.walls.meshes.triangles else None

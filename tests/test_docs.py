@@ -162,7 +162,8 @@ def test_every_channel_kind_cause_finding_and_phase_the_code_has_is_in_the_docs(
 
 def test_the_architecture_page_names_every_module_and_only_files_that_exist():
     """docs/architecture.md is the map: every module of physdbg (outside the engine's own
-    packages, which engine.md lists) is on it, and every path it names exists."""
+    packages, which engine.md lists: test_the_engine_page_names_every_module_of_the_engine)
+    is on it, and every path it names exists."""
     page = (ROOT / "docs" / "architecture.md").read_text()
     package = ROOT / "physdbg"
     named = set(re.findall(r"`((?:[a-z_]+/)*[a-z_-]+\.(?:py|js))`", page)) - {"engine/colliders/capsule.py"}  # the example
@@ -176,6 +177,24 @@ def test_the_architecture_page_names_every_module_and_only_files_that_exist():
     index = (ROOT / "docs" / "README.md").read_text()
     pages = sorted(p.name for p in (ROOT / "docs").glob("*.md") if p.name != "README.md")
     assert [name for name in pages if f"({name})" not in index] == []
+
+
+def test_the_engine_page_names_every_module_of_the_engine():
+    """docs/engine.md's file table names every module of physdbg/engine (a package's modules
+    in its folder's row, or by their path), as architecture.md names the rest."""
+    rows = [line for line in (ROOT / "docs" / "engine.md").read_text().splitlines() if line.startswith("| `")]
+    engine = ROOT / "physdbg" / "engine"
+    unnamed = []
+    for path in sorted(engine.rglob("*.py")):
+        relative = path.relative_to(engine).as_posix()
+        if path.name == "__init__.py" and relative.count("/") != 1:
+            continue  # the engine package's own face
+        folder = relative.rsplit("/", 1)[0] + "/" if "/" in relative else None
+        named = any(f"`{relative}`" in row or (row.startswith(f"| `{folder}`") and f"`{path.name}`" in row)
+                    if folder else f"`{relative}`" in row for row in rows)
+        if not named and not (path.name == "__init__.py" and any(row.startswith(f"| `{folder}`") for row in rows)):
+            unnamed.append(relative)
+    assert unnamed == []
 
 
 def test_every_relative_link_in_the_docs_resolves():

@@ -391,26 +391,57 @@ def test_a_box_carried_into_a_moving_mesh_s_frame_finds_every_triangle_it_meets_
 
 
 def test_the_tree_the_views_draw_is_the_tree_the_engine_walks():
-    """Each mesh's tree in the engine (colliders/mesh.py, pre-order) is the tree the Rerun
-    view draws by level and volume (mesh_view.mesh_trees): the same nodes in pre-order, the
-    same boxes, the same triangle at each leaf."""
-    from physdbg.record import mesh_view
+    """Each mesh's tree is built once, by the scene's mesh set (engine/mesh/mesh_set.py):
+    its pre-order layout is each mesh's tree (MeshTree, the one the Rerun view draws by
+    level and volume) node for node (the same boxes, the same triangle at each leaf, the
+    same depths and parents), and the engine's collider group walks the set's own arrays."""
+    from physdbg.engine.colliders.mesh import MeshGeometry
 
     for name in ("funnel", "paddle", "ramp"):
-        meshes = api.load_scene(name).walls.meshes
-        group = mesh_view.engine_tree(meshes)
-        box_lo, box_hi, leaf, tree_first = group[3], group[4], group[5], group[7]
-        for k, tree in enumerate(mesh_view.mesh_trees(meshes)):
-            nodes, order, stack = tree.nodes, [], [int(tree.nodes.root)]
+        scene = api.load_scene(name)
+        meshes = scene.walls.meshes
+        trees = meshes.mesh_set
+        assert meshes.mesh_set is trees  # built once, kept
+        for k, tree in enumerate(trees.trees):
+            nodes, order, depth, stack = tree.nodes, [], [], [(int(tree.nodes.root), 0)]
             while stack:
-                q = stack.pop()
+                q, d = stack.pop()
                 order.append(q)
+                depth.append(d)
                 if nodes.left[q] >= 0:
-                    stack += [int(nodes.right[q]), int(nodes.left[q])]
-            mine = slice(tree_first[k], tree_first[k + 1])
-            assert np.array_equal(box_lo[mine], nodes.lo[order]) and np.array_equal(box_hi[mine], nodes.hi[order])
+                    stack += [(int(nodes.right[q]), d + 1), (int(nodes.left[q]), d + 1)]
+            mine = trees.nodes_of(k)
+            assert np.array_equal(trees.box_lo[mine], nodes.lo[order])
+            assert np.array_equal(trees.box_hi[mine], nodes.hi[order])
             drawn = [tree.leaf_triangle(q) + int(meshes.first[k]) if nodes.left[q] < 0 else -1 for q in order]
-            assert leaf[mine].tolist() == drawn
+            assert trees.leaf_triangle[mine].tolist() == drawn
+            assert trees.depth[mine].tolist() == depth and np.all(trees.node_mesh[mine] == k)
+            inner = mine[trees.leaf_triangle[mine] < 0]
+            assert np.all(trees.parent[inner + 1] == inner) and np.all(trees.parent[trees.skip[inner + 1]] == inner)
+        group = MeshGeometry.of(scene.walls)
+        assert group.box_lo is trees.box_lo and group.leaf_triangle is trees.leaf_triangle
+        assert group.corners is not meshes.corners  # each group's placement is its own
+
+
+def test_a_recording_builds_each_mesh_tree_once(tmp_path, monkeypatch):
+    """`physdbg record funnel` with the Rerun view, the Foxglove view and the audit on builds
+    each of the scene's mesh trees once (its mesh set), not once per reader (the kernels'
+    warm-up walks a two-triangle mesh of its own)."""
+    from physdbg.engine.mesh import mesh_set
+
+    built = []
+    real = mesh_set.build_mesh_tree
+    monkeypatch.setattr(mesh_set, "build_mesh_tree", lambda vertices, *a, **k: built.append(len(vertices))
+                        or real(vertices, *a, **k))
+    meshes = api.load_scene("funnel").walls.meshes
+    sizes = [3 * int(np.count_nonzero(meshes.mesh_of == k)) for k in range(len(meshes))]
+    built.clear()
+    done = runner.invoke(app, ["record", "funnel", "-o", str(tmp_path / "f.mcap"), "--detail", "full",
+                               "-s", "duration=0.1"])
+    assert done.exit_code == 0, done.output
+    assert (tmp_path / "f.rrd").exists() and "Foxglove view channels written" in done.output
+    assert sizes and all(size > 6 for size in sizes)
+    assert [size for size in built if size > 6] == sizes
 
 
 def test_the_reference_descent_reaches_exactly_the_triangles_whose_boxes_meet():
@@ -427,11 +458,13 @@ def test_the_reference_descent_reaches_exactly_the_triangles_whose_boxes_meet():
     x1 = x0 + rng.normal(0, 0.2, (40, 3))
     radius = np.full(40, 0.1)
     lo, hi = mesh_view.path_boxes(x0, x1, radius)
-    group = mesh_view.engine_tree(meshes)
-    found = mesh_view.search(group, meshes, lo, hi, 0.1, 1 / 60)
-    from physdbg.engine.colliders.mesh import frame_box
+    found = mesh_view.search(meshes, lo, hi, 0.1, 1 / 60)
+    from physdbg.engine.colliders.mesh import MeshGeometry, frame_box, place
 
-    box_lo, box_hi, leaf = group[3], group[4], group[5]
+    group = tuple(MeshGeometry.of(scene.walls))
+    place(group, meshes, 0.1, 1 / 60)
+    trees = meshes.mesh_set
+    box_lo, box_hi, leaf = trees.box_lo, trees.box_hi, trees.leaf_triangle
     leaves = np.flatnonzero(leaf >= 0)
     carried = np.array([frame_box(0, *lo[k], *hi[k], group) for k in range(len(lo))])  # the paddle's frame
     lo, hi = carried[:, :3], carried[:, 3:]
@@ -463,11 +496,10 @@ def test_every_step_s_search_of_the_meshes_trees_is_recorded_as_the_engine_walke
 
     recording = open_recording(_record(tmp_path, name, "full", "duration=0.25"))
     meshes = recording.header.walls.meshes
-    group = mesh_view.engine_tree(meshes)
     tree = recording.mesh_tree()
-    for column, values in mesh_view.tree_table(group).items():
+    for column, values in mesh_view.tree_table(meshes.mesh_set).items():
         assert np.array_equal(tree[column], values), column
-    leaf = group[5]
+    leaf = meshes.mesh_set.leaf_triangle
     walks = later = 0
     for events in recording.iter_step_events():
         begin, search = events[0], next(e for e in events if e.__class__.__name__ == "MeshSearch")
@@ -475,8 +507,7 @@ def test_every_step_s_search_of_the_meshes_trees_is_recorded_as_the_engine_walke
         assert len(search.query_sphere) >= recording.header.count  # every sphere's path box, then re-asks
         assert np.all(search.query_after[:recording.header.count] == -1)
         later += int(np.count_nonzero(search.query_after >= 0))
-        reference = mesh_view.search(mesh_view.engine_tree(meshes), meshes, search.query_lo, search.query_hi,
-                                     begin.time, begin.dt)
+        reference = mesh_view.search(meshes, search.query_lo, search.query_hi, begin.time, begin.dt)
         recorded = np.stack([search.visit_query, search.visit_node, search.visit_outcome, search.visit_parent], 1)
         assert np.array_equal(recorded, reference.visits)
         reached = set(zip(search.query_sphere[search.visit_query[search.visit_outcome == 2]].tolist(),
@@ -836,6 +867,7 @@ def test_the_walk_finds_what_a_brute_force_finds_with_every_volume_and_builder(s
     way down meets the box (the reference test of each, mesh_view._meets), and every
     triangle that meets the box (exact, by separating axes) is among them."""
     from physdbg.engine.colliders.mesh import MeshGeometry, search_visits
+    from physdbg.engine.mesh.mesh_set import MeshSet
     from physdbg.engine.state import Meshes, Walls
     from physdbg.record.mesh_view import _meets
 
@@ -844,8 +876,10 @@ def test_the_walk_finds_what_a_brute_force_finds_with_every_volume_and_builder(s
     corners[:, 1:] = corners[:, :1] + rng.normal(0, 0.4, (count, 2, 3))  # triangles of various sizes
     meshes = Meshes(["m"], np.array([1.0]), corners, np.zeros(count, dtype=np.int64), ["test"],
                     bounding_volume=[volume])
-    group = tuple(MeshGeometry.of(Walls(meshes=meshes), builder))
-    box_lo, box_hi, leaf, parent, node_sphere, node_obb = group[3], group[4], group[5], group[11], group[13], group[14]
+    trees = MeshSet(meshes, builder)
+    group = tuple(MeshGeometry.of(Walls(meshes=meshes), trees=trees))
+    box_lo, box_hi, leaf, parent = trees.box_lo, trees.box_hi, trees.leaf_triangle, trees.parent
+    node_sphere, node_obb = trees.node_sphere, trees.node_obb
     centres = rng.uniform(-1.5, 1.5, (8, 3))
     halves = rng.uniform(0.0, 0.8, (8, 3))
     query, node, outcome, _ = search_visits(centres - halves, centres + halves, group)
@@ -894,6 +928,7 @@ def test_the_simultaneous_descent_finds_what_a_walk_per_sphere_finds(seed, meshe
     builder, fixed and moving meshes; and every triangle that meets a box (exact, by
     separating axes) is among them."""
     from physdbg.engine.colliders.mesh import MeshGeometry, place, reachable, reachable_together
+    from physdbg.engine.mesh.mesh_set import MeshSet
     from physdbg.engine.state import Meshes, Walls
 
     rng = np.random.default_rng(seed)
@@ -906,7 +941,7 @@ def test_the_simultaneous_descent_finds_what_a_walk_per_sphere_finds(seed, meshe
     group_of = Meshes([f"m{k}" for k in range(meshes)], np.ones(meshes), corners, mesh_of,
                       [f"test {k}" for k in range(meshes)], velocity=velocity, angular_velocity=spin,
                       pivot=rng.uniform(-0.5, 0.5, (meshes, 3)), bounding_volume=[volume] * meshes)
-    group = tuple(MeshGeometry.of(Walls(meshes=group_of), builder))
+    group = tuple(MeshGeometry.of(Walls(meshes=group_of), trees=MeshSet(group_of, builder)))
     if moving:
         place(group, group_of, 0.3, 1 / 60)  # placed for a step, as a run does
     centres = rng.uniform(-1.5, 1.5, (spheres, 3))

@@ -166,7 +166,7 @@ def test_cli_overlap_exits_0_when_apart_and_the_json_holds_the_whole_tree():
     (["nope.obj", "paddle"], "error: nope.obj: no such file"),
     (["teapot", "paddle"], "error: teapot: neither a mesh file (.obj, .stl) nor a built-in shape"),
     (["funnel", "paddle", "--pose", "1,2"], "error: --pose '1,2': give 3 or 6 finite numbers"),
-    (["funnel", "paddle", "--volume", "kdop"], "error: --volume 'kdop': one of auto, sphere, aabb, obb"),
+    (["funnel", "paddle", "--volume", "kdop"], "error: --volume 'kdop': one of auto, aabb, sphere, obb"),
     (["funnel", "paddle", "--builder", "octree"], "error: --builder 'octree': one of median, mean, sah, lbvh"),
 ])
 def test_cli_overlap_bad_input_is_one_line_and_exit_2(args, message):

@@ -461,10 +461,10 @@ class Auditor:
         if self._in_overlap:  # counted where it began
             return
         self._in_overlap = True
-        if self._mesh_geometry is None and self.header.walls.meshes.triangles:  # the trees built once a run
+        if self._mesh_geometry is None and self.header.walls.meshes.triangles:  # placed at each overlap
             from ..engine.colliders.mesh import MeshGeometry
 
-            self._mesh_geometry = tuple(MeshGeometry.of(self.header.walls))
+            self._mesh_geometry = MeshGeometry.of(self.header.walls)  # the header's mesh set's trees
         depth, spheres, partner, where = deepest_overlap(end.positions, self.radius, self.header.walls, end.time,
                                                          self._mesh_geometry)
         wall = partner[1] if partner is not None and partner[0] == KIND_WALL else None
@@ -845,7 +845,7 @@ def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls, time: float = 0.0,
     a periodic boundary; partner None), every sphere with every wall (a sphere past a thin
     wall's middle went through it: tunnelling, not an overlap) and with every mesh
     triangle. Depth 0 when none. geometry: the meshes' collider group
-    (colliders.mesh.MeshGeometry as a tuple), if the caller keeps one: it is placed here."""
+    (colliders.mesh.MeshGeometry), if the caller keeps one: it is placed here."""
     from ..engine.broadphase.boxes import NO_LIMIT
     from ..engine.broadphase.grid import grid_pairs
     from ..engine.colliders.plane import gaps
@@ -872,14 +872,14 @@ def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls, time: float = 0.0,
     if walls.meshes.triangles and finite.all():
         from ..engine.colliders.mesh import MeshGeometry, deepest_where, place
 
-        geometry = geometry if geometry is not None else tuple(MeshGeometry.of(walls))
+        geometry = geometry if geometry is not None else MeshGeometry.of(walls)
         place(geometry, walls.meshes, time, 0.0)  # a kinematic mesh where it is at the end of the step
         depth, i, t = deepest_where(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(r, dtype=np.float64),
-                                    geometry, True)
+                                    tuple(geometry), True)
         if depth > best[0]:
             from ..engine.mesh.closest import closest_on_triangle
 
-            corner = geometry[0][int(t)]  # (3, 3), where the mesh is at ``time``
+            corner = geometry.corners[int(t)]  # (3, 3), where the mesh is at ``time``
             feature = closest_on_triangle(*x[int(i)], *corner[0], *corner[1], *corner[2])[3]
             best = (float(depth), [int(i)], (KIND_MESH, int(t), int(feature) + 1), x[int(i)])
     return best

@@ -42,22 +42,19 @@ class MeshOverlaps:
         self.meshes = meshes
         moving = meshes.moving
         self.pairs = [(i, j) for i in range(len(meshes)) for j in range(i + 1, len(meshes)) if moving[i] or moving[j]]
-        self._trees = None
         self._meeting: set[tuple[int, int]] = set()
         self._started = False
 
     def _search(self, i: int, j: int, time: float):
         from ..engine.mesh.descent import descend
         from ..engine.mesh.rigid_motion import Pose
-        from ..record.mesh_view import mesh_trees
 
-        if self._trees is None:
-            self._trees = mesh_trees(self.meshes)
+        trees = self.meshes.mesh_set.trees  # the scene's, built once
         poses = []
         for k in (i, j):
             turn, shift = self.meshes.transform(k, time)
             poses.append(Pose(shift, turn))
-        return descend(self._trees[i], poses[0], self._trees[j], poses[1], "obb", hull=False)
+        return descend(trees[i], poses[0], trees[j], poses[1], "obb", hull=False)
 
     def step(self, start: float, end: float) -> list[MeshMeeting]:
         """The pairs that begin to meet in the step from run time ``start`` to ``end`` s (and,

@@ -202,6 +202,7 @@ class Meshes:
     angular_velocity: np.ndarray | None = None
     pivot: np.ndarray | None = None
     bounding_volume: list[str] | None = None
+    _mesh_set: object = field(default=None, init=False, repr=False, compare=False)  # mesh_set, once built
 
     def __post_init__(self) -> None:
         self.corners = np.ascontiguousarray(self.corners, dtype=np.float64).reshape(-1, 3, 3)
@@ -214,6 +215,17 @@ class Meshes:
             setattr(self, name, np.ascontiguousarray(value))
         if self.bounding_volume is None:
             self.bounding_volume = ["aabb"] * m
+
+    @property
+    def mesh_set(self):
+        """Every mesh's tree (engine/mesh/mesh_set.MeshSet), built at the first ask and kept:
+        the one build of the trees that the engine, the advisor, the audit, the recording
+        and the views all read (the corners at run time 0 never change)."""
+        if self._mesh_set is None:
+            from .mesh.mesh_set import MeshSet
+
+            self._mesh_set = MeshSet(self)
+        return self._mesh_set
 
     def volumes(self) -> list[str]:
         """Each mesh's walked volume; ValueError while one is still "auto" (a World needs

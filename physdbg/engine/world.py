@@ -347,8 +347,7 @@ class World(CalendarSteps):
         reach = (st.radius[asleep] + self.settings.contact_tolerance)[:, None]
         x = st.positions[asleep]
         spheres, triangles = narrow_candidates(KIND_MESH, ctx.pairs, x - reach, x + reach, self._geometry)
-        group = self._geometry[KIND_MESH]  # colliders/mesh.MeshGeometry: mesh_of, moving
-        woke = np.unique(asleep[spheres[group[9][group[1][triangles]]]])
+        woke = np.unique(asleep[spheres[self.walls.meshes.mesh_set.on_moving_mesh(triangles)]])
         if woke.size:
             self.sleepers.wake(woke)
             self._inverse_mass[woke] = st.inverse_mass[woke]
@@ -471,8 +470,7 @@ class World(CalendarSteps):
         group = self._geometry[KIND_MESH]
         walk = float(walk_tests(ctx.path_lo, ctx.path_hi, group))
         ia, other, tests = reachable_together(ctx.path_lo, ctx.path_hi, group)
-        moving = int(np.count_nonzero(group[9]))  # a tree for the fixed meshes, and one per moving mesh
-        boxes = self._st.count * (int(moving < len(group[9])) + moving)
+        boxes = self._st.count * self.walls.meshes.mesh_set.trees_per_box()
         together = TOGETHER_PAIR_COST * tests + TOGETHER_BOX_COST * boxes
         self._search_work = (walk, together)
         return (ia, other) if together < walk else False
@@ -559,10 +557,9 @@ class World(CalendarSteps):
             return None
         held = int(self.held.count[HELD])
         kind, a, other = self.held.kind[:held], self.held.a[:held], self.held.other[:held]
-        group = self._geometry[KIND_MESH]  # colliders/mesh.MeshGeometry: mesh_of, moving
         on_mesh = kind == KIND_MESH
         moving = np.zeros(held, dtype=bool)
-        moving[on_mesh] = group[9][group[1][other[on_mesh]]]
+        moving[on_mesh] = self.walls.meshes.mesh_set.on_moving_mesh(other[on_mesh])
         carried = np.zeros(self._st.count, dtype=bool)
         carried[a[moving]] = True
         return carried

@@ -59,7 +59,6 @@ class FoxgloveView:
         self.header = header
         self.detail = detail
         self.classes = view_schemas()
-        self._group = None  # the engine's trees of the meshes (mesh_view.engine_tree), when first drawn
         self._asleep: np.ndarray | None = None
         self._findings = 0  # audit findings marked so far (each its own entity)
         self._spheres_wire = SphereEntities(fmt.VIEW_SCENE_FRAME, 2.0 * header.radius, self._sphere_rgba(None))
@@ -213,24 +212,25 @@ class FoxgloveView:
         entity.timestamp.FromNanoseconds(ns)
         if search is None or not len(search.visit_node):
             return entity
-        if self._group is None:
-            self._group = mesh_view.engine_tree(self.header.walls.meshes)
-        group, meshes = self._group, self.header.walls.meshes
+        from ..engine.mesh.tree import SPHERE
+
+        meshes = self.header.walls.meshes
+        trees = meshes.mesh_set  # the header's, built once: the recorded nodes are its pre-order positions
         shown = mesh_view.searched_spheres(search, contacts, SEARCHED_SPHERES)
         mine = np.isin(search.query_sphere[search.visit_query], shown)
         node, outcome = search.visit_node[mine].astype(np.int64), search.visit_outcome[mine]
         met = np.unique(node[outcome != SEARCH_CULLED])
         culled = np.setdiff1d(np.unique(node[outcome == SEARCH_CULLED]), met)
-        reached = np.unique(group[5][node[outcome == SEARCH_REACHED]])
+        reached = np.unique(trees.leaf_triangle[node[outcome == SEARCH_REACHED]])
         for k in range(len(meshes)):
             turn, shift = meshes.transform(k, time)
             rotation = mesh_view.quaternions(turn.T[None])[0].tolist()
             for nodes, color in ((met, (0.24, 0.86, 0.35, 1.0)), (culled, (0.9, 0.27, 0.24, 0.8))):
-                mine = nodes[mesh_view.node_mesh(group, nodes) == k]
+                mine = nodes[trees.node_mesh[nodes] == k]
                 if not len(mine):
                     continue
-                if group[12][k] == 1:  # colliders.mesh.VOLUME_SPHERE: the nodes' spheres
-                    for x, y, z, r in group[13][mine].tolist():
+                if trees.volume[k] == SPHERE:  # the nodes' spheres
+                    for x, y, z, r in trees.node_sphere[mine].tolist():
                         ball = entity.spheres.add()
                         ball.pose.orientation.w = 1.0
                         ball.pose.position.x, ball.pose.position.y, ball.pose.position.z = (
@@ -243,7 +243,7 @@ class FoxgloveView:
                 q.x, q.y, q.z, q.w = rotation
                 line.pose.position.x, line.pose.position.y, line.pose.position.z = shift.tolist()
                 line.color.r, line.color.g, line.color.b, line.color.a = color
-                corners, edges = _box_edges(*_node_boxes(group, mine, k))
+                corners, edges = _box_edges(*_node_boxes(trees, mine, k))
                 for x, y, z in corners.tolist():
                     line.points.add(x=x, y=y, z=z)
                 line.indices.extend(edges.tolist())
@@ -308,13 +308,15 @@ class FoxgloveView:
         return out
 
 
-def _node_boxes(group, nodes: np.ndarray, mesh: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _node_boxes(trees, nodes: np.ndarray, mesh: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(centres (K, 3), axes (K, 3, 3) rows, half extents (K, 3)) of ``nodes`` of a mesh
-    walked with an AABB or an OBB (colliders/mesh.MeshGeometry), in the mesh's frame."""
-    if group[12][mesh] == 2:  # colliders.mesh.VOLUME_OBB
-        obb = group[14][nodes]
+    walked with an AABB or an OBB (trees: the mesh set, engine/mesh/mesh_set.MeshSet), in the mesh's frame."""
+    from ..engine.mesh.tree import OBB
+
+    if trees.volume[mesh] == OBB:
+        obb = trees.node_obb[nodes]
         return obb[:, :3], obb[:, 3:12].reshape(-1, 3, 3), obb[:, 12:]
-    lo, hi = group[3][nodes], group[4][nodes]
+    lo, hi = trees.box_lo[nodes], trees.box_hi[nodes]
     return 0.5 * (lo + hi), np.tile(np.eye(3), (len(nodes), 1, 1)), 0.5 * (hi - lo)
 
 

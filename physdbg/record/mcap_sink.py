@@ -115,7 +115,7 @@ class McapRecorder:
         if fmt.TOPIC_MESH_TREE in self._channels:  # the trees the engine walks, as it builds them
             from . import mesh_view
 
-            table = mesh_view.tree_table(mesh_view.engine_tree(header.walls.meshes))
+            table = mesh_view.tree_table(header.walls.meshes.mesh_set)
             self._leaf_triangle = table["triangle"]
             self._write(fmt.TOPIC_MESH_TREE, 0, ns, proto.encode_table(
                 fmt.MESSAGE_OF_TOPIC[fmt.TOPIC_MESH_TREE], 0, table.__getitem__))

@@ -1,16 +1,15 @@
 """What the views draw of a mesh: its BVH by level with every volume, and each step's search.
 
 A recording keeps each mesh's triangles at run time 0 (and a kinematic mesh's motion), so
-its BVH is rebuilt here the way ``physdbg overlap`` builds it (engine/mesh/tree.py, SAH):
-per node an AABB, an OBB and a bounding sphere, in the mesh's own frame (the frame the
-mesh had at run time 0; a view turns them with the mesh).
+its trees are the header's mesh set (state.Meshes.mesh_set, engine/mesh/mesh_set.py: built
+once, SAH, the engine's own): per node an AABB, an OBB and a bounding sphere, in the
+mesh's own frame (the frame the mesh had at run time 0; a view turns them with the mesh).
 
 The search drawn for a step is the seed's "search tree … that records descent into each
 BVH", for spheres against the triangles, as the engine made it: the recording's
 events.MeshSearch (the boxes the engine asked each mesh's tree with, and every node its
-walk visited). The trees are the engine's (colliders/mesh.py: each mesh's SAH tree, in
-pre-order, in the mesh's run-time-0 frame: the same trees ``mesh_trees`` builds, node for
-node; ``tree_table`` is the recording's /physdbg/mesh_tree). ``search`` is the reference
+walk visited), nodes numbered by the set's pre-order positions (``tree_table`` is the
+recording's /physdbg/mesh_tree). ``search`` is the reference
 walk the recorded one is tested against: a Python stack walk from each tree's root with a
 box carried into the mesh's frame as the engine carries it (``colliders.mesh.frame_box``,
 for a kinematic mesh grown by its motion over the step); a node whose box meets it is
@@ -46,18 +45,6 @@ class ReferenceSearch:
     visits: np.ndarray
 
 
-def mesh_trees(meshes) -> list:
-    """Each mesh's tree (engine.mesh.MeshTree, SAH) from a recording's meshes (state.Meshes),
-    in the frame the mesh had at run time 0."""
-    from ..engine.mesh.tree import build_mesh_tree
-
-    trees = []
-    for k in range(len(meshes)):
-        corners = meshes.corners[meshes.mesh_of == k].reshape(-1, 3)
-        trees.append(build_mesh_tree(corners, np.arange(len(corners), dtype=np.int64).reshape(-1, 3), "sah"))
-    return trees
-
-
 def node_depths(tree) -> np.ndarray:
     """(M,) int64: each node's depth below the root (0)."""
     nodes = tree.nodes
@@ -72,27 +59,22 @@ def node_depths(tree) -> np.ndarray:
     return depth
 
 
-def engine_tree(meshes):
-    """The engine's triangle trees for a recording's meshes (state.Meshes): a MeshGeometry
-    as a tuple (colliders/mesh.py), at run time 0; ``search`` places it for a step."""
-    from ..engine.colliders.mesh import MeshGeometry
+def search(meshes, lo: np.ndarray, hi: np.ndarray, time: float, dt: float) -> ReferenceSearch:
+    """Walk the engine's triangle trees (the mesh set of ``meshes``, a state.Meshes, placed
+    here for the step that begins at run time ``time`` and lasts ``dt`` s) with each box
+    lo, hi (K, 3) (world frame), each mesh's tree from its root with the box carried into
+    its frame. Nodes are the set's pre-order positions and tested with the volume each
+    mesh is walked with (``_meets``); a triangle is its number in the scene
+    (state.Meshes.triangle_words names it)."""
+    from ..engine.colliders.mesh import MeshGeometry, frame_box, place
+    from ..engine.mesh.tree import VOLUME_NAMES
     from ..engine.state import Walls
 
-    return tuple(MeshGeometry.of(Walls(meshes=meshes)))
-
-
-def search(group, meshes, lo: np.ndarray, hi: np.ndarray, time: float, dt: float) -> ReferenceSearch:
-    """Walk the engine's triangle trees ``group`` (engine_tree; placed here for the step
-    that begins at run time ``time`` and lasts ``dt`` s) with each box lo, hi (K, 3)
-    (world frame), each mesh's tree from its root with the box carried into its frame.
-    Nodes are positions in the group's pre-order (``tree_first`` says whose) and tested
-    with the volume each mesh is walked with (``_meets``); a triangle is its number in the
-    scene (state.Meshes.triangle_words names it)."""
-    from ..engine.colliders.mesh import VOLUMES, frame_box, place
-
+    trees = meshes.mesh_set
+    group = tuple(MeshGeometry.of(Walls(meshes=meshes)))
     place(group, meshes, time, dt)
-    box_lo, box_hi, leaf, skip, tree_first = group[3], group[4], group[5], group[6], group[7]
-    volume, node_sphere, node_obb = group[12], group[13], group[14]
+    box_lo, box_hi, leaf, skip, tree_first = trees.box_lo, trees.box_hi, trees.leaf_triangle, trees.skip, trees.tree_first
+    volume, node_sphere, node_obb = trees.volume, trees.node_sphere, trees.node_obb
     size = len(leaf)
     met = np.zeros(size, dtype=bool)
     visited = np.zeros(size, dtype=bool)
@@ -107,7 +89,7 @@ def search(group, meshes, lo: np.ndarray, hi: np.ndarray, time: float, dt: float
                 q, parent = stack.pop()
                 row = len(visits)
                 visited[q] = True
-                if not _meets(VOLUMES[volume[mesh]], low, high, q, box_lo, box_hi, node_sphere, node_obb):
+                if not _meets(VOLUME_NAMES[volume[mesh]], low, high, q, box_lo, box_hi, node_sphere, node_obb):
                     visits.append((k, q, CULLED, parent))
                     continue
                 met[q] = True
@@ -123,23 +105,18 @@ def search(group, meshes, lo: np.ndarray, hi: np.ndarray, time: float, dt: float
                       np.array(visits, dtype=np.int64).reshape(-1, 4))
 
 
-def tree_table(group) -> dict[str, np.ndarray]:
-    """The engine's trees (engine_tree's group) as the columns of the recording's mesh-tree
-    channel (format.MESH_TREE_FIELDS): node, mesh, parent, depth, triangle (-1 inside a
-    tree), skip (the position after the node's subtree), lo, hi (Q, 3) m in the mesh's frame,
-    volume (the walked one: colliders.mesh.VOLUMES), and every node's sphere and OBB."""
-    box_lo, box_hi, leaf, skip, tree_first, parent = group[3], group[4], group[5], group[6], group[7], group[11]
-    count = len(leaf)
-    depth = np.zeros(count, dtype=np.int64)
-    for q in range(count):  # pre-order: a parent comes before its children
-        if parent[q] >= 0:
-            depth[q] = depth[parent[q]] + 1
-    mesh = node_mesh(group, np.arange(count))
-    obb = group[14]
-    return {"node": np.arange(count), "mesh": mesh, "parent": parent, "depth": depth,
-            "triangle": leaf, "skip": skip, "lo": box_lo, "hi": box_hi, "volume": group[12][mesh],
-            "sphere_center": group[13][:, :3], "sphere_radius": group[13][:, 3], "obb_center": obb[:, :3],
-            "obb_axis_0": obb[:, 3:6], "obb_axis_1": obb[:, 6:9], "obb_axis_2": obb[:, 9:12], "obb_half": obb[:, 12:]}
+def tree_table(trees) -> dict[str, np.ndarray]:
+    """A mesh set's trees (engine/mesh/mesh_set.MeshSet) as the columns of the recording's
+    mesh-tree channel (format.MESH_TREE_FIELDS): node, mesh, parent, depth, triangle (-1
+    inside a tree), skip (the position after the node's subtree), lo, hi (Q, 3) m in the
+    mesh's frame, volume (the walked one: engine/mesh/tree.VOLUME_NAMES), and every node's
+    sphere and OBB."""
+    obb = trees.node_obb
+    return {"node": np.arange(len(trees.leaf_triangle)), "mesh": trees.node_mesh, "parent": trees.parent,
+            "depth": trees.depth, "triangle": trees.leaf_triangle, "skip": trees.skip, "lo": trees.box_lo,
+            "hi": trees.box_hi, "volume": trees.volume[trees.node_mesh], "sphere_center": trees.node_sphere[:, :3],
+            "sphere_radius": trees.node_sphere[:, 3], "obb_center": obb[:, :3], "obb_axis_0": obb[:, 3:6],
+            "obb_axis_1": obb[:, 6:9], "obb_axis_2": obb[:, 9:12], "obb_half": obb[:, 12:]}
 
 
 def led_to_contacts(search, contacts, leaf_triangle: np.ndarray):
@@ -205,11 +182,6 @@ def _meets(volume: str, low: np.ndarray, high: np.ndarray, q: int, box_lo, box_h
         obb = node_obb[q]
         return bool(obbs_meet(*box, 0, obb[None, :3], obb[None, 3:12].reshape(1, 3, 3), obb[None, 12:], 0))
     return not (np.any(low > box_hi[q]) or np.any(box_lo[q] > high))
-
-
-def node_mesh(group, nodes: np.ndarray) -> np.ndarray:
-    """(K,) int64: the mesh whose tree holds each of ``nodes`` (positions in engine_tree's group)."""
-    return np.searchsorted(group[7], nodes, side="right") - 1
 
 
 def tree_layout(visits: np.ndarray) -> np.ndarray:

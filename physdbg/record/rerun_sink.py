@@ -218,9 +218,9 @@ class RerunSink:
             self.opening = (f"from step {open_at}", int(open_at))
         # each sphere's number beside it, where there are few enough to read
         self._labels = [str(i) for i in range(header.count)] if header.count <= LABELLED_SPHERES else None
-        self._trees = mesh_view.mesh_trees(header.walls.meshes) if len(header.walls.meshes) else []
-        # the engine's trees (colliders/mesh.py), which the recorded search's nodes number
-        self._group = mesh_view.engine_tree(header.walls.meshes) if len(header.walls.meshes) else None
+        # the meshes' trees (the header's mesh set, built once): drawn by level, and the
+        # pre-order positions the recorded search's nodes number
+        self._trees = header.walls.meshes.mesh_set if len(header.walls.meshes) else None
         self._search = None  # the step's MeshSearch, drawn at its end
         self._search_drawn = False
         self._ever_searched = False  # a search reached a triangle (else the blueprint says why the panel is empty)
@@ -246,7 +246,7 @@ class RerunSink:
                                     albedo_factor=[170, 170, 185, 140]), static=True)
             edges = corners.reshape(-1, 3, 3)[:, [0, 1, 2, 0]]
             rec.log(path + "/edges", rr.LineStrips3D(list(edges), colors=[[120, 120, 135]], radii=[-0.75]), static=True)
-            self._mesh_bvh(path, self._trees[k])
+            self._mesh_bvh(path, k)
         for name, strip in periodic_faces(h.walls, lo, hi):  # faces a sphere passes through: blue, thin
             rec.log(self.root + f"world/periodic/{rr.escape_entity_path_part(name)}", rr.LineStrips3D([strip], colors=[[80, 140, 230]], radii=[-1.0]),
                     static=True)
@@ -444,25 +444,26 @@ class RerunSink:
         self.rec.send_columns(self.root + "log", indexes=index, columns=rr.TextLog.columns(
             text=[text for text, _ in lines], level=[level for _, level in lines]))
 
-    def _mesh_bvh(self, path: str, tree) -> None:
-        """A mesh's BVH, static, one entity per volume and level (mesh_view.py)."""
-        rr, rec = self.rr, self.rec
-        depth = mesh_view.node_depths(tree)
-        nodes = tree.nodes
+    def _mesh_bvh(self, path: str, k: int) -> None:
+        """Mesh k's BVH (the header's mesh set), static, one entity per volume and level (mesh_view.py)."""
+        rr, rec, trees = self.rr, self.rec, self._trees
+        nodes = trees.nodes_of(k)
+        depth = trees.depth[nodes]
+        lo, hi, obb, sphere = trees.box_lo[nodes], trees.box_hi[nodes], trees.node_obb[nodes], trees.node_sphere[nodes]
         for level in range(int(depth.max()) + 1):
             at = depth == level
             color = [_level_color(level)]
             rec.log(path + f"/bvh/aabb/level_{level}", rr.Boxes3D(
-                centers=(0.5 * (nodes.lo[at] + nodes.hi[at])).astype(np.float32),
-                half_sizes=(0.5 * (nodes.hi[at] - nodes.lo[at])).astype(np.float32),
+                centers=(0.5 * (lo[at] + hi[at])).astype(np.float32),
+                half_sizes=(0.5 * (hi[at] - lo[at])).astype(np.float32),
                 colors=color, radii=[-0.5], fill_mode="majorwireframe"), static=True)
             rec.log(path + f"/bvh/obb/level_{level}", rr.Boxes3D(
-                centers=tree.obb_center[at].astype(np.float32), half_sizes=tree.obb_half[at].astype(np.float32),
-                quaternions=mesh_view.quaternions(tree.obb_axes[at]).astype(np.float32),
+                centers=obb[at, :3].astype(np.float32), half_sizes=obb[at, 12:].astype(np.float32),
+                quaternions=mesh_view.quaternions(obb[at, 3:12].reshape(-1, 3, 3)).astype(np.float32),
                 colors=color, radii=[-0.5], fill_mode="majorwireframe"), static=True)
             rec.log(path + f"/bvh/sphere/level_{level}", rr.Ellipsoids3D(
-                centers=tree.sphere_center[at].astype(np.float32),
-                half_sizes=np.repeat(tree.sphere_radius[at, None], 3, axis=1).astype(np.float32),
+                centers=sphere[at, :3].astype(np.float32),
+                half_sizes=np.repeat(sphere[at, 3:4], 3, axis=1).astype(np.float32),
                 colors=color, line_radii=[-0.5], fill_mode="majorwireframe"), static=True)
 
     def _meshes_at(self, end: StepEnd, contacts: Contacts | None) -> list[tuple[str, str]]:
@@ -481,7 +482,7 @@ class RerunSink:
         if search is None:
             return []
         if self.detail != "full":  # as the MCAP file keeps it: the walks that led to a contact
-            search = mesh_view.led_to_contacts(search, contacts, self._group[5])
+            search = mesh_view.led_to_contacts(search, contacts, self._trees.leaf_triangle)
         return self._draw_search(end, search, contacts)
 
     def _draw_search(self, end: StepEnd, search, contacts: Contacts | None) -> list[tuple[str, str]]:
@@ -520,14 +521,13 @@ class RerunSink:
         """Draw the visits ``rows`` and the boxes ``asked`` of a search under ``path``;
         returns the nodes met, the nodes culled (met by none) and the triangles reached."""
         rr, rec = self.rr, self.rec
-        meshes, group = self.header.walls.meshes, self._group
+        meshes, trees = self.header.walls.meshes, self._trees
         outcome, node = search.visit_outcome[rows], search.visit_node[rows].astype(np.int64)
         met = np.unique(node[outcome != SEARCH_CULLED])
         culled = np.setdiff1d(np.unique(node[outcome == SEARCH_CULLED]), met)
-        triangles = np.unique(group[5][node[outcome == SEARCH_REACHED]])
+        triangles = np.unique(trees.leaf_triangle[node[outcome == SEARCH_REACHED]])
         for part, which, color in (("met", met, [60, 220, 90]), ("culled", culled, [230, 70, 60])):
-            (centers, half_sizes, quaternions), (sphere_centers, sphere_radii) = _posed_nodes(group, meshes, which,
-                                                                                               end.time)
+            (centers, half_sizes, quaternions), (sphere_centers, sphere_radii) = _posed_nodes(trees, which, end.time)
             rec.log(path + f"/{part}", rr.Boxes3D(
                 centers=centers, half_sizes=half_sizes, quaternions=quaternions,
                 colors=[color], radii=[-1.5 if part == "met" else -0.75], fill_mode="majorwireframe"))
@@ -551,7 +551,7 @@ class RerunSink:
         (whole walks), green where the box met the node, red where the branch ended, yellow
         at a triangle reached; an edge from each visit to those reached from it."""
         rr = self.rr
-        meshes, leaf_triangle = self.header.walls.meshes, self._group[5]
+        meshes, leaf_triangle = self.header.walls.meshes, self._trees.leaf_triangle
         spheres = search.query_sphere
         new_row = np.full(len(search.visit_node), -1, dtype=np.int64)
         new_row[rows] = np.arange(len(rows))
@@ -676,18 +676,22 @@ class RerunSink:
             raise OSError(f"the Rerun file {self.path} ends before its footer: a write failed (is the disk full?)")
 
 
-def _posed_nodes(group, meshes, nodes: np.ndarray, time: float):
-    """The walked volumes of ``nodes`` of the engine's trees (mesh_view.engine_tree), each in
+def _posed_nodes(trees, nodes: np.ndarray, time: float):
+    """The walked volumes of ``nodes`` (pre-order positions of a mesh set's trees,
+    engine/mesh/mesh_set.MeshSet), each in
     its mesh's frame, posed where the mesh is at run time ``time`` (a fixed mesh's frame is
     the world): (boxes: centres (K, 3), half sizes (K, 3), rotations (K, 4 quaternions,
     x y z w), of the nodes walked with an AABB or an OBB; spheres: centres (S, 3), radii
     (S,), of those walked with a sphere), float32."""
     from scipy.spatial.transform import Rotation
 
-    owner = mesh_view.node_mesh(group, nodes)
-    volume = group[12][owner] if len(nodes) else np.zeros(0, dtype=np.int64)
-    lo, hi, obb, sphere = group[3][nodes], group[4][nodes], group[14][nodes], group[13][nodes]
-    is_obb, is_sphere = volume == 2, volume == 1  # colliders.mesh.VOLUME_OBB, VOLUME_SPHERE
+    from ..engine.mesh.tree import OBB, SPHERE
+
+    meshes = trees.meshes
+    owner = trees.node_mesh[nodes]
+    volume = trees.volume[owner]
+    lo, hi, obb, sphere = trees.box_lo[nodes], trees.box_hi[nodes], trees.node_obb[nodes], trees.node_sphere[nodes]
+    is_obb, is_sphere = volume == OBB, volume == SPHERE
     centers = np.where(is_obb[:, None], obb[:, :3], 0.5 * (lo + hi))
     half = np.where(is_obb[:, None], obb[:, 12:], 0.5 * (hi - lo))
     turns = np.tile(np.eye(3), (len(nodes), 1, 1))

@@ -9,10 +9,10 @@ about sphere i against triangle t, each function reached through the switch in
 own path), its contact normal and gap (from the closest point, so the normal turns as a
 sphere rolls over an edge), which triangles a sphere's box reaches, and the deepest overlap.
 
-Which triangles a box reaches is asked of each mesh's own BVH (SAH, built once over its
-triangles' boxes in the frame the mesh has at run time 0: the tree the views draw,
-``record/mesh_view.mesh_trees``), walked without a stack in pre-order with skip links
-(``preorder``, ``skip``), so that the contact loop, which allocates nothing, can ask it.
+Which triangles a box reaches is asked of each mesh's own BVH (SAH over its triangles'
+boxes in the frame the mesh has at run time 0, built once by the scene's mesh set,
+engine/mesh/mesh_set.py: the tree the views draw), walked without a stack in pre-order with
+skip links (``skip``), so that the contact loop, which allocates nothing, can ask it.
 What a triangle reads is this kind's group, ``MeshGeometry``, unpacked by ``_unpack``
 alone.
 
@@ -36,8 +36,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..broadphase.bvh import build, build_lbvh
+from ..broadphase.bvh import build_lbvh
 from ..jit import borrowing, kernel
+from ..mesh.tree import AABB, OBB, SPHERE, VOLUME_NAMES
 from ..mesh.volumes import separating_axes_meet
 from ..mesh.closest import FACE, closest_on_triangle
 from ..mesh.rigid_motion import in_body_frame, surface_acceleration, surface_velocity, turned_with
@@ -79,49 +80,27 @@ class MeshGeometry(NamedTuple):
     node_obb: np.ndarray
 
     @classmethod
-    def of(cls, walls, builder: str = "sah") -> MeshGeometry:
-        """The group of a scene's meshes (state.Walls.meshes, a state.Meshes) at run time 0;
-        builder: the trees' (broadphase.bvh.BUILD_NAMES; the engine's is SAH)."""
-        from ..mesh.tree import build_mesh_tree
-
+    def of(cls, walls, volume: np.ndarray | None = None, trees=None) -> MeshGeometry:
+        """The group of a scene's meshes (state.Walls.meshes, a state.Meshes) at run time 0,
+        from their trees (the scene's mesh set, state.Meshes.mesh_set: built once, its
+        arrays shared by every group); the corners, motions and frames are this group's own,
+        for ``place`` to rewrite. volume: (M,) codes (mesh/tree.VOLUME_NAMES) to walk with
+        instead of the scene's; trees: another mesh.mesh_set.MeshSet of the same meshes
+        (one by another builder, for a test)."""
         meshes = walls.meshes
-        corners = np.ascontiguousarray(meshes.corners, dtype=np.float64).reshape(-1, 3, 3)
-        built = [build_mesh_tree(corners[meshes.mesh_of == k].reshape(-1, 3),
-                                 np.arange(3 * int(np.count_nonzero(meshes.mesh_of == k)), dtype=np.int64).reshape(-1, 3),
-                                 builder) for k in range(len(meshes))]
-        trees = [preorder_nodes(tree.nodes) for tree in built]
-        sizes = [len(tree[2]) for tree in trees]
-        tree_first = np.concatenate([[0], np.cumsum(sizes, dtype=np.int64)]).astype(np.int64)
-        first = meshes.first
-        box_lo = np.concatenate([t[0] for t in trees]) if trees else np.zeros((0, 3))
-        box_hi = np.concatenate([t[1] for t in trees]) if trees else np.zeros((0, 3))
-        # each tree's triangles and skip positions, numbered in the scene
-        leaf = np.concatenate([np.where(t[2] >= 0, t[2] + first[k], -1) for k, t in enumerate(trees)]) if trees \
-            else np.zeros(0, dtype=np.int64)
-        skip = np.concatenate([t[3] + tree_first[k] for k, t in enumerate(trees)]) if trees \
-            else np.zeros(0, dtype=np.int64)
+        trees = meshes.mesh_set if trees is None else trees
         motion = np.ascontiguousarray(np.hstack([meshes.pivot, meshes.velocity, meshes.angular_velocity])
                                       if len(meshes) else np.zeros((0, 9)))
         frame = np.zeros((len(meshes), 22))
         frame[:, [0, 4, 8, 9, 13, 17]] = 1.0  # at run time 0 the world is every mesh's frame
         frame[:, 18:21] = meshes.pivot
-        parent = np.full(len(leaf), -1, dtype=np.int64)
-        inner = np.flatnonzero(leaf < 0)  # in pre-order a node's left child follows it; its right starts after that
-        parent[inner + 1] = inner
-        parent[skip[inner + 1]] = inner
-        # each node's other volumes (engine/mesh/tree.py: padded, in the mesh's frame), in pre-order
-        node_sphere = np.concatenate([np.hstack([tree.sphere_center[t[4]], tree.sphere_radius[t[4], None]])
-                                      for tree, t in zip(built, trees, strict=True)]) if trees else np.zeros((0, 4))
-        node_obb = np.concatenate([np.hstack([tree.obb_center[t[4]], tree.obb_axes[t[4]].reshape(-1, 9),
-                                              tree.obb_half[t[4]]])
-                                   for tree, t in zip(built, trees, strict=True)]) if trees else np.zeros((0, 15))
-        volume = np.array([VOLUMES.index(v) for v in meshes.volumes()], dtype=np.int64)
-        return cls(corners.copy(), np.ascontiguousarray(meshes.mesh_of, dtype=np.int64),
-                   np.ascontiguousarray(meshes.restitution, dtype=np.float64), np.ascontiguousarray(box_lo),
-                   np.ascontiguousarray(box_hi), np.ascontiguousarray(leaf, dtype=np.int64),
-                   np.ascontiguousarray(skip, dtype=np.int64), tree_first, motion,
-                   np.ascontiguousarray(meshes.moving, dtype=np.bool_), frame, parent, volume,
-                   np.ascontiguousarray(node_sphere), np.ascontiguousarray(node_obb))
+        return cls(np.ascontiguousarray(meshes.corners, dtype=np.float64).reshape(-1, 3, 3).copy(),
+                   np.ascontiguousarray(meshes.mesh_of, dtype=np.int64),
+                   np.ascontiguousarray(meshes.restitution, dtype=np.float64), trees.box_lo, trees.box_hi,
+                   trees.leaf_triangle, trees.skip, trees.tree_first, motion,
+                   np.ascontiguousarray(meshes.moving, dtype=np.bool_), frame, trees.parent,
+                   trees.volume if volume is None else np.ascontiguousarray(volume, dtype=np.int64),
+                   trees.node_sphere, trees.node_obb)
 
 
 def place(group: tuple, meshes, time: float, span: float) -> int:
@@ -190,9 +169,10 @@ CALENDAR = True
 # how a step's spheres are searched against the meshes' trees (Settings.mesh_search)
 MESH_SEARCH_NAMES = ("auto", "walk", "together")
 
-# the volume a mesh's tree is walked with (MeshGeometry.volume; scene field bounding_volume)
-VOLUMES = ("aabb", "sphere", "obb")
-VOLUME_AABB, VOLUME_SPHERE, VOLUME_OBB = 0, 1, 2
+# the volume a mesh's tree is walked with (MeshGeometry.volume; scene field bounding_volume):
+# the one table of volume codes, mesh/tree.py's
+VOLUMES = VOLUME_NAMES
+VOLUME_AABB, VOLUME_SPHERE, VOLUME_OBB = AABB, SPHERE, OBB
 
 
 def triangle_boxes(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -200,39 +180,6 @@ def triangle_boxes(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if len(corners) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3))
     return np.ascontiguousarray(corners.min(axis=1)), np.ascontiguousarray(corners.max(axis=1))
-
-
-def preorder(lo: np.ndarray, hi: np.ndarray, builder: str = "sah") -> tuple:
-    """A BVH (by ``builder``, the scene BVH's: SAH unless asked) over boxes lo, hi (T, 3)
-    laid out in pre-order: (box_lo, box_hi (Q, 3), leaf_triangle (Q,) (the box's number; -1
-    inside), skip (Q,): where the walk goes when a node's box is missed)."""
-    if lo.shape[0] == 0:
-        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    return preorder_nodes(build(lo, hi, builder, 1))[:4]
-
-
-def preorder_nodes(tree) -> tuple:
-    """A built BVH (broadphase.bvh.BVHNodes) laid out in pre-order: (box_lo, box_hi (Q, 3),
-    leaf_triangle (Q,), skip (Q,), nodes (Q,): the tree's node at each position)."""
-    order: list[int] = []
-    stack = [tree.root]
-    while stack:
-        node = stack.pop()
-        order.append(node)
-        if tree.left[node] >= 0:
-            stack.append(int(tree.right[node]))
-            stack.append(int(tree.left[node]))
-    position = np.empty(tree.size, dtype=np.int64)
-    position[order] = np.arange(len(order))
-    size = np.ones(tree.size, dtype=np.int64)
-    for node in reversed(order):  # subtree sizes, children before parents
-        if tree.left[node] >= 0:
-            size[node] = 1 + size[tree.left[node]] + size[tree.right[node]]
-    nodes = np.array(order, dtype=np.int64)
-    leaf = np.where(tree.left[nodes] < 0, tree.order[np.minimum(tree.start[nodes], len(tree.order) - 1)], -1)
-    skip = np.arange(len(order), dtype=np.int64) + size[nodes]
-    return (np.ascontiguousarray(tree.lo[nodes]), np.ascontiguousarray(tree.hi[nodes]),
-            np.ascontiguousarray(leaf, dtype=np.int64), skip, nodes)
 
 
 @njit(cache=True, inline="always")

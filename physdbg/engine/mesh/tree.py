@@ -33,8 +33,10 @@ from ..broadphase.bvh import BUILD_NAMES, BVHNodes, build
 from ..jit import kernel
 
 VOLUME_PAD = 1e-9  # times the mesh's bounding-box diagonal
-VOLUME_NAMES = ("sphere", "aabb", "obb")
-SPHERE, AABB, OBB = 0, 1, 2
+# the one table of the three volume kinds, by code: a mesh's walk (colliders/mesh.py), its
+# recorded tree (the mesh-tree channel's ``volume``), the views and the pair descent all read it
+VOLUME_NAMES = ("aabb", "sphere", "obb")
+AABB, SPHERE, OBB = 0, 1, 2
 
 
 @kernel
