@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import time
 from contextlib import contextmanager
+from dataclasses import replace
 
 
 def _ms_per_step(scene, steps: int, audit: bool | str) -> float:
@@ -70,9 +71,15 @@ def measure(label: str, scene, steps: int, rounds: int) -> None:
                                                  "_check_simultaneous", "_check_energy", "_check_collapse")]
     kernels = [(tunnel, name) for name in ("grid_pairs", "pair_crossings", "_pinned_kernel")]
     with _timed(checks + kernels) as spent:
-        started = time.perf_counter()
-        api.run(scene, audit="full")
-        whole = time.perf_counter() - started
+        table = audit.AUDIT_CHECKS  # the audit calls its checks through this table: the timed ones in it
+        audit.AUDIT_CHECKS = tuple(replace(check, method=getattr(audit.Auditor, check.method.__name__))
+                                   for check in table)
+        try:
+            started = time.perf_counter()
+            api.run(scene, audit="full")
+            whole = time.perf_counter() - started
+        finally:
+            audit.AUDIT_CHECKS = table
     step_end = spent.get("_end_step", 0.0)
     print(f"  run with --full-audit (timed): {1e3 * whole / steps:.2f} ms/step; the audit's step ends "
           f"{1e3 * step_end / steps:.2f} ms/step, of which:")

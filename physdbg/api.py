@@ -724,18 +724,52 @@ def _check_class_row(run: str, scene: str | None, overrides: tuple, options: dic
 
 def check_class(runs: Sequence[str | Path], scene: str | None, overrides: Sequence[str] = (),
                 workers: int | None = None, dask: str | None = None, **options):
-    """check-run of every run of a class (analysis.classroom.runs_in) against ``scene`` (a
-    built-in name or a .toml path, read by each worker; None: each run's own scene, which
-    a run without one is an error row for): an analysis.classroom.ClassReport.
-    workers: local processes (None: every core); dask: an existing cluster's scheduler;
-    options: check_run's atol, rtol, time_unit, length_unit, verify."""
-    from .analysis.classroom import class_report
+    """check-run of every run of a class against ``scene`` (a built-in name or a .toml path,
+    read by each worker; None: each run's own scene, which a run without one is an error
+    row for): an analysis.classroom.ClassReport. runs: runs, or folders of runs
+    (analysis.classroom.runs_in: every run in them); workers: local processes (None: every
+    core); dask: an existing cluster's scheduler; options: check_run's atol, rtol,
+    time_unit, length_unit, verify."""
+    from .analysis.classroom import class_report, runs_in
     from .analysis.sweep import run_jobs
+
+    runs = runs_in([Path(run) for run in runs])
 
     # a wrong scene is one error, before any run
     name = load_scene(scene, list(overrides)).name if scene is not None else "each run's own scene"
     jobs = [(str(run), scene, tuple(overrides), options) for run in runs]
     return class_report(name, run_jobs(_check_class_row, jobs, workers=workers, dask=dask))
+
+
+def overlap(a: str, b: str, **options):
+    """Do two meshes (files or built-in shapes) overlap? The two-tree search of
+    analysis.mesh_pair_search.overlap (options: pose_a, pose_b, volume, builder, hull): an
+    OverlapReport, its search tree whole."""
+    from .analysis.mesh_pair_search import overlap as search
+
+    return search(a, b, **options)
+
+
+def read_step_lengths(path: str | Path) -> list[float]:
+    """Step lengths (s) from a file, one per line, each by the rule of a scene's dt
+    (scene.step_length): ``run --dts FILE``."""
+    from .scene import STEP_LENGTH_RANGE, step_length
+
+    path = Path(path)
+    try:
+        lines = path.read_text().split()
+    except (OSError, UnicodeDecodeError) as err:
+        raise PhysdbgError(f"{path}: cannot read step lengths ({err})") from None
+    out = []
+    for number, text in enumerate(lines, 1):
+        value = step_length(text)
+        if value is None:
+            raise PhysdbgError(f"{path}: entry {number} is {text[:40]!r}; each dt must be a number of seconds "
+                               f"{STEP_LENGTH_RANGE}")
+        out.append(value)
+    if not out:
+        raise PhysdbgError(f"{path}: no step lengths in the file")
+    return out
 
 
 SCENE_FORMATS = ("toml", "json", "js")

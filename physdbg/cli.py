@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import gc
 import json
-import math
 import os
 import sys
 from contextlib import contextmanager
@@ -23,6 +22,7 @@ from typing import Annotated, Optional
 
 import typer
 
+from . import viewers
 from .errors import PhysdbgError, one_line, os_error_words
 from .serve import DEFAULT_PORT as SERVE_PORT, MAX_BYTES as SERVE_MAX_BYTES
 
@@ -170,26 +170,17 @@ def _pile_note(scene) -> None:
 
 
 def _choose_tier(scene, overrides) -> object:
-    """Compiled or interpreted for a run of ``scene`` (physdbg/tier.py), chosen and
-    applied before the engine is loaded."""
+    """Compiled or interpreted for a run of ``scene`` (tier.for_scene), before the engine is loaded."""
     from . import tier
 
-    try:
-        return tier.apply(tier.choose(tier.estimate(scene, overrides or [])))
-    except ValueError as err:  # a wrong PHYSDBG_COMPILE
-        raise PhysdbgError(str(err)) from None
+    return tier.for_scene(scene, overrides or [])
 
 
 def _choose_tier_for(*recordings: Path) -> object:
-    """The tier for commands that read recordings (the audit's and the diff's checks are
-    compiled functions too): the work is the recordings' sphere-steps."""
+    """The tier for commands that read recordings (tier.for_recordings)."""
     from . import tier
 
-    works = [tier.estimate_recording(path) for path in recordings]
-    try:
-        return tier.apply(tier.choose(None if None in works else sum(works)))
-    except ValueError as err:
-        raise PhysdbgError(str(err)) from None
+    return tier.for_recordings(*recordings)
 
 
 def _after_interpreted(chosen, quiet: bool = False) -> None:
@@ -267,12 +258,12 @@ def run(
     with _user_errors(as_json):
         tier = _choose_tier(scene, set_)
         from .analysis.report import summary_text
-        from .api import load_scene
+        from .api import load_scene, read_step_lengths
         from .api import run as run_scene
 
         loaded = load_scene(scene, set_ or [])
         _pile_note(loaded)
-        step_lengths = _read_dts(dts) if dts is not None else None
+        step_lengths = read_step_lengths(dts) if dts is not None else None
         total = len(step_lengths) if step_lengths is not None else loaded.steps
         bar = _progress_bar(total, show=progress and not as_json)
         try:
@@ -339,14 +330,14 @@ def record(
         tier = _choose_tier(scene, set_)
         from .analysis.report import size_words, summary_text
         from .api import diff as api_diff
-        from .api import load_scene
+        from .api import load_scene, read_step_lengths
         from .api import record as record_scene
 
         if check_against is not None and not check_against.is_file():
             raise PhysdbgError(f"{check_against}: no such recording to check against")
         loaded = load_scene(scene, set_ or [])
         _pile_note(loaded)
-        step_lengths = _read_dts(dts) if dts is not None else None
+        step_lengths = read_step_lengths(dts) if dts is not None else None
         total = len(step_lengths) if step_lengths is not None else loaded.steps
         bar = _progress_bar(total, show=progress)
         try:
@@ -394,7 +385,7 @@ def _render(report, kind: str, output_format: str, as_json: bool, markdown: bool
         raise PhysdbgError(f"--format must be text, json or markdown, not {chosen!r}")
     if chosen == "json":
         return rendering.report_json(report)
-    return getattr(rendering, f"{kind}_{chosen}")(report)
+    return rendering.RENDERINGS[kind, chosen](report)
 
 
 @app.command()
@@ -518,54 +509,13 @@ def replay(
                 typer.echo(f"replayed    {done['steps']} steps"
                            + (" (truncated recording)" if done["truncated"] else "") + f" -> {target}")
                 if web:
-                    _serve_web(target, port)
+                    viewers.serve_web(target, port, typer.echo)
                 elif spawn:
-                    _spawn_viewer(target)
+                    viewers.spawn_viewer(target)
                     scratch = None  # the viewer reads it after we exit; the OS cleans temp folders
             finally:
                 if scratch is not None:
                     shutil.rmtree(scratch, ignore_errors=True)
-
-
-def _spawn_viewer(rrd: Path) -> None:
-    """Start the native Rerun viewer on an .rrd file, detached (it outlives this command)."""
-    import subprocess
-
-    from .record.rerun_sink import viewer_binary
-
-    try:
-        subprocess.Popen([viewer_binary(), str(rrd)], start_new_session=True)
-    except OSError as err:
-        raise PhysdbgError(f"cannot start the Rerun viewer ({err})") from None
-
-
-def _serve_web(rrd: Path, port: int) -> None:
-    """Serve the recording to the web viewer on localhost only, until Ctrl-C or SIGTERM;
-    the viewer process is stopped either way."""
-    import signal
-
-    from .record.rerun_sink import start_web_viewer, stop_process
-
-    try:
-        viewer, port, grpc_port = start_web_viewer(str(rrd), port)
-    except OSError as err:
-        raise PhysdbgError(f"cannot start the Rerun viewer ({err})") from None
-
-    def stop(signum, frame):
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, stop)
-    try:
-        typer.echo(f"open        http://127.0.0.1:{port}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc_port}%2Fproxy")
-        typer.echo("            (served on localhost only; Ctrl-C to stop)")
-        code = viewer.wait()
-        if code:
-            raise PhysdbgError(f"the Rerun web viewer stopped with exit code {code} (is port {port} in use?)")
-    except KeyboardInterrupt:
-        pass
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-        stop_process(viewer)
 
 
 OverwriteRecording = Annotated[bool, typer.Option("--force", help="Overwrite an existing recording.")]
@@ -621,13 +571,12 @@ def _check_class(folder: Path, scene: str | None, overrides: list[str], atol, rt
             raise PhysdbgError(f"--format must be text, json, markdown or csv, not {chosen!r}")
         from .api import check_class
 
-        runs = classroom.runs_in([folder])
-        report = check_class(runs, scene, overrides, workers=jobs, dask=dask, atol=atol, rtol=rtol,
+        report = check_class([folder], scene, overrides, workers=jobs, dask=dask, atol=atol, rtol=rtol,
                              time_unit=time_unit, length_unit=length_unit, verify=verify)
         if chosen == "json":
             typer.echo(json.dumps(report.as_dict(), indent=2))
         else:
-            typer.echo(getattr(classroom, f"class_{chosen}")(report).rstrip("\n"))
+            typer.echo(classroom.CLASS_FORMATS[chosen](report).rstrip("\n"))
         if report.exit_code:
             raise typer.Exit(report.exit_code)
 
@@ -756,28 +705,17 @@ def check_run(
 def _serve(scene: str | None, overrides: list[str], folder: Path, port: int, max_bytes: int, force: bool,
            **options) -> None:
     """check-run --serve (physdbg/serve.py) until Ctrl-C or SIGTERM; options: check_run's."""
-    import signal
-
     from .serve import CheckServer
 
     server = CheckServer(folder, scene, overrides, port=port, max_bytes=max_bytes, force=force,
                          on_verdict=lambda verdict: typer.echo(verdict.line()), **options)
-
-    def stop(signum, frame):
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, stop)
     typer.echo(f"serving     {server.url}  (127.0.0.1 only; pages with physdbg-trace.js send their runs here "
                f"when finish() is called)")
     typer.echo(f"scene       {scene or 'each run' + chr(39) + 's own (its first line)'}"
                + (f", {' '.join('-s ' + o for o in overrides)}" if overrides else ""))
     typer.echo(f"keeping     {folder}/  (each run with run.mcap and reference.mcap; Ctrl-C stops)")
-    try:
-        server.serve_forever()
-    except KeyboardInterrupt:
+    if viewers.until_stopped(server.serve_forever):
         typer.echo("stopped")
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 @app.command("record-peer")
@@ -821,21 +759,14 @@ def check(
     Example: physdbg check bullet-wall -s detection=discrete
     """
     with _user_errors(as_json):
-        from dataclasses import asdict
-
         from .analysis.report import check_text
         from .api import check as check_scene
 
         result = check_scene(scene, set_ or [])
-        advice = result.advice
         if as_json:
-            from .analysis.report import versioned
+            from .analysis.report import check_dict, versioned
 
-            typer.echo(json.dumps(versioned({"scene": result.scene.name, "ok": result.ok, "current": result.current,
-                                             "recommended": advice.recommended, "reasons": advice.reasons,
-                                             "facts": advice.facts,
-                                             "predictions": [asdict(p) for p in advice.predictions]}),
-                                  indent=2, default=str))
+            typer.echo(json.dumps(versioned(check_dict(result)), indent=2, default=str))
         else:
             typer.echo(check_text(result))
         if not result.ok:
@@ -888,19 +819,11 @@ def bench_accuracy(
                                   command=command, workers=jobs, dask=dask, on_status=bar.status)
         finally:
             bar.close()
-        from .analysis.accuracy import PROBLEMS, pareto
+        from .analysis.accuracy import summary_lines
 
         typer.echo(f"{len(result.runs)} runs in {result.seconds:.1f} s")
-        for name in PROBLEMS:
-            mine = [r for r in result.runs if r.problem == name]
-            if not mine:
-                continue
-            best = pareto(mine)
-            failed = sum(1 for r in mine if r.failure)
-            typer.echo(f"{name:15} {len(best)} on the Pareto front; most accurate {best[-1].method} at "
-                       f"dt 1/{round(1 / best[-1].dt)} ({best[-1].error:.1e} {best[-1].unit})"
-                       + (f"; {failed} of {len(mine)} runs broke (tunnelled, overlapped or blew up: the methods "
-                          f"kept to show where they fail; each named in the table)" if failed else ""))
+        for line in summary_lines(result.runs):
+            typer.echo(line)
         _bench_files(result)
 
 
@@ -935,18 +858,11 @@ def bench_engines(
                                  on_status=bar.status)
         finally:
             bar.close()
+        from .analysis.engines import summary_lines
+
         typer.echo(f"{len(result.runs)} runs in {result.seconds:.1f} s")
-        for name in dict.fromkeys(r.scene for r in result.runs):
-            mine = [r for r in result.runs if r.scene == name and not r.failure]
-            exact = next((r for r in mine if r.method == "physdbg exact"), None)
-            fastest = min(mine, key=lambda r: r.ms_per_step, default=None)
-            if exact is not None and fastest is not None:
-                typer.echo(f"{name:13} physdbg exact {exact.ms_per_step:.3g} ms/step; fastest {fastest.method} "
-                           f"{fastest.ms_per_step:.3g} ms/step (largest overlap {fastest.largest_overlap:.2g} m, "
-                           f"{fastest.tunnelled} tunnelled)")
-        for run in result.runs:
-            if run.failure:
-                typer.echo(f"{run.scene:13} {run.method}: could not run ({run.failure})")
+        for line in summary_lines(result.runs):
+            typer.echo(line)
         _bench_files(result)
 
 
@@ -977,17 +893,11 @@ def bench_stability(
                                    workers=jobs, dask=dask, on_status=bar.status)
         finally:
             bar.close()
-        from .analysis.stability import REACH, first_step
+        from .analysis.stability import REACH, summary_lines
 
         typer.echo(f"{len(result.runs)} cells in {result.seconds:.1f} s; REACH = wall thickness/2 + r = {REACH:g} m")
-        for method in dict.fromkeys(c.method for c in result.runs):
-            step = first_step(result.runs, method)
-            impact = [c for c in result.runs if c.map == "impact" and c.method == method]
-            stack = [c for c in result.runs if c.map == "stack" and c.method == method]
-            typer.echo(f"{method:22} impact {sum(c.outcome == 'pass' for c in impact)}/{len(impact)} pass, "
-                       + ("never tunnels" if math.isinf(step) else
-                          f"tunnels from v·dt = {step:.3g} m ({step / REACH:.2g} × REACH)")
-                       + f"; stacks {sum(c.outcome == 'pass' for c in stack)}/{len(stack)} pass")
+        for line in summary_lines(result.runs):
+            typer.echo(line)
         _bench_files(result)
 
 
@@ -1045,10 +955,11 @@ def overlap(
     Example: physdbg overlap icosphere paddle --pose 0.5,0,0,0,0,30
     """
     with _user_errors(as_json):
-        from .analysis.mesh_pair_search import overlap as search, overlap_text
+        from .analysis.mesh_pair_search import overlap_text
+        from .analysis.report import versioned
+        from .api import overlap as search
 
         report = search(a, b, pose_a=pose_a, pose_b=pose, volume=volume, builder=builder, hull=hull)
-        from .analysis.report import versioned
 
         typer.echo(json.dumps(versioned(report.as_dict()), indent=2) if as_json else overlap_text(report, max_lines))
         raise typer.Exit(report.exit_code)
@@ -1067,29 +978,6 @@ def _command(name: str) -> str:
         return name
     relative = os.path.relpath(beside)
     return relative if not relative.startswith("..") else beside
-
-
-def _read_dts(path: Path) -> list[float]:
-    """Step lengths (s) from a file, one per line, each in the range a scene's dt allows."""
-    from .scene import MAX_MAGNITUDE, MIN_SCALE
-
-    try:
-        lines = path.read_text().split()
-    except (OSError, UnicodeDecodeError) as err:
-        raise PhysdbgError(f"{path}: cannot read step lengths ({err})") from None
-    out = []
-    for number, text in enumerate(lines, 1):
-        try:
-            value = float(text)
-        except ValueError:
-            value = float("nan")
-        if not MIN_SCALE <= value <= MAX_MAGNITUDE:
-            raise PhysdbgError(f"{path}: entry {number} is {text[:40]!r}; each dt must be a number of seconds "
-                               f"between {MIN_SCALE:g} and {MAX_MAGNITUDE:g}")
-        out.append(value)
-    if not out:
-        raise PhysdbgError(f"{path}: no step lengths in the file")
-    return out
 
 
 class _progress_bar:

@@ -358,11 +358,14 @@ class MeshSearch:
 
 @dataclass(frozen=True)
 class EngineWarning:
-    """Something the user should know about a step (code is a stable identifier)."""
+    """Something the user should know about a step: code, a stable identifier (a budget's
+    setting name, overlap, non-finite, pinned, periodic, max_memory); message, one
+    sentence; bodies, the spheres it is about (scene numbering), where it is about some."""
 
     step: int
     code: str
     message: str
+    bodies: tuple[int, ...] = ()
 
 
 # the step pipeline's phases, in order (engine/world.py runs and times each; StepEnd.timings,

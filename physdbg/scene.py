@@ -601,24 +601,35 @@ class _Checker:
         return value
 
 
+STEP_LENGTH_RANGE = f"between {MIN_SCALE:g} and {MAX_MAGNITUDE:g} s"  # what any dt a user gives may be
+
+
+def step_length(value: Any) -> float | None:
+    """A step's length (s) from a number or a number's text (a fraction such as "1/60"),
+    or None when it is neither or outside STEP_LENGTH_RANGE: the one rule for every dt a
+    user gives (a scene's ``dt``, each line of ``--dts``). Text is compared exactly, so
+    "1e400" does not overflow."""
+    if isinstance(value, str):
+        try:
+            exact = Fraction(value.strip())
+        except (ValueError, ZeroDivisionError):
+            return None
+        return float(exact) if MIN_SCALE <= exact <= MAX_MAGNITUDE else None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not MIN_SCALE <= value <= MAX_MAGNITUDE:
+        return None
+    return float(value)
+
+
 def _dt(c: _Checker, dt_raw: Any) -> float | None:
-    """The time step (s) from a number, a fraction such as "1/60", or "real" (None)."""
-    expected = f"expected {TOP_FIELDS['dt']}, between {MIN_SCALE:g} and {MAX_MAGNITUDE:g} s"
+    """The time step (s) from a number, a fraction such as "1/60" (step_length), or "real" (None)."""
     if dt_raw is None:
         c.fail("dt", "is required: " + TOP_FIELDS["dt"])
     if dt_raw == "real":
         return None
-    if isinstance(dt_raw, str):
-        try:
-            exact = Fraction(dt_raw)
-        except (ValueError, ZeroDivisionError):
-            c.fail("dt", f"got {_short(dt_raw)}; {expected}")
-        if not MIN_SCALE <= exact <= MAX_MAGNITUDE:  # compared exactly: "1e400" does not overflow
-            c.fail("dt", f"got {_short(dt_raw)}; {expected}")
-        return float(exact)
-    if isinstance(dt_raw, bool) or not isinstance(dt_raw, (int, float)) or not MIN_SCALE <= dt_raw <= MAX_MAGNITUDE:
-        c.fail("dt", f"got {_short(dt_raw)}; {expected}")
-    return float(dt_raw)
+    dt = step_length(dt_raw)
+    if dt is None:
+        c.fail("dt", f"got {_short(dt_raw)}; expected {TOP_FIELDS['dt']}, {STEP_LENGTH_RANGE}")
+    return dt
 
 
 def _short(value: Any, limit: int = 60) -> str:

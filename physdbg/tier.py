@@ -241,6 +241,32 @@ def apply(tier: Tier) -> Tier:
     return tier
 
 
+def for_scene(scene: str | dict, overrides=()) -> Tier:
+    """Choose and apply the tier for a run of ``scene`` (a built-in name, a .toml path or a
+    scene table) with ``overrides``: the work estimated from the scene before it is loaded.
+    A wrong PHYSDBG_COMPILE is a PhysdbgError."""
+    return _chosen_for(lambda: estimate(scene, list(overrides)))
+
+
+def for_recordings(*paths) -> Tier:
+    """Choose and apply the tier for a command that reads recordings (the audit's and the
+    diff's checks are compiled functions too): the work is the recordings' sphere-steps."""
+    def work() -> int | None:
+        works = [estimate_recording(path) for path in paths]
+        return None if None in works else sum(works)
+
+    return _chosen_for(work)
+
+
+def _chosen_for(work) -> Tier:
+    from .errors import PhysdbgError
+
+    try:
+        return apply(choose(work()))
+    except ValueError as err:  # a wrong PHYSDBG_COMPILE
+        raise PhysdbgError(str(err)) from None
+
+
 def chosen() -> Tier:
     """The tier this process runs in: the one applied, else what numba's switch says."""
     if _chosen is not None:

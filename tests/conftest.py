@@ -33,6 +33,27 @@ def pytest_sessionstart(session):
     compile_kernels("grid", sleeping=True)
 
 
+@pytest.fixture(scope="session")
+def package_registry():
+    """For a test that installs packages (mark ``registry``): skip it, saying why, where pip
+    can fetch nothing here (no network, no mirror, no wheel folder); under CI, which
+    promises a registry (README command 2 installs from it), fail instead of skipping."""
+    import subprocess
+    import sys
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as folder:  # the smallest thing pip can be asked: one pure wheel, no deps
+        done = subprocess.run([sys.executable, "-m", "pip", "download", "--no-deps", "--quiet", "--dest", folder,
+                               "--timeout", "20", "--retries", "1", "iniconfig"], capture_output=True, text=True,
+                              timeout=120)
+    if done.returncode != 0:
+        why = (done.stderr.strip().splitlines() or ["no answer"])[-1]
+        message = f"pip can fetch no package here (a registry, a mirror or a wheel folder): {why}"
+        if os.environ.get("CI"):
+            pytest.fail(message)
+        pytest.skip(message)
+
+
 MAX_AUTO_WORKERS = 4  # a worker holds ~0.5 GB (numba and the kernels) before its tests use any
 
 

@@ -313,7 +313,7 @@ def test_audit_cost_times_both_scenes_check_by_check_and_leaves_the_auditor_as_i
     from benchmarks import audit_cost
     from physdbg.analysis import audit, tunnel
 
-    before = (audit.Auditor._check_crossings, tunnel.pair_crossings)
+    before = (audit.Auditor._check_crossings, tunnel.pair_crossings, audit.AUDIT_CHECKS)
     monkeypatch.setattr("sys.argv", ["audit_cost.py", "--count", "200", "--steps", "5", "--gas-count", "100",
                                      "--gas-steps", "5", "--rounds", "1"])
     audit_cost.main()
@@ -321,7 +321,7 @@ def test_audit_cost_times_both_scenes_check_by_check_and_leaves_the_auditor_as_i
     assert out.startswith("box-rain 200: engine alone ") and "exact gas 100 (packing 0.3): engine alone " in out
     assert out.count("with the default audit") == 2 and out.count(", with --full-audit") == 2
     assert out.count("_check_crossings") == 2 and "pair_crossings" in out
-    assert (audit.Auditor._check_crossings, tunnel.pair_crossings) == before
+    assert (audit.Auditor._check_crossings, tunnel.pair_crossings, audit.AUDIT_CHECKS) == before
     monkeypatch.setattr("sys.argv", ["audit_cost.py", "--count", "1"])
     with pytest.raises(SystemExit) as stopped:
         audit_cost.main()

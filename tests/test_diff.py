@@ -113,7 +113,8 @@ def test_a_sphere_asleep_in_one_run_only_is_named_when_it_falls_asleep_and_when_
              _rec(tmp_path, "d", str(drop), ["duration=1"]))
     sleep = next(c for c in r.causes if c.kind == "sleep")
     assert r.divergence.step == 28 and _kinds(r)[:2] == ["settings", "sleep"]
-    assert sleep.text.startswith("Step 28: sphere 3 was asleep in run A and awake in run B when the step began")
+    assert sleep.step == 28 and sleep.bodies == (3,)
+    assert sleep.text.startswith("sphere 3 was asleep in run A and awake in run B when the step began")
     # sphere 3 sleeps on: only the sphere hit (4) is woken by the impact
     assert sleep.evidence == {"particle": 3, "asleep_at_start": [True, False], "asleep_at_end": [True, False]}
 

@@ -133,7 +133,7 @@ def test_no_two_modules_import_each_other_however_indirectly():
 def test_the_layers_import_only_downwards():
     graph = _module_graph()
     layer = {"errors": 0, "version": 0, "limits": 0, "kernel_cache": 0, "events": 1, "observe": 2, "engine": 2, "scenes": 3, "advisor": 3, "meshes": 3,
-             "scene": 4, "record": 5, "peers": 6, "analysis": 7, "precompile": 8, "tier": 9, "interrupt": 9, "api": 10, "serve": 11,
+             "scene": 4, "record": 5, "peers": 6, "analysis": 7, "precompile": 8, "tier": 9, "interrupt": 9, "api": 10, "viewers": 10, "serve": 11,
              "cli": 12, "__main__": 13, "physdbg": 14}
     for module, imports in graph.items():
         here = layer[module.split(".")[0]]
@@ -168,3 +168,21 @@ def test_importing_physdbg_defines_names_and_does_nothing_else():
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
     assert done.returncode == 0, done.stderr
+
+
+def test_no_sentence_in_analysis_is_assembled_or_taken_apart_by_pattern_or_replace():
+    """Findings, causes and departures are data (kind, step, bodies, advice as fields): no
+    module of analysis/ rewrites or parses a sentence with the re module or str.replace
+    (dataclasses.replace, which copies a record, is not a sentence's)."""
+    found = []
+    for path in sorted((PACKAGE / "analysis").glob("*.py")):
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                names = [alias.name for alias in node.names] if isinstance(node, ast.Import) else [node.module or ""]
+                if "re" in names or "regex" in names:
+                    found.append(f"{path.name}:{node.lineno} imports re")
+            elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "replace"
+                  and not (isinstance(node.func.value, ast.Name) and node.func.value.id == "dataclasses")):
+                found.append(f"{path.name}:{node.lineno} calls .replace")
+    assert found == []

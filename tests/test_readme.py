@@ -18,8 +18,9 @@ from .test_docs import OPENS_A_WINDOW, ROOT, _commands_and_exits_in, _readme_com
 
 README = ROOT / "README.md"
 
-# One fresh venv for the module: under pytest-xdist both tests run on the worker that made it.
-pytestmark = pytest.mark.xdist_group("readme")
+# One fresh venv for the module: under pytest-xdist both tests run on the worker that made it;
+# it is installed from a package registry (conftest.package_registry: skipped without one).
+pytestmark = [pytest.mark.xdist_group("readme"), pytest.mark.registry]
 
 
 def _fresh_copy(dest: Path) -> None:
@@ -34,7 +35,7 @@ def _fresh_copy(dest: Path) -> None:
 
 
 @pytest.fixture(scope="module")
-def newcomer(tmp_path_factory):
+def newcomer(tmp_path_factory, package_registry):
     """(folder, environment) after README command 1 ran there, verbatim."""
     if shutil.which("git") is None or not (ROOT / ".git").exists():
         pytest.fail("the README test copies the repository with git ls-files: run it from a git clone")

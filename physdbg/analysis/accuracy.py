@@ -50,7 +50,8 @@ class Problem:
 class Run:
     """One method on one problem at one dt. error: in the problem's unit (inf: blew up);
     ms_per_second: wall ms per simulated second; failure: "" or what went wrong in words;
-    max_overlap: the deepest overlap left after any step (m)."""
+    max_overlap: the deepest overlap left after any step (m); failure_kind: what went wrong
+    without where or why (the words the report groups the failed runs by)."""
 
     problem: str
     integrator: str
@@ -63,6 +64,7 @@ class Run:
     ms_per_second: float
     failure: str
     max_overlap: float = 0.0
+    failure_kind: str = ""
 
     @property
     def method(self) -> str:
@@ -232,7 +234,7 @@ def run_one(problem: Problem, integrator: str, detection: str, ordering: str, dt
     times, positions, kinetic = np.empty(steps + 1), np.empty((steps + 1, n, 3)), np.empty(steps + 1)
     times[0], positions[0] = 0.0, scene.state.positions
     kinetic[0] = energies(scene.state, np.asarray(scene.settings.gravity))[0]
-    failure = ""
+    failure = kind = ""
     elapsed, overlap = 0.0, 0.0
     for k in range(1, steps + 1):
         started = time.perf_counter()
@@ -240,22 +242,24 @@ def run_one(problem: Problem, integrator: str, detection: str, ordering: str, dt
             stats = world.step(dt)
         except Exception as err:  # a non-finite state: this method blew up here
             elapsed += time.perf_counter() - started
-            failure = f"blew up at step {k} ({type(err).__name__})"
+            kind = "blew up"
+            failure = f"{kind} at step {k} ({type(err).__name__})"
             break
         elapsed += time.perf_counter() - started
         overlap = max(overlap, stats.max_overlap)
         times[k], positions[k], kinetic[k] = world.time, world.state.positions, stats.kinetic
         if not np.all(np.isfinite(positions[k])):
-            failure = f"blew up at step {k}"
+            kind = "blew up"
+            failure = f"{kind} at step {k}"
             break
     done = k if not failure else k - 1
     error = BLEW_UP if failure else problem.error(times[:done + 1], positions[:done + 1], kinetic[:done + 1])
     if not failure and problem.name == "thin-wall" and positions[done, 0, 0] > 1.0:
-        failure = "tunnelled through the wall"
+        failure = kind = "tunnelled through the wall"
     elif not failure and overlap > scene.settings.contact_tolerance:
-        failure = "left spheres overlapping"
+        failure = kind = "left spheres overlapping"
     return Run(problem.name, integrator, detection, ordering, dt, steps, error, problem.unit,
-               1e3 * elapsed / (steps * dt), failure, overlap)
+               1e3 * elapsed / (steps * dt), failure, overlap, kind)
 
 
 def run_named(problem: str, integrator: str, detection: str, ordering: str, dt: float) -> Run:
@@ -288,6 +292,23 @@ def pareto(runs: list[Run]) -> list[Run]:
 
 
 # ----------------------------------------------------------------------------- output
+def summary_lines(runs: list[Run]) -> list[str]:
+    """`bench accuracy`'s summary, a line per problem: its Pareto front, its most accurate
+    method, and how many runs broke."""
+    lines = []
+    for name in PROBLEMS:
+        mine = [r for r in runs if r.problem == name]
+        if not mine:
+            continue
+        best = pareto(mine)
+        failed = sum(1 for r in mine if r.failure)
+        lines.append(f"{name:15} {len(best)} on the Pareto front; most accurate {best[-1].method} at "
+                     f"dt 1/{round(1 / best[-1].dt)} ({best[-1].error:.1e} {best[-1].unit})"
+                     + (f"; {failed} of {len(mine)} runs broke (tunnelled, overlapped or blew up: the methods "
+                        f"kept to show where they fail; each named in the table)" if failed else ""))
+    return lines
+
+
 CSV_FIELDS = ("problem", "integrator", "detection", "ordering", "dt", "steps", "error", "unit", "ms_per_second",
               "failure", "max_overlap")
 
@@ -297,7 +318,8 @@ def to_csv(runs: list[Run]) -> str:
     import io
 
     out = io.StringIO()
-    writer = csv.DictWriter(out, fieldnames=CSV_FIELDS, lineterminator="\n")
+    # failure_kind is not a column: the failure says it, with where and why
+    writer = csv.DictWriter(out, fieldnames=CSV_FIELDS, lineterminator="\n", extrasaction="ignore")
     writer.writeheader()
     for run in runs:
         row = asdict(run)
@@ -322,13 +344,13 @@ def to_markdown(runs: list[Run], command: str) -> str:
         lines += markdown_table(["method (integrator/detection/ordering)", "dt", "error", "ms per simulated s"],
                                 [[run.method, f"1/{round(1 / run.dt)}", _fmt(run.error), f"{run.ms_per_second:.3g}"]
                                  for run in pareto(mine)])
-        failed: dict[str, list[str]] = {}
+        failed: dict[str, list[str]] = {}  # what went wrong: the method of each run it went wrong in
         for run in mine:
             if run.failure:
-                failed.setdefault(run.failure.split(" at step")[0], []).append(f"{run.method} 1/{round(1 / run.dt)}")
-        for what, who in failed.items():
+                failed.setdefault(run.failure_kind, []).append(run.method)
+        for what, methods in failed.items():
             lines.append("")
-            lines.append(f"{what}: {len(who)} runs ({', '.join(sorted(set(w.rsplit(' ', 1)[0] for w in who)))}).")
+            lines.append(f"{what}: {len(methods)} runs ({', '.join(sorted(set(methods)))}).")
         lines.append("")
     return "\n".join(lines)
 

@@ -34,7 +34,6 @@ Checks (kind: what it means):
 
 from __future__ import annotations
 
-import re
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 
@@ -74,9 +73,10 @@ class Finding:
     """One problem. step: the step it happened in, counted from 1 (step k ends at frame k);
     particles: the spheres involved; message: one sentence; advice: what to change;
     position: (3,) m where to put a marker (None when there is no one place);
-    evidence: the numbers behind the sentence; aside: the explanation the message gives in
-    parentheses that findings of its kind can share (said once: ``said_once``), or "".
-    The aside is not a field of the JSON: it is in the message already."""
+    evidence: the numbers behind the sentence; aside: the explanation that findings of its
+    kind can share (said once: ``said_once``), or "": given apart from the message, which
+    then ends with it in parentheses. The aside is not a field of the JSON: it is in the
+    message already."""
 
     kind: str
     step: int
@@ -86,6 +86,18 @@ class Finding:
     position: list[float] | None = None
     evidence: dict = field(default_factory=dict)
     aside: str = ""
+    before_aside: str = field(default="", init=False, repr=False)  # the message up to its aside
+    after_aside: str = field(default="", init=False, repr=False)  # and what ``add_words`` put after it
+
+    def __post_init__(self) -> None:
+        self.before_aside = self.message
+        if self.aside:
+            self.message = f"{self.message} ({self.aside})"
+
+    def add_words(self, words: str) -> None:
+        """Say more at the end of the message (after its aside)."""
+        self.message += words
+        self.after_aside += words
 
     # the record every report prints (report.Record); the JSON keeps the fields above
     code = property(lambda self: self.kind)
@@ -95,36 +107,23 @@ class Finding:
 
     def as_dict(self) -> dict:
         out = asdict(self)
-        del out["aside"]
+        del out["aside"], out["before_aside"], out["after_aside"]
         return out
 
 
 @dataclass(frozen=True)
 class AuditCheck:
     """One check of a step: method, the Auditor's method that makes it (called with the
-    step, its StepEnd and its Contacts or None); kinds: the findings it makes; when: the
+    Auditor, the step, its StepEnd and its Contacts or None); kinds: the findings it makes; when: the
     steps it runs on — "always"; "meshes" (kinematic meshes that can meet); "not finite"
     (the state holds a NaN or infinity) or "finite"; "contacts" (finite, with contact
     records); "foreign" (finite, no contact records, another engine's run)."""
 
-    method: str
+    method: Callable
     kinds: tuple[str, ...]
     when: str
 
 
-# the audit's checks of a step, in the order they run: each finding comes from one of them
-AUDIT_CHECKS = (
-    AuditCheck("_check_warnings", ("non-finite", "pinned", "budget"), "always"),
-    AuditCheck("_check_mesh_overlap", ("mesh-overlap",), "meshes"),
-    AuditCheck("_check_finite", ("non-finite",), "not finite"),
-    AuditCheck("_check_crossings", ("tunnelling",), "finite"),
-    AuditCheck("_check_overlap", ("overlap",), "finite"),
-    AuditCheck("_check_order", ("order",), "contacts"),
-    AuditCheck("_check_simultaneous", ("simultaneous",), "contacts"),
-    AuditCheck("_check_energy", ("energy-gain",), "contacts"),
-    AuditCheck("_check_collapse", ("collapse",), "contacts"),
-    AuditCheck("_check_energy_of_states", ("energy-gain",), "foreign"),
-)
 
 
 @dataclass
@@ -198,7 +197,7 @@ def said_once(findings: list) -> list[tuple]:
         advice = f.advice if lead is f or f.advice != lead.advice else "as above"
         message = f.message
         if lead is not f and f.aside and f.aside == lead.aside:
-            message = message.replace(f"({f.aside})", "(as above)", 1)
+            message = f"{f.before_aside} (as above){f.after_aside}"
         out.append((f, message, advice))
     return out
 
@@ -284,7 +283,7 @@ class Auditor:
                 "foreign": finite and not recorded and bool(self.header.meta.get("foreign"))}
         for check in AUDIT_CHECKS:
             if when[check.when]:
-                getattr(self, check.method)(step, end, contacts)
+                check.method(self, step, end, contacts)
         self._asleep = end.asleep
         # a rattling step's spheres can all be asleep only once one of them fell asleep
         if self._rattling and end.asleep is not None and end.counts.slept:
@@ -335,8 +334,7 @@ class Auditor:
                                   "look at the contacts of this step; a restitution, mass or speed out of "
                                   "proportion usually starts it", evidence={"warning": w.message}))
             elif w.code == "pinned":
-                sphere = re.match(r"sphere (\d+) ", w.message)
-                self._add(Finding("pinned", step, [int(sphere.group(1))] if sphere else [],
+                self._add(Finding("pinned", step, list(w.bodies),
                                   w.message[0].upper() + w.message[1:] + ": a prescribed motion cannot be stopped, "
                                   "so the run ended with this step.",
                                   "a kinematic mesh moves whatever it meets: leave the sphere a way out (move the "
@@ -447,8 +445,7 @@ class Auditor:
                                    "detection": detection}))
             else:
                 message = (f"spheres {c.a} and {c.other} passed into each other with no contact at "
-                           f"{c.time / end.dt:.3f}·dt, {_length(c.depth)} deep"
-                           f"{' (' + how[detection] + ')' if detection in how else ''}")
+                           f"{c.time / end.dt:.3f}·dt, {_length(c.depth)} deep")  # then the aside, how
                 where = 0.5 * (end.positions[c.a] + end.positions[c.other])
                 self._add(Finding("tunnelling", step, [c.a, c.other], message, advice, [float(q) for q in where],
                                   {"time_in_step": c.time, "depth": c.depth, "detection": detection},
@@ -693,7 +690,7 @@ class Auditor:
                    "and they collide ever more often")
             advice = "; ".join(rules) or "lower the restitution, or use a shorter dt"
         finding = Finding("collapse", step, involved[:10].tolist(),
-                          f"{bounces} bounces among {spheres} in one step: the collision rate has blown up ({why})",
+                          f"{bounces} bounces among {spheres} in one step: the collision rate has blown up",
                           advice, evidence={"contacts": len(c), "bounces": bounces, "spheres": len(involved)},
                           aside=why)
         if self.settings.get("sleep_speed"):
@@ -713,8 +710,8 @@ class Auditor:
                 if awake <= SETTLING_AWAKE_FRACTION * len(involved) and quiet >= SETTLED_QUIET_STEPS:
                     self._settling.append((finding.step, awake, len(involved)))
                     continue
-                finding.message += (f"; {awake} of the {len(involved)} spheres were still awake when the run "
-                                    f"ended (step {self.steps})")
+                finding.add_words(f"; {awake} of the {len(involved)} spheres were still awake when the run "
+                                  f"ended (step {self.steps})")
                 finding.evidence["awake_at_end"] = awake
             self._add(finding)
         self._rattling = []
@@ -753,6 +750,21 @@ class Auditor:
         examples = sorted(self.examples, key=lambda f: (f.step, FINDING_KINDS.index(f.kind)))
         return AuditReport(source, self.header.name, total_steps if total_steps is not None else self.steps,
                            self.steps, dict(self.counts), examples, notes)
+
+
+# the audit's checks of a step, in the order they run: each finding comes from one of them
+AUDIT_CHECKS = (
+    AuditCheck(Auditor._check_warnings, ("non-finite", "pinned", "budget"), "always"),
+    AuditCheck(Auditor._check_mesh_overlap, ("mesh-overlap",), "meshes"),
+    AuditCheck(Auditor._check_finite, ("non-finite",), "not finite"),
+    AuditCheck(Auditor._check_crossings, ("tunnelling",), "finite"),
+    AuditCheck(Auditor._check_overlap, ("overlap",), "finite"),
+    AuditCheck(Auditor._check_order, ("order",), "contacts"),
+    AuditCheck(Auditor._check_simultaneous, ("simultaneous",), "contacts"),
+    AuditCheck(Auditor._check_energy, ("energy-gain",), "contacts"),
+    AuditCheck(Auditor._check_collapse, ("collapse",), "contacts"),
+    AuditCheck(Auditor._check_energy_of_states, ("energy-gain",), "foreign"),
+)
 
 
 def explain(recording, on_step: Callable[[int, int], None] | None = None, verify: bool = True,

@@ -16,6 +16,8 @@ from collections import Counter
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from .report import markdown_table
+
 RUN_SUFFIXES = (".csv", ".jsonl", ".mcap")  # what a folder of submissions is searched for
 MAX_RUNS = 10_000  # runs in one class, counted before any is checked
 
@@ -111,12 +113,10 @@ def class_text(report: ClassReport) -> str:
 
 def class_markdown(report: ClassReport) -> str:
     lines = [f"### physdbg check-run: {len(report.rows)} runs of {report.scene}", "",
-             "| cause | runs |", "|---|---|", *[f"| {cause} | {n} |" for cause, n in report.counts.items()], "",
-             "| run | verdict | first departure | cause | what check-run said |", "|---|---|---|---|---|"]
-    for r in report.rows:
-        where = f"step {r.step}, sphere {r.body}" if r.step is not None else ""
-        said = r.said.replace("|", "\\|")
-        lines.append(f"| {Path(r.run).name} | {r.verdict} | {where} | {r.cause or ''} | {said} |")
+             *markdown_table(["cause", "runs"], [[cause, n] for cause, n in report.counts.items()]), "",
+             *markdown_table(["run", "verdict", "first departure", "cause", "what check-run said"],
+                             [[Path(r.run).name, r.verdict, f"step {r.step}, sphere {r.body}" if r.step is not None
+                               else "", r.cause or "", r.said] for r in report.rows])]
     return "\n".join(lines) + "\n"
 
 
@@ -128,3 +128,7 @@ def class_csv(report: ClassReport) -> str:
         writer.writerow([r.run, r.verdict, "" if r.step is None else r.step, "" if r.body is None else r.body,
                          r.cause or "", r.said])
     return out.getvalue()
+
+
+# a class's report in each format but JSON (ClassReport.as_dict)
+CLASS_FORMATS = {"text": class_text, "markdown": class_markdown, "csv": class_csv}

@@ -298,23 +298,27 @@ def _load(foreign, reference) -> _Runs:
 
 # ----------------------------------------------------------------------------- compare
 def compare(foreign, reference, atol: float | None = None, rtol: float | None = None,
-            verify: bool = True, set_aside: list[dict] | None = None) -> CheckRunReport:
+            verify: bool = True, set_aside: list[dict] | None = None,
+            subject: str = "the run departs from physdbg's") -> CheckRunReport:
     """Compare a foreign run's recording with physdbg's recording of the same scene and
     steps (paths or open Recordings; any detail level). verify: check every state read
     against its stored hash and the frame index. set_aside: the own-rule departures
     (evidence dicts) of an earlier comparison, whose rules the reference was recorded
-    without (api.check_run): said in the report and its headline."""
+    without (api.check_run): said in the report and its headline. subject: how the
+    headline names the departure (diff says which run departs from which)."""
     from ..record.reader import opened
 
     with opened(foreign, reference, verify=verify) as (rf, rr), quiet_numerics():
         return _Comparison(rf, rr, DEFAULT_ATOL if atol is None else float(atol),
-                           DEFAULT_RTOL if rtol is None else float(rtol), set_aside or []).run()
+                           DEFAULT_RTOL if rtol is None else float(rtol), set_aside or [], subject).run()
 
 
 class _Comparison:
-    def __init__(self, rf, rr, atol: float, rtol: float, set_aside: list[dict]):
+    def __init__(self, rf, rr, atol: float, rtol: float, set_aside: list[dict],
+                 subject: str = "the run departs from physdbg's"):
         self.rf, self.rr, self.atol, self.rtol = rf, rr, atol, rtol
         self.set_aside = set_aside
+        self.subject = subject  # the headline's words for who departs from whom
         self.runs = _load(rf, rr)
         h = rr.header
         self.scene = rr.scene
@@ -1654,7 +1658,7 @@ class _Comparison:
             why = f"{_KIND_WORDS[cause.kind]}: {cause.text}"
         else:
             why = "the states drift apart with no contact to blame (forces, drag or integration differ)"
-        out = f"the run departs from physdbg's in step {first.step}, sphere {first.body}: {why}"
+        out = f"{self.subject} in step {first.step}, sphere {first.body}: {why}"
         contact = next((d for d in listed if d.kind not in ("drift", first.cause)), None)
         if contact is not None and first.cause == "drift":
             out += f". The first contact that goes wrong: step {contact.step}, {_KIND_WORDS[contact.kind]}"

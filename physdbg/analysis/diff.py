@@ -11,7 +11,6 @@ causes, each with its evidence.
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 
@@ -212,22 +211,22 @@ def _explain_foreign(report: DiffReport, ra, rb, label: str, atol, rtol) -> None
     from .departure import CheckRunError, compare
 
     foreign, reference = (ra, rb) if label == "A" else (rb, ra)
+    other = "B" if label == "A" else "A"
     try:
-        found = compare(foreign, reference, atol or None, rtol or None)
+        found = compare(foreign, reference, atol or None, rtol or None,
+                        subject=f"run {label} (another engine's) departs from run {other}")
     except CheckRunError as err:
         report.causes.append(Cause("foreign", f"run {label} is another engine's; it could not be judged step by "
                                               f"step ({err})"))
         return
-    other = "B" if label == "A" else "A"
     causes = [c for c in report.causes if c.kind in ("settings", "engine-version", "length")]
     for d in found.departures:
-        causes.append(Cause(d.kind, f"step {d.step}: in run {label} (another engine's), {d.text}. What to do: "
-                                    f"{d.advice}", {"departure": asdict(d)}))
+        causes.append(Cause(d.kind, f"in run {label} (another engine's), {d.text}", {"departure": asdict(d)},
+                            step=d.step, bodies=d.bodies, advice=d.advice))
     if found.integrator is not None:
         causes.append(Cause("integrator", f"run {label}: {found.integrator['sentence']}", found.integrator))
     report.causes, report.headline_cause = causes, None
-    report.headline = found.headline.replace("the run departs from physdbg's",
-                                             f"run {label} (another engine's) departs from run {other}")
+    report.headline = found.headline
 
 
 class _Differ:
@@ -324,7 +323,7 @@ class _Differ:
         if not found:
             return []
         return [Cause("structure", "the runs are not of the same bodies: " + "; ".join(found),
-                      {"differences": found})]
+                      {"differences": found})]  # the headline lists the differences (_report)
 
     def _records(self) -> Cause | None:
         """Runs whose every state is bit-identical: their recorded contacts must be the
@@ -347,7 +346,7 @@ class _Differ:
             if fa == fb and _same_rows_at_each_instant(ca, cb):
                 continue
             return Cause("records", f"every state is bit-identical, but the contacts recorded for step {k} differ: "
-                                    f"{_contacts_differ(ca, cb, self.names_a)}", {"step": k})
+                                    f"{_contacts_differ(ca, cb, self.names_a)}", {"step": k}, step=k)
         return None
 
     def _report(self, divergence, growth, causes, compared) -> DiffReport:
@@ -360,7 +359,7 @@ class _Differ:
         records = next((c for c in causes if c.kind == "records"), None)
         said = None  # the cause the headline says whole
         if structure is not None:
-            headline = "different structure: " + structure.text[len("the runs are not of the same bodies: "):]
+            headline = "different structure: " + "; ".join(structure.evidence["differences"])
             if divergence is not None:
                 headline += f"; their states part in step {divergence.step}"
         elif records is not None:
@@ -379,7 +378,7 @@ class _Differ:
             headline = ("the runs differ from the start" if divergence.step == 0 else
                         f"the runs part in step {divergence.step}") + (
                 f" (step {divergence.step_b} of B)" if divergence.step_b != divergence.step else "") + \
-                (": " + re.sub(r"^step \d+: ", "", _main(causes).text, flags=re.IGNORECASE) if causes else "")
+                (": " + _main(causes).text if causes else "")
             said = _main(causes) if causes else None
         return DiffReport(str(ra.path), str(rb.path), ra.header.name, rb.header.name, ra.steps, rb.steps,
                           "step" if self.by_step else "time", note, self.atol, self.rtol, compared,

@@ -55,19 +55,23 @@ CAUSE_KINDS = {
 class Cause:
     """One reason the runs part. kind: a key of ``CAUSE_KINDS``, or, where one run is
     another engine's, a kind of analysis.departure (bounce-time, contact-energy,
-    extra-contact, drift, integrator, …); text: the sentence; evidence: its numbers."""
+    extra-contact, drift, integrator, …); text: the sentence (without its step: the
+    reports say it); evidence: its numbers; step: the step it happened in (counted from
+    1; in A's numbering where the runs are aligned by time), or None for a cause of the
+    whole run (settings, lengths, structure); bodies: the spheres it is about; advice:
+    what to change, or ""."""
 
     kind: str
     text: str
     evidence: dict = field(default_factory=dict)
+    step: int | None = None
+    bodies: tuple[int, ...] = ()
+    advice: str = ""
 
     # the record every report prints (report.Record); the JSON keeps the fields above
     code = property(lambda self: self.kind)
-    step = property(lambda self: None, doc="None: a cause's sentence names its step")
-    bodies = property(lambda self: (), doc="(): the sentence and the evidence name them")
     summary = property(lambda self: self.text)
     detail = property(lambda self: self.evidence)
-    advice = property(lambda self: "")
 
 
 @dataclass
@@ -182,14 +186,15 @@ def engine_warnings(case: StepCase, found: list[Cause]) -> list[Cause]:
     for label, warns, k in (("A", d.warn_a, div.step), ("B", d.warn_b, div.step_b)):
         for w in warns.get(k, []):
             if w["code"] == "non-finite":
-                out.append(Cause("non-finite", f"in run {label}, step {k}: {w['message']}", w))
+                out.append(Cause("non-finite", f"in run {label}: {w['message']}", w, step=k))
             elif w["code"].startswith("max_"):
                 other = d.warn_b if label == "A" else d.warn_a
                 other_k = div.step_b if label == "A" else div.step
                 if not any(x["code"] == w["code"] for x in other.get(other_k, [])):
                     out.append(Cause("engine-limits", f"run {label} hit the {w['code']} budget in step {k} "
                                                       f"and left the rest of the step unresolved; run "
-                                                      f"{'B' if label == 'A' else 'A'} did not ({w['message']})", w))
+                                                      f"{'B' if label == 'A' else 'A'} did not ({w['message']})", w,
+                                     step=div.step))
     return out
 
 
@@ -221,9 +226,9 @@ def tunnelling(case: StepCase, found: list[Cause]) -> list[Cause]:
             made = [x for x in ((case.cb if label == "A" else case.ca) or []) if _touches(x, c)]
             other_did = (f"run {other} resolved a contact there at {made[0]['time_in_step'] / made[0]['dt']:.3f}·dt"
                          if made else f"run {other} did not cross")
-            out.append(Cause("tunnelling", f"step {step}: in run {label} sphere {c.a} {what} "
-                                           f"with no contact ({reason}); {other_did}",
-                             {"run": label, "particle": c.a, "other": c.other, "kind": c.kind}))
+            out.append(Cause("tunnelling", f"in run {label} sphere {c.a} {what} with no contact ({reason}); {other_did}",
+                             {"run": label, "particle": c.a, "other": c.other, "kind": c.kind}, step=step,
+                             bodies=(c.a, c.other) if PARTNER_IS_SPHERE[c.kind] else (c.a,)))
     return out
 
 
@@ -246,7 +251,8 @@ def outside_change(case: StepCase, found: list[Cause]) -> list[Cause]:
                   f"settings and engine, yet sphere {who.get('particle')} differs by {who.get('position', 0):.3g} m "
                   f"after it{seen}. The engine is deterministic, so the state was changed outside its rules (a "
                   f"script that moved a sphere between steps), or the two runs did not come from the same engine "
-                  f"build", {"particle": who})]
+                  f"build", {"particle": who}, step=step,
+                  bodies=(who["particle"],) if "particle" in who else ())]
 
 
 def sleep(case: StepCase, found: list[Cause]) -> list[Cause]:
@@ -272,19 +278,20 @@ def sleep(case: StepCase, found: list[Cause]) -> list[Cause]:
         start, end = (asleep("start", 0, p), asleep("start", 1, p)), (asleep("end", 0, p), asleep("end", 1, p))
         if start[0] != start[1]:
             sleeper, other = ("A", "B") if start[0] else ("B", "A")
-            text = (f"Step {div.step}: sphere {p} was asleep in run {sleeper} and awake in run {other} when "
+            text = (f"sphere {p} was asleep in run {sleeper} and awake in run {other} when "
                     f"the step began{why}. A sleeping sphere does not move: what hits or pushes it bounces "
                     f"off it as off a wall")
         elif end[0] != end[1]:
             changed, other = ("A", "B") if end[0] != start[0] else ("B", "A")
             verb = "fell asleep" if not start[0] else "woke"
-            text = (f"Step {div.step}: sphere {p} {verb} at the end of the step in run {changed} and did not in "
+            text = (f"sphere {p} {verb} at the end of the step in run {changed} and did not in "
                     f"run {other}{why}" + (". Falling asleep sets its velocity to zero" if verb == "fell asleep"
                                            else ""))
         else:
             continue
         return [Cause("sleep", text + "." + case.consequence(),
-                      {"particle": p, "asleep_at_start": list(start), "asleep_at_end": list(end)})]
+                      {"particle": p, "asleep_at_start": list(start), "asleep_at_end": list(end)}, step=div.step,
+                      bodies=(p,))]
     return []
 
 
@@ -318,11 +325,11 @@ def ordering_setting(case: StepCase, found: list[Cause]) -> list[Cause]:
     event, sa, sb, step = case.event, case.settings_a, case.settings_b, case.div.step
     return [Cause(
         "collision-order",
-        f"Step {step}: run A (ordering = {sa.get('ordering')}) resolved "
+        f"run A (ordering = {sa.get('ordering')}) resolved "
         f"{case.sequence(case.ca, event['index'])}; run B (ordering = {sb.get('ordering')}) resolved "
         f"{case.sequence(case.cb, event['index'])}.{_order_note(sa, sb)}"
         + case.consequence(), {"a": event["a"], "b": event["b"], "index": event["index"],
-                               "ordering": [sa.get("ordering"), sb.get("ordering")]})]
+                               "ordering": [sa.get("ordering"), sb.get("ordering")]}, step=step)]
 
 
 def tie(case: StepCase, found: list[Cause]) -> list[Cause]:
@@ -337,12 +344,12 @@ def tie(case: StepCase, found: list[Cause]) -> list[Cause]:
     if sa.get("space_order") != sb.get("space_order"):
         why = (f" The runs number their spheres differently (space_order: {sa.get('space_order')} in A, "
                f"{sb.get('space_order')} in B), and the numbering orders tied contacts.")
-    text = (f"Step {step}: the contacts {both} happen at one instant (t = {x['time_in_step'] / x['dt']:.2f}·dt) in "
+    text = (f"the contacts {both} happen at one instant (t = {x['time_in_step'] / x['dt']:.2f}·dt) in "
             f"both runs; run A took {case.describe(x, times=False)} first, run B {case.describe(y, times=False)}. "
             f"This is a tie: which of contacts at one instant goes first is not the model's to say, so neither run "
             f"is wrong.{why}")
     return [Cause("tie", text + case.consequence(), {"a": x, "b": y, "step": step,
-                                                     "contacts": [list(k) for k in names]})]
+                                                     "contacts": [list(k) for k in names]}, step=step)]
 
 
 def collision_order(case: StepCase, found: list[Cause]) -> list[Cause]:
@@ -351,11 +358,11 @@ def collision_order(case: StepCase, found: list[Cause]) -> list[Cause]:
         return []
     x, y, sa, sb = case.event["a"], case.event["b"], case.settings_a, case.settings_b
     later_a = next((r for r in case.ca if _key(r) == _key(y)), None)
-    text = (f"Step {case.div.step}: run A resolved {case.describe(x)} before "
+    text = (f"run A resolved {case.describe(x)} before "
             f"{case.describe(later_a) if later_a else '…'}{_why_order(sa.get('ordering'))}; run B resolved "
             f"{case.describe(y)} first{_why_order(sb.get('ordering'))}.")
     return [Cause("collision-order", text + case.consequence(),
-                  {"a": x, "b": y, "ordering": [sa.get("ordering"), sb.get("ordering")]})]
+                  {"a": x, "b": y, "ordering": [sa.get("ordering"), sb.get("ordering")]}, step=case.div.step)]
 
 
 def missed_contact(case: StepCase, found: list[Cause]) -> list[Cause]:
@@ -367,18 +374,18 @@ def missed_contact(case: StepCase, found: list[Cause]) -> list[Cause]:
     present, missing, label, other = (x, y, "A", "B") if x is not None else (y, x, "B", "A")
     if present is not None and missing is not None and _key(present) == _key(missing):
         rest = "A" if x["resting"] else "B"
-        text = (f"Step {step}: {case.describe(x, times=False)} was held in run {rest} (with restitution 0, "
+        text = (f"{case.describe(x, times=False)} was held in run {rest} (with restitution 0, "
                 f"instead of bounced: the resting rule holds a pressed, slow contact, the rapid-contact rule a "
                 f"pressed one soon after the spheres' previous contact, under rapid_contact_rule=tc only a slow "
                 f"one) and bounced in the other")
-        return [Cause("missed-contact", text + "." + case.consequence(), {"a": x, "b": y})]
+        return [Cause("missed-contact", text + "." + case.consequence(), {"a": x, "b": y}, step=step)]
     in_other = [r for r in (case.cb if label == "A" else case.ca) if _key(r) == _key(present)]
-    text = (f"Step {step}: run {label} resolved {case.describe(present)} (contact {present['index'] + 1} of the "
+    text = (f"run {label} resolved {case.describe(present)} (contact {present['index'] + 1} of the "
             f"step); run {other} " + (f"resolved it later, as contact {in_other[0]['index'] + 1}"
                                       if in_other else "had no such contact"))
     if missing is not None and not in_other:
         text += f", and resolved {case.describe(missing)} instead"
-    return [Cause("missed-contact", text + "." + case.consequence(), {"a": x, "b": y})]
+    return [Cause("missed-contact", text + "." + case.consequence(), {"a": x, "b": y}, step=step)]
 
 
 def contact_outcome(case: StepCase, found: list[Cause]) -> list[Cause]:
@@ -388,15 +395,15 @@ def contact_outcome(case: StepCase, found: list[Cause]) -> list[Cause]:
     x, y, step = case.event["a"], case.event["b"], case.div.step
     dt = x["dt"]
     if abs(x["time"] - y["time"]) > 0:
-        text = (f"Step {step}: the same contact {case.describe(x, times=False)} happened at "
+        text = (f"the same contact {case.describe(x, times=False)} happened at "
                 f"{x['time_in_step'] / dt:.6f}·dt in A and {y['time_in_step'] / y['dt']:.6f}·dt in B "
                 f"(a difference of {abs(x['time'] - y['time']):.2g} s)")
     else:
-        text = (f"Step {step}: the same contact {case.describe(x, times=False)} at the same time had "
+        text = (f"the same contact {case.describe(x, times=False)} at the same time had "
                 f"another outcome: impulse {x['impulse']:.6g} N·s with e = {x['restitution']:.3g} in A, "
                 f"{y['impulse']:.6g} N·s with e = {y['restitution']:.3g} in B")
         text += _rapid_rule(x, y, case.settings_a, case.settings_b)
-    return [Cause("contact-outcome", text + "." + case.consequence(), {"a": x, "b": y})]
+    return [Cause("contact-outcome", text + "." + case.consequence(), {"a": x, "b": y}, step=step)]
 
 
 def method_drift(case: StepCase, found: list[Cause]) -> list[Cause]:
@@ -406,12 +413,12 @@ def method_drift(case: StepCase, found: list[Cause]) -> list[Cause]:
     d, step, growth = case.differ, case.div.step, case.growth
     method = [s.name for s in d.settings if s.matters and s.name in METHOD_SETTINGS]
     if method or not d.by_step:
-        return [Cause("method-drift", f"no event differs up to step {step}: the states drift apart "
+        return [Cause("method-drift", f"no contact differs up to this step: the states drift apart "
                                       f"smoothly ({', '.join(method) or 'dt'} differ{'s' if len(method) == 1 else ''})"
                                       f"; {growth.sentence() if growth else ''}",
-                      {"settings": method})]
-    return [Cause("method-drift", f"no event differs up to step {step}; the states drift apart "
-                                  f"because of the settings above", {})]
+                      {"settings": method}, step=step)]
+    return [Cause("method-drift", "no contact differs up to this step; the states drift apart because of the "
+                                  "settings above", {}, step=step)]
 
 
 STEP_CAUSES: tuple[Detector, ...] = (

@@ -299,6 +299,22 @@ def _energy(st, x, v, g) -> float:
 
 
 # ----------------------------------------------------------------------------- output
+def summary_lines(runs: list[EngineRun]) -> list[str]:
+    """`bench engines`'s summary: a line per scene (physdbg exact against the fastest method,
+    with that method's largest overlap and tunnelling), then each run that could not run."""
+    lines = []
+    for name in dict.fromkeys(r.scene for r in runs):
+        mine = [r for r in runs if r.scene == name and not r.failure]
+        exact = next((r for r in mine if r.method == "physdbg exact"), None)
+        fastest = min(mine, key=lambda r: r.ms_per_step, default=None)
+        if exact is not None and fastest is not None:
+            lines.append(f"{name:13} physdbg exact {exact.ms_per_step:.3g} ms/step; fastest {fastest.method} "
+                         f"{fastest.ms_per_step:.3g} ms/step (largest overlap {fastest.largest_overlap:.2g} m, "
+                         f"{fastest.tunnelled} tunnelled)")
+    lines += [f"{run.scene:13} {run.method}: could not run ({run.failure})" for run in runs if run.failure]
+    return lines
+
+
 COLUMNS = ("scene", "method", "engine", "ms_per_step", "largest_overlap", "energy_error", "contact_time_error",
            "tunnelled", "steps", "bodies", "failure")
 

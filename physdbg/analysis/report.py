@@ -50,12 +50,15 @@ def report_json(report: DiffReport | AuditReport | CheckRunReport) -> str:
     return json.dumps(versioned(_clean(report.as_dict())), indent=2, default=_plain)
 
 
+_CELL = {ord("|"): "\\|"}  # a cell's own bar is text, not the table's
+
+
 def markdown_table(columns: list[str], rows: list[list]) -> list[str]:
     """A Markdown table's lines: the header, its rule and one line per row (each cell as
-    str; None a cell with nothing in it). The one table writer of every Markdown report
-    and chart page."""
+    str, its bars escaped; None a cell with nothing in it). The one table writer of every
+    Markdown report and chart page."""
     def line(cells) -> str:
-        return "|" + "".join(" |" if cell is None else f" {cell} |" for cell in cells)
+        return "|" + "".join(" |" if cell is None else f" {str(cell).translate(_CELL)} |" for cell in cells)
 
     return [line(columns), "|" + "---|" * len(columns)] + [line(row) for row in rows]
 
@@ -156,8 +159,9 @@ def _cause_text(cause, r: DiffReport) -> str:
 def diff_markdown(r: DiffReport) -> str:
     icon = "✅" if r.equivalent else "❌"
     lines = [f"### {icon} physdbg diff: {'equivalent' if r.equivalent else 'different'}", "",
-             f"**{r.headline}**", "", "| | recording | scene | steps |", "|---|---|---|---|",
-             f"| A | `{r.a}` | {r.scene_a} | {r.steps_a} |", f"| B | `{r.b}` | {r.scene_b} | {r.steps_b} |", "",
+             f"**{r.headline}**", "",
+             *markdown_table([None, "recording", "scene", "steps"],
+                             [["A", f"`{r.a}`", r.scene_a, r.steps_a], ["B", f"`{r.b}`", r.scene_b, r.steps_b]]), "",
              f"Compared {_compared(r)}; tolerance {_tolerance(r)}. "
              f"Checked {_integrity(r)}.", ""]
     if r.settings:
@@ -261,6 +265,12 @@ def check_run_markdown(r: CheckRunReport) -> str:
     return "\n".join(lines) + "\n"
 
 
+# each command's report in each format but JSON (report_json), by (command, format)
+RENDERINGS = {("diff", "text"): diff_text, ("diff", "markdown"): diff_markdown,
+              ("explain", "text"): explain_text, ("explain", "markdown"): explain_markdown,
+              ("check_run", "text"): check_run_text, ("check_run", "markdown"): check_run_markdown}
+
+
 def _contact(c: dict | None) -> str:
     if c is None:
         return "no contact"
@@ -288,11 +298,16 @@ def _interpreted(s) -> bool:
     return str(getattr(s, "kernels", "compiled")).startswith("interpreted")
 
 
+# the step's phases (events.STEP_PHASES) as the run summary names them
+PHASE_WORDS = {"forces": "forces", "broad_phase": "broad phase", "narrow_phase": "narrow phase", "resolve": "resolve",
+               "finish": "finish"}
+
+
 def summary_text(s, observers: str = "the audit") -> str:
     """The human-readable run summary; observers: what watched the run besides the engine
     (its time is in the second speed figure only)."""
     share = sum(s.phase_seconds.values()) or 1.0
-    phases = ", ".join(f"{name.replace('_', ' ')} {100 * sec / share:.0f}%" for name, sec in s.phase_seconds.items())
+    phases = ", ".join(f"{PHASE_WORDS.get(name, name)} {100 * sec / share:.0f}%" for name, sec in s.phase_seconds.items())
     dts = s.dts
     dt_text = f"dt {dts[0]:.6g} s" if dts and min(dts) == max(dts) else (
         f"dt {min(dts):.3g}..{max(dts):.3g} s" if dts else "no steps")
@@ -402,6 +417,18 @@ def size_words(n: int) -> str:
             return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
         n /= 1024
     return str(n)
+
+
+def check_dict(result) -> dict:
+    """`physdbg check --json`'s fields (api.check's CheckResult): the scene, whether its
+    settings are the advised ones, the current and recommended settings, why, the facts
+    the advice rests on and each method's prediction."""
+    from dataclasses import asdict
+
+    advice = result.advice
+    return {"scene": result.scene.name, "ok": result.ok, "current": result.current,
+            "recommended": advice.recommended, "reasons": advice.reasons, "facts": advice.facts,
+            "predictions": [asdict(p) for p in advice.predictions]}
 
 
 def check_text(result) -> str:

@@ -229,6 +229,21 @@ def first_step(cells: list[Cell], method: str, outcome: str = "tunnelled") -> fl
     return min(hits) if hits else math.inf
 
 
+def summary_lines(cells: list[Cell]) -> list[str]:
+    """`bench stability`'s summary, a line per method: impact cells passed and where it
+    starts to tunnel (in v·dt and in REACH), and stack cells passed."""
+    lines = []
+    for method in dict.fromkeys(c.method for c in cells):
+        step = first_step(cells, method)
+        impact = [c for c in cells if c.map == "impact" and c.method == method]
+        stack = [c for c in cells if c.map == "stack" and c.method == method]
+        lines.append(f"{method:22} impact {sum(c.outcome == 'pass' for c in impact)}/{len(impact)} pass, "
+                     + ("never tunnels" if math.isinf(step) else
+                        f"tunnels from v·dt = {step:.3g} m ({step / REACH:.2g} × REACH)")
+                     + f"; stacks {sum(c.outcome == 'pass' for c in stack)}/{len(stack)} pass")
+    return lines
+
+
 def last_step_without(cells: list[Cell], method: str, outcome: str = "tunnelled") -> float:
     """The largest v·dt (m) at which a method did not have this outcome (0: none)."""
     clear = [c.x * c.y for c in cells if c.map == "impact" and c.method == method and c.outcome != outcome]

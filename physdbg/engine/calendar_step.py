@@ -192,7 +192,7 @@ class CalendarSteps:
         if not settle_held(held, particles, method, self._geometry, self._free_accel, s.contact_tolerance,
                            self.resting_budget):
             if held.count[PINNED]:
-                ctx.warn("pinned", self._pinned_words())
+                ctx.warn("pinned", *self._pinned_warning())
             else:
                 ctx.warn("max_resting_work_per_step", budget_message("max_resting_work_per_step", self.resting_budget))
         cal = self._calendar

@@ -77,9 +77,9 @@ class StepContext:
     warnings: list[EngineWarning] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
 
-    def warn(self, code: str, message: str) -> None:
-        """Note a warning for this step and report it at once."""
-        self.warnings.append(EngineWarning(self.step, code, message))
+    def warn(self, code: str, message: str, bodies: tuple[int, ...] = ()) -> None:
+        """Note a warning for this step (bodies: the spheres it is about) and report it at once."""
+        self.warnings.append(EngineWarning(self.step, code, message, tuple(int(b) for b in bodies)))
         if self.observer is not None:
             self.observer.on_event(self.warnings[-1])
 

@@ -40,7 +40,6 @@ from ..events import (
     OUTCOME_CAPPED,
     OUTCOME_HIT,
     OUTCOME_SUPERSEDED,
-    STEP_PHASES,
     BroadPhaseInfo,
     Contacts,
     MeshSearch,
@@ -282,14 +281,19 @@ class World(CalendarSteps):
                 return self._calendar_step(self._begin(dt, renumber=False))
             self._calendar = None  # the time-ordered loop changes the paths: the calendar is out of date
         ctx = self._begin(dt)
-        for name in STEP_PHASES:  # each phase is the method of its name
-            self._timed(ctx, name, getattr(self, f"_{name}"))
+        for name, phase in self._phases():
+            self._timed(ctx, name, phase)
             self._stop_if_asked()
             if name == "broad_phase" and ctx.observer is not None:  # reported outside its timing
                 ctx.observer.on_event(self._broad_phase_event(ctx))
             if name == "resolve" and ctx.search_start is not None:  # while the meshes are placed for the step
                 ctx.mesh_search = self._mesh_search_event(ctx)
         return self._end(ctx)
+
+    def _phases(self) -> tuple:
+        """The step's phases in order, each (its name in events.STEP_PHASES, the method that runs it)."""
+        return (("forces", self._forces), ("broad_phase", self._broad_phase), ("narrow_phase", self._narrow_phase),
+                ("resolve", self._resolve), ("finish", self._finish))
 
     def request_stop(self) -> None:
         """Ask the world to stop: the step under way ends at once, half done and
@@ -366,7 +370,7 @@ class World(CalendarSteps):
         if not settle_held(self.held, particles, method, geometry, self._free_accel, s.contact_tolerance,
                            self.resting_budget):
             if self.held.count[PINNED]:
-                ctx.warn("pinned", self._pinned_words())
+                ctx.warn("pinned", *self._pinned_warning())
             else:
                 ctx.warn("max_resting_work_per_step",
                          budget_message("max_resting_work_per_step", self.resting_budget))
@@ -487,7 +491,7 @@ class World(CalendarSteps):
             ctx.warn("periodic", ctx.too_wide_mid_step)
         if budget == "max_resting_work_per_step" and self.held.count[PINNED]:
             if not ctx.warned("pinned"):
-                ctx.warn("pinned", self._pinned_words())
+                ctx.warn("pinned", *self._pinned_warning())
         elif budget == "max_memory" and not ctx.warned(budget):
             ctx.warn(budget, self._memory.message(ctx))
         elif budget is not None and not ctx.warned(budget):
@@ -515,8 +519,10 @@ class World(CalendarSteps):
                                     s.contact_tolerance)
         ctx.max_overlap, ctx.overlap_with = self._max_overlap(ctx)
         if s.detection == "swept" and ctx.max_overlap > s.contact_tolerance and not ctx.warnings:
-            ctx.warn("overlap", f"{overlap_words(ctx.overlap_with, self.walls.partner_names())} overlap by "
-                                f"{ctx.max_overlap:.3g} m, more than the contact tolerance {s.contact_tolerance:g} m")
+            who = ctx.overlap_with
+            ctx.warn("overlap", f"{overlap_words(who, self.walls.partner_names())} overlap by "
+                                f"{ctx.max_overlap:.3g} m, more than the contact tolerance {s.contact_tolerance:g} m",
+                     () if who is None else (who[1], who[2]) if PARTNER_IS_SPHERE[who[0]] else (who[1],))
         if self.sleepers is not None:
             self._sleep(ctx)
         if self.numbering is not None:  # what leaves the world is in the scene's numbering
@@ -525,7 +531,7 @@ class World(CalendarSteps):
             x, v = self.state.positions, self.state.velocities
         ctx.non_finite = first_non_finite(x, v)
         if ctx.non_finite is not None:
-            ctx.warn("non-finite", str(NonFiniteState(ctx.step, *ctx.non_finite)))
+            ctx.warn("non-finite", str(NonFiniteState(ctx.step, *ctx.non_finite)), (ctx.non_finite[0],))
         ctx.kinetic, ctx.potential, ctx.momentum = energies(self.state, self.gravity)
         ctx.state_hash = state_hash(x, v)
         self.time += ctx.dt
@@ -587,17 +593,18 @@ class World(CalendarSteps):
         if ctx.non_finite is not None:
             raise NonFiniteState(ctx.step, *ctx.non_finite)
         if self.held.count[PINNED]:
-            raise PinnedSphere(ctx.step, self._pinned_words())
+            raise PinnedSphere(ctx.step, self._pinned_warning()[0])
         return end
 
-    def _pinned_words(self) -> str:
-        """The pinned sphere and its two partners (resting.pinned_by), as reports name them."""
+    def _pinned_warning(self) -> tuple[str, tuple[int]]:
+        """The pinned sphere and its two partners (resting.pinned_by), as reports name them,
+        and the sphere (scene numbering): a "pinned" warning's message and bodies."""
         count = self.held.count
         names = self.walls.partner_names()
         sphere = self.scene_sphere(int(count[PINNED]) - 1)
         first, second = (partner_words(int(count[PINNED_CONTACTS + 2 * e]), int(count[PINNED_CONTACTS + 2 * e + 1]),
                                        names) for e in range(2))
-        return f"sphere {sphere} is pinned between {first} and {second}, which close on it from opposite sides"
+        return f"sphere {sphere} is pinned between {first} and {second}, which close on it from opposite sides", (sphere,)
 
     def _renumber(self) -> None:
         """Number the spheres in Morton order of where they are now (space_order.py): every

@@ -191,7 +191,8 @@ BROAD_PHASE_STATS = {
 }
 JSON_SCHEMAS = {
     TOPIC_WARNINGS: ("physdbg.Warning", {"type": "object", "properties": {
-        "step": {"type": "number"}, "code": {"type": "string"}, "message": {"type": "string"}},
+        "step": {"type": "number"}, "code": {"type": "string"}, "message": {"type": "string"},
+        "bodies": {"type": "array", "items": {"type": "number"}}},
         "required": ["step", "code", "message"]}),
     TOPIC_BROAD_PHASE: ("physdbg.BroadPhase", {"type": "object", "properties": {
         "step": {"type": "number"}, "name": {"type": "string"}, "reason": {"type": "string"},

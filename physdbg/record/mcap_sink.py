@@ -157,7 +157,7 @@ class McapRecorder:
         elif isinstance(event, EngineWarning):
             self._warnings.append(event)
             self._pending.append((fmt.TOPIC_WARNINGS, json.dumps(fmt.foxglove_json(
-                {"step": frame, "code": event.code, "message": event.message})).encode()))
+                {"step": frame, "code": event.code, "message": event.message, "bodies": list(event.bodies)})).encode()))
 
     def _end_step(self, end: StepEnd) -> None:
         frame = end.step

@@ -666,7 +666,8 @@ class Recording:
                     stats[key] = meta[key]
             events.append(BroadPhaseInfo(step, meta["name"], meta["reason"], stats, nodes))
         warnings = [json.loads(w) for w in parts.get(fmt.TOPIC_WARNINGS, [])]
-        events.extend(EngineWarning(step, current_name(w["code"]), w["message"]) for w in warnings)
+        events.extend(EngineWarning(step, current_name(w["code"]), w["message"], tuple(w.get("bodies", ())))
+                      for w in warnings)  # bodies: not in files made before warnings named them
         if fmt.TOPIC_CONTACTS in self._channels and fmt.TOPIC_CONTACTS in topics:
             events.append(self._contacts(step, parts.get(fmt.TOPIC_CONTACTS, [b""])[0]))
         if fmt.TOPIC_SWEPT in self._channels and fmt.TOPIC_SWEPT in topics:
