@@ -8,7 +8,7 @@
 (colliders/mesh.reachable, a walk per box, and reachable_together, the simultaneous
 descent) on random triangles and boxes: milliseconds (best of 5), the node tests of each
 and the time of the descent's LBVH over the boxes, whence the weights of
-engine/world.py's TOGETHER_PAIR_COST and TOGETHER_BOX_COST (docs/meshes.md, "Walks or the
+engine/mesh_steps.py's TOGETHER_PAIR_COST and TOGETHER_BOX_COST (docs/meshes.md, "Walks or the
 simultaneous descent"); the candidates are checked equal.
 
 For each built-in shape (an icosphere of 5,120 triangles, the funnel, the paddle turned

@@ -173,12 +173,31 @@ def test_a_kind_with_no_branch_in_the_switch_is_refused_at_its_first_use_never_r
              lambda kind: colliders.narrow_candidates(kind, np.zeros((0, 2), dtype=np.int64), x, x, geometry),
              lambda kind: colliders.every_candidate(kind, 2, geometry),
              lambda kind: colliders.partner_count(kind, geometry),
-             lambda kind: colliders.immovable_partners_in(kind, 0, x, x, geometry, np.zeros((4, 2), dtype=np.int64))]
+             lambda kind: colliders.immovable_partners_in(kind, 0, x, x, geometry, np.zeros((4, 2), dtype=np.int64)),
+             lambda kind: colliders.deepest_of_kind(kind, x, np.ones(2), np.zeros((0, 2), dtype=np.int64), geometry,
+                                                    True)]
     for call in calls:
         call(events.KIND_PAIR)  # a kind it knows
         with pytest.raises(ValueError, match="a collider kind with no branch in this function of the switch"):
             call(3)
     assert "docs/colliders.md" in UNKNOWN_KIND
+
+
+def test_what_the_switch_asks_of_every_kind_it_asks_through_the_switch():
+    """The switch's functions over every kind (the most partners, their bound, the deepest
+    overlap: one of them sizes a buffer) loop over the table's kinds and ask each through
+    a function of the switch, so a kind with no branch there is refused, never left out:
+    none of them names a kind's module itself."""
+    import ast
+    import inspect
+
+    tree = ast.parse(inspect.getsource(colliders))
+    bodies = {node.name: node for node in tree.body if isinstance(node, ast.FunctionDef)}
+    for name in ("most_partners", "partners_bound", "deepest_overlap"):
+        modules = {node.value.id for node in ast.walk(bodies[name])
+                   if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)}
+        assert modules.isdisjoint({"sphere", "plane", "mesh"}), (name, modules)
+        assert "KINDS" in {node.id for node in ast.walk(bodies[name]) if isinstance(node, ast.Name)}, name
 
 
 def test_the_calendar_takes_the_kinds_their_modules_declare_and_refuses_the_rest_by_name(monkeypatch):

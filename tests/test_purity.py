@@ -186,3 +186,17 @@ def test_no_sentence_in_analysis_is_assembled_or_taken_apart_by_pattern_or_repla
                   and not (isinstance(node.func.value, ast.Name) and node.func.value.id == "dataclasses")):
                 found.append(f"{path.name}:{node.lineno} calls .replace")
     assert found == []
+
+
+MODULE_LINES = 800  # a module longer than this says at its top why it is one module
+
+
+def test_a_module_over_800_lines_says_why_it_is_one_module():
+    """Modules are sized by responsibility: one over MODULE_LINES lines gives its reason in
+    its docstring ("Why one module of this size: ..."), so a reader knows it was weighed."""
+    unexplained = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        text = path.read_text()
+        if text.count("\n") > MODULE_LINES and "Why one module of this size" not in (ast.get_docstring(ast.parse(text)) or ""):
+            unexplained.append(f"{path.relative_to(PACKAGE)} ({text.count(chr(10))} lines)")
+    assert unexplained == []

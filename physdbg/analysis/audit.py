@@ -1,5 +1,10 @@
 """Auditing one run: what went wrong, where, in words.
 
+Why one module of this size: the checks share one observer's state through a run (the
+previous step, the warnings, the rattling beds, the findings said once), so they are
+methods of one class, each a stage a reader can take alone (``AUDIT_CHECKS``); what they
+measure with lives elsewhere (tunnel.py, mesh_interpenetration.py, the engine's rules).
+
 :class:`Auditor` is an observer: it reads the engine's events (live, during ``physdbg
 run`` / ``record``) or the same events read back from a recording (``physdbg explain``),
 so the live summary and the audit of a file are the same code. Each check is one method

@@ -274,7 +274,13 @@ RENDERINGS = {("diff", "text"): diff_text, ("diff", "markdown"): diff_markdown,
 def _contact(c: dict | None) -> str:
     if c is None:
         return "no contact"
-    who = c.get("who") or (f"{c['a']}–{c['other']}" if c["kind"] == 0 else f"{c['a']}–wall {c['other']}")
+    if c.get("who"):
+        who = c["who"]
+    else:  # a contact without its words: the partner by its kind's name in the table, and its number
+        from ..events import KIND_NAMES, PARTNER_IS_SPHERE
+
+        kind = int(c["kind"])
+        who = f"{c['a']}–{c['other']}" if PARTNER_IS_SPHERE[kind] else f"{c['a']}–{KIND_NAMES[kind]} #{c['other']}"
     return f"{who} at {c['time_in_step'] / c['dt']:.3f}·dt" + (" (resting)" if c["resting"] else "")
 
 

@@ -1,5 +1,9 @@
 """The event calendar: contacts predicted once and kept across steps (``event_loop = "calendar"``).
 
+Why one module of this size: the calendar's kernels read and write one structure (the
+``Calendar``'s anchors, shells, neighbour and partner lists and its queue) and call each
+other compiled; the world's step from it is calendar_step.py.
+
 The time-ordered loop (timeline.py) works a step at a time: at each step's start it boxes
 every path, pairs the boxes and predicts every pair again, though a sphere between
 contacts keeps its path from one step to the next. This loop is the design of the fastest

@@ -1,5 +1,9 @@
 """The world and its step: a named pipeline of phases, each timed.
 
+Why one module of this size: it is the step pipeline over one step context, each phase
+a method with the Python side of the time-ordered loop it drives; the calendar's step
+(calendar_step.py) and the world's use of its meshes (mesh_steps.py) stand apart.
+
 ``World.step(dt)`` runs::
 
     forces        held contacts -> accelerations; semi-implicit velocity update
@@ -42,7 +46,6 @@ from ..events import (
     OUTCOME_SUPERSEDED,
     BroadPhaseInfo,
     Contacts,
-    MeshSearch,
     StepBegin,
     StepCounts,
     StepEnd,
@@ -52,11 +55,11 @@ from ..events import (
 )
 from . import calendar
 from .calendar_step import CalendarSteps
+from .mesh_steps import MeshSteps
 from .broadphase import choose_broad_phase, make_broad_phase
 from .broadphase.boxes import boxes_meet
 from .broadphase.periodic import PeriodicBroadPhase
-from .colliders import KINDS, PARTNER_IS_SPHERE, deepest_overlap, geometry_of, mesh_search, narrow_candidates
-from .colliders.mesh import place, reachable_together, walk_tests
+from .colliders import KINDS, PARTNER_IS_SPHERE, deepest_overlap, geometry_of, narrow_candidates
 from .jit import records
 from .kernel_args import LoopBudgets, LoopCandidates, LoopMethod, LoopParticles
 from .memory import MemoryBudget
@@ -96,7 +99,6 @@ from .timeline import (
     EVENTS,
     GROW,
     GROW_HELD,
-    MESH_QUERIES,
     RAPID,
     REQUERY,
     RESTING_BUDGET,
@@ -120,21 +122,13 @@ from .timeline import (
 SCAN_PER_LISTED_PAIR = 35.0
 RELIST_EVERY = 32
 
-# A walk per sphere against the simultaneous descent (World._choose_mesh_search), in node
-# tests of a walk (~10 ns each, stackless and in pre-order): a pair of nodes of the descent
-# costs about TOGETHER_PAIR_COST of them (~60 ns: a stack and two trees), and the tree of
-# the path boxes TOGETHER_BOX_COST a box (~350 ns: an LBVH build); measured by
-# benchmarks/mesh_queries.py --together. Both are counted again every RECHOOSE_SEARCH_EVERY steps.
-TOGETHER_PAIR_COST = 6.0
-TOGETHER_BOX_COST = 30.0
-RECHOOSE_SEARCH_EVERY = 32
-
 # Updates of the held-contact solves smaller than this (relative to the largest free
 # acceleration, at least 1 m/s², and for velocities to that acceleration times dt) wake
 # no neighbours: they are rounding.
 SOLVE_TOLERANCE = 1e-12
 
-class World(CalendarSteps):
+
+class World(MeshSteps, CalendarSteps):
     """Particles, walls and settings, stepped in place.
 
     state: the particles (its positions and velocities are updated in place by ``step``,
@@ -326,37 +320,11 @@ class World(CalendarSteps):
         """Whether this step renumbers the spheres (space_order.py: every RENUMBER_EVERY steps)."""
         return self.numbering is not None and bool(self.step_index) and self.step_index % RENUMBER_EVERY == 0
 
-    def _place_meshes(self, time: float, span: float) -> None:
-        """Kinematic meshes where they are at run time ``time``, and their frames for the
-        next ``span`` s (colliders/mesh.place); nothing when none moves."""
-        if self._meshes_move:
-            place(self._geometry[KIND_MESH], self.walls.meshes, time, span)
-
     @staticmethod
     def _timed(ctx: StepContext, name: str, phase) -> None:
         started = perf_counter()
         phase(ctx)
         ctx.timings[name] = perf_counter() - started
-
-    def _wake_where_meshes_move(self, ctx: StepContext) -> None:
-        """Wake the sleeping spheres a kinematic mesh may reach in this step, before anything
-        moves: asleep, a sphere is immovable, and a contact between two immovable partners
-        is skipped, so the mesh would pass through it. Which: those whose box (grown by the
-        contact tolerance) a moving mesh's tree reaches with the box carried into its frame
-        over the step (colliders/mesh.frame_box: the candidates its swept tests would get)."""
-        if self.sleepers is None or not self._meshes_move or not self.sleepers.count:
-            return
-        st = self._st
-        asleep = np.flatnonzero(self.sleepers.asleep)
-        reach = (st.radius[asleep] + self.settings.contact_tolerance)[:, None]
-        x = st.positions[asleep]
-        spheres, triangles = narrow_candidates(KIND_MESH, ctx.pairs, x - reach, x + reach, self._geometry)
-        woke = np.unique(asleep[spheres[self.walls.meshes.mesh_set.on_moving_mesh(triangles)]])
-        if woke.size:
-            self.sleepers.wake(woke)
-            self._inverse_mass[woke] = st.inverse_mass[woke]
-            self._free_accel[woke] = self._free_accel_awake[woke]
-            ctx.woken += int(woke.size)
 
     def _forces(self, ctx: StepContext) -> None:
         """Held contacts -> the accelerations the paths follow (resolve.settle_held), once
@@ -446,40 +414,6 @@ class World(CalendarSteps):
                 ia, other = narrow_candidates(kind, ctx.pairs, ctx.path_lo, ctx.path_hi, self._geometry)
             self._predict(ctx, kind, ia, other, push)
 
-    def _mesh_candidates(self, ctx: StepContext) -> tuple[np.ndarray, np.ndarray]:
-        """The step's sphere–triangle candidates, by a walk of each mesh's tree per sphere
-        or by the simultaneous descent (``settings.mesh_search``; auto: _choose_mesh_search).
-        Both give the same candidates in the same order, so the same states bit for bit."""
-        together = self._choose_mesh_search(ctx)
-        chosen = together is not False
-        self.together_steps += int(chosen)
-        ctx.mesh_search_method = "together" if chosen else "walk"
-        if isinstance(together, tuple):  # counted this step: the descent's candidates are at hand
-            return together
-        return narrow_candidates(KIND_MESH, ctx.pairs, ctx.path_lo, ctx.path_hi, self._geometry, chosen)
-
-    def _choose_mesh_search(self, ctx: StepContext):
-        """Whether this step's spheres are searched against the meshes by the simultaneous
-        descent: ``settings.mesh_search``, or under auto the one of less counted work (never
-        timed, so a run chooses the same every time): every RECHOOSE_SEARCH_EVERY steps both
-        are counted (colliders/mesh.walk_tests; reachable_together's tests, weighed by
-        TOGETHER_PAIR_COST, and TOGETHER_BOX_COST a path box), and the steps between keep
-        the choice. On a counting step that chose the descent, its candidates (a tuple)."""
-        method = self.settings.mesh_search
-        if method != "auto":
-            return method == "together"
-        if self._search_work is not None and self.step_index % RECHOOSE_SEARCH_EVERY != 0:
-            walk, together = self._search_work
-            return together < walk
-        group = self._geometry[KIND_MESH]
-        walk = float(walk_tests(ctx.path_lo, ctx.path_hi, group))
-        ia, other, tests = reachable_together(ctx.path_lo, ctx.path_hi, group)
-        boxes = self._st.count * self.walls.meshes.mesh_set.trees_per_box()
-        together = TOGETHER_PAIR_COST * tests + TOGETHER_BOX_COST * boxes
-        self._search_work = (walk, together)
-        return (ia, other) if together < walk else False
-
-
     def _resolve(self, ctx: StepContext) -> None:
         """The contacts, in the order of the policy (``settings.ordering``); none once a
         sphere is pinned (the forces phase found it: the step ends as it stands)."""
@@ -554,21 +488,6 @@ class World(CalendarSteps):
         ctx.slept = int(fell.size)
         ctx.woken += int(woke.size)
         ctx.sleep_changed = np.concatenate([fell, woke]).astype(np.int64)
-
-    def _carried(self) -> np.ndarray | None:
-        """(N,) bool: the spheres held on a kinematic mesh (a moving surface carries them,
-        so they may not sleep: asleep, a sphere is immovable and the mesh would pass
-        through it); None when no mesh moves."""
-        if not self._meshes_move:
-            return None
-        held = int(self.held.count[HELD])
-        kind, a, other = self.held.kind[:held], self.held.a[:held], self.held.other[:held]
-        on_mesh = kind == KIND_MESH
-        moving = np.zeros(held, dtype=bool)
-        moving[on_mesh] = self.walls.meshes.mesh_set.on_moving_mesh(other[on_mesh])
-        carried = np.zeros(self._st.count, dtype=bool)
-        carried[a[moving]] = True
-        return carried
 
     def _end(self, ctx: StepContext) -> StepEnd:
         """The step's record, after its closing events; raises NonFiniteState or PinnedSphere after reporting."""
@@ -909,24 +828,6 @@ class World(CalendarSteps):
             if self.numbering is not None:
                 nodes["order"] = self.numbering.spheres(nodes["order"])
         return BroadPhaseInfo(ctx.step, bp.name, self.broad_phase_reason, stats, nodes)
-
-    def _mesh_search_event(self, ctx: StepContext) -> MeshSearch:
-        """The step's walks of the meshes' trees: the path boxes asked at step start and
-        those the contact loop logged (timeline's mesh_queries), each walked again by the
-        engine's own walk (colliders.mesh_search) with the meshes placed for the step."""
-        buf = self._buf
-        logged = buf.mesh_queries[:int(buf.counters[MESH_QUERIES])]
-        lo0, hi0 = ctx.search_start
-        n = lo0.shape[0]
-        sphere = np.concatenate([np.arange(n, dtype=np.int64), logged[:, 0].astype(np.int64)])
-        after = np.concatenate([np.full(n, -1, dtype=np.int64), logged[:, 1].astype(np.int64)])
-        lo = np.concatenate([lo0, logged[:, 2:5]])
-        hi = np.concatenate([hi0, logged[:, 5:8]])
-        query, node, outcome, parent = mesh_search(lo, hi, self._geometry)
-        if self.numbering is not None:
-            sphere = self.numbering.spheres(sphere)
-        return MeshSearch(ctx.step, sphere.astype(np.int32), after.astype(np.int32), lo, hi, query.astype(np.int32),
-                          node.astype(np.int32), outcome.astype(np.int8), parent.astype(np.int32))
 
     def _swept_tests_event(self, ctx: StepContext) -> SweptTests:
         buf = self._buf

@@ -1,5 +1,9 @@
 """The Rerun sink: an observer that draws a run for the Rerun viewer.
 
+Why one module of this size: one observer writes one file, and its entities (listed
+below) share the sink's state from step to step (what was drawn last, the blueprint's
+opening step); what is drawn is computed in view.py and mesh_view.py.
+
 The same sink serves a live recording (events from the engine) and a replay (events
 read back from an MCAP file), so the two pictures are the same by construction.
 

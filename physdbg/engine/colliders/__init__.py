@@ -33,7 +33,8 @@ from .kinds import KIND_NAMES, KINDS, PARTNER_IS_SPHERE, partner_sphere
 __all__ = ["KIND_NAMES", "KINDS", "KIND_MODULES", "PARTNER_IS_SPHERE", "partner_sphere", "geometry_of",
            "check_kind_modules", "time_of_impact", "contact_normal", "contact_feature", "partner_surface",
            "partner_normal_motion", "partner_moves", "surface_gap", "contact_gap", "partner_restitution",
-           "partners_of", "max_overlap", "deepest_overlap", "narrow_candidates", "every_candidate", "most_partners", "partners_bound",
+           "partners_of", "max_overlap", "deepest_overlap", "deepest_of_kind", "narrow_candidates", "every_candidate",
+           "most_partners", "partners_bound",
            "searches_meshes", "mesh_search", "CALENDAR_TAKES", "partner_count", "immovable_partners_in"]
 
 # each kind's module, in the order of the kinds' codes: its geometry group is ``module.GEOMETRY``
@@ -256,15 +257,22 @@ def partner_count(kind, geometry) -> int:
 @njit(cache=True, inline="always")
 def most_partners(geometry, max_degree) -> int:
     """The most candidates of one kind a re-predicted sphere can have (the size of
-    partners_of's ``out``): its broad-phase partners (at most max_degree), every wall,
-    every triangle."""
-    return max(max_degree, plane.count(geometry[KIND_WALL]), mesh.count(geometry[KIND_MESH]))
+    partners_of's ``out``): its broad-phase partners (at most max_degree), or every
+    immovable partner of a kind (every wall, every triangle). Every kind of the table is
+    asked (partner_count: a kind with no branch there is refused, never left out)."""
+    most = max_degree
+    for kind in range(KINDS):
+        most = max(most, partner_count(kind, geometry))
+    return most
 
 
 @njit(cache=True, inline="always")
 def partners_bound(geometry, max_degree) -> int:
     """The most candidates of every kind together a re-predicted sphere can have."""
-    return max_degree + plane.count(geometry[KIND_WALL]) + mesh.count(geometry[KIND_MESH])
+    bound = max_degree
+    for kind in range(KINDS):
+        bound += partner_count(kind, geometry)
+    return bound
 
 
 @borrowing
@@ -275,20 +283,29 @@ def max_overlap(x, radius, pairs, geometry, ignore_tunnelled):
 
 
 @borrowing
+def deepest_of_kind(kind, x, radius, pairs, geometry, ignore_tunnelled):
+    """(depth m >= 0, sphere, partner) of the deepest overlap with partners of ``kind``:
+    the candidate sphere pairs (M, 2), every wall, every triangle ((0, -1, -1) when none)."""
+    if kind == KIND_PAIR:
+        return sphere.deepest_where(x, radius, pairs, geometry[KIND_PAIR])
+    if kind == KIND_WALL:
+        return plane.deepest_where(x, radius, geometry[KIND_WALL], ignore_tunnelled)
+    if kind == KIND_MESH:
+        return mesh.deepest_where(x, radius, geometry[KIND_MESH], ignore_tunnelled)
+    raise ValueError(UNKNOWN_KIND)
+
+
+@borrowing
 def deepest_overlap(x, radius, pairs, geometry, ignore_tunnelled):
-    """max_overlap and who: (depth m >= 0, kind, sphere, partner) of the deepest overlap,
-    (0.0, -1, -1, -1) when none; a pair's partner is the other sphere, as in contacts."""
-    best, kind, a, other = 0.0, -1, -1, -1
-    depth, i, j = sphere.deepest_where(x, radius, pairs, geometry[KIND_PAIR])
-    if depth > best:
-        best, kind, a, other = depth, KIND_PAIR, i, j
-    depth, i, j = plane.deepest_where(x, radius, geometry[KIND_WALL], ignore_tunnelled)
-    if depth > best:
-        best, kind, a, other = depth, KIND_WALL, i, j
-    depth, i, j = mesh.deepest_where(x, radius, geometry[KIND_MESH], ignore_tunnelled)
-    if depth > best:
-        best, kind, a, other = depth, KIND_MESH, i, j
-    return best, kind, a, other
+    """max_overlap and who: (depth m >= 0, kind, sphere, partner) of the deepest overlap of
+    every kind of the table, (0.0, -1, -1, -1) when none; a pair's partner is the other
+    sphere, as in contacts."""
+    best, best_kind, a, other = 0.0, -1, -1, -1
+    for kind in range(KINDS):
+        depth, i, j = deepest_of_kind(kind, x, radius, pairs, geometry, ignore_tunnelled)
+        if depth > best:
+            best, best_kind, a, other = depth, kind, i, j
+    return best, best_kind, a, other
 
 
 def narrow_candidates(kind: int, pairs: np.ndarray, lo: np.ndarray, hi: np.ndarray,

@@ -1,5 +1,10 @@
 """Mesh partners: spheres against the triangles of fixed meshes, one collider kind (events.KIND_MESH).
 
+Why one module of this size: a collider kind is one module (colliders/__init__'s rule:
+the switch reaches each kind's functions in its own module), and the mesh kind has the
+most to answer (moving triangles, the tree walks, features); its trees are the scene's
+mesh set (mesh/mesh_set.py) and its tests toi.py's.
+
 A contact's partner ``other`` is a triangle, numbered across every mesh of the scene (the
 scene's meshes in order, each mesh's triangles in its file's order: ``mesh_of`` says whose
 it is). Triangles are two-sided and immovable (the seed's inverse mass 0): a sphere bounces

@@ -1,7 +1,11 @@
 """The held-contact solves: every contact that involves held contacts solved at once with
 the held contacts it reaches (package doc), as worklists (projected Gauss–Seidel), dense
 pivoting for a small cluster and conjugate gradients for a large one (bound_qp.py); the
-release of contacts the solve leaves loose."""
+release of contacts the solve leaves loose.
+
+Why one module of this size: the solves share the held store's layout and call each
+other compiled (a worklist falls back to the dense or the conjugate-gradient solve of a
+cluster); the rules are rules.py and the store store.py."""
 
 from __future__ import annotations
 
