@@ -541,7 +541,9 @@ def test_each_cause_of_check_run_is_named_by_the_judgements_its_table_row_lists(
         for kind in kinds:
             named_by.setdefault(kind, set()).add(name)
     for kind, (_, methods) in departure.DEPARTURE_KINDS.items():
-        assert set(methods) <= named_by.get(kind, set()), (kind, methods, named_by.get(kind))
+        assert all(vars(departure._Comparison).get(m.__name__) is m for m in methods), kind  # its own methods
+        names = {m.__name__ for m in methods}
+        assert names <= named_by.get(kind, set()), (kind, names, named_by.get(kind))
     # every kind made with a literal in an _add or a Departure(...) has its row
     made = set(re.findall(r'(?:_add\(|Departure\(\s*)"([a-z-]+)"', inspect.getsource(departure)))
     assert made and made <= set(departure.DEPARTURE_KINDS)

@@ -666,8 +666,7 @@ class _Comparison:
                 continue
             x, v, contacts = local
             off = self._beyond(r.xf[s], r.vf[s], x, v)
-            if (not off.any() or self._own_rule(s, contacts, off) or self._tie(s, contacts, off)
-                    or self._index_ordered(s, contacts, off) or self._mistaken_chain(s, contacts, off)):
+            if not off.any() or any(explains(self, s, contacts, off) for explains in STEP_EXPLANATIONS):
                 for c in contacts:
                     for b in self._bodies(c):
                         for k in (s, s + 1) if off.any() else (s,):
@@ -1671,38 +1670,44 @@ class _Comparison:
 
 _RUN_WIDE = ("own-rule", "index-order", "drag-per-step", "drag-ignored", "drift", "chaos", "unexplained")
 # check-run's causes, one table: each kind of departure, in the order of telling (the most
-# telling first within a step: _fold), with its words and the judgements (methods of
-# _Comparison) that name it. The restitution mistakes are RESTITUTION_MISTAKES' codes,
+# telling first within a step: _fold), with its words and the judgements (the methods of
+# _Comparison themselves) that name it. The restitution mistakes are RESTITUTION_MISTAKES' codes,
 # which _judge_energy names through restitution_mistake. A test holds every method here
 # to the kinds it names (tests/test_departure.py).
+_MISTAKE_JUDGES = (_Comparison._judge_energy, _Comparison._mistaken_chain)  # a restitution mistake's judges
 DEPARTURE_KINDS = {
-    "impulse-loop": ("an impulse of the wrong sign, met again and again", ("_runaway",)),
-    "non-finite": ("NaN or infinity", ("_non_finite",)),
-    "immovable-moved": ("an immovable body moved", ("_immovable_moved",)),
-    "drag-per-step": ("drag applied per step, not per second", ("_measure_drag",)),
-    "drag-ignored": ("no drag", ("_measure_drag",)),
-    "tunnelling": ("tunnelling", ("_tunnelled",)),
-    "impulse-sign": ("an impulse of the wrong sign", ("_judge_energy", "_mistaken_chain")),
-    "impulse-doubled": ("an impulse applied twice", ("_judge_energy", "_mistaken_chain")),
-    "restitution-sign": ("restitution with the wrong sign", ("_judge_energy", "_mistaken_chain")),
-    "one-missing": ("the 1 of (1 + e) missing from the impulse", ("_judge_energy", "_mistaken_chain")),
-    "restitution-squared": ("restitution applied twice", ("_judge_energy", "_mistaken_chain")),
-    "contact-energy": ("energy at a contact", ("_judge_energy", "_judge_chain")),
-    "tangent-reversed": ("a reflection of the whole velocity", ("_judge_tangent",)),
-    "wrong-normal": ("an impulse along the wrong normal", ("_judge_tangent",)),
-    "own-rule": ("physdbg's own modelling rule, not the engine", ("_own_rule", "_slept")),
-    "tie": ("contacts at one instant taken in another order (a tie, not a mistake)", ("_tie",)),
-    "index-order": ("contacts resolved in index order", ("_index_ordered",)),
-    "collision-order": ("contacts resolved out of order", ("_judge_chain",)),
-    "skipped-rest": ("a bounce that skips the rest of the step", ("_skipped_rest",)),
-    "bounce-time": ("bounced at the wrong time", ("_late",)),
-    "resting": ("a slow or resting contact, held another way", ("_resting",)),
-    "missed-contact": ("a contact missed", ("_judge_one",)),
-    "extra-contact": ("a contact physdbg does not have", ("_extra",)),
-    "drift": ("drift in free flight", ("_drift",)),
-    "chaos": ("chaos: differences below the tolerance grew", ("_no_step_departs",)),
-    "unexplained": ("unexplained", ("_no_step_departs",)),
+    "impulse-loop": ("an impulse of the wrong sign, met again and again", (_Comparison._runaway,)),
+    "non-finite": ("NaN or infinity", (_Comparison._non_finite,)),
+    "immovable-moved": ("an immovable body moved", (_Comparison._immovable_moved,)),
+    "drag-per-step": ("drag applied per step, not per second", (_Comparison._measure_drag,)),
+    "drag-ignored": ("no drag", (_Comparison._measure_drag,)),
+    "tunnelling": ("tunnelling", (_Comparison._tunnelled,)),
+    "impulse-sign": ("an impulse of the wrong sign", _MISTAKE_JUDGES),
+    "impulse-doubled": ("an impulse applied twice", _MISTAKE_JUDGES),
+    "restitution-sign": ("restitution with the wrong sign", _MISTAKE_JUDGES),
+    "one-missing": ("the 1 of (1 + e) missing from the impulse", _MISTAKE_JUDGES),
+    "restitution-squared": ("restitution applied twice", _MISTAKE_JUDGES),
+    "contact-energy": ("energy at a contact", (_Comparison._judge_energy, _Comparison._judge_chain)),
+    "tangent-reversed": ("a reflection of the whole velocity", (_Comparison._judge_tangent,)),
+    "wrong-normal": ("an impulse along the wrong normal", (_Comparison._judge_tangent,)),
+    "own-rule": ("physdbg's own modelling rule, not the engine", (_Comparison._own_rule, _Comparison._slept)),
+    "tie": ("contacts at one instant taken in another order (a tie, not a mistake)", (_Comparison._tie,)),
+    "index-order": ("contacts resolved in index order", (_Comparison._index_ordered,)),
+    "collision-order": ("contacts resolved out of order", (_Comparison._judge_chain,)),
+    "skipped-rest": ("a bounce that skips the rest of the step", (_Comparison._skipped_rest,)),
+    "bounce-time": ("bounced at the wrong time", (_Comparison._late,)),
+    "resting": ("a slow or resting contact, held another way", (_Comparison._resting,)),
+    "missed-contact": ("a contact missed", (_Comparison._judge_one,)),
+    "extra-contact": ("a contact physdbg does not have", (_Comparison._extra,)),
+    "drift": ("drift in free flight", (_Comparison._drift,)),
+    "chaos": ("chaos: differences below the tolerance grew", (_Comparison._no_step_departs,)),
+    "unexplained": ("unexplained", (_Comparison._no_step_departs,)),
 }
+# what may explain a whole step where the run ends elsewhere than physdbg's step from the
+# same state, tried in this order before its contacts are judged one by one (or chain by
+# chain): physdbg's own modelling rule, a tie, index order, an impulse mistake along a chain
+STEP_EXPLANATIONS = (_Comparison._own_rule, _Comparison._tie, _Comparison._index_ordered,
+                     _Comparison._mistaken_chain)
 _PRIORITY = tuple(DEPARTURE_KINDS)
 _KIND_WORDS = {kind: words for kind, (words, _) in DEPARTURE_KINDS.items()}
 
