@@ -43,11 +43,13 @@ class RunSummary:
     counted in wall_seconds or ms_per_step. ms_per_step: the whole loop (the engine and
     whatever observes it: a recorder, the audit); engine_ms_per_step: the engine's own five
     phases (phase_seconds), what a run costs without observers. walls: the walls' names.
-    warning_counts: how many engine warnings of each kind (code); warnings: the first few of each kind, as
-    "step k: message" with k counted from 1 (step k ends at frame k of a recording).
-    finding_counts / findings: what the audit found (physdbg.analysis.audit: tunnelling,
-    overlaps, out-of-order contacts, energy gained, NaN, budgets, collapse), per kind and
-    the first few in words; empty when the run is clean or was not audited. audit_pairs:
+    warning_counts: how many engine warnings of each kind (code); warnings: the first few of
+    each kind, each {step, code, message, bodies} with the step counted from 1 (step k ends
+    at frame k of a recording). finding_counts / findings: what the audit found
+    (physdbg.analysis.audit: tunnelling, overlaps, out-of-order contacts, energy gained,
+    NaN, budgets, collapse), per kind and the first few (audit.Finding; in the JSON each
+    finding's fields); empty when the run is clean or was not audited. The sentences are
+    report.summary_text's. audit_pairs:
     in how many steps the audit took the pairs of spheres from the engine's own swept
     tests instead of walking their paths again, in words (audit.pairs_words; '' when it
     walked them all).
@@ -90,9 +92,9 @@ class RunSummary:
     phase_seconds: dict[str, float]
     final_hash: str
     warning_counts: dict[str, int] = field(default_factory=dict)
-    warnings: list[str] = field(default_factory=list)
+    warnings: list[dict] = field(default_factory=list)
     finding_counts: dict[str, int] = field(default_factory=dict)
-    findings: list[str] = field(default_factory=list)
+    findings: list = field(default_factory=list)  # audit.Finding
     dts: list[float] = field(default_factory=list, repr=False)
     auto: dict[str, str] = field(default_factory=dict)  # setting -> "value: why" for settings given as auto
 
@@ -109,7 +111,8 @@ class RunSummary:
     event_loop: str = ""
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        """The JSON's fields: every field above, each finding as its own (audit.Finding.as_dict)."""
+        return {**asdict(self), "findings": [f.as_dict() for f in self.findings]}
 
 
 def calendar_words(world, steps: int) -> str:
@@ -249,13 +252,13 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         kernels=kernels.reason, wall_seconds=wall, compile_seconds=compile_seconds, ms_per_step=1000.0 * wall / n_steps if n_steps else math.nan,
         engine_ms_per_step=1000.0 * sum(tally.seconds.values()) / n_steps if n_steps else math.nan,
         phase_seconds=tally.seconds, final_hash=digest, warning_counts=dict(warnings.counts),
-        warnings=warnings.examples(), findings=report.lines() if report else [],
+        warnings=warnings.examples(), findings=list(report.findings) if report else [],
         finding_counts=dict(auditor.counts) if auditor else {}, dts=used,
         audit_pairs=pairs_words(auditor.pairs_from_engine, auditor.steps) if auditor else "")
 
 
 class WarningTally:
-    """Engine warnings of a run: a total per kind and the first few of each, as text."""
+    """Engine warnings of a run: a total per kind and the first few of each, as records."""
 
     def __init__(self, examples_per_kind: int = 3):
         self.counts: dict[str, int] = {}
@@ -263,15 +266,16 @@ class WarningTally:
         self.keep = examples_per_kind
 
     def add(self, warnings) -> None:
-        """warnings: EngineWarning events (step, code, message)."""
+        """warnings: EngineWarning events (step, code, message, bodies)."""
         for w in warnings:
             self.counts[w.code] = self.counts.get(w.code, 0) + 1
             kept = self.first.setdefault(w.code, [])
             if len(kept) < self.keep:
-                kept.append(f"step {w.step}: {w.message}")
+                kept.append({"step": w.step, "code": w.code, "message": w.message, "bodies": list(w.bodies)})
 
-    def examples(self) -> list[str]:
-        return [line for lines in self.first.values() for line in lines]
+    def examples(self) -> list[dict]:
+        """The first few warnings of each kind, as records (step, code, message, bodies)."""
+        return [w for kept in self.first.values() for w in kept]
 
 
 # ----------------------------------------------------------------------------- recording

@@ -278,9 +278,9 @@ def run(
                 raise PhysdbgError(f"{dts_out}: cannot write the step lengths ({err})") from None
         _after_interpreted(tier, quiet=as_json)
         if as_json:
-            from .analysis.report import versioned
+            from .analysis.report import report_json
 
-            typer.echo(json.dumps(versioned(summary.as_dict()), indent=2))
+            typer.echo(report_json(summary))
         else:
             typer.echo(summary_text(summary))
         if fail_on_findings and summary.finding_counts:

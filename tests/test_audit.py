@@ -199,7 +199,7 @@ def test_the_readme_pile_falling_asleep_at_the_end_is_a_note_not_a_collapse():
     assert settled.finding_counts == {}
     gas = api.run("gas", ["dt=1e6", "steps=1"])
     assert "with restitution 1 this is not inelastic collapse" in next(
-        f for f in gas.findings if "collision rate has blown up" in f)
+        f.message for f in gas.findings if f.kind == "collapse")
 
 
 def test_an_overlap_names_its_spheres_and_place_and_blames_the_method_that_left_it(tmp_path):
@@ -304,8 +304,12 @@ def test_an_overlap_with_a_moving_mesh_names_the_triangle_where_the_mesh_is(tmp_
                      '[[meshes]]\nname = "plate"\nfile = "plate.obj"\nvelocity = [0.0, 57.0, 0.0]\n'
                      '[[particles]]\nposition = [-0.5, 1.0, 0.5]\nradius = 0.1\n')
     summary = api.run(str(scene))
-    first = next(line for line in summary.findings if "overlap by" in line)
-    assert first.startswith("step 1: sphere 0 and mesh 'plate' triangle 1 (face) overlap by 50 mm"), summary.findings
+    first = next(f for f in summary.findings if f.kind == "overlap")
+    assert first.step == 1 and first.particles == [0], summary.findings
+    assert first.message.startswith("sphere 0 and mesh 'plate' triangle 1 (face) overlap by 50 mm"), first.message
+    from physdbg.analysis.report import summary_text
+
+    assert "  step 1: sphere 0 and mesh 'plate' triangle 1 (face) overlap by 50 mm" in summary_text(summary)
 
 
 def test_a_collapse_driven_by_a_kinematic_mesh_says_so_and_what_helps(tmp_path):
@@ -386,7 +390,7 @@ def test_a_live_audit_takes_the_pairs_of_exact_steps_from_the_engine_and_walks_t
     full = api.run(str(scene), audit="full")
     assert default.finding_counts == full.finding_counts and default.finding_counts["tunnelling"] == 1
     assert default.findings == full.findings
-    assert any("spheres 2 and 3 passed into each other" in line for line in default.findings)
+    assert any("spheres 2 and 3 passed into each other" in f.message for f in default.findings)
     assert default.audit_pairs.startswith("pairs of spheres in 3 of 4 steps taken from the engine's own swept tests")
     assert full.audit_pairs == ""
     recording = tmp_path / "pairs.mcap"

@@ -154,18 +154,17 @@ class AuditReport:
                 "clean": self.clean, "counts": self.counts, "findings": [f.as_dict() for f in self.findings],
                 "notes": self.notes}
 
-    def lines(self) -> list[str]:
-        """One line per finding, with a count of the ones not shown; an explanation a
-        finding shares with the first of its kind is said once (the collapse paragraph was
-        printed five times)."""
-        out = [f"step {f.step}: {message}" for f, message, _ in said_once(self.findings)]
-        shown = {}
-        for f in self.findings:
-            shown[f.kind] = shown.get(f.kind, 0) + 1
-        for kind, count in self.counts.items():
-            if count > shown.get(kind, 0):
-                out.append(f"... and {count - shown.get(kind, 0)} more {kind} findings")
-        return out
+    def not_listed(self) -> dict[str, int]:
+        """How many findings of each kind the report counts but does not list."""
+        return not_listed(self.counts, self.findings)
+
+
+def not_listed(counts: dict[str, int], findings: list[Finding]) -> dict[str, int]:
+    """Of ``counts`` (findings of each kind), how many ``findings`` (those listed) leave out."""
+    shown: dict[str, int] = {}
+    for f in findings:
+        shown[f.kind] = shown.get(f.kind, 0) + 1
+    return {kind: count - shown.get(kind, 0) for kind, count in counts.items() if count > shown.get(kind, 0)}
 
 
 def engine_tests_exact(settings: dict, warnings: list) -> bool:

@@ -46,7 +46,8 @@ def versioned(data: dict) -> dict:
 
 
 def report_json(report: DiffReport | AuditReport | CheckRunReport) -> str:
-    """Any report as JSON: its ``as_dict()`` with the versions first, NaN and infinity as null."""
+    """Any report as JSON (a run's summary too, api.RunSummary): its ``as_dict()`` with the
+    versions first, NaN and infinity as null."""
     return json.dumps(versioned(_clean(report.as_dict())), indent=2, default=_plain)
 
 
@@ -199,7 +200,7 @@ def explain_text(r: AuditReport) -> str:
 
         for f, message, advice in said_once(r.findings):
             lines += record_lines(f, message, advice)
-        lines.extend("  " + line for line in r.lines() if line.startswith("..."))
+        lines.extend("  " + line for line in _more_lines(r.not_listed()))
     lines.extend(f"note     {n}" for n in r.notes)
     return "\n".join(lines)
 
@@ -351,7 +352,7 @@ def summary_text(s, observers: str = "the audit") -> str:
         f"state hash  {s.final_hash}",
         "warnings    " + _warning_totals(s.warning_counts),
     ]
-    lines += [f"  {line}" for line in s.warnings]
+    lines += [f"  step {w['step']}: {w['message']}" for w in s.warnings]
     lines.append("audit       " + ("clean (no tunnelling, overlap, out-of-order contact, energy gain or collapse"
                                    + (", and no meshes passing into each other or pinning a sphere)"
                                       if getattr(s, "meshes_move", False)
@@ -359,10 +360,25 @@ def summary_text(s, observers: str = "the audit") -> str:
                                    if not s.finding_counts else
                                    ", ".join(f"{n} {kind}" for kind, n in s.finding_counts.items())
                                    + "; the first of each kind:"))
-    lines += [f"  {line}" for line in s.findings]
+    lines += [f"  {line}" for line in finding_lines(s.findings, s.finding_counts)]
     if getattr(s, "audit_pairs", ""):
         lines.append(f"  {s.audit_pairs}")
     return "\n".join(lines)
+
+
+def finding_lines(findings: list, counts: dict[str, int]) -> list[str]:
+    """The run summary's findings (audit.Finding, the first of each kind; counts: of every
+    kind): one line each, an explanation a finding shares with the first of its kind said
+    once (the collapse paragraph was printed five times), then a line per kind for the
+    ones not listed."""
+    from .audit import not_listed, said_once
+
+    return ([f"step {f.step}: {message}" for f, message, _ in said_once(findings)]
+            + _more_lines(not_listed(counts, findings)))
+
+
+def _more_lines(more: dict[str, int]) -> list[str]:
+    return [f"... and {n} more {kind} findings" for kind, n in more.items()]
 
 
 def auto_lines(auto: dict[str, str]) -> list[str]:
