@@ -42,8 +42,10 @@ def main() -> None:
         calendar = _run(name, "calendar", args.longest)
         total = sum(calendar.phase_seconds.values()) or 1.0
         shares = ", ".join(f"{100 * s / total:.0f}%" for s in calendar.phase_seconds.values())
+        served = calendar.event_loop  # RunSummary.event_loop: {calendar_steps, steps, unfit}
+        unfit = f"; the time-ordered loop took the rest, which it cannot serve: {served['unfit']}" if served["unfit"] else ""
         print(f"{name:12s} {calendar.steps:6d} {step.engine_ms_per_step:8.3f} {calendar.engine_ms_per_step:8.3f}  "
-              f"{shares:40s}  {calendar.event_loop.split(' (docs/')[0]}", flush=True)
+              f"{shares:40s}  calendar in {served['calendar_steps']} of {served['steps']} steps{unfit}", flush=True)
 
 
 if __name__ == "__main__":

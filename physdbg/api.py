@@ -49,10 +49,11 @@ class RunSummary:
     (physdbg.analysis.audit: tunnelling, overlaps, out-of-order contacts, energy gained,
     NaN, budgets, collapse), per kind and the first few (audit.Finding; in the JSON each
     finding's fields); empty when the run is clean or was not audited. The sentences are
-    report.summary_text's. audit_pairs:
-    in how many steps the audit took the pairs of spheres from the engine's own swept
-    tests instead of walking their paths again, in words (audit.pairs_words; '' when it
-    walked them all).
+    report.summary_text's. audit_pairs: {from_engine, steps}, in how many of the steps the
+    audit took the pairs of spheres from the engine's own swept tests instead of walking
+    their paths again ({} when the run was not audited). event_loop: where the event
+    calendar was asked for, {calendar_steps, steps, unfit}: the steps it served and why the
+    last it could not serve could not (None), {} for the time-ordered loop.
     """
 
     scene: str
@@ -105,25 +106,21 @@ class RunSummary:
     overlap_where: str = ""  # who overlapped most and in which step ("spheres 3 and 4, step 12"), when known
     start_notes: list[str] = field(default_factory=list)  # the spheres that start inside another body
     meshes_driven: bool = False  # a kinematic mesh: its prescribed motion does work on what it strikes
-    audit_pairs: str = ""
-    # settings.event_loop = "calendar": in how many steps the calendar served, and why the
-    # last step it could not serve could not (engine/calendar.py); "" for the step loop
-    event_loop: str = ""
+    audit_pairs: dict = field(default_factory=dict)
+    event_loop: dict = field(default_factory=dict)
 
     def as_dict(self) -> dict:
         """The JSON's fields: every field above, each finding as its own (audit.Finding.as_dict)."""
         return {**asdict(self), "findings": [f.as_dict() for f in self.findings]}
 
 
-def calendar_words(world, steps: int) -> str:
-    """Where a world asked for the event calendar used it, for the run's summary ('' when
-    it was not asked for)."""
+def calendar_use(world, steps: int) -> dict:
+    """Where a world asked for the event calendar used it: {calendar_steps, steps, unfit}
+    (RunSummary.event_loop), {} when it was not asked for."""
     if world.settings.event_loop != "calendar":
-        return ""
-    words = f"calendar in {world.calendar_steps} of {steps} steps"
-    if world.calendar_steps < steps and world.calendar_unfit:
-        words += f"; the time-ordered loop took the rest, which it cannot serve: {world.calendar_unfit}"
-    return words + " (docs/space-order.md, \"The event calendar\")"
+        return {}
+    return {"calendar_steps": world.calendar_steps, "steps": steps,
+            "unfit": world.calendar_unfit if world.calendar_steps < steps else None}
 
 
 def load_scene(scene: str, overrides: Sequence[str] = ()) -> Scene:
@@ -219,8 +216,6 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
                 on_step(len(used), total)
     wall = time.perf_counter() - started
     report = auditor.report(scene.name) if auditor else None  # before its counts: it ends what waits
-    if auditor:
-        from .analysis.audit import pairs_words
     k1, p1, mom1 = energies(st, world.gravity)
     e0, e1 = k0 + p0, k1 + p1
     drift = (e1 - e0) / abs(e0) if e0 != 0 else (e1 - e0)
@@ -232,7 +227,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         broad_phase=world.broad_phase.name,
         broad_phase_reason=world.broad_phase_reason, scanned_steps=world.scanned_steps,
         together_steps=world.together_steps, mesh_search=scene.settings.mesh_search,
-        event_loop=calendar_words(world, n_steps),
+        event_loop=calendar_use(world, n_steps),
         particles=st.count, walls=list(scene.walls.names), meshes=mesh_sizes(scene.walls.meshes),
         meshes_move=bool(scene.walls.meshes.moving.any()) and len(scene.walls.meshes) > 1,
         mesh_notes=list(scene.walls.meshes.notes) + [
@@ -254,7 +249,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         phase_seconds=tally.seconds, final_hash=digest, warning_counts=dict(warnings.counts),
         warnings=warnings.examples(), findings=list(report.findings) if report else [],
         finding_counts=dict(auditor.counts) if auditor else {}, dts=used,
-        audit_pairs=pairs_words(auditor.pairs_from_engine, auditor.steps) if auditor else "")
+        audit_pairs={"from_engine": auditor.pairs_from_engine, "steps": auditor.steps} if auditor else {})
 
 
 class WarningTally:

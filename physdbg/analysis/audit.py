@@ -180,16 +180,6 @@ def engine_tests_exact(settings: dict, warnings: list) -> bool:
             and not warnings)
 
 
-def pairs_words(from_engine: int, steps: int) -> str:
-    """What a live audit did with the pairs of spheres, for the run's summary ('' when it
-    walked every step's)."""
-    if not from_engine:
-        return ""
-    which = f"all {steps}" if from_engine == steps else f"{from_engine} of {steps}"
-    return (f"pairs of spheres in {which} steps taken from the engine's own swept tests (exact and complete "
-            f"there), not walked again: `physdbg explain` (or --full-audit) walks them")
-
-
 def said_once(findings: list) -> list[tuple]:
     """(finding, message, advice) of each finding, where what it shares with the first of its
     kind is "as above": its aside (the explanation in parentheses), when the first's is the

@@ -325,7 +325,7 @@ def summary_text(s, observers: str = "the audit") -> str:
         f"broad phase {s.broad_phase}: {s.broad_phase_reason}" + (
             f"; {s.scanned_steps} of {s.steps} steps scanned every path box for a changed path instead of listing "
             f"partners (fewer box tests: docs/broadphase.md, \"Partner lists or a scan\")" if s.scanned_steps else ""),
-        *([f"event loop  {s.event_loop}"] if getattr(s, "event_loop", "") else []),
+        *([f"event loop  {calendar_words(s.event_loop)}"] if s.event_loop else []),
         f"bodies      {count_words(s.particles, 'particle')}, {count_words(len(s.walls), 'wall')}"
         + _mesh_words(getattr(s, "meshes", {})),
         *(f"meshes      {note}" for note in getattr(s, "mesh_notes", [])),
@@ -361,9 +361,26 @@ def summary_text(s, observers: str = "the audit") -> str:
                                    ", ".join(f"{n} {kind}" for kind, n in s.finding_counts.items())
                                    + "; the first of each kind:"))
     lines += [f"  {line}" for line in finding_lines(s.findings, s.finding_counts)]
-    if getattr(s, "audit_pairs", ""):
-        lines.append(f"  {s.audit_pairs}")
+    if s.audit_pairs.get("from_engine"):
+        lines.append(f"  {pairs_words(s.audit_pairs)}")
     return "\n".join(lines)
+
+
+def calendar_words(use: dict) -> str:
+    """Where a run asked for the event calendar, how it used it (RunSummary.event_loop)."""
+    words = f"calendar in {use['calendar_steps']} of {use['steps']} steps"
+    if use["unfit"]:
+        words += f"; the time-ordered loop took the rest, which it cannot serve: {use['unfit']}"
+    return words + " (docs/space-order.md, \"The event calendar\")"
+
+
+def pairs_words(pairs: dict) -> str:
+    """What a live audit did with the pairs of spheres (RunSummary.audit_pairs, with some
+    taken from the engine)."""
+    from_engine, steps = pairs["from_engine"], pairs["steps"]
+    which = f"all {steps}" if from_engine == steps else f"{from_engine} of {steps}"
+    return (f"pairs of spheres in {which} steps taken from the engine's own swept tests (exact and complete "
+            f"there), not walked again: `physdbg explain` (or --full-audit) walks them")
 
 
 def finding_lines(findings: list, counts: dict[str, int]) -> list[str]:
