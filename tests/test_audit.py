@@ -35,7 +35,7 @@ def test_explain_finds_the_discrete_tunnelling_and_nothing_in_the_swept_run(tmp_
 @pytest.mark.slow
 def test_no_false_alarms_on_the_builtin_scenes(scene):
     report = explain(ROOT / "recordings" / "ci" / f"{scene}.mcap")
-    assert report.clean, report.lines()
+    assert report.clean, [f"step {f.step}: {f.message}" for f in report.findings]
     assert report.checked == report.steps > 0
 
 

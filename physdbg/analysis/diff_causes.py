@@ -186,7 +186,8 @@ def engine_warnings(case: StepCase, found: list[Cause]) -> list[Cause]:
     for label, warns, k in (("A", d.warn_a, div.step), ("B", d.warn_b, div.step_b)):
         for w in warns.get(k, []):
             if w["code"] == "non-finite":
-                out.append(Cause("non-finite", f"in run {label}: {w['message']}", w, step=k))
+                own = f" (its step {k})" if k != div.step else ""  # the cause's step is A's numbering
+                out.append(Cause("non-finite", f"in run {label}{own}: {w['message']}", w, step=div.step))
             elif w["code"].startswith("max_"):
                 other = d.warn_b if label == "A" else d.warn_a
                 other_k = div.step_b if label == "A" else div.step

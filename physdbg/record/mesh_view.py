@@ -45,20 +45,6 @@ class ReferenceSearch:
     visits: np.ndarray
 
 
-def node_depths(tree) -> np.ndarray:
-    """(M,) int64: each node's depth below the root (0)."""
-    nodes = tree.nodes
-    depth = np.zeros(nodes.size, dtype=np.int64)
-    stack = [int(nodes.root)]
-    while stack:
-        q = stack.pop()
-        if nodes.left[q] >= 0:
-            for child in (int(nodes.left[q]), int(nodes.right[q])):
-                depth[child] = depth[q] + 1
-                stack.append(child)
-    return depth
-
-
 def search(meshes, lo: np.ndarray, hi: np.ndarray, time: float, dt: float) -> ReferenceSearch:
     """Walk the engine's triangle trees (the mesh set of ``meshes``, a state.Meshes, placed
     here for the step that begins at run time ``time`` and lasts ``dt`` s) with each box

@@ -22,6 +22,7 @@ them, that hash must be the frame index's for the frame, and frames must arrive 
 from __future__ import annotations
 
 import json
+import re
 import sys
 from contextlib import ExitStack, contextmanager
 from collections import defaultdict
@@ -666,8 +667,8 @@ class Recording:
                     stats[key] = meta[key]
             events.append(BroadPhaseInfo(step, meta["name"], meta["reason"], stats, nodes))
         warnings = [json.loads(w) for w in parts.get(fmt.TOPIC_WARNINGS, [])]
-        events.extend(EngineWarning(step, current_name(w["code"]), w["message"], tuple(w.get("bodies", ())))
-                      for w in warnings)  # bodies: not in files made before warnings named them
+        events.extend(EngineWarning(step, current_name(w["code"]), w["message"], _warning_bodies(w))
+                      for w in warnings)
         if fmt.TOPIC_CONTACTS in self._channels and fmt.TOPIC_CONTACTS in topics:
             events.append(self._contacts(step, parts.get(fmt.TOPIC_CONTACTS, [b""])[0]))
         if fmt.TOPIC_SWEPT in self._channels and fmt.TOPIC_SWEPT in topics:
@@ -779,5 +780,15 @@ class Recording:
                 f"detail={self.detail!r}{', truncated' if self.truncated else ''})")
 
 
+def _warning_bodies(warning: dict) -> tuple[int, ...]:
+    """A recorded warning's spheres: its ``bodies``; in a file made before warnings named
+    them, a pinned warning's sphere as its message names it first ("sphere 3 is pinned ...")."""
+    if "bodies" in warning:
+        return tuple(int(b) for b in warning["bodies"])
+    named = re.match(r"sphere (\d+) ", warning["message"]) if warning["code"] == "pinned" else None
+    return (int(named.group(1)),) if named else ()
+
+
 __all__ = ["ChannelInfo", "FrameState", "FrameTable", "Recording", "RecordingError", "RecordingIntegrityError",
            "StateStream", "open_recording"]
+
