@@ -52,7 +52,7 @@ def main() -> None:
     for _ in range(args.rounds):  # in turn, so the machine's drift falls on every set alike
         for name, label, rules, build in scenes(args.with_exact):
             scene = build(rules)
-            said[(name, label)] = "; ".join(f"{k}={v.split(':')[0]}" for k, v in scene.auto.items()
+            said[(name, label)] = "; ".join(f"{k}={v.value}" for k, v in scene.auto.items()
                                             if k in ("rapid_contact_rule", "sleep_speed", "sleep_time")) or "—"
             ms = ms_per_step(scene)
             best[(name, label)] = min(best.get((name, label), float("inf")), ms)

@@ -40,6 +40,7 @@ import numpy as np
 
 from physdbg.engine.timeline import Buffers
 from physdbg.analysis.engines import box_rain_scene
+from physdbg.analysis.report import decision_words
 from physdbg.engine.warm import warm_up
 from physdbg.errors import SceneError
 from physdbg.peers import PeerSetup, available, build
@@ -217,7 +218,8 @@ def main() -> None:
     print(f"box-rain N={args.count}, {steps} of {args.steps} steps of {scene.dt:.6g} s{overrides}")
     s = scene.settings
     print(f"rules: rapid_contact_rule={s.rapid_contact_rule}, sleep_speed={s.sleep_speed:g} m/s, sleep_time="
-          f"{s.sleep_time:g} s" + "".join(f"; auto {name}={why}" for name, why in scene.auto.items()
+          f"{s.sleep_time:g} s" + "".join(f"; auto {name}={d.value}: {decision_words(d)}"
+                                          for name, d in scene.auto.items()
                                           if name in ("rapid_contact_rule", "sleep_speed")))
     print(f"physdbg: {ms:.1f} ms/step; steps stopped by a budget: {result['capped']}; largest overlap after any step: "
           f"{result['worst_overlap']:.3g} m (contact tolerance {result['tolerance']:g} m); peak memory "

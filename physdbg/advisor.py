@@ -360,6 +360,26 @@ def _contacts_possible(x, r, movable, reach, walls, duration: float = 0.0) -> bo
         outside = np.linalg.norm(np.maximum(0.0, np.maximum(lo - spread - x, x - hi - spread)), axis=1)
         if np.any(outside <= extent):
             return True
+    return _kind_partners_reached(x, extent, walls)
+
+
+def _kind_partners_reached(x, extent, walls) -> bool:
+    """Whether a sphere (centres x (N, 3), each within ``extent`` (N,) m of where it
+    starts) can reach a partner of a kind declaring its own fields (a kind beyond the wall
+    and the mesh): by the boxes its module's ``reach`` gives, or, for a module that gives
+    none, always (what the advisor cannot measure it never calls out of reach)."""
+    from .engine.colliders import extra_kinds
+
+    for _code, name, module in extra_kinds():
+        partners = walls.partners.get(name)
+        if partners is None or not len(partners):
+            continue
+        if getattr(module, "reach", None) is None:
+            return True
+        lo, hi = module.reach(partners)  # (P, 3) each
+        outside = np.linalg.norm(np.maximum(0.0, np.maximum(lo[None] - x[:, None], x[:, None] - hi[None])), axis=2)
+        if np.any(outside <= extent[:, None]):
+            return True
     return False
 
 
@@ -382,7 +402,18 @@ TRIANGLE_TEST_COST = 20.0
 VOLUME_SAMPLES = 256  # boxes a mesh's volumes are counted with
 
 
-def resolve_mesh_volumes(scene) -> dict[str, str]:
+@dataclass(frozen=True)
+class Decision:
+    """An "auto" setting as decided (scene.auto, RunSummary.auto): its value and why, the
+    advisor's words; or ``shared_with``, the setting decided with it whose words say why
+    for both (the pile rules are one decision)."""
+
+    value: object
+    why: str = ""
+    shared_with: str = ""
+
+
+def resolve_mesh_volumes(scene) -> dict[str, Decision]:
     """Each mesh's ``bounding_volume = "auto"``, decided by counted work (never timed, so
     the same scene decides the same): boxes the size of this scene's sphere paths over a
     step (the median radius, the median speed plus a step of gravity, times dt; grown by
@@ -398,7 +429,7 @@ def resolve_mesh_volumes(scene) -> dict[str, str]:
     speed = float(np.median(np.linalg.norm(st.velocities, axis=1))) if st.count else 0.0
     speed += float(np.linalg.norm(scene.settings.gravity)) * dt
     turn = meshes.turn_radii()
-    words = []
+    words, chosen = [], []
     trees = meshes.mesh_set if "auto" in meshes.bounding_volume else None  # the scene's trees, built once
     still = np.zeros(len(meshes), dtype=np.bool_)  # each mesh walked where it starts (its motion is in ``half``)
     for k, name in enumerate(meshes.names):
@@ -420,16 +451,17 @@ def resolve_mesh_volumes(scene) -> dict[str, str]:
                             + TRIANGLE_TEST_COST * int(np.sum(outcome[mine_only] == 2)))
         best = min(work, key=lambda v: (work[v], v != "aabb"))
         meshes.bounding_volume[k] = best
+        chosen.append(f"{best} for '{name}'")
         words.append(f"mesh '{name}' {best} (counted work per box: " + ", ".join(
             f"{v} {work[v] / VOLUME_SAMPLES:.0f}" for v in ("aabb", "sphere", "obb")) + ")")
     if not words:
         return {}
-    return {"bounding_volume": "; ".join(words) + f" for {VOLUME_SAMPLES} path-sized boxes on its triangles "
-                                                   "(docs/meshes.md, \"Bounding volumes\")"}
+    return {"bounding_volume": Decision(", ".join(chosen), "; ".join(words) + f" for {VOLUME_SAMPLES} path-sized "
+                                        "boxes on its triangles (docs/meshes.md, \"Bounding volumes\")")}
 
 
-def resolve_auto(scene) -> dict[str, str]:
-    """Replace ``auto`` in a scene's settings by the advice; returns setting -> "value: why"
+def resolve_auto(scene) -> dict[str, Decision]:
+    """Replace ``auto`` in a scene's settings by the advice; returns setting -> Decision
     for each one decided (empty when none was auto). integrator, detection and ordering
     take ``advise``'s recommendation; rapid_contact_rule and sleep_speed (``auto`` unless
     the scene gives them) take the pile rules (resolve_pile_rules)."""
@@ -440,10 +472,10 @@ def resolve_auto(scene) -> dict[str, str]:
     advice = advise(scene)
     for name in asked:
         setattr(scene.settings, name, advice.recommended[name])
-    return {**{name: f"{advice.recommended[name]}: {advice.reasons[name]}" for name in asked}, **decided}
+    return {**{name: Decision(advice.recommended[name], advice.reasons[name]) for name in asked}, **decided}
 
 
-def resolve_pile_rules(scene) -> dict[str, str]:
+def resolve_pile_rules(scene) -> dict[str, Decision]:
     """``auto`` rapid_contact_time, rapid_contact_rule and sleep_speed: where the spheres
     will make a pile (an exact pile never rests by itself: module doc), the rapid-contact
     rule (RAPID_CONTACT_TIME), the TC rule and sleeping at 0.1 m/s after 0.1 s (PILE_REMEDY,
@@ -476,7 +508,8 @@ def resolve_pile_rules(scene) -> dict[str, str]:
         setattr(s, name, value)
     # one line says why; the others point to it
     first = next(iter(values))
-    return {name: f"{value}: {why}" if name == first else f"{value}: as {first}" for name, value in values.items()}
+    return {name: Decision(value, why) if name == first else Decision(value, shared_with=first)
+            for name, value in values.items()}
 
 
 def _and(parts: list[str]) -> str:

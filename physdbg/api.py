@@ -26,6 +26,7 @@ import numpy as np
 
 from .errors import NonFiniteRunError, PhysdbgError, RecordingInterrupted, StuckRunError
 from .advisor import decide, mesh_sizes
+from .events import partner_words
 from .scene import Scene, read_scene
 
 
@@ -95,15 +96,22 @@ class RunSummary:
     warning_counts: dict[str, int] = field(default_factory=dict)
     warnings: list[dict] = field(default_factory=list)
     finding_counts: dict[str, int] = field(default_factory=dict)
+    # the collider kinds of the run's partners the audit's tunnelling check has no rule for
+    audit_unchecked: list[str] = field(default_factory=list)
     findings: list = field(default_factory=list)  # audit.Finding
     dts: list[float] = field(default_factory=list, repr=False)
     auto: dict[str, str] = field(default_factory=dict)  # setting -> "value: why" for settings given as auto
 
     meshes: dict[str, int] = field(default_factory=dict)  # each fixed mesh's name: its triangles
+    # partners of each collider kind declaring its own fields (docs/colliders.md): kind name: how many
+    partners: dict[str, int] = field(default_factory=dict)
     mesh_notes: list[str] = field(default_factory=list)  # what loading the meshes left out
-    kernels: str = "compiled"  # the engine's tier and why (tier.py)
+    # the engine's tier (tier.py): {interpreted: bool, why: its words}
+    kernels: dict = field(default_factory=lambda: {"interpreted": False, "why": "compiled"})
     meshes_move: bool = False  # two meshes or more, one kinematic: the audit looks for them passing into each other
-    overlap_where: str = ""  # who overlapped most and in which step ("spheres 3 and 4, step 12"), when known
+    # who overlapped most and in which step, when known and past the contact tolerance:
+    # {step, kind, sphere, partner, partner_name} (overlap_parties)
+    overlap_where: dict = field(default_factory=dict)
     start_notes: list[str] = field(default_factory=list)  # the spheres that start inside another body
     meshes_driven: bool = False  # a kinematic mesh: its prescribed motion does work on what it strikes
     audit_pairs: dict = field(default_factory=dict)
@@ -112,6 +120,14 @@ class RunSummary:
     def as_dict(self) -> dict:
         """The JSON's fields: every field above, each finding as its own (audit.Finding.as_dict)."""
         return {**asdict(self), "findings": [f.as_dict() for f in self.findings]}
+
+
+def overlap_parties(parties: tuple[int, int, int], step: int, names) -> dict:
+    """RunSummary.overlap_where of the deepest overlap's (kind, sphere, partner) in ``step``
+    (StepEnd.overlap_with), the partner named as reports name it (events.partner_words)."""
+    kind, sphere, partner = (int(q) for q in parties)
+    return {"step": int(step), "kind": kind, "sphere": sphere, "partner": partner,
+            "partner_name": partner_words(kind, partner, names)}
 
 
 def calendar_use(world, steps: int) -> dict:
@@ -163,7 +179,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     from .advisor import meshes_out_of_reach, start_words, starting_overlaps
     from .engine import NonFiniteState, energies, state_hash
     from .errors import WorldStuck
-    from .events import RunTally, overlap_words
+    from .events import RunTally
     from .interrupt import StopOnCtrlC
     from .observe import FanOut
     from .precompile import compile_kernels
@@ -229,6 +245,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         together_steps=world.together_steps, mesh_search=scene.settings.mesh_search,
         event_loop=calendar_use(world, n_steps),
         particles=st.count, walls=list(scene.walls.names), meshes=mesh_sizes(scene.walls.meshes),
+        partners={kind: len(partners) for kind, partners in scene.walls.partners.items()},
         meshes_move=bool(scene.walls.meshes.moving.any()) and len(scene.walls.meshes) > 1,
         mesh_notes=list(scene.walls.meshes.notes) + [
             f"'{name}' {scene.walls.meshes.motion_words(k)}" for k, name in enumerate(scene.walls.meshes.names)
@@ -241,14 +258,15 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         momentum_start=[float(c) for c in mom0], momentum_end=[float(c) for c in mom1],
         momentum_drift=float(np.linalg.norm(mom1 - mom0)), max_overlap=tally.max_overlap,
         start_notes=start_notes, meshes_driven=bool(scene.walls.meshes.moving.any()),
-        overlap_where=(f"{overlap_words(tally.overlap_with, scene.walls.partner_names())}, step {tally.overlap_step}"
+        overlap_where=(overlap_parties(tally.overlap_with, tally.overlap_step, scene.walls.partner_names())
                        if tally.overlap_with is not None and tally.max_overlap > scene.settings.contact_tolerance
-                       else ""),  # (a rounding-sized overlap, within the tolerance, is nobody's doing)
-        kernels=kernels.reason, wall_seconds=wall, compile_seconds=compile_seconds, ms_per_step=1000.0 * wall / n_steps if n_steps else math.nan,
+                       else {}),  # (a rounding-sized overlap, within the tolerance, is nobody's doing)
+        kernels={"interpreted": kernels.interpreted, "why": kernels.reason}, wall_seconds=wall, compile_seconds=compile_seconds, ms_per_step=1000.0 * wall / n_steps if n_steps else math.nan,
         engine_ms_per_step=1000.0 * sum(tally.seconds.values()) / n_steps if n_steps else math.nan,
         phase_seconds=tally.seconds, final_hash=digest, warning_counts=dict(warnings.counts),
         warnings=warnings.examples(), findings=list(report.findings) if report else [],
         finding_counts=dict(auditor.counts) if auditor else {}, dts=used,
+        audit_unchecked=list(auditor.unchecked_kinds) if auditor else [],
         audit_pairs={"from_engine": auditor.pairs_from_engine, "steps": auditor.steps} if auditor else {})
 
 
@@ -599,6 +617,7 @@ def info(path: str | Path) -> dict:
             "physdbg_version": meta["physdbg_version"], "format_version": meta["format_version"],
             "detail": rec.detail, "particles": n, "walls": list(rec.header.walls.names),
             "meshes": mesh_sizes(rec.header.walls.meshes),
+            "partners": {kind: len(partners) for kind, partners in rec.header.walls.partners.items()},
             # how each kinematic mesh moves, as the run summary says it
             "mesh_motion": [f"'{name}' {rec.header.walls.meshes.motion_words(k)}"
                             for k, name in enumerate(rec.header.walls.meshes.names) if rec.header.walls.meshes.moving[k]],

@@ -31,6 +31,11 @@ class UnknownSceneError(PhysdbgError):
     """The scene is neither a built-in name nor a readable file."""
 
 
+class KindRegistryError(PhysdbgError, ValueError):
+    """The registry of collider kinds (events.COLLIDER_KINDS), the kinds' modules and the
+    switch written from them disagree: physdbg was changed and its switch not written again."""
+
+
 class RecordingError(PhysdbgError):
     """A file that is not a readable physdbg recording."""
 

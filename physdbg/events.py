@@ -29,13 +29,31 @@ import numpy as np
 # one row per kind indexed by its code, is what readers ask (is the partner a sphere that
 # moves? what is it called?) instead of testing for a kind; the engine's colliders read the
 # same rows (engine/colliders/kinds.py) and add each kind's geometry (engine/colliders/).
+class ColliderKindRow(NamedTuple):
+    """A row of the registry of collider kinds: what the partner is called in records and
+    reports (and, for a kind beyond the wall and the mesh, its scene table's name), its
+    module in engine/colliders/ (the geometry, the swept test and what every layer reads
+    of the kind: docs/colliders.md) and whether the partner is a sphere that moves and
+    takes impulses (its own velocity, version, anchor time and held-contact list); the
+    others (a wall, a mesh's triangle) are immovable."""
+
+    name: str
+    module: str
+    partner_is_sphere: bool
+
+
+# The registry: one row per kind, in the order of their codes. A kind is its module and
+# its row here (then `python physdbg/write_switch.py` writes the switch).
+COLLIDER_KINDS = (
+    ColliderKindRow("sphere", "sphere", True),
+    ColliderKindRow("wall", "plane", False),
+    ColliderKindRow("mesh", "mesh", False),
+)
 KIND_PAIR = 0  # the partner is sphere ``other``
 KIND_WALL = 1  # the partner is wall (plane) ``other`` of the scene's walls
 KIND_MESH = 2  # the partner is triangle ``other`` of the scene's meshes (numbered across them)
-KIND_NAMES = ("sphere", "wall", "mesh")
-# the partner is a sphere that moves and takes impulses (its own velocity, version, anchor
-# time and held-contact list); the others (a wall, a mesh's triangle) are immovable
-PARTNER_IS_SPHERE = (True, False, False)
+KIND_NAMES = tuple(row.name for row in COLLIDER_KINDS)
+PARTNER_IS_SPHERE = tuple(row.partner_is_sphere for row in COLLIDER_KINDS)
 _PARTNER_IS_SPHERE = np.array(PARTNER_IS_SPHERE, dtype=bool)
 
 
@@ -71,7 +89,12 @@ def overlap_words(parties: tuple[int, int, int] | None, names) -> str:
     if parties is None:
         return "spheres"
     kind, a, other = parties
-    return f"spheres {a} and {other}" if PARTNER_IS_SPHERE[kind] else f"sphere {a} and {partner_words(kind, other, names)}"
+    return parties_words(kind, a, other, partner_words(kind, other, names))
+
+
+def parties_words(kind: int, a: int, other: int, partner_name: str) -> str:
+    """"spheres 3 and 4" or "sphere 3 and <partner_name>" (partner_words' name of the partner)."""
+    return f"spheres {a} and {other}" if PARTNER_IS_SPHERE[kind] else f"sphere {a} and {partner_name}"
 
 
 def contact_words(kind: int, a: int, other: int, names) -> str:

@@ -124,6 +124,10 @@ def check_scene(name: str, scene) -> None:
     if scene.walls.periodic:
         raise PeerError(f"scene '{scene.name}' has a periodic box, which {name} has no counterpart for; "
                         f"record-peer translates closed boxes and planes only")
+    for kind, partners in scene.walls.partners.items():
+        if len(partners):
+            raise PeerError(f"scene '{scene.name}' has {kind} partners (a collider kind of physdbg's own), which "
+                            f"record-peer does not translate for {name}: it translates spheres, planes and meshes")
     if scene.state.count * scene.steps > MAX_PEER_BODY_STEPS:
         bodies = "1 body" if scene.state.count == 1 else f"{scene.state.count} bodies"
         raise PeerError(f"{bodies} × {scene.steps} steps is more than a peer run may take "

@@ -842,9 +842,48 @@ def _read(c: _Checker, table: dict, prefix: str, rules: dict, defaults: dict | N
             for key, rule in rules.items()}
 
 
+def _kind_tables() -> dict:
+    """The scene's top-level tables of the collider kinds whose modules declare their
+    fields (colliders.extra_kinds): name -> what the table is."""
+    from .engine.colliders import extra_kinds
+
+    return {name: f"array of [[{name}]] tables: partners of the collider kind '{name}' (docs/colliders.md)"
+            for _code, name, _module in extra_kinds()}
+
+
+def _kind_partners(c: _Checker, raw: dict) -> dict:
+    """The [[<kind>]] tables of each collider kind whose module declares its fields
+    (colliders.kinds.Field), as state.Partners by the kind's name (a kind with no table
+    is absent)."""
+    from .engine.colliders import extra_kinds
+    from .engine.state import Partners
+
+    out = {}
+    for _code, kind, module in extra_kinds():
+        tables = c.tables(raw, kind, kind)
+        if not tables:
+            continue
+        allowed = {"name": f"text shown in events (default {kind}<k>)", **{f.name: f.meaning for f in module.FIELDS}}
+        names, values = [], {f.name: [] for f in module.FIELDS}
+        for k, table in enumerate(tables):
+            p = f"{kind}.{k}."
+            c.known(table, allowed, p)
+            names.append(c.text(table, "name", p + "name", f"{kind}{k}"))
+            for f in module.FIELDS:
+                if f.shape == ():
+                    values[f.name].append(c.number(table, f.name, p + f.name, default=f.default, lo=f.lo, hi=f.hi,
+                                                   lo_open=f.lo_open))
+                else:
+                    default = None if f.default is None else np.asarray(f.default, dtype=np.float64)
+                    values[f.name].append(c.vector(table, f.name, p + f.name, default=default))
+        out[kind] = Partners(names, {f.name: np.array(values[f.name], dtype=np.float64).reshape(-1, *f.shape)
+                                     for f in module.FIELDS})
+    return out
+
+
 def _validate(raw: dict, source: str, origins: dict[str, str], meshes: Meshes | None = None) -> Scene:
     c = _Checker(source, origins)
-    c.known(raw, TOP_FIELDS, "")
+    c.known(raw, {**TOP_FIELDS, **_kind_tables()}, "")
     name = c.text(raw, "name", "name", Path(source).stem if source.endswith(".toml") else "scene")
     description = c.text(raw, "description", "description", "")
 
@@ -977,7 +1016,7 @@ def _validate(raw: dict, source: str, origins: dict[str, str], meshes: Meshes | 
     walls = Walls(names, np.array(normals, dtype=np.float64).reshape(-1, 3), np.array(offsets, dtype=np.float64),
                   np.array(rest, dtype=np.float64), np.array(two, dtype=np.bool_), np.array(thick, dtype=np.float64),
                   period, box_lo if box_lo is not None else np.zeros(3),
-                  meshes if meshes is not None else _meshes(c, raw, max_memory))
+                  meshes if meshes is not None else _meshes(c, raw, max_memory), _kind_partners(c, raw))
     if len(walls.meshes) and walls.periodic:
         c.fail("meshes", "a scene with meshes has no periodic axis (box.periodic): a mesh is not repeated")
     if walls.periodic and settings.sleep_speed != "auto" and settings.sleep_speed > 0:

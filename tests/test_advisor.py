@@ -10,7 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from physdbg import api
-from physdbg.advisor import advise, decide
+from physdbg.advisor import Decision, advise, decide
 from physdbg.api import load_scene
 from physdbg.cli import app
 from physdbg.scene import parse_scene
@@ -90,7 +90,8 @@ def test_auto_settings_are_decided_said_and_repeat_on_replay(tmp_path):
     result = api.record("bounce", ["integrator=auto", "detection=auto", "ordering=auto", "steps=30"],
                         mcap_path=str(tmp_path / "auto.mcap"), rrd=False)
     assert result.summary.integrator == "exact" and result.summary.detection == "swept"
-    assert result.summary.auto["detection"].startswith("swept: contacts can happen")
+    assert result.summary.auto["detection"].value == "swept"
+    assert result.summary.auto["detection"].why.startswith("contacts can happen")
     assert api.verify(result.mcap).ok  # the recorded scene says auto; it decides the same again
     done = CliRunner().invoke(app, ["run", "bounce", "-s", "detection=auto"])
     assert done.exit_code == 0 and "auto        detection=swept: contacts can happen" in done.output
@@ -222,14 +223,16 @@ def test_the_pile_rules_default_to_auto_on_only_where_a_pile_forms():
     pile = load_scene("rain", ["generate.count=500"])
     assert (pile.settings.rapid_contact_time, pile.settings.rapid_contact_rule, pile.settings.sleep_speed,
             pile.settings.sleep_time) == (1e-4, "tc", 0.1, 0.1)
-    assert pile.auto["rapid_contact_time"].startswith("0.0001: 500 spheres settle about 1.5 layers deep")
-    assert "the rapid-contact rule, the TC rule and sleeping let it fall asleep" in pile.auto["rapid_contact_time"]
-    assert pile.auto["rapid_contact_rule"] == "tc: as rapid_contact_time"
-    assert pile.auto["sleep_speed"] == "0.1: as rapid_contact_time"
+    assert pile.auto["rapid_contact_time"].value == 1e-4
+    assert pile.auto["rapid_contact_time"].why.startswith("500 spheres settle about 1.5 layers deep")
+    assert "the rapid-contact rule, the TC rule and sleeping let it fall asleep" in pile.auto["rapid_contact_time"].why
+    assert pile.auto["rapid_contact_rule"] == Decision("tc", shared_with="rapid_contact_time")
+    assert pile.auto["sleep_speed"] == Decision(0.1, shared_with="rapid_contact_time")
     thin = load_scene("rain", ["generate.count=100"])  # 0.29 of a layer on the floor
     assert (thin.settings.rapid_contact_time, thin.settings.rapid_contact_rule, thin.settings.sleep_speed) == \
         (0.0, "hold", 0.0)
-    assert "not a pile" in thin.auto["rapid_contact_time"] and "no rapid-contact rule" in thin.auto["rapid_contact_time"]
+    assert "not a pile" in thin.auto["rapid_contact_time"].why
+    assert "no rapid-contact rule" in thin.auto["rapid_contact_time"].why
     for name in ("bounce", "cradle", "gas", "billiards"):  # no closed box under gravity: the seed's model
         scene = load_scene(name)
         assert (scene.settings.rapid_contact_time, scene.settings.rapid_contact_rule,
@@ -276,7 +279,7 @@ def test_a_recorded_scene_comes_back_with_the_settings_the_run_used(tmp_path):
     assert again.settings.undecided() == []
     assert (again.settings.rapid_contact_rule, again.settings.sleep_speed, again.settings.sleep_time) == (
         used["rapid_contact_rule"], used["sleep_speed"], used["sleep_time"])
-    assert again.auto["rapid_contact_rule"].endswith(": as recorded")
+    assert again.auto["rapid_contact_rule"] == Decision(used["rapid_contact_rule"], "as recorded")
 
 
 TROUGH = "v -1 0.5 -1\nv -0.3 0 -1\nv 0.3 0 -1\nv 1 0.5 -1\nv -1 0.5 1\nv -0.3 0 1\nv 0.3 0 1\nv 1 0.5 1\n" \

@@ -228,27 +228,172 @@ def test_the_calendar_takes_the_kinds_their_modules_declare_and_refuses_the_rest
     assert world.calendar_steps == 1
 
 
+# ----------------------------------------------------------------------------- a kind added whole
+POST_SCENE = """\
+name = "posts"
+dt = "1/60"
+duration = 1.0
+integrator = "exact"
+detection = "swept"
+ordering = "time"
+gravity = [0.0, -9.81, 0.0]
+
+[[particles]]
+position = [0.0, 1.1, 0.0]
+radius = 0.1
+restitution = 0.8
+
+[[post]]
+name = "stump"
+centre = [0.0, 0.0, 0.0]
+radius = 0.3
+restitution = 0.5
+"""
+# what the test reads back of a recording, in the copy's own physdbg
+READ_CONTACTS = """\
+import json, sys
+from physdbg import open_recording
+with open_recording(sys.argv[1]) as rec:
+    rows = [dict(step=k, kind=int(c.kind), a=int(c.a), other=int(c.other), normal=[float(q) for q in c.normal],
+                 before=[float(q) for q in c.velocity_a_before], after=[float(q) for q in c.velocity_a_after])
+            for k in range(1, rec.frames) for c in (rec.contacts(k).record(i) for i in range(len(rec.contacts(k))))]
+    print(json.dumps(dict(rows=rows, names=rec.header.walls.partner_names()[3][:])))
+"""
+
+
+@pytest.fixture(scope="module")
+def physdbg_with_posts(tmp_path_factory):
+    """A copy of physdbg with a fourth collider kind, "post" (a fixed sphere: tests/kinds/
+    post.py), added as docs/colliders.md says: its module beside the others, its row in
+    the registry, then the switch written by its script. Nothing else is touched. Returns
+    run(args, code=None) -> CompletedProcess, running the copy's physdbg interpreted
+    (NUMBA_DISABLE_JIT=1: no compile for a test) in a folder with the scene post.toml."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = tmp_path_factory.mktemp("with_posts")
+    package = root / "physdbg"
+    shutil.copytree(Path(events.__file__).parent, package, ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(Path(__file__).parent / "kinds" / "post.py", package / "engine" / "colliders" / "post.py")
+    registry = package / "events.py"
+    last_row = '    ColliderKindRow("mesh", "mesh", False),\n'
+    text = registry.read_text()
+    assert text.count(last_row) == 1
+    registry.write_text(text.replace(last_row, last_row + '    ColliderKindRow("post", "post", False),\n'))  # the line
+    (root / "post.toml").write_text(POST_SCENE)
+    env = dict(os.environ, PYTHONPATH=str(root), NUMBA_DISABLE_JIT="1", PHYSDBG_TRACEBACK="1")
+
+    def run(args, code=None):
+        command = [sys.executable, "-c", code, *args] if code else [sys.executable, "-m", "physdbg", *args]
+        return subprocess.run(command, cwd=root, env=env, capture_output=True, text=True, timeout=600)
+
+    stale = run(["run", "post.toml"])  # before the switch is written again, the copy refuses to load, saying why
+    assert stale.returncode != 0
+    assert ("the switch (switch.py) was written for the kinds' modules sphere, plane, mesh but the registry lists "
+            "sphere, plane, mesh, post") in stale.stderr + stale.stdout
+    written = subprocess.run([sys.executable, str(package / "write_switch.py")], cwd=root,
+                             env=env, capture_output=True, text=True, timeout=120)
+    assert written.returncode == 0 and "wrote" in written.stdout, written.stderr
+    run.root = root
+    return run
+
+
+@pytest.mark.slow  # a copy of physdbg run in subprocesses, interpreted: about 20 s together
+def test_a_kind_in_one_module_and_one_registry_line_runs_through_engine_audit_recording_and_view(physdbg_with_posts):
+    """The Must-show of one owner per collider kind: a ball dropped on a post bounces off it
+    (a contact of kind 3 with the post's normal and restitution), the audit checks its
+    overlaps and says it has no tunnelling rule for posts (never "clean" of what it did
+    not check), the recording replays bit for bit and reads back with the post's name,
+    and both views draw the post."""
+    import json
+
+    from pathlib import Path
+
+    run = physdbg_with_posts
+    # the copy differs from this physdbg by the kind's module, its registry line and the written switch, no more
+    ours, theirs = Path(events.__file__).parent, run.root / "physdbg"
+    files = {path.relative_to(theirs).as_posix() for path in theirs.rglob("*") if path.is_file()
+             and "__pycache__" not in path.parts}
+    changed = {f for f in files if not (ours / f).exists() or (ours / f).read_bytes() != (theirs / f).read_bytes()}
+    assert changed == {"engine/colliders/post.py", *KIND_FILES}, changed
+
+    done = run(["record", "post.toml", "-o", "post.mcap"])
+    assert done.returncode == 0, done.stderr
+    read = run(["post.mcap"], READ_CONTACTS)
+    assert read.returncode == 0, read.stderr
+    seen = json.loads(read.stdout)
+    assert seen["names"] == ["'stump'"]
+    assert [row["kind"] for row in seen["rows"]] == [3] * len(seen["rows"]) and len(seen["rows"]) >= 2
+    first = seen["rows"][0]
+    assert first["other"] == 0 and first["normal"] == pytest.approx([0.0, 1.0, 0.0], abs=1e-9)
+    # restitution: the combined rule of the ball's 0.8 and the post's 0.5 (docs/colliders.md), the
+    # same rule as against a wall: min by default
+    assert first["after"][1] == pytest.approx(-0.5 * first["before"][1], rel=1e-9)
+
+    explained = run(["explain", "post.mcap"])
+    assert explained.returncode == 0, explained.stderr
+    assert "CLEAN: no tunnelling through the partners it checks" in explained.stdout
+    assert "tunnelling through post partners is not checked" in explained.stdout
+    info = run(["info", "post.mcap"])
+    assert "1 particle, 0 walls, 1 post partner" in info.stdout, info.stdout
+    verified = run(["replay", "post.mcap", "--verify", "--rrd", "replayed.rrd"])
+    assert verified.returncode == 0 and "every state hash matches" in verified.stdout, verified.stdout + verified.stderr
+    from rerun.chunk import RrdReader
+
+    paths = {str(chunk.entity_path) for chunk in RrdReader(run.root / "post.rrd").stream()}
+    assert "/world/post/spheres" in paths, sorted(paths)
+    # this physdbg, which has no posts, refuses the recording in one line
+    refused = CliRunner().invoke(app, ["explain", str(run.root / "post.mcap")])
+    assert refused.exit_code == 2, refused.output
+    assert ("the recording has partners of collider kind 'post', which this physdbg does not know (its kinds with "
+            "partners of their own: none)") in refused.output
+    # a scene with a wrong field of the kind is refused naming the file, the field and what is allowed
+    (run.root / "bad.toml").write_text(POST_SCENE.replace("radius = 0.3", "radius = -0.3"))
+    bad = run(["run", "bad.toml"])
+    assert bad.returncode == 2 and "bad.toml: field 'post.0.radius': got -0.3; expected a number > 0" in bad.stderr
+
+
+@pytest.mark.slow  # a copy of physdbg run in subprocesses, interpreted: about 20 s together
+def test_a_kind_the_calendar_does_not_take_is_refused_by_the_calendar_by_name(physdbg_with_posts):
+    run = physdbg_with_posts
+    taken = run(["run", "post.toml", "-s", "event_loop=calendar"])
+    assert taken.returncode == 0, taken.stderr
+    assert "event loop  calendar in 60 of 60 steps" in taken.stdout
+    module = run.root / "physdbg" / "engine" / "colliders" / "post.py"
+    text = module.read_text()
+    module.write_text(text.replace("CALENDAR = True", "CALENDAR = False"))
+    try:
+        refused = run(["run", "post.toml", "-s", "event_loop=calendar"])
+    finally:
+        module.write_text(text)
+    assert refused.returncode == 0, refused.stderr
+    assert "calendar in 0 of 60 steps" in refused.stdout and "it does not take post partners" in refused.stdout
+
+
 # ----------------------------------------------------------------------------- the docs' list
-# The files the tests above exercise for a new collider kind: the table (events.py), the
-# switch and its module table (colliders/__init__.py), and the readers explain reaches that
-# rebuild a contact's geometry and refuse a kind they have no branch for (check-run's,
-# analysis/departure.py, is listed by the page but not run here).
-KIND_FILES = ("events.py", "engine/colliders/__init__.py", "analysis/tunnel.py", "analysis/audit.py")
+# The files a new collider kind touches besides its own module, as the post's copy of
+# physdbg shows (test_a_kind_in_one_module_and_one_registry_line_...): the registry and the
+# switch its script writes.
+KIND_FILES = ("events.py", "engine/colliders/switch.py")
 
 
-def test_the_architecture_page_lists_every_file_these_tests_exercise_for_a_new_kind():
-    """docs/architecture.md, "Adding": read alone, it names every file a new collider kind
-    (a capsule) touches; the ones this file checks are among them, and colliders.md's own
-    list names them too."""
+def test_the_architecture_page_lists_exactly_the_files_a_new_kind_touches():
+    """docs/architecture.md, "Adding": read alone, its list for a new collider kind (a
+    capsule) names the files the post's copy of physdbg differs by, and no other source
+    file (the script that writes the switch and the docs test are tools it names); and
+    colliders.md's own section names them too."""
     import re
     from pathlib import Path
 
     docs = Path(__file__).resolve().parents[1] / "docs"
     page = (docs / "architecture.md").read_text()
-    listed = page[page.index("**A collider kind**"):page.index("**A cause**")]
+    listed = page[page.index("**A collider kind**"):page.index("`tests/test_extending.py` adds a test-only kind")]
     named = set(re.findall(r"`((?:[a-z_]+/)*[a-z_]+\.py)`", listed))
-    assert "engine/colliders/capsule.py" in named
-    assert [f for f in KIND_FILES if f not in named] == []
+    tools = {"physdbg/write_switch.py", "tests/test_docs.py"}
+    assert named - tools == {"engine/colliders/capsule.py", *KIND_FILES}, named
     colliders = (docs / "colliders.md").read_text()
     section = colliders[colliders.index("## Adding an integrator or a collider kind"):]
     assert [f for f in KIND_FILES if f.rsplit("/", 1)[-1] not in section] == []

@@ -144,6 +144,8 @@ class AuditReport:
     counts: dict[str, int]
     findings: list[Finding]
     notes: list[str] = field(default_factory=list)
+    # the collider kinds of the run's partners the tunnelling check has no rule for
+    unchecked: list[str] = field(default_factory=list)
 
     @property
     def clean(self) -> bool:
@@ -152,7 +154,7 @@ class AuditReport:
     def as_dict(self) -> dict:
         return {"source": self.source, "scene": self.scene, "steps": self.steps, "checked": self.checked,
                 "clean": self.clean, "counts": self.counts, "findings": [f.as_dict() for f in self.findings],
-                "notes": self.notes}
+                "notes": self.notes, "unchecked": self.unchecked}
 
     def not_listed(self) -> dict[str, int]:
         """How many findings of each kind the report counts but does not list."""
@@ -236,6 +238,9 @@ class Auditor:
         self._warnings: list[EngineWarning] = []
         self._in_overlap = False  # the step before ended overlapping: the same overlap goes on
         self._mesh_geometry = None  # the meshes' collider group, built at the first overlap (deepest_overlap)
+        # the collider kinds of this run's partners that the tunnelling check has no rule for
+        # (a kind beyond the sphere, the wall and the mesh): said, never called clean
+        self.unchecked_kinds = [kind for kind, partners in header.walls.partners.items() if len(partners)]
         self._non_finite = False  # the step before ended with a NaN or infinity: the same one goes on
         self._saw_contacts = False
         self._energy: float | None = None  # kinetic + potential after the last step (J)
@@ -741,9 +746,11 @@ class Auditor:
         elif not self._saw_contacts and self.steps:
             notes.append("no contacts recorded (detail state): crossings are judged from states alone, and "
                          "order, energy and collapse checks need --detail contacts")
+        if self.unchecked_kinds:
+            notes.append(unchecked_words(self.unchecked_kinds))
         examples = sorted(self.examples, key=lambda f: (f.step, FINDING_KINDS.index(f.kind)))
         return AuditReport(source, self.header.name, total_steps if total_steps is not None else self.steps,
-                           self.steps, dict(self.counts), examples, notes)
+                           self.steps, dict(self.counts), examples, notes, list(self.unchecked_kinds))
 
 
 # the audit's checks of a step, in the order they run: each finding comes from one of them
@@ -888,7 +895,25 @@ def deepest_overlap(x: np.ndarray, radius: np.ndarray, walls, time: float = 0.0,
             corner = geometry.corners[int(t)]  # (3, 3), where the mesh is at ``time``
             feature = closest_on_triangle(*x[int(i)], *corner[0], *corner[1], *corner[2])[3]
             best = (float(depth), [int(i)], (KIND_MESH, int(t), int(feature) + 1), x[int(i)])
+    if any(len(partners) for partners in walls.partners.values()) and finite.all():
+        from ..engine.colliders import deepest_of_kind, extra_kinds, geometry_of
+
+        kinds_geometry = geometry_of(walls)
+        no_pairs = np.zeros((0, 2), dtype=np.int64)
+        for code, _name, _module in extra_kinds():  # each through the engine's own switch
+            depth, i, other = deepest_of_kind(code, np.ascontiguousarray(x, dtype=np.float64),
+                                              np.ascontiguousarray(r, dtype=np.float64), no_pairs, kinds_geometry,
+                                              True)
+            if depth > best[0]:
+                best = (float(depth), [int(i)], (code, int(other)), x[int(i)])
     return best
+
+
+def unchecked_words(kinds: list[str]) -> str:
+    """What the audit could not check of a run with partners of kinds it has no tunnelling
+    rule for (Auditor.unchecked_kinds)."""
+    return (f"tunnelling through {', '.join(f'{kind} partners' for kind in kinds)} is not checked (the tunnelling "
+            f"check knows sphere pairs, walls and meshes); their overlaps are")
 
 
 def _length(metres: float) -> str:

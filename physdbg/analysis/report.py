@@ -188,10 +188,16 @@ def diff_markdown(r: DiffReport) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _partner_words(partners: dict) -> str:
+    """", 2 post partners": the partners of each kind declaring its own fields."""
+    return "".join(f", {count} {kind} partner{'s' if count != 1 else ''}" for kind, count in partners.items())
+
+
 def explain_text(r: AuditReport) -> str:
     lines = [f"{r.source}  ({r.scene}, {r.checked} of {r.steps} steps audited)"]
     if r.clean:
-        lines.append("result   CLEAN: no tunnelling, overlap, out-of-order contact, energy gain, NaN, budget hit "
+        tunnelling = "tunnelling through the partners it checks" if getattr(r, "unchecked", None) else "tunnelling"
+        lines.append(f"result   CLEAN: no {tunnelling}, overlap, out-of-order contact, energy gain, NaN, budget hit "
                      "or collapse found")
     else:
         counts = ", ".join(f"{k} {v}" for k, v in r.counts.items())
@@ -302,7 +308,7 @@ def _mesh_words(meshes: dict) -> str:
 
 def _interpreted(s) -> bool:
     """Whether a run summary's engine ran interpreted (tier.py)."""
-    return str(getattr(s, "kernels", "compiled")).startswith("interpreted")
+    return bool(s.kernels["interpreted"])
 
 
 # the step's phases (events.STEP_PHASES) as the run summary names them
@@ -327,7 +333,7 @@ def summary_text(s, observers: str = "the audit") -> str:
             f"partners (fewer box tests: docs/broadphase.md, \"Partner lists or a scan\")" if s.scanned_steps else ""),
         *([f"event loop  {calendar_words(s.event_loop)}"] if s.event_loop else []),
         f"bodies      {count_words(s.particles, 'particle')}, {count_words(len(s.walls), 'wall')}"
-        + _mesh_words(getattr(s, "meshes", {})),
+        + _mesh_words(getattr(s, "meshes", {})) + _partner_words(getattr(s, "partners", {})),
         *(f"meshes      {note}" for note in getattr(s, "mesh_notes", [])),
         *(f"start       {note}" for note in getattr(s, "start_notes", [])),
         *([f"meshes      searched by the simultaneous descent in {s.together_steps} of {s.steps} steps, by a walk "
@@ -344,16 +350,18 @@ def summary_text(s, observers: str = "the audit") -> str:
         + ("; a kinematic mesh's prescribed motion does work on what it strikes, so the audit judges each "
            "contact's energy relative to the moving surface" if getattr(s, "meshes_driven", False) else ""),
         f"momentum    {_vec(s.momentum_start)} -> {_vec(s.momentum_end)} kg·m/s  (|change| {s.momentum_drift:.3e})",
-        f"overlap     max {s.max_overlap:.3g} m" + (f"  ({s.overlap_where})" if s.overlap_where else ""),
+        f"overlap     max {s.max_overlap:.3g} m" + (f"  ({overlap_where_words(s.overlap_where)})"
+                                                    if s.overlap_where else ""),
         f"speed       {s.engine_ms_per_step:.3f} ms/step in the engine ({phases}); "
         f"{s.ms_per_step:.3f} ms/step with {observers}"
         + (f"; kernels compiled/loaded in {s.compile_seconds:.2f} s" if not _interpreted(s) else ""),
-        *([f"kernels     {s.kernels}"] if _interpreted(s) else []),
+        *([f"kernels     {s.kernels['why']}"] if _interpreted(s) else []),
         f"state hash  {s.final_hash}",
         "warnings    " + _warning_totals(s.warning_counts),
     ]
     lines += [f"  step {w['step']}: {w['message']}" for w in s.warnings]
-    lines.append("audit       " + ("clean (no tunnelling, overlap, out-of-order contact, energy gain or collapse"
+    tunnelling = "tunnelling through the partners it checks" if getattr(s, "audit_unchecked", None) else "tunnelling"
+    lines.append("audit       " + (f"clean (no {tunnelling}, overlap, out-of-order contact, energy gain or collapse"
                                    + (", and no meshes passing into each other or pinning a sphere)"
                                       if getattr(s, "meshes_move", False)
                                       else ")")
@@ -361,9 +369,21 @@ def summary_text(s, observers: str = "the audit") -> str:
                                    ", ".join(f"{n} {kind}" for kind, n in s.finding_counts.items())
                                    + "; the first of each kind:"))
     lines += [f"  {line}" for line in finding_lines(s.findings, s.finding_counts)]
+    if getattr(s, "audit_unchecked", None):
+        from .audit import unchecked_words
+
+        lines.append(f"  {unchecked_words(s.audit_unchecked)}")
     if s.audit_pairs.get("from_engine"):
         lines.append(f"  {pairs_words(s.audit_pairs)}")
     return "\n".join(lines)
+
+
+def overlap_where_words(where: dict) -> str:
+    """Who overlapped most, and when (RunSummary.overlap_where): "spheres 3 and 4, step 12",
+    "sphere 3 and wall 'floor', step 12"."""
+    from ..events import parties_words
+
+    return f"{parties_words(where['kind'], where['sphere'], where['partner'], where['partner_name'])}, step {where['step']}"
 
 
 def calendar_words(use: dict) -> str:
@@ -398,18 +418,23 @@ def _more_lines(more: dict[str, int]) -> list[str]:
     return [f"... and {n} more {kind} findings" for kind, n in more.items()]
 
 
-def auto_lines(auto: dict[str, str]) -> list[str]:
-    """One line per decision: settings decided together ("value: as first") join the first's
-    line, 'auto  rapid_contact_rule=hold, sleep_speed=0.0: no closed box ...'."""
+def auto_lines(auto: dict) -> list[str]:
+    """One line per decision (advisor.Decision by setting): settings decided together join
+    the line of the one whose words say why, 'auto  rapid_contact_rule=hold, sleep_speed=0.0:
+    no closed box ...'."""
     lines: dict[str, list[str]] = {}
-    for name, why in auto.items():
-        value, _, reason = why.partition(": ")
-        joined = reason[3:] if reason.startswith("as ") and reason[3:] in lines else None
-        if joined:
-            lines[joined][0] += f", {name}={value}"
+    for name, decision in auto.items():
+        if decision.shared_with in lines:
+            lines[decision.shared_with][0] += f", {name}={decision.value}"
         else:
-            lines[name] = [f"{name}={value}", reason]
+            lines[name] = [f"{name}={decision.value}", decision_words(decision)]
     return [f"auto        {head}: {reason}" for head, reason in lines.values()]
+
+
+def decision_words(decision) -> str:
+    """Why an "auto" setting took its value (advisor.Decision): its own words, or the
+    setting whose words it shares."""
+    return decision.why or f"as {decision.shared_with}"
 
 
 def _warning_totals(counts: dict[str, int]) -> str:
@@ -535,7 +560,7 @@ def info_text(data: dict) -> str:
         f"settings    {settings}",
         f"steps       {data['steps']}  ({data['sim_time']:.6g} s simulated), detail {data['detail']}",
         f"bodies      {count_words(data['particles'], 'particle')}, {count_words(len(data['walls']), 'wall')}"
-        + _mesh_words(data.get("meshes") or {}),
+        + _mesh_words(data.get("meshes") or {}) + _partner_words(data.get("partners") or {}),
         *(f"meshes      {motion}" for motion in data.get("mesh_motion") or []),
         *([f"sleep       {data['asleep_at_end']} of {data['particles']} spheres asleep at the end "
            f"(sleep_speed {data['settings'].get('sleep_speed')} m/s)"] if data["asleep_at_end"] is not None else []),

@@ -338,6 +338,24 @@ class _TriangleNames:
 
 
 @dataclass
+class Partners:
+    """The partners of one collider kind whose module declares its scene fields (FIELDS:
+    a kind beyond the sphere, the wall and the mesh; docs/colliders.md): their names and
+    one array per declared field, one row per partner (float64, shape (P, *field.shape))."""
+
+    names: list[str] = field(default_factory=list)
+    fields: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    @classmethod
+    def empty(cls, declared) -> Partners:
+        """No partners, with every declared field (kinds.Field rows) as an empty array."""
+        return cls([], {f.name: np.zeros((0, *f.shape)) for f in declared})
+
+
+@dataclass
 class Walls:
     """The immovable geometry: W planes n·x = d (arrays of length W; normals (W, 3) unit)
     and the fixed meshes (``meshes``, a Meshes).
@@ -360,6 +378,9 @@ class Walls:
     period: np.ndarray = field(default_factory=lambda: np.zeros(3))
     period_origin: np.ndarray = field(default_factory=lambda: np.zeros(3))
     meshes: Meshes = field(default_factory=Meshes)
+    # the partners of each kind whose module declares scene fields, by the kind's name
+    # (events.COLLIDER_KINDS); a kind with none is absent
+    partners: dict[str, Partners] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.period = np.ascontiguousarray(self.period, dtype=np.float64).reshape(3)
@@ -373,7 +394,8 @@ class Walls:
         (events.partner_words): the walls' quoted names, the meshes' triangles ("'ramp'
         triangle 3"), and numbers ("#3") for a kind without names (spheres are named by
         events.partner_words itself)."""
-        named = {"wall": [f"'{name}'" for name in self.names], "mesh": _TriangleNames(self.meshes)}
+        named = {"wall": [f"'{name}'" for name in self.names], "mesh": _TriangleNames(self.meshes),
+                 **{kind: [f"'{name}'" for name in partners.names] for kind, partners in self.partners.items()}}
         return tuple(named.get(kind, _Numbered()) for kind in KIND_NAMES)
 
     @property

@@ -218,7 +218,10 @@ JSON_SCHEMAS[TOPIC_WALLS] = ("physdbg.Walls", {"type": "object", "properties": {
         "corners": {"type": "array", "items": {"type": "number"}},
         "velocity": {"type": "array", "items": {"type": "number"}},
         "angular_velocity": {"type": "array", "items": {"type": "number"}},
-        "pivot": {"type": "array", "items": {"type": "number"}}}}}},
+        "pivot": {"type": "array", "items": {"type": "number"}}}}},
+    # partners of a collider kind whose module declares its fields, by the kind's name:
+    # one object per partner, its name and each field (docs/colliders.md)
+    "partners": {"type": "object"}},
     "required": ["step", "walls"]})
 SCENE_SCHEMA_NAME = "physdbg.Scene"  # its JSON Schema is json_schema_of(the message)
 

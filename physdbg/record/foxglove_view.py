@@ -174,6 +174,21 @@ class FoxgloveView:
             entity.metadata.add(key="periodic face", value=name)
         for k in range(len(self.header.walls.meshes)):  # each mesh: its triangles, translucent
             self._mesh(update, k, ns, 0.0)
+        for kind, drawing in view.kind_drawings(self.header.walls):  # a kind declaring its drawing
+            partners = update.entities.add(id=kind, frame_id=fmt.VIEW_SCENE_FRAME)
+            partners.timestamp.FromNanoseconds(ns)
+            for centre, radius in zip(drawing.centres.tolist(), drawing.radii.tolist(), strict=True):
+                ball = partners.spheres.add()
+                ball.pose.position.x, ball.pose.position.y, ball.pose.position.z = centre
+                ball.pose.orientation.w = 1.0
+                ball.size.x = ball.size.y = ball.size.z = 2.0 * radius
+                ball.color.r, ball.color.g, ball.color.b, ball.color.a = 0.67, 0.67, 0.72, 0.55
+            if len(drawing.triangles):
+                surface = partners.triangles.add()
+                surface.pose.orientation.w = 1.0
+                surface.color.r, surface.color.g, surface.color.b, surface.color.a = 0.67, 0.67, 0.72, 0.55
+                for x, y, z in drawing.triangles.reshape(-1, 3).tolist():
+                    surface.points.add(x=x, y=y, z=z)
         return update.SerializeToString()
 
     def _mesh(self, update, k: int, ns: int, time: float) -> None:

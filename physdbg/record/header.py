@@ -117,7 +117,13 @@ class RecordingHeader:
                             "angular_velocity": w.meshes.angular_velocity[k].tolist(),
                             "pivot": w.meshes.pivot[k].tolist()} if w.meshes.moving[k] else {})}
                        for k, (name, source, e) in enumerate(zip(w.meshes.names, w.meshes.sources,
-                                                                 w.meshes.restitution, strict=True))]}
+                                                                 w.meshes.restitution, strict=True))],
+            # the partners of each kind whose module declares its fields (colliders.kinds.Field),
+            # one object per partner: its name and each field's value
+            **({"partners": {kind: [{"name": name, **{key: np.asarray(values[row]).tolist()
+                                                      for key, values in partners.fields.items()}}
+                                    for row, name in enumerate(partners.names)]
+                             for kind, partners in w.partners.items()}} if w.partners else {})}
 
     @staticmethod
     def walls_from_json(data: dict) -> Walls:
@@ -129,7 +135,28 @@ class RecordingHeader:
                      np.array([w["thickness"] for w in walls], dtype=np.float64),
                      np.array(data.get("period", (0.0, 0.0, 0.0)), dtype=np.float64),
                      np.array(data.get("period_origin", (0.0, 0.0, 0.0)), dtype=np.float64),
-                     RecordingHeader.meshes_from_json(data.get("meshes") or []))
+                     RecordingHeader.meshes_from_json(data.get("meshes") or []),
+                     RecordingHeader.partners_from_json(data.get("partners") or {}))
+
+    @staticmethod
+    def partners_from_json(partners: dict) -> dict:
+        """The partners of the kinds that declare their fields (state.Partners by kind name),
+        from a /physdbg/walls message; a kind this physdbg does not know is refused."""
+        from ..engine.colliders import extra_kinds
+        from ..engine.state import Partners
+        from ..errors import RecordingError
+
+        declared = {name: module.FIELDS for _code, name, module in extra_kinds()}
+        out = {}
+        for kind, rows in partners.items():
+            if kind not in declared:
+                raise RecordingError(f"the recording has partners of collider kind '{kind}', which this physdbg does "
+                                     f"not know (its kinds with partners of their own: "
+                                     f"{', '.join(declared) or 'none'})")
+            out[kind] = Partners([row["name"] for row in rows],
+                                 {f.name: np.array([row[f.name] for row in rows], dtype=np.float64).reshape(-1, *f.shape)
+                                  for f in declared[kind]})
+        return out
 
     @staticmethod
     def meshes_from_json(meshes: list) -> Meshes:

@@ -763,7 +763,9 @@ class Recording:
             setattr(scene.settings, name, recorded.get(name, Settings.__dataclass_fields__[name].default))
         if "sleep_speed" in decided and "sleep_time" in recorded:
             scene.settings.sleep_time = recorded["sleep_time"]
-        scene.auto = {name: f"{getattr(scene.settings, name)}: as recorded" for name in decided}
+        from ..advisor import Decision
+
+        scene.auto = {name: Decision(getattr(scene.settings, name), "as recorded") for name in decided}
         return scene
 
     def close(self) -> None:

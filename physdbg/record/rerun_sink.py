@@ -251,6 +251,19 @@ class RerunSink:
             edges = corners.reshape(-1, 3, 3)[:, [0, 1, 2, 0]]
             rec.log(path + "/edges", rr.LineStrips3D(list(edges), colors=[[120, 120, 135]], radii=[-0.75]), static=True)
             self._mesh_bvh(path, k)
+        for kind, drawing in view.kind_drawings(h.walls):  # a kind declaring its drawing (colliders.kinds.Drawing)
+            path = self.root + f"world/{rr.escape_entity_path_part(kind)}"
+            if len(drawing.radii):
+                rec.log(path + "/spheres", rr.Ellipsoids3D(centers=drawing.centres.astype(np.float32),
+                                                           half_sizes=np.repeat(drawing.radii[:, None], 3, axis=1)
+                                                           .astype(np.float32),
+                                                           colors=[[170, 170, 185]], fill_mode="solid"), static=True)
+            if len(drawing.triangles):
+                corners = drawing.triangles.reshape(-1, 3).astype(np.float32)
+                rec.log(path + "/triangles", rr.Mesh3D(vertex_positions=corners,
+                                                       triangle_indices=np.arange(len(corners), dtype=np.uint32)
+                                                       .reshape(-1, 3), albedo_factor=[170, 170, 185, 140]),
+                        static=True)
         for name, strip in periodic_faces(h.walls, lo, hi):  # faces a sphere passes through: blue, thin
             rec.log(self.root + f"world/periodic/{rr.escape_entity_path_part(name)}", rr.LineStrips3D([strip], colors=[[80, 140, 230]], radii=[-1.0]),
                     static=True)

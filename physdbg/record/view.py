@@ -189,3 +189,17 @@ def describe_contacts(frame: int, c: Contacts, dt: float, names) -> list[tuple[s
     if len(c) > LOG_LINES_PER_STEP:
         lines.append((f"step {frame}: ... and {len(c) - LOG_LINES_PER_STEP} more contacts", "INFO"))
     return lines
+
+
+def kind_drawings(walls) -> list:
+    """(kind name, colliders.kinds.Drawing) of each collider kind beyond the wall and the
+    mesh that the scene has partners of, as the kind's module draws them (its
+    ``drawing(partners)``): both views show them."""
+    from ..engine.colliders import extra_kinds
+
+    out = []
+    for _code, name, module in extra_kinds():
+        partners = walls.partners.get(name)
+        if partners is not None and len(partners):
+            out.append((name, module.drawing(partners)))
+    return out

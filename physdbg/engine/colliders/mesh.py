@@ -1,6 +1,6 @@
 """Mesh partners: spheres against the triangles of fixed meshes, one collider kind (events.KIND_MESH).
 
-Why one module of this size: a collider kind is one module (colliders/__init__'s rule:
+Why one module of this size: a collider kind is one module (the registry's rule:
 the switch reaches each kind's functions in its own module), and the mesh kind has the
 most to answer (moving triangles, the tree walks, features); its trees are the scene's
 mesh set (mesh/mesh_set.py) and its tests toi.py's.
@@ -10,7 +10,7 @@ scene's meshes in order, each mesh's triangles in its file's order: ``mesh_of`` 
 it is). Triangles are two-sided and immovable (the seed's inverse mass 0): a sphere bounces
 off either face, an edge or a corner, whichever is closest at the touch. What the engine asks
 about sphere i against triangle t, each function reached through the switch in
-``colliders/__init__``: its swept test (``toi.triangle_toi_swept``, along the integrator's
+``colliders/switch.py``: its swept test (``toi.triangle_toi_swept``, along the integrator's
 own path), its contact normal and gap (from the closest point, so the normal turns as a
 sphere rolls over an edge), which triangles a sphere's box reaches, and the deepest overlap.
 
@@ -47,6 +47,7 @@ from ..mesh.tree import AABB, OBB, SPHERE, VOLUME_NAMES
 from ..mesh.volumes import separating_axes_meet
 from ..mesh.closest import FACE, closest_on_triangle
 from ..mesh.rigid_motion import in_body_frame, surface_acceleration, surface_velocity, turned_with
+from .kinds import every_sphere_with  # noqa: F401 (the switch calls it: SWITCH["every_candidate"])
 from ..toi import (DISCRETE, SWEPT, moving_triangle_toi_sampled, moving_triangle_toi_swept, triangle_toi_sampled,
                    triangle_toi_swept)
 
@@ -170,6 +171,27 @@ GEOMETRY = MeshGeometry  # this kind's group (colliders.geometry_of)
 # mesh's tree, ``partners_of``) whenever its shell is made. A kinematic mesh's triangles
 # move into shells the lists do not watch: World keeps such a scene on the time-ordered loop.
 CALENDAR = True
+# what the collider switch (colliders/switch.py, written by physdbg/write_switch.py) answers for
+# this kind: one expression per function of the switch, in its parameters' names,
+# ``group`` this kind's geometry (MeshGeometry)
+SWITCH = {
+    "time_of_impact": "time_of_impact(ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples, "
+                      "tolerance, group)",
+    "contact_normal": "normal(x, sigma, ia, other, group)",
+    "contact_feature": "1 + feature(x, sigma, ia, other, group)",
+    "partner_surface": "surface(x, sigma, radius, ia, other, n0, n1, n2, group)",
+    "partner_normal_motion": "normal_motion(x, v, sigma, radius, ia, other, n0, n1, n2, group)",
+    "partner_moves": "moves(other, group)",
+    "surface_gap": "surface_gap(x, radius, ia, other, group)",
+    "contact_gap": "gap(x, radius, ia, other, group)",
+    "partner_restitution": "restitution(other, group)",
+    "partners_of": "partners_of(p, path_lo, path_hi, group, out)",
+    "immovable_partners_in": "partners_of(p, lo, hi, group, out)",
+    "partner_count": "count(group)",
+    "deepest_of_kind": "deepest_where(x, radius, group, ignore_tunnelled)",
+    "narrow_candidates": "reachable_together(lo, hi, group)[:2] if together else reachable(lo, hi, group)",
+    "every_candidate": "every_sphere_with(count, count(group))",
+}
 
 # how a step's spheres are searched against the meshes' trees (Settings.mesh_search)
 MESH_SEARCH_NAMES = ("auto", "walk", "together")

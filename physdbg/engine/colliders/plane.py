@@ -4,7 +4,7 @@ A wall is the plane n·x = d (normals (W, 3) unit, offsets (W,) m), one-sided (i
 spheres on the side n points to) or two-sided (a thin slab of half-thickness h that
 pushes a sphere back to whichever side its anchor is on). What the engine asks about
 sphere i against wall w, each function reached through the switch in
-``colliders/__init__``: its swept test, its contact normal and gap, which walls a
+``colliders/switch.py``: its swept test, its contact normal and gap, which walls a
 sphere's box reaches, and the deepest overlap. Immovable: the partner takes no impulse
 (colliders.kinds.PARTNER_IS_SPHERE). What a wall reads is this kind's group,
 ``PlaneGeometry``, unpacked by ``_unpack`` alone.
@@ -20,6 +20,7 @@ from numba import njit
 
 from ..jit import borrowing, kernel
 from ..toi import DISCRETE, SWEPT, wall_toi_sampled, wall_toi_swept
+from .kinds import every_sphere_with  # noqa: F401 (the switch calls it: SWITCH["every_candidate"])
 
 
 class PlaneGeometry(NamedTuple):
@@ -47,6 +48,27 @@ GEOMETRY = PlaneGeometry  # this kind's group (colliders.geometry_of)
 # the event calendar (engine/calendar.py) predicts this kind's contacts from the anchors
 # (colliders.CALENDAR_TAKES): each sphere lists the walls its shell's box reaches
 CALENDAR = True
+# what the collider switch (colliders/switch.py, written by physdbg/write_switch.py) answers for
+# this kind: one expression per function of the switch, in its parameters' names,
+# ``group`` this kind's geometry (PlaneGeometry)
+SWITCH = {
+    "time_of_impact": "time_of_impact(ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples, "
+                      "group)",
+    "contact_normal": "normal(x, ia, other, group)",
+    "contact_feature": "0",
+    "partner_surface": "(0.0, 0.0, 0.0, False)",
+    "partner_normal_motion": "(0.0, 0.0)",
+    "partner_moves": "False",
+    "surface_gap": "gap(x, v, a, radius, ia, other, group)",
+    "contact_gap": "gap(x, v, a, radius, ia, other, group)",
+    "partner_restitution": "restitution(other, group)",
+    "partners_of": "partners_of(p, path_lo, path_hi, group, out)",
+    "immovable_partners_in": "partners_of(p, lo, hi, group, out)",
+    "partner_count": "count(group)",
+    "deepest_of_kind": "deepest_where(x, radius, group, ignore_tunnelled)",
+    "narrow_candidates": "reachable(lo, hi, group)",
+    "every_candidate": "every_sphere_with(count, count(group))",
+}
 
 
 @njit(cache=True, inline="always")

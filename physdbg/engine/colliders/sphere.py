@@ -1,7 +1,7 @@
 """Sphere partners: the seed's sphere–sphere contact, one collider kind (events.KIND_PAIR).
 
 What the engine asks about a pair of spheres i < j, each function reached through the
-switch in ``colliders/__init__``: its swept test, its contact normal and gap, which
+switch (``colliders/switch.py``): its swept test, its contact normal and gap, which
 partners a re-predicted sphere can meet, and the deepest overlap. Positions are (N, 3) m.
 What a pair reads besides the particles is this kind's group, ``SphereGeometry``: the
 period (3,) m of the periodic axes (0 = not periodic), where the minimum image counts.
@@ -38,6 +38,27 @@ GEOMETRY = SphereGeometry  # this kind's group (colliders.geometry_of)
 # the event calendar (engine/calendar.py) predicts this kind's contacts from the anchors
 # (colliders.CALENDAR_TAKES): a pair is a neighbour on both spheres' lists
 CALENDAR = True
+# what the collider switch (colliders/switch.py, written by physdbg/write_switch.py) answers for
+# this kind: one expression per function of the switch, in its parameters' names,
+# ``group`` this kind's geometry (SphereGeometry)
+SWITCH = {
+    "time_of_impact": "time_of_impact(ia, other, x, v, a, radius, sigma, step_end, integrator, k, detection, samples, "
+                      "tolerance, group)",
+    "contact_normal": "normal(x, ia, other, group)",
+    "contact_feature": "0",
+    "partner_surface": "(0.0, 0.0, 0.0, False)",
+    "partner_normal_motion": "(0.0, 0.0)",
+    "partner_moves": "False",
+    "surface_gap": "surface_gap(x, radius, ia, other, group)",
+    "contact_gap": "gap(x, radius, ia, other, group)",
+    "partner_restitution": "restitution[other]",
+    "partners_of": "partners_of(p, box, path_lo, path_hi, adj_start, adj, batch_mark, batch, group, out, scan)",
+    "immovable_partners_in": "0",
+    "partner_count": "0",
+    "deepest_of_kind": "deepest_where(x, radius, pairs, group)",
+    "narrow_candidates": "candidates(pairs, lo, hi, group)",
+    "every_candidate": "every_pair(count)",
+}
 
 
 @njit(cache=True, inline="always")
@@ -103,6 +124,13 @@ def gap(x, radius, ia, ib, spheres):
     if length > 0.0:
         return g, d0 / length, d1 / length, d2 / length, True
     return g, 0.0, 0.0, 0.0, False
+
+
+@borrowing
+def surface_gap(x, radius, ia, ib, spheres):
+    """(gap m, n0, n1, n2, False): gap's gap and normal; a sphere has no face."""
+    g, n0, n1, n2, _renewed = gap(x, radius, ia, ib, spheres)
+    return g, n0, n1, n2, False
 
 
 @njit(cache=True, inline="always")
@@ -193,3 +221,9 @@ def candidates(pairs, lo, hi, spheres):
         other[k] = pairs[t, 1]
         k += 1
     return a[:k], other[:k]
+
+
+def every_pair(count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every pair i < j of ``count`` spheres, (a, other) int64 (the slow reference's)."""
+    a, other = np.triu_indices(count, 1)
+    return a.astype(np.int64), other.astype(np.int64)
