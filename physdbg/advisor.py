@@ -112,7 +112,8 @@ def advise(scene) -> Advice:
     # closes on a sphere faster by its own surface speed
     two_sided += [(f"mesh '{name}'", 0.0, float(u)) for name, u in zip(walls.meshes.names, surface, strict=True)]
     several = n >= 3 or (n >= 2 and len(walls) > 0)  # a step can hold more than one contact
-    facts = {"particles": n, "walls": len(walls), "meshes": mesh_sizes(walls.meshes), "speed_bound": bound, "speed_bound_why": bound_why, "dt": dt, "duration": duration,
+    facts = {"particles": n, "walls": len(walls), "meshes": mesh_sizes(walls.meshes),
+             "partners": {kind: len(partners) for kind, partners in walls.partners.items()}, "speed_bound": bound, "speed_bound_why": bound_why, "dt": dt, "duration": duration,
              "gravity": gravity, "drag": s.drag, "radius_min": r_min, "radius_max": float(r.max()) if n else 0.0,
              "contacts_possible": contacts_possible, "samples": s.samples, "periodic": periodic,
              "mesh_sweeps": mesh_sweeps(walls.meshes, dt, s.budget("max_swept_tests_per_step", n))}
@@ -166,7 +167,7 @@ def advise(scene) -> Advice:
                                 "(docs/stability.md)")
     else:
         recommended["detection"] = "discrete"
-        reasons["detection"] = ("no contact can happen: no sphere can reach another, a wall or a mesh within the run "
+        reasons["detection"] = ("no contact can happen: no sphere can reach another, a wall, a mesh or any other partner within the run "
                                 f"(at most {reach:.3g} m from where it starts), so no swept test is needed")
     recommended["ordering"] = "time"
     reasons["ordering"] = ("a step can hold several contacts: time order resolves them as they happen"
@@ -420,7 +421,7 @@ def resolve_mesh_volumes(scene) -> dict[str, Decision]:
     the mesh's own motion over a step, as the engine grows them) placed at points on its
     triangles (seeded), walked with each volume (colliders/mesh.search_visits): node tests
     and triangles reached, weighed by VOLUME_NODE_COST and TRIANGLE_TEST_COST; the least
-    wins (AABB on a tie). Returns {"bounding_volume": "why"} when any was auto."""
+    wins (AABB on a tie). Returns {"bounding_volume": Decision} when any was auto."""
     from .engine.colliders.mesh import VOLUMES, MeshGeometry, search_visits
 
     meshes, st = scene.walls.meshes, scene.state
@@ -569,8 +570,9 @@ def starting_overlaps(scene, geometry: tuple | None = None) -> list[dict]:
     [{"sphere": i, "partner": "sphere 4" / "wall 'floor'" / "mesh 'trough' triangle 1",
     "depth": m}], each sphere once (its deepest), deepest first. Spheres with spheres by the
     grid broad phase on their own boxes (periodic images included by the minimum image),
-    walls by their gaps (colliders.plane.gaps) and triangles by the engine's mesh search
-    (colliders.mesh.deepest_where), all at run time 0: the engine's own rules. geometry:
+    walls by their gaps (colliders.plane.gaps), triangles by the engine's mesh search
+    (colliders.mesh.deepest_where) and the partners of a kind that declares its fields by
+    the switch's deepest_of_kind, all at run time 0: the engine's own rules. geometry:
     mesh_geometry(scene), if already built."""
     from .engine.broadphase.boxes import NO_LIMIT
     from .engine.broadphase.grid import grid_pairs
@@ -610,6 +612,17 @@ def starting_overlaps(scene, geometry: tuple | None = None) -> list[dict]:
             depth, _, t = deepest_where(np.ascontiguousarray(x[i:i + 1], dtype=np.float64),
                                         np.ascontiguousarray(r[i:i + 1], dtype=np.float64), geometry, False)
             note(int(i), float(depth), partner_words(KIND_MESH, int(t), names))
+    if any(len(partners) for partners in walls.partners.values()):  # a kind that declares its fields
+        from .engine.colliders import deepest_of_kind, extra_kinds, geometry_of
+
+        kinds_geometry, no_pairs = geometry_of(walls), np.zeros((0, 2), dtype=np.int64)
+        for code, _name, _module in extra_kinds():  # the engine's own measure, through the switch
+            for i in range(state.count):
+                depth, _, other = deepest_of_kind(code, np.ascontiguousarray(x[i:i + 1], dtype=np.float64),
+                                                  np.ascontiguousarray(r[i:i + 1], dtype=np.float64), no_pairs,
+                                                  kinds_geometry, False)
+                if other >= 0:
+                    note(int(i), float(depth), partner_words(code, int(other), names))
     return [{"sphere": i, "partner": partner, "depth": depth}
             for i, (depth, partner) in sorted(worst.items(), key=lambda item: (-item[1][0], item[0]))]
 

@@ -100,7 +100,7 @@ class RunSummary:
     audit_unchecked: list[str] = field(default_factory=list)
     findings: list = field(default_factory=list)  # audit.Finding
     dts: list[float] = field(default_factory=list, repr=False)
-    auto: dict[str, str] = field(default_factory=dict)  # setting -> "value: why" for settings given as auto
+    auto: dict = field(default_factory=dict)  # setting -> advisor.Decision, for settings given as auto
 
     meshes: dict[str, int] = field(default_factory=dict)  # each fixed mesh's name: its triangles
     # partners of each collider kind declaring its own fields (docs/colliders.md): kind name: how many

@@ -208,7 +208,7 @@ class Scene:
     walls: Walls
     raw: dict[str, Any] = field(repr=False)
     overrides: tuple[str, ...] = ()  # the --set KEY=VALUE strings applied to the scene file
-    auto: dict[str, str] = field(default_factory=dict)  # setting -> "value: why", once the advisor decided them
+    auto: dict = field(default_factory=dict)  # setting -> advisor.Decision, once the advisor decided them
 
 
     def build_world(self, observer=None) -> World:
@@ -354,11 +354,16 @@ def scene_table(scene: Scene) -> dict:
     inverse_mass = 0: immovable), restitution and gravity_scale, and every wall as a
     ``[[planes]]`` entry (a closed [box] as its six planes), the settings that differ from
     the defaults and those in _STATED_SETTINGS. ``scene_from_dict`` reads it back to the
-    same scene. For a sphere scene with a fixed dt only: meshes and periodic boxes are
-    refused (SceneError), as a table of spheres and planes cannot hold them."""
+    same scene. For a sphere scene with a fixed dt only: meshes, periodic boxes and the
+    partners of another collider kind are refused (SceneError), as a table of spheres and
+    planes cannot hold them."""
     if len(scene.walls.meshes.corners):
         raise SceneError(scene.source, "meshes", "a scene with meshes is written whole only as TOML "
                                                  "(--format toml); as a table of spheres and planes it has no meshes")
+    for kind, partners in scene.walls.partners.items():
+        if len(partners):
+            raise SceneError(scene.source, kind, f"a scene with {kind} partners is written whole only as TOML "
+                                                 f"(--format toml); as a table of spheres and planes it has none")
     if scene.walls.periodic:
         raise SceneError(scene.source, "box.periodic", "a periodic box has no planes to write; the scene is written "
                                                        "whole only as TOML (--format toml)")
@@ -501,7 +506,7 @@ class _Checker:
             problem = f"{problem} (set on the command line: --set {_clip(origin, 80)})"
         raise SceneError(self.source, name, problem)
 
-    def known(self, table: dict, allowed: dict, prefix: str) -> None:
+    def known(self, table: dict, allowed: dict, prefix: str, docs: str = "docs/scenes.md") -> None:
         for key in table:
             if key not in allowed:
                 if key in RENAMED:
@@ -509,7 +514,7 @@ class _Checker:
                 close = difflib.get_close_matches(str(key), list(allowed), n=1)
                 if close:  # the likely fix, not a wall of every field
                     self.fail(prefix + key, f"unknown field; did you mean '{prefix}{close[0]}'? (every field: "
-                                            f"docs/scenes.md)")
+                                            f"{docs})")
                 if len(allowed) <= MAX_FIELDS_LISTED:
                     self.fail(prefix + key, f"unknown field; allowed: {', '.join(allowed)}")
                 self.fail(prefix + key, f"unknown field; the {len(allowed)} fields allowed here are listed in "
@@ -867,7 +872,7 @@ def _kind_partners(c: _Checker, raw: dict) -> dict:
         names, values = [], {f.name: [] for f in module.FIELDS}
         for k, table in enumerate(tables):
             p = f"{kind}.{k}."
-            c.known(table, allowed, p)
+            c.known(table, allowed, p, f"the kind's FIELDS in engine/colliders/{module.__name__.rsplit('.', 1)[1]}.py")
             names.append(c.text(table, "name", p + "name", f"{kind}{k}"))
             for f in module.FIELDS:
                 if f.shape == ():

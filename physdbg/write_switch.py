@@ -25,6 +25,7 @@ is just when this has to run. Run it by its path after adding or changing a kind
 from __future__ import annotations
 
 import ast
+import hashlib
 import sys
 from pathlib import Path
 from typing import NamedTuple
@@ -156,10 +157,13 @@ def read_kind(name: str, module: str, folder: Path = HERE) -> KindModule:
     for node in tree.body:
         if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
             names.add(node.name)
-        elif isinstance(node, ast.ImportFrom):
-            names.update(alias.asname or alias.name for alias in node.names)
+        elif isinstance(node, (ast.Import, ast.ImportFrom)):
+            names.update((alias.asname or alias.name).split(".")[0] for alias in node.names)
         elif isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "SWITCH" for t in node.targets):
             switch = ast.literal_eval(node.value)
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            names.update(t.id for t in targets if isinstance(t, ast.Name))
     if not isinstance(switch, dict):
         raise ValueError(f"{where}: no SWITCH table (the expression answering each function of the collider "
                                 f"switch: {', '.join(f.name for f in FUNCTIONS)})")
@@ -202,11 +206,19 @@ def _branch(function: SwitchFunction, kind: KindModule, code: int) -> str:
     return ast.unparse(Qualify().visit(tree))
 
 
+def switch_fingerprint(kinds) -> str:
+    """A digest of the registry and the kinds' SWITCH tables, [(name, module, SWITCH)] in
+    the order of their codes: the same one colliders/__init__ computes from the modules it
+    loads (check_kind_modules), so a SWITCH changed since the switch was written is seen."""
+    text = repr([(name, module, sorted(switch.items())) for name, module, switch in kinds])
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
 def switch_source(registry: list[tuple[str, str]] | None = None, folder: Path = HERE) -> str:
     """The text of colliders/switch.py for ``registry`` ((name, module) of each kind in the
     order of their codes; default: events.COLLIDER_KINDS, read from its text), the kinds'
     modules read from ``folder``."""
-    kinds = [read_kind(name, module, folder) for name, module in (registry or read_registry())]
+    kinds = [read_kind(name, module, folder) for name, module in (registry if registry is not None else read_registry())]
     names = ", ".join(f'"{kind.module}"' for kind in kinds)
     lines = [
         '"""The collider switch: each function takes a collider kind and calls that kind\'s own.',
@@ -229,6 +241,9 @@ def switch_source(registry: list[tuple[str, str]] | None = None, folder: Path = 
         "# the kinds' modules this switch was written for, in the order of their codes",
         f"WRITTEN_FOR = ({names}{',' if len(kinds) == 1 else ''})",
         f"KIND_MODULES = ({', '.join(kind.module for kind in kinds)}{',' if len(kinds) == 1 else ''})",
+        "# the registry and the kinds' SWITCH tables it was written from (switch_fingerprint): colliders/",
+        "# __init__ refuses to load a switch whose tables have changed since",
+        f'WRITTEN_FROM = "{switch_fingerprint([(k.name, k.module, k.switch) for k in kinds])}"',
         "# what every function raises for a kind it has no branch for",
         'UNKNOWN_KIND = ("engine/colliders: a collider kind with no branch in this function of the switch '
         '(docs/colliders.md, "',

@@ -192,26 +192,26 @@ def test_a_sphere_meets_a_mesh_at_the_swept_time_with_the_normal_from_the_closes
 
 # ----------------------------------------------------------------------------- the written switch
 def test_the_switch_is_what_its_generator_writes_from_the_registry():
-    """colliders/switch.py is written by generate_switch.py from events.COLLIDER_KINDS and
+    """colliders/switch.py is written by physdbg/write_switch.py from events.COLLIDER_KINDS and
     each kind module's SWITCH: the file in the tree is exactly what it writes now (edit
     the kinds' modules or the registry, then run the script; never the file)."""
-    from physdbg import write_switch as generate_switch
+    from physdbg import write_switch
     from physdbg.events import COLLIDER_KINDS
 
-    assert generate_switch.SWITCH_FILE.read_text() == generate_switch.switch_source(), \
-        "switch.py is not what generate_switch.py writes: run python physdbg/write_switch.py"
-    assert generate_switch.read_registry() == [(row.name, row.module) for row in COLLIDER_KINDS]
+    assert write_switch.SWITCH_FILE.read_text() == write_switch.switch_source(), \
+        "switch.py is not what write_switch.py writes: run python physdbg/write_switch.py"
+    assert write_switch.read_registry() == [(row.name, row.module) for row in COLLIDER_KINDS]
     from physdbg.engine.colliders import switch
 
     assert switch.WRITTEN_FOR == tuple(row.module for row in COLLIDER_KINDS)
 
 
 def test_a_kind_module_the_switch_cannot_be_written_from_is_refused_saying_what_is_wrong(tmp_path):
-    from physdbg import write_switch as generate_switch
+    from physdbg import write_switch
     from physdbg.write_switch import switch_source
 
     registry = [("sphere", "sphere"), ("capsule", "capsule")]
-    (tmp_path / "sphere.py").write_text((generate_switch.HERE / "sphere.py").read_text())
+    (tmp_path / "sphere.py").write_text((write_switch.HERE / "sphere.py").read_text())
     with pytest.raises(ValueError, match="lists kind 'capsule' in module 'capsule', but there is no "
                                                 "engine/colliders/capsule.py"):
         switch_source(registry, tmp_path)
@@ -222,7 +222,7 @@ def test_a_kind_module_the_switch_cannot_be_written_from_is_refused_saying_what_
                                          "'normal(x, ia, other, group)'}\n")
     with pytest.raises(ValueError, match="SWITCH has no entry for 'time_of_impact'"):
         switch_source(registry, tmp_path)
-    full = dict.fromkeys((f.name for f in generate_switch.FUNCTIONS), "0")
+    full = dict.fromkeys((f.name for f in write_switch.FUNCTIONS), "0")
     for entry, problem in (({"contact_normal": "turned(x, ia, other, group)"},
                             "calls turned, which the module neither defines nor imports"),
                            ({"contact_normal": "normal(x, ia, other, velocity)"},

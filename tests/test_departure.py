@@ -386,11 +386,11 @@ def test_physdbg_s_sleeping_is_named_and_set_aside_where_it_froze_a_sphere_the_r
 
 def test_a_run_longer_than_check_run_compares_at_once_is_refused_before_the_reference_is_recorded(tmp_path,
                                                                                                  monkeypatch):
-    from physdbg.analysis import departure
+    from physdbg.analysis import departure_records  # where too_long reads its limit
 
     scene = load_scene("bounce", ["integrator=euler", "steps=60"])
     write_csv(tmp_path / "run.csv", *simulate_swept(scene, 60, scene.dt))
-    monkeypatch.setattr(departure, "MAX_BODY_STEPS", 50)
+    monkeypatch.setattr(departure_records, "MAX_BODY_STEPS", 50)
     result = CliRunner().invoke(app, ["check-run", str(tmp_path / "run.csv"), "--scene", "bounce", "--set",
                                       "integrator=euler", "--set", "steps=60", "--keep", str(tmp_path / "kept")])
     assert result.exit_code == 2, result.output
@@ -541,9 +541,13 @@ def test_each_cause_of_check_run_is_named_by_the_judgements_its_table_row_lists(
         for kind in kinds:
             named_by.setdefault(kind, set()).add(name)
     for kind, (_, methods) in departure.DEPARTURE_KINDS.items():
-        assert all(vars(departure._Comparison).get(m.__name__) is m for m in methods), kind  # its own methods
+        assert all(getattr(departure._Comparison, m.__name__) is m for m in methods), kind  # its own methods
         names = {m.__name__ for m in methods}
         assert names <= named_by.get(kind, set()), (kind, names, named_by.get(kind))
     # every kind made with a literal in an _add or a Departure(...) has its row
-    made = set(re.findall(r'(?:_add\(|Departure\(\s*)"([a-z-]+)"', inspect.getsource(departure)))
+    from physdbg.analysis import departure_contacts, departure_flight, departure_steps
+
+    judges = "".join(inspect.getsource(module) for module in (departure, departure_contacts, departure_flight,
+                                                              departure_steps))
+    made = set(re.findall(r'(?:_add\(|Departure\(\s*)"([a-z-]+)"', judges))
     assert made and made <= set(departure.DEPARTURE_KINDS)

@@ -257,7 +257,9 @@ with open_recording(sys.argv[1]) as rec:
     rows = [dict(step=k, kind=int(c.kind), a=int(c.a), other=int(c.other), normal=[float(q) for q in c.normal],
                  before=[float(q) for q in c.velocity_a_before], after=[float(q) for q in c.velocity_a_after])
             for k in range(1, rec.frames) for c in (rec.contacts(k).record(i) for i in range(len(rec.contacts(k))))]
-    print(json.dumps(dict(rows=rows, names=rec.header.walls.partner_names()[3][:])))
+    from physdbg.record.view import scene_bounds
+    lo, hi = scene_bounds(rec.header)
+    print(json.dumps(dict(rows=rows, names=rec.header.walls.partner_names()[3][:], lo=lo.tolist(), hi=hi.tolist())))
 """
 
 
@@ -326,6 +328,7 @@ def test_a_kind_in_one_module_and_one_registry_line_runs_through_engine_audit_re
     assert read.returncode == 0, read.stderr
     seen = json.loads(read.stdout)
     assert seen["names"] == ["'stump'"]
+    assert seen["lo"][1] <= -0.3 and seen["hi"][1] >= 1.2  # the view frames the post (centre 0, radius 0.3) and the ball
     assert [row["kind"] for row in seen["rows"]] == [3] * len(seen["rows"]) and len(seen["rows"]) >= 2
     first = seen["rows"][0]
     assert first["other"] == 0 and first["normal"] == pytest.approx([0.0, 1.0, 0.0], abs=1e-9)
@@ -335,7 +338,7 @@ def test_a_kind_in_one_module_and_one_registry_line_runs_through_engine_audit_re
 
     explained = run(["explain", "post.mcap"])
     assert explained.returncode == 0, explained.stderr
-    assert "CLEAN: no tunnelling through the partners it checks" in explained.stdout
+    assert "CLEAN: no tunnelling through the partners the audit checks" in explained.stdout
     assert "tunnelling through post partners is not checked" in explained.stdout
     info = run(["info", "post.mcap"])
     assert "1 particle, 0 walls, 1 post partner" in info.stdout, info.stdout
@@ -354,6 +357,23 @@ def test_a_kind_in_one_module_and_one_registry_line_runs_through_engine_audit_re
     (run.root / "bad.toml").write_text(POST_SCENE.replace("radius = 0.3", "radius = -0.3"))
     bad = run(["run", "bad.toml"])
     assert bad.returncode == 2 and "bad.toml: field 'post.0.radius': got -0.3; expected a number > 0" in bad.stderr
+    # a ball that starts inside the post: check says so, and the audit finds the overlap, naming the post
+    (run.root / "inside.toml").write_text(POST_SCENE.replace("position = [0.0, 1.1, 0.0]", "position = [0.0, 0.35, 0.0]"))
+    checked = run(["check", "inside.toml"])
+    assert "sphere 0 starts 50 mm inside post 'stump'" in checked.stdout, checked.stdout + checked.stderr
+    assert "predicted to fail" in checked.stdout
+    started = run(["run", "inside.toml", "-s", "steps=1"])
+    assert "sphere 0 and post 'stump' overlap by 50 mm" in started.stdout, started.stdout + started.stderr
+    # a kind's SWITCH changed since the switch was written: refused until the script runs again
+    module = run.root / "physdbg" / "engine" / "colliders" / "post.py"
+    text = module.read_text()
+    module.write_text(text.replace('"partner_restitution": "restitution(other, group)"', '"partner_restitution": "1.0"'))
+    try:
+        stale = run(["run", "post.toml"])
+    finally:
+        module.write_text(text)
+    assert stale.returncode == 2, stale.stdout + stale.stderr
+    assert "the switch (switch.py) was written from other SWITCH tables than the kinds' modules hold now" in stale.stderr
 
 
 @pytest.mark.slow  # a copy of physdbg run in subprocesses, interpreted: about 20 s together

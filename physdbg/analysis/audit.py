@@ -913,7 +913,7 @@ def unchecked_words(kinds: list[str]) -> str:
     """What the audit could not check of a run with partners of kinds it has no tunnelling
     rule for (Auditor.unchecked_kinds)."""
     return (f"tunnelling through {', '.join(f'{kind} partners' for kind in kinds)} is not checked (the tunnelling "
-            f"check knows sphere pairs, walls and meshes); their overlaps are")
+            f"check knows sphere pairs, walls and meshes); overlaps with them are checked")
 
 
 def _length(metres: float) -> str:

@@ -196,7 +196,8 @@ def _partner_words(partners: dict) -> str:
 def explain_text(r: AuditReport) -> str:
     lines = [f"{r.source}  ({r.scene}, {r.checked} of {r.steps} steps audited)"]
     if r.clean:
-        tunnelling = "tunnelling through the partners it checks" if getattr(r, "unchecked", None) else "tunnelling"
+        tunnelling = ("tunnelling through the partners the audit checks" if getattr(r, "unchecked", None)
+                      else "tunnelling")
         lines.append(f"result   CLEAN: no {tunnelling}, overlap, out-of-order contact, energy gain, NaN, budget hit "
                      "or collapse found")
     else:
@@ -360,7 +361,8 @@ def summary_text(s, observers: str = "the audit") -> str:
         "warnings    " + _warning_totals(s.warning_counts),
     ]
     lines += [f"  step {w['step']}: {w['message']}" for w in s.warnings]
-    tunnelling = "tunnelling through the partners it checks" if getattr(s, "audit_unchecked", None) else "tunnelling"
+    tunnelling = ("tunnelling through the partners the audit checks" if getattr(s, "audit_unchecked", None)
+                  else "tunnelling")
     lines.append("audit       " + (f"clean (no {tunnelling}, overlap, out-of-order contact, energy gain or collapse"
                                    + (", and no meshes passing into each other or pinning a sphere)"
                                       if getattr(s, "meshes_move", False)
@@ -504,7 +506,7 @@ def check_text(result) -> str:
     dt = f"dt {f['dt']:.6g} s" if result.scene.dt is not None else f"real-time steps up to {f['dt']:.6g} s"
     lines = [f"scene       {result.scene.name}  ({result.scene.source})",
              f"facts       {count_words(f['particles'], 'particle')}, {count_words(f['walls'], 'wall')}"
-             f"{_mesh_words(f.get('meshes') or {})}; {dt}; "
+             f"{_mesh_words(f.get('meshes') or {})}{_partner_words(f.get('partners') or {})}; {dt}; "
              f"{f['duration']:.6g} s; speeds up to {f['speed_bound']:.3g} m/s ({f['speed_bound_why']}); "
              + ("contacts can happen" if f["contacts_possible"] else "no contact can happen")]
     if f["periodic"] is not None:

@@ -141,7 +141,8 @@ class RecordingHeader:
     @staticmethod
     def partners_from_json(partners: dict) -> dict:
         """The partners of the kinds that declare their fields (state.Partners by kind name),
-        from a /physdbg/walls message; a kind this physdbg does not know is refused."""
+        from a /physdbg/walls message (a field the file lacks takes its default); a kind
+        this physdbg does not know, or a partner without a required field, is refused."""
         from ..engine.colliders import extra_kinds
         from ..engine.state import Partners
         from ..errors import RecordingError
@@ -153,8 +154,14 @@ class RecordingHeader:
                 raise RecordingError(f"the recording has partners of collider kind '{kind}', which this physdbg does "
                                      f"not know (its kinds with partners of their own: "
                                      f"{', '.join(declared) or 'none'})")
+            for row in rows:
+                missing = [f.name for f in declared[kind] if f.name not in row and f.default is None]
+                if missing or "name" not in row:
+                    raise RecordingError(f"a {kind} partner of the recording has no {', '.join(missing or ['name'])} "
+                                         f"(the kind's fields: name, {', '.join(f.name for f in declared[kind])})")
             out[kind] = Partners([row["name"] for row in rows],
-                                 {f.name: np.array([row[f.name] for row in rows], dtype=np.float64).reshape(-1, *f.shape)
+                                 {f.name: np.array([row.get(f.name, f.default) for row in rows],
+                                                   dtype=np.float64).reshape(-1, *f.shape)
                                   for f in declared[kind]})
         return out
 

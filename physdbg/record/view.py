@@ -32,8 +32,9 @@ def contact_centres(c: Contacts, radius: np.ndarray) -> np.ndarray:
 
 
 def scene_bounds(h: RecordingHeader) -> tuple[np.ndarray, np.ndarray]:
-    """A box around the initial spheres, every axis-aligned wall and every mesh (a turning
-    one's whole sweep about its pivot), at least half as deep
+    """A box around the initial spheres, every axis-aligned wall, every mesh (a turning
+    one's whole sweep about its pivot) and the partners of a kind that draws itself
+    (kind_drawings), at least half as deep
     on each axis as on its longest, so a lone floor is drawn bigger than one ball."""
     r = float(h.radius.max()) if h.count else 0.5
     lo = h.positions.min(axis=0) - r if h.count else np.full(3, -1.0)
@@ -52,6 +53,13 @@ def scene_bounds(h: RecordingHeader) -> tuple[np.ndarray, np.ndarray]:
             reach = meshes.turn_radii()[turning][:, None]
             lo = np.minimum(lo, (meshes.pivot[turning] - reach).min(axis=0))
             hi = np.maximum(hi, (meshes.pivot[turning] + reach).max(axis=0))
+    for _kind, drawing in kind_drawings(h.walls):  # and the partners of a kind that draws itself
+        if len(drawing.radii):
+            lo = np.minimum(lo, (drawing.centres - drawing.radii[:, None]).min(axis=0))
+            hi = np.maximum(hi, (drawing.centres + drawing.radii[:, None]).max(axis=0))
+        if len(drawing.triangles):
+            corners = drawing.triangles.reshape(-1, 3)
+            lo, hi = np.minimum(lo, corners.min(axis=0)), np.maximum(hi, corners.max(axis=0))
     periodic = h.walls.period > 0
     lo[periodic] = np.minimum(lo, h.walls.period_origin)[periodic]
     hi[periodic] = np.maximum(hi, h.walls.period_origin + h.walls.period)[periodic]

@@ -26,6 +26,8 @@ integrator or a collider kind").
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 from numba import njit
 
@@ -35,7 +37,7 @@ from ..jit import borrowing
 from ..state import Partners
 from . import mesh
 from .kinds import KIND_NAMES, KINDS, PARTNER_IS_SPHERE, partner_sphere
-from .switch import (KIND_MODULES, UNKNOWN_KIND, WRITTEN_FOR, contact_feature, contact_gap, contact_normal, deepest_of_kind,
+from .switch import (KIND_MODULES, UNKNOWN_KIND, WRITTEN_FOR, WRITTEN_FROM, contact_feature, contact_gap, contact_normal, deepest_of_kind,
                      every_candidate, immovable_partners_in, narrow_candidates, partner_count, partner_moves,
                      partner_normal_motion, partner_restitution, partner_surface, partners_of, surface_gap,
                      time_of_impact)
@@ -68,11 +70,22 @@ def check_kind_modules(names=KIND_NAMES, modules=KIND_MODULES,
         raise KindRegistryError(f"engine/colliders: the switch (switch.py) was written for the kinds' modules "
                                 f"{', '.join(written_for)} but the registry lists {', '.join(registered)}: "
                                 f"{HOW_TO_ADD}")
+    if len(names) == len(modules) and modules is KIND_MODULES and WRITTEN_FROM != switch_fingerprint():
+        raise KindRegistryError("engine/colliders: the switch (switch.py) was written from other SWITCH tables than "
+                                f"the kinds' modules hold now: {HOW_TO_ADD}")
     if len(names) != len(modules):
         missing = ", ".join(f"{code} {name}" for code, name in enumerate(names) if code >= len(modules))
         raise KindRegistryError(f"engine/colliders: {len(names)} collider kinds in the table ({', '.join(names)}) "
                                 f"but {len(modules)} modules in KIND_MODULES"
                                 + (f"; no module for {missing}" if missing else "") + f": {HOW_TO_ADD}")
+
+
+def switch_fingerprint() -> str:
+    """The digest of the registry and the loaded kinds' SWITCH tables, as write_switch.py
+    computes it from their text (switch.WRITTEN_FROM holds the one it wrote from)."""
+    text = repr([(row.name, row.module, sorted(module.SWITCH.items()))
+                 for row, module in zip(COLLIDER_KINDS, KIND_MODULES)])
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 check_kind_modules()

@@ -16,12 +16,12 @@ from typing import NamedTuple
 
 from numba import njit
 
-from ...events import KIND_NAMES, KIND_PAIR, KIND_WALL, PARTNER_IS_SPHERE
+from ...events import KIND_MESH, KIND_NAMES, KIND_PAIR, KIND_WALL, PARTNER_IS_SPHERE
 
 # the rows themselves are events' (readers ask them too): indexed by the kind's code
 KINDS = len(KIND_NAMES)
 
-assert KIND_NAMES[KIND_PAIR] == "sphere" and KIND_NAMES[KIND_WALL] == "wall"
+assert KIND_NAMES[KIND_PAIR] == "sphere" and KIND_NAMES[KIND_WALL] == "wall" and KIND_NAMES[KIND_MESH] == "mesh"
 
 
 @njit(cache=True, inline="always")

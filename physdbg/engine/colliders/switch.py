@@ -18,6 +18,9 @@ from . import sphere, plane, mesh
 # the kinds' modules this switch was written for, in the order of their codes
 WRITTEN_FOR = ("sphere", "plane", "mesh")
 KIND_MODULES = (sphere, plane, mesh)
+# the registry and the kinds' SWITCH tables it was written from (switch_fingerprint): colliders/
+# __init__ refuses to load a switch whose tables have changed since
+WRITTEN_FROM = "6628f43366f2fc4d"
 # what every function raises for a kind it has no branch for
 UNKNOWN_KIND = ("engine/colliders: a collider kind with no branch in this function of the switch (docs/colliders.md, "
                 "\"Adding an integrator or a collider kind\")")
