@@ -160,7 +160,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         dts: Sequence[float] | None = None,
         on_step: Callable[[int, int | None], None] | None = None,
         on_status: Callable[[str], None] | None = None, audit: bool | str = True,
-        on_finding: Callable | None = None) -> RunSummary:
+        on_finding: Callable | None = None, retune_at: tuple[int, dict] | None = None) -> RunSummary:
     """Run a scene (built-in name, path, or Scene) to the end and summarise it.
 
     dts: replay exactly these step lengths (e.g. from a real-time run) instead of the
@@ -174,6 +174,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     spheres of a step whose swept tests were exact and complete from the engine
     (audit.engine_tests_exact), "full" walks every pair's path again as ``explain`` does,
     False does not audit; on_finding(finding): called with each finding as it is made.
+    retune_at: (K, settings): these settings change before step K (a fork: World.retune).
     """
     scene = ready_scene(scene, overrides)
     from .advisor import meshes_out_of_reach, start_words, starting_overlaps
@@ -217,6 +218,8 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     digest = state_hash(st.positions, st.velocities)
     with StopOnCtrlC(world):  # Ctrl-C ends even a long step within a second (interrupt.py)
         for dt in scene.step_lengths(dts):
+            if retune_at is not None and len(used) + 1 == retune_at[0]:
+                world.retune(retune_at[1])
             try:
                 end = world.step(dt)
             except NonFiniteState as err:
@@ -362,7 +365,7 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
            spawn: bool = False, bvh_max_nodes: int | None = None, dts: Sequence[float] | None = None,
            on_step: Callable[[int, int | None], None] | None = None,
            on_status: Callable[[str], None] | None = None, view: bool | None = None,
-           audit: bool | str = True) -> RecordResult:
+           audit: bool | str = True, fork: dict | None = None) -> RecordResult:
     """Run a scene and record every step to MCAP (and Rerun unless rrd=False), audited as
     it runs (``audit``: as for run).
 
@@ -371,7 +374,9 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
     VIEW_AUTO_MAX_SPHERES spheres (``view_choice``).
     bvh_max_nodes: log at most this many BVH nodes a step, whole levels from the root
     (None: the default cap, 0: no cap). Ctrl-C ends the run with valid files up to the
-    last complete step and raises RecordingInterrupted.
+    last complete step and raises RecordingInterrupted. fork: where this run forks from
+    another (``fork_recording``): {parent, parent_run_id, parent_hash, at, changes},
+    kept in the header; ``changes`` (settings) apply from step ``at`` on.
     """
     from .record.format import DETAIL_LEVELS
     from .record.header import DEFAULT_BVH_MAX_NODES, RecordingHeader
@@ -388,6 +393,8 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
     check_writable([mcap_out, rrd_out], force)
     cap = DEFAULT_BVH_MAX_NODES if bvh_max_nodes is None else (bvh_max_nodes or None)
     header = RecordingHeader.from_scene(scene, detail, cap)
+    if fork is not None:
+        header.meta["fork"] = fork
     view, view_note = view_choice(view, header.count)
     outputs = claim([mcap_out, rrd_out], force)  # one writer per file: see record/outputs.py
     mcap_file, rrd_file = outputs.paths
@@ -412,7 +419,8 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
         sinks.insert(0, mcap_sink)
         markers = [s.mark_finding for s in sinks if hasattr(s, "mark_finding")]  # both views mark findings
         summary = run(scene, observer=FanOut(*sinks), dts=dts, on_step=on_step, on_status=on_status,
-                      on_finding=lambda finding: [mark(finding) for mark in markers], audit=audit)
+                      on_finding=lambda finding: [mark(finding) for mark in markers], audit=audit,
+                      retune_at=(fork["at"], fork["changes"]) if fork else None)
     except KeyboardInterrupt:
         interrupted = True
     except StuckRunError as err:
@@ -452,6 +460,95 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
     if interrupted:
         raise RecordingInterrupted(
             f"interrupted: {mcap_out} holds {_steps_held(mcap_sink.frames - 1)}")
+    return result
+
+
+def fork_recording(parent: str | Path, at: int, overrides: Sequence[str] = (), steps: int | None = None,
+                   mcap_path: str | None = None, rrd_path: str | None = None, rrd: bool = True,
+                   detail: str | None = None, force: bool = False,
+                   on_step: Callable[[int, int | None], None] | None = None,
+                   on_status: Callable[[str], None] | None = None, view: bool | None = None) -> RecordResult:
+    """Fork a recording at the start of step ``at`` (K, from 1): the run repeats its parent
+    up to the state of frame K-1, every engine state the parent carried included, then the
+    settings ``overrides`` (``key=value``: only World.retune's RETUNABLE_SETTINGS and dt)
+    apply from step K, to the parent's end (its end time, with another dt) or for
+    ``steps`` steps from K. The new recording is whole (replay, explain, verify), frame
+    for frame beside its parent up to K, and says where it came from (header ``fork``:
+    the parent's file, run id and the hash of frame K-1). With no change it is its parent
+    from K bit for bit. detail: the parent's unless given.
+
+    The steps before K are taken again, not read: the parent's states are the whole
+    state only with what the engine carries across steps (held contacts, sleep, the
+    rapid-contact times, its own numbering), which a recording does not hold. Each of
+    them is checked against the parent's hash (a parent that does not repeat is refused:
+    PhysdbgError naming the step)."""
+    from .engine.world import RETUNABLE_SETTINGS
+    from .record import open_recording
+    from .scene import scene_from_dict
+
+    with open_recording(parent) as rec:
+        foreign = rec.meta.get("foreign")
+        if foreign:
+            raise PhysdbgError(f"{parent} is a run of another engine (imported from {foreign['source']}): there is no "
+                               "physdbg run to fork; record the scene with physdbg and fork that")
+        if not 1 <= at <= rec.steps:
+            raise PhysdbgError(f"--at {at}: {parent} has steps 1..{rec.steps}; a fork starts at one of them")
+        allowed = (*RETUNABLE_SETTINGS, "dt")
+        for item in overrides:
+            key = item.split("=", 1)[0].strip()
+            if key not in allowed:
+                raise PhysdbgError(f"--set {item}: {key} cannot change in the middle of a run (a fork starts from the "
+                                   f"state the parent reached); a fork may change {', '.join(allowed)}")
+        before = rec.scene
+        info = rec.meta["scene"]
+        meshes = rec.header.walls.meshes if len(rec.header.walls.meshes) else None
+        after = scene_from_dict(info["table"], f"{info['source']} (from {Path(parent).name})", meshes,
+                                [item for item in overrides if not item.startswith("dt")])
+        changes = {}
+        for name in RETUNABLE_SETTINGS:
+            if any(item.split("=", 1)[0].strip() == name for item in overrides):
+                value = getattr(after.settings, name)
+                if value == "auto":
+                    raise PhysdbgError(f"--set {name}=auto: a fork takes the value itself (auto is decided for a "
+                                       f"whole scene before its first step)")
+                if value != getattr(before.settings, name):
+                    changes[name] = value
+        table = rec.frame_table()
+        for _ in rec.states(0, at):  # each stored state up to K against its hash and the index: a damaged parent
+            pass                     # is refused here (RecordingIntegrityError names the frame)
+        dts = [float(d) for d in table.dt[1:]]
+        new_dt = next((item.split("=", 1)[1] for item in overrides if item.split("=", 1)[0].strip() == "dt"), None)
+        if new_dt is not None:
+            from .scene import STEP_LENGTH_RANGE, step_length
+
+            dt = step_length(new_dt.strip())
+            if dt is None:
+                raise PhysdbgError(f"--set dt={new_dt}: a step's length is a number of seconds {STEP_LENGTH_RANGE}")
+            remaining = float(table.time[-1] - table.time[at - 1])
+            count = steps if steps is not None else max(1, math.ceil(remaining / dt - 1e-9))
+            after_k = [dt] * count
+        else:
+            after_k = dts[at - 1:] if steps is None else (dts[at - 1:at - 1 + steps] + [dts[-1]] *
+                                                          max(0, steps - len(dts[at - 1:])))
+        fork = {"parent": Path(parent).name, "parent_run_id": rec.meta.get("run_id"),
+                "parent_hash": table.hash_hex(at - 1), "at": at, "changes": changes,
+                "dt": dt if new_dt is not None else None}
+        parent_hashes = [table.hash_hex(k) for k in range(at)]
+        parent_detail = rec.detail
+    before.overrides = tuple(overrides)
+    result = record(before, mcap_path=mcap_path, rrd_path=rrd_path, rrd=rrd, detail=detail or parent_detail,
+                    force=force, dts=dts[:at - 1] + after_k, on_step=on_step, on_status=on_status, view=view,
+                    fork=fork)
+    with open_recording(result.mcap) as made:  # the steps before K are the parent's, bit for bit
+        mine = made.frame_table()
+        for k in range(1, at):
+            if mine.hash_hex(k) != parent_hashes[k]:
+                Path(result.mcap).unlink(missing_ok=True)
+                if result.rrd:
+                    Path(result.rrd).unlink(missing_ok=True)
+                raise PhysdbgError(f"{parent} does not repeat: step {k} taken again gives another state than the "
+                                   f"recorded one (a file from another physdbg, or an altered one; `physdbg replay "
+                                   f"--verify {parent}` says more): no fork is made from it")
     return result
 
 
@@ -537,8 +634,11 @@ def verify(path: str | Path, on_step: Callable[[int, int | None], None] | None =
 def _verify_steps(rec, world, on_step) -> VerifyResult:
     """verify's loop: re-simulate each step and compare it with the file."""
     checked = 0
+    fork = rec.meta.get("fork")
     for frame in rec.states(1):
         k = frame.frame
+        if fork and k == fork["at"]:
+            world.retune(fork["changes"])
         stats = world.step(frame.dt)
         # the states themselves, not only the hashes: without check_file a stored state
         # need not give its stored hash

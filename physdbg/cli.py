@@ -289,7 +289,9 @@ def run(
 
 @app.command()
 def record(
-    scene: SceneArgument,
+    scene: Annotated[Optional[str], typer.Argument(
+        help="Built-in scene name (see `physdbg scenes`) or a .toml file; none with --from.",
+        autocompletion=_complete_scene, show_default=False)] = None,
     set_: SetOption = None,
     output: Annotated[Optional[Path], typer.Option(
         "--output", "-o", help="The MCAP file to write (default recordings/<scene>.mcap).")] = None,
@@ -297,9 +299,10 @@ def record(
         "--rrd", help="The Rerun file to write (default: beside the MCAP file, ending .rrd).")] = None,
     no_rrd: Annotated[bool, typer.Option("--no-rrd", help="Write only the MCAP file.")] = False,
     spawn: Annotated[bool, typer.Option("--spawn", help="Also stream to a Rerun viewer started now.")] = False,
-    detail: Annotated[str, typer.Option(
+    detail: Annotated[Optional[str], typer.Option(
         "--detail", help="What to record: state (states, stats, warnings), contacts (+ every contact), "
-                         "full (+ swept tests, broad phase, BVH nodes).")] = "full",
+                         "full (+ swept tests, broad phase, BVH nodes). Default: full (a fork: its parent's).",
+        show_default=False)] = None,
     view: Annotated[Optional[bool], typer.Option(
         "--view/--no-view", help="Write the view channels (Foxglove 3D scene, point cloud, log) in the MCAP file, "
                                  "or leave them out (smaller, quicker; physdbg's own tools do not need them). "
@@ -321,12 +324,29 @@ def record(
         "--full-audit", help="Walk every pair of spheres' path again in the audit, as `physdbg explain` does; by "
                              "default a step whose swept tests were exact and complete takes its pairs from the "
                              "engine's own tests (docs/diff.md, 'How explain works').")] = False,
+    fork_from: Annotated[Optional[Path], typer.Option(
+        "--from", help="Fork this recording instead of running a scene: repeat it up to --at, then go on with the "
+                       "--set changes (docs/recording.md, \"Forking a recording\").", show_default=False)] = None,
+    at: Annotated[Optional[int], typer.Option(
+        "--at", min=1, help="With --from: the step the fork starts at (its changes apply from this step on).",
+        show_default=False)] = None,
+    steps: Annotated[Optional[int], typer.Option(
+        "--steps", min=1, help="With --from: how many steps from --at on (default: to the parent's end).",
+        show_default=False)] = None,
 ) -> None:
     """Run a scene and record every step: MCAP (lossless) and Rerun (.rrd, to look at).
 
     Example: physdbg record bounce        then: .venv/bin/rerun recordings/bounce.rrd
+
+    Fork a recording: physdbg record --from bounce.mcap --at 40 -s detection=discrete -o fork.mcap
     """
+    if fork_from is not None or at is not None or steps is not None:
+        return _record_fork(scene, fork_from, at, steps, set_, output, rrd, no_rrd, detail, view, force, progress,
+                            dts)
     with _user_errors():
+        if scene is None:
+            raise PhysdbgError("give a scene to record (a built-in name or a .toml file), or --from a recording to "
+                               "fork")
         tier = _choose_tier(scene, set_)
         from .analysis.report import size_words, summary_text
         from .api import diff as api_diff
@@ -342,7 +362,7 @@ def record(
         bar = _progress_bar(total, show=progress)
         try:
             result = record_scene(loaded, mcap_path=str(output) if output else None,
-                                  rrd_path=str(rrd) if rrd else None, rrd=not no_rrd, detail=detail,
+                                  rrd_path=str(rrd) if rrd else None, rrd=not no_rrd, detail=detail or "full",
                                   force=force, spawn=spawn, bvh_max_nodes=bvh_max_nodes, dts=step_lengths,
                                   on_step=bar.update, on_status=bar.status, view=view,
                                   audit="full" if full_audit else True)
@@ -368,6 +388,43 @@ def record(
             typer.echo(f"check       against {check_against}")
             typer.echo(diff_text(report))
             raise typer.Exit(report.exit_code)
+
+
+def _record_fork(scene, parent, at, steps, set_, output, rrd, no_rrd, detail, view, force, progress, dts) -> None:
+    """record --from PARENT --at K: a fork (api.fork_recording), printed as a recording is."""
+    with _user_errors():
+        if scene is not None:
+            raise PhysdbgError(f"give a scene ({scene}) or --from a recording to fork, not both: a fork runs its "
+                               f"parent's scene")
+        if parent is None or at is None:
+            raise PhysdbgError("a fork needs --from (the recording) and --at (the step it starts at)")
+        if dts is not None:
+            raise PhysdbgError("--dts does not go with --from: a fork repeats its parent's steps (--set dt=... "
+                               "changes them from --at on)")
+        if not parent.is_file():
+            raise PhysdbgError(f"{parent}: no such recording to fork")
+        tier = _choose_tier_for(parent)
+        from .analysis.report import size_words, summary_text
+        from .api import fork_recording
+
+        bar = _progress_bar(None, show=progress)
+        try:
+            result = fork_recording(parent, at, set_ or [], steps, mcap_path=str(output) if output else None,
+                                    rrd_path=str(rrd) if rrd else None, rrd=not no_rrd,
+                                    detail=detail, force=force,
+                                    on_step=bar.update, on_status=bar.status, view=view)
+        finally:
+            bar.close()
+        _after_interpreted(tier)
+        typer.echo(summary_text(result.summary, "the recording and the audit"))
+        typer.echo(f"fork        of {parent} at step {at}"
+                   + (f": {', '.join(set_)} from step {at} on" if set_ else ": no change (its parent, bit for bit)"))
+        typer.echo(f"recorded    {result.frames - 1} steps, detail {result.detail}")
+        typer.echo(f"mcap        {result.mcap}  ({size_words(result.bytes_mcap)})")
+        if result.rrd:
+            typer.echo(f"rerun       {result.rrd}  ({size_words(result.bytes_rrd)})")
+        me = _command("physdbg")
+        typer.echo(f"then try    {me} diff {parent} {result.mcap}   |   {me} replay {result.mcap} --verify")
 
 
 NoVerifyOption = Annotated[bool, typer.Option(

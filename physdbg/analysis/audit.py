@@ -272,6 +272,11 @@ class Auditor:
 
     def _end_step(self, end: StepEnd) -> None:
         step = end.step
+        fork = self.header.meta.get("fork")
+        if fork and step == fork["at"] and fork["changes"]:  # a fork's settings from its step on
+            self.settings = {**self.settings, **fork["changes"]}
+            self.checker = StepChecker(self.header.radius, self.header.inverse_mass, self.header.gravity_scale,
+                                       self.header.walls, self.settings)
         contacts = self._contacts
         finite = bool(np.isfinite(end.positions).all() and np.isfinite(end.velocities).all())
         if finite:

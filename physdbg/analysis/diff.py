@@ -229,6 +229,26 @@ def _explain_foreign(report: DiffReport, ra, rb, label: str, atol, rtol) -> None
     report.headline = found.headline
 
 
+def run_meta(meta: dict) -> dict:
+    """A recording's meta with the settings it ran under at its end: a fork's (header
+    ``fork``) changed from its step on (api.fork_recording); its steps before are its
+    parent's, bit for bit, so where two runs part the fork's own settings hold."""
+    fork = meta.get("fork")
+    if not fork or not fork.get("changes"):
+        return meta
+    return {**meta, "settings": {**meta.get("settings", {}), **fork["changes"]}}
+
+
+def fork_words(ra, rb) -> str:
+    """"B is a fork of A at step 20: " where one run forks the other (its header names the
+    other's run id), else ""."""
+    for mine, other, label, of in ((rb, ra, "B", "A"), (ra, rb, "A", "B")):
+        fork = mine.meta.get("fork")
+        if fork and fork.get("parent_run_id") and fork["parent_run_id"] == other.meta.get("run_id"):
+            return f"{label} is a fork of {of} at step {fork['at']}: "
+    return ""
+
+
 class _Differ:
     def __init__(self, ra, rb, atol, rtol):
         self.ra, self.rb = ra, rb
@@ -236,7 +256,7 @@ class _Differ:
         self.warn_a, self.warn_b = _warnings(ra), _warnings(rb)
         budgets_a = {w["code"] for ws in self.warn_a.values() for w in ws}
         budgets_b = {w["code"] for ws in self.warn_b.values() for w in ws}
-        self.settings = compare_settings(ra.meta, rb.meta, budgets_a, budgets_b)
+        self.settings = compare_settings(run_meta(ra.meta), run_meta(rb.meta), budgets_a, budgets_b)
         matters = any(s.matters for s in self.settings)
         default = DEFAULT_TOLERANCE if matters else 0.0
         self.atol = default if atol is None else float(atol)
@@ -603,7 +623,7 @@ class _Differ:
         if matters:
             listed = "; ".join(f"{s.name}: {_show(s.a)} in A, {_show(s.b)} in B" for s in matters[:6])
             more = f" (and {len(matters) - 6} more)" if len(matters) > 6 else ""
-            out.append(Cause("settings", f"different settings: {listed}{more}",
+            out.append(Cause("settings", f"{fork_words(self.ra, self.rb)}different settings: {listed}{more}",
                              {"settings": [s.name for s in matters]}))
         versions = [s for s in self.settings if s.name in ("physdbg_version", "numpy_version")]
         if versions:

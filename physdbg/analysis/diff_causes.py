@@ -105,11 +105,15 @@ class StepCase:
 
     @property
     def settings_a(self) -> dict:
-        return self.differ.ra.meta["settings"]
+        from .diff import run_meta
+
+        return run_meta(self.differ.ra.meta)["settings"]
 
     @property
     def settings_b(self) -> dict:
-        return self.differ.rb.meta["settings"]
+        from .diff import run_meta
+
+        return run_meta(self.differ.rb.meta)["settings"]
 
     @property
     def event(self) -> dict | None:

@@ -126,6 +126,12 @@ RELIST_EVERY = 32
 # acceleration, at least 1 m/s², and for velocities to that acceleration times dt) wake
 # no neighbours: they are rounding.
 SOLVE_TOLERANCE = 1e-12
+# the settings a world takes in the middle of a run (World.retune: a fork of a recording,
+# docs/recording.md "Forking a recording"): those each step reads afresh, and the
+# integrator and detection, whose traits retune derives again. The others shape what the
+# world built (its numbering, broad phase, sleepers, budgets, the forces' arrays).
+RETUNABLE_SETTINGS = ("detection", "integrator", "samples", "restitution_rule", "rapid_contact_time",
+                      "rapid_contact_rule", "rest_fraction")
 
 
 class World(MeshSteps, CalendarSteps):
@@ -288,6 +294,26 @@ class World(MeshSteps, CalendarSteps):
         """The step's phases in order, each (its name in events.STEP_PHASES, the method that runs it)."""
         return (("forces", self._forces), ("broad_phase", self._broad_phase), ("narrow_phase", self._narrow_phase),
                 ("resolve", self._resolve), ("finish", self._finish))
+
+    def retune(self, changes: dict) -> None:
+        """Change settings between two steps (RETUNABLE_SETTINGS, by name: the value as a
+        scene gives it): what the world carries (positions, velocities, held contacts,
+        sleep, the rapid-contact times, its numbering) stays; the integrator's and the
+        detection's codes and traits are derived again, and the event calendar, which
+        predicted with the old ones, starts afresh. ValueError for any other setting."""
+        unknown = sorted(set(changes) - set(RETUNABLE_SETTINGS))
+        if unknown:
+            raise ValueError(f"{', '.join(unknown)} cannot change in the middle of a run; these can: "
+                             f"{', '.join(RETUNABLE_SETTINGS)}")
+        for name, value in changes.items():
+            setattr(self.settings, name, value)
+        self._integrator = self.settings.integrator_code
+        self._detection = self.settings.detection_code
+        self._anchor_is_flow = FLOW[self._integrator][self._drag != 1.0]
+        self._rest_step_factor = REST_STEP_FACTOR[self._integrator]
+        self._kick_first = KICK_AT_STEP_START[self._integrator]
+        self._calendar = None
+        self._calendar_settled_unfit = self._calendar_unfit_by_scene()
 
     def request_stop(self) -> None:
         """Ask the world to stop: the step under way ends at once, half done and

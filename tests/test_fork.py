@@ -1,0 +1,111 @@
+"""Forking a recording (api.fork_recording, `physdbg record --from REC --at K`): a fork
+repeats its parent up to step K, every carried engine state included, and goes on from
+there with the settings changed; with no change it is its parent bit for bit."""
+
+from __future__ import annotations
+
+import pytest
+from typer.testing import CliRunner
+
+from physdbg import api, open_recording
+from physdbg.cli import app
+from physdbg.errors import PhysdbgError
+
+from . import tamper
+
+
+def _hashes(path) -> list[str]:
+    with open_recording(path) as rec:
+        table = rec.frame_table()
+        return [table.hash_hex(k) for k in range(rec.frames)]
+
+
+@pytest.fixture(scope="module")
+def rain(tmp_path_factory):
+    """A small pile that rests, with held contacts, the rapid-contact rule and sleeping
+    (the pile rules, asked for): what a recording's states alone do not hold."""
+    path = tmp_path_factory.mktemp("fork") / "rain.mcap"
+    api.record("rain", ["generate.count=60", "steps=240", "rapid_contact_time=1e-4", "rapid_contact_rule=tc",
+                        "sleep_speed=0.1"], mcap_path=str(path), rrd=False, detail="contacts")
+    with open_recording(path) as rec:
+        settings = rec.meta["settings"]
+        assert settings["sleep_speed"] > 0 and settings["rapid_contact_time"] > 0  # the state a fork must carry
+        assert int(rec.stats(199, 200)["held"][0]) > 0  # held contacts carried into step 200 (sleep timers too)
+    return path
+
+
+def test_a_fork_with_no_change_is_its_parent_bit_for_bit(rain, tmp_path):
+    result = api.fork_recording(rain, 200, [], mcap_path=str(tmp_path / "same.mcap"), rrd=False)
+    assert _hashes(result.mcap) == _hashes(rain)
+    with open_recording(result.mcap) as rec:
+        fork = rec.meta["fork"]
+        assert fork["at"] == 200 and fork["changes"] == {} and fork["parent"] == "rain.mcap"
+        assert fork["parent_hash"] == _hashes(rain)[199]
+        assert rec.detail == "contacts"  # the parent's
+    assert api.verify(result.mcap).ok
+    done = CliRunner().invoke(app, ["diff", str(rain), result.mcap])
+    assert done.exit_code == 0 and "every state is bit-identical" in done.output, done.output
+
+
+def test_a_fork_changes_its_settings_from_its_step_on_and_diff_says_so(tmp_path):
+    parent = tmp_path / "bounce.mcap"
+    api.record("bounce", ["steps=120"], mcap_path=str(parent), rrd=False)
+    runner = CliRunner()
+    done = runner.invoke(app, ["record", "--from", str(parent), "--at", "20", "-s", "detection=discrete",
+                               "-o", str(tmp_path / "discrete.mcap"), "--no-rrd"])
+    assert done.exit_code == 0, done.output
+    assert "fork        of " in done.output and "at step 20: detection=discrete from step 20 on" in done.output
+    mine, theirs = _hashes(tmp_path / "discrete.mcap"), _hashes(parent)
+    assert mine[:20] == theirs[:20] and mine != theirs  # frames 0..19: the state at the start of step 20
+    assert api.verify(tmp_path / "discrete.mcap").ok  # verify takes the change at step 20 too
+    done = runner.invoke(app, ["diff", str(parent), str(tmp_path / "discrete.mcap")])
+    assert done.exit_code == 1
+    assert "B is a fork of A at step 20: different settings: detection: swept in A, discrete in B" in done.output
+    assert "the state was changed outside its rules" not in done.output
+    # another dt from step 20 on: to the parent's end time, in steps of the new length
+    result = api.fork_recording(parent, 20, ["dt=1/120"], mcap_path=str(tmp_path / "fine.mcap"), rrd=False)
+    with open_recording(result.mcap) as rec:
+        table = rec.frame_table()
+        assert rec.steps == 19 + 202  # 101 steps of 1/60 s left in the parent: 202 of 1/120 s
+        assert table.dt[19] == pytest.approx(1 / 60) and table.dt[20] == pytest.approx(1 / 120)
+        assert table.time[-1] == pytest.approx(_parent_end(parent))
+    assert _hashes(result.mcap)[:20] == theirs[:20]
+    assert api.verify(result.mcap).ok
+    short = api.fork_recording(parent, 20, ["integrator=verlet"], steps=5, mcap_path=str(tmp_path / "short.mcap"),
+                               rrd=False)
+    assert short.frames == 25 and api.verify(short.mcap).ok
+
+
+def _parent_end(path) -> float:
+    with open_recording(path) as rec:
+        return float(rec.frame_table().time[-1])
+
+
+def test_a_fork_that_cannot_be_made_is_refused_in_one_line(tmp_path):
+    parent = tmp_path / "bounce.mcap"
+    api.record("bounce", ["steps=30"], mcap_path=str(parent), rrd=False)
+    runner = CliRunner()
+
+    def refused(*args) -> str:
+        done = runner.invoke(app, ["record", "--from", str(parent), *args, "-o", str(tmp_path / "fork.mcap"),
+                                   "--no-rrd"])
+        assert done.exit_code == 2, done.output
+        assert not (tmp_path / "fork.mcap").exists()
+        return done.output
+
+    assert "--at 31: " in refused("--at", "31") and "has steps 1..30" in refused("--at", "31")
+    out = refused("--at", "10", "-s", "generate.count=5")
+    assert "--set generate.count=5: generate.count cannot change in the middle of a run" in out
+    assert "gravity cannot change in the middle of a run" in refused("--at", "10", "-s", "gravity=[0,0,0]")
+    assert "a fork takes the value itself" in refused("--at", "10", "-s", "detection=auto")
+    assert "a fork needs --from (the recording) and --at" in refused()
+    done = runner.invoke(app, ["record", "bounce", "--from", str(parent), "--at", "3"])
+    assert done.exit_code == 2 and "not both" in done.output
+    # a damaged parent: a state altered in place, or altered and rehashed everywhere (only a re-simulation tells)
+    altered = tamper.nudge_state(parent, tmp_path / "altered.mcap", 5)
+    done = runner.invoke(app, ["record", "--from", str(altered), "--at", "10", "-o", str(tmp_path / "f1.mcap")])
+    assert done.exit_code == 2 and "frame 5" in done.output, done.output
+    forged = tamper.nudge_state(parent, tmp_path / "forged.mcap", 5, rehash=True, reindex=True)
+    with pytest.raises(PhysdbgError, match="does not repeat: step 5 taken again gives another state"):
+        api.fork_recording(forged, 10, [], mcap_path=str(tmp_path / "f2.mcap"), rrd=False)
+    assert not (tmp_path / "f2.mcap").exists()
