@@ -160,7 +160,7 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         dts: Sequence[float] | None = None,
         on_step: Callable[[int, int | None], None] | None = None,
         on_status: Callable[[str], None] | None = None, audit: bool | str = True,
-        on_finding: Callable | None = None, retune_at: tuple[int, dict] | None = None) -> RunSummary:
+        on_finding: Callable | None = None, fork: dict | None = None) -> RunSummary:
     """Run a scene (built-in name, path, or Scene) to the end and summarise it.
 
     dts: replay exactly these step lengths (e.g. from a real-time run) instead of the
@@ -174,7 +174,8 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     spheres of a step whose swept tests were exact and complete from the engine
     (audit.engine_tests_exact), "full" walks every pair's path again as ``explain`` does,
     False does not audit; on_finding(finding): called with each finding as it is made.
-    retune_at: (K, settings): these settings change before step K (a fork: World.retune).
+    fork: a fork's header entry (fork_recording): its chain's settings change before
+    each of its steps (World.retune), and the audit takes them there too.
     """
     scene = ready_scene(scene, overrides)
     from .advisor import meshes_out_of_reach, start_words, starting_overlaps
@@ -193,7 +194,10 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
         from .analysis.audit import Auditor
         from .record.header import RecordingHeader
 
-        auditor = Auditor(RecordingHeader.from_scene(scene), on_finding, engine_tested=audit != "full")
+        header = RecordingHeader.from_scene(scene)
+        if fork is not None:
+            header.meta["fork"] = fork  # the audit takes the fork's settings from their steps on
+        auditor = Auditor(header, on_finding, engine_tested=audit != "full")
         observer = FanOut(observer, auditor) if observer is not None else auditor
     overlaps = starting_overlaps(scene)  # said before a step is run: the run cannot mend them
     start_notes = [start_words(overlaps)] if overlaps else []
@@ -218,8 +222,9 @@ def run(scene: Scene | str, overrides: Sequence[str] = (), observer=None,
     digest = state_hash(st.positions, st.velocities)
     with StopOnCtrlC(world):  # Ctrl-C ends even a long step within a second (interrupt.py)
         for dt in scene.step_lengths(dts):
-            if retune_at is not None and len(used) + 1 == retune_at[0]:
-                world.retune(retune_at[1])
+            for entry in (fork or {}).get("chain", []):
+                if entry["at"] == len(used) + 1:
+                    world.retune(entry["changes"])
             try:
                 end = world.step(dt)
             except NonFiniteState as err:
@@ -311,6 +316,7 @@ class RecordResult:
     bytes_rrd: int
     bvh_note: str = ""
     view_note: str = ""
+    fork: dict | None = None  # a fork's header entry (fork_recording)
 
 
 VIEW_AUTO_MAX_SPHERES = 2000  # above this the view channels cost more than the record (docs/recording.md)
@@ -420,7 +426,7 @@ def record(scene: Scene | str, overrides: Sequence[str] = (), mcap_path: str | N
         markers = [s.mark_finding for s in sinks if hasattr(s, "mark_finding")]  # both views mark findings
         summary = run(scene, observer=FanOut(*sinks), dts=dts, on_step=on_step, on_status=on_status,
                       on_finding=lambda finding: [mark(finding) for mark in markers], audit=audit,
-                      retune_at=(fork["at"], fork["changes"]) if fork else None)
+                      fork=fork)
     except KeyboardInterrupt:
         interrupted = True
     except StuckRunError as err:
@@ -504,6 +510,14 @@ def fork_recording(parent: str | Path, at: int, overrides: Sequence[str] = (), s
         meshes = rec.header.walls.meshes if len(rec.header.walls.meshes) else None
         after = scene_from_dict(info["table"], f"{info['source']} (from {Path(parent).name})", meshes,
                                 [item for item in overrides if not item.startswith("dt")])
+        # the parent's own fork chain: what it changed before K stays, what it changed at or
+        # after K too, unless this fork sets it (then this fork's value holds from K on)
+        from .analysis.diff_causes import settings_at
+
+        chain = list((rec.meta.get("fork") or {}).get("chain", []))
+        running = settings_at({"settings": {}, "fork": {"chain": [e for e in chain if e["at"] < at]}})
+        base = {name: running.get(name, getattr(before.settings, name)) for name in RETUNABLE_SETTINGS}
+        at_k = next((dict(e["changes"]) for e in chain if e["at"] == at), {})
         changes = {}
         for name in RETUNABLE_SETTINGS:
             if any(item.split("=", 1)[0].strip() == name for item in overrides):
@@ -511,8 +525,15 @@ def fork_recording(parent: str | Path, at: int, overrides: Sequence[str] = (), s
                 if value == "auto":
                     raise PhysdbgError(f"--set {name}=auto: a fork takes the value itself (auto is decided for a "
                                        f"whole scene before its first step)")
-                if value != getattr(before.settings, name):
-                    changes[name] = value
+                at_k.pop(name, None)
+                changes[name] = value  # what the fork sets holds from K on, even where it is the value then
+        set_here = set(changes)
+        changes_needed = {name: value for name, value in changes.items() if value != base[name]}
+        chain = ([e for e in chain if e["at"] < at] + ([{"at": at, "changes": {**at_k, **changes_needed}}]
+                                                       if at_k or changes_needed else [])
+                 + [{"at": e["at"], "changes": {k: v for k, v in e["changes"].items() if k not in set_here}}
+                    for e in chain if e["at"] > at])
+        chain = [e for e in chain if e["changes"]]
         table = rec.frame_table()
         for _ in rec.states(0, at):  # each stored state up to K against its hash and the index: a damaged parent
             pass                     # is refused here (RecordingIntegrityError names the frame)
@@ -525,14 +546,14 @@ def fork_recording(parent: str | Path, at: int, overrides: Sequence[str] = (), s
             if dt is None:
                 raise PhysdbgError(f"--set dt={new_dt}: a step's length is a number of seconds {STEP_LENGTH_RANGE}")
             remaining = float(table.time[-1] - table.time[at - 1])
-            count = steps if steps is not None else max(1, math.ceil(remaining / dt - 1e-9))
+            count = steps if steps is not None else max(1, math.floor(remaining / dt + 1e-9))  # not past its end
             after_k = [dt] * count
         else:
             after_k = dts[at - 1:] if steps is None else (dts[at - 1:at - 1 + steps] + [dts[-1]] *
                                                           max(0, steps - len(dts[at - 1:])))
         fork = {"parent": Path(parent).name, "parent_run_id": rec.meta.get("run_id"),
                 "parent_hash": table.hash_hex(at - 1), "at": at, "changes": changes,
-                "dt": dt if new_dt is not None else None}
+                "dt": dt if new_dt is not None else None, "chain": chain}
         parent_hashes = [table.hash_hex(k) for k in range(at)]
         parent_detail = rec.detail
     before.overrides = tuple(overrides)
@@ -549,6 +570,7 @@ def fork_recording(parent: str | Path, at: int, overrides: Sequence[str] = (), s
                 raise PhysdbgError(f"{parent} does not repeat: step {k} taken again gives another state than the "
                                    f"recorded one (a file from another physdbg, or an altered one; `physdbg replay "
                                    f"--verify {parent}` says more): no fork is made from it")
+    result.fork = fork
     return result
 
 
@@ -637,8 +659,9 @@ def _verify_steps(rec, world, on_step) -> VerifyResult:
     fork = rec.meta.get("fork")
     for frame in rec.states(1):
         k = frame.frame
-        if fork and k == fork["at"]:
-            world.retune(fork["changes"])
+        for entry in (fork or {}).get("chain", []):
+            if entry["at"] == k:
+                world.retune(entry["changes"])
         stats = world.step(frame.dt)
         # the states themselves, not only the hashes: without check_file a stored state
         # need not give its stored hash
@@ -718,6 +741,7 @@ def info(path: str | Path) -> dict:
             "detail": rec.detail, "particles": n, "walls": list(rec.header.walls.names),
             "meshes": mesh_sizes(rec.header.walls.meshes),
             "partners": {kind: len(partners) for kind, partners in rec.header.walls.partners.items()},
+            "fork": rec.meta.get("fork"),
             # how each kinematic mesh moves, as the run summary says it
             "mesh_motion": [f"'{name}' {rec.header.walls.meshes.motion_words(k)}"
                             for k, name in enumerate(rec.header.walls.meshes.names) if rec.header.walls.meshes.moving[k]],
@@ -766,6 +790,57 @@ def explain(path: str | Path, verify: bool = True, every_finding: bool = False):
     from .analysis.audit import explain as _explain
 
     return _explain(path, verify=verify, every_finding=every_finding)
+
+
+TRY_STEPS = 20  # steps after a finding's own that a try of its advice runs (explain --try-steps)
+
+
+def try_advice(path: str | Path, report, steps: int = TRY_STEPS) -> list[dict]:
+    """Try each piece of advice of an audit (``report``, explain's AuditReport of the
+    recording ``path``) that is a change of settings (Finding.try_settings), on the run
+    itself: a fork at the start of the finding's step with the change, for that step and
+    ``steps`` more (fork_recording), audited. Each kind's first finding with such advice
+    is tried once per change. Sets and returns report.tried, one dict a try: the finding
+    (kind, step, particles), settings, gone (no finding of its kind at its step about its
+    spheres in the fork), left (findings of its kind in the fork's window, and in the
+    run's), changed (diff's result line of the run against the fork: what else the change
+    did), ms_before / ms_after (the engine's ms a step over the window in each)."""
+    import tempfile
+
+    from .events import STEP_PHASES
+    from .record import open_recording
+
+    tried, seen = [], set()
+    with open_recording(path) as rec:
+        last = rec.steps
+    before = None  # the run's every finding, read once there is something to try
+    for finding in report.findings:
+        key = (finding.kind, tuple(sorted(finding.try_settings.items())))
+        if not finding.try_settings or key in seen:
+            continue
+        seen.add(key)
+        at = finding.step
+        window = min(steps + 1, last - at + 1)
+        with tempfile.TemporaryDirectory() as folder:
+            fork = Path(folder) / "try.mcap"
+            made = fork_recording(path, at, [f"{name}={value}" for name, value in finding.try_settings.items()],
+                                  steps=window, mcap_path=str(fork), rrd=False, detail="contacts")
+            after = explain(fork, every_finding=True)
+            before = before or explain(path, every_finding=True)
+            in_window = [f for f in after.findings if f.kind == finding.kind and at <= f.step < at + window]
+            run_window = [f for f in before.findings if f.kind == finding.kind and at <= f.step < at + window]
+            gone = not any(f.step == at and set(f.particles) == set(finding.particles) for f in in_window)
+            changed = diff(path, fork)
+            with open_recording(path) as a, open_recording(fork) as b:
+                ms = [1000.0 * float(sum(r[f"seconds_{phase}"].sum() for phase in STEP_PHASES)) / window
+                      for r in (a.stats(at, at + window), b.stats(at, at + window))]
+            tried.append({"kind": finding.kind, "step": at, "particles": list(finding.particles),
+                          "settings": dict(finding.try_settings), "steps": window, "gone": gone,
+                          "left": len(in_window), "left_in_run": len(run_window),
+                          "changed": changed.headline, "ms_before": ms[0], "ms_after": ms[1],
+                          "verified": verify(made.mcap).ok})
+    report.tried = tried
+    return tried
 
 
 def overlay(a: str | Path, b: str | Path, report=None, rrd_path: str | None = None, force: bool = False,

@@ -417,8 +417,9 @@ def _record_fork(scene, parent, at, steps, set_, output, rrd, no_rrd, detail, vi
             bar.close()
         _after_interpreted(tier)
         typer.echo(summary_text(result.summary, "the recording and the audit"))
-        typer.echo(f"fork        of {parent} at step {at}"
-                   + (f": {', '.join(set_)} from step {at} on" if set_ else ": no change (its parent, bit for bit)"))
+        from .analysis.report import fork_line
+
+        typer.echo(f"fork        {fork_line(result.fork)}")
         typer.echo(f"recorded    {result.frames - 1} steps, detail {result.detail}")
         typer.echo(f"mcap        {result.mcap}  ({size_words(result.bytes_mcap)})")
         if result.rrd:
@@ -493,6 +494,12 @@ def explain(
     no_verify: NoVerifyOption = False,
     every: Annotated[bool, typer.Option("--all", help="List every finding (default: the first 5 of each kind, "
                                                       "with the count of each).")] = False,
+    try_: Annotated[bool, typer.Option(
+        "--try", help="Try each advice that is a change of settings on a fork of the run from the finding's step "
+                      "(docs/recording.md, \"Forking a recording\"): is the finding gone, what else changed, what "
+                      "it cost.")] = False,
+    try_steps: Annotated[int, typer.Option(
+        "--try-steps", min=0, help="With --try: how many steps after the finding's the fork runs.")] = 20,
 ) -> None:
     """Audit one recording: tunnelling, overlaps, out-of-order contacts, energy gained, NaN,
     budgets hit, collapse. Exit 0 clean, 1 findings, 2 error (a file that is missing,
@@ -505,6 +512,10 @@ def explain(
         from . import api
 
         report = api.explain(recording, verify=not no_verify, every_finding=every)
+        if try_:
+            api.try_advice(recording, report, try_steps)
+        elif try_steps != api.TRY_STEPS:
+            raise PhysdbgError("--try-steps says how long --try's forks run: give it with --try")
         _after_interpreted(tier, quiet=True)
         typer.echo(_render(report, "explain", output_format, as_json, markdown))
         raise typer.Exit(0 if report.clean else 1)

@@ -74,6 +74,64 @@ def test_a_fork_changes_its_settings_from_its_step_on_and_diff_says_so(tmp_path)
     short = api.fork_recording(parent, 20, ["integrator=verlet"], steps=5, mcap_path=str(tmp_path / "short.mcap"),
                                rrd=False)
     assert short.frames == 25 and api.verify(short.mcap).ok
+    done = runner.invoke(app, ["diff", str(parent), result.mcap])  # a fork that changed its dt alone
+    assert "B is a fork of A at step 20 (steps of 0.00833333 s from there): no setting differs" in done.output
+
+
+def test_a_fork_of_a_fork_keeps_its_parent_s_changes_unless_it_sets_them(tmp_path):
+    parent = tmp_path / "bounce.mcap"
+    api.record("bounce", ["steps=60"], mcap_path=str(parent), rrd=False)
+    child = api.fork_recording(parent, 10, ["detection=discrete"], mcap_path=str(tmp_path / "child.mcap"), rrd=False)
+    # no change, after and before the child's own step: the child bit for bit
+    for at in (20, 5):
+        same = api.fork_recording(child.mcap, at, [], mcap_path=str(tmp_path / f"same{at}.mcap"), rrd=False)
+        assert _hashes(same.mcap) == _hashes(child.mcap), at
+        assert same.fork["chain"] == [{"at": 10, "changes": {"detection": "discrete"}}]
+    # what the grandchild sets holds from its step on: swept again from step 5 is the first run
+    back = api.fork_recording(child.mcap, 5, ["detection=swept"], mcap_path=str(tmp_path / "back.mcap"), rrd=False)
+    assert _hashes(back.mcap) == _hashes(parent) and back.fork["chain"] == []
+    euler = api.fork_recording(child.mcap, 30, ["integrator=euler"], mcap_path=str(tmp_path / "euler.mcap"),
+                               rrd=False)
+    assert _hashes(euler.mcap)[:30] == _hashes(child.mcap)[:30] and api.verify(euler.mcap).ok
+    assert euler.summary.detection == "discrete" and euler.summary.integrator == "euler"
+    info = CliRunner().invoke(app, ["info", euler.mcap])
+    assert ("fork        of child.mcap at step 30: integrator=euler from step 30 on; and, as its parent, "
+            "detection=discrete from step 10") in info.output, info.output
+
+
+PASS = """\
+dt = 0.1
+steps = 5
+gravity = [0.0, 0.0, 0.0]
+[[particles]]
+position = [-25.0, 0.0, 0.0]
+velocity = [100.0, 0.0, 0.0]
+radius = 0.1
+[[particles]]
+position = [25.0, 0.0, 0.0]
+velocity = [-100.0, 0.0, 0.0]
+radius = 0.1
+"""
+
+
+def test_the_audit_of_a_fork_takes_its_settings_from_its_step_live_and_in_explain(tmp_path):
+    """Two spheres meeting head-on; the fork tests only where steps end from step 2 on, and
+    they pass through each other in step 3: found by the live audit as by explain, with the
+    discrete test named, and diff names the fork's change, not an engine fault."""
+    scene = tmp_path / "pass.toml"
+    scene.write_text(PASS)
+    parent = tmp_path / "pass.mcap"
+    api.record(str(scene), mcap_path=str(parent), rrd=False)
+    fork = api.fork_recording(parent, 2, ["detection=discrete"], mcap_path=str(tmp_path / "fork.mcap"), rrd=False)
+    assert fork.summary.finding_counts == {"tunnelling": 1}
+    (live,) = fork.summary.findings
+    (audited,) = api.explain(fork.mcap).findings
+    assert live.step == audited.step == 3 and "detection = discrete tests only where each step ends" in live.message
+    assert audited.message == live.message
+    done = CliRunner().invoke(app, ["diff", str(parent), fork.mcap])
+    assert "B is a fork of A at step 2: different settings: detection: swept in A, discrete in B" in done.output
+    assert "detection = discrete tests only where each step ends" in done.output
+    assert "should never do this" not in done.output
 
 
 def _parent_end(path) -> float:
@@ -109,3 +167,52 @@ def test_a_fork_that_cannot_be_made_is_refused_in_one_line(tmp_path):
     with pytest.raises(PhysdbgError, match="does not repeat: step 5 taken again gives another state"):
         api.fork_recording(forged, 10, [], mcap_path=str(tmp_path / "f2.mcap"), rrd=False)
     assert not (tmp_path / "f2.mcap").exists()
+
+
+FAST_RAMP = """\
+name = "fast-ramp"
+description = "A fast ball dropped on a small ramp: discrete detection lets it through in step 4"
+dt = "1/60"
+steps = 10
+detection = "discrete"
+gravity = [0.0, -9.81, 0.0]
+
+[[particles]]
+position = [1.0, 3.6, 0.0]
+velocity = [0.0, -60.0, 0.0]
+radius = 0.05
+
+[[meshes]]
+name = "ramp"
+shape = "ramp"
+rotation = [-90.0, 0.0, 0.0]
+"""
+
+
+def test_explain_tries_its_advice_on_a_fork_and_says_what_it_did(tmp_path):
+    """A discrete mesh run that tunnels at step 4: explain --try forks it there with the
+    advised swept detection, and says the tunnelling is gone, what else changed (diff's
+    words) and the cost; the fork verifies; --json carries the same as fields."""
+    import json
+
+    scene = tmp_path / "fast-ramp.toml"
+    scene.write_text(FAST_RAMP)
+    recorded = tmp_path / "ramp.mcap"
+    api.record(str(scene), mcap_path=str(recorded), rrd=False)
+    runner = CliRunner()
+    done = runner.invoke(app, ["explain", str(recorded), "--try"])
+    assert done.exit_code == 1, done.output  # the run's own findings stand
+    assert "step 4 [tunnelling] sphere 0 went through mesh 'ramp'" in done.output
+    tried = next(line for line in done.output.splitlines() if line.startswith("try      "))
+    assert tried.startswith("try      detection=swept from step 4 for 7 steps: the tunnelling of step 4 (sphere 0) "
+                            "is gone; 0 tunnelling findings in those steps (1 in the run's same steps); what else "
+                            "changed: the runs part in step 4:"), tried
+    assert "ms a step in the engine" in tried and "DID NOT VERIFY" not in tried
+    done = runner.invoke(app, ["explain", str(recorded), "--try", "--try-steps", "2", "--json"])
+    (entry,) = json.loads(done.output)["tried"]
+    assert entry["gone"] is True and entry["verified"] is True and entry["steps"] == 3
+    assert entry["settings"] == {"detection": "swept"} and entry["left_in_run"] == 1
+    assert json.loads(done.output)["findings"][0]["try_settings"] == {"detection": "swept"}
+    # advice that is not a change of settings is not tried; without --try nothing is
+    done = runner.invoke(app, ["explain", str(recorded), "--json"])
+    assert json.loads(done.output)["tried"] == []

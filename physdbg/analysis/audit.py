@@ -91,6 +91,9 @@ class Finding:
     position: list[float] | None = None
     evidence: dict = field(default_factory=dict)
     aside: str = ""
+    # the advice as a change of settings a fork can try (physdbg explain --try), {} where the
+    # advice is not one (check each impulse's sign) or cannot change in the middle of a run
+    try_settings: dict = field(default_factory=dict)
     before_aside: str = field(default="", init=False, repr=False)  # the message up to its aside
     after_aside: str = field(default="", init=False, repr=False)  # and what ``add_words`` put after it
 
@@ -146,6 +149,8 @@ class AuditReport:
     notes: list[str] = field(default_factory=list)
     # the collider kinds of the run's partners the tunnelling check has no rule for
     unchecked: list[str] = field(default_factory=list)
+    # advice tried on forks of the run (api.try_advice, explain --try): one dict a try
+    tried: list[dict] = field(default_factory=list)
 
     @property
     def clean(self) -> bool:
@@ -154,7 +159,7 @@ class AuditReport:
     def as_dict(self) -> dict:
         return {"source": self.source, "scene": self.scene, "steps": self.steps, "checked": self.checked,
                 "clean": self.clean, "counts": self.counts, "findings": [f.as_dict() for f in self.findings],
-                "notes": self.notes, "unchecked": self.unchecked}
+                "notes": self.notes, "unchecked": self.unchecked, "tried": self.tried}
 
     def not_listed(self) -> dict[str, int]:
         """How many findings of each kind the report counts but does not list."""
@@ -272,11 +277,11 @@ class Auditor:
 
     def _end_step(self, end: StepEnd) -> None:
         step = end.step
-        fork = self.header.meta.get("fork")
-        if fork and step == fork["at"] and fork["changes"]:  # a fork's settings from its step on
-            self.settings = {**self.settings, **fork["changes"]}
-            self.checker = StepChecker(self.header.radius, self.header.inverse_mass, self.header.gravity_scale,
-                                       self.header.walls, self.settings)
+        for entry in (self.header.meta.get("fork") or {}).get("chain", []):
+            if entry["at"] == step:  # a fork's settings from their step on
+                self.settings = {**self.settings, **entry["changes"]}
+                self.checker = StepChecker(self.header.radius, self.header.inverse_mass, self.header.gravity_scale,
+                                           self.header.walls, self.settings)
         contacts = self._contacts
         finite = bool(np.isfinite(end.positions).all() and np.isfinite(end.velocities).all())
         if finite:
@@ -425,7 +430,8 @@ class Auditor:
                 if h0 != h1:
                     where = x0 + (x1 - x0) * (h0 / (h0 - h1))
                 self._add(Finding("tunnelling", step, [c.a], message, advice, [float(q) for q in where],
-                                  {"wall": name, "speed": speed, "dt": end.dt, "detection": detection}))
+                                  {"wall": name, "speed": speed, "dt": end.dt, "detection": detection},
+                                  try_settings=why.settings))
             elif not PARTNER_IS_SPHERE[c.kind]:  # a mesh's triangle
                 partner = partner_words(c.kind, c.other, self.names)
                 meshes = self.header.walls.meshes
@@ -446,14 +452,14 @@ class Auditor:
                                   {"mesh": meshes.names[mesh], "triangle": c.other - int(meshes.first[mesh]),
                                    "feature": part,
                                    "triangle_index": c.other, "speed": speed, "dt": end.dt,
-                                   "detection": detection}))
+                                   "detection": detection}, try_settings=why.settings))
             else:
                 message = (f"spheres {c.a} and {c.other} passed into each other with no contact at "
                            f"{c.time / end.dt:.3f}·dt, {_length(c.depth)} deep")  # then the aside, how
                 where = 0.5 * (end.positions[c.a] + end.positions[c.other])
                 self._add(Finding("tunnelling", step, [c.a, c.other], message, advice, [float(q) for q in where],
                                   {"time_in_step": c.time, "depth": c.depth, "detection": detection},
-                                  aside=how.get(detection, "")))
+                                  aside=how.get(detection, ""), try_settings=why.settings))
 
     def _check_overlap(self, step: int, end: StepEnd, contacts: Contacts | None) -> None:
         if not end.max_overlap > max(self.tolerance, 0.0):

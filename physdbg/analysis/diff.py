@@ -21,7 +21,7 @@ from ..events import PARTNER_IS_SPHERE, contact_words
 from ..record.format import TOPIC_CONTACTS as CONTACTS_TOPIC
 from . import align
 from .quiet import quiet_numerics
-from .diff_causes import Cause, Divergence, StepCase, _count, _key, _show, step_causes
+from .diff_causes import Cause, Divergence, StepCase, _count, _key, _show, settings_at, step_causes
 
 DEFAULT_TOLERANCE = 1e-9  # atol (m, m/s) and rtol when a setting that matters differs
 GROWTH_DENSE_STEPS = 64  # every frame this many steps after the divergence, then key frames
@@ -230,22 +230,20 @@ def _explain_foreign(report: DiffReport, ra, rb, label: str, atol, rtol) -> None
 
 
 def run_meta(meta: dict) -> dict:
-    """A recording's meta with the settings it ran under at its end: a fork's (header
-    ``fork``) changed from its step on (api.fork_recording); its steps before are its
-    parent's, bit for bit, so where two runs part the fork's own settings hold."""
-    fork = meta.get("fork")
-    if not fork or not fork.get("changes"):
-        return meta
-    return {**meta, "settings": {**meta.get("settings", {}), **fork["changes"]}}
+    """A recording's meta with the settings it ran under at its end (settings_at): a fork's
+    steps before its own are its parent's, bit for bit, so where two runs part the fork's
+    own settings hold."""
+    return {**meta, "settings": settings_at(meta)} if meta.get("fork") else meta
 
 
 def fork_words(ra, rb) -> str:
-    """"B is a fork of A at step 20: " where one run forks the other (its header names the
-    other's run id), else ""."""
+    """"B is a fork of A at step 20: " (and its dt from there, where it changed) where one
+    run forks the other (its header names the other's run id), else ""."""
     for mine, other, label, of in ((rb, ra, "B", "A"), (ra, rb, "A", "B")):
         fork = mine.meta.get("fork")
         if fork and fork.get("parent_run_id") and fork["parent_run_id"] == other.meta.get("run_id"):
-            return f"{label} is a fork of {of} at step {fork['at']}: "
+            dt = f" (steps of {fork['dt']:.6g} s from there)" if fork.get("dt") else ""
+            return f"{label} is a fork of {of} at step {fork['at']}{dt}: "
     return ""
 
 
@@ -625,6 +623,8 @@ class _Differ:
             more = f" (and {len(matters) - 6} more)" if len(matters) > 6 else ""
             out.append(Cause("settings", f"{fork_words(self.ra, self.rb)}different settings: {listed}{more}",
                              {"settings": [s.name for s in matters]}))
+        elif fork_words(self.ra, self.rb):  # a fork that changed no setting: its dt, or nothing
+            out.append(Cause("settings", fork_words(self.ra, self.rb) + "no setting differs", {"settings": []}))
         versions = [s for s in self.settings if s.name in ("physdbg_version", "numpy_version")]
         if versions:
             out.append(Cause("engine-version", "recorded by different engine builds: " + "; ".join(

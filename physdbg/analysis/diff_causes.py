@@ -51,6 +51,17 @@ CAUSE_KINDS = {
 }
 
 
+def settings_at(meta: dict, step: int | None = None) -> dict:
+    """The settings a recording's step ran under (None: its last): its recorded settings
+    with the changes of its fork chain (header ``fork``: api.fork_recording) from their
+    steps on."""
+    settings = dict(meta.get("settings", {}))
+    for entry in (meta.get("fork") or {}).get("chain", []):
+        if step is None or entry["at"] <= step:
+            settings.update(entry["changes"])
+    return settings
+
+
 @dataclass
 class Cause:
     """One reason the runs part. kind: a key of ``CAUSE_KINDS``, or, where one run is
@@ -105,15 +116,11 @@ class StepCase:
 
     @property
     def settings_a(self) -> dict:
-        from .diff import run_meta
-
-        return run_meta(self.differ.ra.meta)["settings"]
+        return settings_at(self.differ.ra.meta, self.div.step)
 
     @property
     def settings_b(self) -> dict:
-        from .diff import run_meta
-
-        return run_meta(self.differ.rb.meta)["settings"]
+        return settings_at(self.differ.rb.meta, self.div.step_b)
 
     @property
     def event(self) -> dict | None:
@@ -214,7 +221,7 @@ def tunnelling(case: StepCase, found: list[Cause]) -> list[Cause]:
         contacts = rec.contacts(step) if rec.detail != "state" else None
         after = d._state(rec, step)
         checker = StepChecker(rec.header.radius, rec.header.inverse_mass, rec.header.gravity_scale,
-                              rec.header.walls, rec.meta["settings"])
+                              rec.header.walls, settings_at(rec.meta, step))
         crossed[label] = checker.check(prev.positions, prev.velocities, after.positions, after.dt, contacts,
                                        after.time - after.dt)
     out = []
@@ -227,7 +234,7 @@ def tunnelling(case: StepCase, found: list[Cause]) -> list[Cause]:
                     else f"went through {partner_words(c.kind, c.other, d.names_a)}")
             rec, warns, k = (d.ra, d.warn_a, step) if label == "A" else (d.rb, d.warn_b, case.div.step_b)
             budgets = [w["code"] for w in warns.get(k, []) if w["code"] not in ("non-finite", "overlap")]
-            reason = why_tunnelled(rec.meta["settings"], budgets, pair=PARTNER_IS_SPHERE[c.kind]).reason
+            reason = why_tunnelled(settings_at(rec.meta, step), budgets, pair=PARTNER_IS_SPHERE[c.kind]).reason
             made = [x for x in ((case.cb if label == "A" else case.ca) or []) if _touches(x, c)]
             other_did = (f"run {other} resolved a contact there at {made[0]['time_in_step'] / made[0]['dt']:.3f}·dt"
                          if made else f"run {other} did not cross")

@@ -209,7 +209,37 @@ def explain_text(r: AuditReport) -> str:
             lines += record_lines(f, message, advice)
         lines.extend("  " + line for line in _more_lines(r.not_listed()))
     lines.extend(f"note     {n}" for n in r.notes)
+    lines.extend(f"try      {tried_words(t)}" for t in r.tried)
     return "\n".join(lines)
+
+
+def fork_line(fork: dict) -> str:
+    """Where a fork came from and what it changed (its header entry: api.fork_recording)."""
+    changed = [f"{name}={value}" for name, value in fork["changes"].items()]
+    if fork.get("dt"):
+        changed.append(f"dt={fork['dt']:.6g} s")
+    inherited = [e for e in fork.get("chain", []) if e["at"] != fork["at"]]
+    return (f"of {fork['parent']} at step {fork['at']}: "
+            + (f"{', '.join(changed)} from step {fork['at']} on" if changed
+               else "no change (its parent, bit for bit)")
+            + (f"; and, as its parent, " + "; ".join(
+                f"{', '.join(f'{k}={v}' for k, v in e['changes'].items())} from step {e['at']}" for e in inherited)
+               if inherited else ""))
+
+
+def tried_words(t: dict) -> str:
+    """One advice tried on a fork (api.try_advice), in one line: the change, whether the
+    finding is gone, what else changed, what it cost."""
+    change = ", ".join(f"{name}={value}" for name, value in t["settings"].items())
+    outcome = (f"the {t['kind']} of step {t['step']} (sphere{'s' if len(t['particles']) > 1 else ''} "
+               f"{', '.join(map(str, t['particles']))}) is gone" if t["gone"] else
+               f"the {t['kind']} of step {t['step']} is still there")
+    left = (f"{t['left']} {t['kind']} finding{'s' if t['left'] != 1 else ''} in those steps "
+            f"({t['left_in_run']} in the run's same steps)")
+    return (f"{change} from step {t['step']} for {count_words(t['steps'], 'step')}: {outcome}; {left}; "
+            f"what else changed: "
+            f"{t['changed']}; {t['ms_before']:.3g} -> {t['ms_after']:.3g} ms a step in the engine"
+            + ("" if t["verified"] else "; THE FORK DID NOT VERIFY"))
 
 
 def explain_markdown(r: AuditReport) -> str:
@@ -220,6 +250,7 @@ def explain_markdown(r: AuditReport) -> str:
         lines += markdown_table(["kind", "count"], [[k, v] for k, v in r.counts.items()]) + [""]
         lines += [record_markdown(f) for f in r.findings]
     lines += [f"> {n}" for n in r.notes]
+    lines += [f"> tried: {tried_words(t)}" for t in r.tried]
     return "\n".join(lines) + "\n"
 
 
@@ -560,6 +591,7 @@ def info_text(data: dict) -> str:
         + (", TRUNCATED: the writer stopped before closing it" if data["truncated"] else "") + ")",
         f"scene       {data['scene']}  ({data['source']})",
         f"settings    {settings}",
+        *([f"fork        {fork_line(data['fork'])}"] if data.get("fork") else []),
         f"steps       {data['steps']}  ({data['sim_time']:.6g} s simulated), detail {data['detail']}",
         f"bodies      {count_words(data['particles'], 'particle')}, {count_words(len(data['walls']), 'wall')}"
         + _mesh_words(data.get("meshes") or {}) + _partner_words(data.get("partners") or {}),

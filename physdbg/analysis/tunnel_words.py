@@ -11,7 +11,7 @@ should never cross: a fault to report).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 # another engine's run: it let a sphere cross within one step, so it tested where steps end
 FOREIGN_ADVICE = ("test for contacts along the path through the step (a swept test: solve for the time of impact), "
@@ -22,10 +22,12 @@ SWEPT_ADVICE = "use detection = swept (exact time of impact), or a shorter dt"
 @dataclass(frozen=True)
 class TunnelWhy:
     """reason: why the run let the sphere cross, in words that follow "with no contact";
-    advice: what to change (each "" where the other says it)."""
+    advice: what to change (each "" where the other says it); settings: the advice as the
+    settings a fork can try from the step on ({} where it is not one)."""
 
     reason: str
     advice: str
+    settings: dict = field(default_factory=dict)
 
 
 def why_tunnelled(settings: dict, budgets: list[str], foreign: bool = False, pair: bool = False,
@@ -42,7 +44,7 @@ def why_tunnelled(settings: dict, budgets: list[str], foreign: bool = False, pai
                   f"detection = sampled tests only {settings.get('samples', 4)} instants a step")
         return TunnelWhy(reason, SWEPT_ADVICE + (
             f" (this step also hit the {budgets[0]} budget: spheres left inside a thin wall by the missed "
-            f"contacts keep meeting it)" if budgets else ""))
+            f"contacts keep meeting it)" if budgets else ""), {"detection": "swept"})
     if budgets and budgets[0] == "max_memory":
         return TunnelWhy("the step reached max_memory, so contacts after it were not resolved",
                          "this step reached max_memory, so contacts after it were not resolved: raise it (the "
@@ -53,7 +55,7 @@ def why_tunnelled(settings: dict, budgets: list[str], foreign: bool = False, pai
                          f"this step hit the {budgets[0]} budget, so contacts after it were not resolved: "
                          f"raise it, or let slow contacts rest (rest_fraction)" + (f"; {pile}" if pile else ""))
     if detection != "swept":
-        return TunnelWhy(f"detection = {detection}", SWEPT_ADVICE)
+        return TunnelWhy(f"detection = {detection}", SWEPT_ADVICE, {"detection": "swept"})
     if settings.get("ordering") == "index" and pair:
         return TunnelWhy("ordering = index: a contact that an earlier one creates is not looked for",
                          "ordering = index resolves the step's predicted contacts in index order, so a contact "
