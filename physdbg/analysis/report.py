@@ -222,7 +222,7 @@ def fork_line(fork: dict) -> str:
     return (f"of {fork['parent']} at step {fork['at']}: "
             + (f"{', '.join(changed)} from step {fork['at']} on" if changed
                else "no change (its parent, bit for bit)")
-            + (f"; and, as its parent, " + "; ".join(
+            + ("; and, as its parent, " + "; ".join(
                 f"{', '.join(f'{k}={v}' for k, v in e['changes'].items())} from step {e['at']}" for e in inherited)
                if inherited else ""))
 
