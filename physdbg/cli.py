@@ -391,7 +391,7 @@ def record(
 
 
 def _record_fork(scene, parent, at, steps, set_, output, rrd, no_rrd, detail, view, force, progress, dts) -> None:
-    """record --from PARENT --at K: a fork (api.fork_recording), printed as a recording is."""
+    """record --from PARENT --at K: a fork (fork.fork_recording), printed as a recording is."""
     with _user_errors():
         if scene is not None:
             raise PhysdbgError(f"give a scene ({scene}) or --from a recording to fork, not both: a fork runs its "
@@ -405,7 +405,7 @@ def _record_fork(scene, parent, at, steps, set_, output, rrd, no_rrd, detail, vi
             raise PhysdbgError(f"{parent}: no such recording to fork")
         tier = _choose_tier_for(parent)
         from .analysis.report import size_words, summary_text
-        from .api import fork_recording
+        from .fork import fork_recording
 
         bar = _progress_bar(None, show=progress)
         try:
@@ -512,9 +512,11 @@ def explain(
         from . import api
 
         report = api.explain(recording, verify=not no_verify, every_finding=every)
+        from .fork import TRY_STEPS, try_advice
+
         if try_:
-            api.try_advice(recording, report, try_steps)
-        elif try_steps != api.TRY_STEPS:
+            try_advice(recording, report, try_steps)
+        elif try_steps != TRY_STEPS:
             raise PhysdbgError("--try-steps says how long --try's forks run: give it with --try")
         _after_interpreted(tier, quiet=True)
         typer.echo(_render(report, "explain", output_format, as_json, markdown))

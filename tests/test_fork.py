@@ -1,4 +1,4 @@
-"""Forking a recording (api.fork_recording, `physdbg record --from REC --at K`): a fork
+"""Forking a recording (fork.fork_recording, `physdbg record --from REC --at K`): a fork
 repeats its parent up to step K, every carried engine state included, and goes on from
 there with the settings changed; with no change it is its parent bit for bit."""
 
@@ -8,6 +8,7 @@ import pytest
 from typer.testing import CliRunner
 
 from physdbg import api, open_recording
+from physdbg.fork import fork_recording
 from physdbg.cli import app
 from physdbg.errors import PhysdbgError
 
@@ -35,7 +36,7 @@ def rain(tmp_path_factory):
 
 
 def test_a_fork_with_no_change_is_its_parent_bit_for_bit(rain, tmp_path):
-    result = api.fork_recording(rain, 200, [], mcap_path=str(tmp_path / "same.mcap"), rrd=False)
+    result = fork_recording(rain, 200, [], mcap_path=str(tmp_path / "same.mcap"), rrd=False)
     assert _hashes(result.mcap) == _hashes(rain)
     with open_recording(result.mcap) as rec:
         fork = rec.meta["fork"]
@@ -63,7 +64,7 @@ def test_a_fork_changes_its_settings_from_its_step_on_and_diff_says_so(tmp_path)
     assert "B is a fork of A at step 20: different settings: detection: swept in A, discrete in B" in done.output
     assert "the state was changed outside its rules" not in done.output
     # another dt from step 20 on: to the parent's end time, in steps of the new length
-    result = api.fork_recording(parent, 20, ["dt=1/120"], mcap_path=str(tmp_path / "fine.mcap"), rrd=False)
+    result = fork_recording(parent, 20, ["dt=1/120"], mcap_path=str(tmp_path / "fine.mcap"), rrd=False)
     with open_recording(result.mcap) as rec:
         table = rec.frame_table()
         assert rec.steps == 19 + 202  # 101 steps of 1/60 s left in the parent: 202 of 1/120 s
@@ -71,7 +72,7 @@ def test_a_fork_changes_its_settings_from_its_step_on_and_diff_says_so(tmp_path)
         assert table.time[-1] == pytest.approx(_parent_end(parent))
     assert _hashes(result.mcap)[:20] == theirs[:20]
     assert api.verify(result.mcap).ok
-    short = api.fork_recording(parent, 20, ["integrator=verlet"], steps=5, mcap_path=str(tmp_path / "short.mcap"),
+    short = fork_recording(parent, 20, ["integrator=verlet"], steps=5, mcap_path=str(tmp_path / "short.mcap"),
                                rrd=False)
     assert short.frames == 25 and api.verify(short.mcap).ok
     done = runner.invoke(app, ["diff", str(parent), result.mcap])  # a fork that changed its dt alone
@@ -81,16 +82,16 @@ def test_a_fork_changes_its_settings_from_its_step_on_and_diff_says_so(tmp_path)
 def test_a_fork_of_a_fork_keeps_its_parent_s_changes_unless_it_sets_them(tmp_path):
     parent = tmp_path / "bounce.mcap"
     api.record("bounce", ["steps=60"], mcap_path=str(parent), rrd=False)
-    child = api.fork_recording(parent, 10, ["detection=discrete"], mcap_path=str(tmp_path / "child.mcap"), rrd=False)
+    child = fork_recording(parent, 10, ["detection=discrete"], mcap_path=str(tmp_path / "child.mcap"), rrd=False)
     # no change, after and before the child's own step: the child bit for bit
     for at in (20, 5):
-        same = api.fork_recording(child.mcap, at, [], mcap_path=str(tmp_path / f"same{at}.mcap"), rrd=False)
+        same = fork_recording(child.mcap, at, [], mcap_path=str(tmp_path / f"same{at}.mcap"), rrd=False)
         assert _hashes(same.mcap) == _hashes(child.mcap), at
         assert same.fork["chain"] == [{"at": 10, "changes": {"detection": "discrete"}}]
     # what the grandchild sets holds from its step on: swept again from step 5 is the first run
-    back = api.fork_recording(child.mcap, 5, ["detection=swept"], mcap_path=str(tmp_path / "back.mcap"), rrd=False)
+    back = fork_recording(child.mcap, 5, ["detection=swept"], mcap_path=str(tmp_path / "back.mcap"), rrd=False)
     assert _hashes(back.mcap) == _hashes(parent) and back.fork["chain"] == []
-    euler = api.fork_recording(child.mcap, 30, ["integrator=euler"], mcap_path=str(tmp_path / "euler.mcap"),
+    euler = fork_recording(child.mcap, 30, ["integrator=euler"], mcap_path=str(tmp_path / "euler.mcap"),
                                rrd=False)
     assert _hashes(euler.mcap)[:30] == _hashes(child.mcap)[:30] and api.verify(euler.mcap).ok
     assert euler.summary.detection == "discrete" and euler.summary.integrator == "euler"
@@ -122,7 +123,7 @@ def test_the_audit_of_a_fork_takes_its_settings_from_its_step_live_and_in_explai
     scene.write_text(PASS)
     parent = tmp_path / "pass.mcap"
     api.record(str(scene), mcap_path=str(parent), rrd=False)
-    fork = api.fork_recording(parent, 2, ["detection=discrete"], mcap_path=str(tmp_path / "fork.mcap"), rrd=False)
+    fork = fork_recording(parent, 2, ["detection=discrete"], mcap_path=str(tmp_path / "fork.mcap"), rrd=False)
     assert fork.summary.finding_counts == {"tunnelling": 1}
     (live,) = fork.summary.findings
     (audited,) = api.explain(fork.mcap).findings
@@ -165,7 +166,7 @@ def test_a_fork_that_cannot_be_made_is_refused_in_one_line(tmp_path):
     assert done.exit_code == 2 and "frame 5" in done.output, done.output
     forged = tamper.nudge_state(parent, tmp_path / "forged.mcap", 5, rehash=True, reindex=True)
     with pytest.raises(PhysdbgError, match="does not repeat: step 5 taken again gives another state"):
-        api.fork_recording(forged, 10, [], mcap_path=str(tmp_path / "f2.mcap"), rrd=False)
+        fork_recording(forged, 10, [], mcap_path=str(tmp_path / "f2.mcap"), rrd=False)
     assert not (tmp_path / "f2.mcap").exists()
 
 

@@ -133,7 +133,7 @@ def test_no_two_modules_import_each_other_however_indirectly():
 def test_the_layers_import_only_downwards():
     graph = _module_graph()
     layer = {"errors": 0, "version": 0, "limits": 0, "kernel_cache": 0, "write_switch": 0, "events": 1, "observe": 2, "engine": 2, "scenes": 3, "advisor": 3, "meshes": 3,
-             "scene": 4, "record": 5, "peers": 6, "analysis": 7, "precompile": 8, "tier": 9, "interrupt": 9, "api": 10, "viewers": 10, "serve": 11,
+             "scene": 4, "record": 5, "peers": 6, "analysis": 7, "precompile": 8, "tier": 9, "interrupt": 9, "api": 10, "viewers": 10, "serve": 11, "fork": 11,
              "cli": 12, "__main__": 13, "physdbg": 14}
     for module, imports in graph.items():
         here = layer[module.split(".")[0]]

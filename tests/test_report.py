@@ -29,7 +29,8 @@ def test_a_cause_a_finding_and_a_departure_are_one_record_printed_one_way():
     assert record_markdown(cause, "said above") == "- **step 3** *tunnelling*: said above"
     assert record_markdown(whole_run, "said above") == "- *settings*: said above"
     # the record's names are not fields of the JSON
-    assert set(finding.as_dict()) == {"kind", "step", "particles", "message", "advice", "position", "evidence"}
+    assert set(finding.as_dict()) == {"kind", "step", "particles", "message", "advice", "position", "evidence",
+                                      "try_settings"}
 
 
 def test_a_markdown_table_writes_empty_and_absent_cells_as_the_reports_always_have():

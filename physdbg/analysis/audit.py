@@ -149,7 +149,7 @@ class AuditReport:
     notes: list[str] = field(default_factory=list)
     # the collider kinds of the run's partners the tunnelling check has no rule for
     unchecked: list[str] = field(default_factory=list)
-    # advice tried on forks of the run (api.try_advice, explain --try): one dict a try
+    # advice tried on forks of the run (fork.try_advice, explain --try): one dict a try
     tried: list[dict] = field(default_factory=list)
 
     @property

@@ -53,7 +53,7 @@ CAUSE_KINDS = {
 
 def settings_at(meta: dict, step: int | None = None) -> dict:
     """The settings a recording's step ran under (None: its last): its recorded settings
-    with the changes of its fork chain (header ``fork``: api.fork_recording) from their
+    with the changes of its fork chain (header ``fork``: fork.fork_recording) from their
     steps on."""
     settings = dict(meta.get("settings", {}))
     for entry in (meta.get("fork") or {}).get("chain", []):

@@ -214,7 +214,7 @@ def explain_text(r: AuditReport) -> str:
 
 
 def fork_line(fork: dict) -> str:
-    """Where a fork came from and what it changed (its header entry: api.fork_recording)."""
+    """Where a fork came from and what it changed (its header entry: fork.fork_recording)."""
     changed = [f"{name}={value}" for name, value in fork["changes"].items()]
     if fork.get("dt"):
         changed.append(f"dt={fork['dt']:.6g} s")
@@ -228,7 +228,7 @@ def fork_line(fork: dict) -> str:
 
 
 def tried_words(t: dict) -> str:
-    """One advice tried on a fork (api.try_advice), in one line: the change, whether the
+    """One advice tried on a fork (fork.try_advice), in one line: the change, whether the
     finding is gone, what else changed, what it cost."""
     change = ", ".join(f"{name}={value}" for name, value in t["settings"].items())
     outcome = (f"the {t['kind']} of step {t['step']} (sphere{'s' if len(t['particles']) > 1 else ''} "
