@@ -217,3 +217,5 @@ def test_explain_tries_its_advice_on_a_fork_and_says_what_it_did(tmp_path):
     # advice that is not a change of settings is not tried; without --try nothing is
     done = runner.invoke(app, ["explain", str(recorded), "--json"])
     assert json.loads(done.output)["tried"] == []
+    done = runner.invoke(app, ["explain", str(recorded), "--try-steps", "3"])
+    assert done.exit_code == 2 and "--try-steps says how long --try's forks run: give it with --try" in done.output
