@@ -160,6 +160,11 @@ def test_a_fork_that_cannot_be_made_is_refused_in_one_line(tmp_path):
     assert "a fork needs --from (the recording) and --at" in refused()
     done = runner.invoke(app, ["record", "bounce", "--from", str(parent), "--at", "3"])
     assert done.exit_code == 2 and "not both" in done.output
+    done = runner.invoke(app, ["record"])
+    assert done.exit_code == 2 and "give a scene to record (a built-in name or a .toml file), or --from" in done.output
+    done = runner.invoke(app, ["record", "--from", str(parent), "--at", "10", "--steps", "4", "-o",
+                               str(tmp_path / "four.mcap"), "--no-rrd"])
+    assert done.exit_code == 0 and "recorded    13 steps" in done.output, done.output  # steps 1..9, then 4 from 10
     # a damaged parent: a state altered in place, or altered and rehashed everywhere (only a re-simulation tells)
     altered = tamper.nudge_state(parent, tmp_path / "altered.mcap", 5)
     done = runner.invoke(app, ["record", "--from", str(altered), "--at", "10", "-o", str(tmp_path / "f1.mcap")])
