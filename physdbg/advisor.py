@@ -341,11 +341,8 @@ def _contacts_possible(x, r, movable, reach, walls, duration: float = 0.0) -> bo
     if n == 0:
         return False
     extent = np.where(movable, reach, 0.0) + r
-    if n >= 2:
-        d = np.linalg.norm(minimum_image(x[:, None, :] - x[None, :, :], walls.period), axis=2)
-        np.fill_diagonal(d, np.inf)
-        if np.any(d <= extent[:, None] + extent[None, :]):
-            return True
+    if n >= 2 and _two_reach_each_other(x, extent, walls):
+        return True
     for normal, offset, two, t in zip(walls.normals, walls.offsets, walls.two_sided, walls.thickness, strict=True):
         gap = x @ normal - offset  # signed distance of each centre from the plane
         distance = np.abs(gap) - t / 2 if two else gap  # a one-sided wall is a half-space: behind it is touching
@@ -362,6 +359,38 @@ def _contacts_possible(x, r, movable, reach, walls, duration: float = 0.0) -> bo
         if np.any(outside <= extent):
             return True
     return _kind_partners_reached(x, extent, walls)
+
+
+PAIRS_LOOKED_AT = 1_000_000  # box pairs _two_reach_each_other measures before it says "maybe"
+
+
+def _two_reach_each_other(x, extent, walls) -> bool:
+    """Whether two spheres (centres x (N, 3) m, each within ``extent`` (N,) m of where it
+    starts) can touch: the broad phase's grid finds the pairs whose boxes meet, so time
+    and memory grow with N and those pairs, never N × N. Past PAIRS_LOOKED_AT pairs of
+    boxes, or where a sphere reaches half a periodic box round, the answer is yes (what
+    the advisor has not measured it never calls out of reach)."""
+    from .engine.broadphase.grid import grid_pairs
+    from .engine.broadphase.periodic import images
+
+    period = np.asarray(walls.period, dtype=np.float64)
+    periodic = period > 0
+    if periodic.any():
+        if 2.0 * float(extent.max()) >= float(period[periodic].min()) / 2.0:
+            return True
+        origin = np.asarray(walls.period_origin, dtype=np.float64)
+        x = np.where(periodic, origin + np.mod(x - origin, np.where(periodic, period, 1.0)), x)
+        lo, hi, owner = images(x - extent[:, None], x + extent[:, None], origin, period)
+    else:
+        lo, hi, owner = x - extent[:, None], x + extent[:, None], np.arange(len(x))
+    boxes, _, _ = grid_pairs(np.ascontiguousarray(lo), np.ascontiguousarray(hi), 0.0, PAIRS_LOOKED_AT)
+    if len(boxes) > PAIRS_LOOKED_AT:
+        return True
+    a, b = owner[boxes[:, 0]], owner[boxes[:, 1]]
+    keep = a != b
+    a, b = a[keep], b[keep]
+    d = np.linalg.norm(minimum_image(x[a] - x[b], period), axis=1)
+    return bool(np.any(d <= extent[a] + extent[b]))
 
 
 def _kind_partners_reached(x, extent, walls) -> bool:

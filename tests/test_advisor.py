@@ -7,6 +7,8 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from physdbg import api
@@ -338,3 +340,41 @@ def test_check_notes_a_kinematic_mesh_s_work_and_a_sphere_riding_it(tmp_path):
     assert "note        sphere 0 starts resting on mesh 'platform' triangle 0, which moves: it is carried" in result.output
     lifted = CliRunner().invoke(app, ["check", str(scene), "-s", "particles.0.position=[0.0, 0.5, 0.0]"]).output
     assert "starts resting" not in lifted and "does work on every sphere" in lifted
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(2, 40), periodic=st.booleans(), reach=st.floats(0.0, 0.6))
+def test_whether_two_spheres_reach_each_other_is_the_brute_force_answer(seed, n, periodic, reach):
+    """The grid's answer equals every pair measured, in an open and in a periodic box
+    (where a pair meets through its nearest images)."""
+    from physdbg.advisor import _two_reach_each_other
+    from physdbg.engine.periodic import minimum_image
+    from physdbg.engine.state import Walls
+
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(0.0, 4.0, (n, 3))
+    extent = rng.uniform(0.0, 0.05, n) + reach * (rng.random(n) < 0.5)
+    walls = Walls(period=np.array([4.0, 0.0, 4.0]) if periodic else np.zeros(3))
+    d = np.linalg.norm(minimum_image(x[:, None] - x[None], walls.period), axis=2)
+    np.fill_diagonal(d, np.inf)
+    brute = bool(np.any(d <= extent[:, None] + extent[None]))
+    if periodic and 2 * extent.max() >= 2.0:
+        assert _two_reach_each_other(x, extent, walls)  # reaching half the box round: yes, unmeasured
+    else:
+        assert _two_reach_each_other(x, extent, walls) == brute
+
+
+def test_check_of_a_hundred_thousand_spheres_needs_no_n_by_n_matrix():
+    """check's estimates come from the broad phase's grid: at 100,000 spheres an N x N
+    matrix of distances would be 80 GB; numpy's allocations stay under 200 MB."""
+    import tracemalloc
+
+    scene = load_scene("rain", ["generate.count=100000", "generate.radius=0.004"])
+    tracemalloc.start()
+    try:
+        advice = advise(scene)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert advice.facts["contacts_possible"]
+    assert peak < 200e6, f"{peak / 1e6:.0f} MB"

@@ -973,3 +973,26 @@ def test_each_mesh_search_gives_the_same_run_and_auto_says_which_it_took(name):
     result = CliRunner().invoke(app, ["run", name, "--set", "steps=40", "--set", "mesh_search=together"])
     assert result.exit_code == 0, result.output
     assert "searched by the simultaneous descent in 40 of 40 steps" in result.output
+
+
+@pytest.mark.parametrize("speed", [50.0, 80.0, 130.0, 300.0])
+def test_a_discrete_sphere_ending_a_step_deep_in_a_closed_box_makes_one_contact_or_tunnels_never_a_storm(speed):
+    """A 0.2 m sphere at 1.05 m from a 1 m box's centre, 0.01 s steps: at 50 m/s it ends
+    the first step 5 cm short of the face, overlapping it, and bounces off (one contact);
+    at 80 and 130 m/s its centre ends inside the box, past a face: it went through, the
+    audit names the tunnelling, and no face bounces it back and forth; at 300 m/s it
+    passes the box whole. Before the discrete test was one contact per mesh, a centre
+    between two faces approached one, then the other, up to the contact budget."""
+    scene = parse_scene('dt = 0.01\nsteps = 4\ngravity = [0.0, 0.0, 0.0]\ndetection = "discrete"\n'
+                        '[[meshes]]\nname = "block"\nshape = "box"\n'
+                        f'[[particles]]\nposition = [-1.05, 0.0, 0.0]\nvelocity = [{speed}, 0.0, 0.0]\n'
+                        'radius = 0.2\n', "deep.toml")
+    result = api.run(scene)
+    assert not result.warnings and "budget" not in result.finding_counts
+    assert "collapse" not in result.finding_counts
+    if speed == 50.0:
+        assert result.contacts == 1 and "tunnelling" not in result.finding_counts
+        assert result.momentum_end[0] == pytest.approx(-result.momentum_start[0])  # bounced off the near face
+    else:
+        assert result.contacts == 0 and result.finding_counts["tunnelling"] >= 1
+        assert result.momentum_end == result.momentum_start  # through, untouched

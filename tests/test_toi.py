@@ -358,7 +358,7 @@ def test_a_paddle_sweeping_a_resting_ball_is_caught_by_the_swept_test_and_missed
     arm = math.hypot(1.0, 0.15)
     expected = (math.atan2(0.15, 1.0) - math.asin(radius / arm)) / 30.0
     assert t == pytest.approx(expected, rel=1e-9)
-    missed, _ = moving_triangle_toi_sampled(*ball, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, radius, tri, motion, 0.0, EULER,
+    missed, *_ = moving_triangle_toi_sampled(*ball, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, radius, tri, motion, 0.0, EULER,
                                             0.0, 0.01, 1)
     assert missed == INF
 
@@ -376,7 +376,7 @@ def test_a_sphere_falling_on_a_triangle_touches_its_face_edge_or_corner_as_aimed
         if expected is not None:
             assert t == pytest.approx(expected, abs=1e-12)  # (1 − 0.1) / 2 m/s
     # discrete: one sample at the end of the step; a fast sphere passes through unseen
-    t, found = triangle_toi_sampled(0.25, 0.25, 1.0, 0.0, 0.0, -20.0, 0.0, 0.0, 0.0, 0.1, tri, EULER, 0.0, 0.1, 1)
+    t, found, *_ = triangle_toi_sampled(0.25, 0.25, 1.0, 0.0, 0.0, -20.0, 0.0, 0.0, 0.0, 0.1, tri, EULER, 0.0, 0.1, 1)
     assert t == math.inf and found == -1
     t, found, _ = triangle_toi_swept(0.25, 0.25, 1.0, 0.0, 0.0, -20.0, 0.0, 0.0, 0.0, 0.1, tri, EULER, 0.0, 0.1, 1e-12)
     assert t == pytest.approx(0.045, abs=1e-12) and found == FACE

@@ -417,11 +417,11 @@ class Auditor:
             # a test that looks only at some instants says so in the message too
             how = {detection: why.reason} if detection in ("discrete", "sampled") else {}
             speed = float(np.linalg.norm(self._v[c.a]))
+            travel = self._travel_words(c.a, end)
             if c.kind == KIND_WALL:
                 name = self.wall_names[c.other]
                 message = (f"sphere {c.a} went through wall '{name}' with no contact "
-                           f"(it moved {speed * end.dt:.3g} m in the step at {speed:.3g} m/s"
-                           f"{'; ' + how[detection] if detection in how else ''})")
+                           f"({travel}{'; ' + how[detection] if detection in how else ''})")
                 where = self.header.walls.normals[c.other] * self.header.walls.offsets[c.other]
                 # the point where the centre's straight path met the plane
                 x0, x1 = self._x[c.a], end.positions[c.a]
@@ -445,9 +445,9 @@ class Auditor:
                                f"{_length(c.depth)} past the triangle's plane"
                                f"{'; ' + how[detection] if detection in how else ''})")
                 else:
-                    message = (f"sphere {c.a} went through {partner} with no contact (across its {part}; it moved "
-                               f"{speed * end.dt:.3g} m in the step at {speed:.3g} m/s, ending {_length(c.depth)} "
-                               f"past the triangle's plane{'; ' + how[detection] if detection in how else ''})")
+                    message = (f"sphere {c.a} went through {partner} with no contact (across its {part}; {travel}, "
+                               f"ending {_length(c.depth)} past the triangle's plane"
+                               f"{'; ' + how[detection] if detection in how else ''})")
                 self._add(Finding("tunnelling", step, [c.a], message, advice, [float(q) for q in c.where],
                                   {"mesh": meshes.names[mesh], "triangle": c.other - int(meshes.first[mesh]),
                                    "feature": part,
@@ -460,6 +460,20 @@ class Auditor:
                 self._add(Finding("tunnelling", step, [c.a, c.other], message, advice, [float(q) for q in where],
                                   {"time_in_step": c.time, "depth": c.depth, "detection": detection},
                                   aside=how.get(detection, ""), try_settings=why.settings))
+
+    def _travel_words(self, i: int, end: StepEnd) -> str:
+        """How far sphere i got in the step and how fast, from the run's own numbers: the
+        straight distance from its start to its end (the nearest image in a periodic box),
+        at its speed at the start, and at the end too where a contact or a force changed
+        it by more than a tenth (a sphere struck in the step moved farther than its
+        starting speed says)."""
+        from ..engine.periodic import minimum_image
+
+        moved = float(np.linalg.norm(minimum_image(end.positions[i] - self._x[i], self.header.walls.period)))
+        before, after = float(np.linalg.norm(self._v[i])), float(np.linalg.norm(end.velocities[i]))
+        if abs(after - before) <= 0.1 * max(before, after):
+            return f"it moved {moved:.3g} m in the step at {before:.3g} m/s"
+        return f"it moved {moved:.3g} m in the step, at {before:.3g} m/s at its start and {after:.3g} m/s at its end"
 
     def _check_overlap(self, step: int, end: StepEnd, contacts: Contacts | None) -> None:
         if not end.max_overlap > max(self.tolerance, 0.0):
@@ -683,7 +697,22 @@ class Auditor:
         driven = on_mesh.copy()
         if on_mesh.any():
             driven[on_mesh] = meshes.moving[meshes.mesh_of[c.other[on_mesh]]]
-        if 2 * int(driven.sum()) > bounces:
+        detection = self.settings.get("detection", "swept")
+        headline = f"{bounces} bounces among {spheres} in one step: the collision rate has blown up"
+        try_settings = {}
+        if detection in ("discrete", "sampled"):
+            # every contact of such a run is found at an instant the test looks, among
+            # spheres already overlapping there: the storm is the test's, not the motion's
+            where = ("where the step ends" if detection == "discrete"
+                     else f"at its {self.settings.get('samples')} samples a step")
+            headline = (f"{bounces} bounces among {spheres} in one step, at the instants the {detection} test looks "
+                        f"({where})")
+            why = (f"detection = {detection} finds contacts only among spheres already overlapping at those instants, "
+                   "and an impulse can leave a sphere approaching another body it overlaps, so the same spheres are "
+                   "bounced again and again at one instant; swept tests meet each contact at its own time of impact")
+            advice = "use detection = swept (each contact at its time of impact), or a shorter dt"
+            try_settings = {"detection": "swept"}
+        elif 2 * int(driven.sum()) > bounces:
             names = sorted({f"'{meshes.names[k]}'" for k in meshes.mesh_of[c.other[driven]].tolist()})
             why = (f"kinematic mesh {', '.join(names)} drives them: its prescribed motion strikes the same spheres "
                    "again and again within the step, as when it carries a sphere or squeezes it against something, "
@@ -699,10 +728,9 @@ class Auditor:
             why = ("inelastic collapse: with restitution below 1 the gaps between a few spheres shrink geometrically "
                    "and they collide ever more often")
             advice = "; ".join(rules) or "lower the restitution, or use a shorter dt"
-        finding = Finding("collapse", step, involved[:10].tolist(),
-                          f"{bounces} bounces among {spheres} in one step: the collision rate has blown up",
-                          advice, evidence={"contacts": len(c), "bounces": bounces, "spheres": len(involved)},
-                          aside=why)
+        finding = Finding("collapse", step, involved[:10].tolist(), headline, advice,
+                          evidence={"contacts": len(c), "bounces": bounces, "spheres": len(involved)}, aside=why,
+                          try_settings=try_settings)
         if self.settings.get("sleep_speed"):
             self._rattling.append((finding, involved))
             self._last_rattle = step

@@ -334,9 +334,11 @@ def triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, integrat
 
 @borrowing
 def triangle_toi_sampled(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, integrator, k, horizon, samples):
-    """(t, feature): the first of ``samples`` instants in (0, horizon] at which the sphere
-    overlaps the triangle while approaching it (the seed's case c; ``samples`` = 1 is the
-    discrete test), or (INF, -1)."""
+    """(t, feature, y0, y1, y2): the first of ``samples`` instants in (0, horizon] at which
+    the sphere overlaps the triangle while approaching it (the seed's case c; ``samples`` =
+    1 is the discrete test), or (INF, -1, ...), and where the centre is then (m; for a
+    moving triangle, seen from its mesh as it stood at the step's start): a mesh's
+    collider asks whether this triangle is the mesh's nearest there."""
     return _triangle_toi_sampled(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, False, tri[0], 0.0, integrator, k,
                                  horizon, samples)
 
@@ -365,8 +367,9 @@ def moving_triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, m
 @borrowing
 def moving_triangle_toi_sampled(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, motion, tau0, integrator, k,
                                 horizon, samples):
-    """(t, feature): triangle_toi_sampled for a triangle of a moving mesh (arguments as
-    moving_triangle_toi_swept's): overlap and approach judged in the mesh's frame."""
+    """(t, feature, y0, y1, y2): triangle_toi_sampled for a triangle of a moving mesh
+    (arguments as moving_triangle_toi_swept's): overlap and approach judged in the mesh's
+    frame."""
     return _triangle_toi_sampled(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, True, motion, tau0, integrator, k,
                                  horizon, samples)
 
@@ -427,7 +430,8 @@ def _triangle_toi_swept(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, moving,
 def _triangle_toi_sampled(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, moving, motion, tau0, integrator, k,
                           horizon, samples):
     """The sampled test against a fixed or (``moving``) a moving triangle: overlap and
-    approach at each sample, seen from the triangle."""
+    approach at each sample, seen from the triangle; (t, feature, y0, y1, y2) as
+    triangle_toi_sampled's."""
     if STRAIGHT_PATH[integrator]:
         a0 = 0.0
         a1 = 0.0
@@ -438,5 +442,5 @@ def _triangle_toi_sampled(x0, x1, x2, v0, v1, v2, a0, a1, a2, radius, tri, movin
         y0, y1, y2, r0, r1, r2 = _seen_from_triangle(p0, p1, p2, e0, e1, e2, moving, motion, tau0 + t)
         d0, d1, d2, feature = _from_triangle(y0, y1, y2, tri)
         if d0 * d0 + d1 * d1 + d2 * d2 < radius * radius and d0 * r0 + d1 * r1 + d2 * r2 < 0.0:
-            return t, feature
-    return INF, -1
+            return t, feature, y0, y1, y2
+    return INF, -1, 0.0, 0.0, 0.0

@@ -265,20 +265,130 @@ def time_of_impact(i, t, x, v, a, radius, sigma, step_end, integrator, k, detect
                                                                 a[i, 0], a[i, 1], a[i, 2], radius[i], corners[t],
                                                                 motion, start, integrator, k, horizon, tolerance)
             return start, found, passes
-        found, _feature = moving_triangle_toi_sampled(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2],
-                                                      a[i, 0], a[i, 1], a[i, 2], radius[i], corners[t], motion,
-                                                      start, integrator, k, horizon,
-                                                      1 if detection == DISCRETE else samples)
+        found, _feature, y0, y1, y2 = moving_triangle_toi_sampled(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1],
+                                                                  v[i, 2], a[i, 0], a[i, 1], a[i, 2], radius[i],
+                                                                  corners[t], motion, start, integrator, k, horizon,
+                                                                  1 if detection == DISCRETE else samples)
+        if found != math.inf:
+            s0, s1, s2, _r0, _r1, _r2 = in_body_frame(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2], motion,
+                                                      start)
+            if not one_contact_with_its_mesh(s0, s1, s2, y0, y1, y2, t, meshes):
+                found = math.inf
         return start, found, 1
     if detection == SWEPT:
         found, _feature, _passes = triangle_toi_swept(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2], a[i, 0],
                                                       a[i, 1], a[i, 2], radius[i], corners[t], integrator, k, horizon,
                                                       tolerance)
     else:
-        found, _feature = triangle_toi_sampled(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2], a[i, 0],
-                                               a[i, 1], a[i, 2], radius[i], corners[t], integrator, k, horizon,
-                                               1 if detection == DISCRETE else samples)
+        found, _feature, y0, y1, y2 = triangle_toi_sampled(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2],
+                                                           a[i, 0], a[i, 1], a[i, 2], radius[i], corners[t],
+                                                           integrator, k, horizon,
+                                                           1 if detection == DISCRETE else samples)
+        if found != math.inf and not one_contact_with_its_mesh(x[i, 0], x[i, 1], x[i, 2], y0, y1, y2, t, meshes):
+            found = math.inf
     return start, found, 1
+
+
+@borrowing
+def one_contact_with_its_mesh(s0, s1, s2, y0, y1, y2, t, meshes) -> bool:
+    """Whether a sampled or discrete test's overlap with triangle t, found with the centre
+    at y after starting the test at s (m; both in the frame of the corners at the step's
+    start), is the sphere's one contact with t's mesh: its centre went through none of the
+    mesh's triangles on the way (through_its_mesh: it has tunnelled, and the audit names
+    it), and t is the mesh's triangle nearest it (nearest_of_its_mesh).
+
+    Why: a sphere that ends a step deep in a closed mesh overlaps faces on both sides of
+    its centre and approaches the far one; bounced off it, it approaches the near one, and
+    so on without end (a storm of contacts at one instant, up to the budget). The seed's
+    discrete test looks where the step ends: a centre past a face went through it, and an
+    overlap is one contact with the surface where it is nearest, resolved if the sphere
+    approaches it."""
+    return not through_its_mesh(s0, s1, s2, y0, y1, y2, t, meshes) and nearest_of_its_mesh(y0, y1, y2, t, meshes)
+
+
+@borrowing
+def _through_triangle(s0, s1, s2, e0, e1, e2, corners, u) -> bool:
+    """Whether the segment from s to e (m) passes through triangle u's face (from one side
+    of its plane strictly to the other, across the face or its edges)."""
+    a0, a1, a2 = corners[u, 0, 0], corners[u, 0, 1], corners[u, 0, 2]
+    b0, b1, b2 = corners[u, 1, 0], corners[u, 1, 1], corners[u, 1, 2]
+    c0, c1, c2 = corners[u, 2, 0], corners[u, 2, 1], corners[u, 2, 2]
+    u0, u1, u2 = b0 - a0, b1 - a1, b2 - a2
+    w0, w1, w2 = c0 - a0, c1 - a1, c2 - a2
+    n0 = u1 * w2 - u2 * w1
+    n1 = u2 * w0 - u0 * w2
+    n2 = u0 * w1 - u1 * w0
+    before = n0 * (s0 - a0) + n1 * (s1 - a1) + n2 * (s2 - a2)
+    after = n0 * (e0 - a0) + n1 * (e1 - a1) + n2 * (e2 - a2)
+    if not ((before > 0.0 and after < 0.0) or (before < 0.0 and after > 0.0)):
+        return False
+    f = before / (before - after)
+    p0, p1, p2 = s0 + f * (e0 - s0), s1 + f * (e1 - s1), s2 + f * (e2 - s2)
+    # on the inner side of each edge (or on it): the crossing point is on the face
+    for k in range(3):
+        if k == 0:
+            q0, q1, q2, d0, d1, d2 = a0, a1, a2, u0, u1, u2
+        elif k == 1:
+            q0, q1, q2, d0, d1, d2 = b0, b1, b2, c0 - b0, c1 - b1, c2 - b2
+        else:
+            q0, q1, q2, d0, d1, d2 = c0, c1, c2, a0 - c0, a1 - c1, a2 - c2
+        r0, r1, r2 = p0 - q0, p1 - q1, p2 - q2
+        if n0 * (d1 * r2 - d2 * r1) + n1 * (d2 * r0 - d0 * r2) + n2 * (d0 * r1 - d1 * r0) < 0.0:
+            return False
+    return True
+
+
+@borrowing
+def through_its_mesh(s0, s1, s2, e0, e1, e2, t, meshes) -> bool:
+    """Whether the segment from s to e (m, in the frame of the corners at the step's start)
+    passes through a triangle of triangle t's mesh: a walk of the mesh's tree with the
+    segment's box."""
+    corners, _mesh_of, _restitution, box_lo, box_hi, leaf, skip, tree_first = _unpack(meshes)
+    k = meshes[1][t]
+    l0, l1, l2, h0, h1, h2 = frame_box(k, min(s0, e0), min(s1, e1), min(s2, e2), max(s0, e0), max(s1, e1),
+                                       max(s2, e2), meshes)
+    q = tree_first[k]
+    while q < tree_first[k + 1]:
+        if _box_meets(l0, l1, l2, h0, h1, h2, box_lo, box_hi, q):
+            u = leaf[q]
+            if u >= 0 and _through_triangle(s0, s1, s2, e0, e1, e2, corners, u):
+                return True
+            q += 1
+        else:
+            q = skip[q]
+    return False
+
+
+@borrowing
+def nearest_of_its_mesh(y0, y1, y2, t, meshes) -> bool:
+    """Whether triangle t is the triangle of its mesh nearest the point y (m; in the frame
+    of the corners at the step's start), the lower number winning a tie: a walk of the
+    mesh's tree with y's box grown by t's distance."""
+    corners, _mesh_of, _restitution, box_lo, box_hi, leaf, skip, tree_first = _unpack(meshes)
+    q0, q1, q2, _feature = closest_on_triangle(y0, y1, y2, corners[t, 0, 0], corners[t, 0, 1], corners[t, 0, 2],
+                                               corners[t, 1, 0], corners[t, 1, 1], corners[t, 1, 2],
+                                               corners[t, 2, 0], corners[t, 2, 1], corners[t, 2, 2])
+    mine = (y0 - q0) * (y0 - q0) + (y1 - q1) * (y1 - q1) + (y2 - q2) * (y2 - q2)
+    reach = math.sqrt(mine)
+    k = meshes[1][t]
+    l0, l1, l2, h0, h1, h2 = frame_box(k, y0 - reach, y1 - reach, y2 - reach, y0 + reach, y1 + reach, y2 + reach,
+                                       meshes)
+    q = tree_first[k]
+    while q < tree_first[k + 1]:
+        if _box_meets(l0, l1, l2, h0, h1, h2, box_lo, box_hi, q):
+            u = leaf[q]
+            if u >= 0 and u != t:
+                q0, q1, q2, _feature = closest_on_triangle(y0, y1, y2, corners[u, 0, 0], corners[u, 0, 1],
+                                                           corners[u, 0, 2], corners[u, 1, 0], corners[u, 1, 1],
+                                                           corners[u, 1, 2], corners[u, 2, 0], corners[u, 2, 1],
+                                                           corners[u, 2, 2])
+                theirs = (y0 - q0) * (y0 - q0) + (y1 - q1) * (y1 - q1) + (y2 - q2) * (y2 - q2)
+                if theirs < mine or (theirs == mine and u < t):
+                    return False
+            q += 1
+        else:
+            q = skip[q]
+    return True
 
 
 @borrowing

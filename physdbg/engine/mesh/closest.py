@@ -39,7 +39,8 @@ def closest_on_triangle(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
         return bx, by, bz, CORNER_1
     vc = d1 * d4 - d3 * d2
     if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-        t = d1 / (d1 - d3)
+        # d1 - d3 = |ab|² > 0, but computed from a far point's dot products it can cancel to 0
+        t = d1 / (d1 - d3) if d1 - d3 > 0.0 else 0.0
         return ax + t * abx, ay + t * aby, az + t * abz, EDGE_0
     cpx = px - cx
     cpy = py - cy
@@ -50,12 +51,20 @@ def closest_on_triangle(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
         return cx, cy, cz, CORNER_2
     vb = d5 * d2 - d1 * d6
     if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-        t = d2 / (d2 - d6)
+        t = d2 / (d2 - d6) if d2 - d6 > 0.0 else 0.0  # |ac|², as above
         return ax + t * acx, ay + t * acy, az + t * acz, EDGE_2
     va = d3 * d6 - d5 * d4
     if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
-        t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        t = (d4 - d3) / ((d4 - d3) + (d5 - d6)) if (d4 - d3) + (d5 - d6) > 0.0 else 0.0  # |bc|², as above
         return bx + t * (cx - bx), by + t * (cy - by), bz + t * (cz - bz), EDGE_1
+    if va + vb + vc <= 0.0:
+        # |ab × ac|² cancelled to nothing (a point far from a small triangle): its
+        # projection on the triangle's plane, from the normal, which does not cancel
+        nx = aby * acz - abz * acy
+        ny = abz * acx - abx * acz
+        nz = abx * acy - aby * acx
+        s = (nx * apx + ny * apy + nz * apz) / (nx * nx + ny * ny + nz * nz)
+        return px - s * nx, py - s * ny, pz - s * nz, FACE
     denom = 1.0 / (va + vb + vc)
     v = vb * denom
     w = vc * denom
