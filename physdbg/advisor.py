@@ -448,10 +448,10 @@ def resolve_mesh_volumes(scene) -> dict[str, Decision]:
     the same scene decides the same): boxes the size of this scene's sphere paths over a
     step (the median radius, the median speed plus a step of gravity, times dt; grown by
     the mesh's own motion over a step, as the engine grows them) placed at points on its
-    triangles (seeded), walked with each volume (colliders/mesh.search_visits): node tests
+    triangles (seeded), walked with each volume (colliders/mesh.search_work): node tests
     and triangles reached, weighed by VOLUME_NODE_COST and TRIANGLE_TEST_COST; the least
     wins (AABB on a tie). Returns {"bounding_volume": Decision} when any was auto."""
-    from .engine.colliders.mesh import VOLUMES, MeshGeometry, search_visits
+    from .engine.colliders.mesh import VOLUMES, MeshGeometry, search_work
 
     meshes, st = scene.walls.meshes, scene.state
     dt = scene.dt if scene.dt is not None else 1.0 / 60.0
@@ -460,7 +460,6 @@ def resolve_mesh_volumes(scene) -> dict[str, Decision]:
     speed += float(np.linalg.norm(scene.settings.gravity)) * dt
     turn = meshes.turn_radii()
     words, chosen = [], []
-    trees = meshes.mesh_set if "auto" in meshes.bounding_volume else None  # the scene's trees, built once
     still = np.zeros(len(meshes), dtype=np.bool_)  # each mesh walked where it starts (its motion is in ``half``)
     for k, name in enumerate(meshes.names):
         if meshes.bounding_volume[k] != "auto":
@@ -475,10 +474,8 @@ def resolve_mesh_volumes(scene) -> dict[str, Decision]:
         work = {}
         for volume in VOLUMES:
             group = MeshGeometry.of(scene.walls, np.full(len(meshes), VOLUMES.index(volume)))._replace(moving=still)
-            _query, node, outcome, _parent = search_visits(points - half, points + half, tuple(group))
-            mine_only = trees.node_mesh[node] == k  # the boxes are this mesh's: the other trees' visits aside
-            work[volume] = (VOLUME_NODE_COST[volume] * int(np.count_nonzero(mine_only))
-                            + TRIANGLE_TEST_COST * int(np.sum(outcome[mine_only] == 2)))
+            tests, reached = search_work(points - half, points + half, tuple(group), k)
+            work[volume] = VOLUME_NODE_COST[volume] * int(tests) + TRIANGLE_TEST_COST * int(reached)
         best = min(work, key=lambda v: (work[v], v != "aabb"))
         meshes.bounding_volume[k] = best
         chosen.append(f"{best} for '{name}'")

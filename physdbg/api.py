@@ -116,6 +116,8 @@ class RunSummary:
     meshes_driven: bool = False  # a kinematic mesh: its prescribed motion does work on what it strikes
     audit_pairs: dict = field(default_factory=dict)
     event_loop: dict = field(default_factory=dict)
+    # each finding's advice tried on a fork (fork.try_advice: record --try), as explain's
+    tried: list = field(default_factory=list)
 
     def as_dict(self) -> dict:
         """The JSON's fields: every field above, each finding as its own (audit.Finding.as_dict)."""

@@ -333,6 +333,11 @@ def record(
     steps: Annotated[Optional[int], typer.Option(
         "--steps", min=1, help="With --from: how many steps from --at on (default: to the parent's end).",
         show_default=False)] = None,
+    try_: Annotated[bool, typer.Option(
+        "--try", help="Try each audit finding's advice that is a change of settings on a fork of the new recording "
+                      "from the finding's step, and say what it changed (as explain --try).")] = False,
+    try_steps: Annotated[int, typer.Option(
+        "--try-steps", min=0, help="With --try: how many steps after the finding's the fork runs.")] = 20,
 ) -> None:
     """Run a scene and record every step: MCAP (lossless) and Rerun (.rrd, to look at).
 
@@ -340,7 +345,14 @@ def record(
 
     Fork a recording: physdbg record --from bounce.mcap --at 40 -s detection=discrete -o fork.mcap
     """
+    if try_steps != 20 and not try_:
+        with _user_errors():
+            raise PhysdbgError("--try-steps says how long --try's forks run: give it with --try")
     if fork_from is not None or at is not None or steps is not None:
+        if try_:
+            with _user_errors():
+                raise PhysdbgError("--try tries a new recording's advice: record it first, then `physdbg explain "
+                                   "FORK --try`")
         return _record_fork(scene, fork_from, at, steps, set_, output, rrd, no_rrd, detail, view, force, progress,
                             dts)
     with _user_errors():
@@ -381,6 +393,14 @@ def record(
         typer.echo("open with   " + (f"{_command('rerun')} {result.rrd}" if result.rrd
                                  else f"{me} replay {result.mcap} --spawn"))
         typer.echo(f"then try    {me} info {result.mcap}   |   {me} explain {result.mcap}")
+        if try_:
+            from .analysis.report import tried_words
+            from .fork import try_advice
+
+            for tried in try_advice(result.mcap, result.summary, try_steps):
+                typer.echo(f"try         {tried_words(tried)}")
+            if not result.summary.tried:
+                typer.echo("try         no finding's advice is a change of settings: nothing to try")
         if check_against is not None:
             report = api_diff(check_against, result.mcap)
             from .analysis.report import diff_text
@@ -464,6 +484,11 @@ def diff(
     spawn: Annotated[bool, typer.Option("--spawn", help="Open the overlay in the Rerun viewer.")] = False,
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing --rrd file.")] = False,
     no_verify: NoVerifyOption = False,
+    try_: Annotated[bool, typer.Option(
+        "--try", help="Try each cause's advice that is a change of settings on a fork of the run it happened in, "
+                      "from the cause's step, and say what it changed.")] = False,
+    try_steps: Annotated[int, typer.Option(
+        "--try-steps", min=0, help="With --try: how many steps after the cause's the fork runs.")] = 20,
 ) -> None:
     """Find where two recordings part ways and say why. Exit 0 equivalent, 1 different, 2 error
     (a file that is missing, damaged or altered).
@@ -473,10 +498,17 @@ def diff(
     with _user_errors(as_json or output_format == "json"):
         tier = _choose_tier_for(a, b)
         from . import api
+        from .fork import TRY_STEPS, try_causes
 
+        if try_steps != TRY_STEPS and not try_:
+            raise PhysdbgError("--try-steps says how long --try's forks run: give it with --try")
         report = api.diff(a, b, atol=atol, rtol=rtol, verify=not no_verify)
+        if try_:
+            try_causes(report, try_steps)
         _after_interpreted(tier, quiet=True)
         typer.echo(_render(report, "diff", output_format, as_json, markdown))
+        if try_ and not report.tried and not (as_json or markdown or output_format != "text"):
+            typer.echo("try      no cause's advice is a change of settings: nothing to try")
         if overlay or spawn:
             written = api.overlay(a, b, report, str(overlay) if overlay else None, force=force, spawn=spawn,
                                   verify=not no_verify)

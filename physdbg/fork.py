@@ -129,47 +129,75 @@ TRY_STEPS = 20  # steps after a finding's own that a try of its advice runs (exp
 
 def try_advice(path: str | Path, report, steps: int = TRY_STEPS) -> list[dict]:
     """Try each piece of advice of an audit (``report``, explain's AuditReport of the
-    recording ``path``) that is a change of settings (Finding.try_settings), on the run
-    itself: a fork at the start of the finding's step with the change, for that step and
-    ``steps`` more (fork_recording), audited. Each kind's first finding with such advice
-    is tried once per change. Sets and returns report.tried, one dict a try: the finding
-    (kind, step, particles), settings, gone (no finding of its kind at its step about its
-    spheres in the fork), left (findings of its kind in the fork's window, and in the
-    run's), changed (diff's result line of the run against the fork: what else the change
-    did), ms_before / ms_after (the engine's ms a step over the window in each)."""
-    import tempfile
-
-    from .events import STEP_PHASES
-    from .record import open_recording
-
-    tried, seen = [], set()
-    with open_recording(path) as rec:
-        last = rec.steps
-    before = None  # the run's every finding, read once there is something to try
+    recording ``path``, or a RunSummary: anything with ``findings``) that is a change of
+    settings (Finding.try_settings), on the run itself (try_change). Each kind's first
+    finding with such advice is tried once per change. Sets and returns report.tried."""
+    tried, seen, before = [], set(), {}
     for finding in report.findings:
         key = (finding.kind, tuple(sorted(finding.try_settings.items())))
         if not finding.try_settings or key in seen:
             continue
         seen.add(key)
-        at = finding.step
-        window = min(steps + 1, last - at + 1)
-        with tempfile.TemporaryDirectory() as folder:
-            fork = Path(folder) / "try.mcap"
-            made = fork_recording(path, at, [f"{name}={value}" for name, value in finding.try_settings.items()],
-                                  steps=window, mcap_path=str(fork), rrd=False, detail="contacts")
-            after = explain(fork, every_finding=True)
-            before = before or explain(path, every_finding=True)
-            in_window = [f for f in after.findings if f.kind == finding.kind and at <= f.step < at + window]
-            run_window = [f for f in before.findings if f.kind == finding.kind and at <= f.step < at + window]
-            gone = not any(f.step == at and set(f.particles) == set(finding.particles) for f in in_window)
-            changed = diff(path, fork)
-            with open_recording(path) as a, open_recording(fork) as b:
-                ms = [1000.0 * float(sum(r[f"seconds_{phase}"].sum() for phase in STEP_PHASES)) / window
-                      for r in (a.stats(at, at + window), b.stats(at, at + window))]
-            tried.append({"kind": finding.kind, "step": at, "particles": list(finding.particles),
-                          "settings": dict(finding.try_settings), "steps": window, "gone": gone,
-                          "left": len(in_window), "left_in_run": len(run_window),
-                          "changed": changed.headline, "ms_before": ms[0], "ms_after": ms[1],
-                          "verified": verify(made.mcap).ok})
+        tried.append(try_change(path, finding.step, finding.try_settings, finding.kind, finding.particles, steps,
+                                before))
     report.tried = tried
     return tried
+
+
+def try_causes(report, steps: int = TRY_STEPS) -> list[dict]:
+    """Try each cause of a diff (``report``, api.diff's DiffReport) whose advice is a change
+    of settings (Cause.try_settings: a tunnelling in one run), on the run it happened in
+    (A or B, the cause's evidence["run"]): try_change at the cause's step, the finding
+    looked for being the audit's of that kind about the cause's bodies. Each (run, kind,
+    change) is tried once. Sets and returns report.tried, each with "run" ("A" or "B")."""
+    tried, seen, before = [], set(), {}
+    for cause in report.causes:
+        label = cause.evidence.get("run") if isinstance(cause.evidence, dict) else None
+        key = (label, cause.kind, tuple(sorted(cause.try_settings.items())))
+        if not cause.try_settings or cause.step is None or label not in ("A", "B") or key in seen:
+            continue
+        seen.add(key)
+        path = report.a if label == "A" else report.b
+        tried.append({"run": label, **try_change(path, cause.step, cause.try_settings, cause.kind,
+                                                 list(cause.bodies), steps, before.setdefault(label, {}))})
+    report.tried = tried
+    return tried
+
+
+def try_change(path: str | Path, at: int, settings: dict, kind: str, particles: Sequence[int],
+               steps: int = TRY_STEPS, before: dict | None = None) -> dict:
+    """Try a change of settings on the recording ``path`` for a finding of ``kind`` about
+    ``particles`` at step ``at``: a fork at the start of that step with the change, for
+    that step and ``steps`` more (fork_recording), audited. Returns one dict: the finding
+    (kind, step, particles), settings, steps, gone (no finding of its kind at its step
+    about its spheres in the fork), left (findings of its kind in the fork's window, and
+    left_in_run: in the run's), changed (diff's result line of the run against the fork:
+    what else the change did), ms_before / ms_after (the engine's ms a step over the
+    window in each), verified (the fork verifies). before: a dict this call may keep the
+    run's own audit in, for the next call on the same run."""
+    import tempfile
+
+    from .events import STEP_PHASES
+    from .record import open_recording
+
+    before = {} if before is None else before
+    with open_recording(path) as rec:
+        last = rec.steps
+    window = min(steps + 1, last - at + 1)
+    with tempfile.TemporaryDirectory() as folder:
+        fork = Path(folder) / "try.mcap"
+        made = fork_recording(path, at, [f"{name}={value}" for name, value in settings.items()],
+                              steps=window, mcap_path=str(fork), rrd=False, detail="contacts")
+        after = explain(fork, every_finding=True)
+        if "audit" not in before:
+            before["audit"] = explain(path, every_finding=True)
+        in_window = [f for f in after.findings if f.kind == kind and at <= f.step < at + window]
+        run_window = [f for f in before["audit"].findings if f.kind == kind and at <= f.step < at + window]
+        gone = not any(f.step == at and set(f.particles) == set(particles) for f in in_window)
+        changed = diff(path, fork)
+        with open_recording(path) as a, open_recording(fork) as b:
+            ms = [1000.0 * float(sum(r[f"seconds_{phase}"].sum() for phase in STEP_PHASES)) / window
+                  for r in (a.stats(at, at + window), b.stats(at, at + window))]
+        return {"kind": kind, "step": at, "particles": list(particles), "settings": dict(settings),
+                "steps": window, "gone": gone, "left": len(in_window), "left_in_run": len(run_window),
+                "changed": changed.headline, "ms_before": ms[0], "ms_after": ms[1], "verified": verify(made.mcap).ok}

@@ -115,6 +115,31 @@ def test_contacts_a_rule_holds_are_the_remedy_not_a_collapse():
     assert auditor.examples[0].message.startswith("400 bounces among 20 spheres")
 
 
+def test_a_storm_in_a_discrete_run_is_named_as_the_discrete_test_s_own_and_advises_swept():
+    """With detection = discrete every contact is found where a step ends, among spheres
+    overlapping there: 400 bounces among 20 spheres is the test's storm, not "the
+    collision rate has blown up" nor inelastic collapse; the advice, swept detection, is
+    one explain --try can try."""
+    from physdbg.analysis.audit import Auditor
+    from physdbg.events import HOW_IMPULSE, KIND_PAIR, Contacts
+    from physdbg.record import open_recording
+
+    with open_recording(ROOT / "recordings" / "ci" / "rain.mcap") as rec:
+        header = rec.header
+    header.meta["settings"] = {**header.meta["settings"], "detection": "discrete", "sleep_speed": 0.0}
+    contacts = Contacts.empty(5, 400)
+    contacts.kind[:] = KIND_PAIR
+    contacts.a[:], contacts.other[:] = [i % 10 for i in range(400)], [10 + i % 10 for i in range(400)]
+    contacts.how[:], contacts.restitution[:] = HOW_IMPULSE, 0.8
+    auditor = Auditor(header)
+    auditor._check_collapse(5, None, contacts)
+    finding = auditor.examples[0]
+    assert finding.message.startswith("400 bounces among 20 spheres (0, 1, 2, 3, 4, …) in one step, at the "
+                                      "instants the discrete test looks (where the step ends)"), finding.message
+    assert "blown up" not in finding.message and "inelastic collapse" not in finding.message
+    assert finding.advice.startswith("use detection = swept") and finding.try_settings == {"detection": "swept"}
+
+
 def test_under_the_tc_rule_the_collapse_advice_names_the_hold_rule():
     """Under rapid_contact_rule = tc a dense bed's fast rapid contacts stay elastic and it
     rattles (rain-500: ~5 000 bounces a step among its 500 spheres); the advice says which

@@ -448,7 +448,7 @@ def test_a_new_diff_cause_in_the_table_is_tried_and_printed_in_every_format(monk
     assert "- **step 1** *dummy*: after ['settings', 'tunnelling']" in markdown.output
     data = json.loads(runner.invoke(app, ["diff", *paths, "--json"]).output)
     assert data["causes"][-1] == {"kind": "dummy", "text": "after ['settings', 'tunnelling']", "evidence": {},
-                                  "step": 1, "bodies": [], "advice": ""}
+                                  "step": 1, "bodies": [], "advice": "", "try_settings": {}}
 
 
 def test_the_architecture_page_names_every_file_a_new_cause_is_written_in():

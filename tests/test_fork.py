@@ -224,3 +224,37 @@ def test_explain_tries_its_advice_on_a_fork_and_says_what_it_did(tmp_path):
     assert json.loads(done.output)["tried"] == []
     done = runner.invoke(app, ["explain", str(recorded), "--try-steps", "3"])
     assert done.exit_code == 2 and "--try-steps says how long --try's forks run: give it with --try" in done.output
+
+
+def test_diff_and_record_try_the_advice_of_their_causes_and_findings(tmp_path):
+    """The fast ramp recorded swept (A) and discrete (B): diff's cause, B's tunnelling at
+    step 4, advises swept detection; diff --try forks B there with it and says the
+    tunnelling is gone. record --try does the same for the new recording's own findings."""
+    import json
+
+    scene = tmp_path / "fast-ramp.toml"
+    scene.write_text(FAST_RAMP)
+    swept, discrete = tmp_path / "swept.mcap", tmp_path / "discrete.mcap"
+    api.record(str(scene), ["detection=swept"], mcap_path=str(swept), rrd=False)
+    runner = CliRunner()
+    done = runner.invoke(app, ["record", str(scene), "-o", str(discrete), "--no-rrd", "--try", "--try-steps", "2"])
+    assert done.exit_code == 0, done.output
+    tried = next(line for line in done.output.splitlines() if line.startswith("try         "))
+    assert tried.startswith("try         detection=swept from step 4 for 3 steps: the tunnelling of step 4 (sphere 0) "
+                            "is gone"), tried
+    done = runner.invoke(app, ["diff", str(swept), str(discrete), "--try", "--try-steps", "2"])
+    assert done.exit_code == 1, done.output
+    assert "went through mesh 'ramp' triangle" in done.output
+    tried = next(line for line in done.output.splitlines() if line.startswith("try      "))
+    assert tried.startswith("try      in run B: detection=swept from step 4 for 3 steps: the tunnelling of step 4 "
+                            "(sphere 0) is gone"), tried
+    report = json.loads(runner.invoke(app, ["diff", str(swept), str(discrete), "--try", "--try-steps", "2",
+                                            "--json"]).output)
+    (entry,) = report["tried"]
+    assert entry["run"] == "B" and entry["gone"] is True and entry["verified"] is True
+    assert any(c["try_settings"] == {"detection": "swept"} for c in report["causes"])
+    # nothing to try where no cause is a change of settings; --try-steps alone is refused
+    same = runner.invoke(app, ["diff", str(swept), str(swept), "--try"])
+    assert same.exit_code == 0 and "try      no cause's advice is a change of settings: nothing to try" in same.output
+    done = runner.invoke(app, ["diff", str(swept), str(discrete), "--try-steps", "3"])
+    assert done.exit_code == 2 and "--try-steps says how long --try's forks run: give it with --try" in done.output

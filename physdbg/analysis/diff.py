@@ -84,6 +84,9 @@ class DiffReport:
     # what was checked of each file's integrity: {"verified": bool, "a": frames checked,
     # "frames_a": frames held, "b", "frames_b"} (docs/recording.md, "Integrity")
     integrity: dict = field(default_factory=dict)
+    # each cause's advice tried on a fork (fork.try_causes, physdbg diff --try): {run, and
+    # the fields of fork.try_change}
+    tried: list = field(default_factory=list)
     # the cause the headline says whole (its index in causes), so the report says it once;
     # not a field of the JSON, whose headline and causes both hold it
     headline_cause: int | None = None
@@ -403,7 +406,7 @@ class _Differ:
                           self.settings, divergence, growth, causes, headline, self._same_length(),
                           {"verified": ra.verify and rb.verify, "a": ra.checked_frames, "frames_a": ra.frames,
                            "b": rb.checked_frames, "frames_b": rb.frames},
-                          next((i for i, c in enumerate(causes) if c is said), None))
+                          headline_cause=next((i for i, c in enumerate(causes) if c is said), None))
 
     def _same_length(self) -> bool:
         if self.by_step:

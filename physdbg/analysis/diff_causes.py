@@ -78,6 +78,9 @@ class Cause:
     step: int | None = None
     bodies: tuple[int, ...] = ()
     advice: str = ""
+    # the advice as a change of settings a fork of the run the cause is in can try
+    # (physdbg diff --try), {} where it is not one
+    try_settings: dict = field(default_factory=dict)
 
     # the record every report prints (report.Record); the JSON keeps the fields above
     code = property(lambda self: self.kind)
@@ -234,13 +237,15 @@ def tunnelling(case: StepCase, found: list[Cause]) -> list[Cause]:
                     else f"went through {partner_words(c.kind, c.other, d.names_a)}")
             rec, warns, k = (d.ra, d.warn_a, step) if label == "A" else (d.rb, d.warn_b, case.div.step_b)
             budgets = [w["code"] for w in warns.get(k, []) if w["code"] not in ("non-finite", "overlap")]
-            reason = why_tunnelled(settings_at(rec.meta, step), budgets, pair=PARTNER_IS_SPHERE[c.kind]).reason
+            why = why_tunnelled(settings_at(rec.meta, step), budgets, pair=PARTNER_IS_SPHERE[c.kind])
+            reason = why.reason
             made = [x for x in ((case.cb if label == "A" else case.ca) or []) if _touches(x, c)]
             other_did = (f"run {other} resolved a contact there at {made[0]['time_in_step'] / made[0]['dt']:.3f}·dt"
                          if made else f"run {other} did not cross")
             out.append(Cause("tunnelling", f"in run {label} sphere {c.a} {what} with no contact ({reason}); {other_did}",
                              {"run": label, "particle": c.a, "other": c.other, "kind": c.kind}, step=step,
-                             bodies=(c.a, c.other) if PARTNER_IS_SPHERE[c.kind] else (c.a,)))
+                             bodies=(c.a, c.other) if PARTNER_IS_SPHERE[c.kind] else (c.a,), advice=why.advice,
+                             try_settings=why.settings))
     return out
 
 

@@ -147,6 +147,7 @@ def diff_text(r: DiffReport) -> str:
     if r.causes:
         lines.append("why:")
         lines.extend(line for c in r.causes for line in record_lines(c, _cause_text(c, r)))
+    lines.extend(f"try      in run {t['run']}: {tried_words(t)}" for t in r.tried)
     return "\n".join(lines)
 
 
@@ -185,6 +186,7 @@ def diff_markdown(r: DiffReport) -> str:
         lines.append("")
     if r.causes:
         lines += ["**Why**", ""] + [record_markdown(c, _cause_text(c, r)) for c in r.causes]
+    lines += [f"> tried in run {t['run']}: {tried_words(t)}" for t in r.tried]
     return "\n".join(lines) + "\n"
 
 
