@@ -449,3 +449,14 @@ def test_the_live_audit_finds_what_the_full_walk_finds_on_the_builtin_scenes(sce
     default = api.run(scene, ["duration=0.5"])
     assert default.finding_counts == api.run(scene, ["duration=0.5"], audit="full").finding_counts == {}
     assert default.audit_pairs["from_engine"] > 0
+
+
+def test_an_overlap_left_by_a_discrete_test_advises_swept_as_settings_a_fork_can_try(tmp_path):
+    """bounce with detection = discrete leaves the ball inside the floor at step 28; the
+    advice (swept detection) is a change of settings (Finding.try_settings), and a swept
+    run's overlap, were there one, would have none to try."""
+    out = tmp_path / "bounce.mcap"
+    api.record("bounce", ["detection=discrete", "steps=30"], mcap_path=str(out), rrd=False, detail="contacts")
+    (overlap,) = [f for f in explain(out).findings if f.kind == "overlap"]
+    assert overlap.advice.startswith("detection = discrete finds a contact only once the spheres overlap")
+    assert overlap.try_settings == {"detection": "swept"}

@@ -497,12 +497,27 @@ class Auditor:
             who = f"spheres {spheres[0]} and {spheres[1]} overlap"
         else:  # across a periodic boundary, where the search below does not look
             who, depth = "spheres overlap", end.max_overlap
+        # an overlap after the first step may be the scene's own start: no setting removes that
+        started = step == 1 and deepest_overlap(self._x, self.radius, self.header.walls, end.time - end.dt,
+                                                self._mesh_geometry)[0] > max(self.tolerance, 0.0)
+        advice = ("the scene starts with bodies inside each other (`physdbg check` names each sphere that does), and "
+                  "physdbg does not push bodies apart: it resolves contacts from where they are, so the overlap stays "
+                  "until their motions part them; move them apart in the scene" if started
+                  else self._overlap_advice(step))
         self._add(Finding("overlap", step, spheres,
                           f"{who} by {_length(depth)} after the step (the contact tolerance is {self.tolerance:g} m)",
-                          self._overlap_advice(step),
-                          [float(q) for q in where] if where is not None else None,
+                          advice, [float(q) for q in where] if where is not None else None,
                           {"depth": depth, "max_overlap": end.max_overlap, "wall": self.wall_names[wall]
-                           if wall is not None else None}))
+                           if wall is not None else None, "at_start": started},
+                          try_settings={} if started else self._overlap_try()))
+
+    def _overlap_try(self) -> dict:
+        """The overlap advice as settings a fork can try: swept detection where the run's
+        test looks only at some instants (and no budget stopped the step: _overlap_advice's
+        order), else none."""
+        if self.header.meta.get("foreign") or any(w.code.startswith("max_") for w in self._warnings):
+            return {}
+        return {"detection": "swept"} if self.settings.get("detection", "swept") != "swept" else {}
 
     def _overlap_advice(self, step: int) -> str:
         """Why a run left an overlap, from what the run says of itself."""
