@@ -171,7 +171,8 @@ def try_change(path: str | Path, at: int, settings: dict, kind: str, particles: 
     that step and ``steps`` more (fork_recording), audited. Returns one dict: the finding
     (kind, step, particles), settings, steps, gone (no finding of its kind at its step
     about its spheres in the fork), left (findings of its kind in the fork's window, and
-    left_in_run: in the run's), changed (diff's result line of the run against the fork:
+    left_in_run: in the run's), in_run (the run's own audit names it: where it does not,
+    nothing was there to remove, and gone is False), changed (diff's result line of the run against the fork:
     what else the change did), ms_before / ms_after (the engine's ms a step over the
     window in each), verified (the fork verifies). before: a dict this call may keep the
     run's own audit in, for the next call on the same run."""
@@ -194,10 +195,13 @@ def try_change(path: str | Path, at: int, settings: dict, kind: str, particles: 
         in_window = [f for f in after.findings if f.kind == kind and at <= f.step < at + window]
         run_window = [f for f in before["audit"].findings if f.kind == kind and at <= f.step < at + window]
         gone = not any(f.step == at and set(f.particles) == set(particles) for f in in_window)
+        # a diff's cause is its own check's: the run's audit may not name it (then nothing was removed)
+        in_run = any(f.step == at and set(f.particles) == set(particles) for f in run_window)
         changed = diff(path, fork)
         with open_recording(path) as a, open_recording(fork) as b:
             ms = [1000.0 * float(sum(r[f"seconds_{phase}"].sum() for phase in STEP_PHASES)) / window
                   for r in (a.stats(at, at + window), b.stats(at, at + window))]
         return {"kind": kind, "step": at, "particles": list(particles), "settings": dict(settings),
-                "steps": window, "gone": gone, "left": len(in_window), "left_in_run": len(run_window),
+                "steps": window, "gone": gone and in_run, "in_run": in_run, "left": len(in_window),
+                "left_in_run": len(run_window),
                 "changed": changed.headline, "ms_before": ms[0], "ms_after": ms[1], "verified": verify(made.mcap).ok}

@@ -131,6 +131,7 @@ def test_a_storm_in_a_discrete_run_is_named_as_the_discrete_test_s_own_and_advis
     contacts.kind[:] = KIND_PAIR
     contacts.a[:], contacts.other[:] = [i % 10 for i in range(400)], [10 + i % 10 for i in range(400)]
     contacts.how[:], contacts.restitution[:] = HOW_IMPULSE, 0.8
+    contacts.time_in_step[:] = 1 / 60  # all where the step ends, as a discrete test finds them
     auditor = Auditor(header)
     auditor._check_collapse(5, None, contacts)
     finding = auditor.examples[0]

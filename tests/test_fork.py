@@ -63,6 +63,18 @@ def test_a_fork_changes_its_settings_from_its_step_on_and_diff_says_so(tmp_path)
     assert done.exit_code == 1
     assert "B is a fork of A at step 20: different settings: detection: swept in A, discrete in B" in done.output
     assert "the state was changed outside its rules" not in done.output
+    assert ("aligned  B is a fork of A at step 20: frames 0..19 are its parent's, equal as they should be; from step "
+            "20 on, frame k of A against frame k of B") in done.output
+    assert api.diff(parent, tmp_path / "discrete.mcap").fork == {"fork": "B", "parent": "A", "at": 20, "dt": None}
+    # the overlay opens where the fork starts: the rows on its opening timeline begin at step 20
+    from rerun.chunk import RrdReader
+
+    overlay = tmp_path / "overlay.rrd"
+    done = runner.invoke(app, ["diff", str(parent), str(tmp_path / "discrete.mcap"), "--rrd", str(overlay)])
+    assert done.exit_code == 1 and overlay.exists(), done.output
+    opening = [t for chunk in RrdReader(overlay).stream() if "diverged" in chunk.timeline_names
+               for t in chunk.to_record_batch().column("diverged").to_pylist() if t is not None]
+    assert min(opening) == 20
     # another dt from step 20 on: to the parent's end time, in steps of the new length
     result = fork_recording(parent, 20, ["dt=1/120"], mcap_path=str(tmp_path / "fine.mcap"), rrd=False)
     with open_recording(result.mcap) as rec:

@@ -1056,3 +1056,19 @@ def test_five_meshes_one_spinning_at_a_hundred_thousand_degrees_a_second_stay_wi
         tracemalloc.stop()
     assert result.steps == 3 and "max_memory" not in result.warning_counts
     assert peak < 1e8, f"{peak / 1e6:.0f} MB"
+
+
+def test_a_discrete_sphere_in_a_crease_meets_both_faces(tmp_path):
+    """A floor and a wall of one mesh meeting at a right angle, a 0.2 m sphere ending its
+    first step 0.15 m from each: both faces are contacts (their directions to the centre
+    are not opposed, as two walls are not), and it leaves the crease the way it came; only
+    faces on both sides of the centre (inside a thin part of a mesh) are one contact."""
+    (tmp_path / "crease.obj").write_text("v 0 0 -1\nv 2 0 -1\nv 2 0 1\nv 0 0 1\nv 0 2 -1\nv 0 2 1\n"
+                                         "f 1 2 3\nf 1 3 4\nf 1 4 6\nf 1 6 5\n")
+    (tmp_path / "crease.toml").write_text('dt = 0.01\nsteps = 1\ngravity = [0.0, 0.0, 0.0]\ndetection = "discrete"\n'
+                                          '[[meshes]]\nname = "crease"\nfile = "crease.obj"\n'
+                                          '[[particles]]\nposition = [0.5, 0.5, 0.0]\nvelocity = [-35.0, -35.0, 0.0]\n'
+                                          'radius = 0.2\n')
+    result = api.run(str(tmp_path / "crease.toml"))
+    assert result.contacts == 2 and not result.warnings
+    assert result.momentum_end[:2] == pytest.approx([35.0, 35.0])

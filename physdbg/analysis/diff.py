@@ -87,6 +87,8 @@ class DiffReport:
     # each cause's advice tried on a fork (fork.try_causes, physdbg diff --try): {run, and
     # the fields of fork.try_change}
     tried: list = field(default_factory=list)
+    # where one run is a fork of the other: {fork: "A" or "B", parent, at: K, dt} (fork_of)
+    fork: dict = field(default_factory=dict)
     # the cause the headline says whole (its index in causes), so the report says it once;
     # not a field of the JSON, whose headline and causes both hold it
     headline_cause: int | None = None
@@ -239,15 +241,24 @@ def run_meta(meta: dict) -> dict:
     return {**meta, "settings": settings_at(meta)} if meta.get("fork") else meta
 
 
-def fork_words(ra, rb) -> str:
-    """"B is a fork of A at step 20: " (and its dt from there, where it changed) where one
-    run forks the other (its header names the other's run id), else ""."""
+def fork_of(ra, rb) -> dict:
+    """{"fork": "B", "parent": "A", "at": K, "dt": its dt from K or None} where one run
+    forks the other (its header names the other's run id), else {}."""
     for mine, other, label, of in ((rb, ra, "B", "A"), (ra, rb, "A", "B")):
         fork = mine.meta.get("fork")
         if fork and fork.get("parent_run_id") and fork["parent_run_id"] == other.meta.get("run_id"):
-            dt = f" (steps of {fork['dt']:.6g} s from there)" if fork.get("dt") else ""
-            return f"{label} is a fork of {of} at step {fork['at']}{dt}: "
-    return ""
+            return {"fork": label, "parent": of, "at": int(fork["at"]), "dt": fork.get("dt")}
+    return {}
+
+
+def fork_words(ra, rb) -> str:
+    """"B is a fork of A at step 20: " (and its dt from there, where it changed) where one
+    run forks the other, else "" (fork_of)."""
+    fork = fork_of(ra, rb)
+    if not fork:
+        return ""
+    dt = f" (steps of {fork['dt']:.6g} s from there)" if fork["dt"] else ""
+    return f"{fork['fork']} is a fork of {fork['parent']} at step {fork['at']}{dt}: "
 
 
 class _Differ:
@@ -376,6 +387,15 @@ class _Differ:
                 if self.by_step else
                 "by simulated time: each frame of the run with longer steps against the other run at that time "
                 "(its own frame when one falls there, else Hermite interpolation between its two frames)")
+        fork = fork_of(ra, rb)
+        if fork:
+            # a fork's frames before K are its parent's, made by the same steps: compared
+            # all the same (each state read and checked against its hash), and said so
+            before = fork["at"] - 1
+            same = divergence is None or divergence.step > before
+            shared = "its parent's, equal as they should be" if same else "meant to be its parent's, and are not"
+            note = (f"{fork['fork']} is a fork of {fork['parent']} at step {fork['at']}: frames 0..{before} are "
+                    f"{shared}; from step {fork['at']} on, {note}")
         structure = next((c for c in causes if c.kind == "structure"), None)
         records = next((c for c in causes if c.kind == "records"), None)
         said = None  # the cause the headline says whole
@@ -406,7 +426,7 @@ class _Differ:
                           self.settings, divergence, growth, causes, headline, self._same_length(),
                           {"verified": ra.verify and rb.verify, "a": ra.checked_frames, "frames_a": ra.frames,
                            "b": rb.checked_frames, "frames_b": rb.frames},
-                          headline_cause=next((i for i, c in enumerate(causes) if c is said), None))
+                          fork=fork, headline_cause=next((i for i, c in enumerate(causes) if c is said), None))
 
     def _same_length(self) -> bool:
         if self.by_step:

@@ -46,7 +46,10 @@ def write_overlay(a, b, report, rrd_path: str | None, spawn: bool = False, verif
     div = report.divergence
     with open_recording(a, verify=verify) as ra, open_recording(b, verify=verify) as rb:
         stream.send_recording_name(f"diff {ra.header.name} vs {rb.header.name}")
-        runs = (("a", ra, COLOR_A, div.step if div else None), ("b", rb, COLOR_B, div.step_b if div else None))
+        # opened at the divergence, or, where one run forks the other, where the fork starts
+        at = report.fork.get("at") if report.fork else None
+        runs = (("a", ra, COLOR_A, at or (div.step if div else None)),
+                ("b", rb, COLOR_B, at or (div.step_b if div else None)))
         sinks = {root: RerunSink(rec.header, stream=stream, root=root, color=color,
                                  detail="contacts" if rec.detail != "state" else "state",
                                  opening=(OPENING_TIMELINE, step) if step is not None else None)

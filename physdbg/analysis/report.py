@@ -128,6 +128,8 @@ def diff_text(r: DiffReport) -> str:
              f"result   {'EQUIVALENT' if r.equivalent else 'DIFFERENT'}: {r.headline}",
              f"compared {_compared(r)}; tolerance {_tolerance(r)}",
              f"checked  {_integrity(r)}"]
+    if r.fork:
+        lines.append(f"aligned  {r.alignment_note}")
     if r.settings:
         lines.append("settings that differ:")
         for s in r.settings:
@@ -165,7 +167,7 @@ def diff_markdown(r: DiffReport) -> str:
              *markdown_table([None, "recording", "scene", "steps"],
                              [["A", f"`{r.a}`", r.scene_a, r.steps_a], ["B", f"`{r.b}`", r.scene_b, r.steps_b]]), "",
              f"Compared {_compared(r)}; tolerance {_tolerance(r)}. "
-             f"Checked {_integrity(r)}.", ""]
+             f"Checked {_integrity(r)}." + (f" Aligned: {r.alignment_note}." if r.fork else ""), ""]
     if r.settings:
         lines += markdown_table(["setting", "A", "B", "note"],
                                 [[f"`{s.name}`", _show(s.a), _show(s.b), "" if s.matters else "cannot matter: " + s.note]
@@ -233,9 +235,10 @@ def tried_words(t: dict) -> str:
     """One advice tried on a fork (fork.try_advice), in one line: the change, whether the
     finding is gone, what else changed, what it cost."""
     change = ", ".join(f"{name}={value}" for name, value in t["settings"].items())
-    outcome = (f"the {t['kind']} of step {t['step']} (sphere{'s' if len(t['particles']) > 1 else ''} "
-               f"{', '.join(map(str, t['particles']))}) is gone" if t["gone"] else
-               f"the {t['kind']} of step {t['step']} is still there")
+    who = f"sphere{'s' if len(t['particles']) > 1 else ''} {', '.join(map(str, t['particles']))}"
+    outcome = (f"the {t['kind']} of step {t['step']} ({who}) is gone" if t["gone"] else
+               f"the {t['kind']} of step {t['step']} is still there" if t.get("in_run", True) else
+               f"the run's own audit names no {t['kind']} of step {t['step']} ({who}): nothing to remove")
     left = (f"{t['left']} {t['kind']} finding{'s' if t['left'] != 1 else ''} in those steps "
             f"({t['left_in_run']} in the run's same steps)")
     return (f"{change} from step {t['step']} for {count_words(t['steps'], 'step')}: {outcome}; {left}; "

@@ -23,8 +23,9 @@ recorded contact, and its rebuilt path then ran through a neighbour it never cam
 * Mesh triangles (two-sided, no thickness): the centre's straight path from the step's
   start to its end passes through a triangle, and the sphere resolved no contact with
   that mesh in the step (a sphere that bounced off the mesh is not checked: conservative),
-  nor any contact before the step's end (one deflected on the way did not take that
-  path: not checked either). A kinematic mesh's triangles are met in its own frame, where
+  nor was deflected on the way by another contact (a contact before the step's end and
+  an end more than half a radius from where its flight alone would have taken it: it did
+  not take that path, and is not checked either). A kinematic mesh's triangles are met in its own frame, where
   its turn bends the path: the path is followed there in pieces over which it turns little.
 * Sphere pairs: the swept test on the rebuilt paths finds a touch while approaching,
   no contact between the two was resolved, and they go on to overlap by more than the
@@ -269,7 +270,7 @@ def _in_mesh_frame(meshes, k: int, x0: np.ndarray, x1: np.ndarray, time: float, 
     pieces = int(min(MOST_PIECES, max(1, math.ceil(turn / TURN_PER_PIECE))))
     # where the mesh can be during the step: its turning ball about its pivot, carried along
     reach = meshes.turn_radii()[k]
-    _, pivot = meshes.transform(k, time)
+    pivot = meshes.pivot[k] + meshes.velocity[k] * time  # where its pivot is at the step's start
     drift = np.asarray(meshes.velocity[k], dtype=np.float64) * dt
     lo = pivot + np.minimum(drift, 0.0) - reach
     hi = pivot + np.maximum(drift, 0.0) + reach
@@ -371,7 +372,7 @@ class StepChecker:
             x1 = unwrap_near(x1, x0, self.walls.period)
         out = self._walls(x0, x1, contacts)
         if self.walls.meshes.triangles:
-            out += self._meshes(x0, x1, contacts, time, dt)
+            out += self._meshes(x0, v0, x1, contacts, time, dt)
         if self.n > 1 and pairs:
             out += self._pairs(x0, v0, x1, dt, contacts)
         return out
@@ -395,7 +396,7 @@ class StepChecker:
                 out.append(Crossing(KIND_WALL, int(i), int(w), math.nan, depth))
         return out
 
-    def _meshes(self, x0, x1, contacts, time, dt) -> list[Crossing]:
+    def _meshes(self, x0, v0, x1, contacts, time, dt) -> list[Crossing]:
         """Spheres whose centre's straight path through the step passes through a triangle
         of a mesh they resolved no contact with (module doc). A kinematic mesh is checked
         in its own frame, where a turning mesh bends the path: followed there in pieces
@@ -438,12 +439,19 @@ class StepChecker:
         if contacts is not None:
             on_mesh = contacts.kind == KIND_MESH
             touched = set(zip(contacts.a[on_mesh].tolist(), mesh_of[contacts.other[on_mesh]].tolist(), strict=True))
-            # a sphere whose velocity a contact changed before the step's end did not take
-            # the straight path from its start to its end (a bounce off the floor beside a
-            # block has a chord through the block): not checked
+            # a sphere a contact deflected before the step's end did not take the straight
+            # path from its start to its end (a bounce off the floor beside a block has a
+            # chord through the block): not checked where its end is more than half a radius
+            # from where its flight alone would have taken it (a ball rolling on a floor,
+            # held there, still is)
             early = contacts.time_in_step < dt * (1.0 - 1e-9)
-            deflected = set(contacts.a[early].tolist())
-            deflected |= set(contacts.other[early & (contacts.kind == KIND_PAIR)].tolist())
+            touched_early = set(contacts.a[early].tolist())
+            touched_early |= set(contacts.other[early & (contacts.kind == KIND_PAIR)].tolist())
+            if touched_early:
+                who = np.fromiter(touched_early, dtype=np.int64)
+                flight = x0[who] + v0[who] * dt + 0.5 * self.gravity_acc[who] * dt * dt
+                off = np.linalg.norm(x1[who] - flight, axis=1) > 0.5 * self.radius[who]
+                deflected = set(who[off].tolist())
         out, seen = [], set()
         for k in np.flatnonzero(hit).tolist():
             i, t = int(sphere[k]), int(triangle[k])

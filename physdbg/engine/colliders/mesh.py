@@ -270,10 +270,17 @@ def time_of_impact(i, t, x, v, a, radius, sigma, step_end, integrator, k, detect
                                                                   corners[t], motion, start, integrator, k, horizon,
                                                                   1 if detection == DISCRETE else samples)
         if found != math.inf:
-            s0, s1, s2, _r0, _r1, _r2 = in_body_frame(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2], motion,
-                                                      start)
-            if not one_contact_with_its_mesh(s0, s1, s2, y0, y1, y2, t, meshes):
-                found = math.inf
+            if motion[6] != 0.0 or motion[7] != 0.0 or motion[8] != 0.0:
+                # a turning mesh bends the path in its frame: the chord from the test's start
+                # to the sample stands for it no better than for a crossing, so only the
+                # nearest-face rule applies
+                if not nearest_of_its_mesh(y0, y1, y2, t, meshes):
+                    found = math.inf
+            else:
+                s0, s1, s2, _r0, _r1, _r2 = in_body_frame(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2],
+                                                          motion, start)
+                if not one_contact_with_its_mesh(s0, s1, s2, y0, y1, y2, t, meshes):
+                    found = math.inf
         return start, found, 1
     if detection == SWEPT:
         found, _feature, _passes = triangle_toi_swept(x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2], a[i, 0],
@@ -293,16 +300,18 @@ def time_of_impact(i, t, x, v, a, radius, sigma, step_end, integrator, k, detect
 def one_contact_with_its_mesh(s0, s1, s2, y0, y1, y2, t, meshes) -> bool:
     """Whether a sampled or discrete test's overlap with triangle t, found with the centre
     at y after starting the test at s (m; both in the frame of the corners at the step's
-    start), is the sphere's one contact with t's mesh: its centre went through none of the
+    start), is a contact of the sphere with t's mesh: its centre went through none of the
     mesh's triangles on the way (through_its_mesh: it has tunnelled, and the audit names
-    it), and t is the mesh's triangle nearest it (nearest_of_its_mesh).
+    it), and no nearer triangle of the mesh lies on the other side of the centre
+    (nearest_of_its_mesh).
 
     Why: a sphere that ends a step deep in a closed mesh overlaps faces on both sides of
     its centre and approaches the far one; bounced off it, it approaches the near one, and
     so on without end (a storm of contacts at one instant, up to the budget). The seed's
     discrete test looks where the step ends: a centre past a face went through it, and an
-    overlap is one contact with the surface where it is nearest, resolved if the sphere
-    approaches it."""
+    overlap of a thin part of a mesh is one contact, with its face nearest the centre,
+    resolved if the sphere approaches it. Faces on the same side of the centre (a ball in
+    a crease) are each a contact, as two walls are."""
     return not through_its_mesh(s0, s1, s2, y0, y1, y2, t, meshes) and nearest_of_its_mesh(y0, y1, y2, t, meshes)
 
 
@@ -361,14 +370,17 @@ def through_its_mesh(s0, s1, s2, e0, e1, e2, t, meshes) -> bool:
 
 @borrowing
 def nearest_of_its_mesh(y0, y1, y2, t, meshes) -> bool:
-    """Whether triangle t is the triangle of its mesh nearest the point y (m; in the frame
-    of the corners at the step's start), the lower number winning a tie: a walk of the
-    mesh's tree with y's box grown by t's distance."""
+    """Whether no triangle of t's mesh nearer the point y (m; in the frame of the corners
+    at the step's start) than t lies on the other side of y (their directions from their
+    closest points to y opposed: y is between them, inside a thin part of the mesh), the
+    lower number winning a tie: a walk of the mesh's tree with y's box grown by t's
+    distance."""
     corners, _mesh_of, _restitution, box_lo, box_hi, leaf, skip, tree_first = _unpack(meshes)
     q0, q1, q2, _feature = closest_on_triangle(y0, y1, y2, corners[t, 0, 0], corners[t, 0, 1], corners[t, 0, 2],
                                                corners[t, 1, 0], corners[t, 1, 1], corners[t, 1, 2],
                                                corners[t, 2, 0], corners[t, 2, 1], corners[t, 2, 2])
-    mine = (y0 - q0) * (y0 - q0) + (y1 - q1) * (y1 - q1) + (y2 - q2) * (y2 - q2)
+    m0, m1, m2 = y0 - q0, y1 - q1, y2 - q2
+    mine = m0 * m0 + m1 * m1 + m2 * m2
     reach = math.sqrt(mine)
     k = meshes[1][t]
     l0, l1, l2, h0, h1, h2 = frame_box(k, y0 - reach, y1 - reach, y2 - reach, y0 + reach, y1 + reach, y2 + reach,
@@ -383,7 +395,8 @@ def nearest_of_its_mesh(y0, y1, y2, t, meshes) -> bool:
                                                            corners[u, 1, 2], corners[u, 2, 0], corners[u, 2, 1],
                                                            corners[u, 2, 2])
                 theirs = (y0 - q0) * (y0 - q0) + (y1 - q1) * (y1 - q1) + (y2 - q2) * (y2 - q2)
-                if theirs < mine or (theirs == mine and u < t):
+                opposed = (y0 - q0) * m0 + (y1 - q1) * m1 + (y2 - q2) * m2 < 0.0
+                if opposed and (theirs < mine or (theirs == mine and u < t)):
                     return False
             q += 1
         else:
