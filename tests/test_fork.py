@@ -224,7 +224,7 @@ def test_explain_tries_its_advice_on_a_fork_and_says_what_it_did(tmp_path):
     tried = next(line for line in done.output.splitlines() if line.startswith("try      "))
     assert tried.startswith("try      detection=swept from step 4 for 7 steps: the tunnelling of step 4 (sphere 0) "
                             "is gone; 0 tunnelling findings in those steps (1 in the run's same steps); what else "
-                            "changed: the runs part in step 4:"), tried
+                            "changed (diff of the run, A, against the fork, B): the runs part in step 4:"), tried
     assert "ms a step in the engine" in tried and "DID NOT VERIFY" not in tried
     done = runner.invoke(app, ["explain", str(recorded), "--try", "--try-steps", "2", "--json"])
     (entry,) = json.loads(done.output)["tried"]
@@ -270,3 +270,9 @@ def test_diff_and_record_try_the_advice_of_their_causes_and_findings(tmp_path):
     assert same.exit_code == 0 and "try      no cause's advice is a change of settings: nothing to try" in same.output
     done = runner.invoke(app, ["diff", str(swept), str(discrete), "--try-steps", "3"])
     assert done.exit_code == 2 and "--try-steps says how long --try's forks run: give it with --try" in done.output
+    done = runner.invoke(app, ["record", str(scene), "-o", str(tmp_path / "x.mcap"), "--no-rrd", "--try-steps", "3"])
+    assert done.exit_code == 2 and "--try-steps says how long --try's forks run: give it with --try" in done.output
+    done = runner.invoke(app, ["record", "--from", str(discrete), "--at", "2", "-o", str(tmp_path / "f.mcap"),
+                               "--try"])
+    assert done.exit_code == 2 and "--try tries a new recording's advice: record it first" in done.output
+    assert not (tmp_path / "x.mcap").exists() and not (tmp_path / "f.mcap").exists()

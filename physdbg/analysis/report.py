@@ -242,7 +242,7 @@ def tried_words(t: dict) -> str:
     left = (f"{t['left']} {t['kind']} finding{'s' if t['left'] != 1 else ''} in those steps "
             f"({t['left_in_run']} in the run's same steps)")
     return (f"{change} from step {t['step']} for {count_words(t['steps'], 'step')}: {outcome}; {left}; "
-            f"what else changed: "
+            f"what else changed (diff of the run, A, against the fork, B): "
             f"{t['changed']}; {t['ms_before']:.3g} -> {t['ms_after']:.3g} ms a step in the engine"
             + ("" if t["verified"] else "; THE FORK DID NOT VERIFY"))
 

@@ -271,9 +271,8 @@ def time_of_impact(i, t, x, v, a, radius, sigma, step_end, integrator, k, detect
                                                                   1 if detection == DISCRETE else samples)
         if found != math.inf:
             if motion[6] != 0.0 or motion[7] != 0.0 or motion[8] != 0.0:
-                # a turning mesh bends the path in its frame: the chord from the test's start
-                # to the sample stands for it no better than for a crossing, so only the
-                # nearest-face rule applies
+                # a turning mesh bends the path in its frame, so the chord from the test's
+                # start to the sample is no test of a crossing: the nearest-face rule alone
                 if not nearest_of_its_mesh(y0, y1, y2, t, meshes):
                     found = math.inf
             else:
